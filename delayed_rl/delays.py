@@ -1,0 +1,282 @@
+"""Delay distributions: how many steps late each reward (or observation) arrives.
+
+Every distribution draws non-negative integer delays and exposes the same small interface:
+
+- ``sample(rng, size)``: a batch of delays as an ``int64`` array (batched, so a wrapper draws many
+  at once instead of calling the generator every step);
+- ``pmf(k)``: the probability of delay ``k`` (vectorised over ``k``);
+- ``mean``: the expected delay;
+- ``support_max``: the largest delay it can produce (``None`` when unbounded, as for Poisson).
+
+The thesis assumes Poisson delays; its future work asks for other statistics, so the wrappers and
+agents accept any :class:`Delay`.
+
+Example:
+    >>> import numpy as np
+    >>> from delayed_rl.delays import Poisson
+    >>> Poisson(5).sample(np.random.default_rng(0), 4).tolist()
+    [3, 7, 3, 4]
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from abc import ABC, abstractmethod
+from collections.abc import Sequence
+
+import numpy as np
+
+__all__ = [
+    "Constant",
+    "Delay",
+    "Empirical",
+    "Geometric",
+    "Poisson",
+    "Uniform",
+    "as_delay",
+]
+
+
+def _check_real(name: str, value: object, *, low: float, allowed: str) -> float:
+    """Return ``value`` as a float after checking that it is a finite real ``>= low``."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise TypeError(f"{name} must be a real number ({allowed}), got {value!r}")
+    value = float(value)
+    if not math.isfinite(value) or value < low:
+        raise ValueError(f"{name} must be {allowed}, got {value!r}")
+    return value
+
+
+def _check_int(name: str, value: object, *, low: int, allowed: str) -> int:
+    """Return ``value`` as an int after checking that it is an integer ``>= low``."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise TypeError(f"{name} must be an integer ({allowed}), got {value!r}")
+    if value < low:
+        raise ValueError(f"{name} must be {allowed}, got {value!r}")
+    return int(value)
+
+
+class Delay(ABC):
+    """A distribution over non-negative integer delays (in steps)."""
+
+    @abstractmethod
+    def sample(self, rng: np.random.Generator, size: int | None = None) -> np.ndarray | int:
+        """Draw delays: an ``int64`` array of ``size`` delays, or one ``int`` if ``size`` is None."""
+
+    @abstractmethod
+    def pmf(self, k: int | np.ndarray) -> float | np.ndarray:
+        """Probability that the delay equals ``k`` (0 outside the support)."""
+
+    @property
+    @abstractmethod
+    def mean(self) -> float:
+        """The expected delay."""
+
+    @property
+    def support_max(self) -> int | None:
+        """The largest possible delay, or ``None`` if the support is unbounded."""
+        return None
+
+    def _finish(self, draws: np.ndarray, size: int | None) -> np.ndarray | int:
+        draws = np.asarray(draws, dtype=np.int64)
+        return int(draws) if size is None else draws
+
+    def __eq__(self, other: object) -> bool:
+        return type(self) is type(other) and repr(self) == repr(other)
+
+    def __hash__(self) -> int:
+        return hash(repr(self))
+
+
+class Poisson(Delay):
+    """Poisson(λ) delays, the thesis's model: ``P(d = k) = λ^k e^{-λ} / k!``.
+
+    Args:
+        lam: the mean (and variance) λ ≥ 0, any finite real; λ = 0 means no delay.
+    """
+
+    def __init__(self, lam: float):
+        self.lam = _check_real("lam", lam, low=0.0, allowed="a finite number >= 0")
+
+    def sample(self, rng, size=None):
+        return self._finish(rng.poisson(self.lam, size), size)
+
+    def pmf(self, k):
+        k = np.asarray(k)
+        if self.lam == 0.0:
+            out = (k == 0).astype(float)
+        else:
+            safe_k = np.where(k >= 0, k, 0).astype(float)
+            log_p = safe_k * math.log(self.lam) - self.lam - _log_factorial(safe_k)
+            out = np.where(k >= 0, np.exp(log_p), 0.0)
+        return float(out) if out.ndim == 0 else out
+
+    @property
+    def mean(self) -> float:
+        return self.lam
+
+    def __repr__(self) -> str:
+        return f"Poisson(lam={self.lam!r})"
+
+
+class Constant(Delay):
+    """Every delay is exactly ``k`` steps (the constant-delay MDP of the literature).
+
+    Args:
+        k: the delay, an integer ≥ 0.
+    """
+
+    def __init__(self, k: int):
+        self.k = _check_int("k", k, low=0, allowed="an integer >= 0")
+
+    def sample(self, rng, size=None):
+        return self._finish(np.full(() if size is None else size, self.k), size)
+
+    def pmf(self, k):
+        out = (np.asarray(k) == self.k).astype(float)
+        return float(out) if out.ndim == 0 else out
+
+    @property
+    def mean(self) -> float:
+        return float(self.k)
+
+    @property
+    def support_max(self) -> int:
+        return self.k
+
+    def __repr__(self) -> str:
+        return f"Constant(k={self.k!r})"
+
+
+class Geometric(Delay):
+    """Geometric delays on {0, 1, 2, ...}: ``P(d = k) = p (1 − p)^k`` (failures before a success).
+
+    Args:
+        p: the per-step arrival probability, ``0 < p <= 1``; the mean is ``(1 − p) / p``.
+    """
+
+    def __init__(self, p: float):
+        p = _check_real("p", p, low=0.0, allowed="a probability in (0, 1]")
+        if not 0.0 < p <= 1.0:
+            raise ValueError(f"p must be a probability in (0, 1], got {p!r}")
+        self.p = p
+
+    def sample(self, rng, size=None):
+        return self._finish(rng.geometric(self.p, size) - 1, size)
+
+    def pmf(self, k):
+        k = np.asarray(k)
+        out = np.where(k >= 0, self.p * (1.0 - self.p) ** np.where(k >= 0, k, 0), 0.0)
+        return float(out) if out.ndim == 0 else out
+
+    @property
+    def mean(self) -> float:
+        return (1.0 - self.p) / self.p
+
+    @property
+    def support_max(self) -> int | None:
+        return 0 if self.p == 1.0 else None
+
+    def __repr__(self) -> str:
+        return f"Geometric(p={self.p!r})"
+
+
+class Uniform(Delay):
+    """Delays uniform on the integers ``low, low + 1, ..., high`` (both ends included).
+
+    Args:
+        low: the smallest delay, an integer ≥ 0.
+        high: the largest delay, an integer ≥ ``low``.
+    """
+
+    def __init__(self, low: int, high: int):
+        self.low = _check_int("low", low, low=0, allowed="an integer >= 0")
+        self.high = _check_int("high", high, low=0, allowed="an integer >= 0")
+        if self.high < self.low:
+            raise ValueError(f"high must be >= low (= {self.low}), got high={self.high!r}")
+
+    def sample(self, rng, size=None):
+        return self._finish(rng.integers(self.low, self.high + 1, size), size)
+
+    def pmf(self, k):
+        k = np.asarray(k)
+        out = np.where((k >= self.low) & (k <= self.high), 1.0 / (self.high - self.low + 1), 0.0)
+        return float(out) if out.ndim == 0 else out
+
+    @property
+    def mean(self) -> float:
+        return (self.low + self.high) / 2.0
+
+    @property
+    def support_max(self) -> int:
+        return self.high
+
+    def __repr__(self) -> str:
+        return f"Uniform(low={self.low!r}, high={self.high!r})"
+
+
+class Empirical(Delay):
+    """Delays with an explicit probability table: ``P(d = k) = pmf[k]``.
+
+    Args:
+        pmf: non-negative finite weights for delays 0, 1, ..., len(pmf) − 1, summing to 1
+            (within 1e-9; they are then renormalised exactly). Use it for measured latency
+            histograms.
+    """
+
+    def __init__(self, pmf: Sequence[float] | np.ndarray):
+        probs = np.asarray(pmf, dtype=float)
+        if probs.ndim != 1 or probs.size == 0:
+            raise ValueError(f"pmf must be a non-empty 1-D sequence of probabilities, got {pmf!r}")
+        if not np.all(np.isfinite(probs)) or np.any(probs < 0):
+            raise ValueError(f"pmf must hold finite probabilities >= 0, got {pmf!r}")
+        total = probs.sum()
+        if abs(total - 1.0) > 1e-9:
+            raise ValueError(f"pmf must sum to 1, got a sum of {total!r}")
+        self.probs = probs / total
+        self._cdf = np.cumsum(self.probs)
+        self._cdf[-1] = 1.0
+
+    def sample(self, rng, size=None):
+        draws = np.searchsorted(self._cdf, rng.random(size), side="right")
+        return self._finish(draws, size)
+
+    def pmf(self, k):
+        k = np.asarray(k)
+        inside = (k >= 0) & (k < self.probs.size)
+        out = np.where(inside, self.probs[np.where(inside, k, 0)], 0.0)
+        return float(out) if out.ndim == 0 else out
+
+    @property
+    def mean(self) -> float:
+        return float(np.dot(np.arange(self.probs.size), self.probs))
+
+    @property
+    def support_max(self) -> int:
+        return int(np.flatnonzero(self.probs)[-1])
+
+    def __repr__(self) -> str:
+        return f"Empirical(pmf={self.probs.tolist()!r})"
+
+
+def _log_factorial(k: np.ndarray) -> np.ndarray:
+    from math import lgamma
+
+    return np.vectorize(lambda x: lgamma(x + 1.0), otypes=[float])(k)
+
+
+def as_delay(delay: Delay | float, name: str = "delay") -> Delay:
+    """Turn ``delay`` into a :class:`Delay`: a number is read as a Poisson mean λ.
+
+    Raises:
+        TypeError: if ``delay`` is neither a :class:`Delay` nor a real number.
+    """
+    if isinstance(delay, Delay):
+        return delay
+    if isinstance(delay, numbers.Real) and not isinstance(delay, bool):
+        return Poisson(delay)
+    raise TypeError(
+        f"{name} must be a delayed_rl.delays.Delay (Poisson, Constant, Geometric, Uniform, "
+        f"Empirical) or a number read as a Poisson mean, got {delay!r}"
+    )

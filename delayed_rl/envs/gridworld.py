@@ -1,0 +1,150 @@
+"""The thesis's square grid world (Campbell 2015, section 5.1)."""
+
+from __future__ import annotations
+
+import numbers
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+UP, RIGHT, DOWN, LEFT = 0, 1, 2, 3
+_MOVES = {UP: (-1, 0), RIGHT: (0, 1), DOWN: (1, 0), LEFT: (0, -1)}
+
+
+class GridWorldEnv(gym.Env):
+    """An ``size × size`` grid whose top-left cell pays +10 and warps the agent home.
+
+    ## Description
+    The grid world of the thesis (section 5.1, Figs. 5.1, 5.7 and 5.8). The agent starts in the
+    bottom-right cell and must walk to the reward cell in the top-left corner; any action taken
+    there pays +10 and warps it back to the bottom-right cell. Walls are penalised. The task is
+    continuing: it never terminates, so the optimal average reward is one +10 per round trip of
+    ``2(size − 1) + 1`` steps, ``10 / (2(size − 1) + 1)`` (0.588 for 9×9).
+
+    ## Action Space
+    ``Discrete(4)``: 0 up, 1 right, 2 down, 3 left (the thesis's actions 1–4).
+
+    ## Observation Space
+    ``Discrete(size²)``: the cell index, row-major from the top-left corner, so the thesis's state
+    ``k`` (Fig. 5.8) is index ``k − 1``; the reward cell is 0 and the start cell ``size² − 1``.
+
+    ## Rewards
+    - +10 for any action in the reward cell (index 0), which moves the agent to the start cell;
+    - −1 for a move into a wall (the agent stays where it is);
+    - 0 for every other move.
+
+    ## Starting State
+    The bottom-right cell (index ``size² − 1``), as in the thesis; ``reset(options={"state": k})``
+    starts in cell ``k`` instead.
+
+    ## Episode End
+    Never terminates. With ``max_steps`` set, the episode is truncated after that many steps
+    (the env does it itself, so a reward-delay wrapper on top sees the end and can flush).
+
+    ## Tabular model
+    ``env.P[s][a]`` is the list ``[(probability, next_state, reward, terminated)]``, the protocol of
+    Gymnasium's toy-text envs (FrozenLake, Taxi, CliffWalking); agents and compiled training loops
+    may read the dynamics from it.
+
+    ## Arguments
+    - ``size``: the side length, an integer ≥ 2 (default 9).
+    - ``max_steps``: truncate after this many steps (``None``, the default, never truncates).
+    - ``render_mode``: ``None`` or ``"ansi"`` (a text picture of the grid).
+
+    ## Registered Configurations
+    - ``delayed_rl/GridWorld-3x3-v0``, ``delayed_rl/GridWorld-5x5-v0``,
+      ``delayed_rl/GridWorld-9x9-v0``: the thesis's three worlds;
+    - ``delayed_rl/GridWorld-v0``: pass ``size=``.
+
+    Every id takes ``reward_delay=λ`` to come wrapped in
+    :class:`~delayed_rl.wrappers.PoissonRewardDelay`.
+    """
+
+    metadata = {"render_modes": ["ansi"], "render_fps": 4}
+
+    def __init__(self, size: int = 9, max_steps: int | None = None, render_mode: str | None = None):
+        if isinstance(size, bool) or not isinstance(size, numbers.Integral) or size < 2:
+            raise ValueError(f"size must be an integer >= 2, got {size!r}")
+        if max_steps is not None and (
+            isinstance(max_steps, bool)
+            or not isinstance(max_steps, numbers.Integral)
+            or max_steps < 1
+        ):
+            raise ValueError(f"max_steps must be None or an integer >= 1, got {max_steps!r}")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(
+                f"render_mode must be None or one of {self.metadata['render_modes']}, "
+                f"got {render_mode!r}"
+            )
+        self.size = int(size)
+        self.max_steps = None if max_steps is None else int(max_steps)
+        self.render_mode = render_mode
+        self.n_states = self.size * self.size
+        self.start_state = self.n_states - 1
+        self.reward_state = 0
+        self.observation_space = spaces.Discrete(self.n_states)
+        self.action_space = spaces.Discrete(4)
+        self.next_state, self.reward_table = self._build_tables()
+        self.P = {
+            s: {
+                a: [(1.0, int(self.next_state[s, a]), float(self.reward_table[s, a]), False)]
+                for a in range(4)
+            }
+            for s in range(self.n_states)
+        }
+        self.initial_state_distrib = np.zeros(self.n_states)
+        self.initial_state_distrib[self.start_state] = 1.0
+        self.state = self.start_state
+        self.steps = 0
+
+    @property
+    def optimal_average_reward(self) -> float:
+        """The best long-run reward per step: +10 every ``2(size − 1) + 1`` steps."""
+        return 10.0 / (2 * (self.size - 1) + 1)
+
+    def _build_tables(self) -> tuple[np.ndarray, np.ndarray]:
+        next_state = np.zeros((self.n_states, 4), dtype=np.int64)
+        reward = np.zeros((self.n_states, 4), dtype=np.float64)
+        for s in range(self.n_states):
+            row, col = divmod(s, self.size)
+            for a, (d_row, d_col) in _MOVES.items():
+                if s == self.reward_state:
+                    next_state[s, a], reward[s, a] = self.start_state, 10.0
+                elif 0 <= row + d_row < self.size and 0 <= col + d_col < self.size:
+                    next_state[s, a] = (row + d_row) * self.size + col + d_col
+                else:
+                    next_state[s, a], reward[s, a] = s, -1.0
+        return next_state, reward
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        state = self.start_state
+        if options and "state" in options:
+            state = options["state"]
+            if not self.observation_space.contains(state):
+                raise ValueError(
+                    f"options['state'] must be a cell in [0, {self.n_states}), got {state!r}"
+                )
+        self.state = int(state)
+        self.steps = 0
+        return self.state, {}
+
+    def step(self, action):
+        if not self.action_space.contains(action):
+            raise ValueError(
+                f"action must be in Discrete(4) (0 up, 1 right, 2 down, 3 left), got {action!r}"
+            )
+        reward = float(self.reward_table[self.state, action])
+        self.state = int(self.next_state[self.state, action])
+        self.steps += 1
+        truncated = self.max_steps is not None and self.steps >= self.max_steps
+        return self.state, reward, False, truncated, {}
+
+    def render(self) -> str | None:
+        if self.render_mode != "ansi":
+            return None
+        cells = np.full((self.size, self.size), ".", dtype="<U1")
+        cells.flat[self.reward_state] = "R"
+        cells.flat[self.state] = "A"
+        return "\n".join(" ".join(row) for row in cells) + "\n"

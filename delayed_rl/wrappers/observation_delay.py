@@ -1,0 +1,65 @@
+"""Observation delay: the agent sees an observation from a random number of steps ago."""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from typing import Any
+
+import gymnasium as gym
+
+from delayed_rl.delays import Delay, as_delay
+from delayed_rl.wrappers.reward_delay import DelaySampler, check_max_delay
+
+
+class ObservationDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """Shows, at step ``t``, the observation of step ``t − d_t`` with ``d_t`` drawn from ``delay``.
+
+    Observations are numbered from the reset observation ``o_0``; the observation returned by
+    step ``t`` (counted from 0) is ``o_{t+1}`` undelayed and ``o_{max(0, t+1−d_t)}`` here: a delay
+    reaching back past the episode's start shows the episode's first observation. The reset
+    observation itself is never delayed. This is the thesis's delayed-sensing baseline
+    (section 5.2.3: the P-controller fed camera readings λ = 90 steps old on average).
+
+    Rewards, termination and ``info`` are the inner env's, plus ``info["observation_delay"]``, the
+    delay actually applied (``d_t`` clipped to the episode's start and to the history kept).
+
+    The wrapper keeps the last ``history`` observations: ``max_delay + 1`` when ``max_delay`` is
+    set, otherwise enough for all but a negligible tail of the distribution (mean + 10·√mean + 20
+    steps for an unbounded one). A delay reaching further back than that is applied as the oldest
+    observation kept, and ``info["observation_delay"]`` says so. Seeded by ``reset(seed=...)`` from
+    the same independent delay stream as :class:`~delayed_rl.wrappers.RewardDelay`.
+
+    Args:
+        env: the env whose observations to delay.
+        delay: a :class:`~delayed_rl.delays.Delay`, or a number read as a Poisson mean.
+        max_delay: clip delays to at most this many steps (``None``: unbounded).
+    """
+
+    def __init__(self, env: gym.Env, delay: Delay | float, max_delay: int | None = None):
+        gym.utils.RecordConstructorArgs.__init__(self, delay=delay, max_delay=max_delay)
+        gym.Wrapper.__init__(self, env)
+        self.delay = as_delay(delay)
+        self.max_delay = check_max_delay(max_delay)
+        self._sampler = DelaySampler(self.delay, self.max_delay)
+        bound = self.delay.support_max if self.max_delay is None else self.max_delay
+        if bound is None:
+            bound = int(self.delay.mean + 10.0 * math.sqrt(self.delay.mean) + 20.0)
+        self.history = bound + 1
+        self._observations: deque = deque(maxlen=self.history)
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        obs, info = self.env.reset(seed=seed, options=options)
+        if seed is not None:
+            self._sampler.seed(seed)
+        self._observations.clear()
+        self._observations.append(obs)
+        info["observation_delay"] = 0
+        return obs, info
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self._observations.append(obs)
+        applied = min(self._sampler(), len(self._observations) - 1)
+        info["observation_delay"] = applied
+        return self._observations[-1 - applied], reward, terminated, truncated, info

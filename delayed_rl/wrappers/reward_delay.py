@@ -1,0 +1,332 @@
+"""Reward-delay wrappers: every reward arrives its own random number of steps late."""
+
+from __future__ import annotations
+
+import math
+import numbers
+import warnings
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from delayed_rl.delays import Delay, Poisson, as_delay
+
+__all__ = ["EPISODE_END_MODES", "PoissonRewardDelay", "RewardDelay", "delay_rng"]
+
+EPISODE_END_MODES = ("flush", "drop", "carry")
+_BLOCK = 1024  # delays drawn per call to the generator
+_DELAY_STREAM = 0x5DE1A7  # spawn key separating the delay stream from the env's own stream
+
+
+def delay_rng(seed: int | None) -> np.random.Generator:
+    """The delay generator for ``seed``: independent of the env's ``np_random`` for that seed."""
+    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(_DELAY_STREAM,)))
+
+
+def check_max_delay(max_delay: Any) -> int | None:
+    """Validate ``max_delay``: ``None`` or an integer ``>= 0``."""
+    if max_delay is None:
+        return None
+    if isinstance(max_delay, bool) or not isinstance(max_delay, numbers.Integral):
+        raise TypeError(f"max_delay must be None or an integer >= 0, got {max_delay!r}")
+    if max_delay < 0:
+        raise ValueError(f"max_delay must be None or an integer >= 0, got {max_delay!r}")
+    return int(max_delay)
+
+
+def check_episode_end(on_episode_end: Any) -> str:
+    """Validate ``on_episode_end``: one of :data:`EPISODE_END_MODES`."""
+    if on_episode_end not in EPISODE_END_MODES:
+        raise ValueError(
+            f"on_episode_end must be one of {EPISODE_END_MODES}, got {on_episode_end!r}"
+        )
+    return on_episode_end
+
+
+class DelaySampler:
+    """Hands out delays one at a time from blocks drawn in one generator call.
+
+    Args:
+        delay: the distribution.
+        max_delay: clip every delay to at most this many steps (``None``: no clipping).
+    """
+
+    def __init__(self, delay: Delay, max_delay: int | None):
+        self.delay = delay
+        self.max_delay = max_delay
+        self.rng = delay_rng(None)
+        self._block: list[int] = []
+        self._next = 0
+
+    def seed(self, seed: int | None) -> None:
+        """Restart the delay stream from ``seed`` and discard delays drawn ahead."""
+        self.rng = delay_rng(seed)
+        self._block, self._next = [], 0
+
+    def draw_block(self) -> list[int]:
+        draws = self.delay.sample(self.rng, _BLOCK)
+        if self.max_delay is not None:
+            draws = np.minimum(draws, self.max_delay)
+        self._block, self._next = draws.tolist(), 0
+        return self._block
+
+    def __call__(self) -> int:
+        i = self._next
+        if i == len(self._block):
+            self.draw_block()
+            i = 0
+        self._next = i + 1
+        return self._block[i]
+
+
+class RewardDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """Delays every reward by its own random number of steps, drawn from ``delay``.
+
+    At step ``t`` (counted from 0 in each episode) the inner env emits ``r_t``; the wrapper draws
+    ``d_t`` from ``delay`` (clipped to ``max_delay`` if given) and returns, at step ``t``, the sum
+    of every ``r_j`` with ``j + d_j = t``. Rewards therefore overlap (they are summed) and arrive out
+    of order; a step with nothing due returns ``0.0``. ``d_t = 0`` delivers ``r_t`` at once.
+
+    Nothing is lost silently. When an episode ends (terminated or truncated), the rewards still
+    pending follow ``on_episode_end``:
+
+    - ``"flush"`` (default): they are added to the final step's reward, so the episode's return
+      equals the undelayed return (``info["flushed_reward"]`` says how much was added);
+    - ``"drop"``: they are discarded and reported as ``info["dropped_reward"]``;
+    - ``"carry"``: they are kept and delivered in the next episode at their scheduled offsets
+      (continuing-task semantics: a robot put back on its track keeps receiving old feedback).
+
+    If ``reset()`` is called in the middle of an episode (for example by an outer ``TimeLimit``
+    that this wrapper cannot see), the pending rewards are discarded under ``"flush"`` and
+    ``"drop"`` (they can no longer be delivered), reported as ``info["dropped_reward"]`` in the
+    reset ``info``, with a warning; ``"carry"`` keeps them. Put ``TimeLimit`` *inside* this wrapper,
+    or use an env that truncates itself, to have them flushed instead.
+
+    ``info`` on every step:
+
+    - ``undelayed_reward``: ``r_t``, the inner env's reward at this step;
+    - ``reward_delay``: ``d_t``;
+    - ``pending_reward``: the sum of rewards emitted but not yet delivered (after this step);
+    - ``reward_arrivals`` (with ``record_arrivals=True``): the list of ``(emission_step, value)``
+      delivered now, ``emission_step`` on this episode's clock (negative for rewards carried over
+      from an earlier episode): the non-anonymous oracle view, for baselines and tests.
+
+    Delays come only from the wrapper's own generator, seeded by ``reset(seed=...)`` (from a stream
+    independent of the inner env's, so delays do not correlate with the env's own randomness): the
+    same seed gives the same delays. Delays are drawn in blocks of 1024 so the per-step cost stays
+    close to that of Gymnasium's ``RecordEpisodeStatistics``.
+
+    Args:
+        env: the env whose rewards to delay (any reward type convertible to ``float``).
+        delay: a :class:`~delayed_rl.delays.Delay`, or a number read as a Poisson mean.
+        max_delay: clip delays to at most this many steps (``None``: unbounded).
+        on_episode_end: ``"flush"``, ``"drop"`` or ``"carry"`` (see above).
+        record_arrivals: add ``info["reward_arrivals"]`` on every step.
+
+    Raises:
+        TypeError, ValueError: at construction, for an invalid argument (the message names it).
+        ValueError: at a step where the inner env returns a NaN or infinite reward.
+
+    Example:
+        >>> import gymnasium as gym
+        >>> from delayed_rl.wrappers import RewardDelay
+        >>> from delayed_rl.delays import Constant
+        >>> env = RewardDelay(gym.make("CliffWalking-v1"), Constant(2))
+        >>> _ = env.reset(seed=0)
+        >>> [env.step(0)[1] for _ in range(3)]
+        [0.0, 0.0, -1.0]
+    """
+
+    def __init__(
+        self,
+        env: gym.Env,
+        delay: Delay | float,
+        max_delay: int | None = None,
+        on_episode_end: str = "flush",
+        record_arrivals: bool = False,
+    ):
+        gym.utils.RecordConstructorArgs.__init__(
+            self,
+            delay=delay,
+            max_delay=max_delay,
+            on_episode_end=on_episode_end,
+            record_arrivals=record_arrivals,
+        )
+        gym.Wrapper.__init__(self, env)
+        self.delay = as_delay(delay)
+        self.max_delay = check_max_delay(max_delay)
+        self.on_episode_end = check_episode_end(on_episode_end)
+        if not isinstance(record_arrivals, bool):
+            raise TypeError(f"record_arrivals must be a bool, got {record_arrivals!r}")
+        self.record_arrivals = record_arrivals
+        self._sampler = DelaySampler(self.delay, self.max_delay)
+        bound = self.delay.support_max if self.max_delay is None else self.max_delay
+        if bound is None:  # unbounded: start from a generous guess, grow when a delay exceeds it
+            bound = int(self.delay.mean + 6.0 * math.sqrt(self.delay.mean) + 8.0)
+        self._buffer = [0.0] * _ring_size(bound + 1)
+        self._mask = len(self._buffer) - 1
+        self._arrivals: dict[int, list[tuple[int, float]]] = {}
+        self._clock = 0  # steps since construction: the ring buffer's index
+        self._episode_start = 0  # the clock at this episode's first step
+        self._pending = 0.0
+        self._episode_over = True
+
+    @property
+    def pending_reward(self) -> float:
+        """The sum of rewards emitted but not yet delivered."""
+        return self._pending
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        """Reset the env; ``seed`` also reseeds the delay generator."""
+        obs, info = self.env.reset(seed=seed, options=options)
+        if seed is not None:
+            self._sampler.seed(seed)
+        if not self._episode_over and self.on_episode_end != "carry":
+            lost = self._clear_pending()
+            info["dropped_reward"] = lost
+            if lost != 0.0:
+                warnings.warn(
+                    f"reset() in the middle of an episode discarded {lost} of pending reward "
+                    f"(on_episode_end={self.on_episode_end!r}); end episodes inside the "
+                    "RewardDelay wrapper to have them flushed",
+                    stacklevel=2,
+                )
+        self._episode_start = self._clock
+        self._episode_over = False
+        info["pending_reward"] = self._pending
+        return obs, info
+
+    def step(self, action):
+        """Step the env; return the rewards due now (see the class docstring)."""
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        reward = float(reward)
+        if reward - reward != 0.0:
+            raise ValueError(
+                f"the inner env returned a non-finite reward ({reward!r}) at episode step "
+                f"{self._clock - self._episode_start}; RewardDelay refuses to buffer it"
+            )
+        sampler = self._sampler
+        i = sampler._next
+        if i == len(sampler._block):
+            sampler.draw_block()
+            i = 0
+        sampler._next = i + 1
+        delay = sampler._block[i]
+        clock = self._clock
+        buffer = self._buffer
+        if delay > self._mask:
+            self._grow(delay)
+            buffer = self._buffer
+        slot = clock & self._mask
+        if delay == 0:
+            delivered = buffer[slot] + reward
+            self._pending -= delivered - reward
+        else:
+            buffer[(clock + delay) & self._mask] += reward
+            delivered = buffer[slot]
+            self._pending += reward - delivered
+        buffer[slot] = 0.0
+        if self.record_arrivals:
+            arrivals = self._record(clock, delay, reward)
+        self._clock = clock + 1
+        if terminated or truncated:
+            self._episode_over = True
+            if self.on_episode_end == "flush":
+                if self.record_arrivals:
+                    arrivals += self._pop_all_arrivals()
+                flushed = self._clear_pending()
+                info["flushed_reward"] = flushed
+                delivered += flushed
+            elif self.on_episode_end == "drop":
+                self._arrivals.clear()
+                info["dropped_reward"] = self._clear_pending()
+        info["undelayed_reward"] = reward
+        info["reward_delay"] = delay
+        info["pending_reward"] = self._pending
+        if self.record_arrivals:
+            info["reward_arrivals"] = arrivals
+        return obs, delivered, terminated, truncated, info
+
+    def _record(self, clock: int, delay: int, reward: float) -> list[tuple[int, float]]:
+        """Book-keep the oracle view: who emitted what, and what is delivered at ``clock``."""
+        self._arrivals.setdefault(clock + delay, []).append((clock, reward))
+        start = self._episode_start
+        return [(emitted - start, r) for emitted, r in self._arrivals.pop(clock, [])]
+
+    def _pop_all_arrivals(self) -> list[tuple[int, float]]:
+        start = self._episode_start
+        arrivals = [
+            (t - start, r) for due in sorted(self._arrivals) for t, r in self._arrivals[due]
+        ]
+        self._arrivals.clear()
+        return arrivals
+
+    def _clear_pending(self) -> float:
+        """Empty the buffer and return the exact sum that was in it."""
+        total = math.fsum(self._buffer)
+        self._buffer = [0.0] * len(self._buffer)
+        self._pending = 0.0
+        return total
+
+    def _grow(self, delay: int) -> None:
+        """Enlarge the ring buffer to hold ``delay``, keeping every pending reward in its slot."""
+        old, old_mask = self._buffer, self._mask
+        size = _ring_size(delay + 1)
+        new = [0.0] * size
+        for offset in range(len(old)):
+            new[(self._clock + offset) & (size - 1)] = old[(self._clock + offset) & old_mask]
+        self._buffer, self._mask = new, size - 1
+
+
+class PoissonRewardDelay(RewardDelay):
+    """:class:`RewardDelay` with Poisson(λ) delays, the thesis's variably-delayed MDP.
+
+    Args:
+        env: the env whose rewards to delay.
+        lam: the mean delay λ ≥ 0 (any finite real; need not be an integer).
+        max_delay: clip delays to at most this many steps (``None``: unbounded).
+        on_episode_end: ``"flush"`` (default), ``"drop"`` or ``"carry"``.
+        record_arrivals: add ``info["reward_arrivals"]`` on every step.
+
+    Example:
+        >>> import gymnasium as gym
+        >>> import delayed_rl
+        >>> from delayed_rl.wrappers import PoissonRewardDelay
+        >>> env = PoissonRewardDelay(gym.make("Taxi-v4"), lam=5)
+    """
+
+    def __init__(
+        self,
+        env: gym.Env,
+        lam: float,
+        max_delay: int | None = None,
+        on_episode_end: str = "flush",
+        record_arrivals: bool = False,
+    ):
+        gym.utils.RecordConstructorArgs.__init__(
+            self,
+            lam=lam,
+            max_delay=max_delay,
+            on_episode_end=on_episode_end,
+            record_arrivals=record_arrivals,
+        )
+        super().__init__(env, Poisson(lam), max_delay, on_episode_end, record_arrivals)
+        self.lam = self.delay.lam
+
+
+def _ring_size(n: int) -> int:
+    """The smallest power of two ``>= n`` (so slots are found with a bit mask)."""
+    return 1 << max(0, int(n - 1).bit_length())
+
+
+def wrap_reward_delay(env: gym.Env, reward_delay: Delay | float) -> RewardDelay:
+    """Wrap ``env`` for ``gym.make(id, reward_delay=...)``: a number means Poisson(λ)."""
+    if isinstance(reward_delay, Delay):
+        return RewardDelay(env, reward_delay)
+    if isinstance(reward_delay, numbers.Real) and not isinstance(reward_delay, bool):
+        return PoissonRewardDelay(env, lam=reward_delay)
+    raise TypeError(
+        "reward_delay must be a number (the Poisson mean λ) or a delayed_rl.delays.Delay, "
+        f"got {reward_delay!r}"
+    )
