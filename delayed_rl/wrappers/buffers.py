@@ -7,7 +7,12 @@ import math
 import numpy as np
 
 from delayed_rl.delays import Delay
-from delayed_rl.wrappers.reward_delay import _BLOCK, _ring_size, delay_rng
+from delayed_rl.wrappers.reward_delay import _BLOCK, delay_rng
+
+
+def _ring_size(n: int) -> int:
+    """The smallest power of two ``>= n`` (so slots are found with a bit mask)."""
+    return 1 << max(0, int(n - 1).bit_length())
 
 
 class RewardBuffers:

@@ -47,6 +47,9 @@ def check_episode_end(on_episode_end: Any) -> str:
 class DelaySampler:
     """Hands out delays one at a time from blocks drawn in one generator call.
 
+    ``block`` holds the delays still to be used, in reverse order, so that ``block.pop()`` (the
+    cheapest list operation) yields them in the order drawn; :meth:`refill` draws the next block.
+
     Args:
         delay: the distribution.
         max_delay: clip every delay to at most this many steps (``None``: no clipping).
@@ -55,29 +58,26 @@ class DelaySampler:
     def __init__(self, delay: Delay, max_delay: int | None):
         self.delay = delay
         self.max_delay = max_delay
-        self.rng = delay_rng(None)
-        self._block: list[int] = []
-        self._next = 0
+        self.seed(None)
 
     def seed(self, seed: int | None) -> None:
         """Restart the delay stream from ``seed`` and discard delays drawn ahead."""
         self.rng = delay_rng(seed)
-        self._block, self._next = [], 0
+        if not hasattr(self, "block"):
+            self.block: list[int] = []
+        self.block.clear()
 
-    def draw_block(self) -> list[int]:
+    def refill(self) -> list[int]:
+        """Draw the next block of delays into ``block`` (the same list, reversed for ``pop()``)."""
         draws = self.delay.sample(self.rng, _BLOCK)
         if self.max_delay is not None:
             draws = np.minimum(draws, self.max_delay)
-        self._block, self._next = draws.tolist(), 0
-        return self._block
+        self.block[:] = draws[::-1].tolist()
+        return self.block
 
     def __call__(self) -> int:
-        i = self._next
-        if i == len(self._block):
-            self.draw_block()
-            i = 0
-        self._next = i + 1
-        return self._block[i]
+        """The next delay."""
+        return (self.block or self.refill()).pop()
 
 
 class RewardDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
@@ -114,8 +114,9 @@ class RewardDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     Delays come only from the wrapper's own generator, seeded by ``reset(seed=...)`` (from a stream
     independent of the inner env's, so delays do not correlate with the env's own randomness): the
-    same seed gives the same delays. Delays are drawn in blocks of 1024 so the per-step cost stays
-    close to that of Gymnasium's ``RecordEpisodeStatistics``.
+    same seed gives the same delays. Delays are drawn in blocks of 1024 and pending rewards are kept in a
+    dict keyed by due step (zero rewards are never stored), so the per-step cost stays close to
+    that of Gymnasium's ``RecordEpisodeStatistics``.
 
     Args:
         env: the env whose rewards to delay (any reward type convertible to ``float``).
@@ -161,11 +162,8 @@ class RewardDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
             raise TypeError(f"record_arrivals must be a bool, got {record_arrivals!r}")
         self.record_arrivals = record_arrivals
         self._sampler = DelaySampler(self.delay, self.max_delay)
-        bound = self.delay.support_max if self.max_delay is None else self.max_delay
-        if bound is None:  # unbounded: start from a generous guess, grow when a delay exceeds it
-            bound = int(self.delay.mean + 6.0 * math.sqrt(self.delay.mean) + 8.0)
-        self._buffer = [0.0] * _ring_size(bound + 1)
-        self._mask = len(self._buffer) - 1
+        self._delays = self._sampler.block  # the sampler refills this very list
+        self._due: dict[int, float] = {}  # clock step -> sum of the rewards due then
         self._arrivals: dict[int, list[tuple[int, float]]] = {}
         self._clock = 0  # steps since construction: the ring buffer's index
         self._episode_start = 0  # the clock at this episode's first step
@@ -185,6 +183,7 @@ class RewardDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
         if not self._episode_over and self.on_episode_end != "carry":
             lost = self._clear_pending()
             info["dropped_reward"] = lost
+            self._arrivals.clear()
             if lost != 0.0:
                 warnings.warn(
                     f"reset() in the middle of an episode discarded {lost} of pending reward "
@@ -200,83 +199,61 @@ class RewardDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
     def step(self, action):
         """Step the env; return the rewards due now (see the class docstring)."""
         obs, reward, terminated, truncated, info = self.env.step(action)
-        reward = float(reward)
-        if reward - reward != 0.0:
+        if reward - reward:  # NaN or ±inf (x - x is 0 for every finite number)
             raise ValueError(
                 f"the inner env returned a non-finite reward ({reward!r}) at episode step "
                 f"{self._clock - self._episode_start}; RewardDelay refuses to buffer it"
             )
-        sampler = self._sampler
-        i = sampler._next
-        if i == len(sampler._block):
-            sampler.draw_block()
-            i = 0
-        sampler._next = i + 1
-        delay = sampler._block[i]
+        delays = self._delays
+        delay = delays.pop() if delays else self._sampler.refill().pop()
         clock = self._clock
-        buffer = self._buffer
-        if delay > self._mask:
-            self._grow(delay)
-            buffer = self._buffer
-        slot = clock & self._mask
-        if delay == 0:
-            delivered = buffer[slot] + reward
-            self._pending -= delivered - reward
+        due = self._due
+        if reward:  # a zero reward changes no sum: nothing to schedule
+            when = clock + delay
+            due[when] = due.get(when, 0.0) + reward
+        if due:
+            delivered = due.pop(clock, 0.0)
+            self._pending = (self._pending + reward) - delivered if due else 0.0
         else:
-            buffer[(clock + delay) & self._mask] += reward
-            delivered = buffer[slot]
-            self._pending += reward - delivered
-        buffer[slot] = 0.0
-        if self.record_arrivals:
-            arrivals = self._record(clock, delay, reward)
+            delivered = 0.0
         self._clock = clock + 1
         if terminated or truncated:
             self._episode_over = True
             if self.on_episode_end == "flush":
-                if self.record_arrivals:
-                    arrivals += self._pop_all_arrivals()
                 flushed = self._clear_pending()
                 info["flushed_reward"] = flushed
                 delivered += flushed
             elif self.on_episode_end == "drop":
-                self._arrivals.clear()
                 info["dropped_reward"] = self._clear_pending()
         info["undelayed_reward"] = reward
         info["reward_delay"] = delay
         info["pending_reward"] = self._pending
         if self.record_arrivals:
-            info["reward_arrivals"] = arrivals
+            info["reward_arrivals"] = self._arrivals_now(
+                clock, delay, reward, terminated or truncated
+            )
         return obs, delivered, terminated, truncated, info
 
-    def _record(self, clock: int, delay: int, reward: float) -> list[tuple[int, float]]:
+    def _arrivals_now(
+        self, clock: int, delay: int, reward: float, episode_ended: bool
+    ) -> list[tuple[int, float]]:
         """Book-keep the oracle view: who emitted what, and what is delivered at ``clock``."""
-        self._arrivals.setdefault(clock + delay, []).append((clock, reward))
+        book = self._arrivals
+        book.setdefault(clock + delay, []).append((clock, reward))
         start = self._episode_start
-        return [(emitted - start, r) for emitted, r in self._arrivals.pop(clock, [])]
-
-    def _pop_all_arrivals(self) -> list[tuple[int, float]]:
-        start = self._episode_start
-        arrivals = [
-            (t - start, r) for due in sorted(self._arrivals) for t, r in self._arrivals[due]
-        ]
-        self._arrivals.clear()
+        arrivals = [(emitted - start, r) for emitted, r in book.pop(clock, [])]
+        if episode_ended and self.on_episode_end == "flush":
+            arrivals += [(t - start, r) for due in sorted(book) for t, r in book[due]]
+        if episode_ended and self.on_episode_end != "carry":
+            book.clear()
         return arrivals
 
     def _clear_pending(self) -> float:
         """Empty the buffer and return the exact sum that was in it."""
-        total = math.fsum(self._buffer)
-        self._buffer = [0.0] * len(self._buffer)
+        total = math.fsum(self._due.values())
+        self._due.clear()
         self._pending = 0.0
         return total
-
-    def _grow(self, delay: int) -> None:
-        """Enlarge the ring buffer to hold ``delay``, keeping every pending reward in its slot."""
-        old, old_mask = self._buffer, self._mask
-        size = _ring_size(delay + 1)
-        new = [0.0] * size
-        for offset in range(len(old)):
-            new[(self._clock + offset) & (size - 1)] = old[(self._clock + offset) & old_mask]
-        self._buffer, self._mask = new, size - 1
 
 
 class PoissonRewardDelay(RewardDelay):
@@ -313,11 +290,6 @@ class PoissonRewardDelay(RewardDelay):
         )
         super().__init__(env, Poisson(lam), max_delay, on_episode_end, record_arrivals)
         self.lam = self.delay.lam
-
-
-def _ring_size(n: int) -> int:
-    """The smallest power of two ``>= n`` (so slots are found with a bit mask)."""
-    return 1 << max(0, int(n - 1).bit_length())
 
 
 def wrap_reward_delay(env: gym.Env, reward_delay: Delay | float) -> RewardDelay:
