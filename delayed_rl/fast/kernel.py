@@ -1,0 +1,209 @@
+"""The compiled training loop: env step, reward-delay buffer, ε-greedy MMQ choice and update.
+
+One function, :func:`run_chunk`, advances a whole training run by a chunk of steps. All state
+(Q-table, cached maxima, history ring, delay ring, clocks) lives in arrays owned by the caller,
+so a run proceeds chunk by chunk, with callbacks and the progress bar between chunks.
+
+The update rule is the one of :mod:`delayed_rl.agents.mmq` (DESIGN.md, "Multiple Model
+Q-learning, exactly"); the exactness tests drive both on scripted transitions.
+"""
+
+# ruff: noqa: NPY002  (numba compiles only the legacy np.random API, one generator per thread)
+from __future__ import annotations
+
+import numpy as np
+
+try:
+    import numba
+
+    HAVE_NUMBA = True
+    _jit = numba.njit(cache=True, nogil=True)
+except ImportError:  # pragma: no cover - exercised where numba is absent
+    HAVE_NUMBA = False
+
+    def _jit(function):
+        return function
+
+
+# Episode-end modes of the reward buffer, as integers for the compiled code.
+FLUSH, DROP, CARRY = 0, 1, 2
+
+
+@_jit
+def seed_kernel(seed):
+    """Seed the compiled code's own random generator (numba keeps one per thread)."""
+    np.random.seed(seed)
+
+
+@_jit
+def _argmax_random_ties(values):
+    best = values[0]
+    index = 0
+    ties = 1
+    for i in range(1, values.shape[0]):
+        v = values[i]
+        if v > best:
+            best = v
+            index = i
+            ties = 1
+        elif v == best:
+            ties += 1
+            if np.random.random() * ties < 1.0:
+                index = i
+    return index
+
+
+@_jit
+def _repair_max(q, s, qmax, qarg_l, qarg_a):
+    """Recompute state ``s``'s cached max over (model, action)."""
+    best = q[s, 0, 0]
+    bl = 0
+    ba = 0
+    for m in range(q.shape[1]):
+        for a in range(q.shape[2]):
+            if q[s, m, a] > best:
+                best = q[s, m, a]
+                bl = m
+                ba = a
+    qmax[s] = best
+    qarg_l[s] = bl
+    qarg_a[s] = ba
+
+
+@_jit
+def apply_update(
+    q, lags, reward, alpha, gamma, hist_s, hist_a, hist_s2, hist_term, hist_count,
+    qmax, qarg_l, qarg_a, targets,
+):  # fmt: skip
+    """One MMQ learning step from the received ``reward`` (targets first, then the writes).
+
+    ``hist_*`` is the episode's history ring (power-of-two length), ``hist_count`` the number of
+    transitions in this episode so far, the newest at index ``hist_count - 1``.
+    """
+    mask = hist_s.shape[0] - 1
+    n_models = lags.shape[0]
+    for m in range(n_models):
+        lag = lags[m]
+        if lag < hist_count:
+            pos = (hist_count - 1 - lag) & mask
+            bootstrap = 0.0 if hist_term[pos] else gamma * qmax[hist_s2[pos]]
+            targets[m] = reward + bootstrap
+    for m in range(n_models):
+        lag = lags[m]
+        if lag < hist_count:
+            pos = (hist_count - 1 - lag) & mask
+            s = hist_s[pos]
+            a = hist_a[pos]
+            old = q[s, m, a]
+            new = old + alpha * (targets[m] - old)
+            q[s, m, a] = new
+            if new > qmax[s]:
+                qmax[s] = new
+                qarg_l[s] = m
+                qarg_a[s] = a
+            elif new < old and qarg_l[s] == m and qarg_a[s] == a:
+                _repair_max(q, s, qmax, qarg_l, qarg_a)
+
+
+@_jit
+def run_chunk(
+    q, lags, qmax, qarg_l, qarg_a,
+    out_cdf, out_next, out_reward, out_term, init_cdf, max_steps,
+    delays, buffer, episode_end_mode,
+    alpha, gamma, eps_initial, eps_final, eps_steps, start_step,
+    hist_s, hist_a, hist_s2, hist_term, state,
+    rec_undelayed, rec_delivered, rec_obs, rec_action, rec_model, rec_episode_end,
+):  # fmt: skip
+    """Advance training by ``delays.shape[0]`` steps.
+
+    ``state`` is an int64 array ``[s, hist_count, episode_steps, clock]`` carried between chunks.
+    ``out_*`` are the env's outcome tables of shape (S, A, K): cumulative probabilities, next
+    states, rewards, termination flags. ``init_cdf`` is the cumulative initial-state distribution.
+    ``buffer`` is the reward-delay ring (power-of-two length above every delay in ``delays``).
+    The ``rec_*`` arrays receive one entry per step.
+    """
+    n_models = lags.shape[0]
+    n_actions = q.shape[2]
+    hmask = hist_s.shape[0] - 1
+    bmask = buffer.shape[0] - 1
+    targets = np.zeros(n_models)
+    model_values = np.empty(n_models)
+    s = state[0]
+    hist_count = state[1]
+    episode_steps = state[2]
+    clock = state[3]
+    for t in range(delays.shape[0]):
+        step = start_step + t
+        if step >= eps_steps:
+            eps = eps_final
+        else:
+            eps = eps_initial + (eps_final - eps_initial) * (step / eps_steps)
+        # choose the acting model, then the action (two ε-greedy levels, random tie-breaks)
+        if n_models == 1:
+            m = 0
+        elif np.random.random() < eps:
+            m = np.random.randint(n_models)
+        else:
+            for j in range(n_models):
+                best = q[s, j, 0]
+                for a in range(1, n_actions):
+                    if q[s, j, a] > best:
+                        best = q[s, j, a]
+                model_values[j] = best
+            m = _argmax_random_ties(model_values)
+        if np.random.random() < eps:
+            action = np.random.randint(n_actions)
+        else:
+            action = _argmax_random_ties(q[s, m])
+        # the env
+        u = np.random.random()
+        k = 0
+        while k < out_cdf.shape[2] - 1 and out_cdf[s, action, k] <= u:
+            k += 1
+        s2 = out_next[s, action, k]
+        reward = out_reward[s, action, k]
+        terminated = out_term[s, action, k]
+        episode_steps += 1
+        ended = terminated or (max_steps > 0 and episode_steps >= max_steps)
+        # the reward delay
+        buffer[(clock + delays[t]) & bmask] += reward
+        delivered = buffer[clock & bmask]
+        buffer[clock & bmask] = 0.0
+        clock += 1
+        if ended and episode_end_mode != CARRY:
+            total = 0.0
+            for i in range(buffer.shape[0]):
+                total += buffer[i]
+                buffer[i] = 0.0
+            if episode_end_mode == FLUSH:
+                delivered += total
+        # record, remember, learn
+        rec_undelayed[t] = reward
+        rec_delivered[t] = delivered
+        rec_obs[t] = s
+        rec_action[t] = action
+        rec_model[t] = m
+        rec_episode_end[t] = ended
+        pos = hist_count & hmask
+        hist_s[pos] = s
+        hist_a[pos] = action
+        hist_s2[pos] = s2
+        hist_term[pos] = terminated
+        hist_count += 1
+        apply_update(
+            q, lags, delivered, alpha, gamma, hist_s, hist_a, hist_s2, hist_term, hist_count,
+            qmax, qarg_l, qarg_a, targets,
+        )  # fmt: skip
+        if ended:
+            u = np.random.random()
+            s = 0
+            while s < init_cdf.shape[0] - 1 and init_cdf[s] <= u:
+                s += 1
+            hist_count = 0
+            episode_steps = 0
+        else:
+            s = s2
+    state[0] = s
+    state[1] = hist_count
+    state[2] = episode_steps
+    state[3] = clock

@@ -1,0 +1,94 @@
+"""Read a tabular env's dynamics, and its reward delay, so the loop can run compiled.
+
+The protocol an env follows to be compiled (Gymnasium's toy-text envs already do):
+
+- ``env.P[s][a]`` is a list of ``(probability, next_state, reward, terminated)`` outcomes for every
+  state ``s`` of a ``Discrete`` observation space and action ``a`` of a ``Discrete`` action space;
+- ``env.initial_state_distrib``: the probabilities of the reset state;
+- ``env.max_steps`` (optional): the env truncates its own episodes after that many steps.
+
+The dynamics must be fully described by these tables (no hidden state). The stack above the env
+may hold Gymnasium's bookkeeping wrappers (``OrderEnforcing``, ``PassiveEnvChecker``) and at most
+one :class:`~delayed_rl.wrappers.RewardDelay`, with any delay distribution; anything else (a
+``TimeLimit``, a reward or observation wrapper) changes what the agent sees, and the stack runs
+on the Python path instead.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import gymnasium as gym
+import numpy as np
+
+from delayed_rl.wrappers.reward_delay import RewardDelay
+
+TRANSPARENT_WRAPPERS = (gym.wrappers.OrderEnforcing, gym.wrappers.PassiveEnvChecker)
+
+
+class NotCompilable(Exception):
+    """The env stack cannot run on the compiled path; the message says why."""
+
+
+@dataclass
+class TabularModel:
+    """An env's dynamics as arrays of shape (S, A, K) over its K outcomes per (state, action)."""
+
+    out_cdf: np.ndarray
+    out_next: np.ndarray
+    out_reward: np.ndarray
+    out_term: np.ndarray
+    init_cdf: np.ndarray
+    max_steps: int
+
+    @classmethod
+    def from_env(cls, env: gym.Env) -> TabularModel:
+        """Read the tables of ``env`` (an unwrapped env following the protocol above)."""
+        table = getattr(env, "P", None)
+        if not isinstance(table, dict):
+            raise NotCompilable(f"{type(env).__name__} has no toy-text table P[s][a]")
+        if not isinstance(env.observation_space, gym.spaces.Discrete) or not isinstance(
+            env.action_space, gym.spaces.Discrete
+        ):
+            raise NotCompilable("the observation and action spaces must be Discrete")
+        init = getattr(env, "initial_state_distrib", None)
+        if init is None:
+            raise NotCompilable(f"{type(env).__name__} has no initial_state_distrib")
+        n_states, n_actions = int(env.observation_space.n), int(env.action_space.n)
+        if any(s not in table or len(table[s]) != n_actions for s in range(n_states)):
+            raise NotCompilable("P must list every action of every state")
+        k = max(len(table[s][a]) for s in range(n_states) for a in range(n_actions))
+        prob = np.zeros((n_states, n_actions, k))
+        out_next = np.zeros((n_states, n_actions, k), dtype=np.int64)
+        out_reward = np.zeros((n_states, n_actions, k))
+        out_term = np.zeros((n_states, n_actions, k), dtype=np.bool_)
+        for s in range(n_states):
+            for a in range(n_actions):
+                for i, (p, s2, r, term) in enumerate(table[s][a]):
+                    prob[s, a, i], out_next[s, a, i] = p, s2
+                    out_reward[s, a, i], out_term[s, a, i] = r, term
+        cdf = np.cumsum(prob, axis=2)
+        cdf[:, :, -1] = 1.0 + 1e-12  # every uniform draw falls inside the last outcome
+        init_cdf = np.cumsum(np.asarray(init, dtype=float))
+        init_cdf[-1] = 1.0 + 1e-12
+        max_steps = getattr(env, "max_steps", None) or 0
+        return cls(cdf, out_next, out_reward, out_term, init_cdf, int(max_steps))
+
+
+def inspect_stack(env: gym.Env) -> tuple[TabularModel, RewardDelay | None]:
+    """Split ``env`` into its compiled model and its reward-delay wrapper (or ``None``).
+
+    Raises:
+        NotCompilable: if a wrapper or the env itself is outside the protocol.
+    """
+    delay_wrapper = None
+    layer = env
+    while isinstance(layer, gym.Wrapper):
+        if isinstance(layer, RewardDelay):
+            if delay_wrapper is not None:
+                raise NotCompilable("more than one RewardDelay wrapper")
+            delay_wrapper = layer
+        elif not isinstance(layer, TRANSPARENT_WRAPPERS):
+            raise NotCompilable(f"wrapper {type(layer).__name__} is not supported")
+        layer = layer.env
+    return TabularModel.from_env(layer), delay_wrapper
