@@ -1,0 +1,254 @@
+"""Delay distributions: interface, validation and goodness of fit of the sampled delays.
+
+Statistical tests use fixed seeds and a significance level of ``ALPHA = 1e-3``: a correct sampler
+fails a given check with probability 1e-3, and since the seeds are fixed the outcome is
+deterministic. Chi-square bins are merged until every expected count is at least 5 (the usual
+validity condition); means are checked to within 4 standard errors.
+"""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from scipy import stats
+
+from delayed_rl.delays import Constant, Delay, Empirical, Geometric, Poisson, Uniform, as_delay
+from delayed_rl.wrappers import PoissonRewardDelay, RewardDelay
+
+ALPHA = 1e-3
+N_DRAWS = 20_000
+N_SE = 4.0
+
+
+def binned_chisquare(draws: np.ndarray, pmf) -> float:
+    """p-value of a chi-square goodness-of-fit test of integer ``draws`` against ``pmf``.
+
+    Bins are consecutive integers merged left to right until each expected count is >= 5; all
+    probability mass beyond the largest draw goes to the last bin, so the bins cover the support.
+    """
+    draws = np.asarray(draws, dtype=np.int64)
+    assert draws.min() >= 0
+    n = draws.size
+    kmax = int(draws.max())
+    probs = np.asarray(pmf(np.arange(kmax + 1)), dtype=float)
+    probs[-1] += max(0.0, 1.0 - probs.sum())  # the tail P(d > kmax)
+    observed = np.bincount(draws, minlength=kmax + 1).astype(float)
+    obs_bins, exp_bins = [], []
+    acc_o = acc_e = 0.0
+    for o, p in zip(observed, probs, strict=True):
+        acc_o += o
+        acc_e += n * p
+        if acc_e >= 5.0:
+            obs_bins.append(acc_o)
+            exp_bins.append(acc_e)
+            acc_o = acc_e = 0.0
+    if acc_e > 0.0 or acc_o > 0.0:
+        obs_bins[-1] += acc_o
+        exp_bins[-1] += acc_e
+    assert len(obs_bins) >= 2, "too few bins for a chi-square test"
+    exp_arr = np.asarray(exp_bins)
+    exp_arr *= n / exp_arr.sum()
+    return float(stats.chisquare(np.asarray(obs_bins), exp_arr).pvalue)
+
+
+def assert_mean_close(draws: np.ndarray, mean: float, var: float) -> None:
+    se = math.sqrt(var / draws.size) if var > 0 else 0.0
+    assert abs(draws.mean() - mean) <= N_SE * se + 1e-12, (draws.mean(), mean, se)
+
+
+# (distribution, scipy frozen distribution on {0, 1, ...} or None, variance)
+LAMS = [0.5, 5, 13.7, 90, 150]
+CASES = [(Poisson(lam), stats.poisson(lam)) for lam in LAMS] + [
+    (Geometric(0.3), stats.geom(0.3, loc=-1)),
+    (Geometric(0.05), stats.geom(0.05, loc=-1)),
+    (Uniform(2, 9), stats.randint(2, 10)),
+    (Empirical([0.1, 0.0, 0.45, 0.25, 0.2]), None),
+]
+
+
+@pytest.mark.parametrize(("dist", "ref"), CASES, ids=[repr(c[0]) for c in CASES])
+def test_sample_goodness_of_fit(dist: Delay, ref) -> None:
+    draws = dist.sample(np.random.default_rng(20240601), N_DRAWS)
+    assert draws.dtype == np.int64 and draws.shape == (N_DRAWS,)
+    assert draws.min() >= 0
+    if dist.support_max is not None:
+        assert draws.max() <= dist.support_max
+    if draws.max() > 0:
+        assert binned_chisquare(draws, dist.pmf) > ALPHA
+    var = (
+        ref.var()
+        if ref is not None
+        else float(dist.pmf(np.arange(5)) @ (np.arange(5) - dist.mean) ** 2)
+    )
+    assert_mean_close(draws, dist.mean, var)
+
+
+@pytest.mark.parametrize(("dist", "ref"), [c for c in CASES if c[1] is not None])
+def test_pmf_and_mean_match_scipy(dist: Delay, ref) -> None:
+    ks = np.arange(0, int(ref.ppf(1 - 1e-12)) + 2)
+    np.testing.assert_allclose(dist.pmf(ks), ref.pmf(ks), rtol=1e-9, atol=1e-300)
+    assert dist.pmf(np.array([-1, -5])).tolist() == [0.0, 0.0]
+    assert isinstance(dist.pmf(1), float)
+    assert dist.mean == pytest.approx(ref.mean(), rel=1e-12)
+    assert float(dist.pmf(ks).sum()) == pytest.approx(1.0, abs=1e-9)
+
+
+def test_chisquare_rejects_a_wrong_distribution() -> None:
+    """The test machinery has power: Poisson(5.5) draws are rejected as Poisson(5)."""
+    draws = Poisson(5.5).sample(np.random.default_rng(1), N_DRAWS)
+    assert binned_chisquare(draws, Poisson(5).pmf) < ALPHA
+
+
+def test_empirical_pmf_mean_support() -> None:
+    dist = Empirical([0.1, 0.0, 0.45, 0.25, 0.2, 0.0])
+    assert dist.pmf(np.arange(-1, 8)).tolist() == [0.0, 0.1, 0.0, 0.45, 0.25, 0.2, 0.0, 0.0, 0.0]
+    assert dist.mean == pytest.approx(0.9 + 0.75 + 0.8)
+    assert dist.support_max == 4  # trailing zeros do not count
+    draws = dist.sample(np.random.default_rng(3), 5000)
+    assert set(np.unique(draws).tolist()) == {0, 2, 3, 4}
+
+
+def test_constant_and_degenerate_supports() -> None:
+    c = Constant(7)
+    assert c.sample(np.random.default_rng(0), 10).tolist() == [7] * 10
+    assert c.sample(np.random.default_rng(0)) == 7 and isinstance(
+        c.sample(np.random.default_rng(0)), int
+    )
+    assert c.pmf(np.array([6, 7, 8])).tolist() == [0.0, 1.0, 0.0]
+    assert (c.mean, c.support_max) == (7.0, 7)
+    zero = Poisson(0)
+    assert zero.sample(np.random.default_rng(0), 100).tolist() == [0] * 100
+    assert zero.pmf(np.array([0, 1])).tolist() == [1.0, 0.0]
+    assert zero.support_max is None and Poisson(3).support_max is None
+    assert Geometric(1.0).support_max == 0 and Geometric(0.5).support_max is None
+    assert Geometric(1.0).sample(np.random.default_rng(0), 50).tolist() == [0] * 50
+    assert Uniform(3, 6).support_max == 6 and Uniform(3, 6).mean == 4.5
+    assert Uniform(4, 4).sample(np.random.default_rng(0), 20).tolist() == [4] * 20
+
+
+@pytest.mark.parametrize(
+    "dist", [Poisson(2.5), Constant(2), Geometric(0.4), Uniform(1, 4), Empirical([0.5, 0.5])]
+)
+def test_sample_shapes_and_seed_reproducibility(dist: Delay) -> None:
+    one = dist.sample(np.random.default_rng(5))
+    assert isinstance(one, int)
+    block = dist.sample(np.random.default_rng(5), (7, 3))
+    assert block.shape == (7, 3) and block.dtype == np.int64
+    a = dist.sample(np.random.default_rng(11), 200)
+    b = dist.sample(np.random.default_rng(11), 200)
+    np.testing.assert_array_equal(a, b)
+
+
+def test_equality_and_hash() -> None:
+    assert Poisson(5) == Poisson(5.0) and hash(Poisson(5)) == hash(Poisson(5.0))
+    assert Poisson(5) != Poisson(6) and Poisson(1) != Constant(1)
+    assert Empirical([0.5, 0.5]) == Empirical(np.array([0.5, 0.5]))
+
+
+def test_as_delay() -> None:
+    d = Geometric(0.2)
+    assert as_delay(d) is d
+    assert as_delay(3.5) == Poisson(3.5)
+    assert as_delay(np.float64(2.0)) == Poisson(2.0)
+    with pytest.raises(TypeError, match="delay"):
+        as_delay("5")
+    with pytest.raises(TypeError, match="delay"):
+        as_delay(True)
+    with pytest.raises(TypeError, match="my_name"):
+        as_delay(None, name="my_name")
+
+
+@pytest.mark.parametrize(
+    ("factory", "exc", "name"),
+    [
+        (lambda: Poisson(-1), ValueError, "lam"),
+        (lambda: Poisson(-1e-9), ValueError, "lam"),
+        (lambda: Poisson(float("nan")), ValueError, "lam"),
+        (lambda: Poisson(float("inf")), ValueError, "lam"),
+        (lambda: Poisson(True), TypeError, "lam"),
+        (lambda: Poisson("5"), TypeError, "lam"),
+        (lambda: Poisson(None), TypeError, "lam"),
+        (lambda: Constant(-1), ValueError, "k"),
+        (lambda: Constant(1.5), TypeError, "k"),
+        (lambda: Constant(2.0), TypeError, "k"),
+        (lambda: Constant(True), TypeError, "k"),
+        (lambda: Geometric(0), ValueError, r"\bp\b"),
+        (lambda: Geometric(1.5), ValueError, r"\bp\b"),
+        (lambda: Geometric(-0.1), ValueError, r"\bp\b"),
+        (lambda: Geometric(float("nan")), ValueError, r"\bp\b"),
+        (lambda: Geometric("0.5"), TypeError, r"\bp\b"),
+        (lambda: Uniform(5, 2), ValueError, "high"),
+        (lambda: Uniform(-1, 2), ValueError, "low"),
+        (lambda: Uniform(0.5, 2), TypeError, "low"),
+        (lambda: Uniform(0, 2.5), TypeError, "high"),
+        (lambda: Empirical([0.5, 0.4]), ValueError, "sum to 1"),
+        (lambda: Empirical([0.6, 0.6]), ValueError, "sum to 1"),
+        (lambda: Empirical([-0.1, 1.1]), ValueError, "pmf"),
+        (lambda: Empirical([float("nan"), 1.0]), ValueError, "pmf"),
+        (lambda: Empirical([]), ValueError, "pmf"),
+        (lambda: Empirical([[0.5, 0.5]]), ValueError, "pmf"),
+    ],
+)
+def test_invalid_arguments_raise_naming_them(factory, exc, name) -> None:
+    with pytest.raises(exc, match=name):
+        factory()
+
+
+# --- the delays the reward wrapper actually applies (the info["reward_delay"] stream) ---------
+
+
+class NeverEndingEnv(gym.Env):
+    """Reward 1 every step, never ends: the cheapest env to drive a delay wrapper."""
+
+    observation_space = gym.spaces.Discrete(1)
+    action_space = gym.spaces.Discrete(1)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        return 0, {}
+
+    def step(self, action):
+        return 0, 1.0, False, False, {}
+
+
+def delay_stream(env: gym.Env, n: int, seed: int) -> np.ndarray:
+    env.reset(seed=seed)
+    return np.array([env.step(0)[4]["reward_delay"] for _ in range(n)])
+
+
+@pytest.mark.parametrize("lam", LAMS)
+def test_wrapper_delay_stream_is_poisson(lam: float) -> None:
+    draws = delay_stream(PoissonRewardDelay(NeverEndingEnv(), lam), N_DRAWS, seed=7)
+    assert binned_chisquare(draws, Poisson(lam).pmf) > ALPHA
+    assert_mean_close(draws, lam, lam)
+
+
+@pytest.mark.parametrize(
+    "dist", [Geometric(0.25), Uniform(3, 12), Empirical([0.2, 0.1, 0.0, 0.3, 0.4])], ids=repr
+)
+def test_wrapper_delay_stream_other_distributions(dist: Delay) -> None:
+    draws = delay_stream(RewardDelay(NeverEndingEnv(), dist), N_DRAWS, seed=8)
+    assert binned_chisquare(draws, dist.pmf) > ALPHA
+
+
+@pytest.mark.parametrize(("lam", "clip"), [(13.7, 10), (5, 0), (90, 80)])
+def test_max_delay_puts_the_tail_mass_at_the_clip(lam: float, clip: int) -> None:
+    draws = delay_stream(PoissonRewardDelay(NeverEndingEnv(), lam, max_delay=clip), N_DRAWS, seed=9)
+    assert draws.max() <= clip
+    ref = stats.poisson(lam)
+
+    def clipped_pmf(k):
+        k = np.asarray(k)
+        return np.where(k < clip, ref.pmf(k), np.where(k == clip, ref.sf(clip - 1), 0.0))
+
+    if clip == 0:
+        assert draws.tolist() == [0] * N_DRAWS
+        return
+    assert binned_chisquare(draws, clipped_pmf) > ALPHA
+    # the clip cell alone: binomial count within N_SE standard errors
+    p_clip = ref.sf(clip - 1)
+    count = int((draws == clip).sum())
+    assert abs(count - N_DRAWS * p_clip) <= N_SE * math.sqrt(N_DRAWS * p_clip * (1 - p_clip))
