@@ -1,0 +1,25 @@
+"""The thesis experiments, one module each, on the shared runner (:mod:`.runner`)."""
+
+from __future__ import annotations
+
+import importlib
+
+from delayed_rl.experiments.runner import Config, Experiment, Summary, run_experiment
+
+_MODULES = {
+    "delay-sweep": "delay_sweep",
+    "world-size": "world_size",
+    "estimate-error": "estimate_error",
+    "mmq-gridworld": "mmq_gridworld",
+}
+NAMES = tuple(_MODULES)
+
+
+def get_experiment(name: str) -> Experiment:
+    """The experiment called ``name`` (one of :data:`NAMES`)."""
+    if name not in _MODULES:
+        raise ValueError(f"unknown experiment {name!r}; choose one of {', '.join(NAMES)}")
+    return importlib.import_module(f"delayed_rl.experiments.{_MODULES[name]}").EXPERIMENT
+
+
+__all__ = ["NAMES", "Config", "Experiment", "Summary", "get_experiment", "run_experiment"]

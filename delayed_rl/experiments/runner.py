@@ -1,0 +1,233 @@
+"""The shared experiment runner: seeds in parallel, curves, summaries, figures and a report.
+
+An experiment module defines an :class:`Experiment`: its name, the thesis figure it reproduces,
+``tasks(config)`` (one picklable task per (condition, seed)), ``run_task(task)`` (a dict of
+results, numbers or numpy arrays) and ``summarize(results, config)`` (the claims checked against
+the thesis, as :class:`Claim` rows, plus figures). :func:`run_experiment` runs the tasks through
+joblib — on its default ``loky`` process pool, or handed to Ray or Dask — and writes
+``curves.csv``, ``summary.json``, the figures and ``report.md`` into the output folder.
+
+Every task carries its own seed, so results do not depend on the number of workers.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+BACKENDS = ("loky", "ray", "dask")
+
+
+@dataclass
+class Config:
+    """How to run an experiment.
+
+    Attributes:
+        seeds: the number of seeds (independent runs per condition).
+        steps: training steps per run (``None``: the experiment's thesis-scale default).
+        quick: a scaled-down version that runs in seconds (fewer steps, seeds and conditions).
+        workers: parallel worker processes (1 runs in this process).
+        backend: ``"loky"`` (joblib's process pool), ``"ray"`` or ``"dask"``.
+        base_seed: the first seed; run ``i`` uses ``base_seed + i``.
+    """
+
+    seeds: int | None = None
+    steps: int | None = None
+    quick: bool = False
+    workers: int = 1
+    backend: str = "loky"
+    base_seed: int = 0
+
+
+@dataclass
+class Claim:
+    """One thesis number beside the measurement: a row of ``report.md``."""
+
+    quantity: str
+    thesis: str
+    mean: float
+    ci95: float
+    n: int
+    verdict: str
+    note: str = ""
+
+
+@dataclass
+class Curve:
+    """A curve of one run: ``values`` at ``steps`` for one condition and seed."""
+
+    condition: str
+    seed: int
+    steps: np.ndarray
+    values: np.ndarray
+    metric: str = "average_reward"
+
+
+@dataclass
+class Summary:
+    """What an experiment's ``summarize`` returns."""
+
+    claims: list[Claim]
+    curves: list[Curve]
+    figures: dict[str, Callable[[Path], None]] = field(default_factory=dict)
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class Experiment:
+    """A thesis experiment (see the module docstring)."""
+
+    name: str
+    thesis: str
+    description: str
+    tasks: Callable[[Config], list[dict]]
+    run_task: Callable[[dict], dict]
+    summarize: Callable[[list[dict], list[dict], Config], Summary]
+    default_seeds: int
+    quick_seeds: int = 2
+
+
+def mean_ci95(values: Sequence[float]) -> tuple[float, float]:
+    """Mean and the half-width of a 95 % Student-t confidence interval (0 for one value)."""
+    values = np.asarray(values, dtype=float)
+    n = values.size
+    if n == 0:
+        return math.nan, math.nan
+    if n == 1:
+        return float(values[0]), 0.0
+    from statistics import NormalDist
+
+    # Student t quantile through a Cornish–Fisher expansion of the normal one (no scipy needed).
+    z = NormalDist().inv_cdf(0.975)
+    df = n - 1
+    t = z + (z**3 + z) / (4 * df) + (5 * z**5 + 16 * z**3 + 3 * z) / (96 * df**2)
+    return float(values.mean()), float(t * values.std(ddof=1) / math.sqrt(n))
+
+
+def running_average(rewards: np.ndarray, points: int = 200) -> tuple[np.ndarray, np.ndarray]:
+    """The average reward from step 1 to step t (the thesis's learning curves), at ``points`` t."""
+    steps = np.unique(np.linspace(1, rewards.size, points).astype(np.int64))
+    cumulative = np.cumsum(rewards)
+    return steps, cumulative[steps - 1] / steps
+
+
+def run_tasks(
+    run_task: Callable[[dict], dict], tasks: list[dict], workers: int, backend: str
+) -> list[dict]:
+    """Run ``tasks`` through joblib with ``workers`` processes on ``backend``; keep their order."""
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
+    if workers == 1 and backend == "loky":
+        return [run_task(task) for task in tasks]
+    import joblib
+
+    if backend == "ray":
+        try:
+            from ray.util.joblib import register_ray
+        except ImportError as error:
+            raise RuntimeError("backend 'ray' needs Ray: pip install 'ray[default]'") from error
+        register_ray()
+    elif backend == "dask":
+        try:
+            from dask.distributed import Client
+        except ImportError as error:
+            raise RuntimeError(
+                "backend 'dask' needs Dask: pip install 'dask[distributed]'"
+            ) from error
+        Client(processes=True, n_workers=workers)
+    with joblib.parallel_config(backend=backend, n_jobs=workers):
+        return list(joblib.Parallel()(joblib.delayed(run_task)(task) for task in tasks))
+
+
+def run_experiment(
+    experiment: Experiment, config: Config, out: Path | str | None = None, progress: bool = True
+) -> Summary:
+    """Run ``experiment`` and, if ``out`` is given, write its files there."""
+    if config.seeds is None:
+        config.seeds = experiment.quick_seeds if config.quick else experiment.default_seeds
+    tasks = experiment.tasks(config)
+    started = time.perf_counter()
+    if progress:
+        print(f"[{experiment.name}] {len(tasks)} runs on {config.workers} worker(s)...", flush=True)
+    results = run_tasks(experiment.run_task, tasks, config.workers, config.backend)
+    summary = experiment.summarize(tasks, results, config)
+    summary.extra["wall_time_s"] = round(time.perf_counter() - started, 2)
+    if out is not None:
+        write_outputs(experiment, config, summary, Path(out))
+    return summary
+
+
+def write_outputs(experiment: Experiment, config: Config, summary: Summary, out: Path) -> None:
+    """Write ``curves.csv``, ``summary.json``, the figures and ``report.md`` into ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    with open(out / "curves.csv", "w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(["experiment", "condition", "seed", "metric", "step", "value"])
+        for curve in summary.curves:
+            for step, value in zip(curve.steps.tolist(), curve.values.tolist(), strict=True):
+                writer.writerow(
+                    [experiment.name, curve.condition, curve.seed, curve.metric, step, value]
+                )
+    payload = {
+        "experiment": experiment.name,
+        "thesis": experiment.thesis,
+        "config": asdict(config),
+        "claims": [asdict(claim) for claim in summary.claims],
+        **summary.extra,
+    }
+    (out / "summary.json").write_text(json.dumps(payload, indent=2, default=_json_default))
+    figures = []
+    for name, draw in summary.figures.items():
+        try:
+            draw(out / f"{name}.png")
+            figures.append(f"{name}.png")
+        except ImportError:
+            figures.append(f"{name}.png (not drawn: install the plot extra, matplotlib)")
+    (out / "report.md").write_text(render_report(experiment, config, summary, figures))
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"cannot write {type(value).__name__} to JSON")
+
+
+def render_report(
+    experiment: Experiment, config: Config, summary: Summary, figures: list[str]
+) -> str:
+    """The Markdown report: thesis value beside measured mean ± 95 % CI, per claim."""
+    lines = [
+        f"# {experiment.name} — {experiment.thesis}",
+        "",
+        experiment.description,
+        "",
+        f"Seeds: {config.seeds} (from {config.base_seed}); steps: "
+        f"{config.steps or 'thesis default'}; quick: {config.quick}; "
+        f"wall time: {summary.extra.get('wall_time_s', '?')} s.",
+        "",
+        "| quantity | thesis value | measured mean ± 95 % CI | seeds | verdict |",
+        "|---|---|---|---|---|",
+    ]
+    for claim in summary.claims:
+        lines.append(
+            f"| {claim.quantity} | {claim.thesis} | {claim.mean:.3f} ± {claim.ci95:.3f} | "
+            f"{claim.n} | {claim.verdict} |"
+        )
+    notes = [f"- {claim.quantity}: {claim.note}" for claim in summary.claims if claim.note]
+    if notes:
+        lines += ["", "Notes:", *notes]
+    if figures:
+        lines += ["", "Figures:", *[f"- {figure}" for figure in figures]]
+    return "\n".join(lines) + "\n"
