@@ -70,12 +70,12 @@ class VectorRewardDelay(gym.vector.VectorWrapper):
 
     def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
         """Reset (all sub-envs, or those in ``options["reset_mask"]``); ``seed`` reseeds delays."""
+        envs = np.ones(self.num_envs, dtype=bool)
+        if options and "reset_mask" in options:  # read first: SyncVectorEnv.reset pops it
+            envs = np.array(options["reset_mask"], dtype=bool)
         obs, info = self.env.reset(seed=seed, options=options)
         if seed is not None:
             self.buffers.seed(seed if isinstance(seed, int) else int(seed[0]))
-        envs = np.ones(self.num_envs, dtype=bool)
-        if options and "reset_mask" in options:
-            envs = np.asarray(options["reset_mask"], dtype=bool)
         cut_short = envs & ~self._episode_over
         if self.on_episode_end != "carry" and cut_short.any():
             _with_mask(info, "dropped_reward", self.buffers.clear(cut_short), cut_short)
