@@ -1,0 +1,248 @@
+"""VectorRewardDelay: per-sub-env semantics under every gymnasium autoreset mode."""
+
+from __future__ import annotations
+
+import math
+from collections import defaultdict
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.vector import AutoresetMode, SyncVectorEnv
+
+from delayed_rl.delays import Constant, Empirical, Poisson
+from delayed_rl.wrappers import EPISODE_END_MODES, VectorRewardDelay
+
+TOL = 1e-9
+MODES = [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP, AutoresetMode.DISABLED]
+
+
+class RandomEndEnv(gym.Env):
+    """Random real rewards, episodes that end at random times (all from ``np_random``)."""
+
+    observation_space = gym.spaces.Discrete(4)
+    action_space = gym.spaces.Discrete(2)
+
+    def __init__(self, p_end: float = 0.1, reward=None):
+        self.p_end, self.reward = p_end, reward
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        return 0, {}
+
+    def step(self, action):
+        reward = float(self.np_random.normal() * 5 + action) if self.reward is None else self.reward
+        u = float(self.np_random.random())
+        terminated = u < self.p_end / 2
+        truncated = not terminated and u < self.p_end
+        return int(self.np_random.integers(4)), reward, terminated, truncated, {}
+
+
+def make_vec(n: int, mode: AutoresetMode, p_end: float = 0.1, reward=None) -> SyncVectorEnv:
+    return SyncVectorEnv(
+        [lambda: RandomEndEnv(p_end, reward) for _ in range(n)], autoreset_mode=mode
+    )
+
+
+class SubEnvReference:
+    """One sub-env's schedule, keyed by that sub-env's own step clock."""
+
+    def __init__(self, on_episode_end: str):
+        self.mode = on_episode_end
+        self.clock = 0
+        self.due: dict[int, float] = defaultdict(float)
+
+    def pending(self) -> float:
+        return math.fsum(self.due.values())
+
+    def step(self, reward: float, delay: int, ended: bool) -> tuple[float, float, float]:
+        self.due[self.clock + delay] += reward
+        delivered = self.due.pop(self.clock, 0.0)
+        self.clock += 1
+        flushed = dropped = 0.0
+        if ended and self.mode != "carry":
+            rest = self.pending()
+            self.due.clear()
+            if self.mode == "flush":
+                flushed = rest
+            else:
+                dropped = rest
+        return delivered + flushed, flushed, dropped
+
+    def clear(self) -> float:
+        lost = self.pending()
+        self.due.clear()
+        return lost
+
+
+def run_vector(autoreset: AutoresetMode, on_episode_end: str, delay, n_envs=3, steps=300, seed=0):
+    env = VectorRewardDelay(make_vec(n_envs, autoreset), delay, on_episode_end=on_episode_end)
+    twin = make_vec(n_envs, autoreset)  # the same sub-envs, undelayed, stepped in lockstep
+    assert env.autoreset_mode == autoreset
+    env.reset(seed=seed)
+    twin.reset(seed=seed)
+    refs = [SubEnvReference(on_episode_end) for _ in range(n_envs)]
+    resetting = np.zeros(n_envs, dtype=bool)  # NEXT_STEP: this step is sub-env i's reset step
+    delivered_sum = np.zeros(n_envs)
+    undelayed_sum = np.zeros(n_envs)
+    dropped_sum = np.zeros(n_envs)
+    ep_delivered = np.zeros(n_envs)
+    ep_undelayed = np.zeros(n_envs)
+    episodes = np.zeros(n_envs, dtype=int)
+    rng = np.random.default_rng(seed)
+    for _ in range(steps):
+        actions = rng.integers(2, size=n_envs)
+        _, rewards, terminated, truncated, info = env.step(actions)
+        _, raw, raw_term, raw_trunc, _ = twin.step(actions)
+        np.testing.assert_array_equal(terminated, raw_term)
+        np.testing.assert_array_equal(truncated, raw_trunc)
+        assert rewards.shape == (n_envs,)
+        ended = terminated | truncated
+        active = ~resetting
+        np.testing.assert_array_equal(info["_undelayed_reward"], active)
+        np.testing.assert_array_equal(info["_reward_delay"], active)
+        for i in range(n_envs):
+            if not active[i]:  # the reset step emits and delivers nothing
+                assert rewards[i] == 0.0 and info["reward_delay"][i] == 0
+                assert info["undelayed_reward"][i] == 0.0
+                assert not ended[i]
+                continue
+            d = int(info["reward_delay"][i])
+            assert d >= 0
+            assert info["undelayed_reward"][i] == raw[i]
+            expected, flushed, dropped = refs[i].step(float(raw[i]), d, bool(ended[i]))
+            assert rewards[i] == pytest.approx(expected, abs=TOL)
+            if ended[i] and on_episode_end == "flush":
+                assert info["_flushed_reward"][i] and info["flushed_reward"][i] == pytest.approx(
+                    flushed, abs=TOL
+                )
+            if ended[i] and on_episode_end == "drop":
+                assert info["_dropped_reward"][i] and info["dropped_reward"][i] == pytest.approx(
+                    dropped, abs=TOL
+                )
+            dropped_sum[i] += dropped
+            undelayed_sum[i] += raw[i]
+            ep_undelayed[i] += raw[i]
+        delivered_sum += rewards
+        ep_delivered += rewards
+        pending = info["pending_reward"]
+        for i in range(n_envs):
+            assert pending[i] == pytest.approx(refs[i].pending(), abs=TOL)
+        # conservation per sub-env at every step
+        np.testing.assert_allclose(delivered_sum + pending + dropped_sum, undelayed_sum, atol=TOL)
+        for i in np.flatnonzero(ended):
+            episodes[i] += 1
+            if on_episode_end == "flush":  # each sub-env's episode return is the undelayed one
+                assert ep_delivered[i] == pytest.approx(ep_undelayed[i], abs=TOL)
+                assert pending[i] == 0.0
+            ep_delivered[i] = ep_undelayed[i] = 0.0
+        if autoreset == AutoresetMode.NEXT_STEP:
+            resetting = ended.copy()
+        elif autoreset == AutoresetMode.DISABLED and ended.any():
+            _, reset_info = env.reset(options={"reset_mask": ended})
+            twin.reset(options={"reset_mask": ended})
+            assert "dropped_reward" not in reset_info  # those episodes had ended properly
+    assert (episodes >= 10).all()
+    return env
+
+
+@pytest.mark.parametrize("autoreset", MODES, ids=[m.name for m in MODES])
+@pytest.mark.parametrize("on_episode_end", EPISODE_END_MODES)
+@pytest.mark.parametrize(
+    "delay",
+    [Poisson(0), Poisson(0.5), Poisson(13.7), Constant(3), Empirical([0.3, 0, 0.7])],
+    ids=repr,
+)
+def test_per_sub_env_conservation(autoreset, on_episode_end, delay) -> None:
+    run_vector(autoreset, on_episode_end, delay)
+
+
+@pytest.mark.parametrize("autoreset", MODES, ids=[m.name for m in MODES])
+def test_large_delays_grow_the_buffers(autoreset) -> None:
+    run_vector(autoreset, "carry", Poisson(90), steps=500)
+
+
+def test_same_seed_same_delays_different_seeds_differ() -> None:
+    def delays(seed):
+        env = VectorRewardDelay(make_vec(2, AutoresetMode.NEXT_STEP), 5)
+        env.reset(seed=seed)
+        return np.array([env.step(np.zeros(2, dtype=int))[4]["reward_delay"] for _ in range(100)])
+
+    np.testing.assert_array_equal(delays(1), delays(1))
+    assert not np.array_equal(delays(1), delays(2))
+    d = delays(1)
+    assert not np.array_equal(d[:, 0], d[:, 1])  # sub-envs draw their own delays
+
+
+def test_disabled_mode_mid_episode_reset_drops_pending() -> None:
+    env = VectorRewardDelay(make_vec(2, AutoresetMode.DISABLED, p_end=0.0, reward=1.0), Constant(5))
+    env.reset(seed=0)
+    for _ in range(3):
+        env.step(np.zeros(2, dtype=int))
+    _, info = env.reset(options={"reset_mask": np.array([True, False])})
+    np.testing.assert_array_equal(info["_dropped_reward"], [True, False])
+    assert info["dropped_reward"][0] == 3.0
+    *_, info = env.step(np.zeros(2, dtype=int))
+    np.testing.assert_array_equal(info["pending_reward"], [1.0, 4.0])
+
+
+def test_disabled_mode_mid_episode_reset_carry_keeps_pending() -> None:
+    env = VectorRewardDelay(
+        make_vec(2, AutoresetMode.DISABLED, p_end=0.0, reward=1.0),
+        Constant(5),
+        on_episode_end="carry",
+    )
+    env.reset(seed=0)
+    for _ in range(3):
+        env.step(np.zeros(2, dtype=int))
+    _, info = env.reset(options={"reset_mask": np.array([True, False])})
+    assert "dropped_reward" not in info
+    *_, info = env.step(np.zeros(2, dtype=int))
+    np.testing.assert_array_equal(info["pending_reward"], [4.0, 4.0])
+
+
+def test_next_step_reset_step_value_by_value() -> None:
+    """Episode of 2 steps, Constant(1): the flush lands on the last step, the reset step is 0."""
+
+    class TwoStep(RandomEndEnv):
+        def reset(self, *, seed=None, options=None):
+            self.t = 0
+            return super().reset(seed=seed)
+
+        def step(self, action):
+            self.t += 1
+            return 0, float(self.t), self.t == 2, False, {}
+
+    env = VectorRewardDelay(
+        SyncVectorEnv([TwoStep], autoreset_mode=AutoresetMode.NEXT_STEP), Constant(1)
+    )
+    env.reset(seed=0)
+    got = [env.step(np.zeros(1, dtype=int)) for _ in range(6)]
+    assert [float(g[1][0]) for g in got] == [0.0, 3.0, 0.0, 0.0, 3.0, 0.0]
+    assert [bool(g[2][0]) for g in got] == [False, True, False, False, True, False]
+    assert float(got[1][4]["flushed_reward"][0]) == 2.0
+
+
+@pytest.mark.parametrize("autoreset", MODES, ids=[m.name for m in MODES])
+@pytest.mark.parametrize("bad", [float("nan"), float("inf")])
+def test_non_finite_reward_raises(autoreset, bad) -> None:
+    env = VectorRewardDelay(make_vec(2, autoreset, reward=bad), 2)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="non-finite"):
+        env.step(np.zeros(2, dtype=int))
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "exc", "name"),
+    [
+        ({"delay": -1}, ValueError, "lam"),
+        ({"delay": float("nan")}, ValueError, "lam"),
+        ({"delay": "x"}, TypeError, "delay"),
+        ({"delay": 1, "max_delay": -2}, ValueError, "max_delay"),
+        ({"delay": 1, "max_delay": 2.0}, TypeError, "max_delay"),
+        ({"delay": 1, "on_episode_end": "later"}, ValueError, "on_episode_end"),
+    ],
+)
+def test_invalid_arguments(kwargs, exc, name) -> None:
+    with pytest.raises(exc, match=name):
+        VectorRewardDelay(make_vec(2, AutoresetMode.NEXT_STEP), **kwargs)
