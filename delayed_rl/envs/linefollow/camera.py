@@ -1,0 +1,151 @@
+"""The e-puck's 1×40 line camera and the line-centroid state (thesis Eq. 5.6).
+
+Geometry (all documented defaults, in metres, robot frame: x forward, y to the robot's left)::
+
+               pixel 1 (left)                pixel 40 (right)
+                  o  o  o  o  ...  o  o  o  o        <- scanline, LOOK_AHEAD ahead
+                  |<------ FIELD_WIDTH ------>|
+                           ^
+                         robot (body centre), heading up
+
+- The scanline is perpendicular to the heading, centred ``LOOK_AHEAD`` = 0.05 m ahead of the body
+  centre (1.3 cm beyond the front of the 3.7 cm-radius body: "just in front of its body").
+- It is ``FIELD_WIDTH`` = 0.064 m wide and split into 40 pixels of 1.6 mm. Pixel i (1-based)
+  samples the floor at lateral offset (20.5 − i)·1.6 mm: **pixel 1 is on the robot's left**,
+  pixel 40 on its right, as in an image row seen from the robot.
+- The line (black tape) is ``LINE_WIDTH`` = 0.010 m wide. A pixel sees the line (1) when its sample
+  point is within 5 mm of the track's centreline. A robot centred on a straight line therefore
+  sees pixels 18–23 (offsets ±0.8, ±2.4, ±4.0 mm), the thesis's own worked example, whose
+  centroid 20.5 gives the state 20.
+
+Centroid: m = round(Σ f(i)·i / Σ f(i)) with ties rounded **down** (half-down: 20.5 → 20,
+19.5 → 19), so every state m covers the centroids (m − ½, m + ½]. That matches the thesis's
+example (pixels 18–23 → 20) and makes the centred robot read exactly ``p_centre`` = 20. (Python's
+``round`` would also give 20 here but rounds other ties unevenly, 21.5 → 22 and 19.5 → 20; MATLAB's
+``round`` and ``np.floor(x + 0.5)`` give 21.) The thesis's Eq. 5.6 prints the divisor as 40, which
+contradicts its own example; the divisor here is Σ f(i), the number of pixels that see the line.
+m = 0 when no pixel sees the line.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from delayed_rl.envs.linefollow.track import CELL_SIZE, Track
+
+__all__ = [
+    "CENTRE_PIXEL",
+    "FIELD_WIDTH",
+    "LINE_WIDTH",
+    "LOOK_AHEAD",
+    "N_PIXELS",
+    "Camera",
+    "line_centroid",
+]
+
+#: Pixels on the scanline.
+N_PIXELS = 40
+#: p_centre of Eq. 5.7: the state of a centred line.
+CENTRE_PIXEL = 20
+#: Distance (m) from the body centre to the scanline.
+LOOK_AHEAD = 0.05
+#: Width (m) of the floor the scanline covers.
+FIELD_WIDTH = 0.064
+#: Width (m) of the line (black tape).
+LINE_WIDTH = 0.010
+
+_INDICES = np.arange(1, N_PIXELS + 1)
+
+
+def line_centroid(pixels: ArrayLike) -> int | NDArray[np.int64]:
+    """The line-centroid state m of thesis Eq. 5.6, rounded half-down; 0 when nothing is seen.
+
+    Args:
+        pixels: ``(..., 40)`` pixel values; nonzero means "sees the line".
+
+    Returns:
+        m in 0..40: an int for one scanline, an int64 array for a batch.
+
+    Example:
+        >>> line_centroid([0] * 17 + [1] * 6 + [0] * 17)  # pixels 18–23 → 20.5 → 20
+        20
+    """
+    seen = np.asarray(pixels) != 0
+    if seen.ndim == 0 or seen.shape[-1] != N_PIXELS:
+        raise ValueError(f"pixels must have {N_PIXELS} values on the last axis, got {seen.shape}")
+    if seen.ndim == 1:  # the env's per-step path: Python integers
+        count = int(np.count_nonzero(seen))
+        return _round_half_down(int(_INDICES @ seen), count) if count else 0
+    count = seen.sum(axis=-1)
+    m = _round_half_down((seen * _INDICES).sum(axis=-1), np.maximum(count, 1))
+    return np.where(count > 0, m, 0).astype(np.int64)
+
+
+def _round_half_down(total: Any, count: Any) -> Any:
+    """total / count rounded to the nearest integer, ties down: ceil((2·total − count) / (2·count)),
+    in exact integer arithmetic (ints or integer arrays)."""
+    return -((count - 2 * total) // (2 * count))
+
+
+class Camera:
+    """A downward-looking scanline of 40 binary pixels (see the module docstring for the layout).
+
+    Args:
+        look_ahead: distance (m) from the body centre to the scanline.
+        field_width: width (m) of floor the scanline covers.
+        line_width: width (m) of the line on the floor.
+    """
+
+    def __init__(
+        self,
+        look_ahead: float = LOOK_AHEAD,
+        field_width: float = FIELD_WIDTH,
+        line_width: float = LINE_WIDTH,
+    ):
+        for name, value in (
+            ("look_ahead", look_ahead),
+            ("field_width", field_width),
+            ("line_width", line_width),
+        ):
+            if not (isinstance(value, int | float) and np.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a finite number > 0 (m), got {value!r}")
+        if field_width / 2 + line_width / 2 > CELL_SIZE:
+            raise ValueError(
+                f"field_width / 2 + line_width / 2 must be <= {CELL_SIZE} m (the track index's "
+                f"reach), got {field_width / 2 + line_width / 2}"
+            )
+        self.look_ahead = float(look_ahead)
+        self.field_width = float(field_width)
+        self.line_width = float(line_width)
+        #: Width (m) of one pixel's footprint.
+        self.pixel_width = self.field_width / N_PIXELS
+        #: Lateral offset (m, positive to the robot's left) of each pixel's sample point.
+        self.offsets = ((N_PIXELS + 1) / 2 - _INDICES) * self.pixel_width
+
+    def _scanline(
+        self, x: float, y: float, heading: float
+    ) -> tuple[NDArray[np.complex128], complex]:
+        """The sample points (complex x + iy) and the scanline's centre."""
+        forward = complex(math.cos(heading), math.sin(heading))
+        centre = complex(x, y) + self.look_ahead * forward
+        return centre + self.offsets * (1j * forward), centre  # 1j·forward points left
+
+    def sample_points(self, x: float, y: float, heading: float) -> NDArray[np.float64]:
+        """World coordinates ``(40, 2)`` of the pixels' sample points for a robot pose."""
+        points = self._scanline(x, y, heading)[0]
+        return np.column_stack([points.real, points.imag])
+
+    def read(self, track: Track, x: float, y: float, heading: float) -> NDArray[np.bool_]:
+        """Which of the 40 pixels see the line, for a robot at (x, y) facing ``heading`` (rad)."""
+        points, centre = self._scanline(x, y, heading)
+        return track.near_line(points, 0.5 * self.line_width, centre)
+
+    def __repr__(self) -> str:
+        return (
+            f"Camera(look_ahead={self.look_ahead}, field_width={self.field_width}, "
+            f"line_width={self.line_width})"
+        )

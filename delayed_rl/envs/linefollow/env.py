@@ -1,0 +1,465 @@
+"""The e-puck line-following environment (thesis section 5.2), without Webots."""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from numpy.typing import ArrayLike, NDArray
+
+from delayed_rl.envs.linefollow.camera import CENTRE_PIXEL, N_PIXELS, Camera, line_centroid
+from delayed_rl.envs.linefollow.robot import EPuckRobot
+from delayed_rl.envs.linefollow.track import TRACK_NAMES, Track, make_track
+
+__all__ = [
+    "CONTROL_PERIOD",
+    "MAX_WHEEL_SPEED",
+    "PHYSICS_SUBSTEPS",
+    "WHEEL_SPEED_ACTIONS",
+    "EPuckLineFollowEnv",
+]
+
+#: Seconds of simulated time per env step.
+CONTROL_PERIOD = 0.064
+#: Physics sub-steps per env step (each CONTROL_PERIOD / PHYSICS_SUBSTEPS = 16 ms long).
+PHYSICS_SUBSTEPS = 4
+#: v_max of Eq. 5.7 and the top wheel speed of every action (steps/s).
+MAX_WHEEL_SPEED = 300
+#: Thesis Table 5.2: (left, right) wheel speeds (steps/s) of discrete actions 0..6 (thesis 1..7).
+WHEEL_SPEED_ACTIONS: tuple[tuple[int, int], ...] = (
+    (0, 300),
+    (100, 300),
+    (200, 300),
+    (300, 300),
+    (300, 200),
+    (300, 100),
+    (300, 0),
+)
+
+_OBSERVATION_MODES = ("centroid", "pixels")
+_ACTION_MODES = ("discrete", "continuous")
+_LOST_LINE_MODES = ("terminate", "recover")
+_RESET_OPTIONS = ("start_progress", "pose")
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, int | np.integer) and not isinstance(value, bool)
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
+
+
+def _check_choice(name: str, value: Any, allowed: tuple[str, ...]) -> None:
+    if not isinstance(value, str):
+        raise TypeError(f"{name} must be one of {allowed}, got {value!r} ({type(value).__name__})")
+    if value not in allowed:
+        raise ValueError(f"{name} must be one of {allowed}, got {value!r}")
+
+
+def _check_number(name: str, value: Any, low: float, high: float, high_open: bool) -> None:
+    if not _is_number(value):
+        raise TypeError(f"{name} must be a number, got {value!r} ({type(value).__name__})")
+    ok = math.isfinite(value) and low <= value and (value < high if high_open else value <= high)
+    if not ok:
+        interval = f"[{low}, {high})" if high_open else f"[{low}, {high}]"
+        raise ValueError(f"{name} must be a finite number in {interval}, got {value!r}")
+
+
+def _check_count(name: str, value: Any, allow_none: bool) -> None:
+    if allow_none and value is None:
+        return
+    allowed = "an int >= 1" + (" or None" if allow_none else "")
+    if not _is_int(value):
+        raise TypeError(f"{name} must be {allowed}, got {value!r} ({type(value).__name__})")
+    if value < 1:
+        raise ValueError(f"{name} must be {allowed}, got {value!r}")
+
+
+class EPuckLineFollowEnv(gym.Env):
+    """An e-puck robot follows a black line with a 1×40 camera (Campbell thesis, section 5.2).
+
+    ## Description
+
+    A simulated e-puck (a 7.4 cm differential-drive robot) drives on a floor with a closed black
+    line. Its only sensor is one row of 40 binary pixels looking at the floor just in front of
+    it. The goal is the thesis's: drive fast while keeping the line centred in the camera. The
+    robot is a pymunk body with the e-puck's constants (wheel radius 0.0205 m, axle 0.053 m,
+    body radius 0.037 m, 0.15 kg) dragged by top-down friction joints
+    (:mod:`~delayed_rl.envs.linefollow.robot`); wheel speeds are in e-puck units (steps/s,
+    1000 steps per wheel turn, so 300 ≈ 0.0386 m/s).
+
+    Each step lasts ``CONTROL_PERIOD`` = 0.064 s of simulated time (4 physics sub-steps of 16 ms,
+    multiples of Webots' usual e-puck ``basicTimeStep``). At full speed the robot then moves
+    2.5 mm and turns at most 2.7° per step: the camera's reading changes by about one pixel per
+    step, so each of the 7 actions leads to distinguishable next states (a learnable tabular
+    task), and a 1700-step run (the thesis's Fig. 5.19) is 109 s, about one lap of the
+    racetrack. (The thesis's real robot stepped every ~200 ms; there one step moves ~5 pixels
+    and a tabular agent sees far coarser dynamics.)
+
+    Camera (:mod:`~delayed_rl.envs.linefollow.camera`): the scanline is 0.05 m ahead of the body
+    centre, 0.064 m wide (1.6 mm per pixel), across the heading; **pixel 1 is on the robot's
+    left**. The line is 0.010 m wide, so a robot centred on a straight line sees pixels 18–23.
+
+    ## Action Space
+
+    ``action_mode="discrete"`` (default): ``Discrete(7)``, the (left, right) wheel speeds of
+    thesis Table 5.2 (action k here is thesis action k + 1):
+
+    | action | left | right | motion |
+    |---|---|---|---|
+    | 0 | 0 | 300 | sharpest left turn |
+    | 1 | 100 | 300 | left |
+    | 2 | 200 | 300 | gentle left |
+    | 3 | 300 | 300 | straight, full speed |
+    | 4 | 300 | 200 | gentle right |
+    | 5 | 300 | 100 | right |
+    | 6 | 300 | 0 | sharpest right turn |
+
+    ``action_mode="continuous"``: ``Box(-1, 1, (2,), float32)``, (left, right) wheel speeds as a
+    fraction of 300, mapped linearly to [−300, 300] steps/s (negative = reverse; out-of-range
+    values are clipped).
+
+    ## Observation Space
+
+    ``observation_mode="centroid"`` (default): ``Discrete(41)``, the line centroid state of
+    Eq. 5.6, m = round(Σ f(i)·i / Σ f(i)) ∈ 1..40, ties rounded down (pixels 18–23 → 20.5 → 20),
+    and 0 when no pixel sees the line.
+
+    ``observation_mode="pixels"``: ``Box(0, 1, (40,), float32)``, the raw pixels (1 = line),
+    pixel 1 first.
+
+    ## Rewards
+
+    Eq. 5.7: −1 when the line is not seen (m = 0), else
+    (v_l + v_r) / (2·300) · (1 − |m − 20| / 20), with the commanded wheel speeds of the step's
+    action and the centroid m of the camera reading at the end of the step (with
+    ``camera_noise``, of the noisy reading the agent observes). At most 1 (full speed, line
+    centred); reversing in continuous mode earns negative rewards.
+
+    ## Starting State
+
+    The robot is at rest on the centreline at a uniformly random point of the track (from the
+    env's generator, so ``reset(seed=...)`` is deterministic), facing along the track's
+    direction. ``reset(options=...)`` may instead give ``{"start_progress": f}`` (the point a
+    fraction f ∈ [0, 1) of the way round the track) or ``{"pose": (x, y, heading)}`` (any pose,
+    metres and radians). With ``track="random"`` and no ``track_seed``, every reset also draws a
+    new random track from the env's generator.
+
+    ## Episode End
+
+    - Termination: the line has been out of sight for ``lost_line_steps`` consecutive steps
+      (default 50 steps = 3.2 s) and ``lost_line="terminate"`` (default). With
+      ``lost_line="recover"`` the robot is instead put back on the nearest centreline point,
+      facing along the track, wheels stopped (as the thesis's experimenters did by hand), and
+      the episode continues; that step's reward is the −1 earned before the recovery, its
+      observation and ``info`` describe the robot after it, and ``info["recovered"]`` is True.
+    - Truncation: after ``max_steps`` steps (default 2000); ``max_steps=None`` never truncates.
+      The env counts its own steps instead of relying on Gymnasium's ``TimeLimit`` because
+      reward-delay wrappers sit directly on the env (``gym.make(..., reward_delay=λ)``) and must
+      see every episode end to flush their pending rewards; a ``TimeLimit`` would sit outside
+      them.
+
+    ## Info
+
+    - ``line_visible`` (bool): whether any pixel sees the line.
+    - ``centroid`` (int): m, 0..40 (also in pixel mode).
+    - ``line_error_px`` (int): m − 20 when the line is visible, 0 when it is not (check
+      ``line_visible``); positive when the line is to the robot's right.
+    - ``lateral_error_m`` (float): signed distance (m) of the body centre from the nearest
+      centreline point, positive when the robot is left of the track (for its direction).
+    - ``lap_progress`` (float): laps driven along the track since the reset (arc length / track
+      length, cumulative, negative when driving backwards).
+    - ``wheel_speeds`` ((float, float)): the commanded (left, right) speeds (steps/s).
+    - ``lost_steps`` (int): consecutive steps without the line so far.
+    - ``recovered`` (bool): the robot was put back on the track this step.
+    - ``pose`` ((float, float, float)): x, y (m) and heading (rad, in (−π, π]).
+
+    ## Arguments
+
+    - ``track``: ``"racetrack"`` (default; long sweeping turns, like thesis Fig. 5.18),
+      ``"oval"``, ``"figure8"``, ``"random"``, a :class:`~delayed_rl.envs.linefollow.track.Track`,
+      or an ``(n, 2)`` closed polyline in metres (last point == first; validated by
+      :meth:`Track.from_polyline`).
+    - ``track_seed``: with ``track="random"``, an int fixes the track; None draws a new one at
+      every reset.
+    - ``observation_mode``: ``"centroid"`` or ``"pixels"``.
+    - ``action_mode``: ``"discrete"`` or ``"continuous"``.
+    - ``max_steps``: steps before truncation (int ≥ 1) or None.
+    - ``lost_line``: ``"terminate"`` or ``"recover"``.
+    - ``lost_line_steps``: consecutive line-less steps before that happens (int ≥ 1).
+    - ``motor_lag``: first-order time constant (s, ≥ 0) of the wheel speeds; 0 = off.
+    - ``wheel_slip``: in [0, 1): each step, each wheel's ground speed is scaled by a factor drawn
+      uniformly from [1 − wheel_slip, 1]; 0 = off.
+    - ``camera_noise``: in [0, 1]: each pixel is flipped with this probability each step;
+      0 = off.
+    - ``render_mode``: None, ``"rgb_array"`` (numpy-drawn track, trail, robot and scanline) or
+      ``"human"`` (a pygame window; needs the ``render`` extra).
+
+    Noise is drawn from the env's ``np_random``, so seeded resets reproduce it.
+
+    ## Registered Configurations
+
+    - ``delayed_rl/EPuckLineFollow-v0``: the defaults above. Pass any argument to
+      ``gym.make``, and ``reward_delay=λ`` to get the env already wrapped in
+      :class:`~delayed_rl.wrappers.PoissonRewardDelay`.
+    """
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": round(1 / CONTROL_PERIOD)}
+
+    def __init__(
+        self,
+        track: str | Track | ArrayLike = "racetrack",
+        *,
+        track_seed: int | None = None,
+        observation_mode: str = "centroid",
+        action_mode: str = "discrete",
+        max_steps: int | None = 2000,
+        lost_line: str = "terminate",
+        lost_line_steps: int = 50,
+        motor_lag: float = 0.0,
+        wheel_slip: float = 0.0,
+        camera_noise: float = 0.0,
+        render_mode: str | None = None,
+    ):
+        _check_choice("observation_mode", observation_mode, _OBSERVATION_MODES)
+        _check_choice("action_mode", action_mode, _ACTION_MODES)
+        _check_count("max_steps", max_steps, allow_none=True)
+        _check_choice("lost_line", lost_line, _LOST_LINE_MODES)
+        _check_count("lost_line_steps", lost_line_steps, allow_none=False)
+        _check_number("motor_lag", motor_lag, 0.0, math.inf, high_open=True)
+        _check_number("wheel_slip", wheel_slip, 0.0, 1.0, high_open=True)
+        _check_number("camera_noise", camera_noise, 0.0, 1.0, high_open=False)
+        if render_mode is not None:
+            _check_choice("render_mode", render_mode, tuple(self.metadata["render_modes"]))
+        if track_seed is not None:
+            if not _is_int(track_seed) or track_seed < 0:
+                raise TypeError(f"track_seed must be an int >= 0 or None, got {track_seed!r}")
+            if not (isinstance(track, str) and track == "random"):
+                raise ValueError(
+                    f"track_seed is only used with track='random', got track={track!r}"
+                )
+        self._random_tracks = isinstance(track, str) and track == "random" and track_seed is None
+        self.track = self._make_track(track, track_seed)
+
+        self.observation_mode = observation_mode
+        self.action_mode = action_mode
+        self.max_steps = max_steps
+        self.lost_line = lost_line
+        self.lost_line_steps = int(lost_line_steps)
+        self.motor_lag = float(motor_lag)
+        self.wheel_slip = float(wheel_slip)
+        self.camera_noise = float(camera_noise)
+        self.render_mode = render_mode
+
+        if observation_mode == "centroid":
+            self.observation_space: spaces.Space = spaces.Discrete(N_PIXELS + 1)
+        else:
+            self.observation_space = spaces.Box(0.0, 1.0, (N_PIXELS,), np.float32)
+        if action_mode == "discrete":
+            self.action_space: spaces.Space = spaces.Discrete(len(WHEEL_SPEED_ACTIONS))
+        else:
+            self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
+
+        self.camera = Camera()
+        self.robot = EPuckRobot(CONTROL_PERIOD / PHYSICS_SUBSTEPS, self.motor_lag)
+        self._renderer: Any = None
+        self._trail: deque[tuple[float, float]] = deque(maxlen=4000)
+        self._pixels = np.zeros(N_PIXELS, dtype=bool)
+        self._s = 0.0
+        self._segment = 0
+        self._lateral = 0.0
+        self._progress = 0.0
+        self._lost = 0
+        self._steps = 0
+
+    @staticmethod
+    def _make_track(track: Any, track_seed: int | None) -> Track:
+        if isinstance(track, Track):
+            return track
+        if isinstance(track, str):
+            if track not in TRACK_NAMES:
+                raise ValueError(
+                    f"track must be one of {TRACK_NAMES}, a Track or an (n, 2) closed polyline, "
+                    f"got {track!r}"
+                )
+            # A random track without track_seed is redrawn at every reset; seed 0 until then.
+            return make_track(track, 0 if track_seed is None else track_seed)
+        try:
+            return Track.from_polyline(track)
+        except (TypeError, ValueError) as exc:
+            raise type(exc)(f"track: {exc}") from exc
+
+    # ------------------------------------------------------------------ gym API
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[Any, dict[str, Any]]:
+        """Start an episode (see the class docstring's "Starting State")."""
+        super().reset(seed=seed)
+        options = {} if options is None else options
+        unknown = set(options) - set(_RESET_OPTIONS)
+        if unknown or len(options) > 1:
+            raise ValueError(
+                f"options may hold one of {_RESET_OPTIONS}, got {sorted(options)}"
+                if not unknown
+                else f"unknown reset options {sorted(unknown)}; allowed: {_RESET_OPTIONS}"
+            )
+        if self._random_tracks:
+            self.track = make_track("random", self.np_random)
+        track = self.track
+        if "pose" in options:
+            pose = np.asarray(options["pose"], dtype=np.float64)
+            if pose.shape != (3,) or not np.all(np.isfinite(pose)):
+                raise ValueError(
+                    f"options['pose'] must be a finite (x, y, heading), got {options['pose']!r}"
+                )
+            x, y, heading = (float(v) for v in pose)
+        else:
+            fraction = options.get("start_progress")
+            if fraction is None:
+                fraction = float(self.np_random.uniform())
+            elif not (_is_number(fraction) and 0.0 <= fraction < 1.0):
+                raise ValueError(
+                    f"options['start_progress'] must be a number in [0, 1), got {fraction!r}"
+                )
+            x, y, heading = track.point_at(fraction * track.length)
+        self.robot.reset(x, y, heading)
+        self._s, _, self._segment = track.locate(x, y)
+        self._progress = 0.0
+        self._lost = 0
+        self._steps = 0
+        self._trail.clear()
+        obs, info = self._obs_info(self._read(x, y, heading), x, y, heading, 0.0, 0.0, False)
+        if self.render_mode == "human":
+            self.render()
+        return obs, info
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        """Drive for one control period with the action's wheel speeds."""
+        v_left, v_right = self._wheel_speeds(action)
+        if self.wheel_slip > 0:
+            slip = self.np_random.uniform(1.0 - self.wheel_slip, 1.0, size=2)
+            self.robot.step(v_left, v_right, PHYSICS_SUBSTEPS, (float(slip[0]), float(slip[1])))
+        else:
+            self.robot.step(v_left, v_right, PHYSICS_SUBSTEPS)
+        self._steps += 1
+        x, y, heading = self.robot.pose
+        m = self._read(x, y, heading)
+        if m:
+            self._lost = 0
+            reward = (
+                (v_left + v_right)
+                / (2 * MAX_WHEEL_SPEED)
+                * (1.0 - abs(m - CENTRE_PIXEL) / CENTRE_PIXEL)
+            )
+        else:
+            self._lost += 1
+            reward = -1.0
+        terminated = recovered = False
+        if self._lost >= self.lost_line_steps:
+            if self.lost_line == "terminate":
+                terminated = True
+            else:
+                x, y, heading = self.track.point_at(self._s)
+                self.robot.reset(x, y, heading)
+                m = self._read(x, y, heading)
+                self._lost = 0 if m else self._lost
+                recovered = True
+        obs, info = self._obs_info(m, x, y, heading, v_left, v_right, recovered)
+        truncated = self.max_steps is not None and self._steps >= self.max_steps
+        if self.render_mode == "human":
+            self.render()
+        return obs, float(reward), terminated, truncated, info
+
+    def _wheel_speeds(self, action: Any) -> tuple[float, float]:
+        if self.action_mode == "discrete":
+            try:
+                index = int(action)
+            except (TypeError, ValueError):
+                index = -1
+            if not (0 <= index < len(WHEEL_SPEED_ACTIONS)) or index != action:
+                raise ValueError(
+                    f"action must be an int in 0..{len(WHEEL_SPEED_ACTIONS) - 1}, got {action!r}"
+                )
+            left, right = WHEEL_SPEED_ACTIONS[index]
+            return float(left), float(right)
+        a = np.asarray(action, dtype=np.float64)
+        if a.shape == (2,):
+            left, right = float(a[0]), float(a[1])
+            if math.isfinite(left) and math.isfinite(right):
+                return (
+                    min(max(left, -1.0), 1.0) * MAX_WHEEL_SPEED,
+                    min(max(right, -1.0), 1.0) * MAX_WHEEL_SPEED,
+                )
+        raise ValueError(f"action must be 2 finite numbers in [-1, 1], got {action!r}")
+
+    def _read(self, x: float, y: float, heading: float) -> int:
+        """Read the camera at a pose and update the track position; returns the centroid m."""
+        track = self.track
+        pixels = self.camera.read(track, x, y, heading)
+        if self.camera_noise > 0:
+            pixels ^= self.np_random.random(N_PIXELS) < self.camera_noise
+        self._pixels = pixels
+        s, self._lateral, self._segment = track.locate(x, y, self._segment)
+        half = 0.5 * track.length
+        self._progress += ((s - self._s + half) % track.length - half) / track.length
+        self._s = s
+        if self.render_mode is not None:
+            self._trail.append((x, y))
+        return line_centroid(pixels)
+
+    def _obs_info(
+        self,
+        m: int,
+        x: float,
+        y: float,
+        heading: float,
+        v_left: float,
+        v_right: float,
+        recovered: bool,
+    ) -> tuple[Any, dict[str, Any]]:
+        if self.observation_mode == "centroid":
+            obs: Any = np.int64(m)
+        else:
+            obs = self._pixels.astype(np.float32)
+        info = {
+            "line_visible": m > 0,
+            "centroid": m,
+            "line_error_px": m - CENTRE_PIXEL if m else 0,
+            "lateral_error_m": self._lateral,
+            "lap_progress": self._progress,
+            "wheel_speeds": (v_left, v_right),
+            "lost_steps": self._lost,
+            "recovered": recovered,
+            "pose": (x, y, math.remainder(heading, 2 * math.pi)),
+        }
+        return obs, info
+
+    # ------------------------------------------------------------------ rendering
+    def render(self) -> NDArray[np.uint8] | None:
+        """Draw the scene: an RGB array (``"rgb_array"``) or a pygame window (``"human"``)."""
+        if self.render_mode is None:
+            gym.logger.warn(
+                "render() called without a render_mode; pass render_mode='rgb_array' or 'human'"
+            )
+            return None
+        from delayed_rl.envs.linefollow.render import Renderer
+
+        if self._renderer is None or self._renderer.track is not self.track:
+            self._renderer = Renderer(self.track, self.camera)
+        frame = self._renderer.draw(self.robot.pose, self._pixels, self._trail)
+        if self.render_mode == "human":
+            self._renderer.show(frame, self.metadata["render_fps"])
+            return None
+        return frame
+
+    def close(self) -> None:
+        """Close the pygame window, if any."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+        super().close()

@@ -1,0 +1,165 @@
+"""A pymunk e-puck: a differential-drive disc on a floor with friction, seen from above.
+
+Top-down friction the pymunk way (its "tank" example): the robot is a dynamic body joined to a
+kinematic *control body* by a :class:`pymunk.PivotJoint` and a :class:`pymunk.GearJoint` whose
+``max_force`` emulate the tyres' grip (linear and angular) and whose ``max_bias = 0`` disable
+position correction, so only velocities are matched. Each physics sub-step the control body's
+velocity and angular velocity are set from the differential-drive kinematics of the current wheel
+speeds and the robot's heading::
+
+    v = (v_l + v_r) / 2 · k,     ω = (v_r − v_l) · k / AXLE_LENGTH,    k = 2π·WHEEL_RADIUS / 1000
+
+with wheel speeds in e-puck units (steps/s, 1000 steps per wheel turn). The joints then drag the
+robot towards that motion within the grip limits (μ = :data:`FRICTION`).
+
+Wheel speeds follow an optional first-order motor lag (time constant ``motor_lag`` s); slip
+factors (from the env's generator) scale each wheel's ground speed. The robot itself draws no
+random numbers, so it is deterministic given its inputs.
+
+Pickling: pymunk's solver caches each joint's last impulse for warm-starting, which a pickled
+space cannot restore. A :class:`EPuckRobot` therefore pickles its plain state (poses,
+velocities, wheel speeds) and rebuilds its space on unpickling; pickling also rebuilds the
+original's space, so both copies continue bit-for-bit identically.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import pymunk
+
+__all__ = [
+    "AXLE_LENGTH",
+    "BODY_RADIUS",
+    "FRICTION",
+    "MASS",
+    "METRES_PER_STEP",
+    "STEPS_PER_REVOLUTION",
+    "WHEEL_RADIUS",
+    "EPuckRobot",
+]
+
+#: e-puck wheel radius (m).
+WHEEL_RADIUS = 0.0205
+#: Distance (m) between the e-puck's wheels.
+AXLE_LENGTH = 0.053
+#: e-puck body radius (m).
+BODY_RADIUS = 0.037
+#: e-puck mass (kg).
+MASS = 0.15
+#: Motor steps per wheel revolution (e-puck stepper motors).
+STEPS_PER_REVOLUTION = 1000
+#: Ground distance (m) per motor step: 300 steps/s ≈ 0.0386 m/s.
+METRES_PER_STEP = 2 * math.pi * WHEEL_RADIUS / STEPS_PER_REVOLUTION
+#: Tyre–floor friction coefficient behind the joints' force limits.
+FRICTION = 0.8
+_GRAVITY = 9.81
+
+
+class EPuckRobot:
+    """The e-puck's body and its pymunk space.
+
+    Args:
+        physics_dt: the physics sub-step (s).
+        motor_lag: first-order time constant (s) of the wheel speeds; 0 = instantaneous.
+    """
+
+    def __init__(self, physics_dt: float = 0.016, motor_lag: float = 0.0):
+        self.physics_dt = float(physics_dt)
+        self.motor_lag = float(motor_lag)
+        #: Fraction of the gap to the commanded speed closed per sub-step.
+        self._lag_gain = 1.0 if motor_lag == 0 else 1.0 - math.exp(-physics_dt / motor_lag)
+        #: Current (lagged) wheel speeds (steps/s).
+        self.wheel_speeds = (0.0, 0.0)
+        self._build({})
+
+    # ------------------------------------------------------------------ space
+    def _build(self, state: dict[str, Any]) -> None:
+        space = pymunk.Space()
+        moment = 0.5 * MASS * BODY_RADIUS**2  # a uniform disc
+        body = pymunk.Body(MASS, moment)
+        control = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+        for b, prefix in ((body, "body"), (control, "control")):
+            b.position = state.get(f"{prefix}_position", (0.0, 0.0))
+            b.angle = state.get(f"{prefix}_angle", 0.0)
+            b.velocity = state.get(f"{prefix}_velocity", (0.0, 0.0))
+            b.angular_velocity = state.get(f"{prefix}_angular_velocity", 0.0)
+        pivot = pymunk.PivotJoint(control, body, (0, 0), (0, 0))
+        pivot.max_bias = 0.0  # match velocities only
+        pivot.max_force = FRICTION * MASS * _GRAVITY  # linear grip
+        gear = pymunk.GearJoint(control, body, 0.0, 1.0)
+        gear.max_bias = 0.0
+        gear.max_force = FRICTION * MASS * _GRAVITY * AXLE_LENGTH / 2  # angular grip (N·m)
+        space.add(body, control, pivot, gear)
+        self.space, self.body, self.control = space, body, control
+
+    def _state(self) -> dict[str, Any]:
+        state: dict[str, Any] = {}
+        for b, prefix in ((self.body, "body"), (self.control, "control")):
+            state[f"{prefix}_position"] = tuple(b.position)
+            state[f"{prefix}_angle"] = b.angle
+            state[f"{prefix}_velocity"] = tuple(b.velocity)
+            state[f"{prefix}_angular_velocity"] = b.angular_velocity
+        return state
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self._state()
+        self._build(state)  # drop the solver's warm-start cache here too (see module docstring)
+        return {
+            "physics": state,
+            "physics_dt": self.physics_dt,
+            "motor_lag": self.motor_lag,
+            "lag_gain": self._lag_gain,
+            "wheel_speeds": self.wheel_speeds,
+        }
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.physics_dt = state["physics_dt"]
+        self.motor_lag = state["motor_lag"]
+        self._lag_gain = state["lag_gain"]
+        self.wheel_speeds = state["wheel_speeds"]
+        self._build(state["physics"])
+
+    # ------------------------------------------------------------------ control
+    def reset(self, x: float, y: float, heading: float) -> None:
+        """Place the robot at rest at (x, y) facing ``heading`` (rad), wheels stopped."""
+        self.wheel_speeds = (0.0, 0.0)
+        self._build({"body_position": (x, y), "body_angle": heading})
+
+    @property
+    def pose(self) -> tuple[float, float, float]:
+        """``(x, y, heading)``: position (m) and heading (rad, unwrapped)."""
+        x, y = self.body.position
+        return x, y, self.body.angle
+
+    def step(
+        self,
+        v_left: float,
+        v_right: float,
+        substeps: int,
+        slip: tuple[float, float] = (1.0, 1.0),
+    ) -> None:
+        """Drive for ``substeps`` physics sub-steps with commanded wheel speeds (steps/s).
+
+        Args:
+            v_left, v_right: commanded wheel speeds (steps/s).
+            substeps: number of physics sub-steps of ``physics_dt``.
+            slip: factors scaling each wheel's ground speed during these sub-steps.
+        """
+        lagged = self.motor_lag > 0
+        wl, wr = self.wheel_speeds if lagged else (v_left, v_right)
+        gain = self._lag_gain
+        sl, sr = slip
+        body, control, space, dt = self.body, self.control, self.space, self.physics_dt
+        for _ in range(substeps):
+            if lagged:
+                wl += (v_left - wl) * gain
+                wr += (v_right - wr) * gain
+            gl, gr = wl * sl * METRES_PER_STEP, wr * sr * METRES_PER_STEP
+            v = 0.5 * (gl + gr)
+            angle = body.angle
+            control.velocity = (v * math.cos(angle), v * math.sin(angle))
+            control.angular_velocity = (gr - gl) / AXLE_LENGTH
+            space.step(dt)
+        self.wheel_speeds = (wl, wr)

@@ -1,0 +1,604 @@
+"""Track geometry for the e-puck line-following task.
+
+A :class:`Track` is a closed centreline (metres, y up), stored as a dense polyline whose
+segments are at most :data:`SAMPLE_SPACING` long, with a uniform spatial grid that answers the
+two questions the env asks every step quickly:
+
+- which of a handful of points (the camera's 40 samples) lie within ``half_width`` of the
+  centreline (:meth:`Track.near_line`), and
+- where is the nearest centreline point to the robot (:meth:`Track.locate`), with an arc-length
+  hint so a figure-eight's crossing does not make the robot jump to the other branch.
+
+Built-in tracks: :func:`make_track` with ``"oval"``, ``"racetrack"`` (long sweeping turns, like
+thesis Fig. 5.18), ``"figure8"`` and ``"random"`` (seeded, smooth, closed, simple). A user's own
+closed polyline goes through :meth:`Track.from_polyline`, which validates it.
+
+Every track must have a minimum turning radius of at least :data:`MIN_TURN_RADIUS` (0.1 m). The
+geometry behind that bound: with the camera's scanline 5 cm ahead and 6.4 cm wide, a robot centred
+and tangent on a circle of radius R still sees the line while R ≥ (0.05² + 0.032²) / (2·0.032)
+≈ 0.055 m, and the proportional controller's tightest turn (wheels 300 and 60) has radius 0.04 m.
+0.1 m leaves a margin for the controller's lag; random tracks use 0.2 m by default.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "MIN_TURN_RADIUS",
+    "SAMPLE_SPACING",
+    "TRACK_NAMES",
+    "Track",
+    "figure8_track",
+    "make_track",
+    "oval_track",
+    "racetrack_track",
+    "random_track",
+]
+
+#: Smallest turning radius (m) any track may have.
+MIN_TURN_RADIUS = 0.1
+#: Longest segment (m) of a track's dense polyline.
+SAMPLE_SPACING = 0.005
+#: Side (m) of the spatial grid's cells. A query returns every segment within this distance of
+#: the query point, which covers the camera's scanline (3.12 cm half-length + 0.5 cm line
+#: half-width from its centre) and one dense segment.
+CELL_SIZE = 0.04
+#: Segments either side of the previous answer that :meth:`Track.locate` searches first
+#: (20 × 5 mm = 10 cm, far more than the robot moves in one step).
+LOCAL_WINDOW = 20
+#: Names accepted by :func:`make_track`.
+TRACK_NAMES = ("oval", "racetrack", "figure8", "random")
+
+FloatArray = NDArray[np.float64]
+
+
+def _as_points(points: ArrayLike, name: str = "points") -> FloatArray:
+    try:
+        arr = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(
+            f"{name} must be an array-like of (x, y) points in metres, got {points!r}"
+        ) from exc
+    if arr.ndim != 2 or arr.shape[1] != 2:
+        raise ValueError(
+            f"{name} must have shape (n, 2) (a polyline of (x, y) points), got shape {arr.shape}"
+        )
+    return arr
+
+
+def turn_radii(points: ArrayLike) -> FloatArray:
+    """Turning radius (m) at every vertex of a closed polyline.
+
+    The radius at vertex i is that of the circle through vertices i−1, i and i+1 (the inverse
+    of the Menger curvature); it equals R exactly for points on a circle of radius R and is
+    ``inf`` where three vertices are collinear.
+
+    Args:
+        points: ``(n, 2)`` vertices of a closed polyline (the closing segment is implied).
+
+    Returns:
+        ``(n,)`` radii.
+    """
+    p = _as_points(points)
+    a = p - np.roll(p, 1, axis=0)
+    b = np.roll(p, -1, axis=0) - p
+    c = np.roll(p, -1, axis=0) - np.roll(p, 1, axis=0)
+    cross = np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])
+    lengths = np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1) * np.linalg.norm(c, axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        radii = lengths / (2.0 * cross)
+    return np.where(cross > 0.0, radii, np.inf)
+
+
+def _segment_crossings(a0: FloatArray, a1: FloatArray, b0: FloatArray, b1: FloatArray) -> Any:
+    """Whether segments a0–a1 and b0–b1 (broadcast arrays of points) properly intersect or touch."""
+
+    def orient(p: FloatArray, q: FloatArray, r: FloatArray) -> FloatArray:
+        return (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (
+            r[..., 0] - p[..., 0]
+        )
+
+    d1 = orient(b0, b1, a0)
+    d2 = orient(b0, b1, a1)
+    d3 = orient(a0, a1, b0)
+    d4 = orient(a0, a1, b1)
+    return (d1 * d2 <= 0.0) & (d3 * d4 <= 0.0)
+
+
+def self_intersections(points: ArrayLike) -> list[tuple[int, int]]:
+    """Pairs of non-adjacent segments of a closed polyline that intersect or touch.
+
+    Segment i joins vertex i to vertex i+1 (mod n). Adjacent segments (sharing a vertex) are not
+    compared.
+
+    Args:
+        points: ``(n, 2)`` vertices of a closed polyline (the closing segment is implied).
+
+    Returns:
+        Sorted ``(i, j)`` pairs with ``i < j``; empty for a simple polygon.
+    """
+    p = _as_points(points)
+    n = len(p)
+    q = np.roll(p, -1, axis=0)
+    lo = np.minimum(p, q)
+    hi = np.maximum(p, q)
+    pairs: list[tuple[int, int]] = []
+    chunk = max(1, 2_000_000 // max(n, 1))
+    idx = np.arange(n)
+    for start in range(0, n, chunk):
+        i = idx[start : start + chunk, None]
+        j = idx[None, :]
+        # Bounding boxes overlap, j > i, and the segments are not neighbours (mod n).
+        cand = (
+            (j > i)
+            & (j != i + 1)
+            & ~((i == 0) & (j == n - 1))
+            & (lo[i, 0] <= hi[j, 0])
+            & (lo[j, 0] <= hi[i, 0])
+            & (lo[i, 1] <= hi[j, 1])
+            & (lo[j, 1] <= hi[i, 1])
+        )
+        ii, jj = np.nonzero(cand)
+        if ii.size == 0:
+            continue
+        ii = ii + start
+        hit = _segment_crossings(p[ii], q[ii], p[jj], q[jj])
+        pairs.extend(zip(ii[hit].tolist(), jj[hit].tolist(), strict=True))
+    return sorted(pairs)
+
+
+def _resample(points: FloatArray, spacing: float) -> FloatArray:
+    """A closed polyline through every vertex of ``points`` with segments at most ``spacing``."""
+    q = np.roll(points, -1, axis=0)
+    lengths = np.linalg.norm(q - points, axis=1)
+    pieces = np.maximum(1, np.ceil(lengths / spacing - 1e-9).astype(np.int64))
+    seg = np.repeat(np.arange(len(points)), pieces)
+    frac = (np.arange(pieces.sum()) - np.repeat(np.cumsum(pieces) - pieces, pieces)) / np.repeat(
+        pieces, pieces
+    )
+    return points[seg] + frac[:, None] * (q[seg] - points[seg])
+
+
+def _uniform_resample(points: FloatArray, spacing: float) -> FloatArray:
+    """Resample a densely evaluated smooth closed curve at (nearly) uniform arc length."""
+    closed = np.vstack([points, points[:1]])
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(closed, axis=0), axis=1))])
+    n = max(3, int(np.ceil(s[-1] / spacing)))
+    targets = np.arange(n) * (s[-1] / n)
+    return np.column_stack(
+        [np.interp(targets, s, closed[:, 0]), np.interp(targets, s, closed[:, 1])]
+    )
+
+
+class Track:
+    """A closed line on the floor: a dense centreline polyline plus a spatial index.
+
+    Build one with :meth:`from_polyline` (validated) or :func:`make_track`. Tracks are immutable
+    and safe to share between envs.
+
+    Attributes:
+        name: a label (``"oval"``, ``"custom"``, ``"random-<seed>"``...).
+        points: ``(n, 2)`` dense centreline vertices (m); the closing segment is implied.
+        length: the centreline's length (m).
+        min_turn_radius: the smallest turning radius (m) of the track as given (before
+            densification).
+        allow_crossings: whether the track may cross itself (the figure-eight).
+    """
+
+    def __init__(
+        self,
+        points: ArrayLike,
+        *,
+        name: str = "custom",
+        min_turn_radius: float | None = None,
+        allow_crossings: bool = False,
+    ):
+        p = _as_points(points)
+        self.name = name
+        self.allow_crossings = allow_crossings
+        self.points = p
+        z = p[:, 0] + 1j * p[:, 1]  # complex coordinates keep the per-step queries short
+        d = np.roll(z, -1) - z
+        seg_len = np.abs(d)
+        self._a = z  # segment i runs from _a[i] to _a[i] + _d[i]
+        self._d = d
+        self._seg_len = seg_len
+        self._inv_len2 = 1.0 / np.maximum(seg_len**2, 1e-300)
+        self._s0 = np.concatenate([[0.0], np.cumsum(seg_len)[:-1]])
+        self.length = float(seg_len.sum())
+        self.min_turn_radius = (
+            float(turn_radii(p).min()) if min_turn_radius is None else float(min_turn_radius)
+        )
+        self.bounds = (p.min(axis=0), p.max(axis=0))
+        self._build_index()
+        for arr in (self.points, self._a, self._d, self._seg_len, self._inv_len2, self._s0):
+            arr.setflags(write=False)
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_polyline(
+        cls,
+        points: ArrayLike,
+        *,
+        name: str = "custom",
+        min_turn_radius: float = MIN_TURN_RADIUS,
+        allow_crossings: bool = False,
+        spacing: float = SAMPLE_SPACING,
+    ) -> Track:
+        """Validate a user's closed polyline and build a track from it.
+
+        The polyline must be closed explicitly: its last point equals its first (within 1 µm).
+        Between consecutive vertices the line is straight; the track is densified so that no
+        segment is longer than ``spacing``, keeping every given vertex.
+
+        Args:
+            points: ``(n + 1, 2)`` vertices in metres, ``points[-1] == points[0]``, n ≥ 3.
+            name: a label for the track.
+            min_turn_radius: the smallest allowed turning radius (m) at any vertex (the radius of
+                the circle through it and its two neighbours).
+            allow_crossings: allow the line to cross itself (as a figure-eight does).
+            spacing: the longest segment (m) of the dense polyline.
+
+        Raises:
+            ValueError: if the polyline is not closed, has fewer than 3 distinct vertices, holds
+                non-finite values or repeated consecutive vertices, crosses itself (unless
+                ``allow_crossings``), or turns more tightly than ``min_turn_radius``.
+        """
+        p = _as_points(points)
+        if not np.all(np.isfinite(p)):
+            bad = np.argwhere(~np.isfinite(p))[0, 0]
+            raise ValueError(f"track polyline must be finite, got point {bad} = {p[bad].tolist()}")
+        if len(p) < 4:
+            raise ValueError(
+                f"track polyline needs at least 3 distinct points plus the closing point "
+                f"(last == first), got {len(p)} points"
+            )
+        if np.linalg.norm(p[-1] - p[0]) > 1e-6:
+            raise ValueError(
+                f"track polyline must be closed: its last point {p[-1].tolist()} must equal its "
+                f"first point {p[0].tolist()} (repeat the first point at the end)"
+            )
+        p = p[:-1]
+        seg = np.linalg.norm(np.roll(p, -1, axis=0) - p, axis=1)
+        if np.any(seg <= 1e-9):
+            bad = int(np.argmax(seg <= 1e-9))
+            raise ValueError(
+                f"track polyline has repeated consecutive points at index {bad}: "
+                f"{p[bad].tolist()}; every segment must have a positive length"
+            )
+        if not (np.isfinite(min_turn_radius) and min_turn_radius >= 0):
+            raise ValueError(f"min_turn_radius must be a finite number >= 0, got {min_turn_radius}")
+        if not (np.isfinite(spacing) and spacing > 0):
+            raise ValueError(f"spacing must be a finite number > 0, got {spacing}")
+        radii = turn_radii(p)
+        worst = int(np.argmin(radii))
+        if radii[worst] < min_turn_radius:
+            raise ValueError(
+                f"track polyline turns too sharply at point {worst} {p[worst].tolist()}: turning "
+                f"radius {radii[worst]:.4g} m < min_turn_radius {min_turn_radius} m (the robot "
+                f"cannot follow it); smooth the corner or pass a smaller min_turn_radius"
+            )
+        if not allow_crossings:
+            crossings = self_intersections(p)
+            if crossings:
+                i, j = crossings[0]
+                raise ValueError(
+                    f"track polyline crosses itself: segment {i} {p[i].tolist()}→"
+                    f"{p[(i + 1) % len(p)].tolist()} meets segment {j} {p[j].tolist()}→"
+                    f"{p[(j + 1) % len(p)].tolist()} ({len(crossings)} crossing(s)); pass "
+                    f"allow_crossings=True for a figure-eight"
+                )
+        return cls(
+            _resample(p, spacing),
+            name=name,
+            min_turn_radius=float(radii[worst]),
+            allow_crossings=allow_crossings,
+        )
+
+    def _build_index(self) -> None:
+        """Spatial grid: each segment is registered (by its midpoint's cell) in that cell's 3×3
+        neighbourhood; per cell, its segments' data are stored contiguously (CSR), so a query is
+        a slice. A window of :data:`LOCAL_WINDOW` segments either side of each segment, stored
+        contiguously too (wrapping round the track), serves hinted :meth:`locate` queries."""
+        n = len(self._a)
+        mid = self._a + 0.5 * self._d
+        self._origin = (mid.real.min() - 2 * CELL_SIZE, mid.imag.min() - 2 * CELL_SIZE)
+        self._nx = int(np.ceil((mid.real.max() + 2 * CELL_SIZE - self._origin[0]) / CELL_SIZE)) + 1
+        self._ny = int(np.ceil((mid.imag.max() + 2 * CELL_SIZE - self._origin[1]) / CELL_SIZE)) + 1
+        cx = np.floor((mid.real - self._origin[0]) / CELL_SIZE).astype(np.int64)
+        cy = np.floor((mid.imag - self._origin[1]) / CELL_SIZE).astype(np.int64)
+        offsets = [(dx, dy) for dx in (-1, 0, 1) for dy in (-1, 0, 1)]
+        keys = np.concatenate([(cx + dx) * self._ny + (cy + dy) for dx, dy in offsets])
+        segs = np.tile(np.arange(n), len(offsets))
+        order = np.argsort(keys, kind="stable")
+        keys, segs = keys[order], segs[order]
+        self._cell_start = np.searchsorted(keys, np.arange(self._nx * self._ny + 1)).tolist()
+        self._cell_segs = segs
+        self._cell_a = self._a[segs]
+        self._cell_d = self._d[segs]
+        self._cell_inv = self._inv_len2[segs]
+        w = np.arange(-LOCAL_WINDOW, n + LOCAL_WINDOW) % n  # padded: window of i = [i, i + 2W]
+        self._pad_a = self._a[w]
+        self._pad_d = self._d[w]
+        self._pad_inv = self._inv_len2[w]
+
+    # ------------------------------------------------------------------ queries
+    def _cell(self, x: float, y: float) -> slice:
+        ix = int((x - self._origin[0]) // CELL_SIZE)
+        iy = int((y - self._origin[1]) // CELL_SIZE)
+        if not (0 <= ix < self._nx and 0 <= iy < self._ny):
+            return slice(0, 0)
+        k = ix * self._ny + iy
+        return slice(self._cell_start[k], self._cell_start[k + 1])
+
+    def candidates(self, x: float, y: float) -> NDArray[np.int64]:
+        """Indices of segments that may lie within :data:`CELL_SIZE` of (x, y).
+
+        Every segment within that distance is included; far from the track the answer is empty.
+        """
+        return self._cell_segs[self._cell(x, y)]
+
+    def near_line(self, points: NDArray[np.complex128], half_width: float, centre: complex) -> Any:
+        """Which ``points`` lie within ``half_width`` of the centreline.
+
+        Args:
+            points: ``(k,)`` query points as complex numbers x + iy, all within
+                ``CELL_SIZE − half_width`` of ``centre``.
+            half_width: half the line's width (m).
+            centre: a point (x + iy) for the spatial-index lookup (the camera's scanline centre).
+
+        Returns:
+            ``(k,)`` booleans.
+        """
+        cell = self._cell(centre.real, centre.imag)
+        if cell.start == cell.stop:
+            return np.zeros(len(points), dtype=bool)
+        w = points[:, None] - self._cell_a[cell]
+        d = self._cell_d[cell]
+        t = (w * d.conjugate()).real * self._cell_inv[cell]
+        np.maximum(t, 0.0, out=t)
+        np.minimum(t, 1.0, out=t)
+        w -= t * d
+        return (np.abs(w) <= half_width).any(axis=1)
+
+    def _nearest(
+        self, z: complex, a: NDArray, d: NDArray, inv: NDArray
+    ) -> tuple[int, float, complex]:
+        w = z - a
+        t = (w * d.conjugate()).real * inv
+        np.maximum(t, 0.0, out=t)
+        np.minimum(t, 1.0, out=t)
+        w -= t * d
+        k = int(np.argmin(w.real * w.real + w.imag * w.imag))
+        return k, float(t[k]), complex(w[k])
+
+    def locate(self, x: float, y: float, hint: int | None = None) -> tuple[float, float, int]:
+        """The nearest centreline point to (x, y).
+
+        Args:
+            x, y: the query point (m).
+            hint: the segment of the previous answer. When given, the nearest point among the
+                :data:`LOCAL_WINDOW` segments either side of it is used if it is inside that
+                window and within :data:`CELL_SIZE` of (x, y), so a robot crossing a
+                figure-eight stays on its own branch; otherwise the global nearest point.
+
+        Returns:
+            ``(s, lateral, segment)``: the arc length (m, in ``[0, length)``) of the nearest
+            point, the signed distance (m) of (x, y) from it (positive to the left of the
+            direction of travel), and its segment (the next call's ``hint``).
+        """
+        z = complex(x, y)
+        n = len(self._a)
+        seg = -1
+        if hint is not None:
+            window = slice(hint, hint + 2 * LOCAL_WINDOW + 1)
+            k, t, e = self._nearest(
+                z, self._pad_a[window], self._pad_d[window], self._pad_inv[window]
+            )
+            if 0 < k < 2 * LOCAL_WINDOW and abs(e) <= CELL_SIZE:
+                seg = (hint + k - LOCAL_WINDOW) % n
+        if seg < 0:
+            cell = self._cell(x, y)
+            if cell.start == cell.stop:
+                k, t, e = self._nearest(z, self._a, self._d, self._inv_len2)
+                seg = k
+            else:
+                k, t, e = self._nearest(
+                    z, self._cell_a[cell], self._cell_d[cell], self._cell_inv[cell]
+                )
+                seg = int(self._cell_segs[cell][k])
+        d = self._d[seg]
+        cross = d.real * e.imag - d.imag * e.real
+        lateral = abs(e) if cross > 0 else -abs(e) if cross < 0 else 0.0
+        s = (float(self._s0[seg]) + t * float(self._seg_len[seg])) % self.length
+        return s, lateral, seg
+
+    def point_at(self, s: float) -> tuple[float, float, float]:
+        """The centreline point at arc length ``s`` (mod length): ``(x, y, heading)``."""
+        s = float(s) % self.length
+        seg = int(np.searchsorted(self._s0, s, side="right") - 1)
+        z = self._a[seg] + (s - self._s0[seg]) / self._seg_len[seg] * self._d[seg]
+        d = self._d[seg]
+        return float(z.real), float(z.imag), float(np.arctan2(d.imag, d.real))
+
+    def clearance(self, exclude_arc: float) -> float:
+        """Smallest distance between two vertices more than ``exclude_arc`` apart along the track.
+
+        A measure of how close distinct parts of the track come to each other (the camera sees
+        only one line while this exceeds its field width).
+        """
+        p = self.points
+        s = self._s0
+        best = np.inf
+        chunk = max(1, 2_000_000 // len(p))
+        for start in range(0, len(p), chunk):
+            d2 = ((p[start : start + chunk, None, :] - p[None, :, :]) ** 2).sum(axis=2)
+            ds = np.abs(s[start : start + chunk, None] - s[None, :])
+            far = np.minimum(ds, self.length - ds) > exclude_arc
+            if far.any():
+                best = min(best, float(d2[far].min()))
+        return float(np.sqrt(best))
+
+    def __repr__(self) -> str:
+        return (
+            f"Track(name={self.name!r}, length={self.length:.3f} m, "
+            f"min_turn_radius={self.min_turn_radius:.3f} m, vertices={len(self.points)})"
+        )
+
+
+# ---------------------------------------------------------------------- built-in tracks
+def _bspline_closed(control: ArrayLike, samples_per_span: int = 2000) -> FloatArray:
+    """A closed uniform cubic B-spline (C² smooth) through-ish the control polygon."""
+    c = np.asarray(control, dtype=np.float64)
+    u = np.arange(samples_per_span) / samples_per_span
+    b0 = (1 - u) ** 3 / 6
+    b1 = (3 * u**3 - 6 * u**2 + 4) / 6
+    b2 = (-3 * u**3 + 3 * u**2 + 3 * u + 1) / 6
+    b3 = u**3 / 6
+    spans = [
+        b0[:, None] * c[j - 1]
+        + b1[:, None] * c[j]
+        + b2[:, None] * c[(j + 1) % len(c)]
+        + b3[:, None] * c[(j + 2) % len(c)]
+        for j in range(len(c))
+    ]
+    return np.vstack(spans)
+
+
+def _smooth_track(curve: FloatArray, name: str, allow_crossings: bool = False) -> Track:
+    dense = _uniform_resample(curve, SAMPLE_SPACING)
+    return Track(dense, name=name, allow_crossings=allow_crossings)
+
+
+@functools.cache
+def oval_track() -> Track:
+    """An ellipse with semi-axes 0.75 m × 0.45 m (length 3.8 m, tightest radius 0.27 m)."""
+    t = np.linspace(0.0, 2 * np.pi, 16384, endpoint=False)
+    return _smooth_track(np.column_stack([0.75 * np.cos(t), 0.45 * np.sin(t)]), "oval")
+
+
+#: Control polygon (m) of the racetrack's B-spline: long straights joined by long sweeping turns,
+#: in the spirit of thesis Fig. 5.18.
+RACETRACK_CONTROL = (
+    (-0.6, -0.55),
+    (0.3, -0.55),
+    (0.85, -0.5),
+    (1.0, -0.1),
+    (0.8, 0.25),
+    (0.35, 0.2),
+    (0.1, 0.35),
+    (0.05, 0.6),
+    (-0.4, 0.65),
+    (-0.85, 0.45),
+    (-1.0, 0.0),
+    (-0.95, -0.4),
+)
+
+
+@functools.cache
+def racetrack_track() -> Track:
+    """A race circuit of long sweeping turns and straights (see :data:`RACETRACK_CONTROL`)."""
+    return _smooth_track(_bspline_closed(RACETRACK_CONTROL), "racetrack")
+
+
+@functools.cache
+def figure8_track() -> Track:
+    """A figure-eight x = sin t, y = 0.4 sin 2t (m): 2 m wide, crossing itself at the origin."""
+    t = np.linspace(0.0, 2 * np.pi, 16384, endpoint=False)
+    curve = np.column_stack([np.sin(t), 0.4 * np.sin(2 * t)])
+    return _smooth_track(curve, "figure8", allow_crossings=True)
+
+
+def random_track(
+    seed: int | np.random.Generator | None = None,
+    *,
+    min_turn_radius: float = 0.2,
+    clearance: float = 0.15,
+    mean_radius: float = 0.8,
+    harmonics: int = 5,
+    max_tries: int = 1000,
+) -> Track:
+    """A seeded random smooth closed track that does not cross itself.
+
+    The centreline is a polar curve r(θ) = R·(1 + Σₖ aₖ cos(kθ + φₖ)), k = 2..``harmonics``, with
+    random amplitudes (decaying as 1/k) and phases; r > 0 makes it simple (no self-intersection)
+    and the finite Fourier series makes it smooth (C^∞). A draw is rejected until its tightest
+    turn is at least ``min_turn_radius`` and distinct parts of the track stay at least
+    ``clearance`` apart (so the camera never sees two lines).
+
+    Args:
+        seed: an int seed, a ``numpy.random.Generator`` (consumed), or None (fresh entropy).
+        min_turn_radius: smallest turning radius (m), at least :data:`MIN_TURN_RADIUS`.
+        clearance: smallest distance (m) between parts of the track more than half a metre
+            apart along it.
+        mean_radius: R, the mean distance (m) from the centre.
+        harmonics: the highest harmonic k.
+        max_tries: draws before giving up.
+
+    Raises:
+        ValueError: for invalid arguments, or if no acceptable track was drawn.
+    """
+    if not (np.isfinite(min_turn_radius) and min_turn_radius >= MIN_TURN_RADIUS):
+        raise ValueError(
+            f"min_turn_radius must be >= MIN_TURN_RADIUS ({MIN_TURN_RADIUS} m), "
+            f"got {min_turn_radius}"
+        )
+    if not (np.isfinite(mean_radius) and mean_radius >= 2 * min_turn_radius):
+        raise ValueError(
+            f"mean_radius must be >= 2 * min_turn_radius ({2 * min_turn_radius} m), "
+            f"got {mean_radius}"
+        )
+    if not (isinstance(harmonics, int | np.integer) and harmonics >= 2):
+        raise ValueError(f"harmonics must be an int >= 2, got {harmonics!r}")
+    name = f"random-{seed}" if isinstance(seed, int | np.integer) else "random"
+    rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+    theta = np.linspace(0.0, 2 * np.pi, 16384, endpoint=False)
+    k = np.arange(2, harmonics + 1)
+    for _ in range(max_tries):
+        amp = rng.uniform(0.0, 0.35, size=k.size) / (k - 1)
+        phase = rng.uniform(0.0, 2 * np.pi, size=k.size)
+        r = mean_radius * (
+            1.0 + (amp[:, None] * np.cos(k[:, None] * theta + phase[:, None])).sum(0)
+        )
+        if r.min() <= 0.2 * mean_radius:
+            continue
+        curve = np.column_stack([r * np.cos(theta), r * np.sin(theta)])
+        if turn_radii(curve).min() < min_turn_radius:
+            continue
+        track = _smooth_track(curve, name)
+        if track.min_turn_radius >= min_turn_radius and track.clearance(0.5) >= clearance:
+            return track
+    raise ValueError(
+        f"no random track with min_turn_radius={min_turn_radius} and clearance={clearance} "
+        f"found in {max_tries} draws; relax them or raise mean_radius"
+    )
+
+
+@functools.lru_cache(maxsize=64)
+def _seeded_random_track(seed: int) -> Track:
+    return random_track(seed)
+
+
+def make_track(name: str, seed: int | np.random.Generator | None = None) -> Track:
+    """A built-in track by name.
+
+    Args:
+        name: one of :data:`TRACK_NAMES`.
+        seed: for ``"random"`` only: an int (cached), a generator, or None.
+
+    Raises:
+        ValueError: for an unknown name.
+    """
+    if name == "random":
+        if isinstance(seed, int | np.integer):
+            return _seeded_random_track(int(seed))
+        return random_track(seed)
+    builders = {"oval": oval_track, "racetrack": racetrack_track, "figure8": figure8_track}
+    if name not in builders:
+        raise ValueError(f"unknown track name {name!r}; allowed: {', '.join(TRACK_NAMES)}")
+    return builders[name]()
