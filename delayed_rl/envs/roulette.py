@@ -75,6 +75,7 @@ class RouletteEnv(gym.Env):
                 BET_13: [(1 / POCKETS, 0, 35.0, False), (1 - 1 / POCKETS, 0, -1.0, False)],
             }
         }
+        self.initial_state_distrib = [1.0]
         self.steps = 0
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):

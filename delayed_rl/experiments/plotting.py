@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -23,9 +24,12 @@ def learning_curves(path: Path, groups: dict, title: str, ylabel: str) -> None:
     for label, runs in groups.items():
         steps = runs[0][0]
         values = np.vstack([v for _, v in runs])
-        mean = np.nanmean(values, axis=0)
+        with warnings.catch_warnings():  # a normalised curve is NaN before any reference reward
+            warnings.simplefilter("ignore", RuntimeWarning)
+            mean = np.nanmean(values, axis=0)
+            std = np.nanstd(values, axis=0, ddof=1) if len(runs) > 1 else None
         if len(runs) > 1:
-            half = 1.96 * np.nanstd(values, axis=0, ddof=1) / np.sqrt(len(runs))
+            half = 1.96 * std / np.sqrt(len(runs))
             ax.fill_between(steps, mean - half, mean + half, alpha=0.25)
         ax.plot(steps, mean, label=label)
     ax.set_xlabel("time step")

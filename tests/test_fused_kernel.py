@@ -1,0 +1,108 @@
+"""The compiled kernel: the exact MMQ update, the env tables, and the reward-delay ring."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import delayed_rl  # noqa: F401
+from delayed_rl.delays import Constant
+from delayed_rl.fast import FusedRun, NotCompilable, inspect_stack
+from delayed_rl.fast.kernel import apply_update
+from delayed_rl.wrappers import RewardDelay
+
+
+def _cache(q):
+    flat = q.reshape(q.shape[0], -1)
+    arg = flat.argmax(axis=1)
+    return flat.max(axis=1), arg // q.shape[2], arg % q.shape[2]
+
+
+def test_roulette_walk_through_tables_3_2_to_3_5():
+    """Thesis section 3.2: q_init 50, α 0.1, γ 0.9, Λ = {0, 1, 2}; EVEN = 0, THIRTEEN = 1."""
+    q = np.full((1, 3, 2), 50.0)
+    qmax, ql, qa = _cache(q)
+    lags = np.arange(3)
+    hist = [
+        np.zeros(4, np.int64),
+        np.zeros(4, np.int64),
+        np.zeros(4, np.int64),
+        np.zeros(4, np.bool_),
+    ]
+    rounds = [(0, 0.0), (1, 35.0), (0, -1.0)]  # (wager, reward received that round)
+    for count, (action, reward) in enumerate(rounds, start=1):
+        hist[1][(count - 1) & 3] = action
+        apply_update(q, lags, reward, 0.1, 0.9, *hist, count, qmax, ql, qa, np.zeros(3))
+        if count == 1:
+            np.testing.assert_allclose(q[0], [[49.5, 50], [50, 50], [50, 50]])
+        if count == 2:
+            np.testing.assert_allclose(q[0], [[49.5, 53], [53, 50], [50, 50]])
+    np.testing.assert_allclose(q[0], [[49.22, 53], [53, 49.67], [49.67, 50]])
+    assert qmax[0] == 53.0
+
+
+def test_cache_tracks_the_brute_force_max_under_random_updates():
+    rng = np.random.default_rng(3)
+    q = rng.normal(size=(5, 4, 3))
+    qmax, ql, qa = _cache(q)
+    lags = np.arange(4)
+    hist = [
+        rng.integers(0, 5, 8),
+        rng.integers(0, 3, 8),
+        rng.integers(0, 5, 8),
+        rng.random(8) < 0.2,
+    ]
+    for step in range(200):
+        reward = float(rng.normal(scale=3))
+        apply_update(q, lags, reward, 0.5, 0.9, *hist, 8 + step, qmax, ql, qa, np.zeros(4))
+        brute = q.reshape(5, -1).max(axis=1)
+        np.testing.assert_array_equal(qmax, brute)
+        np.testing.assert_array_equal(q[np.arange(5), ql, qa], brute)
+
+
+def test_constant_delay_ring_delivers_k_steps_late():
+    env = RewardDelay(gym.make("delayed_rl/GridWorld-3x3-v0").unwrapped, Constant(3))
+    run = FusedRun(env, np.array([0]), seed=1)
+    q = np.zeros((9, 1, 4))
+    log = run.run(q, *_cache(q), 5000, 0, 0.1, 0.9, 1.0, 1.0, 1)
+    np.testing.assert_array_equal(log["reward"][3:], log["undelayed_reward"][:-3])
+    assert not log["reward"][:3].any()
+
+
+def test_flush_at_episode_end_conserves_each_episode():
+    env = gym.make("delayed_rl/GridWorld-v0", size=4, max_steps=50, reward_delay=8)
+    run = FusedRun(env, np.array([0, 4]), seed=2)
+    q = np.zeros((16, 2, 4))
+    log = run.run(q, *_cache(q), 5000, 0, 0.1, 0.9, 0.5, 0.5, 1)
+    ends = np.flatnonzero(log["episode_end"]) + 1
+    assert ends.size == 100
+    for delivered, undelayed in zip(np.split(log["reward"], ends)[:-1],
+                                    np.split(log["undelayed_reward"], ends)[:-1], strict=True):  # fmt: skip
+        assert delivered.sum() == pytest.approx(undelayed.sum())
+
+
+def test_same_seed_same_run_and_tables_follow_the_env():
+    env = gym.make("delayed_rl/Roulette-v0", reward_delay=2)
+    logs = []
+    for _ in range(2):
+        q = np.zeros((1, 1, 2))
+        logs.append(
+            FusedRun(env, np.array([0]), seed=7).run(
+                q, *_cache(q), 38_000, 0, 0.1, 0.9, 1.0, 1.0, 1
+            )
+        )
+    np.testing.assert_array_equal(logs[0]["undelayed_reward"], logs[1]["undelayed_reward"])
+    even = logs[0]["undelayed_reward"][logs[0]["action"] == 0]
+    win = (even == 1).mean()
+    se = np.sqrt(18 / 38 * 20 / 38 / even.size)
+    assert abs(win - 18 / 38) < 4 * se
+
+
+def test_unsupported_stacks_are_refused_with_a_reason():
+    with pytest.raises(NotCompilable, match="TimeLimit"):
+        inspect_stack(gym.make("delayed_rl/GridWorld-3x3-v0", max_episode_steps=10))
+    with pytest.raises(NotCompilable, match="P"):
+        inspect_stack(gym.make("CartPole-v1").unwrapped)
+    model, wrapper = inspect_stack(gym.make("FrozenLake-v1").unwrapped)
+    assert wrapper is None and model.out_cdf.shape[:2] == (16, 4)
