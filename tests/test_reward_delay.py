@@ -459,6 +459,7 @@ def trajectory(env: gym.Env, seed: int, n: int = 400):
     return out
 
 
+@pytest.mark.filterwarnings("ignore:reset\\(\\) in the middle of an episode")
 def test_same_seed_same_delays_and_rewards() -> None:
     a = trajectory(PoissonRewardDelay(RandomEndEnv(), 5), 42)
     b = trajectory(PoissonRewardDelay(RandomEndEnv(), 5), 42)

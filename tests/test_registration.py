@@ -1,0 +1,126 @@
+"""Registration: ids, ``gym.make(id, reward_delay=...)`` and ``gym.make(env.spec)``."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+from delayed_rl.delays import Geometric, Uniform
+from delayed_rl.envs import env_ids, register_envs
+from delayed_rl.envs.gridworld import GridWorldEnv
+from delayed_rl.envs.roulette import RouletteEnv
+from delayed_rl.wrappers import PoissonRewardDelay, RewardDelay
+
+IDS = {
+    "delayed_rl/GridWorld-3x3-v0": {},
+    "delayed_rl/GridWorld-5x5-v0": {},
+    "delayed_rl/GridWorld-9x9-v0": {},
+    "delayed_rl/GridWorld-v0": {"size": 6},
+    "delayed_rl/Roulette-v0": {},
+}
+
+
+def find(env: gym.Env, cls: type) -> gym.Env | None:
+    layer = env
+    while True:
+        if isinstance(layer, cls):
+            return layer
+        if not isinstance(layer, gym.Wrapper):
+            return None
+        layer = layer.env
+
+
+def test_ids_are_registered_on_import() -> None:
+    ids = env_ids()
+    assert set(IDS) <= set(ids)
+    assert ids == sorted(ids)
+    register_envs()  # idempotent
+    assert env_ids() == ids
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_check_env_every_registered_id(env_id: str) -> None:
+    env = gym.make(env_id, **IDS[env_id])
+    assert isinstance(env.unwrapped, GridWorldEnv | RouletteEnv)
+    assert find(env, RewardDelay) is None  # no delay unless asked for
+    check_env(env.unwrapped)
+
+
+@pytest.mark.parametrize("env_id", IDS)
+@pytest.mark.parametrize("lam", [0, 2.5, 13])
+def test_make_with_reward_delay_wraps(env_id: str, lam: float) -> None:
+    env = gym.make(env_id, reward_delay=lam, **IDS[env_id])
+    wrapper = find(env, PoissonRewardDelay)
+    assert wrapper is not None and wrapper.lam == lam
+    assert env.spec.kwargs["reward_delay"] == lam
+    _, info = env.reset(seed=0)
+    assert info["pending_reward"] == 0.0
+    *_, info = env.step(env.action_space.sample())
+    assert {"undelayed_reward", "reward_delay", "pending_reward"} <= set(info)
+
+
+def test_make_with_a_delay_distribution() -> None:
+    env = gym.make("delayed_rl/Roulette-v0", reward_delay=Geometric(0.25))
+    wrapper = find(env, RewardDelay)
+    assert type(wrapper) is RewardDelay and wrapper.delay == Geometric(0.25)
+
+
+def trajectory(env: gym.Env, seed: int, n: int = 300):
+    env.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(n):
+        _, reward, terminated, truncated, info = env.step(int(rng.integers(env.action_space.n)))
+        out.append((reward, info["reward_delay"], info["undelayed_reward"], terminated, truncated))
+        if terminated or truncated:
+            env.reset()
+    return out
+
+
+@pytest.mark.parametrize(
+    ("env_id", "kwargs"),
+    [
+        ("delayed_rl/GridWorld-5x5-v0", {"reward_delay": 4.5, "max_steps": 40}),
+        ("delayed_rl/GridWorld-v0", {"size": 4, "reward_delay": Uniform(1, 7)}),
+        ("delayed_rl/Roulette-v0", {"reward_delay": 13.7, "max_steps": 60}),
+    ],
+)
+def test_make_from_spec_rebuilds_an_equivalent_stack(env_id: str, kwargs: dict) -> None:
+    env = gym.make(env_id, **kwargs)
+    rebuilt = gym.make(env.spec)
+    assert type(find(rebuilt, RewardDelay)) is type(find(env, RewardDelay))
+    assert find(rebuilt, RewardDelay).delay == find(env, RewardDelay).delay
+    assert rebuilt.unwrapped.max_steps == env.unwrapped.max_steps
+    a, b = trajectory(env, 11), trajectory(rebuilt, 11)
+    assert a == b
+    assert len({x[1] for x in a}) > 1  # the delays varied
+    assert trajectory(rebuilt, 12) != a
+
+
+def test_outer_wrapper_spec_round_trip() -> None:
+    env = PoissonRewardDelay(
+        gym.make("delayed_rl/GridWorld-3x3-v0", max_steps=20), 3, on_episode_end="carry"
+    )
+    rebuilt = gym.make(env.spec)
+    wrapper = find(rebuilt, PoissonRewardDelay)
+    assert wrapper is not None and (wrapper.lam, wrapper.on_episode_end) == (3, "carry")
+    assert trajectory(env, 5) == trajectory(rebuilt, 5)
+
+
+@pytest.mark.parametrize(
+    ("bad", "exc", "name"),
+    [
+        ("5", TypeError, "reward_delay"),
+        (True, TypeError, "reward_delay"),
+        ([1, 2], TypeError, "reward_delay"),
+        (-1, ValueError, "lam"),
+        (float("nan"), ValueError, "lam"),
+        (float("inf"), ValueError, "lam"),
+    ],
+)
+@pytest.mark.parametrize("env_id", ["delayed_rl/GridWorld-3x3-v0", "delayed_rl/Roulette-v0"])
+def test_make_rejects_bad_reward_delay(env_id: str, bad, exc, name) -> None:
+    with pytest.raises(exc, match=name):
+        gym.make(env_id, reward_delay=bad)

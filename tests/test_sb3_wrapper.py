@@ -1,0 +1,184 @@
+"""stable-baselines3: training through the delay wrappers, and the VecRewardDelay twin."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from collections import defaultdict
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from stable_baselines3 import DQN, PPO
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
+
+from delayed_rl.delays import Constant, Poisson, Uniform
+from delayed_rl.wrappers import EPISODE_END_MODES, PoissonRewardDelay
+from delayed_rl.wrappers.sb3 import VecRewardDelay
+
+
+class RandomEndEnv(gym.Env):
+    """Random real rewards, episodes that end at random times (all from ``np_random``)."""
+
+    observation_space = gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
+    action_space = gym.spaces.Discrete(2)
+
+    def __init__(self, p_end: float = 0.1, reward=None):
+        self.p_end, self.reward = p_end, reward
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        return np.zeros(2, np.float32), {}
+
+    def step(self, action):
+        reward = float(self.np_random.normal() + action) if self.reward is None else self.reward
+        u = float(self.np_random.random())
+        terminated = u < self.p_end / 2
+        truncated = not terminated and u < self.p_end
+        return np.zeros(2, np.float32), reward, terminated, truncated, {}
+
+
+def test_importing_delayed_rl_does_not_import_torch_or_sb3() -> None:
+    code = (
+        "import delayed_rl, delayed_rl.wrappers, delayed_rl.delays, delayed_rl.envs, sys; "
+        "bad = [m for m in ('torch', 'stable_baselines3') if m in sys.modules]; "
+        "assert not bad, bad"
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120
+    )
+    assert result.returncode == 0, result.stderr
+
+
+@pytest.mark.parametrize("on_episode_end", EPISODE_END_MODES)
+@pytest.mark.parametrize("delay", [Poisson(0), Poisson(3.5), Constant(2), Uniform(0, 8)], ids=repr)
+def test_vec_reward_delay_conservation_and_info(on_episode_end, delay) -> None:
+    n_envs = 3
+    venv = make_vec_env(RandomEndEnv, n_envs=n_envs, seed=4)
+    twin = make_vec_env(RandomEndEnv, n_envs=n_envs, seed=4)
+    env = VecRewardDelay(venv, delay, on_episode_end=on_episode_end, seed=9)
+    env.reset()
+    twin.reset()
+    due = [defaultdict(float) for _ in range(n_envs)]
+    delivered_sum, undelayed_sum, dropped_sum = np.zeros(n_envs), np.zeros(n_envs), np.zeros(n_envs)
+    ep_delivered, ep_undelayed = np.zeros(n_envs), np.zeros(n_envs)
+    episodes = 0
+    rng = np.random.default_rng(0)
+    for t in range(300):
+        actions = rng.integers(2, size=n_envs)
+        _, rewards, dones, infos = env.step(actions)
+        _, raw, raw_dones, _ = twin.step(actions)
+        np.testing.assert_array_equal(dones, raw_dones)
+        assert rewards.dtype == np.float32
+        for i, info in enumerate(infos):
+            assert info["undelayed_reward"] == pytest.approx(float(raw[i]), rel=1e-6)
+            d = info["reward_delay"]
+            assert isinstance(d, int) and d >= 0
+            if delay.support_max is not None:
+                assert d <= delay.support_max
+            due[i][t + d] += info["undelayed_reward"]
+            expected = due[i].pop(t, 0.0)
+            if dones[i]:
+                rest = math.fsum(due[i].values())
+                if on_episode_end != "carry":
+                    due[i].clear()
+                if on_episode_end == "flush":
+                    expected += rest
+                    assert info["flushed_reward"] == pytest.approx(rest, abs=1e-9)
+                elif on_episode_end == "drop":
+                    assert info["dropped_reward"] == pytest.approx(rest, abs=1e-9)
+                    dropped_sum[i] += rest
+                else:
+                    assert "flushed_reward" not in info and "dropped_reward" not in info
+            assert rewards[i] == pytest.approx(expected, rel=1e-6, abs=1e-5)  # float32 output
+            assert info["pending_reward"] == pytest.approx(math.fsum(due[i].values()), abs=1e-9)
+            delivered_sum[i] += rewards[i]
+            undelayed_sum[i] += info["undelayed_reward"]
+            ep_delivered[i] += rewards[i]
+            ep_undelayed[i] += info["undelayed_reward"]
+            pending = info["pending_reward"]
+            assert delivered_sum[i] + pending + dropped_sum[i] == pytest.approx(
+                undelayed_sum[i], abs=1e-4
+            )
+            if dones[i]:
+                episodes += 1
+                if on_episode_end == "flush":
+                    assert ep_delivered[i] == pytest.approx(ep_undelayed[i], abs=1e-4)
+                ep_delivered[i] = ep_undelayed[i] = 0.0
+    assert episodes >= 30
+
+
+def test_vec_reward_delay_seeding() -> None:
+    def delays(seed=None, via_seed_method=False):
+        env = VecRewardDelay(
+            make_vec_env(RandomEndEnv, n_envs=2, seed=0), 5, seed=None if via_seed_method else seed
+        )
+        if via_seed_method:
+            env.seed(seed)
+        env.reset()
+        return [
+            [info["reward_delay"] for info in env.step(np.zeros(2, dtype=int))[3]]
+            for _ in range(80)
+        ]
+
+    assert delays(3) == delays(3)
+    assert delays(3) != delays(4)
+    assert delays(3, via_seed_method=True) == delays(3, via_seed_method=True)
+    assert delays(3, via_seed_method=True) != delays(4, via_seed_method=True)
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf")])
+def test_vec_reward_delay_non_finite_reward_raises(bad) -> None:
+    env = VecRewardDelay(DummyVecEnv([lambda: RandomEndEnv(reward=bad)]), 2, seed=0)
+    env.reset()
+    with pytest.raises(ValueError, match="non-finite"):
+        env.step(np.zeros(1, dtype=int))
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "exc", "name"),
+    [
+        ({"delay": -1}, ValueError, "lam"),
+        ({"delay": "x"}, TypeError, "delay"),
+        ({"delay": 1, "max_delay": -1}, ValueError, "max_delay"),
+        ({"delay": 1, "on_episode_end": "nope"}, ValueError, "on_episode_end"),
+    ],
+)
+def test_vec_reward_delay_invalid_arguments(kwargs, exc, name) -> None:
+    with pytest.raises(exc, match=name):
+        VecRewardDelay(DummyVecEnv([RandomEndEnv]), **kwargs)
+
+
+@pytest.mark.slow
+def test_dqn_trains_through_the_gymnasium_wrapper() -> None:
+    env = PoissonRewardDelay(gym.make("CartPole-v1"), 5)
+    model = DQN("MlpPolicy", env, learning_starts=500, train_freq=16, seed=0, device="cpu")
+    model.learn(2000)
+    assert model.num_timesteps >= 2000
+    # SB3's Monitor sits outside the delay wrapper: with "flush" it still sees the true returns
+    returns = [(ep["r"], ep["l"]) for ep in model.ep_info_buffer]
+    assert len(returns) >= 10
+    assert all(r == pytest.approx(length) for r, length in returns)  # CartPole pays 1 per step
+
+
+@pytest.mark.slow
+def test_dqn_trains_on_a_registered_env_with_reward_delay() -> None:
+    env = gym.make("delayed_rl/GridWorld-3x3-v0", reward_delay=2, max_steps=50)
+    model = DQN("MlpPolicy", env, learning_starts=100, train_freq=16, seed=0, device="cpu")
+    model.learn(1000)
+    assert model.num_timesteps >= 1000 and len(model.ep_info_buffer) >= 10
+    assert all(ep["l"] == 50 for ep in model.ep_info_buffer)  # max_steps truncation, seen by SB3
+
+
+@pytest.mark.slow
+def test_ppo_trains_through_vec_reward_delay() -> None:
+    venv = DummyVecEnv([lambda: gym.make("CartPole-v1") for _ in range(2)])
+    env = VecMonitor(VecRewardDelay(venv, 5, seed=0))
+    model = PPO("MlpPolicy", env, n_steps=512, batch_size=256, n_epochs=1, seed=0, device="cpu")
+    model.learn(2048)
+    assert model.num_timesteps >= 2048
+    returns = [(ep["r"], ep["l"]) for ep in model.ep_info_buffer]
+    assert len(returns) >= 10
+    assert all(r == pytest.approx(length, rel=1e-5) for r, length in returns)
