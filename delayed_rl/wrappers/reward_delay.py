@@ -200,7 +200,8 @@ class RewardDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
         """Step the env; return the rewards due now (see the class docstring)."""
         obs, reward, terminated, truncated, info = self.env.step(action)
         # a Python float, so that numpy-typed rewards (e.g. float32) are summed in double precision
-        reward = float(reward)
+        if type(reward) is not float:
+            reward = float(reward)
         if reward - reward:  # NaN or ±inf (x - x is 0 for every finite number)
             raise ValueError(
                 f"the inner env returned a non-finite reward ({reward!r}) at episode step "
