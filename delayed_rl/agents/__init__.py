@@ -1,0 +1,29 @@
+"""Tabular agents with a stable-baselines3-like API.
+
+- :class:`QLearning`: Q-learning (rewards credited to the step that just happened);
+- :class:`FixedDelayQLearning`: Q-learning that assumes a constant delay ``k``;
+- :class:`MultipleModelQLearning` (alias :class:`MMQ`): Multiple Model Q-learning, which learns
+  over parallel delay hypotheses (thesis section 3.2);
+- :func:`load_agent`: load any of them from a file, whatever its class.
+
+All share :class:`~delayed_rl.agents.base.TabularAgent`: ``learn``, ``predict``, ``update``,
+``save``/``load``, ``get_env``/``set_env``, ``logger``, and SB3 callbacks.
+"""
+
+from delayed_rl.agents.base import RECORD_KEYS, TabularAgent
+from delayed_rl.agents.mmq import MMQ, MultipleModelQLearning
+from delayed_rl.agents.qlearning import FixedDelayQLearning, QLearning
+from delayed_rl.agents.schedules import ConstantSchedule, LinearSchedule
+from delayed_rl.agents.serialization import load_agent
+
+__all__ = [
+    "MMQ",
+    "RECORD_KEYS",
+    "ConstantSchedule",
+    "FixedDelayQLearning",
+    "LinearSchedule",
+    "MultipleModelQLearning",
+    "QLearning",
+    "TabularAgent",
+    "load_agent",
+]

@@ -1,0 +1,382 @@
+"""Multiple Model Q-learning (Campbell 2015, section 3.2, Eq. 3.7 and Algorithm 1).
+
+The agent keeps one Q-table per delay hypothesis λ̂ ∈ Λ, stacked as ``q_table[s, λ̂, a]``.
+
+- **Acting** in ``s``: λ̂* = argmax over λ̂ of max_a Q(s, a, λ̂), ε-greedy (with probability ε a
+  uniformly random model); then a* = argmax_a Q(s, a, λ̂*), ε-greedy. Ties are broken uniformly
+  at random at both levels. With a single model (Q-learning, fixed-delay Q-learning) the first
+  level is skipped and draws no random numbers.
+- **Learning** at episode step ``t`` from the received reward ``r_t``: for every λ̂ whose step
+  ``t − λ̂`` is in this episode's history, with (s, a, s′, done) the transition of that step,
+  ``Q(s, a, λ̂) += α (r_t + γ (1 − done) max_{λ̂′, a′} Q(s′, a′, λ̂′) − Q(s, a, λ̂))``. The max spans
+  all models, and all targets of a step are computed before any of its writes (the parallel
+  update of the thesis's Roulette walk-through, Tables 3.2–3.5).
+- **Cost** O(|Λ|) per step: each state's max over (λ̂, a) is cached with its position and
+  recomputed only when the entry at that position decreases; the |Λ| updates of a step are one
+  batch of numpy gathers and scatters over a ring buffer of the episode's transitions.
+"""
+
+from __future__ import annotations
+
+import numbers
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from delayed_rl.agents.base import TabularAgent
+from delayed_rl.agents.schedules import Schedule
+
+__all__ = ["MMQ", "MultipleModelQLearning"]
+
+DEFAULT_MAX_DELAY_ESTIMATE = 50  # the thesis's λ̂max in the 9×9 grid world (section 5.1.1)
+_SMALL_ROW = 16  # rows up to this many entries are scanned in Python (cheaper than numpy calls)
+
+
+def check_delay_estimates(
+    max_delay_estimate: Any, delay_step: Any, delay_estimates: Any
+) -> np.ndarray:
+    """Λ from MMQ's three ways of giving it, validated; sorted ``int64`` array of distinct values.
+
+    Raises:
+        TypeError, ValueError: an invalid or contradictory argument (the message names it).
+    """
+    if delay_estimates is not None:
+        if max_delay_estimate is not None or delay_step is not None:
+            raise ValueError(
+                "give either delay_estimates or max_delay_estimate/delay_step, not both "
+                f"(got delay_estimates={delay_estimates!r}, max_delay_estimate="
+                f"{max_delay_estimate!r}, delay_step={delay_step!r})"
+            )
+        if isinstance(delay_estimates, (str, bytes)) or not isinstance(
+            delay_estimates, (Sequence, np.ndarray, range)
+        ):
+            raise TypeError(
+                "delay_estimates must be a sequence of distinct integers >= 0, "
+                f"got {delay_estimates!r}"
+            )
+        values = list(delay_estimates)
+        if not values or any(
+            isinstance(v, (bool, np.bool_)) or not isinstance(v, numbers.Integral) or v < 0
+            for v in values
+        ):
+            raise ValueError(
+                "delay_estimates must be a non-empty sequence of distinct integers >= 0, "
+                f"got {delay_estimates!r}"
+            )
+        if len(set(values)) != len(values):
+            raise ValueError(f"delay_estimates must be distinct, got {delay_estimates!r}")
+        return np.array(sorted(int(v) for v in values), dtype=np.int64)
+    if max_delay_estimate is None:
+        max_delay_estimate = DEFAULT_MAX_DELAY_ESTIMATE
+    if delay_step is None:
+        delay_step = 1
+    if (
+        isinstance(max_delay_estimate, bool)
+        or not isinstance(max_delay_estimate, numbers.Integral)
+        or max_delay_estimate < 0
+    ):
+        raise ValueError(f"max_delay_estimate must be an integer >= 0, got {max_delay_estimate!r}")
+    if (
+        isinstance(delay_step, bool)
+        or not isinstance(delay_step, numbers.Integral)
+        or delay_step < 1
+    ):
+        raise ValueError(f"delay_step must be an integer >= 1, got {delay_step!r}")
+    return np.arange(0, int(max_delay_estimate) + 1, int(delay_step), dtype=np.int64)
+
+
+class MultipleModelQLearning(TabularAgent):
+    """Multiple Model Q-learning (MMQ): Q-learning over parallel delay hypotheses.
+
+    For rewards that arrive a random number of steps late (e.g. under
+    :class:`~delayed_rl.wrappers.PoissonRewardDelay`), MMQ keeps one Q-table per delay estimate
+    λ̂ ∈ Λ. Each step's reward is credited, in table λ̂, to the transition λ̂ steps back; the agent
+    acts from the table whose best value is highest, so it learns which delay hypothesis pays
+    (see the module docstring for the exact rule). ``QLearning`` is the case Λ = {0} and
+    ``FixedDelayQLearning(delay=k)`` the case Λ = {k}.
+
+    Args:
+        env: the training env (``Discrete`` observation and action spaces) or an env id.
+        learning_rate: α in (0, 1], or a schedule of the progress remaining (as in SB3).
+        gamma: the discount factor γ in [0, 1].
+        exploration_initial_eps: ε at the start of ``learn()`` (applies at both levels).
+        exploration_final_eps: ε after ``exploration_fraction`` of ``learn()``; equal to the
+            initial value (default 0.1 for both) for a constant ε, as in the thesis.
+        exploration_fraction: the fraction of training over which ε moves, in (0, 1].
+        q_init: the initial value of every entry; set it above the achievable values for
+            optimistic exploration (the thesis does; e.g. 50 in the Roulette example).
+        max_delay_estimate: λ̂max; Λ = {0, delay_step, 2·delay_step, ...} up to λ̂max
+            (default 50, the thesis's grid-world setting).
+        delay_step: the resolution of Λ (default 1).
+        delay_estimates: Λ given explicitly (distinct integers ≥ 0; stored sorted), instead of
+            ``max_delay_estimate``/``delay_step``.
+        seed: seeds the agent's random choices and the env's first reset.
+        verbose: 0 silent, 1 prints the logged metrics.
+
+    Example:
+        >>> import gymnasium as gym
+        >>> import delayed_rl
+        >>> from delayed_rl.agents import MMQ
+        >>> env = gym.make("delayed_rl/GridWorld-5x5-v0", reward_delay=3)
+        >>> agent = MMQ(env, max_delay_estimate=10, q_init=20.0, seed=0).learn(2_000)
+        >>> agent.q_table.shape
+        (25, 11, 4)
+    """
+
+    _hyperparameter_names = (*TabularAgent._hyperparameter_names, "delay_estimates")
+
+    def __init__(
+        self,
+        env: gym.Env | str,
+        learning_rate: float | Schedule = 0.1,
+        gamma: float = 0.9,
+        exploration_initial_eps: float = 0.1,
+        exploration_final_eps: float = 0.1,
+        exploration_fraction: float = 0.1,
+        q_init: float = 0.0,
+        max_delay_estimate: int | None = None,
+        delay_step: int | None = None,
+        delay_estimates: Sequence[int] | None = None,
+        seed: int | None = None,
+        verbose: int = 0,
+    ):
+        self._delays = check_delay_estimates(max_delay_estimate, delay_step, delay_estimates)
+        super().__init__(
+            env,
+            learning_rate=learning_rate,
+            gamma=gamma,
+            exploration_initial_eps=exploration_initial_eps,
+            exploration_final_eps=exploration_final_eps,
+            exploration_fraction=exploration_fraction,
+            q_init=q_init,
+            seed=seed,
+            verbose=verbose,
+        )
+
+    # ------------------------------------------------------------------ model
+    @property
+    def delay_estimates(self) -> list[int]:
+        """Λ, the delay hypotheses (sorted): ``q_table[:, i, :]`` assumes delay ``Λ[i]``."""
+        return self._delays.tolist()
+
+    @property
+    def q_table(self) -> np.ndarray:
+        """The Q-values, shape ``(|S|, |Λ|, |A|)`` (a read-only view; change it via learning)."""
+        view = self._q.view()
+        view.flags.writeable = False
+        return view
+
+    def _setup_model(self) -> None:
+        n_models = len(self._delays)
+        self._n_models = n_models
+        self._q = np.full((self.n_states, n_models, self.n_actions), self.q_init)
+        self._q_rows = self._q.reshape(self.n_states, n_models * self.n_actions)  # views
+        self._q_flat = self._q.reshape(-1)
+        self._row_size = n_models * self.n_actions
+        self._model_offset = np.arange(n_models, dtype=np.int64) * self.n_actions
+        self._rebuild_cache()
+        self._first_lag = int(self._delays[0])
+        self._max_lag = int(self._delays[-1])
+        history = 1 << int(self._max_lag).bit_length()  # a power of two > the largest lag
+        self._history_mask = history - 1
+        self._hist_s = np.zeros(history, dtype=np.int64)
+        self._hist_s2 = np.zeros(history, dtype=np.int64)
+        self._hist_cell = np.zeros(history, dtype=np.int64)  # s·|Λ||A| + a: model 0's cell
+        # how many models can learn at episode step t < max lag: those with lag <= t
+        self._n_valid = np.searchsorted(
+            self._delays, np.arange(self._max_lag + 1), side="right"
+        ).tolist()
+        self._zero_lag = bool(self._delays[0] == 0)
+        self._t = 0
+
+    def _rebuild_cache(self) -> None:
+        """Recompute every state's max over (λ̂, a) (``_v_max``) and its cell (``_v_cell``)."""
+        self._v_max = np.zeros(self.n_states)
+        self._v_cell = np.zeros(self.n_states, dtype=np.int64)
+        self._repair(np.arange(self.n_states))
+
+    def _end_episode(self) -> None:
+        self._t = 0
+
+    def _n_models_for_stats(self) -> int:
+        return self._n_models
+
+    # ------------------------------------------------------------------ acting
+    def _choose(self, s: int, eps: float, uniform: Callable[[], float]) -> tuple[int, int]:
+        n_actions, n_models = self.n_actions, self._n_models
+        actions: Any = None
+        if n_models > 1 and uniform() < eps:
+            model = int(uniform() * n_models)
+        else:
+            ties = self._ties(s)
+            if len(ties) == 1:
+                model, action = divmod(int(ties[0]), n_actions)
+                actions = (action,)
+            elif n_models == 1:
+                model, actions = 0, ties
+            else:
+                ties = np.asarray(ties)
+                models = ties // n_actions
+                candidates = np.unique(models)
+                model = int(candidates[0])
+                if candidates.size > 1:
+                    model = int(candidates[int(uniform() * candidates.size)])
+                actions = ties[models == model] - model * n_actions
+        if uniform() < eps:
+            return model, int(uniform() * n_actions)
+        if actions is None:  # the model was explored: act greedily within its table
+            row = self._q[s, model]
+            actions = np.flatnonzero(row == row.max())
+        n = len(actions)
+        return model, int(actions[0] if n == 1 else actions[int(uniform() * n)])
+
+    def _ties(self, s: int) -> Any:
+        """The positions in state ``s``'s row (λ̂-major) that hold its max, ascending."""
+        best = self._v_max[s]
+        if self._row_size <= _SMALL_ROW:
+            return [i for i, value in enumerate(self._q_rows[s].tolist()) if value == best]
+        return np.flatnonzero(self._q_rows[s] == best)
+
+    def _greedy_actions(self, states: np.ndarray) -> np.ndarray:
+        # the first arg-max over (λ̂, a) in row-major order: the lowest-index λ̂* whose table holds
+        # the state's max, then the lowest-index a* in that table
+        return self._q_rows[states].argmax(axis=1) % self.n_actions
+
+    def preferred_delay(self, observation: Any) -> Any:
+        """λ̂* at ``observation``: the delay estimate whose table holds the state's best value.
+
+        Ties go to the smallest estimate. Returns an ``int`` for one observation and an ``int64``
+        array for a batch.
+        """
+        index, single = self._obs_indices(observation)
+        flat = index.reshape(-1)
+        models = self._q_rows[flat].argmax(axis=1) // self.n_actions
+        delays = self._delays[models]
+        return int(delays[0]) if single else delays
+
+    # ------------------------------------------------------------------ learning
+    def _learn_transition(
+        self, s: int, a: int, r: float, s2: int, terminated: bool, truncated: bool
+    ) -> None:
+        t = self._t
+        mask = self._history_mask
+        j = t & mask
+        self._hist_s[j] = s
+        self._hist_s2[j] = s2
+        self._hist_cell[j] = s * self._row_size + a
+        n = self._n_models if t >= self._max_lag else self._n_valid[t]
+        if n == 1:
+            self._update_first_model((t - self._first_lag) & mask, r, terminated)
+        elif n:
+            self._update_models(n, (t - self._delays[:n]) & mask, r, terminated)
+        self.num_timesteps += 1
+        self._t = 0 if (terminated or truncated) else t + 1
+
+    def _update_models(self, n: int, positions: np.ndarray, r: float, terminated: bool) -> None:
+        """Update Q(s_{t−λ̂}, a_{t−λ̂}, λ̂) for the first ``n`` models, all targets first."""
+        v_max, v_cell = self._v_max, self._v_cell
+        states = self._hist_s[positions]
+        cells = self._hist_cell[positions] + self._model_offset[:n]
+        bootstrap = v_max[self._hist_s2[positions]]
+        if terminated and self._zero_lag:
+            bootstrap[0] = 0.0  # only the current step (lag 0) can be terminal in an episode
+        target = r + self.gamma * bootstrap
+        q_flat = self._q_flat
+        old = q_flat[cells]
+        new = old + self._alpha * (target - old)
+        q_flat[cells] = new
+        # repair the cache: recompute the states whose cached arg-max entry fell ...
+        old_max = v_max[states]
+        fell = v_cell[states] == cells
+        if fell.any():
+            fell &= new < old
+            if fell.any():
+                self._repair(np.unique(states[fell]))
+        # ... and raise the max of the states where an entry rose above it
+        rose = new > old_max
+        if rose.any():
+            rose_states, rose_values, rose_cells = states[rose], new[rose], cells[rose]
+            np.maximum.at(v_max, rose_states, rose_values)
+            top = rose_values == v_max[rose_states]
+            v_cell[rose_states[top]] = rose_cells[top]
+
+    def _update_first_model(self, position: int, r: float, terminated: bool) -> None:
+        """:meth:`_update_models` for the one model that can learn (Python scalars, faster)."""
+        v_max, v_cell, q_flat = self._v_max, self._v_cell, self._q_flat
+        s = self._hist_s.item(position)
+        cell = self._hist_cell.item(position)
+        bootstrap = (
+            0.0 if terminated and self._zero_lag else v_max.item(self._hist_s2.item(position))
+        )
+        target = r + self.gamma * bootstrap
+        old = q_flat.item(cell)
+        new = old + self._alpha * (target - old)
+        q_flat[cell] = new
+        if new > v_max.item(s):
+            v_max[s] = new
+            v_cell[s] = cell
+        elif new < old and v_cell.item(s) == cell:
+            self._repair(np.array([s]))
+
+    def _repair(self, states: np.ndarray) -> None:
+        """Recompute the cached max and its cell for ``states`` (distinct state indices)."""
+        rows = self._q_rows[states]
+        arg = rows.argmax(axis=1)
+        self._v_max[states] = rows[np.arange(states.size), arg]
+        self._v_cell[states] = states * self._row_size + arg
+
+    # ------------------------------------------------------------------ diagnostics
+    @property
+    def acting_delay_share(self) -> np.ndarray:
+        """The share of ``learn()`` steps each λ̂ was the acting model (since the counter reset).
+
+        Indexed like :attr:`delay_estimates`; all zeros before any training step.
+        """
+        counts = np.asarray(self._acting_counts, dtype=np.float64)
+        total = counts.sum()
+        return counts / total if total else counts
+
+    def _record_model_metrics(self, logger: Any) -> None:
+        if self._n_models == 1:
+            return
+        counts = np.asarray(self._acting_counts) - np.asarray(self._log_counts)
+        self._log_counts = list(self._acting_counts)
+        total = counts.sum()
+        if total:
+            logger.record("mmq/acting_delay_mean", float(counts @ self._delays / total))
+            logger.record("mmq/acting_delay_mode", int(self._delays[int(np.argmax(counts))]))
+            logger.record("mmq/acting_delay_mode_share", float(counts.max() / total))
+
+    # ------------------------------------------------------------------ persistence
+    def _get_state_arrays(self) -> dict[str, np.ndarray]:
+        return {"q_table": self._q.copy(), "delay_estimates": self._delays.copy()}
+
+    def _set_state_arrays(self, arrays: dict[str, np.ndarray], where: str) -> None:
+        q = arrays.get("q_table")
+        expected = (self.n_states, self._n_models, self.n_actions)
+        if q is None or q.dtype != np.float64 or q.shape != expected:
+            got = "missing" if q is None else f"{q.dtype} array of shape {q.shape}"
+            raise ValueError(
+                f"{where}: q_table must be a float64 array of shape {expected}, got {got}"
+            )
+        if not np.all(np.isfinite(q)):
+            raise ValueError(f"{where}: q_table holds non-finite values")
+        delays = arrays.get("delay_estimates")
+        if delays is None or not np.array_equal(delays, self._delays):
+            raise ValueError(
+                f"{where}: the delay_estimates array ({delays!r}) does not match the "
+                f"metadata ({self.delay_estimates})"
+            )
+        self._q[...] = q
+        self._rebuild_cache()
+
+    def _set_hyperparameters(self, *, delay_estimates: Any = None, **kwargs: Any) -> None:
+        if delay_estimates is not None:
+            self._delays = check_delay_estimates(None, None, delay_estimates)
+        super()._set_hyperparameters(**kwargs)
+
+
+MMQ = MultipleModelQLearning
+"""Short alias of :class:`MultipleModelQLearning`."""

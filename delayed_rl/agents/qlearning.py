@@ -1,0 +1,126 @@
+"""Q-learning and fixed-delay Q-learning: Multiple Model Q-learning with a single model.
+
+``QLearning`` is MMQ with Λ = {0} (every reward credited to the step that just happened, the
+textbook rule, thesis Eq. 3.2); ``FixedDelayQLearning(delay=k)`` is MMQ with Λ = {k} (every
+reward credited to the step ``k`` steps back, the constant-delay agents of thesis Fig. 5.6). Both
+run MMQ's code, so ``QLearning`` and ``MultipleModelQLearning(delay_estimates=[0])`` produce
+identical tables for the same seed and env.
+"""
+
+from __future__ import annotations
+
+import numbers
+import gymnasium as gym
+
+from delayed_rl.agents.mmq import MultipleModelQLearning
+from delayed_rl.agents.schedules import Schedule
+
+__all__ = ["FixedDelayQLearning", "QLearning"]
+
+
+class QLearning(MultipleModelQLearning):
+    """Tabular Q-learning (Watkins), ε-greedy with random tie-breaks.
+
+    ``Q(s, a) += α (r + γ (1 − terminated) max_a′ Q(s′, a′) − Q(s, a))`` after every step. Under
+    delayed rewards it credits each reward to the wrong step, which is what the thesis measures.
+    ``q_table`` has shape ``(|S|, 1, |A|)`` (one delay model, λ̂ = 0), like MMQ's.
+
+    Args:
+        env: the training env (``Discrete`` observation and action spaces) or an env id.
+        learning_rate: α in (0, 1], or a schedule of the progress remaining (as in SB3).
+        gamma: the discount factor γ in [0, 1].
+        exploration_initial_eps: ε at the start of ``learn()``.
+        exploration_final_eps: ε after ``exploration_fraction`` of ``learn()`` (equal to the
+            initial value, the default 0.1, for a constant ε).
+        exploration_fraction: the fraction of training over which ε moves, in (0, 1].
+        q_init: the initial value of every entry (optimistic when above the achievable values).
+        seed: seeds the agent's random choices and the env's first reset.
+        verbose: 0 silent, 1 prints the logged metrics.
+
+    Example:
+        >>> import delayed_rl
+        >>> from delayed_rl.agents import QLearning
+        >>> agent = QLearning("delayed_rl/GridWorld-3x3-v0", q_init=20.0, seed=0).learn(2_000)
+        >>> agent.predict(8, deterministic=True)[0] in (0, 3)  # from the start: up or left
+        True
+    """
+
+    def __init__(
+        self,
+        env: gym.Env | str,
+        learning_rate: float | Schedule = 0.1,
+        gamma: float = 0.9,
+        exploration_initial_eps: float = 0.1,
+        exploration_final_eps: float = 0.1,
+        exploration_fraction: float = 0.1,
+        q_init: float = 0.0,
+        seed: int | None = None,
+        verbose: int = 0,
+    ):
+        super().__init__(
+            env,
+            learning_rate=learning_rate,
+            gamma=gamma,
+            exploration_initial_eps=exploration_initial_eps,
+            exploration_final_eps=exploration_final_eps,
+            exploration_fraction=exploration_fraction,
+            q_init=q_init,
+            delay_estimates=[0],
+            seed=seed,
+            verbose=verbose,
+        )
+
+
+class FixedDelayQLearning(MultipleModelQLearning):
+    """Q-learning that assumes every reward arrives exactly ``delay`` steps late.
+
+    The reward received at step ``t`` is credited to the transition of step ``t − delay``
+    (steps before the episode's start are not updated). Under a constant delay ``k`` with
+    ``delay=k`` this is exact credit assignment; under random delays it is right only as often as
+    the delay equals ``delay`` (thesis Eq. 3.8 and Fig. 5.6). It acts from its only table.
+
+    Args:
+        env: the training env (``Discrete`` observation and action spaces) or an env id.
+        delay: the assumed delay, an integer >= 0 (0 is plain Q-learning).
+        learning_rate: α in (0, 1], or a schedule of the progress remaining (as in SB3).
+        gamma: the discount factor γ in [0, 1].
+        exploration_initial_eps: ε at the start of ``learn()``.
+        exploration_final_eps: ε after ``exploration_fraction`` of ``learn()``.
+        exploration_fraction: the fraction of training over which ε moves, in (0, 1].
+        q_init: the initial value of every entry.
+        seed: seeds the agent's random choices and the env's first reset.
+        verbose: 0 silent, 1 prints the logged metrics.
+    """
+
+    def __init__(
+        self,
+        env: gym.Env | str,
+        delay: int,
+        learning_rate: float | Schedule = 0.1,
+        gamma: float = 0.9,
+        exploration_initial_eps: float = 0.1,
+        exploration_final_eps: float = 0.1,
+        exploration_fraction: float = 0.1,
+        q_init: float = 0.0,
+        seed: int | None = None,
+        verbose: int = 0,
+    ):
+        if isinstance(delay, bool) or not isinstance(delay, numbers.Integral) or delay < 0:
+            raise ValueError(f"delay must be an integer >= 0, got {delay!r}")
+        super().__init__(
+            env,
+            learning_rate=learning_rate,
+            gamma=gamma,
+            exploration_initial_eps=exploration_initial_eps,
+            exploration_final_eps=exploration_final_eps,
+            exploration_fraction=exploration_fraction,
+            q_init=q_init,
+            delay_estimates=[int(delay)],
+            seed=seed,
+            verbose=verbose,
+        )
+
+    @property
+    def delay(self) -> int:
+        """The assumed delay."""
+        return int(self._delays[0])
