@@ -9,3 +9,5 @@ from delayed_rl.agents import (  # noqa: E402  (after the env registration above
     MultipleModelQLearning,
     QLearning,
 )
+
+__all__ = ["MMQ", "FixedDelayQLearning", "MultipleModelQLearning", "QLearning", "__version__"]

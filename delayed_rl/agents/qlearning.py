@@ -10,6 +10,7 @@ identical tables for the same seed and env.
 from __future__ import annotations
 
 import numbers
+
 import gymnasium as gym
 
 from delayed_rl.agents.mmq import MultipleModelQLearning
