@@ -52,6 +52,10 @@ def test_public_exports():
     assert delayed_rl.MMQ is MMQ is MultipleModelQLearning
     assert delayed_rl.QLearning is QLearning
     assert delayed_rl.FixedDelayQLearning is FixedDelayQLearning
+    from delayed_rl.agents import ProportionalController
+    from delayed_rl.agents.controllers import ProportionalController as Controller
+
+    assert ProportionalController is Controller
 
 
 def test_env_id_string_and_get_env():

@@ -4,7 +4,9 @@
 - :class:`FixedDelayQLearning`: Q-learning that assumes a constant delay ``k``;
 - :class:`MultipleModelQLearning` (alias :class:`MMQ`): Multiple Model Q-learning, which learns
   over parallel delay hypotheses (thesis section 3.2);
-- :func:`load_agent`: load any of them from a file, whatever its class.
+- :func:`load_agent`: load any of them from a file, whatever its class;
+- ``ProportionalController`` (thesis Eqs. 5.8–5.9), imported from
+  :mod:`delayed_rl.agents.controllers` on first access.
 
 All share :class:`~delayed_rl.agents.base.TabularAgent`: ``learn``, ``predict``, ``update``,
 ``save``/``load``, ``get_env``/``set_env``, ``logger``, and SB3 callbacks.
@@ -18,6 +20,7 @@ from delayed_rl.agents.serialization import load_agent
 
 __all__ = [
     "MMQ",
+    "ProportionalController",
     "RECORD_KEYS",
     "ConstantSchedule",
     "FixedDelayQLearning",
@@ -27,3 +30,12 @@ __all__ = [
     "TabularAgent",
     "load_agent",
 ]
+
+
+def __getattr__(name: str):
+    # lazy: the controller module is only imported when it is asked for
+    if name == "ProportionalController":
+        from delayed_rl.agents.controllers import ProportionalController
+
+        return ProportionalController
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -286,7 +286,7 @@ class TabularAgent:
         from delayed_rl.agents.schedules import schedule_to_json
 
         params = {name: getattr(self, name) for name in self._hyperparameter_names}
-        params["learning_rate"] = schedule_to_json(self.lr_schedule, self._progress_remaining)
+        params["learning_rate"] = schedule_to_json(self.lr_schedule, self._alpha)
         return params
 
     # ------------------------------------------------------------------ env

@@ -117,8 +117,8 @@ def check_schedule_value(
     return number
 
 
-def schedule_to_json(schedule: Schedule, progress_remaining: float) -> dict[str, Any]:
-    """Describe ``schedule`` as JSON: exactly for the classes here, else by its current value."""
+def schedule_to_json(schedule: Schedule, current_value: float) -> dict[str, Any]:
+    """Describe ``schedule`` as JSON: exactly for the classes here, else by ``current_value``."""
     if isinstance(schedule, ConstantSchedule):
         return {"type": "constant", "value": schedule.value}
     if isinstance(schedule, LinearSchedule):
@@ -131,7 +131,7 @@ def schedule_to_json(schedule: Schedule, progress_remaining: float) -> dict[str,
     return {
         "type": "callable",
         "repr": repr(schedule),
-        "value": float(schedule(progress_remaining)),
+        "value": float(current_value),
     }
 
 

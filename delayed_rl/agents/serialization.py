@@ -85,20 +85,26 @@ def _space_from_json(data: Any, name: str, where: str) -> spaces.Discrete:
 
 def _read_arrays(path: Path) -> dict[str, np.ndarray]:
     try:
-        with np.load(path, allow_pickle=False) as data:
-            if not isinstance(data, np.lib.npyio.NpzFile):
-                raise ValueError("it holds a single array, not an .npz archive")
-            return {key: data[key] for key in data.files}
-    except AttributeError:  # np.load returned a plain array (no context manager)
+        data = np.load(path, allow_pickle=False)
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as error:
+        raise _unreadable(path, error) from None
+    if not isinstance(data, np.lib.npyio.NpzFile):
         raise ValueError(
             f"{path} is not a delayed-rl model file: it holds a single .npy array, not an .npz "
             "archive"
-        ) from None
+        )
+    try:
+        with data:
+            return {key: data[key] for key in data.files}
     except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as error:
-        raise ValueError(
-            f"{path} is not a readable delayed-rl model file (.npz archive read with "
-            f"allow_pickle=False): {error}"
-        ) from None
+        raise _unreadable(path, error) from None
+
+
+def _unreadable(path: Path, error: Exception) -> ValueError:
+    return ValueError(
+        f"{path} is not a readable delayed-rl model file (.npz archive read with "
+        f"allow_pickle=False): {error}"
+    )
 
 
 def load_agent(
