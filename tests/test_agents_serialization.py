@@ -60,6 +60,17 @@ def test_every_class_round_trips(tmp_path):
         assert loaded.delay_estimates == agent.delay_estimates
     assert FixedDelayQLearning.load(tmp_path / "FixedDelayQLearning").delay == 4
     assert type(TabularAgent.load(tmp_path / "QLearning.npz")) is QLearning
+    assert QLearning.load(tmp_path / "QLearning.npz").learning_rate == 0.1
+    # a QLearning file claiming several delay models is refused
+    path = tmp_path / "QLearning.npz"
+    with np.load(path) as data:
+        metadata = json.loads(str(data["metadata"]))
+    metadata["hyperparameters"]["delay_estimates"] = [0, 1]
+    rewrite(path, tmp_path / "bad.npz", metadata=np.array(json.dumps(metadata)))
+    with pytest.raises(
+        ValueError, match=r"invalid hyper-parameters: QLearning has delay_estimates"
+    ):
+        QLearning.load(tmp_path / "bad.npz")
 
 
 def test_resumed_training_continues_where_it_stopped(tmp_path):

@@ -3,9 +3,11 @@
 :class:`TabularAgent` owns everything that is not the learning rule: the env (an instance or an id
 string), argument checks, the training loop of :meth:`~TabularAgent.learn` with SB3's callback
 protocol, progress bar and logger, :meth:`~TabularAgent.predict`, and saving to / loading from
-``.npz`` files. A subclass supplies the learning rule through four methods: ``_setup_model``,
+``.npz`` files. A subclass supplies the learning rule: ``_setup_model`` (allocate the tables),
 ``_choose`` (one behaviour action), ``_learn_transition`` (one learning step, shared by
-:meth:`~TabularAgent.learn` and :meth:`~TabularAgent.update`) and ``_greedy_actions``.
+:meth:`~TabularAgent.learn` and :meth:`~TabularAgent.update`), ``_greedy_actions``,
+``_end_episode`` (forget the episode's history) and ``_get_state_arrays``/``_set_state_arrays``
+(what a model file holds).
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from gymnasium import spaces
 from delayed_rl.agents.callbacks import as_callback
 from delayed_rl.agents.logger import Logger
 from delayed_rl.agents.schedules import (
+    ConstantSchedule,
     LinearSchedule,
     Schedule,
     as_learning_rate_schedule,
@@ -602,7 +605,7 @@ class TabularAgent:
         env = self.env
         obs_start, action_start = self._obs_start, self._action_start
         eps_constant = self.exploration_initial_eps == self.exploration_final_eps
-        lr_constant = not callable(self.learning_rate)
+        lr_constant = isinstance(self.lr_schedule, ConstantSchedule)
         eps = self.exploration_rate
         uniform = self._uniform
         choose, learn_transition = self._choose, self._learn_transition

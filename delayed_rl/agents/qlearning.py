@@ -10,6 +10,7 @@ identical tables for the same seed and env.
 from __future__ import annotations
 
 import numbers
+from typing import Any
 
 import gymnasium as gym
 
@@ -71,6 +72,11 @@ class QLearning(MultipleModelQLearning):
             verbose=verbose,
         )
 
+    def _set_hyperparameters(self, *, delay_estimates: Any = None, **kwargs: Any) -> None:
+        if delay_estimates is not None and list(delay_estimates) != [0]:
+            raise ValueError(f"QLearning has delay_estimates [0], got {delay_estimates!r}")
+        super()._set_hyperparameters(delay_estimates=delay_estimates, **kwargs)
+
 
 class FixedDelayQLearning(MultipleModelQLearning):
     """Q-learning that assumes every reward arrives exactly ``delay`` steps late.
@@ -125,3 +131,11 @@ class FixedDelayQLearning(MultipleModelQLearning):
     def delay(self) -> int:
         """The assumed delay."""
         return int(self._delays[0])
+
+    def _set_hyperparameters(self, *, delay_estimates: Any = None, **kwargs: Any) -> None:
+        if delay_estimates is not None and len(delay_estimates) != 1:
+            raise ValueError(
+                f"FixedDelayQLearning has one delay estimate, got delay_estimates="
+                f"{delay_estimates!r}"
+            )
+        super()._set_hyperparameters(delay_estimates=delay_estimates, **kwargs)

@@ -135,11 +135,12 @@ def schedule_to_json(schedule: Schedule, current_value: float) -> dict[str, Any]
     }
 
 
-def schedule_from_json(data: dict[str, Any]) -> Schedule:
-    """Rebuild a schedule that :func:`schedule_to_json` described (a callable: its saved value)."""
+def schedule_from_json(data: dict[str, Any]) -> Schedule | float:
+    """Rebuild what :func:`schedule_to_json` described: a constant (or a callable schedule,
+    which cannot be stored) comes back as its value."""
     kind = data["type"]
     if kind == "linear":
         return LinearSchedule(data["start"], data["end"], data["end_fraction"])
     if kind in ("constant", "callable"):
-        return ConstantSchedule(data["value"])
+        return float(data["value"])
     raise ValueError(f"unknown schedule type {kind!r}")
