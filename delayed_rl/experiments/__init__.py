@@ -11,6 +11,7 @@ _MODULES = {
     "world-size": "world_size",
     "estimate-error": "estimate_error",
     "mmq-gridworld": "mmq_gridworld",
+    "roulette": "roulette",
 }
 NAMES = tuple(_MODULES)
 
