@@ -1,18 +1,26 @@
 """The ``delayed-rl`` command line.
 
 - ``delayed-rl list``: the envs, agents and experiments;
+- ``delayed-rl train``: train a tabular agent on an env (optionally reward-delayed) and save it;
+- ``delayed-rl evaluate``: run a saved agent greedily and report its average reward;
 - ``delayed-rl bench NAME``: one thesis experiment over seeds, written to ``--out/NAME``;
 - ``delayed-rl reproduce``: every experiment.
 
-Exit codes: 0 success, 2 bad usage (unknown names, bad values), 1 a failure while running.
+Exit codes: 0 success, 2 bad usage (unknown names, bad values; argparse's message), 1 a failure
+while running (a missing or unreadable model file, an env the agent cannot use, ...), reported
+as one ``error: ...`` line on stderr, without a traceback.
 """
 
 from __future__ import annotations
 
 import argparse
+import difflib
+import math
 import sys
-from collections.abc import Sequence
+import time
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 
@@ -41,11 +49,165 @@ def _list(args: argparse.Namespace) -> int:
     return 0
 
 
-def _positive_int(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text}")
-    return value
+def _number(
+    kind: type, low: float | None = None, high: float | None = None, low_open: bool = False
+) -> Callable[[str], Any]:
+    """An argparse ``type``: ``kind(text)``, finite, within the bounds given.
+
+    Args:
+        kind: ``int`` or ``float``.
+        low: the smallest allowed value (``None``: no lower bound).
+        high: the largest allowed value (``None``: no upper bound).
+        low_open: exclude ``low`` itself.
+    """
+    what = "an integer" if kind is int else "a number"
+    if low is None:
+        allowed = f"a finite {what.split()[-1]}"
+    elif high is None:
+        allowed = f"{what} {'>' if low_open else '>='} {low}"
+    else:
+        allowed = f"{what} in {'(' if low_open else '['}{low}, {high}]"
+
+    def parse(text: str) -> Any:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be {allowed}, got {text!r}") from None
+        above = low is None or (value > low if low_open else value >= low)
+        if not (math.isfinite(value) and above and (high is None or value <= high)):
+            raise argparse.ArgumentTypeError(f"must be {allowed}, got {text!r}")
+        return value
+
+    parse.__name__ = kind.__name__
+    return parse
+
+
+_positive_int = _number(int, 1)
+
+
+_float = _number(float)
+_non_negative_int = _number(int, 0)
+_non_negative_float = _number(float, 0.0)
+_probability = _number(float, 0.0, 1.0)
+_learning_rate = _number(float, 0.0, 1.0, low_open=True)
+
+#: ``--agent`` choices: the agent class for each.
+AGENTS = {"q": "QLearning", "fixed": "FixedDelayQLearning", "mmq": "MultipleModelQLearning"}
+#: What ``--episodes`` waits for an episode to end before calling the env continuing.
+MAX_EPISODE_STEPS = 100_000
+
+
+class CommandError(Exception):
+    """A failure while running a command: reported as ``error: ...`` with exit code 1."""
+
+
+def _env_id(text: str) -> str:
+    """An argparse ``type``: a registered Gymnasium id (or ``module:Id``, imported on make)."""
+    if text in gym.registry or ":" in text:
+        return text
+    close = difflib.get_close_matches(text, list(gym.registry), n=3)
+    hint = f"; did you mean {', '.join(close)}?" if close else "; see delayed-rl list"
+    raise argparse.ArgumentTypeError(f"unknown env id {text!r}{hint}")
+
+
+def _make_env(env_id: str, reward_delay: float | None) -> gym.Env:
+    """``gym.make(env_id)``, behind a Poisson(``reward_delay``) reward delay when one is given."""
+    try:
+        env = gym.make(env_id)
+    except (gym.error.Error, ImportError, TypeError, ValueError) as error:
+        raise CommandError(f"cannot make env {env_id!r}: {error}") from None
+    if reward_delay is None:
+        return env
+    from delayed_rl.wrappers import PoissonRewardDelay
+
+    return PoissonRewardDelay(env, reward_delay)
+
+
+def _delay_text(reward_delay: float | None) -> str:
+    return "undelayed" if reward_delay is None else f"Poisson reward delay λ = {reward_delay:g}"
+
+
+def _train(args: argparse.Namespace) -> int:
+    from delayed_rl import agents
+
+    env = _make_env(args.env, args.reward_delay)
+    options: dict[str, Any] = {
+        "learning_rate": args.learning_rate,
+        "gamma": args.gamma,
+        "exploration_initial_eps": args.epsilon,
+        "exploration_final_eps": args.epsilon,
+        "q_init": args.q_init,
+        "seed": args.seed,
+    }
+    if args.agent == "fixed":
+        options["delay"] = args.delay
+    elif args.agent == "mmq":
+        options["max_delay_estimate"] = args.max_delay_estimate
+    save = Path(args.save)
+    try:  # fail before training, not after, when the model cannot be written there
+        save.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise CommandError(f"cannot create the folder of --save {save}: {error}") from None
+    try:
+        agent = getattr(agents, AGENTS[args.agent])(env, **options)
+    except (TypeError, ValueError) as error:
+        raise CommandError(f"cannot train {AGENTS[args.agent]} on {args.env}: {error}") from None
+    progress = sys.stderr.isatty() if args.progress is None else args.progress
+    started = time.perf_counter()
+    agent.learn(args.steps, log_interval=None, progress_bar=progress)
+    seconds = time.perf_counter() - started
+    average = agent.logger.dumps[-1]["rollout/undelayed_reward_per_step"]
+    try:
+        written = agent.save(save)
+    except OSError as error:
+        raise CommandError(f"cannot save the model to {save}: {error}") from None
+    print(
+        f"trained {AGENTS[args.agent]} on {args.env} ({_delay_text(args.reward_delay)}) for "
+        f"{args.steps} steps in {seconds:.1f} s: average undelayed reward {average:.4f} per "
+        f"step; saved to {written}"
+    )
+    return 0
+
+
+def _evaluate(args: argparse.Namespace) -> int:
+    from delayed_rl.agents import load_agent
+
+    env = _make_env(args.env, args.reward_delay)
+    agent = load_agent(args.path, env)  # its errors name the file and the problem
+    obs, _ = env.reset(seed=args.seed)
+    steps = episodes = episode_steps = 0
+    total = episode_return = 0.0
+    returns: list[float] = []
+    limit = args.steps
+    while (steps < limit) if limit is not None else (episodes < args.episodes):
+        action, _ = agent.predict(obs, deterministic=True)
+        obs, reward, terminated, truncated, info = env.step(action)
+        reward = float(info.get("undelayed_reward", reward))
+        steps, episode_steps = steps + 1, episode_steps + 1
+        total += reward
+        episode_return += reward
+        if terminated or truncated:
+            returns.append(episode_return)
+            episodes += 1
+            episode_steps, episode_return = 0, 0.0
+            obs, _ = env.reset()
+        elif limit is None and episode_steps >= args.max_episode_steps:
+            raise CommandError(
+                f"no episode of {args.env} ended within {args.max_episode_steps} steps: it looks "
+                "like a continuing task; evaluate it with --steps N"
+            )
+    env.close()
+    per_episode = (
+        f"{sum(returns) / len(returns):.4f} per episode over {len(returns)} episode(s)"
+        if returns
+        else "no episode ended"
+    )
+    print(
+        f"evaluated {type(agent).__name__} from {args.path} greedily on {args.env} "
+        f"({_delay_text(args.reward_delay)}) for {steps} steps: average undelayed reward "
+        f"{total / steps:.4f} per step; {per_episode}"
+    )
+    return 0
 
 
 def _bench(args: argparse.Namespace) -> int:
@@ -85,6 +247,126 @@ def build_parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     listing = commands.add_parser("list", help="list the registered envs and the agents")
     listing.set_defaults(run=_list)
+    train = commands.add_parser(
+        "train",
+        help="train a tabular agent and save it",
+        description="Train Q-learning, fixed-delay Q-learning or Multiple Model Q-learning on a "
+        "Gymnasium env with Discrete spaces (optionally behind a Poisson reward delay), save the "
+        "agent and print its average undelayed reward per step during training.",
+    )
+    train.add_argument(
+        "--env",
+        required=True,
+        type=_env_id,
+        help="a registered env id, e.g. delayed_rl/GridWorld-3x3-v0",
+    )
+    train.add_argument(
+        "--agent",
+        required=True,
+        choices=AGENTS,
+        help="q: Q-learning; fixed: Q-learning assuming --delay; mmq: Multiple "
+        "Model Q-learning over delays 0..--max-delay-estimate",
+    )
+    train.add_argument(
+        "--reward-delay",
+        type=_non_negative_float,
+        metavar="λ",
+        help="delay rewards by Poisson(λ) steps (default: undelayed)",
+    )
+    train.add_argument(
+        "--steps", type=_positive_int, default=100_000, help="training steps (default 100000)"
+    )
+    train.add_argument(
+        "--learning-rate", type=_learning_rate, default=0.1, help="α in (0, 1] (default 0.1)"
+    )
+    train.add_argument(
+        "--gamma", type=_probability, default=0.9, help="discount factor in [0, 1] (default 0.9)"
+    )
+    train.add_argument(
+        "--epsilon",
+        type=_probability,
+        default=0.1,
+        help="constant ε of ε-greedy exploration (default 0.1)",
+    )
+    train.add_argument(
+        "--q-init",
+        type=_float,
+        default=0.0,
+        help="initial Q-value; above the true values explores optimistically (default 0)",
+    )
+    train.add_argument(
+        "--delay",
+        type=_non_negative_int,
+        metavar="K",
+        help="the delay that --agent fixed assumes (required for it)",
+    )
+    train.add_argument(
+        "--max-delay-estimate",
+        type=_non_negative_int,
+        metavar="N",
+        help="--agent mmq: the largest delay estimate λ̂max (default 50)",
+    )
+    train.add_argument(
+        "--seed",
+        type=_non_negative_int,
+        default=None,
+        help="seeds the agent and the env (default: unseeded)",
+    )
+    train.add_argument(
+        "--progress",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="show a progress bar (default: when stderr is a terminal)",
+    )
+    train.add_argument(
+        "--save",
+        required=True,
+        metavar="PATH",
+        help="where to save the agent (.npz appended when PATH has no suffix)",
+    )
+    train.set_defaults(run=_train, parser=train)
+    evaluate = commands.add_parser(
+        "evaluate",
+        help="run a saved agent greedily and report its average reward",
+        description="Load an agent saved by `delayed-rl train` (or agent.save), run its greedy "
+        "policy without learning, and print the average undelayed reward per step and per "
+        "episode. Continuing envs (whose episodes never end, like the grid worlds) need --steps.",
+    )
+    evaluate.add_argument("path", help="the saved model file")
+    evaluate.add_argument(
+        "--env", required=True, type=_env_id, help="the env id (its spaces must match the model's)"
+    )
+    evaluate.add_argument(
+        "--reward-delay",
+        type=_non_negative_float,
+        metavar="λ",
+        help="delay rewards by Poisson(λ) steps (the reported reward is the "
+        "undelayed one either way)",
+    )
+    length = evaluate.add_mutually_exclusive_group()
+    length.add_argument(
+        "--episodes", type=_positive_int, default=None, help="run this many episodes (default 10)"
+    )
+    length.add_argument(
+        "--steps",
+        type=_positive_int,
+        default=None,
+        help="run this many steps (for continuing envs)",
+    )
+    evaluate.add_argument(
+        "--max-episode-steps",
+        type=_positive_int,
+        default=MAX_EPISODE_STEPS,
+        help="with --episodes: fail when an episode runs longer than this "
+        f"(default {MAX_EPISODE_STEPS})",
+    )
+    evaluate.add_argument(
+        "--seed",
+        type=_non_negative_int,
+        default=None,
+        help="seeds the env's first reset (default: unseeded)",
+    )
+    evaluate.set_defaults(run=_evaluate)
     bench = commands.add_parser("bench", help="run one thesis experiment over seeds")
     bench.add_argument("name", choices=NAMES, help="the experiment")
     _add_bench_options(bench, "runs")
@@ -97,9 +379,23 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``delayed-rl`` with ``argv`` (default: the process's arguments); return the exit code."""
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command == "train":
+        if args.agent == "fixed" and args.delay is None:
+            args.parser.error("--agent fixed needs --delay K (the delay it assumes)")
+        if args.agent != "fixed" and args.delay is not None:
+            args.parser.error(f"--delay is for --agent fixed, not --agent {args.agent}")
+        if args.agent != "mmq" and args.max_delay_estimate is not None:
+            args.parser.error(f"--max-delay-estimate is for --agent mmq, not --agent {args.agent}")
+    if args.command == "evaluate" and args.episodes is None and args.steps is None:
+        args.episodes = 10
     gym.logger.min_level = 40  # keep Gymnasium's warnings out of command output
-    return args.run(args)
+    try:
+        return args.run(args)
+    except (CommandError, OSError, ValueError, TypeError, RuntimeError, gym.error.Error) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

@@ -102,3 +102,83 @@ def test_cli_bench_quick_writes_report(tmp_path, capsys):
     assert main(argv) == 0
     assert (tmp_path / "delay-sweep" / "report.md").exists()
     assert "verdict" in capsys.readouterr().out
+
+
+def test_line_error_counts_an_unseen_line_as_the_worst_offset():
+    from delayed_rl.experiments.linefollow import line_error
+
+    np.testing.assert_array_equal(line_error([0, 1, 19, 20, 21, 40]), [20, 19, 1, 0, 1, 20])
+
+
+def test_line_following_tasks_follow_the_thesis_scale_and_seeds():
+    from delayed_rl.experiments import controllers, linefollow
+
+    full = linefollow.tasks(Config(seeds=5, base_seed=7))
+    assert sorted((t["agent"], t["seed"]) for t in full) == sorted(
+        (agent, seed) for agent in ("MMQ", "Q") for seed in range(7, 12)
+    )
+    assert {t["steps"] for t in full} == {150_000}
+    runs = controllers.tasks(Config(seeds=2, base_seed=3))
+    assert {t["controller"] for t in runs} == {
+        "P undelayed", "P delayed observations", "Q", "MMQ"
+    }  # fmt: skip
+    assert {t["seed"] for t in runs} == {3, 4}
+    assert {(t["train_steps"], t["run_steps"]) for t in runs} == {(300_000, 1700)}
+    assert {t["steps"] for t in linefollow.tasks(Config(quick=True, seeds=1, steps=123))} == {123}
+
+
+def test_delayed_observations_break_the_proportional_controller():
+    from delayed_rl.experiments.controllers import run_task
+
+    task = {"train_steps": 0, "run_steps": 1700, "seed": 0}
+    undelayed = run_task({**task, "controller": "P undelayed"})
+    delayed = run_task({**task, "controller": "P delayed observations"})
+    # Fig. 5.19: ≈ 0.9 undelayed; the Poisson(90)-late camera loses the line most of the time.
+    assert undelayed["average"] > 0.75 and undelayed["visible"] > 0.95
+    assert delayed["average"] < 0.3 and delayed["visible"] < 0.8
+    assert undelayed["curve"][-1] == pytest.approx(undelayed["average"])
+    assert delayed["total_error"] > 3 * undelayed["total_error"]
+
+
+def test_learners_keep_learning_through_the_controllers_run():
+    from delayed_rl.experiments.controllers import run_task
+
+    result = run_task({"controller": "Q", "train_steps": 500, "run_steps": 200, "seed": 1})
+    assert result["steps"][-1] == 200 and result["curve"][-1] == pytest.approx(result["average"])
+    assert -1.0 <= result["average"] <= 1.0
+
+
+def test_linefollow_run_records_reward_and_accumulated_error():
+    from delayed_rl.experiments.linefollow import run_task
+
+    result = run_task({"agent": "MMQ", "steps": 1000, "seed": 0})
+    assert result["steps"][-1] == 1000 and result["error"][-1] == result["total_error"]
+    assert np.all(np.diff(result["error"]) >= 0)  # an accumulated sum of |Δ| ≥ 0
+    assert np.all(np.diff(result["error"]) <= 20 * np.diff(result["steps"]))  # |Δ| ≤ 20 a step
+    assert result["curve"][-1] == pytest.approx(result["average"])
+
+
+def _fake_linefollow(mmq: tuple[float, float], q: tuple[float, float], seeds: int = 3):
+    from delayed_rl.experiments.linefollow import summarize
+
+    tasks, results = [], []
+    for seed in range(seeds):
+        for agent, (average, error) in (("MMQ", mmq), ("Q", q)):
+            tasks.append({"agent": agent, "steps": 10, "seed": seed})
+            steps = np.array([5, 10])
+            jitter = 0.01 * seed
+            results.append({"steps": steps, "curve": np.full(2, average + jitter),
+                            "error": np.array([error / 2, error]), "average": average + jitter,
+                            "total_error": error * (1 + jitter), "visible": 1.0})  # fmt: skip
+    summary = summarize(tasks, results, Config(seeds=seeds))
+    return {claim.quantity: claim for claim in summary.claims}
+
+
+def test_linefollow_verdicts_follow_the_documented_rules():
+    thesis_like = _fake_linefollow(mmq=(0.55, 400.0), q=(0.12, 1000.0))
+    assert all(claim.verdict == "agrees" for claim in thesis_like.values())
+    ratio = thesis_like["MMQ accumulated error / Q accumulated error"]
+    assert ratio.mean == pytest.approx(0.4, abs=0.01) and ratio.n == 3
+    unlike = _fake_linefollow(mmq=(0.3, 900.0), q=(0.6, 1000.0))
+    assert all(claim.verdict == "differs" for claim in unlike.values())
+    assert unlike["MMQ minus Q average reward (paired by seed)"].mean == pytest.approx(-0.3)

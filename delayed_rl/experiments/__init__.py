@@ -12,6 +12,8 @@ _MODULES = {
     "estimate-error": "estimate_error",
     "mmq-gridworld": "mmq_gridworld",
     "roulette": "roulette",
+    "controllers": "controllers",
+    "linefollow": "linefollow",
 }
 NAMES = tuple(_MODULES)
 

@@ -1,0 +1,155 @@
+"""``controllers`` (thesis Fig. 5.19): four line followers over 1700 steps of the racetrack, λ = 90.
+
+The contestants, each run for 1700 steps on the env of :func:`.linefollow.line_env` (racetrack,
+put back on the track after 50 line-less steps, Poisson(90) reward delay), all starting from the
+same pose for a given seed:
+
+- **P undelayed**: the thesis's proportional controller (Eqs. 5.8–5.9, k_p = 6) on continuous
+  wheel speeds, seeing the camera undelayed. Its rewards still pass through the Poisson(90)
+  reward delay, as in the thesis; the controller ignores rewards and the metric uses the
+  undelayed stream, so this changes nothing.
+- **P delayed observations**: the same controller behind
+  :class:`~delayed_rl.wrappers.ObservationDelay` with Poisson(90) delays: at step t it sees
+  the camera of step t − d_t.
+- **Q** and **MMQ** (λ̂max = 150, as in Figs. 5.20–5.23): first "thoroughly trained" under the
+  Poisson(90) reward delay for ``steps`` steps (default 300k, twice the 150k of Figs. 5.20–5.23;
+  the learning curves are flat by then), then their Q-tables start the 1700-step run on a fresh
+  env, where they keep learning with ε = 0.1 as the thesis's did.
+
+Metric: the running average of the undelayed reward over the 1700 steps (Fig. 5.19); the claim
+is its final value. Verdict: a controller agrees when |measured − thesis| ≤ 0.2; the ordering
+claim agrees when the four means are ordered as the thesis's, P > MMQ > Q > delayed P.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from delayed_rl.experiments import plotting
+from delayed_rl.experiments.common import claim
+from delayed_rl.experiments.linefollow import LAM, LAMBDA_MAX, line_env, line_error, make_agent
+from delayed_rl.experiments.runner import (
+    Config,
+    Curve,
+    Experiment,
+    Summary,
+    mean_ci95,
+    running_average,
+)
+
+RUN_STEPS = 1700
+#: Thesis Fig. 5.19's final average rewards, in the thesis's order of performance.
+THESIS = {"P undelayed": 0.9, "MMQ": 0.6, "Q": 0.3, "P delayed observations": -0.6}
+TOLERANCE = 0.2
+
+
+def tasks(config: Config) -> list[dict]:
+    train_steps = config.steps or (2_000 if config.quick else 300_000)
+    run_steps = 300 if config.quick else RUN_STEPS
+    return [
+        {
+            "controller": name,
+            "train_steps": train_steps,
+            "run_steps": run_steps,
+            "seed": config.base_seed + i,
+        }  # fmt: skip
+        for i in range(config.seeds)
+        for name in THESIS
+    ]
+
+
+def _run_proportional(delayed: bool, steps: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """The P controller's undelayed rewards and true centroids over ``steps`` steps."""
+    from delayed_rl.agents.controllers import ProportionalController
+    from delayed_rl.delays import Poisson
+    from delayed_rl.wrappers import ObservationDelay
+
+    env = line_env(action_mode="continuous")
+    if delayed:
+        env = ObservationDelay(env, Poisson(LAM))
+    controller = ProportionalController(env=env)
+    obs, info = env.reset(seed=seed)
+    rewards, centroids = np.zeros(steps), np.zeros(steps, dtype=np.int64)
+    state = None
+    for t in range(steps):
+        centroids[t] = info["centroid"]  # the camera now, whatever the controller is shown
+        action, state = controller.predict(obs, state)
+        obs, _, _, _, info = env.step(action)
+        rewards[t] = info["undelayed_reward"]
+    env.close()
+    return rewards, centroids
+
+
+def _run_learner(kind: str, train_steps: int, steps: int, seed: int) -> tuple[np.ndarray, ...]:
+    """Train ``kind`` for ``train_steps``, then keep learning for ``steps`` on a fresh env."""
+    agent = make_agent(kind, line_env(), seed)
+    agent.learn(train_steps, log_interval=None)
+    agent.set_env(line_env())  # its first reset uses the agent's seed: the P runs' start pose
+    agent.learn(steps, log_interval=None, reset_num_timesteps=False, record=True)
+    return agent.training_log["undelayed_reward"], agent.training_log["obs"]
+
+
+def run_task(task: dict) -> dict:
+    name, seed, steps = task["controller"], task["seed"], task["run_steps"]
+    if name.startswith("P "):
+        rewards, centroids = _run_proportional(name != "P undelayed", steps, seed)
+    else:
+        rewards, centroids = _run_learner(name, task["train_steps"], steps, seed)
+    points, curve = running_average(rewards)
+    return {
+        "steps": points,
+        "curve": curve,
+        "average": float(rewards.mean()),
+        "total_error": float(line_error(centroids).sum()),
+        "visible": float(np.mean(centroids != 0)),
+    }
+
+
+def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
+    runs: dict[str, list[dict]] = {name: [] for name in THESIS}
+    curves = []
+    for task, result in zip(task_list, results, strict=True):
+        runs[task["controller"]].append(result)
+        curves.append(Curve(task["controller"], task["seed"], result["steps"], result["curve"]))
+    stat = {n: mean_ci95([r["average"] for r in rs]) + (len(rs),) for n, rs in runs.items()}
+    claims = [
+        claim(f"{name}: average reward after {task_list[0]['run_steps']} steps",
+              f"≈ {value:+.1f} (Fig. 5.19)", stat[name],
+              ok=abs(stat[name][0] - value) <= TOLERANCE,
+              note=f"agrees when |measured − thesis| ≤ {TOLERANCE}")
+        for name, value in THESIS.items()
+    ]  # fmt: skip
+    means = [stat[name][0] for name in THESIS]
+    in_order = sum(a > b for a, b in zip(means, means[1:], strict=False))
+    claims.append(claim(
+        "ordered pairs in P > MMQ > Q > delayed P (of 3)", "3 (Fig. 5.19)",
+        (float(in_order), 0.0, config.seeds), ok=in_order == 3,
+        note="measured order: " + " > ".join(sorted(THESIS, key=lambda n: -stat[n][0]))))  # fmt: skip
+    groups = {n: [(r["steps"], r["curve"]) for r in rs] for n, rs in runs.items()}
+    figures = {"fig5_19_controllers": lambda path: plotting.learning_curves(
+        path, groups, f"line following, λ = {LAM}: controllers' performance (Fig. 5.19)",
+        "average reward")}  # fmt: skip
+    extra = {
+        "train_steps": task_list[0]["train_steps"],
+        "run_steps": task_list[0]["run_steps"],
+        "lambda_max": LAMBDA_MAX,
+        "accumulated_error": {n: mean_ci95([r["total_error"] for r in rs])
+                              for n, rs in runs.items()},
+        "line_visible_fraction": {n: mean_ci95([r["visible"] for r in rs])
+                                  for n, rs in runs.items()},
+    }  # fmt: skip
+    return Summary(claims, curves, figures, extra)
+
+
+EXPERIMENT = Experiment(
+    name="controllers",
+    thesis="Fig. 5.19",
+    description="1700 steps of the racetrack under Poisson(90) delays: the proportional "
+    "controller (k_p = 6) undelayed and with Poisson(90)-delayed observations, and Q-learning "
+    "and MMQ (λ̂max = 150) trained first for --steps steps (default 300k) under the reward delay "
+    "and still learning during the run. Average reward from the undelayed reward stream.",
+    tasks=tasks,
+    run_task=run_task,
+    summarize=summarize,
+    default_seeds=5,
+)
