@@ -14,15 +14,20 @@ from delayed_rl.wrappers import RewardDelay
 
 
 def _cache(q):
+    """(qmax, qcell): each state's max and its flat index in q (the agents' layout)."""
     flat = q.reshape(q.shape[0], -1)
-    arg = flat.argmax(axis=1)
-    return flat.max(axis=1), arg // q.shape[2], arg % q.shape[2]
+    return flat.max(axis=1), np.arange(q.shape[0]) * flat.shape[1] + flat.argmax(axis=1)
+
+
+def _caches(q):
+    """The kernel's two caches: per state (qmax, qcell) and per model (mmax, marg)."""
+    return (*_cache(q), q.max(axis=2), q.argmax(axis=2))
 
 
 def test_roulette_walk_through_tables_3_2_to_3_5():
     """Thesis section 3.2: q_init 50, α 0.1, γ 0.9, Λ = {0, 1, 2}; EVEN = 0, THIRTEEN = 1."""
     q = np.full((1, 3, 2), 50.0)
-    qmax, ql, qa = _cache(q)
+    caches = _caches(q)
     lags = np.arange(3)
     hist = [
         np.zeros(4, np.int64),
@@ -33,19 +38,19 @@ def test_roulette_walk_through_tables_3_2_to_3_5():
     rounds = [(0, 0.0), (1, 35.0), (0, -1.0)]  # (wager, reward received that round)
     for count, (action, reward) in enumerate(rounds, start=1):
         hist[1][(count - 1) & 3] = action
-        apply_update(q, lags, reward, 0.1, 0.9, *hist, count, qmax, ql, qa, np.zeros(3))
+        apply_update(q, lags, reward, 0.1, 0.9, *hist, count, *caches, np.zeros(3))
         if count == 1:
             np.testing.assert_allclose(q[0], [[49.5, 50], [50, 50], [50, 50]])
         if count == 2:
             np.testing.assert_allclose(q[0], [[49.5, 53], [53, 50], [50, 50]])
     np.testing.assert_allclose(q[0], [[49.22, 53], [53, 49.67], [49.67, 50]])
-    assert qmax[0] == 53.0
+    assert caches[0][0] == 53.0
 
 
 def test_cache_tracks_the_brute_force_max_under_random_updates():
     rng = np.random.default_rng(3)
     q = rng.normal(size=(5, 4, 3))
-    qmax, ql, qa = _cache(q)
+    qmax, qcell, mmax, marg = _caches(q)
     lags = np.arange(4)
     hist = [
         rng.integers(0, 5, 8),
@@ -55,10 +60,14 @@ def test_cache_tracks_the_brute_force_max_under_random_updates():
     ]
     for step in range(200):
         reward = float(rng.normal(scale=3))
-        apply_update(q, lags, reward, 0.5, 0.9, *hist, 8 + step, qmax, ql, qa, np.zeros(4))
+        apply_update(
+            q, lags, reward, 0.5, 0.9, *hist, 8 + step, qmax, qcell, mmax, marg, np.zeros(4)
+        )
         brute = q.reshape(5, -1).max(axis=1)
         np.testing.assert_array_equal(qmax, brute)
-        np.testing.assert_array_equal(q[np.arange(5), ql, qa], brute)
+        np.testing.assert_array_equal(q.reshape(-1)[qcell], brute)
+        np.testing.assert_array_equal(mmax, q.max(axis=2))
+        np.testing.assert_array_equal(np.take_along_axis(q, marg[..., None], 2)[..., 0], mmax)
 
 
 def test_constant_delay_ring_delivers_k_steps_late():

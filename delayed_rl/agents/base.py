@@ -180,6 +180,7 @@ class TabularAgent:
         exploration_rate: the current ε.
         training_log: after ``learn(..., record=True)``, one array per step for each key of
             :data:`RECORD_KEYS`.
+        last_learn_path: ``"fused"`` or ``"python"``: the loop the last ``learn()`` ran on.
     """
 
     _hyperparameter_names: ClassVar[tuple[str, ...]] = (
@@ -528,6 +529,7 @@ class TabularAgent:
         reset_num_timesteps: bool = True,
         progress_bar: bool = False,
         record: bool = False,
+        fused: bool | None = None,
     ) -> TabularAgent:
         """Train for ``total_timesteps`` steps of the env (SB3's signature and semantics).
 
@@ -556,6 +558,21 @@ class TabularAgent:
                 ``acting_delay_index`` (the index into ``delay_estimates`` of the acting model)
                 and ``done`` (the episode ended at that step) — what experiments need to
                 compute average rewards from the undelayed stream.
+            fused: run the whole loop compiled (:mod:`delayed_rl.fast`): ``None`` (default)
+                does when it can — the env stack compiles (a tabular env exposing its tables,
+                under at most one :class:`~delayed_rl.wrappers.RewardDelay`, see
+                :mod:`delayed_rl.fast.tabular`), the learning rate is constant and no
+                ``callback`` is given (``progress_bar`` is fine) — and runs the Python loop
+                otherwise; ``False`` never does; ``True`` must (raises
+                :class:`~delayed_rl.fast.NotCompilable` with the reason otherwise). Both paths
+                apply the same update rule; their random streams differ, so seeded runs agree
+                in distribution, not step by step. On the compiled path the env object is not
+                stepped (the next Python-path ``learn()`` resets it). Callbacks still get one
+                ``on_step()`` per step, with that step's ``locals`` (``info`` holds only
+                ``undelayed_reward``), but they run after each compiled chunk of
+                :attr:`fused_chunk` steps: the model they see (an ``EvalCallback``'s
+                evaluation, a ``CheckpointCallback``'s file) is the one at the chunk's end, and
+                a callback's ``False`` stops training at the end of its chunk.
 
         Returns:
             The agent itself.
@@ -586,6 +603,7 @@ class TabularAgent:
             raise ValueError(
                 "the agent has no env to learn from: pass env= to load() or call set_env(env)"
             )
+        per_step_callbacks = callback is not None
         callback = as_callback(callback, progress_bar)
         if reset_num_timesteps:
             self.num_timesteps = 0
@@ -621,6 +639,18 @@ class TabularAgent:
             callback.on_rollout_start()
         self._log_start = (time.perf_counter(), self.num_timesteps)
         next_log = n_steps + 1 if log_interval is None else log_interval
+        if fused is None and per_step_callbacks:
+            fused = False  # callbacks see the exact per-step model on the Python path
+        fused_run = self._fused_run(fused, lr_constant, reset_num_timesteps)
+        self.last_learn_path = "python" if fused_run is None else "fused"
+        if fused_run is not None:
+            steps_done, reward_total, undelayed_total = self._learn_fused(
+                fused_run, n_steps, start_timesteps, total_timesteps, callback, locals_,
+                log_interval, log,
+            )  # fmt: skip
+            return self._finish_learn(
+                steps_done, reward_total, undelayed_total, total_timesteps, record, log, callback
+            )
         s = self._obs
         episode_reward, episode_length = self._episode_reward, self._episode_length
         reward_total = undelayed_total = 0.0
@@ -689,6 +719,21 @@ class TabularAgent:
                 reward_total = undelayed_total = 0.0
         self._obs = s
         self._episode_reward, self._episode_length = episode_reward, episode_length
+        return self._finish_learn(
+            steps_done, reward_total, undelayed_total, total_timesteps, record, log, callback
+        )
+
+    def _finish_learn(
+        self,
+        steps_done: int,
+        reward_total: float,
+        undelayed_total: float,
+        total_timesteps: int,
+        record: bool,
+        log: dict[str, np.ndarray],
+        callback: Any,
+    ) -> TabularAgent:
+        """What ends every ``learn()``: the record, the last metrics, the callbacks' ends."""
         self._progress_remaining = 1.0 - self.num_timesteps / max(total_timesteps, 1)
         if record:
             self.training_log = {key: value[:steps_done] for key, value in log.items()}
@@ -698,6 +743,146 @@ class TabularAgent:
             callback.on_rollout_end()
             callback.on_training_end()
         return self
+
+    # ------------------------------------------------------------------ the compiled path
+    fused_chunk: int = 1_000
+    """Steps per compiled call when callbacks are attached (they are called between calls)."""
+
+    def _fused_run(self, fused: bool | None, lr_constant: bool, restart: bool) -> Any:
+        """The compiled run to train with, or ``None`` for the Python loop (see ``learn``).
+
+        A run continues (same episode, history and pending rewards) across ``learn()`` calls
+        with ``reset_num_timesteps=False`` on the same env; otherwise a new one starts, seeded
+        from the agent's own generator (so seeded agents are reproducible).
+        """
+        if fused is not None and not isinstance(fused, bool):
+            raise ValueError(f"fused must be None (automatic), True or False, got {fused!r}")
+        if fused is False:
+            self._fused = None
+            return None
+        from delayed_rl.fast import FusedRun, NotCompilable
+
+        try:
+            if not lr_constant:
+                raise NotCompilable("the learning rate is a schedule (only a constant compiles)")
+            if not hasattr(self, "_q"):
+                raise NotCompilable(f"{type(self).__name__} has no compiled learning rule")
+            cached = getattr(self, "_fused", None)
+            if cached is None or cached[0] is not self.env or restart:
+                seed = int(self._uniform.rng.integers(2**63))
+                self._fused = (self.env, FusedRun(self.env, self._delays, seed))
+            return self._fused[1]
+        except NotCompilable:
+            self._fused = None
+            if fused:
+                raise
+            return None
+
+    def _learn_fused(
+        self,
+        run: Any,
+        n_steps: int,
+        start_timesteps: int,
+        total_timesteps: int,
+        callback: Any,
+        locals_: dict[str, Any],
+        log_interval: int | None,
+        log: dict[str, np.ndarray],
+    ) -> tuple[int, float, float]:
+        """Train ``n_steps`` on the compiled path; return (steps done, reward sums since the log)."""
+        eps_steps = max(1, round(self.exploration_fraction * total_timesteps))
+        if self.exploration_initial_eps == self.exploration_final_eps:
+            eps_steps = 1
+        chunk = self.fused_chunk if callback is not None else n_steps
+        if log_interval is not None:
+            chunk = min(chunk, log_interval)
+        next_log = n_steps + 1 if log_interval is None else log_interval
+        steps_done, reward_total, undelayed_total = 0, 0.0, 0.0
+        while steps_done < n_steps:
+            length = min(chunk, n_steps - steps_done, next_log - steps_done)
+            out = run.run(
+                self._q, self._v_max, self._v_cell, length, start_timesteps + steps_done,
+                self._alpha, self.gamma, self.exploration_initial_eps,
+                self.exploration_final_eps, eps_steps,
+            )  # fmt: skip
+            self.num_timesteps += length
+            self._record_fused_chunk(out, log, steps_done)
+            steps_done += length
+            reward_total += float(out["reward"].sum())
+            undelayed_total += float(out["undelayed_reward"].sum())
+            # ε as the Python loop leaves it: the value used at the chunk's last step
+            self._progress_remaining = 1.0 - (self.num_timesteps - 1) / total_timesteps
+            self.exploration_rate = self.exploration_schedule(self._progress_remaining)
+            if callback is not None and not self._replay_callback(
+                callback, locals_, out, run.state[0], self.num_timesteps - length
+            ):
+                break
+            if steps_done == next_log:
+                next_log += log_interval
+                self._log_metrics(reward_total, undelayed_total)
+                reward_total = undelayed_total = 0.0
+        self._episode_open = False  # the env object was not stepped: reset it next time
+        return steps_done, reward_total, undelayed_total
+
+    def _replay_callback(
+        self, callback: Any, locals_: dict[str, Any], out: dict, last_obs: int, start: int
+    ) -> bool:
+        """Call ``callback.on_step()`` once per step of a compiled chunk, with that step's locals.
+
+        The chunk has already been learned: a callback sees the Q-table of the chunk's end, and
+        a ``False`` from it stops training at the chunk's end.
+        """
+        o0, a0 = self._obs_start, self._action_start
+        obs = (out["obs"] + o0).tolist()
+        next_obs = [*obs[1:], int(last_obs) + o0]
+        actions = (out["action"] + a0).tolist()
+        rewards, undelayed = out["reward"].tolist(), out["undelayed_reward"].tolist()
+        ends, terminals = out["episode_end"].tolist(), out["terminated"].tolist()
+        models = out["model"].tolist()
+        end = self.num_timesteps
+        keep_going = True
+        for i, action in enumerate(actions):
+            self.num_timesteps = start + i + 1
+            info: dict[str, Any] = {"undelayed_reward": undelayed[i]}
+            locals_.update(
+                obs=obs[i], action=action, reward=rewards[i], undelayed_reward=undelayed[i],
+                terminated=terminals[i], truncated=ends[i] and not terminals[i], info=info,
+                acting_delay_index=models[i], new_obs=np.array([next_obs[i]]),
+                actions=np.array([action]), rewards=np.array([rewards[i]]),
+                dones=np.array([ends[i]]), infos=[info],
+            )  # fmt: skip
+            callback.update_locals(locals_)
+            if not callback.on_step():
+                keep_going = False
+                break
+        self.num_timesteps = end
+        return keep_going
+
+    def _record_fused_chunk(self, out: dict, log: dict[str, np.ndarray], offset: int) -> None:
+        """Book-keep a compiled chunk: acting counts, episode statistics, the optional record."""
+        counts = np.bincount(out["model"], minlength=len(self._acting_counts))
+        self._acting_counts = [a + int(b) for a, b in zip(self._acting_counts, counts, strict=True)]
+        ends = np.flatnonzero(out["episode_end"])
+        rewards = out["undelayed_reward"]
+        previous = 0
+        for end in ends.tolist():
+            self._episode_rewards.append(
+                self._episode_reward + float(rewards[previous : end + 1].sum())
+            )
+            self._episode_lengths.append(self._episode_length + end + 1 - previous)
+            self._episode_reward, self._episode_length = 0.0, 0
+            self._episodes += 1
+            previous = end + 1
+        self._episode_reward += float(rewards[previous:].sum())
+        self._episode_length += rewards.size - previous
+        if log:
+            stop = offset + rewards.size
+            log["obs"][offset:stop] = out["obs"] + self._obs_start
+            log["action"][offset:stop] = out["action"] + self._action_start
+            log["reward"][offset:stop] = out["reward"]
+            log["undelayed_reward"][offset:stop] = rewards
+            log["acting_delay_index"][offset:stop] = out["model"]
+            log["done"][offset:stop] = out["episode_end"]
 
     def _reset_statistics(self) -> None:
         self._acting_counts = [0] * self._n_models_for_stats()

@@ -12,9 +12,10 @@ from delayed_rl.experiments.training import grid_env, train
 
 def grid_task(task: dict) -> dict:
     """Train on ``GridWorld(size)`` with Poisson(``lam``) delays and estimates ``lags``."""
-    run = train(grid_env(task["size"], task["lam"]), task["lags"], task["steps"], task["seed"])
-    steps, curve = running_average(run.undelayed_reward)
-    return {"steps": steps, "curve": curve, "average": float(run.undelayed_reward.mean())}
+    agent = train(grid_env(task["size"], task["lam"]), task["lags"], task["steps"], task["seed"])
+    rewards = agent.training_log["undelayed_reward"]
+    steps, curve = running_average(rewards)
+    return {"steps": steps, "curve": curve, "average": float(rewards.mean())}
 
 
 def normalised(tasks: list[dict], results: list[dict], reference: dict) -> dict:

@@ -48,18 +48,19 @@ def _greedy_route(q: np.ndarray) -> list[int]:
 
 
 def run_task(task: dict) -> dict:
-    run = train(grid_env(SIZE, task["lam"]), task["lags"], task["steps"], task["seed"])
-    steps, curve = running_average(run.undelayed_reward)
-    route = _greedy_route(run.q)
-    policy = greedy_policy(run.q)
-    table = [(s, int(policy[s]), float(run.q[s, :, policy[s]].mean()),
-              float(run.q[s, :, policy[s]].var())) for s in route]  # fmt: skip
+    agent = train(grid_env(SIZE, task["lam"]), task["lags"], task["steps"], task["seed"])
+    log, q = agent.training_log, agent.q_table
+    steps, curve = running_average(log["undelayed_reward"])
+    route = _greedy_route(q)
+    policy = greedy_policy(q)
+    table = [(s, int(policy[s]), float(q[s, :, policy[s]].mean()),
+              float(q[s, :, policy[s]].var())) for s in route]  # fmt: skip
     return {
-        "steps": steps, "curve": curve, "average": float(run.undelayed_reward.mean()),
-        "greedy": greedy_average_reward(run, 1000),
-        "visits": np.bincount(run.obs, minlength=SIZE * SIZE).reshape(SIZE, SIZE),
+        "steps": steps, "curve": curve, "average": float(log["undelayed_reward"].mean()),
+        "greedy": greedy_average_reward(agent, SIZE, 1000),
+        "visits": np.bincount(log["obs"], minlength=SIZE * SIZE).reshape(SIZE, SIZE),
         "policy": policy.reshape(SIZE, SIZE), "route_table": table,
-        "model_share": np.bincount(run.model, minlength=len(task["lags"])) / run.model.size,
+        "model_share": agent.acting_delay_share,
     }  # fmt: skip
 
 

@@ -1,32 +1,19 @@
-"""Thesis-setting training runs on the grid worlds, on the compiled path.
+"""Thesis-setting training runs on the grid worlds, through the agents' ``learn()``.
 
 The thesis's hyper-parameters (section 3.2, Algorithm 1): α = 0.1, γ = 0.9, ε-greedy with a
 constant ε. The thesis does not state ε nor its optimistic initial value for the grid worlds;
 we use ε = 0.1 and ``q_init`` = 10 (above every true value, V* ≈ 2.2 on 9×9, so optimistic).
+On these tabular envs ``learn()`` takes its compiled path (:mod:`delayed_rl.fast`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import gymnasium as gym
 import numpy as np
 
-from delayed_rl.fast import FusedRun
+from delayed_rl.agents import MultipleModelQLearning
 
 ALPHA, GAMMA, EPSILON, Q_INIT = 0.1, 0.9, 0.1, 10.0
-CHUNK = 250_000
-
-
-@dataclass
-class TabularRun:
-    """The outcome of a training run: the Q-table and the per-step record."""
-
-    q: np.ndarray
-    undelayed_reward: np.ndarray
-    obs: np.ndarray
-    model: np.ndarray
-    fused: FusedRun
 
 
 def grid_env(size: int, lam: float) -> gym.Env:
@@ -36,35 +23,28 @@ def grid_env(size: int, lam: float) -> gym.Env:
     return gym.make("delayed_rl/GridWorld-v0", size=size, reward_delay=lam if lam > 0 else None)
 
 
-def train(
-    env: gym.Env, lags: np.ndarray | list[int], steps: int, seed: int, q_init: float = Q_INIT,
-    epsilon: float = EPSILON,
-) -> TabularRun:  # fmt: skip
-    """Train an MMQ agent with delay estimates ``lags`` (``[0]``: Q-learning; ``[k]``: fixed)."""
-    lags = np.asarray(lags, dtype=np.int64)
-    n_states, n_actions = env.observation_space.n, env.action_space.n
-    q = np.full((n_states, lags.size, n_actions), float(q_init))
-    qmax = np.full(n_states, float(q_init))
-    qarg_l = np.zeros(n_states, dtype=np.int64)
-    qarg_a = np.zeros(n_states, dtype=np.int64)
-    fused = FusedRun(env, lags, seed)
-    logs = []
-    for start in range(0, steps, CHUNK):
-        n = min(CHUNK, steps - start)
-        logs.append(fused.run(q, qmax, qarg_l, qarg_a, n, start, ALPHA, GAMMA, epsilon, epsilon, 1))
-    cat = {key: np.concatenate([log[key] for log in logs]) for key in logs[0]}
-    fused.cache = (qmax, qarg_l, qarg_a)
-    return TabularRun(q, cat["undelayed_reward"], cat["obs"], cat["model"], fused)
+def train(env: gym.Env, lags: list[int], steps: int, seed: int) -> MultipleModelQLearning:
+    """Train MMQ with delay estimates ``lags`` (``[0]``: Q-learning; ``[k]``: fixed delay k).
+
+    The agent's ``training_log`` holds the per-step record (``undelayed_reward``, ``obs``, ...).
+    """
+    agent = MultipleModelQLearning(
+        env, learning_rate=ALPHA, gamma=GAMMA, exploration_initial_eps=EPSILON,
+        exploration_final_eps=EPSILON, q_init=Q_INIT, delay_estimates=list(lags), seed=seed,
+    )  # fmt: skip
+    return agent.learn(steps, log_interval=None, record=True)
 
 
-def greedy_average_reward(run: TabularRun, steps: int = 1000) -> float:
-    """Average reward of the greedy policy (ε = 0, no learning) from the start state."""
-    qmax, qarg_l, qarg_a = (array.copy() for array in run.fused.cache)
-    q = run.q.copy()
-    run.fused.state[:] = [run.fused.model.init_cdf.searchsorted(0.5, side="right"), 0, 0, 0]
-    run.fused.buffer[:] = 0.0
-    log = run.fused.run(q, qmax, qarg_l, qarg_a, steps, 0, 0.0, GAMMA, 0.0, 0.0, 1)
-    return float(log["undelayed_reward"].mean())
+def greedy_average_reward(agent: MultipleModelQLearning, size: int, steps: int = 1000) -> float:
+    """Average reward of the deterministic greedy policy over ``steps`` from the start cell."""
+    env = grid_env(size, 0).unwrapped
+    env.reset(seed=0)
+    state, total = env.start_state, 0.0
+    policy = greedy_policy(agent.q_table)
+    for _ in range(steps):
+        state, reward, *_ = env.step(int(policy[state]))
+        total += reward
+    return total / steps
 
 
 def greedy_policy(q: np.ndarray) -> np.ndarray:

@@ -36,83 +36,93 @@ def seed_kernel(seed):
 
 
 @_jit
-def _argmax_random_ties(values):
-    best = values[0]
-    index = 0
-    ties = 1
-    for i in range(1, values.shape[0]):
-        v = values[i]
-        if v > best:
-            best = v
-            index = i
-            ties = 1
-        elif v == best:
-            ties += 1
-            if np.random.random() * ties < 1.0:
-                index = i
-    return index
+def model_maxima(q, mmax, marg):
+    """Fill ``mmax[s, m]`` = max_a ``q[s, m, a]`` and ``marg[s, m]`` its first action."""
+    for s in range(q.shape[0]):
+        for m in range(q.shape[1]):
+            _repair_model(q, s, m, mmax, marg)
 
 
 @_jit
-def _repair_max(q, s, qmax, qarg_l, qarg_a):
-    """Recompute state ``s``'s cached max over (model, action)."""
-    best = q[s, 0, 0]
-    bl = 0
-    ba = 0
-    for m in range(q.shape[1]):
-        for a in range(q.shape[2]):
-            if q[s, m, a] > best:
-                best = q[s, m, a]
-                bl = m
-                ba = a
+def _repair_model(q, s, m, mmax, marg):
+    best = q[s, m, 0]
+    arg = 0
+    for a in range(1, q.shape[2]):
+        if q[s, m, a] > best:
+            best = q[s, m, a]
+            arg = a
+    mmax[s, m] = best
+    marg[s, m] = arg
+
+
+@_jit
+def _repair_state(s, n_actions, mmax, marg, qmax, qcell):
+    """Recompute state ``s``'s max from its models' maxima (first position, λ̂-major)."""
+    best = mmax[s, 0]
+    model = 0
+    for m in range(1, mmax.shape[1]):
+        if mmax[s, m] > best:
+            best = mmax[s, m]
+            model = m
     qmax[s] = best
-    qarg_l[s] = bl
-    qarg_a[s] = ba
+    qcell[s] = (s * mmax.shape[1] + model) * n_actions + marg[s, model]
 
 
 @_jit
 def apply_update(
     q, lags, reward, alpha, gamma, hist_s, hist_a, hist_s2, hist_term, hist_count,
-    qmax, qarg_l, qarg_a, targets,
+    qmax, qcell, mmax, marg, targets,
 ):  # fmt: skip
     """One MMQ learning step from the received ``reward`` (targets first, then the writes).
 
-    ``hist_*`` is the episode's history ring (power-of-two length), ``hist_count`` the number of
-    transitions in this episode so far, the newest at index ``hist_count - 1``.
+    ``lags`` must be sorted ascending (the agents keep Λ sorted). ``hist_*`` is the episode's
+    history ring (power-of-two length), ``hist_count`` the number of transitions in this episode
+    so far, the newest at index ``hist_count - 1``. Two caches are
+    kept exact: ``qmax[s]``, the max of ``q[s]``, with ``qcell[s]`` its flat index in ``q`` (the
+    agents' layout), and ``mmax[s, m]``, the max of ``q[s, m]``, with ``marg[s, m]`` its action.
+    An entry is recomputed only when the cached arg-max entry decreases.
     """
     mask = hist_s.shape[0] - 1
     n_models = lags.shape[0]
+    n_actions = q.shape[2]
+    count = 0  # the models whose step t − λ̂ is in this episode: a prefix, as lags are sorted
     for m in range(n_models):
         lag = lags[m]
-        if lag < hist_count:
-            pos = (hist_count - 1 - lag) & mask
-            bootstrap = 0.0 if hist_term[pos] else gamma * qmax[hist_s2[pos]]
-            targets[m] = reward + bootstrap
-    for m in range(n_models):
-        lag = lags[m]
-        if lag < hist_count:
-            pos = (hist_count - 1 - lag) & mask
-            s = hist_s[pos]
-            a = hist_a[pos]
-            old = q[s, m, a]
-            new = old + alpha * (targets[m] - old)
-            q[s, m, a] = new
-            if new > qmax[s]:
-                qmax[s] = new
-                qarg_l[s] = m
-                qarg_a[s] = a
-            elif new < old and qarg_l[s] == m and qarg_a[s] == a:
-                _repair_max(q, s, qmax, qarg_l, qarg_a)
+        if lag >= hist_count:
+            break
+        pos = (hist_count - 1 - lag) & mask
+        bootstrap = 0.0 if hist_term[pos] else gamma * qmax[hist_s2[pos]]
+        targets[m] = reward + bootstrap
+        count += 1
+    for m in range(count):
+        pos = (hist_count - 1 - lags[m]) & mask
+        s = hist_s[pos]
+        a = hist_a[pos]
+        old = q[s, m, a]
+        new = old + alpha * (targets[m] - old)
+        q[s, m, a] = new
+        if new > mmax[s, m]:
+            mmax[s, m] = new
+            marg[s, m] = a
+        elif new < old and marg[s, m] == a:
+            _repair_model(q, s, m, mmax, marg)
+        cell = (s * n_models + m) * n_actions + a
+        if new > qmax[s]:
+            qmax[s] = new
+            qcell[s] = cell
+        elif new < old and qcell[s] == cell:
+            _repair_state(s, n_actions, mmax, marg, qmax, qcell)
 
 
 @_jit
 def run_chunk(
-    q, lags, qmax, qarg_l, qarg_a,
+    q, lags, qmax, qcell, mmax, marg,
     out_cdf, out_next, out_reward, out_term, init_cdf, max_steps,
     delays, buffer, episode_end_mode,
     alpha, gamma, eps_initial, eps_final, eps_steps, start_step,
     hist_s, hist_a, hist_s2, hist_term, state,
     rec_undelayed, rec_delivered, rec_obs, rec_action, rec_model, rec_episode_end,
+    rec_terminated,
 ):  # fmt: skip
     """Advance training by ``delays.shape[0]`` steps.
 
@@ -127,7 +137,6 @@ def run_chunk(
     hmask = hist_s.shape[0] - 1
     bmask = buffer.shape[0] - 1
     targets = np.zeros(n_models)
-    model_values = np.empty(n_models)
     s = state[0]
     hist_count = state[1]
     episode_steps = state[2]
@@ -143,18 +152,26 @@ def run_chunk(
             m = 0
         elif np.random.random() < eps:
             m = np.random.randint(n_models)
-        else:
+        else:  # a uniformly random model among those holding the state's max
+            best = qmax[s]
+            m = 0
+            ties = 0
             for j in range(n_models):
-                best = q[s, j, 0]
-                for a in range(1, n_actions):
-                    if q[s, j, a] > best:
-                        best = q[s, j, a]
-                model_values[j] = best
-            m = _argmax_random_ties(model_values)
+                if mmax[s, j] == best:
+                    ties += 1
+                    if ties == 1 or np.random.random() * ties < 1.0:
+                        m = j
         if np.random.random() < eps:
             action = np.random.randint(n_actions)
-        else:
-            action = _argmax_random_ties(q[s, m])
+        else:  # a uniformly random action among the model's best
+            best = mmax[s, m]
+            action = 0
+            ties = 0
+            for a in range(n_actions):
+                if q[s, m, a] == best:
+                    ties += 1
+                    if ties == 1 or np.random.random() * ties < 1.0:
+                        action = a
         # the env
         u = np.random.random()
         k = 0
@@ -184,6 +201,7 @@ def run_chunk(
         rec_action[t] = action
         rec_model[t] = m
         rec_episode_end[t] = ended
+        rec_terminated[t] = terminated
         pos = hist_count & hmask
         hist_s[pos] = s
         hist_a[pos] = action
@@ -192,7 +210,7 @@ def run_chunk(
         hist_count += 1
         apply_update(
             q, lags, delivered, alpha, gamma, hist_s, hist_a, hist_s2, hist_term, hist_count,
-            qmax, qarg_l, qarg_a, targets,
+            qmax, qcell, mmax, marg, targets,
         )  # fmt: skip
         if ended:
             u = np.random.random()

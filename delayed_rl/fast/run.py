@@ -42,6 +42,8 @@ class FusedRun:
             for dtype in (np.int64, np.int64, np.int64, np.bool_)
         ]
         self.buffer = np.zeros(1)
+        self.mmax = np.empty((0, 0))
+        self.marg = np.empty((0, 0), dtype=np.int64)
         seed_seq = np.random.SeedSequence(seed)
         kernel_seed, delay_seed = seed_seq.generate_state(2)
         kernel.seed_kernel(int(kernel_seed) & 0x7FFFFFFF)
@@ -73,10 +75,9 @@ class FusedRun:
 
     def run(
         self,
-        q,
-        qmax,
-        qarg_l,
-        qarg_a,
+        q: np.ndarray,
+        qmax: np.ndarray,
+        qcell: np.ndarray,
         steps: int,
         start_step: int,
         alpha: float,
@@ -85,7 +86,19 @@ class FusedRun:
         eps_final: float,
         eps_steps: int,
     ) -> dict:
-        """Advance ``steps`` steps, updating ``q`` and its cache in place; return the step log."""
+        """Advance ``steps`` steps, updating ``q`` and its cache in place; return the step log.
+
+        The log holds one entry per step: ``obs`` (the state acted in), ``action``, ``model``
+        (the acting model's index), ``reward`` (delivered), ``undelayed_reward``,
+        ``episode_end`` and ``terminated``; :attr:`state` ``[0]`` is the state after the last.
+
+        ``qmax[s]`` is the max of ``q[s]`` and ``qcell[s]`` its flat index into ``q`` (the layout
+        of :class:`~delayed_rl.agents.MultipleModelQLearning`'s cache).
+        """
+        if self.mmax.shape != q.shape[:2]:
+            self.mmax = np.empty(q.shape[:2])
+            self.marg = np.empty(q.shape[:2], dtype=np.int64)
+        kernel.model_maxima(q, self.mmax, self.marg)  # q may have changed since the last call
         delays = self._draw_delays(steps)
         self._fit_buffer(int(delays.max(initial=0)))
         log = {
@@ -95,15 +108,16 @@ class FusedRun:
             "action": np.zeros(steps, dtype=np.int64),
             "model": np.zeros(steps, dtype=np.int64),
             "episode_end": np.zeros(steps, dtype=np.bool_),
+            "terminated": np.zeros(steps, dtype=np.bool_),
         }
         m = self.model
         kernel.run_chunk(
-            q, self.lags, qmax, qarg_l, qarg_a,
+            q, self.lags, qmax, qcell, self.mmax, self.marg,
             m.out_cdf, m.out_next, m.out_reward, m.out_term, m.init_cdf, m.max_steps,
             delays, self.buffer, self.mode,
             float(alpha), float(gamma), float(eps_initial), float(eps_final), int(eps_steps),
             int(start_step), *self.history, self.state,
             log["undelayed_reward"], log["reward"], log["obs"], log["action"], log["model"],
-            log["episode_end"],
+            log["episode_end"], log["terminated"],
         )  # fmt: skip
         return log

@@ -1,0 +1,138 @@
+"""The compiled path of ``learn()``: the same rule as the Python path, chosen automatically."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import delayed_rl  # noqa: F401
+from delayed_rl.agents import MMQ, FixedDelayQLearning, QLearning
+from delayed_rl.agents.callbacks import BaseCallback
+from delayed_rl.agents.schedules import LinearSchedule
+from delayed_rl.fast import NotCompilable
+from delayed_rl.fast.kernel import apply_update, model_maxima
+
+
+@pytest.mark.parametrize("lags", [[0], [3], list(range(10)), [0, 2, 5, 11]])
+def test_scripted_transitions_give_identical_tables(lags):
+    """Python ``update()`` and the kernel's update on one scripted sequence: equal to the bit."""
+    rng = np.random.default_rng(len(lags))
+    n_states, n_actions = 6, 3
+    agent = MMQ("delayed_rl/GridWorld-v0", delay_estimates=lags, q_init=1.0, gamma=0.9)
+    q = np.full((agent.n_states, len(lags), agent.n_actions), 1.0)
+    flat = q.reshape(q.shape[0], -1)
+    qmax = flat.max(axis=1)
+    qcell = np.arange(q.shape[0]) * flat.shape[1] + flat.argmax(axis=1)
+    mmax, marg = np.empty(q.shape[:2]), np.empty(q.shape[:2], dtype=np.int64)
+    model_maxima(q, mmax, marg)
+    size = 1 << int(max(lags)).bit_length()
+    hist = [np.zeros(size, np.int64), np.zeros(size, np.int64), np.zeros(size, np.int64),
+            np.zeros(size, np.bool_)]  # fmt: skip
+    count = 0
+    for _ in range(3000):
+        s, a, s2 = (int(x) for x in rng.integers(0, [n_states, n_actions, n_states]))
+        reward = float(rng.normal(scale=2.0))
+        terminated = bool(rng.random() < 0.02)
+        agent.update(s, a, reward, s2, terminated)
+        pos = count & (size - 1)
+        hist[0][pos], hist[1][pos], hist[2][pos], hist[3][pos] = s, a, s2, terminated
+        count += 1
+        apply_update(q, np.array(lags), reward, 0.1, 0.9, *hist, count, qmax, qcell, mmax, marg,
+                     np.zeros(len(lags)))  # fmt: skip
+        if terminated:
+            count = 0
+    np.testing.assert_array_equal(agent.q_table, q)
+
+
+def _average_rewards(fused: bool, seeds: range) -> np.ndarray:
+    out = []
+    for seed in seeds:
+        env = gym.make("delayed_rl/GridWorld-5x5-v0", reward_delay=5)
+        agent = MMQ(env, delay_estimates=list(range(9)), q_init=10.0, seed=seed)
+        agent.learn(20_000, record=True, fused=fused)
+        assert agent.last_learn_path == ("fused" if fused else "python")
+        out.append(agent.training_log["undelayed_reward"].mean())
+    return np.array(out)
+
+
+@pytest.mark.slow
+def test_seeded_runs_agree_in_distribution():
+    """Mean training reward of 6 seeds per path: equal within 4 standard errors of the gap."""
+    fused, python = _average_rewards(True, range(6)), _average_rewards(False, range(100, 106))
+    gap_se = np.sqrt(fused.var(ddof=1) / fused.size + python.var(ddof=1) / python.size)
+    assert abs(fused.mean() - python.mean()) < 4 * gap_se + 1e-3, (fused, python)
+    assert fused.mean() > 0.3  # both learn the 9-step route (optimum 10/9 ≈ 1.11)
+
+
+@pytest.mark.filterwarnings("ignore:reset\\(\\) in the middle of an episode")
+def test_auto_falls_back_and_can_be_switched_off_or_forced():
+    timed = gym.make("delayed_rl/GridWorld-3x3-v0", reward_delay=2, max_episode_steps=50)
+    agent = QLearning(timed, seed=0).learn(500)
+    assert agent.last_learn_path == "python"
+    with pytest.raises(NotCompilable, match="TimeLimit"):
+        agent.learn(500, fused=True)
+    scheduled = QLearning(
+        "delayed_rl/GridWorld-3x3-v0", learning_rate=LinearSchedule(0.5, 0.1, 1.0)
+    )
+    assert scheduled.learn(500).last_learn_path == "python"
+    with pytest.raises(NotCompilable, match="schedule"):
+        scheduled.learn(500, fused=True)
+    plain = QLearning("delayed_rl/GridWorld-3x3-v0", seed=0)
+    assert plain.learn(500).last_learn_path == "fused"
+    assert plain.learn(500, fused=False).last_learn_path == "python"
+    with pytest.raises(ValueError, match="fused"):
+        plain.learn(10, fused="yes")
+
+
+def test_fused_fills_the_diagnostics_and_the_record():
+    agent = MMQ(
+        gym.make("delayed_rl/GridWorld-5x5-v0", reward_delay=3), max_delay_estimate=6, seed=1
+    )
+    agent.learn(5000, record=True, log_interval=1000)
+    assert agent.last_learn_path == "fused" and agent.num_timesteps == 5000
+    assert {key: len(value) for key, value in agent.training_log.items()} == dict.fromkeys(
+        agent.training_log, 5000
+    )
+    assert agent.acting_delay_share.sum() == pytest.approx(1.0)
+    counts = np.bincount(agent.training_log["acting_delay_index"], minlength=7)
+    np.testing.assert_allclose(agent.acting_delay_share, counts / 5000)
+    agent.learn(3000, reset_num_timesteps=False)
+    assert agent.num_timesteps == 8000
+
+
+def test_grid_dynamics_and_cache_hold_on_the_fused_path():
+    agent = FixedDelayQLearning(gym.make("delayed_rl/GridWorld-3x3-v0"), delay=0, seed=4)
+    agent.learn(4000, record=True)
+    log = agent.training_log
+    env = gym.make("delayed_rl/GridWorld-3x3-v0").unwrapped
+    np.testing.assert_array_equal(
+        log["undelayed_reward"], env.reward_table[log["obs"], log["action"]]
+    )
+    np.testing.assert_array_equal(log["obs"][1:], env.next_state[log["obs"], log["action"]][:-1])
+    flat = agent.q_table.reshape(9, -1)
+    np.testing.assert_array_equal(agent._v_max, flat.max(axis=1))
+
+
+def test_callbacks_see_every_step_and_stop_at_the_chunk_end():
+    class Recorder(BaseCallback):
+        def _init_callback(self):
+            self.seen = []
+
+        def _on_step(self):
+            self.seen.append((self.num_timesteps, self.locals["obs"], self.locals["action"],
+                              self.locals["undelayed_reward"], bool(self.locals["dones"][0])))  # fmt: skip
+            return self.num_timesteps < 2700
+
+    recorder = Recorder()
+    agent = QLearning("delayed_rl/GridWorld-3x3-v0", seed=0)
+    agent.fused_chunk = 500
+    agent.learn(10_000, callback=recorder, record=True, fused=True)
+    assert agent.last_learn_path == "fused"
+    assert recorder.n_calls == 2700 and agent.num_timesteps == 3000  # stops at its chunk's end
+    steps, obs, actions, rewards, _ = map(np.array, zip(*recorder.seen, strict=True))
+    np.testing.assert_array_equal(steps, np.arange(1, 2701))
+    log = agent.training_log
+    np.testing.assert_array_equal(obs, log["obs"][:2700])
+    np.testing.assert_array_equal(actions, log["action"][:2700])
+    np.testing.assert_array_equal(rewards, log["undelayed_reward"][:2700])
