@@ -1,6 +1,8 @@
 """Per-step cost of ``learn()`` for Q-learning and MMQ as the number of delay models grows.
 
-MMQ's per-step cost must be O(|Λ|) with a small constant, not O(|Λ|²·|A|): every step updates
+This measures the Python path (``learn(fused=False)``); ``benchmarks/speed.py`` sets it beside
+the compiled one. MMQ's per-step cost must be O(|Λ|) with a small constant, not O(|Λ|²·|A|):
+every step updates
 one entry per model (a batch of numpy gathers and scatters) and reads each next state's max over
 all models from a cache instead of recomputing it. This script measures, in one process:
 
@@ -38,11 +40,25 @@ def make_agent(size: int, n_models: int) -> MMQ:
     return MMQ(env, delay_estimates=list(range(n_models)), **settings)
 
 
-def time_learn(agent: MMQ, steps: int) -> float:
-    """Seconds per step of ``agent.learn(steps)``, continuing the agent's run."""
+def time_learn(agent: MMQ, steps: int, fused: bool = False) -> float:
+    """Seconds per step of ``agent.learn(steps)`` on one path, continuing the agent's run."""
     start = time.perf_counter()
-    agent.learn(steps, reset_num_timesteps=False)
+    agent.learn(steps, reset_num_timesteps=False, fused=fused)
     return (time.perf_counter() - start) / steps
+
+
+def measure(steps: int, repeats: int, fused: bool = False) -> dict[str, float]:
+    """Fastest seconds per step of each configuration, repeats interleaved, on one path."""
+    configs = {f"9x9, |Λ|={n}": (9, n) for n in MODEL_COUNTS}
+    configs["30x30, |Λ|=51"] = (30, 51)
+    agents = {name: make_agent(*config) for name, config in configs.items()}
+    for agent in agents.values():
+        agent.learn(steps, fused=fused)  # warm-up: past the history-limited start
+    best = {name: float("inf") for name in agents}
+    for _ in range(repeats):
+        for name, agent in agents.items():
+            best[name] = min(best[name], time_learn(agent, steps, fused))
+    return best
 
 
 def main() -> None:
@@ -50,16 +66,7 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=30_000, help="steps per timed repeat")
     parser.add_argument("--repeats", type=int, default=5, help="interleaved repeats")
     args = parser.parse_args()
-
-    configs = {f"9x9, |Λ|={n}": (9, n) for n in MODEL_COUNTS}
-    configs["30x30, |Λ|=51"] = (30, 51)
-    agents = {name: make_agent(*config) for name, config in configs.items()}
-    for agent in agents.values():
-        agent.learn(args.steps)  # warm-up: past the history-limited start, tables in motion
-    best = {name: float("inf") for name in agents}
-    for _ in range(args.repeats):
-        for name, agent in agents.items():
-            best[name] = min(best[name], time_learn(agent, args.steps))
+    best = measure(args.steps, args.repeats)
 
     print(f"learn() cost per step (fastest of {args.repeats} x {args.steps} steps)")
     print(f"{'configuration':<18} {'µs/step':>9} {'vs |Λ|=1':>9}")

@@ -9,7 +9,7 @@ import pytest
 import delayed_rl  # noqa: F401
 from delayed_rl.delays import Constant
 from delayed_rl.fast import FusedRun, NotCompilable, inspect_stack
-from delayed_rl.fast.kernel import apply_update
+from delayed_rl.fast.kernel import apply_update, scratch
 from delayed_rl.wrappers import RewardDelay
 
 
@@ -38,7 +38,7 @@ def test_roulette_walk_through_tables_3_2_to_3_5():
     rounds = [(0, 0.0), (1, 35.0), (0, -1.0)]  # (wager, reward received that round)
     for count, (action, reward) in enumerate(rounds, start=1):
         hist[1][(count - 1) & 3] = action
-        apply_update(q, lags, reward, 0.1, 0.9, *hist, count, *caches, np.zeros(3))
+        apply_update(q, lags, reward, 0.1, 0.9, *hist, count, *caches, *scratch(3))
         if count == 1:
             np.testing.assert_allclose(q[0], [[49.5, 50], [50, 50], [50, 50]])
         if count == 2:
@@ -61,7 +61,7 @@ def test_cache_tracks_the_brute_force_max_under_random_updates():
     for step in range(200):
         reward = float(rng.normal(scale=3))
         apply_update(
-            q, lags, reward, 0.5, 0.9, *hist, 8 + step, qmax, qcell, mmax, marg, np.zeros(4)
+            q, lags, reward, 0.5, 0.9, *hist, 8 + step, qmax, qcell, mmax, marg, *scratch(4)
         )
         brute = q.reshape(5, -1).max(axis=1)
         np.testing.assert_array_equal(qmax, brute)

@@ -11,7 +11,7 @@ from delayed_rl.agents import MMQ, FixedDelayQLearning, QLearning
 from delayed_rl.agents.callbacks import BaseCallback
 from delayed_rl.agents.schedules import LinearSchedule
 from delayed_rl.fast import NotCompilable
-from delayed_rl.fast.kernel import apply_update, model_maxima
+from delayed_rl.fast.kernel import apply_update, model_maxima, scratch
 
 
 @pytest.mark.parametrize("lags", [[0], [3], list(range(10)), [0, 2, 5, 11]])
@@ -39,7 +39,7 @@ def test_scripted_transitions_give_identical_tables(lags):
         hist[0][pos], hist[1][pos], hist[2][pos], hist[3][pos] = s, a, s2, terminated
         count += 1
         apply_update(q, np.array(lags), reward, 0.1, 0.9, *hist, count, qmax, qcell, mmax, marg,
-                     np.zeros(len(lags)))  # fmt: skip
+                     *scratch(len(lags)))  # fmt: skip
         if terminated:
             count = 0
     np.testing.assert_array_equal(agent.q_table, q)

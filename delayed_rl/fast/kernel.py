@@ -18,11 +18,14 @@ try:
 
     HAVE_NUMBA = True
     _jit = numba.njit(cache=True, nogil=True)
+    _jit_inline = numba.njit(cache=True, nogil=True, inline="always")  # no call overhead
 except ImportError:  # pragma: no cover - exercised where numba is absent
     HAVE_NUMBA = False
 
     def _jit(function):
         return function
+
+    _jit_inline = _jit
 
 
 # Episode-end modes of the reward buffer, as integers for the compiled code.
@@ -35,6 +38,11 @@ def seed_kernel(seed):
     np.random.seed(seed)
 
 
+def scratch(n_models: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The scratch arrays :func:`apply_update` needs: targets, states and actions per model."""
+    return np.zeros(n_models), np.zeros(n_models, np.int64), np.zeros(n_models, np.int64)
+
+
 @_jit
 def model_maxima(q, mmax, marg):
     """Fill ``mmax[s, m]`` = max_a ``q[s, m, a]`` and ``marg[s, m]`` its first action."""
@@ -43,35 +51,35 @@ def model_maxima(q, mmax, marg):
             _repair_model(q, s, m, mmax, marg)
 
 
-@_jit
+@_jit_inline
 def _repair_model(q, s, m, mmax, marg):
     best = q[s, m, 0]
     arg = 0
     for a in range(1, q.shape[2]):
-        if q[s, m, a] > best:
-            best = q[s, m, a]
-            arg = a
+        value = q[s, m, a]
+        higher = value > best
+        best = value if higher else best
+        arg = a if higher else arg
     mmax[s, m] = best
     marg[s, m] = arg
 
 
-@_jit
+@_jit_inline
 def _repair_state(s, n_actions, mmax, marg, qmax, qcell):
     """Recompute state ``s``'s max from its models' maxima (first position, λ̂-major)."""
-    best = mmax[s, 0]
+    row = mmax[s]
+    best = row.max()  # a reduction the compiler vectorises; then the first model holding it
     model = 0
-    for m in range(1, mmax.shape[1]):
-        if mmax[s, m] > best:
-            best = mmax[s, m]
-            model = m
+    while row[model] != best:
+        model += 1
     qmax[s] = best
     qcell[s] = (s * mmax.shape[1] + model) * n_actions + marg[s, model]
 
 
-@_jit
+@_jit_inline
 def apply_update(
     q, lags, reward, alpha, gamma, hist_s, hist_a, hist_s2, hist_term, hist_count,
-    qmax, qcell, mmax, marg, targets,
+    qmax, qcell, mmax, marg, targets, states, actions,
 ):  # fmt: skip
     """One MMQ learning step from the received ``reward`` (targets first, then the writes).
 
@@ -80,11 +88,13 @@ def apply_update(
     so far, the newest at index ``hist_count - 1``. Two caches are
     kept exact: ``qmax[s]``, the max of ``q[s]``, with ``qcell[s]`` its flat index in ``q`` (the
     agents' layout), and ``mmax[s, m]``, the max of ``q[s, m]``, with ``marg[s, m]`` its action.
-    An entry is recomputed only when the cached arg-max entry decreases.
+    An entry is recomputed only when the cached arg-max entry decreases. ``targets``,
+    ``states`` and ``actions`` are scratch arrays of length |Λ|.
     """
     mask = hist_s.shape[0] - 1
     n_models = lags.shape[0]
     n_actions = q.shape[2]
+    # targets first (each reads the cached max of its next state), remembering each model's cell
     count = 0  # the models whose step t − λ̂ is in this episode: a prefix, as lags are sorted
     for m in range(n_models):
         lag = lags[m]
@@ -93,24 +103,21 @@ def apply_update(
         pos = (hist_count - 1 - lag) & mask
         bootstrap = 0.0 if hist_term[pos] else gamma * qmax[hist_s2[pos]]
         targets[m] = reward + bootstrap
+        states[m] = hist_s[pos]
+        actions[m] = hist_a[pos]
         count += 1
-    for m in range(count):
-        pos = (hist_count - 1 - lags[m]) & mask
-        s = hist_s[pos]
-        a = hist_a[pos]
+    for m in range(count):  # then the writes, repairing a cache only when its arg-max fell
+        s = states[m]
+        a = actions[m]
         old = q[s, m, a]
         new = old + alpha * (targets[m] - old)
         q[s, m, a] = new
-        if new > mmax[s, m]:
-            mmax[s, m] = new
-            marg[s, m] = a
-        elif new < old and marg[s, m] == a:
-            _repair_model(q, s, m, mmax, marg)
-        cell = (s * n_models + m) * n_actions + a
+        _repair_model(q, s, m, mmax, marg)  # |A| compares without branches: cheaper than a
+        # data-dependent branch the processor would mispredict half the time
         if new > qmax[s]:
             qmax[s] = new
-            qcell[s] = cell
-        elif new < old and qcell[s] == cell:
+            qcell[s] = (s * n_models + m) * n_actions + a
+        elif new < old and qcell[s] == (s * n_models + m) * n_actions + a:
             _repair_state(s, n_actions, mmax, marg, qmax, qcell)
 
 
@@ -137,6 +144,8 @@ def run_chunk(
     hmask = hist_s.shape[0] - 1
     bmask = buffer.shape[0] - 1
     targets = np.zeros(n_models)
+    states = np.zeros(n_models, dtype=np.int64)
+    actions = np.zeros(n_models, dtype=np.int64)
     s = state[0]
     hist_count = state[1]
     episode_steps = state[2]
@@ -210,7 +219,7 @@ def run_chunk(
         hist_count += 1
         apply_update(
             q, lags, delivered, alpha, gamma, hist_s, hist_a, hist_s2, hist_term, hist_count,
-            qmax, qcell, mmax, marg, targets,
+            qmax, qcell, mmax, marg, targets, states, actions,
         )  # fmt: skip
         if ended:
             u = np.random.random()

@@ -1,0 +1,155 @@
+"""The speed suite: one command, one table, every figure measured in this one run.
+
+- wrapper overhead: ``PoissonRewardDelay`` against ``RecordEpisodeStatistics`` (GridWorld-9x9);
+- env steps per second for every registered env, random actions;
+- ``learn()`` cost per step against |Λ| on the Python path and on the compiled path;
+- compiled vs Python path for Q-learning and MMQ (|Λ| = 51) on GridWorld-9x9 with Poisson(13);
+- the wall time of a 1M-step MMQ run (|Λ| = 51) in a fresh process, including the load of the
+  compiled code from numba's on-disk cache (the cache is warmed first);
+- with ``--reproduce``, the wall time of ``delayed-rl reproduce`` at full scale.
+
+    python benchmarks/speed.py [--quick] [--reproduce] [--markdown benchmarks/SPEED.md]
+
+Targets: delay-wrapper overhead ≤ 1.5 × RecordEpisodeStatistics'; compiled ≥ 30 × the Python
+path for Q-learning and for MMQ |Λ| = 51; a 1M-step MMQ run ≤ 1.5 s including compilation from
+a warm cache.
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import agent_step_cost
+import gymnasium as gym
+import numpy as np
+import wrapper_overhead
+
+import delayed_rl
+
+ONE_MILLION_MMQ = """
+import time
+start = time.perf_counter()
+import gymnasium as gym
+import delayed_rl
+from delayed_rl.agents import MMQ
+ready = time.perf_counter()
+agent = MMQ(gym.make("delayed_rl/GridWorld-9x9-v0", reward_delay=13), max_delay_estimate=50,
+            q_init=10.0, seed=0)
+agent.learn(1_000_000, log_interval=None)
+assert agent.last_learn_path == "fused"
+print(time.perf_counter() - ready, ready - start)
+"""
+
+
+def env_steps_per_second(steps: int) -> dict[str, float]:
+    """Random-action steps per second of every registered env (and the e-puck's pixel mode)."""
+    configs = {
+        env_id: {} for env_id in delayed_rl.envs.env_ids() if env_id != "delayed_rl/GridWorld-v0"
+    }
+    configs["delayed_rl/EPuckLineFollow-v0 (pixels)"] = {"observation_mode": "pixels"}
+    rates = {}
+    for name, kwargs in configs.items():
+        env = gym.make(name.split(" ")[0], **kwargs).unwrapped
+        env.reset(seed=0)
+        env.action_space.seed(0)
+        actions = [env.action_space.sample() for _ in range(steps)]
+        start = time.perf_counter()
+        for action in actions:
+            _, _, terminated, truncated, _ = env.step(action)
+            if terminated or truncated:
+                env.reset()
+        rates[name] = steps / (time.perf_counter() - start)
+    return rates
+
+
+def one_million_mmq_seconds() -> tuple[float, float]:
+    """(learn seconds, import seconds) of a 1M-step MMQ run in a fresh interpreter, cache warm."""
+    with tempfile.NamedTemporaryFile("w", suffix=".py", delete=False) as handle:
+        handle.write(ONE_MILLION_MMQ)
+    subprocess.run([sys.executable, handle.name], check=True, capture_output=True)  # warm cache
+    out = subprocess.run([sys.executable, handle.name], check=True, capture_output=True, text=True)
+    Path(handle.name).unlink()
+    learn, imports = (float(x) for x in out.stdout.split())
+    return learn, imports
+
+
+def reproduce_seconds(out: Path) -> float:
+    """Wall time of ``delayed-rl reproduce --workers 2`` at full scale."""
+    start = time.perf_counter()
+    subprocess.run(
+        [sys.executable, "-m", "delayed_rl.cli", "reproduce", "--workers", "2", "--out", str(out)],
+        check=True, capture_output=True,
+    )  # fmt: skip
+    return time.perf_counter() - start
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="fewer steps (noisier)")
+    parser.add_argument("--reproduce", action="store_true", help="also time the full reproduction")
+    parser.add_argument("--markdown", type=Path, help="also write the report to this file")
+    args = parser.parse_args()
+    scale = 5 if args.quick else 1
+    lines = [
+        f"Machine: {platform.processor() or platform.machine()}, Python {platform.python_version()}, "
+        f"numpy {np.__version__}, delayed-rl {delayed_rl.__version__}.",
+        "",
+    ]
+
+    cost = wrapper_overhead.measure(200_000 // scale, 7)
+    bare = cost["bare"]
+    lines += ["## Wrapper overhead (GridWorld-9x9, µs/step, fastest of 7 interleaved repeats)", "",
+              "| stack | µs/step | overhead over bare |", "|---|---|---|"]  # fmt: skip
+    lines += [f"| {n} | {v * 1e6:.3f} | {(v - bare) * 1e6:.3f} |" for n, v in cost.items()]
+    ratio = wrapper_overhead.overhead_ratio(cost)
+    lines += ["", f"Overhead ratio: **{ratio:.2f}** (target ≤ 1.5).", ""]
+
+    rates = env_steps_per_second(100_000 // scale)
+    lines += ["## Env steps per second (random actions, unwrapped)", "", "| env | steps/s |",
+              "|---|---|"]  # fmt: skip
+    lines += [f"| {n} | {r:,.0f} |" for n, r in rates.items()]
+    lines.append("")
+
+    python = agent_step_cost.measure(30_000 // scale, 3, fused=False)
+    fused = agent_step_cost.measure(300_000 // scale, 3, fused=True)
+    lines += ["## learn() cost per step (µs; GridWorld with Poisson(13) delays)", "",
+              "| configuration | Python path | compiled path | speed-up |", "|---|---|---|---|"]  # fmt: skip
+    for name in python:
+        lines.append(f"| {name} | {python[name] * 1e6:.2f} | {fused[name] * 1e6:.3f} | "
+                     f"{python[name] / fused[name]:.0f}× |")  # fmt: skip
+    q_gain = python["9x9, |Λ|=1"] / fused["9x9, |Λ|=1"]
+    mmq_gain = python["9x9, |Λ|=51"] / fused["9x9, |Λ|=51"]
+    scaling = python["9x9, |Λ|=151"] / python["9x9, |Λ|=1"]
+    world = python["30x30, |Λ|=51"] / python["9x9, |Λ|=51"]
+    lines += [
+        "",
+        f"Compiled vs Python: Q-learning **{q_gain:.0f}×**, MMQ |Λ| = 51 **{mmq_gain:.0f}×** "
+        "(target ≥ 30×).",
+        f"Python path: cost(|Λ| = 151) / cost(|Λ| = 1) = {scaling:.2f} (target ≤ 3); "
+        f"cost(30×30) / cost(9×9) at |Λ| = 51 = {world:.2f} (target ≤ 1.5).",
+        "",
+    ]
+    learn, imports = one_million_mmq_seconds()
+    lines += [f"1M-step MMQ (|Λ| = 51) in a fresh process: **{learn:.2f} s** of learn() "
+              f"including loading the compiled code from the warm cache (target ≤ 1.5 s); "
+              f"importing the library took a further {imports:.2f} s.", ""]  # fmt: skip
+    if args.reproduce:
+        with tempfile.TemporaryDirectory() as out:
+            seconds = reproduce_seconds(Path(out))
+        lines += [f"`delayed-rl reproduce --workers 2` at full scale: **{seconds:.0f} s**.", ""]
+    report = "\n".join(lines)
+    print(report)
+    if args.markdown:
+        args.markdown.write_text("# Speed\n\nGenerated by `python benchmarks/speed.py"
+                                 + (" --reproduce" if args.reproduce else "")
+                                 + "`.\n\n" + report)  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
