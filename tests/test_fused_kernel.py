@@ -9,7 +9,7 @@ import pytest
 import delayed_rl  # noqa: F401
 from delayed_rl.delays import Constant
 from delayed_rl.fast import FusedRun, NotCompilable, inspect_stack
-from delayed_rl.fast.kernel import apply_update, scratch
+from delayed_rl.fast.kernel import replay
 from delayed_rl.wrappers import RewardDelay
 
 
@@ -19,55 +19,19 @@ def _cache(q):
     return flat.max(axis=1), np.arange(q.shape[0]) * flat.shape[1] + flat.argmax(axis=1)
 
 
-def _caches(q):
-    """The kernel's two caches: per state (qmax, qcell) and per model (mmax, marg)."""
-    return (*_cache(q), q.max(axis=2), q.argmax(axis=2))
-
-
 def test_roulette_walk_through_tables_3_2_to_3_5():
     """Thesis section 3.2: q_init 50, α 0.1, γ 0.9, Λ = {0, 1, 2}; EVEN = 0, THIRTEEN = 1."""
-    q = np.full((1, 3, 2), 50.0)
-    caches = _caches(q)
-    lags = np.arange(3)
-    hist = [
-        np.zeros(4, np.int64),
-        np.zeros(4, np.int64),
-        np.zeros(4, np.int64),
-        np.zeros(4, np.bool_),
+    rounds = [(0, 0.0), (1, 35.0), (0, -1.0)]  # (wager, payout received that round)
+    expected = [
+        [[49.5, 50], [50, 50], [50, 50]],
+        [[49.5, 53], [53, 50], [50, 50]],
+        [[49.22, 53], [53, 49.67], [49.67, 50]],
     ]
-    rounds = [(0, 0.0), (1, 35.0), (0, -1.0)]  # (wager, reward received that round)
-    for count, (action, reward) in enumerate(rounds, start=1):
-        hist[1][(count - 1) & 3] = action
-        apply_update(q, lags, reward, 0.1, 0.9, *hist, count, *caches, *scratch(3))
-        if count == 1:
-            np.testing.assert_allclose(q[0], [[49.5, 50], [50, 50], [50, 50]])
-        if count == 2:
-            np.testing.assert_allclose(q[0], [[49.5, 53], [53, 50], [50, 50]])
-    np.testing.assert_allclose(q[0], [[49.22, 53], [53, 49.67], [49.67, 50]])
-    assert caches[0][0] == 53.0
-
-
-def test_cache_tracks_the_brute_force_max_under_random_updates():
-    rng = np.random.default_rng(3)
-    q = rng.normal(size=(5, 4, 3))
-    qmax, qcell, mmax, marg = _caches(q)
-    lags = np.arange(4)
-    hist = [
-        rng.integers(0, 5, 8),
-        rng.integers(0, 3, 8),
-        rng.integers(0, 5, 8),
-        rng.random(8) < 0.2,
-    ]
-    for step in range(200):
-        reward = float(rng.normal(scale=3))
-        apply_update(
-            q, lags, reward, 0.5, 0.9, *hist, 8 + step, qmax, qcell, mmax, marg, *scratch(4)
-        )
-        brute = q.reshape(5, -1).max(axis=1)
-        np.testing.assert_array_equal(qmax, brute)
-        np.testing.assert_array_equal(q.reshape(-1)[qcell], brute)
-        np.testing.assert_array_equal(mmax, q.max(axis=2))
-        np.testing.assert_array_equal(np.take_along_axis(q, marg[..., None], 2)[..., 0], mmax)
+    for n in range(1, 4):
+        q = np.full((1, 3, 2), 50.0)
+        wagers = np.array([[0, a, 0] for a, _ in rounds[:n]])
+        replay(q, np.arange(3), wagers, np.zeros(n, bool), [r for _, r in rounds[:n]], 0.1, 0.9)
+        np.testing.assert_allclose(q[0], expected[n - 1], rtol=0, atol=1e-12)
 
 
 def test_constant_delay_ring_delivers_k_steps_late():
@@ -115,3 +79,16 @@ def test_unsupported_stacks_are_refused_with_a_reason():
         inspect_stack(gym.make("CartPole-v1").unwrapped)
     model, wrapper = inspect_stack(gym.make("FrozenLake-v1").unwrapped)
     assert wrapper is None and model.out_cdf.shape[:2] == (16, 4)
+
+
+@pytest.mark.parametrize("q_init", [0.0, 50.0])
+def test_cached_maxima_stay_exact(q_init):
+    """After compiled training, each state's cached max and cell agree with a brute-force max."""
+    env = gym.make("delayed_rl/GridWorld-v0", size=4, max_steps=300, reward_delay=3)
+    q = np.full((16, 8, 4), q_init)
+    qmax, qcell = _cache(q)
+    FusedRun(env, np.arange(8), seed=3).run(q, qmax, qcell, 20_000, 0, 0.3, 0.9, 0.2, 0.2, 1)
+    brute = q.reshape(16, -1).max(axis=1)
+    np.testing.assert_array_equal(qmax, brute)
+    np.testing.assert_array_equal(q.reshape(-1)[qcell], brute)
+    assert np.all(qcell // 32 == np.arange(16))  # each cell lies in its own state's row

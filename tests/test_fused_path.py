@@ -11,37 +11,22 @@ from delayed_rl.agents import MMQ, FixedDelayQLearning, QLearning
 from delayed_rl.agents.callbacks import BaseCallback
 from delayed_rl.agents.schedules import LinearSchedule
 from delayed_rl.fast import NotCompilable
-from delayed_rl.fast.kernel import apply_update, model_maxima, scratch
+from delayed_rl.fast.kernel import replay
 
 
 @pytest.mark.parametrize("lags", [[0], [3], list(range(10)), [0, 2, 5, 11]])
 def test_scripted_transitions_give_identical_tables(lags):
-    """Python ``update()`` and the kernel's update on one scripted sequence: equal to the bit."""
+    """Python ``update()`` and the compiled loop on one scripted sequence: equal to the bit."""
     rng = np.random.default_rng(len(lags))
-    n_states, n_actions = 6, 3
+    n = 3000
+    transitions = rng.integers(0, [6, 4, 6], size=(n, 3))  # (s, a, s') on 6 of the 81 cells
+    rewards = rng.normal(scale=2.0, size=n)
+    terminated = rng.random(n) < 0.02
     agent = MMQ("delayed_rl/GridWorld-v0", delay_estimates=lags, q_init=1.0, gamma=0.9)
-    q = np.full((agent.n_states, len(lags), agent.n_actions), 1.0)
-    flat = q.reshape(q.shape[0], -1)
-    qmax = flat.max(axis=1)
-    qcell = np.arange(q.shape[0]) * flat.shape[1] + flat.argmax(axis=1)
-    mmax, marg = np.empty(q.shape[:2]), np.empty(q.shape[:2], dtype=np.int64)
-    model_maxima(q, mmax, marg)
-    size = 1 << int(max(lags)).bit_length()
-    hist = [np.zeros(size, np.int64), np.zeros(size, np.int64), np.zeros(size, np.int64),
-            np.zeros(size, np.bool_)]  # fmt: skip
-    count = 0
-    for _ in range(3000):
-        s, a, s2 = (int(x) for x in rng.integers(0, [n_states, n_actions, n_states]))
-        reward = float(rng.normal(scale=2.0))
-        terminated = bool(rng.random() < 0.02)
-        agent.update(s, a, reward, s2, terminated)
-        pos = count & (size - 1)
-        hist[0][pos], hist[1][pos], hist[2][pos], hist[3][pos] = s, a, s2, terminated
-        count += 1
-        apply_update(q, np.array(lags), reward, 0.1, 0.9, *hist, count, qmax, qcell, mmax, marg,
-                     *scratch(len(lags)))  # fmt: skip
-        if terminated:
-            count = 0
+    for (s, a, s2), reward, done in zip(transitions, rewards, terminated, strict=True):
+        agent.update(int(s), int(a), float(reward), int(s2), bool(done))
+    q = np.full(agent.q_table.shape, 1.0)
+    replay(q, np.array(lags), transitions, terminated, rewards, 0.1, 0.9)
     np.testing.assert_array_equal(agent.q_table, q)
 
 

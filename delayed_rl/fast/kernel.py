@@ -18,7 +18,7 @@ try:
 
     HAVE_NUMBA = True
     _jit = numba.njit(cache=True, nogil=True)
-    _jit_inline = numba.njit(cache=True, nogil=True, inline="always")  # no call overhead
+    _jit_inline = numba.njit(cache=True, nogil=True, inline="always")
 except ImportError:  # pragma: no cover - exercised where numba is absent
     HAVE_NUMBA = False
 
@@ -38,30 +38,25 @@ def seed_kernel(seed):
     np.random.seed(seed)
 
 
-def scratch(n_models: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The scratch arrays :func:`apply_update` needs: targets, states and actions per model."""
-    return np.zeros(n_models), np.zeros(n_models, np.int64), np.zeros(n_models, np.int64)
-
-
-@_jit
-def model_maxima(q, mmax, marg):
-    """Fill ``mmax[s, m]`` = max_a ``q[s, m, a]`` and ``marg[s, m]`` its first action."""
-    for s in range(q.shape[0]):
-        for m in range(q.shape[1]):
-            _repair_model(q, s, m, mmax, marg)
-
-
 @_jit_inline
-def _repair_model(q, s, m, mmax, marg):
-    best = q[s, m, 0]
-    arg = 0
-    for a in range(1, q.shape[2]):
-        value = q[s, m, a]
-        higher = value > best
-        best = value if higher else best
-        arg = a if higher else arg
-    mmax[s, m] = best
-    marg[s, m] = arg
+def _pick_tie(values, best):
+    """A uniformly random index among those where ``values`` equals ``best`` (one draw at most)."""
+    ties = 0
+    first = 0
+    for i in range(values.shape[0]):
+        if values[i] == best:
+            if ties == 0:
+                first = i
+            ties += 1
+    if ties == 1:
+        return first
+    k = np.random.randint(ties)
+    for i in range(first, values.shape[0]):
+        if values[i] == best:
+            if k == 0:
+                return i
+            k -= 1
+    return first
 
 
 @_jit_inline
@@ -76,51 +71,6 @@ def _repair_state(s, n_actions, mmax, marg, qmax, qcell):
     qcell[s] = (s * mmax.shape[1] + model) * n_actions + marg[s, model]
 
 
-@_jit_inline
-def apply_update(
-    q, lags, reward, alpha, gamma, hist_s, hist_a, hist_s2, hist_term, hist_count,
-    qmax, qcell, mmax, marg, targets, states, actions,
-):  # fmt: skip
-    """One MMQ learning step from the received ``reward`` (targets first, then the writes).
-
-    ``lags`` must be sorted ascending (the agents keep Λ sorted). ``hist_*`` is the episode's
-    history ring (power-of-two length), ``hist_count`` the number of transitions in this episode
-    so far, the newest at index ``hist_count - 1``. Two caches are
-    kept exact: ``qmax[s]``, the max of ``q[s]``, with ``qcell[s]`` its flat index in ``q`` (the
-    agents' layout), and ``mmax[s, m]``, the max of ``q[s, m]``, with ``marg[s, m]`` its action.
-    An entry is recomputed only when the cached arg-max entry decreases. ``targets``,
-    ``states`` and ``actions`` are scratch arrays of length |Λ|.
-    """
-    mask = hist_s.shape[0] - 1
-    n_models = lags.shape[0]
-    n_actions = q.shape[2]
-    # targets first (each reads the cached max of its next state), remembering each model's cell
-    count = 0  # the models whose step t − λ̂ is in this episode: a prefix, as lags are sorted
-    for m in range(n_models):
-        lag = lags[m]
-        if lag >= hist_count:
-            break
-        pos = (hist_count - 1 - lag) & mask
-        bootstrap = 0.0 if hist_term[pos] else gamma * qmax[hist_s2[pos]]
-        targets[m] = reward + bootstrap
-        states[m] = hist_s[pos]
-        actions[m] = hist_a[pos]
-        count += 1
-    for m in range(count):  # then the writes, repairing a cache only when its arg-max fell
-        s = states[m]
-        a = actions[m]
-        old = q[s, m, a]
-        new = old + alpha * (targets[m] - old)
-        q[s, m, a] = new
-        _repair_model(q, s, m, mmax, marg)  # |A| compares without branches: cheaper than a
-        # data-dependent branch the processor would mispredict half the time
-        if new > qmax[s]:
-            qmax[s] = new
-            qcell[s] = (s * n_models + m) * n_actions + a
-        elif new < old and qcell[s] == (s * n_models + m) * n_actions + a:
-            _repair_state(s, n_actions, mmax, marg, qmax, qcell)
-
-
 @_jit
 def run_chunk(
     q, lags, qmax, qcell, mmax, marg,
@@ -129,9 +79,21 @@ def run_chunk(
     alpha, gamma, eps_initial, eps_final, eps_steps, start_step,
     hist_s, hist_a, hist_s2, hist_term, state,
     rec_undelayed, rec_delivered, rec_obs, rec_action, rec_model, rec_episode_end,
-    rec_terminated,
+    rec_terminated, script, script_term, script_reward,
 ):  # fmt: skip
     """Advance training by ``delays.shape[0]`` steps.
+
+    The MMQ update (DESIGN.md, "Multiple Model Q-learning, exactly"): at each step, for every
+    model ``m`` whose step ``t − lags[m]`` is in this episode's history, with (s, a, s′, done) that
+    step's transition, ``target = r_t + γ (1 − done) max Q[s′]``; all targets of a step are
+    computed before its writes. ``lags`` must be sorted ascending (the agents keep Λ sorted).
+    Two caches are kept exact: ``qmax[s]``, the max of ``q[s]``, with ``qcell[s]`` its flat index
+    in ``q`` (the agents' layout), and ``mmax[s, m]``, the max of ``q[s, m]``, with ``marg[s, m]``
+    its action; a state's max is recomputed only when its cached arg-max entry decreases.
+
+    With a non-empty ``script`` (rows ``(s, a, s′)``, with ``script_term`` and ``script_reward``)
+    the steps replay those transitions and received rewards instead of acting in the env:
+    :func:`replay` uses it so that tests drive this very loop with scripted transitions.
 
     ``state`` is an int64 array ``[s, hist_count, episode_steps, clock]`` carried between chunks.
     ``out_*`` are the env's outcome tables of shape (S, A, K): cumulative probabilities, next
@@ -150,60 +112,57 @@ def run_chunk(
     hist_count = state[1]
     episode_steps = state[2]
     clock = state[3]
+    scripted = script.shape[0] > 0
     for t in range(delays.shape[0]):
-        step = start_step + t
-        if step >= eps_steps:
-            eps = eps_final
+        if scripted:
+            s = script[t, 0]
+            action = script[t, 1]
+            s2 = script[t, 2]
+            terminated = script_term[t]
+            delivered = script_reward[t]
+            reward = delivered
+            m = 0
+            ended = terminated
         else:
-            eps = eps_initial + (eps_final - eps_initial) * (step / eps_steps)
-        # choose the acting model, then the action (two ε-greedy levels, random tie-breaks)
-        if n_models == 1:
-            m = 0
-        elif np.random.random() < eps:
-            m = np.random.randint(n_models)
-        else:  # a uniformly random model among those holding the state's max
-            best = qmax[s]
-            m = 0
-            ties = 0
-            for j in range(n_models):
-                if mmax[s, j] == best:
-                    ties += 1
-                    if ties == 1 or np.random.random() * ties < 1.0:
-                        m = j
-        if np.random.random() < eps:
-            action = np.random.randint(n_actions)
-        else:  # a uniformly random action among the model's best
-            best = mmax[s, m]
-            action = 0
-            ties = 0
-            for a in range(n_actions):
-                if q[s, m, a] == best:
-                    ties += 1
-                    if ties == 1 or np.random.random() * ties < 1.0:
-                        action = a
-        # the env
-        u = np.random.random()
-        k = 0
-        while k < out_cdf.shape[2] - 1 and out_cdf[s, action, k] <= u:
-            k += 1
-        s2 = out_next[s, action, k]
-        reward = out_reward[s, action, k]
-        terminated = out_term[s, action, k]
-        episode_steps += 1
-        ended = terminated or (max_steps > 0 and episode_steps >= max_steps)
-        # the reward delay
-        buffer[(clock + delays[t]) & bmask] += reward
-        delivered = buffer[clock & bmask]
-        buffer[clock & bmask] = 0.0
-        clock += 1
-        if ended and episode_end_mode != CARRY:
-            total = 0.0
-            for i in range(buffer.shape[0]):
-                total += buffer[i]
-                buffer[i] = 0.0
-            if episode_end_mode == FLUSH:
-                delivered += total
-        # record, remember, learn
+            step = start_step + t
+            if step >= eps_steps:
+                eps = eps_final
+            else:
+                eps = eps_initial + (eps_final - eps_initial) * (step / eps_steps)
+            # the acting model, then the action (two ε-greedy levels, random tie-breaks)
+            if n_models == 1:
+                m = 0
+            elif np.random.random() < eps:
+                m = np.random.randint(n_models)
+            else:  # a uniformly random model among those holding the state's max
+                m = _pick_tie(mmax[s], qmax[s])
+            if np.random.random() < eps:
+                action = np.random.randint(n_actions)
+            else:  # a uniformly random action among the model's best
+                action = _pick_tie(q[s, m], mmax[s, m])
+            # the env
+            u = np.random.random()
+            k = 0
+            while k < out_cdf.shape[2] - 1 and out_cdf[s, action, k] <= u:
+                k += 1
+            s2 = out_next[s, action, k]
+            reward = out_reward[s, action, k]
+            terminated = out_term[s, action, k]
+            episode_steps += 1
+            ended = terminated or (max_steps > 0 and episode_steps >= max_steps)
+            # the reward delay
+            buffer[(clock + delays[t]) & bmask] += reward
+            delivered = buffer[clock & bmask]
+            buffer[clock & bmask] = 0.0
+            clock += 1
+            if ended and episode_end_mode != CARRY:
+                total = 0.0
+                for i in range(buffer.shape[0]):
+                    total += buffer[i]
+                    buffer[i] = 0.0
+                if episode_end_mode == FLUSH:
+                    delivered += total
+        # record, remember
         rec_undelayed[t] = reward
         rec_delivered[t] = delivered
         rec_obs[t] = s
@@ -217,20 +176,89 @@ def run_chunk(
         hist_s2[pos] = s2
         hist_term[pos] = terminated
         hist_count += 1
-        apply_update(
-            q, lags, delivered, alpha, gamma, hist_s, hist_a, hist_s2, hist_term, hist_count,
-            qmax, qcell, mmax, marg, targets, states, actions,
-        )  # fmt: skip
+        # learn: every target first (each reads the cached max of its next state) ...
+        count = 0  # the models whose step t − λ̂ is in this episode: a prefix (sorted lags)
+        for j in range(n_models):
+            lag = lags[j]
+            if lag >= hist_count:
+                break
+            pos = (hist_count - 1 - lag) & hmask
+            bootstrap = 0.0 if hist_term[pos] else gamma * qmax[hist_s2[pos]]
+            targets[j] = delivered + bootstrap
+            states[j] = hist_s[pos]
+            actions[j] = hist_a[pos]
+            count += 1
+        for j in range(count):  # ... then the writes, repairing caches whose arg-max fell
+            sj = states[j]
+            aj = actions[j]
+            old = q[sj, j, aj]
+            new = old + alpha * (targets[j] - old)
+            q[sj, j, aj] = new
+            # the model's max, |A| branch-free compares: cheaper than a data-dependent branch
+            best = q[sj, j, 0]
+            arg = 0
+            for a in range(1, n_actions):
+                value = q[sj, j, a]
+                higher = value > best
+                best = value if higher else best
+                arg = a if higher else arg
+            mmax[sj, j] = best
+            marg[sj, j] = arg
+            cell = (sj * n_models + j) * n_actions + aj
+            if new > qmax[sj]:
+                qmax[sj] = new
+                qcell[sj] = cell
+            elif new < old and qcell[sj] == cell:
+                _repair_state(sj, n_actions, mmax, marg, qmax, qcell)
         if ended:
-            u = np.random.random()
-            s = 0
-            while s < init_cdf.shape[0] - 1 and init_cdf[s] <= u:
-                s += 1
+            if not scripted:
+                u = np.random.random()
+                s = 0
+                while s < init_cdf.shape[0] - 1 and init_cdf[s] <= u:
+                    s += 1
             hist_count = 0
             episode_steps = 0
-        else:
+        elif not scripted:
             s = s2
     state[0] = s
     state[1] = hist_count
     state[2] = episode_steps
     state[3] = clock
+
+
+def replay(
+    q: np.ndarray, lags: np.ndarray, transitions: np.ndarray, terminated: np.ndarray,
+    rewards: np.ndarray, alpha: float, gamma: float,
+) -> None:  # fmt: skip
+    """Apply the MMQ update of :func:`run_chunk` to scripted transitions, in place on ``q``.
+
+    Args:
+        q: the Q-table, shape (|S|, |Λ|, |A|), updated in place.
+        lags: Λ, sorted ascending.
+        transitions: rows ``(s, a, s′)`` in the order they happened (one episode or several:
+            a ``terminated`` row ends its episode and clears the history).
+        terminated: one flag per row.
+        rewards: the reward received at each row's step.
+        alpha: the learning rate.
+        gamma: the discount factor.
+    """
+    n = transitions.shape[0]
+    lags = np.asarray(lags, dtype=np.int64)
+    flat = q.reshape(q.shape[0], -1)
+    qmax = flat.max(axis=1)
+    qcell = np.arange(q.shape[0]) * flat.shape[1] + flat.argmax(axis=1)
+    mmax, marg = q.max(axis=2), q.argmax(axis=2)
+    size = 1 << int(lags.max()).bit_length()
+    history = [np.zeros(size, np.int64), np.zeros(size, np.int64), np.zeros(size, np.int64),
+               np.zeros(size, np.bool_)]  # fmt: skip
+    records = [np.zeros(n), np.zeros(n)] + [np.zeros(n, np.int64) for _ in range(3)]
+    records += [np.zeros(n, np.bool_), np.zeros(n, np.bool_)]
+    none = np.zeros((1, 1, 1))
+    run_chunk(
+        q, lags, qmax, qcell, mmax, marg,
+        none, none.astype(np.int64), none, none.astype(np.bool_), np.ones(1), 0,
+        np.zeros(n, np.int64), np.zeros(1), FLUSH, alpha, gamma, 0.0, 0.0, 1, 0,
+        *history, np.zeros(4, np.int64), *records,
+        np.asarray(transitions, np.int64), np.asarray(terminated, np.bool_),
+        np.asarray(rewards, np.float64),
+    )  # fmt: skip

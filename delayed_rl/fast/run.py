@@ -10,6 +10,9 @@ from delayed_rl.fast.tabular import NotCompilable, inspect_stack
 _MODES = {"flush": kernel.FLUSH, "drop": kernel.DROP, "carry": kernel.CARRY}
 
 
+_NO_SCRIPT = (np.zeros((0, 3), np.int64), np.zeros(0, np.bool_), np.zeros(0))
+
+
 def _pow2(n: int) -> int:
     return 1 << max(0, int(n - 1).bit_length())
 
@@ -98,7 +101,8 @@ class FusedRun:
         if self.mmax.shape != q.shape[:2]:
             self.mmax = np.empty(q.shape[:2])
             self.marg = np.empty(q.shape[:2], dtype=np.int64)
-        kernel.model_maxima(q, self.mmax, self.marg)  # q may have changed since the last call
+        np.max(q, axis=2, out=self.mmax)  # q may have changed since the last call
+        np.argmax(q, axis=2, out=self.marg)
         delays = self._draw_delays(steps)
         self._fit_buffer(int(delays.max(initial=0)))
         log = {
@@ -118,6 +122,6 @@ class FusedRun:
             float(alpha), float(gamma), float(eps_initial), float(eps_final), int(eps_steps),
             int(start_step), *self.history, self.state,
             log["undelayed_reward"], log["reward"], log["obs"], log["action"], log["model"],
-            log["episode_end"], log["terminated"],
+            log["episode_end"], log["terminated"], *_NO_SCRIPT,
         )  # fmt: skip
         return log
