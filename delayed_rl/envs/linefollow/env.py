@@ -387,7 +387,10 @@ class EPuckLineFollowEnv(gym.Env):
                 )
             left, right = WHEEL_SPEED_ACTIONS[index]
             return float(left), float(right)
-        a = np.asarray(action, dtype=np.float64)
+        try:
+            a = np.asarray(action, dtype=np.float64)
+        except (TypeError, ValueError):
+            a = np.empty(0)
         if a.shape == (2,):
             left, right = float(a[0]), float(a[1])
             if math.isfinite(left) and math.isfinite(right):

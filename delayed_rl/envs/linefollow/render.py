@@ -112,7 +112,7 @@ class Renderer:
         import pygame  # the ``render`` extra; imported only for human rendering
 
         if self._window is None:
-            pygame.init()
+            pygame.display.init()
             pygame.display.set_caption("delayed_rl EPuckLineFollow")
             self._window = pygame.display.set_mode((self.width, self.height))
             self._clock = pygame.time.Clock()

@@ -29,6 +29,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
+    "MAX_CORNER_ANGLE",
     "MIN_TURN_RADIUS",
     "SAMPLE_SPACING",
     "TRACK_NAMES",
@@ -42,6 +43,10 @@ __all__ = [
 
 #: Smallest turning radius (m) any track may have.
 MIN_TURN_RADIUS = 0.1
+#: Largest kink (degrees) allowed at a vertex of a user's polyline. The drawn line has a corner
+#: there; the proportional controller follows 72° kinks without losing the line, loses it
+#: briefly at 90° and needs recoveries at 120°, so 60° leaves a margin.
+MAX_CORNER_ANGLE = 60.0
 #: Longest segment (m) of a track's dense polyline.
 SAMPLE_SPACING = 0.005
 #: Side (m) of the spatial grid's cells. A query returns every segment within this distance of
@@ -93,6 +98,18 @@ def turn_radii(points: ArrayLike) -> FloatArray:
     with np.errstate(divide="ignore", invalid="ignore"):
         radii = lengths / (2.0 * cross)
     return np.where(cross > 0.0, radii, np.inf)
+
+
+def corner_angles(points: ArrayLike) -> FloatArray:
+    """The kink (degrees, 0 = straight on) at every vertex of a closed polyline.
+
+    Args:
+        points: ``(n, 2)`` vertices of a closed polyline (the closing segment is implied).
+    """
+    p = _as_points(points)
+    z = p[:, 0] + 1j * p[:, 1]
+    d = np.roll(z, -1) - z
+    return np.degrees(np.abs(np.angle(d / np.roll(d, 1))))
 
 
 def _segment_crossings(a0: FloatArray, a1: FloatArray, b0: FloatArray, b1: FloatArray) -> Any:
@@ -227,6 +244,7 @@ class Track:
         *,
         name: str = "custom",
         min_turn_radius: float = MIN_TURN_RADIUS,
+        max_corner_angle: float = MAX_CORNER_ANGLE,
         allow_crossings: bool = False,
         spacing: float = SAMPLE_SPACING,
     ) -> Track:
@@ -241,13 +259,17 @@ class Track:
             name: a label for the track.
             min_turn_radius: the smallest allowed turning radius (m) at any vertex (the radius of
                 the circle through it and its two neighbours).
+            max_corner_angle: the largest allowed kink (degrees) at any vertex: the line is
+                drawn straight between vertices, so a coarse polygon has sharp corners even when
+                the circle through its vertices is large.
             allow_crossings: allow the line to cross itself (as a figure-eight does).
             spacing: the longest segment (m) of the dense polyline.
 
         Raises:
             ValueError: if the polyline is not closed, has fewer than 3 distinct vertices, holds
                 non-finite values or repeated consecutive vertices, crosses itself (unless
-                ``allow_crossings``), or turns more tightly than ``min_turn_radius``.
+                ``allow_crossings``), turns more tightly than ``min_turn_radius`` or kinks by
+                more than ``max_corner_angle``.
         """
         p = _as_points(points)
         if not np.all(np.isfinite(p)):
@@ -273,6 +295,10 @@ class Track:
             )
         if not (np.isfinite(min_turn_radius) and min_turn_radius >= 0):
             raise ValueError(f"min_turn_radius must be a finite number >= 0, got {min_turn_radius}")
+        if not (np.isfinite(max_corner_angle) and 0 < max_corner_angle <= 180):
+            raise ValueError(
+                f"max_corner_angle must be in (0, 180] degrees, got {max_corner_angle}"
+            )
         if not (np.isfinite(spacing) and spacing > 0):
             raise ValueError(f"spacing must be a finite number > 0, got {spacing}")
         radii = turn_radii(p)
@@ -282,6 +308,14 @@ class Track:
                 f"track polyline turns too sharply at point {worst} {p[worst].tolist()}: turning "
                 f"radius {radii[worst]:.4g} m < min_turn_radius {min_turn_radius} m (the robot "
                 f"cannot follow it); smooth the corner or pass a smaller min_turn_radius"
+            )
+        angles = corner_angles(p)
+        sharpest = int(np.argmax(angles))
+        if angles[sharpest] > max_corner_angle + 1e-9:
+            raise ValueError(
+                f"track polyline kinks by {angles[sharpest]:.4g}° at point {sharpest} "
+                f"{p[sharpest].tolist()} > max_corner_angle {max_corner_angle}° (the camera loses "
+                f"the line at sharp corners); add vertices to round the corner"
             )
         if not allow_crossings:
             crossings = self_intersections(p)
