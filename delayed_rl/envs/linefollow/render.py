@@ -25,11 +25,14 @@ ROBOT = (200, 70, 60)
 ROBOT_EDGE = (120, 30, 25)
 PIXEL_ON = (40, 200, 70)
 PIXEL_OFF = (250, 190, 40)
+CAMERA_FLOOR = (255, 255, 255)
 MARGIN = 0.12  # metres of floor around the track
 
 
 class Renderer:
-    """Draws a track, the robot's trail, the robot and its camera scanline.
+    """Draws a track, the robot's trail, the robot, its camera scanline (on the floor: green where
+    a pixel sees the line, amber where not) and, magnified in the top-left corner, the camera's
+    view.
 
     Args:
         track: the track to draw (drawn once, then reused).
@@ -105,7 +108,20 @@ class Renderer:
         seen = np.asarray(pixels, dtype=bool)
         self._stamp(frame, samples[~seen], 1.0, PIXEL_OFF)
         self._stamp(frame, samples[seen], 1.0, PIXEL_ON)
+        self._draw_camera_view(frame, seen)
         return frame
+
+    @staticmethod
+    def _draw_camera_view(frame: NDArray[np.uint8], seen: NDArray[np.bool_]) -> None:
+        """The 40 pixels as the robot sees them (pixel 1 left), magnified in the top-left corner
+        (like thesis Fig. 5.17): dark where the line is seen."""
+        cell, height, x0, y0 = 6, 14, 8, 8
+        width = cell * len(seen)
+        if frame.shape[0] < y0 + height + 2 or frame.shape[1] < x0 + width + 2:
+            return
+        frame[y0 - 1 : y0 + height + 1, x0 - 1 : x0 + width + 1] = ROBOT_EDGE
+        strip = np.where(seen[:, None], np.array(LINE), np.array(CAMERA_FLOOR))
+        frame[y0 : y0 + height, x0 : x0 + width] = np.repeat(strip, cell, axis=0)[None, :, :]
 
     def show(self, frame: NDArray[np.uint8], fps: float) -> None:
         """Show a frame in a pygame window (opened on first use), at most ``fps`` per second."""
