@@ -136,3 +136,9 @@ def test_incompatible_env_is_rejected():
 def test_bad_observations_are_rejected(obs):
     with pytest.raises(ValueError, match=r"observation must be line centroids in 0\.\.40"):
         ProportionalController().predict(obs)
+
+
+def test_exported_from_agents():
+    from delayed_rl.agents import ProportionalController as Exported
+
+    assert Exported is ProportionalController

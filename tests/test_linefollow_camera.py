@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import math
+from fractions import Fraction
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from delayed_rl.envs.linefollow.camera import (
     CENTRE_PIXEL,
@@ -173,3 +176,15 @@ def test_a_tilted_line_is_seen_wider(straight):
 def test_camera_rejects_bad_geometry(kwargs, match):
     with pytest.raises(ValueError, match=match):
         Camera(**kwargs)
+
+
+@given(st.lists(st.booleans(), min_size=N_PIXELS, max_size=N_PIXELS))
+def test_centroid_matches_exact_rational_rounding(pixels):
+    seen = [i for i, p in enumerate(pixels, start=1) if p]
+    if not seen:
+        assert line_centroid(pixels) == 0
+        return
+    c = Fraction(sum(seen), len(seen))
+    expected = math.floor(c) + (1 if c - math.floor(c) > Fraction(1, 2) else 0)  # ties down
+    assert line_centroid(pixels) == expected
+    assert abs(line_centroid(pixels) - c) <= Fraction(1, 2)

@@ -195,8 +195,6 @@ def test_from_polyline_checks_its_own_arguments():
         Track.from_polyline(hexagon, max_corner_angle=59.0)
     assert corner_angles(hexagon[:-1]) == pytest.approx([60.0] * 6)
     assert Track.from_polyline(hexagon).length == pytest.approx(6 * 0.8)
-    with pytest.raises(ValueError, match="spacing"):
-        Track.from_polyline(circle(0.5, 48), spacing=0.0)
     # A smaller min_turn_radius lets a tighter polygon through.
     small = circle(0.05, 48)
     with pytest.raises(ValueError, match="turns too sharply"):
@@ -249,3 +247,13 @@ def test_near_line_marks_points_within_half_width():
     # only points whose |y| ≤ 0.005 and that lie within CELL_SIZE of the lookup centre count
     expected = (np.abs(points.imag) <= 0.005) & (np.abs(points - 0.0) <= 0.036)
     assert np.array_equal(near, expected)
+
+
+def test_coarse_points_are_densified_for_the_index():
+    square = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=float)
+    track = Track(square)  # unvalidated, but still indexed correctly
+    assert len(track.points) == 800
+    assert track.length == pytest.approx(4.0)
+    # The middle of a 1 m side is found by the spatial index.
+    assert track.near_line(np.array([0.5 + 0.001j]), 0.005, 0.5 + 0.0j).tolist() == [True]
+    assert track.locate(0.5, 0.01, None)[:2] == pytest.approx((0.5, 0.01))

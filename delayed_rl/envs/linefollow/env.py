@@ -95,11 +95,14 @@ class EPuckLineFollowEnv(gym.Env):
 
     Each step lasts ``CONTROL_PERIOD`` = 0.064 s of simulated time (4 physics sub-steps of 16 ms,
     multiples of Webots' usual e-puck ``basicTimeStep``). At full speed the robot then moves
-    2.5 mm and turns at most 2.7° per step: the camera's reading changes by about one pixel per
-    step, so each of the 7 actions leads to distinguishable next states (a learnable tabular
-    task), and a 1700-step run (the thesis's Fig. 5.19) is 109 s, about one lap of the
-    racetrack. (The thesis's real robot stepped every ~200 ms; there one step moves ~5 pixels
-    and a tabular agent sees far coarser dynamics.)
+    2.5 mm and turns at most 2.7° per step, which shifts the line in the camera by one or two
+    pixels: each of the 7 actions leads to distinguishable next states (a learnable tabular
+    task) and the line never jumps out of view within one step. A 1700-step run (thesis
+    Fig. 5.19) lasts 109 s, about four-fifths of a lap of the 5.1 m racetrack. (The thesis's
+    real robot stepped every ~200 ms; there a sharp turn shifts the line ~5 pixels per step and
+    a tabular agent sees far coarser dynamics.) A new command moves the robot from the second
+    sub-step on (pymunk integrates positions before it solves the friction joints): 16 ms of
+    actuation latency.
 
     Camera (:mod:`~delayed_rl.envs.linefollow.camera`): the scanline is 0.05 m ahead of the body
     centre, 0.064 m wide (1.6 mm per pixel), across the heading; **pixel 1 is on the robot's

@@ -10,7 +10,10 @@ speeds and the robot's heading::
     v = (v_l + v_r) / 2 · k,     ω = (v_r − v_l) · k / AXLE_LENGTH,    k = 2π·WHEEL_RADIUS / 1000
 
 with wheel speeds in e-puck units (steps/s, 1000 steps per wheel turn). The joints then drag the
-robot towards that motion within the grip limits (μ = :data:`FRICTION`).
+robot towards that motion within the grip limits (μ = :data:`FRICTION`). At e-puck speeds the
+grip always suffices, so the body reaches the commanded velocity within one sub-step; since
+pymunk integrates positions before it solves the joints, that velocity moves the body from the
+next sub-step on (one sub-step of actuation latency).
 
 Wheel speeds follow an optional first-order motor lag (time constant ``motor_lag`` s); slip
 factors (from the env's generator) scale each wheel's ground speed. The robot itself draws no

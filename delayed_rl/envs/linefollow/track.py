@@ -17,7 +17,9 @@ Every track must have a minimum turning radius of at least :data:`MIN_TURN_RADIU
 geometry behind that bound: with the camera's scanline 5 cm ahead and 6.4 cm wide, a robot centred
 and tangent on a circle of radius R still sees the line while R ≥ (0.05² + 0.032²) / (2·0.032)
 ≈ 0.055 m, and the proportional controller's tightest turn (wheels 300 and 60) has radius 0.04 m.
-0.1 m leaves a margin for the controller's lag; random tracks use 0.2 m by default.
+0.1 m leaves a margin for the controller's lag; random tracks use 0.2 m by default. A user's
+polyline is drawn straight between its vertices, so it must also not kink by more than
+:data:`MAX_CORNER_ANGLE` (60°) at any vertex.
 """
 
 from __future__ import annotations
@@ -200,7 +202,9 @@ class Track:
 
     Attributes:
         name: a label (``"oval"``, ``"custom"``, ``"random-<seed>"``...).
-        points: ``(n, 2)`` dense centreline vertices (m); the closing segment is implied.
+        points: ``(n, 2)`` dense centreline vertices (m), no two consecutive ones more than
+            :data:`SAMPLE_SPACING` apart (coarser input is densified); the closing segment is
+            implied.
         length: the centreline's length (m).
         min_turn_radius: the smallest turning radius (m) of the track as given (before
             densification).
@@ -216,6 +220,8 @@ class Track:
         allow_crossings: bool = False,
     ):
         p = _as_points(points)
+        if np.linalg.norm(np.roll(p, -1, axis=0) - p, axis=1).max() > SAMPLE_SPACING * (1 + 1e-9):
+            p = _resample(p, SAMPLE_SPACING)  # the spatial index relies on short segments
         self.name = name
         self.allow_crossings = allow_crossings
         self.points = p
@@ -246,13 +252,12 @@ class Track:
         min_turn_radius: float = MIN_TURN_RADIUS,
         max_corner_angle: float = MAX_CORNER_ANGLE,
         allow_crossings: bool = False,
-        spacing: float = SAMPLE_SPACING,
     ) -> Track:
         """Validate a user's closed polyline and build a track from it.
 
         The polyline must be closed explicitly: its last point equals its first (within 1 µm).
-        Between consecutive vertices the line is straight; the track is densified so that no
-        segment is longer than ``spacing``, keeping every given vertex.
+        Between consecutive vertices the line is straight (the track is densified so that no
+        segment is longer than :data:`SAMPLE_SPACING`, keeping every given vertex).
 
         Args:
             points: ``(n + 1, 2)`` vertices in metres, ``points[-1] == points[0]``, n ≥ 3.
@@ -263,7 +268,6 @@ class Track:
                 drawn straight between vertices, so a coarse polygon has sharp corners even when
                 the circle through its vertices is large.
             allow_crossings: allow the line to cross itself (as a figure-eight does).
-            spacing: the longest segment (m) of the dense polyline.
 
         Raises:
             ValueError: if the polyline is not closed, has fewer than 3 distinct vertices, holds
@@ -299,8 +303,6 @@ class Track:
             raise ValueError(
                 f"max_corner_angle must be in (0, 180] degrees, got {max_corner_angle}"
             )
-        if not (np.isfinite(spacing) and spacing > 0):
-            raise ValueError(f"spacing must be a finite number > 0, got {spacing}")
         radii = turn_radii(p)
         worst = int(np.argmin(radii))
         if radii[worst] < min_turn_radius:
@@ -328,7 +330,7 @@ class Track:
                     f"allow_crossings=True for a figure-eight"
                 )
         return cls(
-            _resample(p, spacing),
+            p,
             name=name,
             min_turn_radius=float(radii[worst]),
             allow_crossings=allow_crossings,
