@@ -94,13 +94,13 @@ class EPuckLineFollowEnv(gym.Env):
     1000 steps per wheel turn, so 300 ≈ 0.0386 m/s).
 
     Each step lasts ``CONTROL_PERIOD`` = 0.064 s of simulated time (4 physics sub-steps of 16 ms,
-    multiples of Webots' usual e-puck ``basicTimeStep``). At full speed the robot then moves
-    2.5 mm and turns at most 2.7° per step, which shifts the line in the camera by one or two
-    pixels: each of the 7 actions leads to distinguishable next states (a learnable tabular
-    task) and the line never jumps out of view within one step. A 1700-step run (thesis
-    Fig. 5.19) lasts 109 s, about four-fifths of a lap of the 5.1 m racetrack. (The thesis's
-    real robot stepped every ~200 ms; there a sharp turn shifts the line ~5 pixels per step and
-    a tabular agent sees far coarser dynamics.) A new command moves the robot from the second
+    a multiple of the 16–32 ms ``basicTimeStep`` of Webots' e-puck worlds). At full speed the
+    robot then moves 2.5 mm and turns at most 2.7° per step, which shifts the line in the camera
+    by one or two pixels: each of the 7 actions leads to distinguishable next states (a
+    learnable tabular task) and the line never jumps out of view within one step. A 1700-step
+    run (thesis Fig. 5.19) lasts 109 s, about four-fifths of a lap of the 5.1 m racetrack. (The
+    thesis's real robot stepped every ~200 ms; there a sharp turn shifts the line ~5 pixels per
+    step and a tabular agent sees far coarser dynamics.) A new command moves the robot from the second
     sub-step on (pymunk integrates positions before it solves the friction joints): 16 ms of
     actuation latency.
 

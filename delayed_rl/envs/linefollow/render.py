@@ -1,4 +1,5 @@
-"""Drawing the line-following scene with numpy (``rgb_array``) and showing it with pygame (``human``).
+"""Drawing the line-following scene with numpy (``rgb_array``) and showing it with pygame
+(``human``).
 
 pygame is imported only when a window is first shown, so ``rgb_array`` rendering needs numpy
 alone.
