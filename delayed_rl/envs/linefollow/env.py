@@ -240,8 +240,10 @@ class EPuckLineFollowEnv(gym.Env):
         if render_mode is not None:
             _check_choice("render_mode", render_mode, tuple(self.metadata["render_modes"]))
         if track_seed is not None:
-            if not _is_int(track_seed) or track_seed < 0:
+            if not _is_int(track_seed):
                 raise TypeError(f"track_seed must be an int >= 0 or None, got {track_seed!r}")
+            if track_seed < 0:
+                raise ValueError(f"track_seed must be an int >= 0 or None, got {track_seed!r}")
             if not (isinstance(track, str) and track == "random"):
                 raise ValueError(
                     f"track_seed is only used with track='random', got track={track!r}"
