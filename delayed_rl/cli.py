@@ -390,12 +390,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             args.parser.error(f"--max-delay-estimate is for --agent mmq, not --agent {args.agent}")
     if args.command == "evaluate" and args.episodes is None and args.steps is None:
         args.episodes = 10
-    gym.logger.min_level = 40  # keep Gymnasium's warnings out of command output
+    level, gym.logger.min_level = gym.logger.min_level, 40  # Gymnasium's warnings stay out
     try:
         return args.run(args)
     except (CommandError, OSError, ValueError, TypeError, RuntimeError, gym.error.Error) as error:
         print(f"error: {error}", file=sys.stderr)
         return 1
+    finally:
+        gym.logger.min_level = level  # main() may be called from a program: leave it as it was
 
 
 if __name__ == "__main__":
