@@ -5,8 +5,9 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
+from support import ScriptedDelay
 
-from delayed_rl.delays import Constant, Delay, Poisson, Uniform
+from delayed_rl.delays import Constant, Poisson, Uniform
 from delayed_rl.wrappers import ObservationDelay
 from delayed_rl.wrappers.reward_delay import delay_rng
 
@@ -33,29 +34,6 @@ class CounterEnv(gym.Env):
         self.t += 1
         end = self.episode_length is not None and self.t >= self.episode_length
         return self.episode * EPISODE_STRIDE + self.t, float(self.t), end, False, {"t": self.t}
-
-
-class ScriptedDelay(Delay):
-    """Delays read from a script, then ``then``; ignores the generator."""
-
-    def __init__(self, script, then: int = 0, mean: float = 1.0):
-        self.script, self.then, self._mean, self.used = list(script), then, mean, 0
-
-    def sample(self, rng, size=None):
-        n = 1 if size is None else int(np.prod(size))
-        out = [
-            self.script[i] if i < len(self.script) else self.then
-            for i in range(self.used, self.used + n)
-        ]
-        self.used += n
-        return self._finish(np.reshape(out, () if size is None else size), size)
-
-    def pmf(self, k):
-        return 0.0
-
-    @property
-    def mean(self):
-        return self._mean
 
 
 @pytest.mark.parametrize("lam", [0.5, 3, 13.7])

@@ -13,8 +13,9 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from support import ScriptedDelay
 
-from delayed_rl.delays import Constant, Delay, Empirical, Geometric, Poisson, Uniform
+from delayed_rl.delays import Constant, Empirical, Geometric, Poisson, Uniform
 from delayed_rl.wrappers import (
     EPISODE_END_MODES,
     PoissonRewardDelay,
@@ -77,29 +78,6 @@ class ScriptedEnv(gym.Env):
         self.t += 1
         end = self.episode < len(self.lengths) and self.t >= self.lengths[self.episode]
         return 0, reward, end and not self.truncate, end and self.truncate, {}
-
-
-class ScriptedDelay(Delay):
-    """Delays read from a script, in order (``then`` once it runs out); ignores the generator."""
-
-    def __init__(self, script, then: int = 0, mean: float = 1.0):
-        self.script, self.then, self._mean, self.used = list(script), then, mean, 0
-
-    def sample(self, rng, size=None):
-        n = 1 if size is None else int(np.prod(size))
-        out = [
-            self.script[i] if i < len(self.script) else self.then
-            for i in range(self.used, self.used + n)
-        ]
-        self.used += n
-        return self._finish(np.reshape(out, () if size is None else size), size)
-
-    def pmf(self, k):
-        return 0.0
-
-    @property
-    def mean(self):
-        return self._mean
 
 
 class ConstantRewardEnv(gym.Env):
