@@ -182,3 +182,19 @@ def test_linefollow_verdicts_follow_the_documented_rules():
     unlike = _fake_linefollow(mmq=(0.3, 900.0), q=(0.6, 1000.0))
     assert all(claim.verdict == "differs" for claim in unlike.values())
     assert unlike["MMQ minus Q average reward (paired by seed)"].mean == pytest.approx(-0.3)
+
+
+def test_behaviour_policy_is_the_two_level_epsilon_greedy_rule():
+    from delayed_rl.experiments.mmq_gridworld import behaviour_policy
+
+    q = np.zeros((2, 3, 4))
+    q[0, 1, 2] = 5.0  # state 0: one model holds the max at action 2
+    q[1, :, 0] = q[1, :, 1] = 1.0  # state 1: every model ties actions 0 and 1
+    policy = behaviour_policy(q, epsilon=0.1)
+    np.testing.assert_allclose(policy.sum(axis=1), 1.0)
+    # state 0: greedy model (0.9 + 0.1/3) acts greedily (0.9 + 0.1/4) on action 2; the 2 other
+    # models (0.1/3 each) tie all four actions
+    greedy_model = 0.9 + 0.1 / 3
+    expected = greedy_model * (0.9 * np.eye(4)[2] + 0.025) + (2 * 0.1 / 3) * np.full(4, 0.25)
+    np.testing.assert_allclose(policy[0], expected)
+    np.testing.assert_allclose(policy[1], [0.475, 0.475, 0.025, 0.025])

@@ -14,7 +14,13 @@ from delayed_rl.experiments.runner import (
     mean_ci95,
     running_average,
 )
-from delayed_rl.experiments.training import greedy_average_reward, greedy_policy, grid_env, train
+from delayed_rl.experiments.training import (
+    EPSILON,
+    greedy_average_reward,
+    greedy_policy,
+    grid_env,
+    train,
+)
 
 SIZE, LAM, LAMBDA_MAX = 9, 13, 50
 
@@ -47,6 +53,23 @@ def _greedy_route(q: np.ndarray) -> list[int]:
     return route
 
 
+def behaviour_policy(q: np.ndarray, epsilon: float = EPSILON) -> np.ndarray:
+    """P(a | s) of the two-level ε-greedy acting rule (thesis Figs. 5.12 and 5.15), shape (S, A).
+
+    A greedy model (uniform among those holding the state's max) with probability 1 − ε, else a
+    uniform model; then that model's greedy action (uniform among ties) with probability 1 − ε,
+    else a uniform action.
+    """
+    n_states, n_models, n_actions = q.shape
+    model_best = q.max(axis=2)  # (S, Λ)
+    holds_max = model_best == model_best.max(axis=1, keepdims=True)
+    p_model = (1 - epsilon) * holds_max / holds_max.sum(axis=1, keepdims=True)
+    p_model = p_model + epsilon / n_models if n_models > 1 else np.ones((n_states, 1))
+    greedy = q == model_best[..., None]  # (S, Λ, A)
+    p_action = (1 - epsilon) * greedy / greedy.sum(axis=2, keepdims=True) + epsilon / n_actions
+    return np.einsum("sm,sma->sa", p_model, p_action)
+
+
 def run_task(task: dict) -> dict:
     agent = train(grid_env(SIZE, task["lam"]), task["lags"], task["steps"], task["seed"])
     log, q = agent.training_log, agent.q_table
@@ -60,6 +83,7 @@ def run_task(task: dict) -> dict:
         "greedy": greedy_average_reward(agent, SIZE, 1000),
         "visits": np.bincount(log["obs"], minlength=SIZE * SIZE).reshape(SIZE, SIZE),
         "policy": policy.reshape(SIZE, SIZE), "route_table": table,
+        "behaviour": behaviour_policy(q).T.reshape(4, SIZE, SIZE),
         "model_share": agent.acting_delay_share,
     }  # fmt: skip
 
@@ -140,6 +164,12 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
             path, {a: runs[0][1]["visits"] for a, runs in by_agent.items()},
             "Deterministic greedy policies, first seed (Fig. 5.11)",
             arrows={a: runs[0][1]["policy"] for a, runs in by_agent.items()}),
+        **{f"fig5_12_15_probabilistic_policy_{a.replace(' ', '_')}": (
+            lambda path, a=a, runs=runs: plotting.grid_heatmap(
+                path, dict(zip(("P(up)", "P(right)", "P(down)", "P(left)"),
+                               runs[0][1]["behaviour"], strict=True)),
+                f"{a}: probabilistic (ε-greedy) policy, first seed (Figs. 5.12, 5.15)"))
+           for a, runs in by_agent.items()},
     }  # fmt: skip
     share = np.mean([r["model_share"] for _, r in by_agent["MMQ"]], axis=0)
     return Summary(claims, curves, figures, {"table_5_1_first_seed": table51,
