@@ -60,20 +60,30 @@ def _pick_tie(values, best):
 
 
 @_jit_inline
-def _repair_state(s, n_actions, mmax, marg, qmax, qcell):
-    """Recompute state ``s``'s max from its models' maxima (first position, λ̂-major)."""
-    row = mmax[s]
-    best = row.max()  # a reduction the compiler vectorises; then the first model holding it
-    model = 0
-    while row[model] != best:
-        model += 1
-    qmax[s] = best
-    qcell[s] = (s * mmax.shape[1] + model) * n_actions + marg[s, model]
+def _pick_model(rows, best, cell, n_models, n_actions):
+    """A uniformly random model among those holding ``best`` somewhere in their row."""
+    flat = rows.ravel()
+    ties = 0
+    for i in range(flat.shape[0]):
+        ties += flat[i] == best
+    if ties == 1:
+        return (cell // n_actions) % n_models
+    holders = np.zeros(n_models, np.bool_)
+    for i in range(flat.shape[0]):
+        if flat[i] == best:
+            holders[i // n_actions] = True
+    k = np.random.randint(holders.sum())
+    for m in range(n_models):
+        if holders[m]:
+            if k == 0:
+                return m
+            k -= 1
+    return 0
 
 
 @_jit
 def run_chunk(
-    q, lags, qmax, qcell, mmax, marg,
+    q, lags, qmax, qcell,
     out_cdf, out_next, out_reward, out_term, init_cdf, max_steps,
     delays, buffer, episode_end_mode,
     alpha, gamma, eps_initial, eps_final, eps_steps, start_step,
@@ -87,9 +97,9 @@ def run_chunk(
     model ``m`` whose step ``t − lags[m]`` is in this episode's history, with (s, a, s′, done) that
     step's transition, ``target = r_t + γ (1 − done) max Q[s′]``; all targets of a step are
     computed before its writes. ``lags`` must be sorted ascending (the agents keep Λ sorted).
-    Two caches are kept exact: ``qmax[s]``, the max of ``q[s]``, with ``qcell[s]`` its flat index
-    in ``q`` (the agents' layout), and ``mmax[s, m]``, the max of ``q[s, m]``, with ``marg[s, m]``
-    its action; a state's max is recomputed only when its cached arg-max entry decreases.
+    The cache is kept exact: ``qmax[s]``, the max of ``q[s]``, with ``qcell[s]`` its flat index
+    in ``q`` (the agents' layout); a state's max is recomputed only when its cached arg-max entry
+    decreases.
 
     With a non-empty ``script`` (rows ``(s, a, s′)``, with ``script_term`` and ``script_reward``)
     the steps replay those transitions and received rewards instead of acting in the env:
@@ -135,11 +145,11 @@ def run_chunk(
             elif np.random.random() < eps:
                 m = np.random.randint(n_models)
             else:  # a uniformly random model among those holding the state's max
-                m = _pick_tie(mmax[s], qmax[s])
+                m = _pick_model(q[s], qmax[s], qcell[s], n_models, n_actions)
             if np.random.random() < eps:
                 action = np.random.randint(n_actions)
             else:  # a uniformly random action among the model's best
-                action = _pick_tie(q[s, m], mmax[s, m])
+                action = _pick_tie(q[s, m], q[s, m].max())
             # the env
             u = np.random.random()
             k = 0
@@ -194,22 +204,18 @@ def run_chunk(
             old = q[sj, j, aj]
             new = old + alpha * (targets[j] - old)
             q[sj, j, aj] = new
-            # the model's max, |A| branch-free compares: cheaper than a data-dependent branch
-            best = q[sj, j, 0]
-            arg = 0
-            for a in range(1, n_actions):
-                value = q[sj, j, a]
-                higher = value > best
-                best = value if higher else best
-                arg = a if higher else arg
-            mmax[sj, j] = best
-            marg[sj, j] = arg
             cell = (sj * n_models + j) * n_actions + aj
             if new > qmax[sj]:
                 qmax[sj] = new
                 qcell[sj] = cell
-            elif new < old and qcell[sj] == cell:
-                _repair_state(sj, n_actions, mmax, marg, qmax, qcell)
+            elif new < old and qcell[sj] == cell:  # the arg-max fell: rescan the state's row
+                row = q[sj].ravel()
+                best = row.max()  # a reduction the compiler vectorises; then its first position
+                first = 0
+                while row[first] != best:
+                    first += 1
+                qmax[sj] = best
+                qcell[sj] = sj * row.shape[0] + first
         if ended:
             if not scripted:
                 u = np.random.random()
@@ -247,7 +253,6 @@ def replay(
     flat = q.reshape(q.shape[0], -1)
     qmax = flat.max(axis=1)
     qcell = np.arange(q.shape[0]) * flat.shape[1] + flat.argmax(axis=1)
-    mmax, marg = q.max(axis=2), q.argmax(axis=2)
     size = 1 << int(lags.max()).bit_length()
     history = [np.zeros(size, np.int64), np.zeros(size, np.int64), np.zeros(size, np.int64),
                np.zeros(size, np.bool_)]  # fmt: skip
@@ -255,7 +260,7 @@ def replay(
     records += [np.zeros(n, np.bool_), np.zeros(n, np.bool_)]
     none = np.zeros((1, 1, 1))
     run_chunk(
-        q, lags, qmax, qcell, mmax, marg,
+        q, lags, qmax, qcell,
         none, none.astype(np.int64), none, none.astype(np.bool_), np.ones(1), 0,
         np.zeros(n, np.int64), np.zeros(1), FLUSH, alpha, gamma, 0.0, 0.0, 1, 0,
         *history, np.zeros(4, np.int64), *records,

@@ -45,8 +45,6 @@ class FusedRun:
             for dtype in (np.int64, np.int64, np.int64, np.bool_)
         ]
         self.buffer = np.zeros(1)
-        self.mmax = np.empty((0, 0))
-        self.marg = np.empty((0, 0), dtype=np.int64)
         seed_seq = np.random.SeedSequence(seed)
         kernel_seed, delay_seed = seed_seq.generate_state(2)
         kernel.seed_kernel(int(kernel_seed) & 0x7FFFFFFF)
@@ -98,11 +96,6 @@ class FusedRun:
         ``qmax[s]`` is the max of ``q[s]`` and ``qcell[s]`` its flat index into ``q`` (the layout
         of :class:`~delayed_rl.agents.MultipleModelQLearning`'s cache).
         """
-        if self.mmax.shape != q.shape[:2]:
-            self.mmax = np.empty(q.shape[:2])
-            self.marg = np.empty(q.shape[:2], dtype=np.int64)
-        np.max(q, axis=2, out=self.mmax)  # q may have changed since the last call
-        np.argmax(q, axis=2, out=self.marg)
         delays = self._draw_delays(steps)
         self._fit_buffer(int(delays.max(initial=0)))
         log = {
@@ -116,7 +109,7 @@ class FusedRun:
         }
         m = self.model
         kernel.run_chunk(
-            q, self.lags, qmax, qcell, self.mmax, self.marg,
+            q, self.lags, qmax, qcell,
             m.out_cdf, m.out_next, m.out_reward, m.out_term, m.init_cdf, m.max_steps,
             delays, self.buffer, self.mode,
             float(alpha), float(gamma), float(eps_initial), float(eps_final), int(eps_steps),
