@@ -25,6 +25,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from delayed_rl._validation import check_int
 from delayed_rl.agents.callbacks import as_callback
 from delayed_rl.agents.logger import Logger
 from delayed_rl.agents.schedules import (
@@ -254,14 +255,8 @@ class TabularAgent:
         ):
             raise ValueError(f"q_init must be a finite real number, got {q_init!r}")
         self.q_init = float(q_init)
-        if seed is not None and (
-            isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or seed < 0
-        ):
-            raise ValueError(f"seed must be None or an integer >= 0, got {seed!r}")
-        self.seed = None if seed is None else int(seed)
-        if isinstance(verbose, bool) or not isinstance(verbose, numbers.Integral) or verbose < 0:
-            raise ValueError(f"verbose must be an integer >= 0 (0 silent, 1 info), got {verbose!r}")
-        self.verbose = int(verbose)
+        self.seed = check_int("seed", seed, 0, optional=True)
+        self.verbose = check_int("verbose", verbose, 0, note=" (0 silent, 1 info)")
         self._progress_remaining = 1.0
         self._alpha = self._current_learning_rate()
         self.exploration_rate = self.exploration_schedule(1.0)
@@ -580,18 +575,8 @@ class TabularAgent:
         Raises:
             ValueError: a bad argument, or the agent has no env.
         """
-        if (
-            isinstance(total_timesteps, bool)
-            or not isinstance(total_timesteps, numbers.Integral)
-            or total_timesteps < 0
-        ):
-            raise ValueError(f"total_timesteps must be an integer >= 0, got {total_timesteps!r}")
-        if log_interval is not None and (
-            isinstance(log_interval, bool)
-            or not isinstance(log_interval, numbers.Integral)
-            or log_interval < 1
-        ):
-            raise ValueError(f"log_interval must be None or an integer >= 1, got {log_interval!r}")
+        total_timesteps = check_int("total_timesteps", total_timesteps, 0)
+        log_interval = check_int("log_interval", log_interval, 1, optional=True)
         for name, flag in (
             ("reset_num_timesteps", reset_num_timesteps),
             ("progress_bar", progress_bar),

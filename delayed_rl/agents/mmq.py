@@ -25,6 +25,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from delayed_rl._validation import check_int
 from delayed_rl.agents.base import TabularAgent
 from delayed_rl.agents.schedules import Schedule
 
@@ -72,19 +73,9 @@ def check_delay_estimates(
         max_delay_estimate = DEFAULT_MAX_DELAY_ESTIMATE
     if delay_step is None:
         delay_step = 1
-    if (
-        isinstance(max_delay_estimate, bool)
-        or not isinstance(max_delay_estimate, numbers.Integral)
-        or max_delay_estimate < 0
-    ):
-        raise ValueError(f"max_delay_estimate must be an integer >= 0, got {max_delay_estimate!r}")
-    if (
-        isinstance(delay_step, bool)
-        or not isinstance(delay_step, numbers.Integral)
-        or delay_step < 1
-    ):
-        raise ValueError(f"delay_step must be an integer >= 1, got {delay_step!r}")
-    return np.arange(0, int(max_delay_estimate) + 1, int(delay_step), dtype=np.int64)
+    max_delay_estimate = check_int("max_delay_estimate", max_delay_estimate, 0)
+    delay_step = check_int("delay_step", delay_step, 1)
+    return np.arange(0, max_delay_estimate + 1, delay_step, dtype=np.int64)
 
 
 class MultipleModelQLearning(TabularAgent):

@@ -9,11 +9,11 @@ identical tables for the same seed and env.
 
 from __future__ import annotations
 
-import numbers
 from typing import Any
 
 import gymnasium as gym
 
+from delayed_rl._validation import check_int
 from delayed_rl.agents.mmq import MultipleModelQLearning
 from delayed_rl.agents.schedules import Schedule
 
@@ -112,8 +112,7 @@ class FixedDelayQLearning(MultipleModelQLearning):
         seed: int | None = None,
         verbose: int = 0,
     ):
-        if isinstance(delay, bool) or not isinstance(delay, numbers.Integral) or delay < 0:
-            raise ValueError(f"delay must be an integer >= 0, got {delay!r}")
+        check_int("delay", delay, 0)
         super().__init__(
             env,
             learning_rate=learning_rate,

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import numbers
-
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+
+from delayed_rl._validation import check_int
 
 UP, RIGHT, DOWN, LEFT = 0, 1, 2, 3
 _MOVES = {UP: (-1, 0), RIGHT: (0, 1), DOWN: (1, 0), LEFT: (0, -1)}
@@ -64,21 +64,15 @@ class GridWorldEnv(gym.Env):
     metadata = {"render_modes": ["ansi"], "render_fps": 4}
 
     def __init__(self, size: int = 9, max_steps: int | None = None, render_mode: str | None = None):
-        if isinstance(size, bool) or not isinstance(size, numbers.Integral) or size < 2:
-            raise ValueError(f"size must be an integer >= 2, got {size!r}")
-        if max_steps is not None and (
-            isinstance(max_steps, bool)
-            or not isinstance(max_steps, numbers.Integral)
-            or max_steps < 1
-        ):
-            raise ValueError(f"max_steps must be None or an integer >= 1, got {max_steps!r}")
+        size = check_int("size", size, 2)
+        max_steps = check_int("max_steps", max_steps, 1, optional=True)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
                 f"render_mode must be None or one of {self.metadata['render_modes']}, "
                 f"got {render_mode!r}"
             )
-        self.size = int(size)
-        self.max_steps = None if max_steps is None else int(max_steps)
+        self.size = size
+        self.max_steps = max_steps
         self.render_mode = render_mode
         self.n_states = self.size * self.size
         self.start_state = self.n_states - 1

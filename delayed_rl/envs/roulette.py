@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-import numbers
-
 import gymnasium as gym
 from gymnasium import spaces
+
+from delayed_rl._validation import check_int
 
 BET_EVEN, BET_13 = 0, 1
 POCKETS = 38  # an American wheel: 1-36, 0 and 00
@@ -52,17 +52,12 @@ class RouletteEnv(gym.Env):
     metadata = {"render_modes": []}
 
     def __init__(self, max_steps: int | None = None, render_mode: str | None = None):
-        if max_steps is not None and (
-            isinstance(max_steps, bool)
-            or not isinstance(max_steps, numbers.Integral)
-            or max_steps < 1
-        ):
-            raise ValueError(f"max_steps must be None or an integer >= 1, got {max_steps!r}")
+        max_steps = check_int("max_steps", max_steps, 1, optional=True)
         if render_mode is not None:
             raise ValueError(
                 f"render_mode must be None (Roulette does not render), got {render_mode!r}"
             )
-        self.max_steps = None if max_steps is None else int(max_steps)
+        self.max_steps = max_steps
         self.render_mode = None
         self.observation_space = spaces.Discrete(1)
         self.action_space = spaces.Discrete(2)

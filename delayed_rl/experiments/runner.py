@@ -23,6 +23,8 @@ from typing import Any
 
 import numpy as np
 
+from delayed_rl._validation import check_int
+
 BACKENDS = ("loky", "ray", "dask")
 # Student t 0.975 quantiles for 1..30 degrees of freedom (no scipy at run time).
 _T975 = (12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179,
@@ -129,8 +131,7 @@ def run_tasks(
     """Run ``tasks`` through joblib with ``workers`` processes on ``backend``; keep their order."""
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
-    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-        raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
+    check_int("workers", workers, 1)
     if workers == 1 and backend == "loky":
         return [run_task(task) for task in tasks]
     import joblib
