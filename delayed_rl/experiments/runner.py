@@ -12,6 +12,7 @@ Every task carries its own seed, so results do not depend on the number of worke
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
 import math
@@ -136,22 +137,23 @@ def run_tasks(
         return [run_task(task) for task in tasks]
     import joblib
 
-    if backend == "ray":
-        try:
-            from ray.util.joblib import register_ray
-        except ImportError as error:
-            raise RuntimeError("backend 'ray' needs Ray: pip install 'ray[default]'") from error
-        register_ray()
-    elif backend == "dask":
-        try:
-            from dask.distributed import Client
-        except ImportError as error:
-            raise RuntimeError(
-                "backend 'dask' needs Dask: pip install 'dask[distributed]'"
-            ) from error
-        Client(processes=True, n_workers=workers)
-    with joblib.parallel_config(backend=backend, n_jobs=workers):
-        return list(joblib.Parallel()(joblib.delayed(run_task)(task) for task in tasks))
+    with contextlib.ExitStack() as cleanup:
+        if backend == "ray":
+            try:
+                from ray.util.joblib import register_ray
+            except ImportError as error:
+                raise RuntimeError("backend 'ray' needs Ray: pip install 'ray[default]'") from error
+            register_ray()
+        elif backend == "dask":
+            try:
+                from dask.distributed import Client
+            except ImportError as error:
+                raise RuntimeError(
+                    "backend 'dask' needs Dask: pip install 'dask[distributed]'"
+                ) from error
+            cleanup.enter_context(Client(processes=True, n_workers=workers))  # closed after
+        with joblib.parallel_config(backend=backend, n_jobs=workers):
+            return list(joblib.Parallel()(joblib.delayed(run_task)(task) for task in tasks))
 
 
 def run_experiment(
