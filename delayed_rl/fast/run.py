@@ -34,7 +34,7 @@ class FusedRun:
 
     def __init__(self, env, lags: np.ndarray, seed: int | None):
         if not kernel.HAVE_NUMBA:
-            raise NotCompilable("numba is not installed (pip install 'delayed-rl[fast]')")
+            raise NotCompilable("numba is not installed (a core dependency: pip install numba)")
         self.model, wrapper = inspect_stack(env)
         self.delay = None if wrapper is None else wrapper.delay
         self.max_delay = None if wrapper is None else wrapper.max_delay
