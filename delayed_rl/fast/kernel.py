@@ -18,14 +18,11 @@ try:
 
     HAVE_NUMBA = True
     _jit = numba.njit(cache=True, nogil=True)
-    _jit_inline = numba.njit(cache=True, nogil=True, inline="always")
 except ImportError:  # pragma: no cover - exercised where numba is absent
     HAVE_NUMBA = False
 
     def _jit(function):
         return function
-
-    _jit_inline = _jit
 
 
 # Episode-end modes of the reward buffer, as integers for the compiled code.
@@ -38,47 +35,70 @@ def seed_kernel(seed):
     np.random.seed(seed)
 
 
-@_jit_inline
-def _pick_tie(values, best):
-    """A uniformly random index among those where ``values`` equals ``best`` (one draw at most)."""
-    ties = 0
-    first = 0
-    for i in range(values.shape[0]):
-        if values[i] == best:
-            if ties == 0:
-                first = i
+@_jit
+def _scan_max(qf, base, size):
+    """``(max, first index of the max, number of entries equal to it)`` of ``qf[base:base+size]``.
+
+    One scalar pass: cheaper here than a vectorised max followed by a search for its position.
+    """
+    best = qf[base]
+    first = base
+    ties = 1
+    for i in range(base + 1, base + size):
+        value = qf[i]
+        if value > best:
+            best = value
+            first = i
+            ties = 1
+        elif value == best:
             ties += 1
-    if ties == 1:
-        return first
-    k = np.random.randint(ties)
-    for i in range(first, values.shape[0]):
-        if values[i] == best:
+    return best, first, ties
+
+
+@_jit
+def _nth_equal(qf, base, size, best, k):
+    """The index of the ``k``-th (from 0) entry of ``qf[base:base+size]`` equal to ``best``."""
+    for i in range(base, base + size):
+        if qf[i] == best:
             if k == 0:
                 return i
             k -= 1
-    return first
+    return base
 
 
-@_jit_inline
-def _pick_model(rows, best, cell, n_models, n_actions):
-    """A uniformly random model among those holding ``best`` somewhere in their row."""
-    flat = rows.ravel()
-    ties = 0
-    for i in range(flat.shape[0]):
-        ties += flat[i] == best
-    if ties == 1:
-        return (cell // n_actions) % n_models
-    holders = np.zeros(n_models, np.bool_)
-    for i in range(flat.shape[0]):
-        if flat[i] == best:
-            holders[i // n_actions] = True
-    k = np.random.randint(holders.sum())
+@_jit
+def _pick_model(qf, base, n_models, n_actions, best):
+    """A uniformly random model among those holding ``best`` somewhere in their row.
+
+    ``qf[base:]`` is the state's rows, model after model (one draw).
+    """
+    holders = 0
     for m in range(n_models):
-        if holders[m]:
-            if k == 0:
-                return m
-            k -= 1
+        row = base + m * n_actions
+        for i in range(row, row + n_actions):
+            if qf[i] == best:
+                holders += 1
+                break
+    k = np.random.randint(holders)
+    for m in range(n_models):
+        row = base + m * n_actions
+        for i in range(row, row + n_actions):
+            if qf[i] == best:
+                if k == 0:
+                    return m
+                k -= 1
+                break
     return 0
+
+
+@_jit
+def _count_ties(qf, qmax, row_size):
+    """How many entries of each state's row equal the state's cached max."""
+    ties = np.zeros(qmax.shape[0], dtype=np.int64)
+    for s in range(qmax.shape[0]):
+        for i in range(s * row_size, (s + 1) * row_size):
+            ties[s] += qf[i] == qmax[s]
+    return ties
 
 
 @_jit
@@ -97,9 +117,13 @@ def run_chunk(
     model ``m`` whose step ``t − lags[m]`` is in this episode's history, with (s, a, s′, done) that
     step's transition, ``target = r_t + γ (1 − done) max Q[s′]``; all targets of a step are
     computed before its writes. ``lags`` must be sorted ascending (the agents keep Λ sorted).
-    The cache is kept exact: ``qmax[s]``, the max of ``q[s]``, with ``qcell[s]`` its flat index
-    in ``q`` (the agents' layout); a state's max is recomputed only when its cached arg-max entry
-    decreases.
+
+    The cache is kept exact: ``qmax[s]``, the max of ``q[s]``, with ``qcell[s]`` the flat index
+    in ``q`` (the agents' layout) of an entry holding it; and, for this call only, how many
+    entries hold it. A state's row is rescanned only when the cached arg-max entry decreases;
+    the acting model is read off ``qcell`` unless the max is tied, so ties cost a scan and
+    nothing else does. Random draws happen exactly where the Python path draws: ε tests,
+    uniform choices, and a tie-break only when there is a tie.
 
     With a non-empty ``script`` (rows ``(s, a, s′)``, with ``script_term`` and ``script_reward``)
     the steps replay those transitions and received rewards instead of acting in the env:
@@ -110,14 +134,20 @@ def run_chunk(
     states, rewards, termination flags. ``init_cdf`` is the cumulative initial-state distribution.
     ``buffer`` is the reward-delay ring (power-of-two length above every delay in ``delays``).
     The ``rec_*`` arrays receive one entry per step.
+
+    Indices into the Q-table and its cache are cast to unsigned integers, which spares the
+    compiled code numba's negative-index handling in the innermost loops (about 5%).
     """
     n_models = lags.shape[0]
     n_actions = q.shape[2]
+    row_size = n_models * n_actions
+    qf = q.reshape(q.size)  # the Q-table, flat: entry (s, m, a) is qf[(s·|Λ| + m)·|A| + a]
+    qties = _count_ties(qf, qmax, row_size)
     hmask = hist_s.shape[0] - 1
     bmask = buffer.shape[0] - 1
     targets = np.zeros(n_models)
-    states = np.zeros(n_models, dtype=np.int64)
-    actions = np.zeros(n_models, dtype=np.int64)
+    states = np.zeros(n_models, dtype=np.uint64)
+    cells = np.zeros(n_models, dtype=np.uint64)
     s = state[0]
     hist_count = state[1]
     episode_steps = state[2]
@@ -144,12 +174,18 @@ def run_chunk(
                 m = 0
             elif np.random.random() < eps:
                 m = np.random.randint(n_models)
-            else:  # a uniformly random model among those holding the state's max
-                m = _pick_model(q[s], qmax[s], qcell[s], n_models, n_actions)
+            elif qties[s] == 1:  # the one model holding the state's max
+                m = (qcell[s] // n_actions) % n_models
+            else:  # a uniformly random model among those holding it
+                m = _pick_model(qf, s * row_size, n_models, n_actions, qmax[s])
             if np.random.random() < eps:
                 action = np.random.randint(n_actions)
             else:  # a uniformly random action among the model's best
-                action = _pick_tie(q[s, m], q[s, m].max())
+                row = s * row_size + m * n_actions
+                best, first, ties = _scan_max(qf, row, n_actions)
+                if ties > 1:
+                    first = _nth_equal(qf, row, n_actions, best, np.random.randint(ties))
+                action = first - row
             # the env
             u = np.random.random()
             k = 0
@@ -192,30 +228,29 @@ def run_chunk(
             lag = lags[j]
             if lag >= hist_count:
                 break
-            pos = (hist_count - 1 - lag) & hmask
-            bootstrap = 0.0 if hist_term[pos] else gamma * qmax[hist_s2[pos]]
+            pos = np.uint64((hist_count - 1 - lag) & hmask)
+            bootstrap = 0.0 if hist_term[pos] else gamma * qmax[np.uint64(hist_s2[pos])]
             targets[j] = delivered + bootstrap
             states[j] = hist_s[pos]
-            actions[j] = hist_a[pos]
+            cells[j] = hist_s[pos] * row_size + j * n_actions + hist_a[pos]
             count += 1
-        for j in range(count):  # ... then the writes, repairing caches whose arg-max fell
+        for j in range(count):  # ... then the writes, keeping the cache exact
             sj = states[j]
-            aj = actions[j]
-            old = q[sj, j, aj]
+            cell = cells[j]
+            old = qf[cell]
             new = old + alpha * (targets[j] - old)
-            q[sj, j, aj] = new
-            cell = (sj * n_models + j) * n_actions + aj
+            qf[cell] = new
             if new > qmax[sj]:
                 qmax[sj] = new
                 qcell[sj] = cell
-            elif new < old and qcell[sj] == cell:  # the arg-max fell: rescan the state's row
-                row = q[sj].ravel()
-                best = row.max()  # a reduction the compiler vectorises; then its first position
-                first = 0
-                while row[first] != best:
-                    first += 1
-                qmax[sj] = best
-                qcell[sj] = sj * row.shape[0] + first
+                qties[sj] = 1
+            elif new == qmax[sj]:
+                qties[sj] += old != new
+            elif old == qmax[sj]:  # an entry holding the max fell
+                if qcell[sj] != cell:
+                    qties[sj] -= 1
+                else:  # the cached arg-max itself: rescan the state's row
+                    qmax[sj], qcell[sj], qties[sj] = _scan_max(qf, sj * row_size, row_size)
         if ended:
             if not scripted:
                 u = np.random.random()
