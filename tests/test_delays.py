@@ -14,6 +14,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from scipy import stats
+from support import binned_chisquare
 
 from delayed_rl.delays import Constant, Delay, Empirical, Geometric, Poisson, Uniform, as_delay
 from delayed_rl.wrappers import PoissonRewardDelay, RewardDelay
@@ -21,37 +22,6 @@ from delayed_rl.wrappers import PoissonRewardDelay, RewardDelay
 ALPHA = 1e-3
 N_DRAWS = 20_000
 N_SE = 4.0
-
-
-def binned_chisquare(draws: np.ndarray, pmf) -> float:
-    """p-value of a chi-square goodness-of-fit test of integer ``draws`` against ``pmf``.
-
-    Bins are consecutive integers merged left to right until each expected count is >= 5; all
-    probability mass beyond the largest draw goes to the last bin, so the bins cover the support.
-    """
-    draws = np.asarray(draws, dtype=np.int64)
-    assert draws.min() >= 0
-    n = draws.size
-    kmax = int(draws.max())
-    probs = np.asarray(pmf(np.arange(kmax + 1)), dtype=float)
-    probs[-1] += max(0.0, 1.0 - probs.sum())  # the tail P(d > kmax)
-    observed = np.bincount(draws, minlength=kmax + 1).astype(float)
-    obs_bins, exp_bins = [], []
-    acc_o = acc_e = 0.0
-    for o, p in zip(observed, probs, strict=True):
-        acc_o += o
-        acc_e += n * p
-        if acc_e >= 5.0:
-            obs_bins.append(acc_o)
-            exp_bins.append(acc_e)
-            acc_o = acc_e = 0.0
-    if acc_e > 0.0 or acc_o > 0.0:
-        obs_bins[-1] += acc_o
-        exp_bins[-1] += acc_e
-    assert len(obs_bins) >= 2, "too few bins for a chi-square test"
-    exp_arr = np.asarray(exp_bins)
-    exp_arr *= n / exp_arr.sum()
-    return float(stats.chisquare(np.asarray(obs_bins), exp_arr).pvalue)
 
 
 def assert_mean_close(draws: np.ndarray, mean: float, var: float) -> None:

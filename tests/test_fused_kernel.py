@@ -87,8 +87,40 @@ def test_cached_maxima_stay_exact(q_init):
     env = gym.make("delayed_rl/GridWorld-v0", size=4, max_steps=300, reward_delay=3)
     q = np.full((16, 8, 4), q_init)
     qmax, qcell = _cache(q)
-    FusedRun(env, np.arange(8), seed=3).run(q, qmax, qcell, 20_000, 0, 0.3, 0.9, 0.2, 0.2, 1)
+    run = FusedRun(env, np.arange(8), seed=3)
+    run.run(q, qmax, qcell, 20_000, 0, 0.3, 0.9, 0.2, 0.2, 1)
     brute = q.reshape(16, -1).max(axis=1)
     np.testing.assert_array_equal(qmax, brute)
+    np.testing.assert_array_equal(run.tie_counts, (q.reshape(16, -1) == brute[:, None]).sum(1))
     np.testing.assert_array_equal(q.reshape(-1)[qcell], brute)
     assert np.all(qcell // 32 == np.arange(16))  # each cell lies in its own state's row
+
+
+@pytest.mark.parametrize(
+    "env_id, kwargs", [("delayed_rl/GridWorld-v0", {"size": 4}), ("delayed_rl/Roulette-v0", {})]
+)
+def test_tie_counts_kept_within_a_call_match_a_fresh_count(env_id, kwargs):
+    """One long call and one call per step make the same choices, draw for draw.
+
+    A call counts each state's tied maxima once, at its start, then keeps the counts up to date
+    as it learns; they decide whether the acting model is read off the cached arg-max or drawn
+    among the tied ones. α = 1, γ = 0 and integer rewards keep many exact ties appearing and
+    disappearing: the counts must equal a fresh count after the long call, and the runs must not
+    part.
+    """
+    env = RewardDelay(gym.make(env_id, **kwargs).unwrapped, Constant(2))
+    logs, tables = [], []
+    for chunk in (3000, 1):
+        q = np.zeros((env.observation_space.n, 6, env.action_space.n))
+        cache = _cache(q)
+        run = FusedRun(env, np.arange(6), seed=9)
+        parts = [run.run(q, *cache, chunk, start, 1.0, 0.0, 0.1, 0.1, 1)
+                 for start in range(0, 3000, chunk)]  # fmt: skip
+        logs.append({key: np.concatenate([p[key] for p in parts]) for key in parts[0]})
+        tables.append(q)
+        fresh = (q.reshape(q.shape[0], -1) == q.reshape(q.shape[0], -1).max(1)[:, None]).sum(1)
+        np.testing.assert_array_equal(run.tie_counts, fresh)
+    assert len(np.unique(logs[0]["model"])) == 6  # ties were broken among all the models
+    for key in logs[0]:
+        np.testing.assert_array_equal(logs[0][key], logs[1][key], err_msg=key)
+    np.testing.assert_array_equal(tables[0], tables[1])

@@ -92,18 +92,17 @@ def _pick_model(qf, base, n_models, n_actions, best):
 
 
 @_jit
-def _count_ties(qf, qmax, row_size):
-    """How many entries of each state's row equal the state's cached max."""
-    ties = np.zeros(qmax.shape[0], dtype=np.int64)
+def _count_ties(qf, qmax, row_size, ties):
+    """Set ``ties[s]`` to how many entries of state ``s``'s row equal its cached max."""
     for s in range(qmax.shape[0]):
+        ties[s] = 0
         for i in range(s * row_size, (s + 1) * row_size):
             ties[s] += qf[i] == qmax[s]
-    return ties
 
 
 @_jit
 def run_chunk(
-    q, lags, qmax, qcell,
+    q, lags, qmax, qcell, qties,
     out_cdf, out_next, out_reward, out_term, init_cdf, max_steps,
     delays, buffer, episode_end_mode,
     alpha, gamma, eps_initial, eps_final, eps_steps, start_step,
@@ -119,8 +118,8 @@ def run_chunk(
     computed before its writes. ``lags`` must be sorted ascending (the agents keep Λ sorted).
 
     The cache is kept exact: ``qmax[s]``, the max of ``q[s]``, with ``qcell[s]`` the flat index
-    in ``q`` (the agents' layout) of an entry holding it; and, for this call only, how many
-    entries hold it. A state's row is rescanned only when the cached arg-max entry decreases;
+    in ``q`` (the agents' layout) of an entry holding it, and ``qties[s]`` how many entries hold
+    it (counted afresh at the start of each call, then kept up to date). A state's row is rescanned only when the cached arg-max entry decreases;
     the acting model is read off ``qcell`` unless the max is tied, so ties cost a scan and
     nothing else does. Random draws happen exactly where the Python path draws: ε tests,
     uniform choices, and a tie-break only when there is a tie.
@@ -142,7 +141,7 @@ def run_chunk(
     n_actions = q.shape[2]
     row_size = n_models * n_actions
     qf = q.reshape(q.size)  # the Q-table, flat: entry (s, m, a) is qf[(s·|Λ| + m)·|A| + a]
-    qties = _count_ties(qf, qmax, row_size)
+    _count_ties(qf, qmax, row_size, qties)
     hmask = hist_s.shape[0] - 1
     bmask = buffer.shape[0] - 1
     targets = np.zeros(n_models)
@@ -295,7 +294,7 @@ def replay(
     records += [np.zeros(n, np.bool_), np.zeros(n, np.bool_)]
     none = np.zeros((1, 1, 1))
     run_chunk(
-        q, lags, qmax, qcell,
+        q, lags, qmax, qcell, np.zeros(q.shape[0], np.int64),
         none, none.astype(np.int64), none, none.astype(np.bool_), np.ones(1), 0,
         np.zeros(n, np.int64), np.zeros(1), FLUSH, alpha, gamma, 0.0, 0.0, 1, 0,
         *history, np.zeros(4, np.int64), *records,

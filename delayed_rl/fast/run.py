@@ -30,6 +30,12 @@ class FusedRun:
             stream, the reward delays (Poisson delays from an alias table, see
             :mod:`delayed_rl.fast.sampling`; others with the delay's own ``sample``).
 
+    Attributes:
+        state: ``[s, history length, episode steps, clock]``, carried from one call to the next.
+        tie_counts: after :meth:`run`, how many entries of each state's Q-row hold its max (the
+            compiled code keeps them to read the acting model off the cached arg-max unless the
+            max is tied).
+
     Raises:
         NotCompilable: if numba is missing or the stack is outside the protocol.
     """
@@ -48,6 +54,7 @@ class FusedRun:
             for dtype in (np.int64, np.int64, np.int64, np.bool_)
         ]
         self.buffer = np.zeros(1)
+        self.tie_counts = np.zeros(0, dtype=np.int64)
         seed_seq = np.random.SeedSequence(seed)
         kernel_seed, delay_seed = seed_seq.generate_state(2)
         kernel.seed_kernel(int(kernel_seed) & 0x7FFFFFFF)
@@ -113,8 +120,10 @@ class FusedRun:
             "terminated": np.zeros(steps, dtype=np.bool_),
         }
         m = self.model
+        if self.tie_counts.shape != qmax.shape:
+            self.tie_counts = np.zeros(qmax.shape, dtype=np.int64)
         kernel.run_chunk(
-            q, self.lags, qmax, qcell,
+            q, self.lags, qmax, qcell, self.tie_counts,
             m.out_cdf, m.out_next, m.out_reward, m.out_term, m.init_cdf, m.max_steps,
             delays, self.buffer, self.mode,
             float(alpha), float(gamma), float(eps_initial), float(eps_final), int(eps_steps),

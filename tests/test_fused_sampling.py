@@ -1,0 +1,94 @@
+"""Delay draws of the compiled path: the alias table and when it is used.
+
+Goodness of fit as in ``test_delays``: fixed seeds, chi-square at significance 1e-3.
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from support import binned_chisquare
+
+import delayed_rl  # noqa: F401
+from delayed_rl.delays import Geometric, Poisson
+from delayed_rl.fast import FusedRun
+from delayed_rl.fast.sampling import MAX_TABLE, TAIL, AliasTable, delay_table, poisson_table
+from delayed_rl.wrappers import RewardDelay
+
+ALPHA = 1e-3
+
+
+@pytest.mark.parametrize(
+    "pmf", [[1.0], [0.5, 0.5], [0.7, 0.0, 0.2, 0.1], [3.0, 1.0, 0.0, 4.0, 2.0]]
+)
+def test_alias_table_draws_its_distribution(pmf):
+    """Draws fit the normalised pmf; a zero-probability value is never drawn."""
+    pmf = np.asarray(pmf) / np.sum(pmf)
+    draws = AliasTable(pmf).sample(np.random.default_rng(11), 50_000)
+    assert draws.dtype == np.int64 and draws.min() >= 0 and draws.max() < pmf.size
+    assert not np.isin(draws, np.flatnonzero(pmf == 0)).any()
+    if pmf.size > 1:
+        assert binned_chisquare(draws, lambda k: pmf[k]) > ALPHA
+
+
+def test_alias_table_has_power():
+    """The check above rejects a table built from a different distribution."""
+    draws = AliasTable([0.55, 0.45]).sample(np.random.default_rng(12), 50_000)
+    assert binned_chisquare(draws, lambda k: np.array([0.5, 0.5])[k]) < ALPHA
+
+
+@pytest.mark.parametrize("pmf", [[], [0.5, -0.1], [np.nan, 1.0], [0.0, 0.0], [[0.5, 0.5]]])
+def test_alias_table_rejects_bad_pmfs(pmf):
+    with pytest.raises(ValueError, match="pmf"):
+        AliasTable(pmf)
+
+
+@pytest.mark.parametrize("lam", [0.0, 0.3, 4.0, 13.0, 250.0])
+def test_poisson_table_fits_poisson(lam):
+    table = poisson_table(lam, None)
+    assert Poisson(lam).pmf(table.keep.size) < TAIL  # the tail left out is negligible
+    draws = table.sample(np.random.default_rng(int(lam * 10)), 50_000)
+    if lam == 0:
+        assert not draws.any()
+    else:
+        assert binned_chisquare(draws, Poisson(lam).pmf) > ALPHA
+
+
+@pytest.mark.parametrize("lam, cap", [(13.0, 10), (13.0, 0), (2.0, 40)])
+def test_poisson_table_puts_the_tail_at_the_cap(lam, cap):
+    """Capped delays: P(cap) is the whole tail P(d >= cap), as the wrapper's ``min`` gives."""
+    draws = poisson_table(lam, cap).sample(np.random.default_rng(5), 50_000)
+    assert draws.max() <= cap
+    pmf = Poisson(lam).pmf(np.arange(cap + 1))
+    pmf[-1] = 1.0 - pmf[:-1].sum()
+    if cap == 0:
+        assert not draws.any()
+    else:
+        assert binned_chisquare(draws, lambda k: pmf[k]) > ALPHA
+
+
+def test_huge_means_and_other_delays_use_their_own_sampler():
+    assert poisson_table(MAX_TABLE, None) is None
+    assert delay_table(Geometric(0.2), None) is None
+
+    class Shifted(Poisson):  # a subclass may draw differently from its pmf
+        def sample(self, rng, size=None):
+            return super().sample(rng, size) + 1
+
+    assert delay_table(Shifted(3.0), None) is None
+    assert delay_table(Poisson(3.0), None) is not None
+
+
+@pytest.mark.parametrize("max_delay", [None, 6])
+def test_fused_run_draws_poisson_delays(max_delay):
+    """The compiled run's delays are Poisson(λ), capped like the wrapper's."""
+    env = RewardDelay(gym.make("delayed_rl/GridWorld-3x3-v0").unwrapped, 9.0, max_delay=max_delay)
+    run = FusedRun(env, np.array([0]), seed=4)
+    draws = np.concatenate([run._draw_delays(10_000) for _ in range(5)])
+    pmf = Poisson(9.0).pmf(np.arange(60))
+    if max_delay is not None:
+        assert draws.max() == max_delay
+        pmf[max_delay] = 1.0 - pmf[:max_delay].sum()
+        pmf[max_delay + 1 :] = 0.0
+    assert binned_chisquare(draws, lambda k: pmf[k]) > ALPHA
