@@ -23,6 +23,9 @@ from delayed_rl.experiments.training import (
 )
 
 SIZE, LAM, LAMBDA_MAX = 9, 13, 50
+LOOP_FRACTION = 0.95
+"""A greedy average this close to 10/17 means the optimal 17-step loop: over 1000 steps that loop
+scores 58 rewards (0.580, 0.986 of 10/17), the next shortest, 19 steps, 0.895 of it."""
 
 
 def tasks(config: Config) -> list[dict]:
@@ -105,8 +108,8 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
             "0.59 (near-optimal; optimum 0.588)",
             stat["MMQ"]["greedy"],
             ok=stat["MMQ"]["greedy"][0] >= 0.9 * optimal,
-            note=f"{sum(r['greedy'] >= 0.99 * optimal for _, r in by_agent['MMQ'])} of "
-            f"{len(by_agent['MMQ'])} seeds' greedy policies walk the optimal 17-step loop",
+            note=f"{sum(r['greedy'] >= LOOP_FRACTION * optimal for _, r in by_agent['MMQ'])} "
+            f"of {len(by_agent['MMQ'])} seeds' greedy policies walk the optimal 17-step loop",
         ),  # fmt: skip
         claim(
             "Q greedy average reward (1000 steps)",

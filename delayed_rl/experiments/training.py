@@ -5,7 +5,7 @@ constant ε. The thesis does not state ε nor its optimistic initial value for t
 we use ε = 0.1 and ``q_init`` = 25. Optimistic means above every value the estimates will
 reach, and MMQ's estimates do not converge to the true values (V* ≈ 2.2 on 9×9): the max over
 all models in every target inflates them, to ≈ 21.4 along the route in the thesis's Table 5.1
-(≈ 16 in ours). A sensitivity check (seeds 0–4, 1M steps, greedy reward over 1000 steps) is
+(≈ 18 in ours). A sensitivity check (seeds 0–4, 1M steps, greedy reward over 1000 steps) is
 in ``benchmarks/REPORT.md``.
 On these tabular envs ``learn()`` takes its compiled path (:mod:`delayed_rl.fast`).
 """
