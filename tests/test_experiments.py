@@ -198,3 +198,43 @@ def test_behaviour_policy_is_the_two_level_epsilon_greedy_rule():
     expected = greedy_model * (0.9 * np.eye(4)[2] + 0.025) + (2 * 0.1 / 3) * np.full(4, 0.25)
     np.testing.assert_allclose(policy[0], expected)
     np.testing.assert_allclose(policy[1], [0.475, 0.475, 0.025, 0.025])
+
+
+def _value_iteration_policy(env, gamma: float = 0.9, sweeps: int = 200) -> np.ndarray:
+    """A greedy policy of the optimal values, from the env's tables (``env.P``)."""
+    n_states, n_actions = env.observation_space.n, env.action_space.n
+    v = np.zeros(n_states)
+    for _ in range(sweeps):
+        q = np.array([[sum(p * (r + gamma * v[s2]) for p, s2, r, _ in env.P[s][a])
+                       for a in range(n_actions)] for s in range(n_states)])  # fmt: skip
+        v = q.max(axis=1)
+    return q.argmax(axis=1)
+
+
+def test_mmq_gridworld_counts_the_optimal_loop_over_a_finite_walk():
+    """The optimal policy's 1000-step greedy walk counts as the optimal loop, a detour does not."""
+    from delayed_rl.experiments.mmq_gridworld import LOOP_FRACTION, SIZE
+    from delayed_rl.experiments.training import greedy_average_reward, grid_env
+
+    env = grid_env(SIZE, 0).unwrapped
+    policy = _value_iteration_policy(env)
+    optimal = 10 / (2 * (SIZE - 1) + 1)
+
+    class Greedy:  # greedy_average_reward reads only the Q-table
+        def __init__(self, actions):
+            self.q_table = np.eye(env.action_space.n)[actions][:, None, :]
+
+    assert greedy_average_reward(Greedy(policy), SIZE) >= LOOP_FRACTION * optimal
+    # a detour: from the cell above the start, left, down (away from the reward cell), left,
+    # then back on the optimal route: two moves more, the 19-step loop
+    size, start = SIZE, env.start_state
+    detour = policy.copy()
+    for here, there in [(start - size, start - size - 1), (start - size - 1, start - 1),
+                        (start - 1, start - 2)]:  # fmt: skip
+        detour[here] = _action(env, here, there)
+    assert greedy_average_reward(Greedy(detour), SIZE) < LOOP_FRACTION * optimal
+
+
+def _action(env, state: int, target: int) -> int:
+    """The action leading from ``state`` to the neighbouring ``target``."""
+    return next(a for a in env.P[state] if env.P[state][a][0][1] == target)
