@@ -15,11 +15,12 @@ Example:
     >>> import numpy as np
     >>> from delayed_rl.delays import Poisson
     >>> Poisson(5).sample(np.random.default_rng(0), 4).tolist()
-    [3, 7, 3, 4]
+    [5, 2, 1, 2]
 """
 
 from __future__ import annotations
 
+import functools
 import math
 import numbers
 from abc import ABC, abstractmethod
@@ -28,6 +29,7 @@ from collections.abc import Sequence
 import numpy as np
 
 __all__ = [
+    "AliasTable",
     "Constant",
     "Delay",
     "Empirical",
@@ -89,18 +91,85 @@ class Delay(ABC):
         return hash(repr(self))
 
 
+class AliasTable:
+    """Draws from a distribution on ``0, 1, …, len(pmf) − 1`` in O(1) per draw.
+
+    Vose's construction of Walker's alias table: each of the ``n`` columns holds a probability
+    ``keep[i]`` of its own value and an ``alias[i]`` for the rest, so a draw picks a column with
+    the integer part of ``n·u`` (``u`` uniform) and decides with its fractional part. Exact up to
+    the rounding of the probabilities (relative 1e-16).
+
+    Args:
+        pmf: non-negative probabilities; they are normalised to sum to one.
+
+    Raises:
+        ValueError: if ``pmf`` is empty, has a negative or non-finite entry, or sums to zero.
+    """
+
+    def __init__(self, pmf: Sequence[float] | np.ndarray):
+        pmf = np.asarray(pmf, dtype=float)
+        if pmf.ndim != 1 or pmf.size == 0 or not np.all(np.isfinite(pmf)) or np.any(pmf < 0):
+            raise ValueError(f"pmf must be a non-empty 1-d array of finite values >= 0, got {pmf}")
+        total = pmf.sum()
+        if total <= 0:
+            raise ValueError(f"pmf must have positive mass, got {pmf}")
+        n = pmf.size
+        scaled = pmf * (n / total)
+        self.keep = np.ones(n)
+        self.alias = np.arange(n)
+        small = [i for i in range(n) if scaled[i] < 1.0]
+        large = [i for i in range(n) if scaled[i] >= 1.0]
+        while small and large:
+            low, high = small.pop(), large[-1]
+            self.keep[low] = scaled[low]
+            self.alias[low] = high
+            scaled[high] -= 1.0 - scaled[low]
+            if scaled[high] < 1.0:
+                small.append(large.pop())
+        # what is left holds probability one up to rounding: it keeps its own value
+
+    def sample(self, rng: np.random.Generator, size: int | tuple[int, ...] | None) -> np.ndarray:
+        """Independent draws, an ``int64`` array of shape ``size`` (0-d if ``size`` is None)."""
+        u = np.asarray(rng.random(size)) * self.keep.size
+        column = u.astype(np.int64)
+        return np.where(u - column < self.keep[column], column, self.alias[column])
+
+
 class Poisson(Delay):
     """Poisson(λ) delays, the thesis's model: ``P(d = k) = λ^k e^{-λ} / k!``.
+
+    Delays are drawn by table look-up (an :class:`AliasTable` of the pmf, built on first use and
+    ending where the remaining tail weighs less than 1e-20, far below a uniform draw's 2⁻⁵³
+    resolution): about 7 ns a draw in batches, against about 40 ns for numpy's transformed
+    rejection, which was the largest part of the delay wrappers' and the compiled path's cost.
+    Beyond λ ≈ 30 000 the table would pass 65 536 entries and numpy's ``poisson`` draws instead.
 
     Args:
         lam: the mean (and variance) λ ≥ 0, any finite real; λ = 0 means no delay.
     """
 
+    TAIL = 1e-20
+    """The mass of the far tail left out of the table."""
+
+    MAX_TABLE = 1 << 16
+    """The largest table built."""
+
     def __init__(self, lam: float):
         self.lam = _check_real("lam", lam, low=0.0, allowed="a finite number >= 0")
 
     def sample(self, rng, size=None):
-        return self._finish(rng.poisson(self.lam, size), size)
+        table = self.table
+        if table is None:
+            return self._finish(rng.poisson(self.lam, size), size)
+        return self._finish(table.sample(rng, size), size)
+
+    @functools.cached_property
+    def table(self) -> AliasTable | None:
+        """The alias table of the pmf up to a negligible tail, or ``None`` if it is too long."""
+        end = math.ceil(2 * self.lam) + 1  # past 2λ each term is less than half the one before
+        while end <= self.MAX_TABLE and self.pmf(end) * 2 >= self.TAIL:
+            end *= 2
+        return AliasTable(self.pmf(np.arange(end))) if end <= self.MAX_TABLE else None
 
     def pmf(self, k):
         k = np.asarray(k)

@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 
 from delayed_rl.fast import kernel
-from delayed_rl.fast.sampling import delay_table
 from delayed_rl.fast.tabular import NotCompilable, inspect_stack
 
 _MODES = {"flush": kernel.FLUSH, "drop": kernel.DROP, "carry": kernel.CARRY}
@@ -27,8 +26,7 @@ class FusedRun:
         env: the env stack (see :mod:`delayed_rl.fast.tabular` for what compiles).
         lags: the delay estimates Λ of the agent, one per Q-table model.
         seed: seeds the compiled generator (actions, env outcomes) and, through a separate
-            stream, the reward delays (Poisson delays from an alias table, see
-            :mod:`delayed_rl.fast.sampling`; others with the delay's own ``sample``).
+            stream, the reward delays.
 
     Attributes:
         state: ``[s, history length, episode steps, clock]``, carried from one call to the next.
@@ -47,7 +45,6 @@ class FusedRun:
         self.delay = None if wrapper is None else wrapper.delay
         self.max_delay = None if wrapper is None else wrapper.max_delay
         self.mode = _MODES["flush" if wrapper is None else wrapper.on_episode_end]
-        self.delay_table = None if self.delay is None else delay_table(self.delay, self.max_delay)
         self.lags = np.asarray(lags, dtype=np.int64)
         self.history = [
             np.zeros(_pow2(int(self.lags.max()) + 1), dtype=dtype)
@@ -68,8 +65,6 @@ class FusedRun:
     def _draw_delays(self, n: int) -> np.ndarray:
         if self.delay is None:
             return np.zeros(n, dtype=np.int64)
-        if self.delay_table is not None:
-            return self.delay_table.sample(self.delay_rng, n)
         delays = np.asarray(self.delay.sample(self.delay_rng, n), dtype=np.int64)
         if self.max_delay is not None:
             delays = np.minimum(delays, self.max_delay)

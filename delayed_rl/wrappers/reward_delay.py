@@ -199,27 +199,24 @@ class RewardDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
     def step(self, action):
         """Step the env; return the rewards due now (see the class docstring)."""
         obs, reward, terminated, truncated, info = self.env.step(action)
-        # a Python float, so that numpy-typed rewards (e.g. float32) are summed in double precision
-        if type(reward) is not float:
-            reward = float(reward)
-        if reward - reward:  # NaN or ±inf (x - x is 0 for every finite number)
-            raise ValueError(
-                f"the inner env returned a non-finite reward ({reward!r}) at episode step "
-                f"{self._clock - self._episode_start}; RewardDelay refuses to buffer it"
-            )
-        delays = self._delays
-        delay = delays.pop() if delays else self._sampler.refill().pop()
+        if type(reward) is not float or reward - reward:  # x - x is 0 for every finite float
+            reward = self._checked_reward(reward)
+        try:
+            delay = self._delays.pop()
+        except IndexError:  # once every block of delays
+            delay = self._sampler.refill().pop()
         clock = self._clock
+        self._clock = clock + 1
         due = self._due
         if reward:  # a zero reward changes no sum: nothing to schedule
             when = clock + delay
             due[when] = due.get(when, 0.0) + reward
-        if due:
-            delivered = due.pop(clock, 0.0)
-            self._pending = (self._pending + reward) - delivered if due else 0.0
+            self._pending += reward
+        if clock in due:
+            delivered = due.pop(clock)
+            self._pending = self._pending - delivered if due else 0.0  # exact 0 once all is in
         else:
             delivered = 0.0
-        self._clock = clock + 1
         if terminated or truncated:
             self._episode_over = True
             if self.on_episode_end == "flush":
@@ -236,6 +233,17 @@ class RewardDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
                 clock, delay, reward, terminated or truncated
             )
         return obs, delivered, terminated, truncated, info
+
+    def _checked_reward(self, reward: Any) -> float:
+        """``reward`` as a Python float (numpy-typed rewards, e.g. float32, are then summed in
+        double precision); a NaN or infinite reward raises ``ValueError``."""
+        reward = float(reward)
+        if not math.isfinite(reward):
+            raise ValueError(
+                f"the inner env returned a non-finite reward ({reward!r}) at episode step "
+                f"{self._clock - self._episode_start}; RewardDelay refuses to buffer it"
+            )
+        return reward
 
     def _arrivals_now(
         self, clock: int, delay: int, reward: float, episode_ended: bool

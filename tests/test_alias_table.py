@@ -1,4 +1,4 @@
-"""Delay draws of the compiled path: the alias table and when it is used.
+"""Poisson delays by table look-up: the alias table, the Poisson table, and the streams using it.
 
 Goodness of fit as in ``test_delays``: fixed seeds, chi-square at significance 1e-3.
 """
@@ -11,9 +11,8 @@ import pytest
 from support import binned_chisquare
 
 import delayed_rl  # noqa: F401
-from delayed_rl.delays import Geometric, Poisson
+from delayed_rl.delays import AliasTable, Poisson
 from delayed_rl.fast import FusedRun
-from delayed_rl.fast.sampling import MAX_TABLE, TAIL, AliasTable, delay_table, poisson_table
 from delayed_rl.wrappers import RewardDelay
 
 ALPHA = 1e-3
@@ -46,43 +45,32 @@ def test_alias_table_rejects_bad_pmfs(pmf):
 
 @pytest.mark.parametrize("lam", [0.0, 0.3, 4.0, 13.0, 250.0])
 def test_poisson_table_fits_poisson(lam):
-    table = poisson_table(lam, None)
-    assert Poisson(lam).pmf(table.keep.size) < TAIL  # the tail left out is negligible
-    draws = table.sample(np.random.default_rng(int(lam * 10)), 50_000)
+    table = Poisson(lam).table
+    assert Poisson(lam).pmf(table.keep.size) < Poisson.TAIL  # the tail left out is negligible
+    draws = Poisson(lam).sample(np.random.default_rng(int(lam * 10)), 50_000)
     if lam == 0:
         assert not draws.any()
     else:
         assert binned_chisquare(draws, Poisson(lam).pmf) > ALPHA
 
 
-@pytest.mark.parametrize("lam, cap", [(13.0, 10), (13.0, 0), (2.0, 40)])
-def test_poisson_table_puts_the_tail_at_the_cap(lam, cap):
-    """Capped delays: P(cap) is the whole tail P(d >= cap), as the wrapper's ``min`` gives."""
-    draws = poisson_table(lam, cap).sample(np.random.default_rng(5), 50_000)
-    assert draws.max() <= cap
-    pmf = Poisson(lam).pmf(np.arange(cap + 1))
-    pmf[-1] = 1.0 - pmf[:-1].sum()
-    if cap == 0:
-        assert not draws.any()
-    else:
-        assert binned_chisquare(draws, lambda k: pmf[k]) > ALPHA
+def test_poisson_draws_from_numpy_beyond_the_largest_table():
+    huge = Poisson(4.0 * Poisson.MAX_TABLE)
+    assert huge.table is None
+    draws = huge.sample(np.random.default_rng(1), 2000)
+    assert abs(draws.mean() - huge.lam) < 4 * np.sqrt(huge.lam / draws.size)
 
 
-def test_huge_means_and_other_delays_use_their_own_sampler():
-    assert poisson_table(MAX_TABLE, None) is None
-    assert delay_table(Geometric(0.2), None) is None
-
-    class Shifted(Poisson):  # a subclass may draw differently from its pmf
-        def sample(self, rng, size=None):
-            return super().sample(rng, size) + 1
-
-    assert delay_table(Shifted(3.0), None) is None
-    assert delay_table(Poisson(3.0), None) is not None
+def test_poisson_scalar_and_shaped_draws():
+    rng = np.random.default_rng(2)
+    assert isinstance(Poisson(3.0).sample(rng), int)
+    assert Poisson(3.0).sample(rng, (4, 5)).shape == (4, 5)
 
 
 @pytest.mark.parametrize("max_delay", [None, 6])
 def test_fused_run_draws_poisson_delays(max_delay):
-    """The compiled run's delays are Poisson(λ), capped like the wrapper's."""
+    """The compiled run's delays are Poisson(λ), capped like the wrapper's: the whole tail at the
+    cap."""
     env = RewardDelay(gym.make("delayed_rl/GridWorld-3x3-v0").unwrapped, 9.0, max_delay=max_delay)
     run = FusedRun(env, np.array([0]), seed=4)
     draws = np.concatenate([run._draw_delays(10_000) for _ in range(5)])
