@@ -5,9 +5,10 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
+from support import ScriptedDelay
 
 import delayed_rl  # noqa: F401
-from delayed_rl.delays import Constant
+from delayed_rl.delays import Constant, Empirical, Geometric, Poisson, Uniform
 from delayed_rl.fast import FusedRun, NotCompilable, inspect_stack
 from delayed_rl.fast.kernel import replay
 from delayed_rl.wrappers import RewardDelay
@@ -124,3 +125,55 @@ def test_tie_counts_kept_within_a_call_match_a_fresh_count(env_id, kwargs):
     for key in logs[0]:
         np.testing.assert_array_equal(logs[0][key], logs[1][key], err_msg=key)
     np.testing.assert_array_equal(tables[0], tables[1])
+
+
+class _Replay(gym.Env):
+    """Emits a logged reward stream and its episode ends, whatever the action."""
+
+    observation_space = gym.spaces.Discrete(1)
+    action_space = gym.spaces.Discrete(1)
+
+    def __init__(self, rewards, ends, terminals):
+        self.steps = iter(zip(rewards.tolist(), ends.tolist(), terminals.tolist(), strict=True))
+
+    def reset(self, *, seed=None, options=None):
+        return 0, {}
+
+    def step(self, action):
+        reward, end, terminal = next(self.steps)
+        return 0, reward, terminal, end and not terminal, {}
+
+
+@pytest.mark.parametrize("mode", ["flush", "drop", "carry"])
+@pytest.mark.parametrize(
+    "delay, max_delay",
+    [
+        (Geometric(0.15), None),
+        (Uniform(0, 9), None),
+        (Empirical([0.5, 0, 0.2, 0.3]), None),
+        (Poisson(6.0), 4),
+    ],  # fmt: skip
+)
+def test_compiled_delay_ring_matches_the_wrapper(mode, delay, max_delay):
+    """Same delays, same undelayed rewards: the compiled ring delivers what ``RewardDelay`` does.
+
+    The compiled run acts at random on a 4×4 grid that truncates every 40 steps; its log's
+    undelayed rewards and episode ends are then fed through the Python wrapper with the same
+    scripted delays, episode-end mode and cap.
+    """
+    draws = delay.sample(np.random.default_rng(3), 4000).tolist()
+    grid = gym.make("delayed_rl/GridWorld-v0", size=4, max_steps=40).unwrapped
+    env = RewardDelay(grid, ScriptedDelay(draws), max_delay=max_delay, on_episode_end=mode)
+    q = np.zeros((16, 1, 4))
+    log = FusedRun(env, np.array([0]), seed=5).run(q, *_cache(q), 4000, 0, 0.1, 0.9, 1.0, 1.0, 1)
+    assert log["episode_end"].sum() == 100 and np.count_nonzero(log["undelayed_reward"]) > 100
+    replay = _Replay(log["undelayed_reward"], log["episode_end"], log["terminated"])
+    wrapper = RewardDelay(replay, ScriptedDelay(draws), max_delay=max_delay, on_episode_end=mode)
+    wrapper.reset(seed=0)
+    delivered = []
+    for _ in range(4000):
+        _, reward, terminated, truncated, _ = wrapper.step(0)
+        delivered.append(reward)
+        if terminated or truncated:
+            wrapper.reset()
+    np.testing.assert_allclose(log["reward"], delivered, rtol=0, atol=1e-9)
