@@ -32,24 +32,48 @@ def test_scripted_transitions_give_identical_tables(lags):
     np.testing.assert_array_equal(agent.q_table, q)
 
 
-def _average_rewards(fused: bool, seeds: range) -> np.ndarray:
+def _mean_rewards(make_agent, fused: bool, seeds: range) -> np.ndarray:
+    """Each seed's mean undelayed training reward over 20k steps, on one path."""
     out = []
     for seed in seeds:
-        env = gym.make("delayed_rl/GridWorld-5x5-v0", reward_delay=5)
-        agent = MMQ(env, delay_estimates=list(range(9)), q_init=10.0, seed=seed)
+        agent = make_agent(seed)
         agent.learn(20_000, record=True, fused=fused)
         assert agent.last_learn_path == ("fused" if fused else "python")
         out.append(agent.training_log["undelayed_reward"].mean())
     return np.array(out)
 
 
+def _assert_paths_agree(make_agent, n_seeds: int) -> tuple[np.ndarray, np.ndarray]:
+    """Both paths on disjoint seeds: mean rewards equal within 4 standard errors of the gap."""
+    fused = _mean_rewards(make_agent, True, range(n_seeds))
+    python = _mean_rewards(make_agent, False, range(100, 100 + n_seeds))
+    gap_se = np.sqrt(fused.var(ddof=1) / fused.size + python.var(ddof=1) / python.size)
+    assert abs(fused.mean() - python.mean()) < 4 * gap_se + 1e-3 * fused.mean(), (fused, python)
+    return fused, python
+
+
 @pytest.mark.slow
 def test_seeded_runs_agree_in_distribution():
-    """Mean training reward of 6 seeds per path: equal within 4 standard errors of the gap."""
-    fused, python = _average_rewards(True, range(6)), _average_rewards(False, range(100, 106))
-    gap_se = np.sqrt(fused.var(ddof=1) / fused.size + python.var(ddof=1) / python.size)
-    assert abs(fused.mean() - python.mean()) < 4 * gap_se + 1e-3, (fused, python)
+    """MMQ on GridWorld-5x5 under Poisson(5) delays, 6 seeds a path."""
+
+    def make_agent(seed):
+        env = gym.make("delayed_rl/GridWorld-5x5-v0", reward_delay=5)
+        return MMQ(env, delay_estimates=list(range(9)), q_init=10.0, seed=seed)
+
+    fused, _ = _assert_paths_agree(make_agent, 6)
     assert fused.mean() > 0.3  # both learn the 9-step route (optimum 10/9 ≈ 1.11)
+
+
+@pytest.mark.slow
+def test_seeded_runs_agree_on_a_gymnasium_env_with_other_delays():
+    """Q-learning on FrozenLake (its own ``P`` tables, slippery) under Geometric delays."""
+
+    def make_agent(seed):
+        lake = gym.make("FrozenLake-v1").unwrapped
+        return QLearning(RewardDelay(lake, Geometric(0.3)), q_init=1.0, seed=seed)
+
+    _, python = _assert_paths_agree(make_agent, 8)
+    assert python.mean() > 0.005  # both learn to reach the goal (random play: about 0.002 a step)
 
 
 @pytest.mark.filterwarnings("ignore:reset\\(\\) in the middle of an episode")
@@ -123,23 +147,3 @@ def test_callbacks_see_every_step_and_stop_at_the_chunk_end():
     np.testing.assert_array_equal(obs, log["obs"][:2700])
     np.testing.assert_array_equal(actions, log["action"][:2700])
     np.testing.assert_array_equal(rewards, log["undelayed_reward"][:2700])
-
-
-def _frozen_lake_rewards(fused: bool, seeds: range) -> np.ndarray:
-    out = []
-    for seed in seeds:
-        lake = gym.make("FrozenLake-v1").unwrapped  # slippery: three outcomes per action
-        agent = QLearning(RewardDelay(lake, Geometric(0.3)), q_init=1.0, seed=seed)
-        agent.learn(20_000, record=True, fused=fused)
-        assert agent.last_learn_path == ("fused" if fused else "python")
-        out.append(agent.training_log["undelayed_reward"].mean())
-    return np.array(out)
-
-
-@pytest.mark.slow
-def test_seeded_runs_agree_on_a_gymnasium_env_with_other_delays():
-    """FrozenLake (its own ``P`` tables) under Geometric delays: 8 seeds a path, within 4 SE."""
-    fused, python = _frozen_lake_rewards(True, range(8)), _frozen_lake_rewards(False, range(50, 58))
-    gap_se = np.sqrt(fused.var(ddof=1) / fused.size + python.var(ddof=1) / python.size)
-    assert abs(fused.mean() - python.mean()) < 4 * gap_se, (fused, python)
-    assert python.mean() > 0.005  # both learn to reach the goal (random play: about 0.002 a step)
