@@ -107,8 +107,7 @@ def main() -> None:
     lines += ["## Wrapper overhead (GridWorld-9x9, µs/step, fastest of 11 interleaved repeats)", "",
               "| stack | µs/step | overhead over bare |", "|---|---|---|"]  # fmt: skip
     lines += [f"| {n} | {v * 1e6:.3f} | {(v - bare) * 1e6:.3f} |" for n, v in cost.items()]
-    ratio_line = wrapper_overhead.summary(cost, per_repeat)
-    lines += ["", ratio_line[0].upper() + ratio_line[1:] + ".", ""]
+    lines += ["", wrapper_overhead.summary(cost, per_repeat) + ".", ""]
 
     rates = env_steps_per_second(100_000 // scale)
     lines += ["## Env steps per second (random actions, unwrapped)", "", "| env | steps/s |",

@@ -71,9 +71,9 @@ def overhead_ratio(cost: dict[str, float]) -> float:
 def summary(cost: dict[str, float], per_repeat: list[float]) -> str:
     """One line: the ratio of the fastest repeats, and the median and range within repeats."""
     low, median, high = np.percentile(per_repeat, [0, 50, 100])
-    return (f"overhead ratio PoissonRewardDelay / RecordEpisodeStatistics: {overhead_ratio(cost):.2f}"
-            f" (fastest repeats), median {median:.2f} within repeats (range {low:.2f}–{high:.2f});"
-            " target ≤ 1.5")  # fmt: skip
+    return (f"Overhead ratio PoissonRewardDelay / RecordEpisodeStatistics: "
+            f"{overhead_ratio(cost):.2f} (fastest repeats), median {median:.2f} within repeats "
+            f"(range {low:.2f}–{high:.2f}); target ≤ 1.5")  # fmt: skip
 
 
 def main() -> None:

@@ -119,10 +119,11 @@ def run_chunk(
 
     The cache is kept exact: ``qmax[s]``, the max of ``q[s]``, with ``qcell[s]`` the flat index
     in ``q`` (the agents' layout) of an entry holding it, and ``qties[s]`` how many entries hold
-    it (counted afresh at the start of each call, then kept up to date). A state's row is rescanned only when the cached arg-max entry decreases;
-    the acting model is read off ``qcell`` unless the max is tied, so ties cost a scan and
-    nothing else does. Random draws happen exactly where the Python path draws: ε tests,
-    uniform choices, and a tie-break only when there is a tie.
+    it (counted afresh at the start of each call, then kept up to date). A state's row is
+    rescanned only when the cached arg-max entry decreases; the acting model is read off
+    ``qcell`` unless the max is tied, so ties cost a scan and nothing else does. Random draws
+    happen exactly where the Python path draws: ε tests, uniform choices, and a tie-break only
+    when there is a tie.
 
     With a non-empty ``script`` (rows ``(s, a, s′)``, with ``script_term`` and ``script_reward``)
     the steps replay those transitions and received rewards instead of acting in the env:
