@@ -29,7 +29,7 @@ from delayed_rl._validation import check_int
 from delayed_rl.agents.base import TabularAgent
 from delayed_rl.agents.schedules import Schedule
 
-__all__ = ["MMQ", "MultipleModelQLearning"]
+__all__ = ["MMQ", "MultipleModelQLearning", "greedy_actions"]
 
 DEFAULT_MAX_DELAY_ESTIMATE = 50  # the thesis's λ̂max in the 9×9 grid world (section 5.1.1)
 _SMALL_ROW = 16  # rows up to this many entries are scanned in Python (cheaper than numpy calls)
@@ -76,6 +76,25 @@ def check_delay_estimates(
     max_delay_estimate = check_int("max_delay_estimate", max_delay_estimate, 0)
     delay_step = check_int("delay_step", delay_step, 1)
     return np.arange(0, max_delay_estimate + 1, delay_step, dtype=np.int64)
+
+
+def greedy_actions(q_table: np.ndarray, states: np.ndarray | None = None) -> np.ndarray:
+    """MMQ's deterministic greedy policy read off a Q-table of shape ``(|S|, |Λ|, |A|)``.
+
+    Per state, the action of the first arg-max over (λ̂, a) in row-major order: the lowest-index
+    λ̂* whose table holds the state's max, then the lowest-index a* in that table.
+
+    Args:
+        q_table: the Q-values (e.g. ``agent.q_table`` or a snapshot of it).
+        states: 0-based state indices (``None``: every state).
+
+    Returns:
+        The 0-based action index of each state, ``int64``.
+    """
+    rows = q_table.reshape(q_table.shape[0], -1)
+    if states is not None:
+        rows = rows[states]
+    return rows.argmax(axis=1) % q_table.shape[2]
 
 
 class MultipleModelQLearning(TabularAgent):
@@ -231,9 +250,7 @@ class MultipleModelQLearning(TabularAgent):
         return np.flatnonzero(self._q_rows[s] == best)
 
     def _greedy_actions(self, states: np.ndarray) -> np.ndarray:
-        # the first arg-max over (λ̂, a) in row-major order: the lowest-index λ̂* whose table holds
-        # the state's max, then the lowest-index a* in that table
-        return self._q_rows[states].argmax(axis=1) % self.n_actions
+        return greedy_actions(self._q, states)
 
     def preferred_delay(self, observation: Any) -> Any:
         """λ̂* at ``observation``: the delay estimate whose table holds the state's best value.
