@@ -2,9 +2,9 @@
 
 This measures the Python path (``learn(fused=False)``); ``benchmarks/speed.py`` sets it beside
 the compiled one. MMQ's per-step cost must be O(|Λ|) with a small constant, not O(|Λ|²·|A|):
-every step updates
-one entry per model (a batch of numpy gathers and scatters) and reads each next state's max over
-all models from a cache instead of recomputing it. This script measures, in one process:
+every step updates one entry per model (a batch of numpy gathers and scatters) and reads each
+next state's max over all models from a cache instead of recomputing it. This script measures,
+in one process:
 
 - ``learn()`` on ``GridWorld-9x9`` with Poisson(13) reward delays for |Λ| ∈ {1, 11, 51, 151}
   (|Λ| = 1 is plain Q-learning; Λ = {0, 1, ..., |Λ| − 1});
@@ -62,6 +62,7 @@ def measure(steps: int, repeats: int, fused: bool = False) -> dict[str, float]:
 
 
 def main() -> None:
+    """Measure every configuration and print the cost table and the two target checks."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=30_000, help="steps per timed repeat")
     parser.add_argument("--repeats", type=int, default=5, help="interleaved repeats")
@@ -85,6 +86,7 @@ def main() -> None:
 
 
 def _verdict(ratio: float, target: float) -> str:
+    """``ok`` when ``ratio`` meets its target (at most ``target``), else ``MISSED``."""
     return "ok" if ratio <= target else "MISSED"
 
 

@@ -23,6 +23,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 import agent_step_cost
@@ -81,15 +82,28 @@ def one_million_mmq_seconds() -> tuple[float, float]:
 
 def reproduce_seconds(out: Path) -> float:
     """Wall time of ``delayed-rl reproduce --workers 2`` at full scale."""
+    command = ["reproduce", "--workers", "2", "--out", str(out)]
     start = time.perf_counter()
     subprocess.run(
-        [sys.executable, "-m", "delayed_rl.cli", "reproduce", "--workers", "2", "--out", str(out)],
-        check=True, capture_output=True,
-    )  # fmt: skip
+        [sys.executable, "-m", "delayed_rl.cli", *command], check=True, capture_output=True
+    )
     return time.perf_counter() - start
 
 
+def markdown_table(title: str, columns: Sequence[str], rows: Iterable[Sequence[str]]) -> list[str]:
+    """The lines of a report section: a ``## title`` heading, then a table and a blank line."""
+    return [
+        f"## {title}",
+        "",
+        "| " + " | ".join(columns) + " |",
+        "|" + "---|" * len(columns),
+        *("| " + " | ".join(row) + " |" for row in rows),
+        "",
+    ]
+
+
 def main() -> None:
+    """Measure everything, print the report and, with ``--markdown``, write it to a file."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer steps (noisier)")
     parser.add_argument("--reproduce", action="store_true", help="also time the full reproduction")
@@ -97,37 +111,43 @@ def main() -> None:
     args = parser.parse_args()
     scale = 5 if args.quick else 1
     lines = [
-        f"Machine: {platform.processor() or platform.machine()}, Python {platform.python_version()}, "
-        f"numpy {np.__version__}, delayed-rl {delayed_rl.__version__}.",
+        f"Machine: {platform.processor() or platform.machine()}, "
+        f"Python {platform.python_version()}, numpy {np.__version__}, "
+        f"delayed-rl {delayed_rl.__version__}.",
         "",
     ]
 
     cost, per_repeat = wrapper_overhead.measure(200_000 // scale, 11)
     bare = cost["bare"]
-    lines += ["## Wrapper overhead (GridWorld-9x9, µs/step, fastest of 11 interleaved repeats)", "",
-              "| stack | µs/step | overhead over bare |", "|---|---|---|"]  # fmt: skip
-    lines += [f"| {n} | {v * 1e6:.3f} | {(v - bare) * 1e6:.3f} |" for n, v in cost.items()]
-    lines += ["", wrapper_overhead.summary(cost, per_repeat) + ".", ""]
+    lines += markdown_table(
+        "Wrapper overhead (GridWorld-9x9, µs/step, fastest of 11 interleaved repeats)",
+        ["stack", "µs/step", "overhead over bare"],
+        [(n, f"{v * 1e6:.3f}", f"{(v - bare) * 1e6:.3f}") for n, v in cost.items()],
+    )
+    lines += [wrapper_overhead.summary(cost, per_repeat) + ".", ""]
 
     rates = env_steps_per_second(100_000 // scale)
-    lines += ["## Env steps per second (random actions, unwrapped)", "", "| env | steps/s |",
-              "|---|---|"]  # fmt: skip
-    lines += [f"| {n} | {r:,.0f} |" for n, r in rates.items()]
-    lines.append("")
+    lines += markdown_table(
+        "Env steps per second (random actions, unwrapped)",
+        ["env", "steps/s"],
+        [(n, f"{r:,.0f}") for n, r in rates.items()],
+    )
 
     python = agent_step_cost.measure(30_000 // scale, 3, fused=False)
     fused = agent_step_cost.measure(300_000 // scale, 3, fused=True)
-    lines += ["## learn() cost per step (µs; GridWorld with Poisson(13) delays)", "",
-              "| configuration | Python path | compiled path | speed-up |", "|---|---|---|---|"]  # fmt: skip
-    for name in python:
-        lines.append(f"| {name} | {python[name] * 1e6:.2f} | {fused[name] * 1e6:.3f} | "
-                     f"{python[name] / fused[name]:.0f}× |")  # fmt: skip
+    lines += markdown_table(
+        "learn() cost per step (µs; GridWorld with Poisson(13) delays)",
+        ["configuration", "Python path", "compiled path", "speed-up"],
+        [
+            (n, f"{python[n] * 1e6:.2f}", f"{fused[n] * 1e6:.3f}", f"{python[n] / fused[n]:.0f}×")
+            for n in python
+        ],
+    )
     q_gain = python["9x9, |Λ|=1"] / fused["9x9, |Λ|=1"]
     mmq_gain = python["9x9, |Λ|=51"] / fused["9x9, |Λ|=51"]
     scaling = python["9x9, |Λ|=151"] / python["9x9, |Λ|=1"]
     world = python["30x30, |Λ|=51"] / python["9x9, |Λ|=51"]
     lines += [
-        "",
         f"Compiled vs Python: Q-learning **{q_gain:.0f}×**, MMQ |Λ| = 51 **{mmq_gain:.0f}×** "
         "(target ≥ 30×).",
         f"Python path: cost(|Λ| = 151) / cost(|Λ| = 1) = {scaling:.2f} (target ≤ 3); "
@@ -135,9 +155,12 @@ def main() -> None:
         "",
     ]
     learn, imports = one_million_mmq_seconds()
-    lines += [f"1M-step MMQ (|Λ| = 51) in a fresh process: **{learn:.2f} s** of learn() "
-              f"including loading the compiled code from the warm cache (target ≤ 1.5 s); "
-              f"importing the library took a further {imports:.2f} s.", ""]  # fmt: skip
+    lines += [
+        f"1M-step MMQ (|Λ| = 51) in a fresh process: **{learn:.2f} s** of learn() "
+        f"including loading the compiled code from the warm cache (target ≤ 1.5 s); "
+        f"importing the library took a further {imports:.2f} s.",
+        "",
+    ]
     if args.reproduce:
         with tempfile.TemporaryDirectory() as out:
             seconds = reproduce_seconds(Path(out))
@@ -145,9 +168,8 @@ def main() -> None:
     report = "\n".join(lines)
     print(report)
     if args.markdown:
-        args.markdown.write_text("# Speed\n\nGenerated by `python benchmarks/speed.py"
-                                 + (" --reproduce" if args.reproduce else "")
-                                 + "`.\n\n" + report)  # fmt: skip
+        command = "python benchmarks/speed.py" + (" --reproduce" if args.reproduce else "")
+        args.markdown.write_text(f"# Speed\n\nGenerated by `{command}`.\n\n{report}")
 
 
 if __name__ == "__main__":

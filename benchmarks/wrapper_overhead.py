@@ -57,8 +57,10 @@ def measure(steps: int, repeats: int) -> tuple[dict[str, float], list[float]]:
     for _ in range(repeats):
         for name, env in stacks.items():
             samples[name].append(time_steps(env, actions))
-    per_repeat = [overhead_ratio({name: values[i] for name, values in samples.items()})
-                  for i in range(repeats)]  # fmt: skip
+    per_repeat = [
+        overhead_ratio({name: values[i] for name, values in samples.items()})
+        for i in range(repeats)
+    ]
     return {name: min(values) for name, values in samples.items()}, per_repeat
 
 
@@ -71,12 +73,15 @@ def overhead_ratio(cost: dict[str, float]) -> float:
 def summary(cost: dict[str, float], per_repeat: list[float]) -> str:
     """One line: the ratio of the fastest repeats, and the median and range within repeats."""
     low, median, high = np.percentile(per_repeat, [0, 50, 100])
-    return (f"Overhead ratio PoissonRewardDelay / RecordEpisodeStatistics: "
-            f"{overhead_ratio(cost):.2f} (fastest repeats), median {median:.2f} within repeats "
-            f"(range {low:.2f}–{high:.2f}); target ≤ 1.5")  # fmt: skip
+    return (
+        f"Overhead ratio PoissonRewardDelay / RecordEpisodeStatistics: "
+        f"{overhead_ratio(cost):.2f} (fastest repeats), median {median:.2f} within repeats "
+        f"(range {low:.2f}–{high:.2f}); target ≤ 1.5"
+    )
 
 
 def main() -> None:
+    """Time the three stacks and print their costs, overheads and the overhead ratio."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=200_000)
     parser.add_argument("--repeats", type=int, default=11)

@@ -1,9 +1,8 @@
 """delayed-rl: stochastically delayed rewards for Gymnasium, and Multiple Model Q-learning."""
 
 from delayed_rl import envs as _envs  # noqa: F401  (registers the env ids)
-
-__version__ = "0.1.0"
-from delayed_rl.agents import (  # noqa: E402  (after the env registration above)
+from delayed_rl._version import __version__
+from delayed_rl.agents import (
     MMQ,
     FixedDelayQLearning,
     MultipleModelQLearning,

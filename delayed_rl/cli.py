@@ -6,16 +6,18 @@
 - ``delayed-rl bench NAME``: one thesis experiment over seeds, written to ``--out/NAME``;
 - ``delayed-rl reproduce``: every experiment.
 
-Exit codes: 0 success, 2 bad usage (unknown names, bad values; argparse's message), 1 a failure
-while running (a missing or unreadable model file, an env the agent cannot use, ...), reported
-as one ``error: ...`` line on stderr, without a traceback.
+Exit codes: 0 success, 2 bad usage (unknown names, bad values; argparse's usage and one
+``error:`` line), 1 a failure while running (a missing or unreadable model file, an env the
+agent cannot use, ...), reported as one ``error: ...`` line on stderr, without a traceback.
+
+Option values are checked by :mod:`delayed_rl._validation`, the library's own checks, so the
+command line and the Python API refuse the same values with the same words.
 """
 
 from __future__ import annotations
 
 import argparse
 import difflib
-import math
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -25,80 +27,104 @@ from typing import Any
 import gymnasium as gym
 
 import delayed_rl
+from delayed_rl._validation import check_fraction, check_int, check_probability, check_real
 from delayed_rl.envs import env_ids
 from delayed_rl.experiments import NAMES
 from delayed_rl.experiments.runner import BACKENDS
 
-
-def _list(args: argparse.Namespace) -> int:
-    print("Environments (gymnasium.make(id, reward_delay=λ) adds a Poisson reward delay):")
-    for env_id in env_ids():
-        print(f"  {env_id}")
-    agents = [
-        name
-        for name in ("QLearning", "FixedDelayQLearning", "MultipleModelQLearning")
-        if hasattr(delayed_rl, name)
-    ]
-    if agents:
-        print("Agents:")
-        for name in agents:
-            print(f"  {name}")
-    print("Experiments (delayed-rl bench NAME):")
-    for name in NAMES:
-        print(f"  {name}")
-    return 0
+#: The name :func:`_checked` gives the library's checks, cut from their messages again: argparse
+#: already names the option (``argument --steps: must be an integer >= 1, got 0``).
+_VALUE = "value"
 
 
-def _number(
-    kind: type, low: float | None = None, high: float | None = None, low_open: bool = False
-) -> Callable[[str], Any]:
-    """An argparse ``type``: ``kind(text)``, finite, within the bounds given.
+def _checked(kind: type, check: Callable[..., Any], *bounds: Any) -> Callable[[str], Any]:
+    """An argparse ``type``: the text read as ``kind``, then checked by ``check``.
 
     Args:
-        kind: ``int`` or ``float``.
-        low: the smallest allowed value (``None``: no lower bound).
-        high: the largest allowed value (``None``: no upper bound).
-        low_open: exclude ``low`` itself.
+        kind: ``int`` or ``float``, what the text is read as.
+        check: one of :mod:`delayed_rl._validation`'s checks, e.g. ``check_int``.
+        *bounds: ``check``'s arguments after the value, e.g. the lower bound.
+
+    Returns:
+        The parser of the option's text. Text that does not read as ``kind`` reaches ``check``
+        as the string itself, which it refuses with a ``TypeError``; a value out of range it
+        refuses with a ``ValueError``. Both become an ``argparse.ArgumentTypeError`` with the
+        check's message, so argparse prints it and exits with code 2.
     """
-    what = "an integer" if kind is int else "a number"
-    if low is None:
-        allowed = f"a finite {what.split()[-1]}"
-    elif high is None:
-        allowed = f"{what} {'>' if low_open else '>='} {low}"
-    else:
-        allowed = f"{what} in {'(' if low_open else '['}{low}, {high}]"
 
     def parse(text: str) -> Any:
         try:
-            value = kind(text)
+            value: Any = kind(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"must be {allowed}, got {text!r}") from None
-        above = low is None or (value > low if low_open else value >= low)
-        if not (math.isfinite(value) and above and (high is None or value <= high)):
-            raise argparse.ArgumentTypeError(f"must be {allowed}, got {text!r}")
-        return value
+            value = text
+        try:
+            return check(_VALUE, value, *bounds)
+        except (TypeError, ValueError) as error:
+            raise argparse.ArgumentTypeError(str(error).removeprefix(f"{_VALUE} ")) from None
 
     parse.__name__ = kind.__name__
     return parse
 
 
-_positive_int = _number(int, 1)
-
-
-_float = _number(float)
-_non_negative_int = _number(int, 0)
-_non_negative_float = _number(float, 0.0)
-_probability = _number(float, 0.0, 1.0)
-_learning_rate = _number(float, 0.0, 1.0, low_open=True)
+_float = _checked(float, check_real)
+_non_negative_float = _checked(float, check_real, 0.0)
+_probability = _checked(float, check_probability)
+_learning_rate = _checked(float, check_fraction)
+_non_negative_int = _checked(int, check_int, 0)
+_positive_int = _checked(int, check_int, 1)
 
 #: ``--agent`` choices: the agent class for each.
 AGENTS = {"q": "QLearning", "fixed": "FixedDelayQLearning", "mmq": "MultipleModelQLearning"}
 #: What ``--episodes`` waits for an episode to end before calling the env continuing.
 MAX_EPISODE_STEPS = 100_000
+#: How many episodes ``evaluate`` runs when given neither ``--episodes`` nor ``--steps``.
+EPISODES = 10
 
 
 class CommandError(Exception):
     """A failure while running a command: reported as ``error: ...`` with exit code 1."""
+
+
+class _DeprecatedAlias(argparse.Action):
+    """An option's old name: stores like the new one, and says on stderr that it is deprecated.
+
+    Args:
+        option_strings: the old flag, e.g. ``["--delay"]``.
+        dest: the new option's ``dest``, so both names fill one attribute.
+        new: the new flag, named in the warning.
+        **kwargs: the other ``add_argument`` arguments (``type``, ``metavar``, ``help``...).
+    """
+
+    def __init__(self, option_strings: Sequence[str], dest: str, new: str, **kwargs: Any):
+        super().__init__(option_strings, dest, **kwargs)
+        self.new = new
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: Any,
+        option_string: str | None = None,
+    ) -> None:
+        print(
+            f"{parser.prog}: warning: {option_string} is deprecated; use {self.new}",
+            file=sys.stderr,
+        )
+        setattr(namespace, self.dest, values)
+
+
+def _list(args: argparse.Namespace) -> int:
+    """``delayed-rl list``: print the registered envs, the agents and the experiments."""
+    print("Environments (gymnasium.make(id, reward_delay=λ) adds a Poisson reward delay):")
+    for env_id in env_ids():
+        print(f"  {env_id}")
+    print("Agents (delayed-rl train --agent KEY):")
+    for key, name in AGENTS.items():
+        print(f"  {key}: {name}")
+    print("Experiments (delayed-rl bench NAME):")
+    for name in NAMES:
+        print(f"  {name}")
+    return 0
 
 
 def _env_id(text: str) -> str:
@@ -124,10 +150,12 @@ def _make_env(env_id: str, reward_delay: float | None) -> gym.Env:
 
 
 def _delay_text(reward_delay: float | None) -> str:
+    """How the reports name the reward delay of ``--reward-delay``."""
     return "undelayed" if reward_delay is None else f"Poisson reward delay λ = {reward_delay:g}"
 
 
 def _train(args: argparse.Namespace) -> int:
+    """``delayed-rl train``: train the agent, save it, report its average reward."""
     from delayed_rl import agents
 
     env = _make_env(args.env, args.reward_delay)
@@ -140,7 +168,7 @@ def _train(args: argparse.Namespace) -> int:
         "seed": args.seed,
     }
     if args.agent == "fixed":
-        options["delay"] = args.delay
+        options["delay_estimate"] = args.delay_estimate
     elif args.agent == "mmq":
         options["max_delay_estimate"] = args.max_delay_estimate
     save = Path(args.save)
@@ -170,6 +198,7 @@ def _train(args: argparse.Namespace) -> int:
 
 
 def _evaluate(args: argparse.Namespace) -> int:
+    """``delayed-rl evaluate``: run a saved agent greedily, report its average reward."""
     from delayed_rl.agents import load_agent
 
     env = _make_env(args.env, args.reward_delay)
@@ -179,7 +208,8 @@ def _evaluate(args: argparse.Namespace) -> int:
     total = episode_return = 0.0
     returns: list[float] = []
     limit = args.steps
-    while (steps < limit) if limit is not None else (episodes < args.episodes):
+    wanted = EPISODES if args.episodes is None else args.episodes
+    while (steps < limit) if limit is not None else (episodes < wanted):
         action, _ = agent.predict(obs, deterministic=True)
         obs, reward, terminated, truncated, info = env.step(action)
         reward = float(info.get("undelayed_reward", reward))
@@ -211,12 +241,19 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 
 def _bench(args: argparse.Namespace) -> int:
+    """``delayed-rl bench NAME`` and ``reproduce``: run experiments, write and print reports."""
     from delayed_rl.experiments import Config, get_experiment, run_experiment
 
     names = list(NAMES) if args.name == "all" else [args.name]
     for name in names:
-        config = Config(seeds=args.seeds, steps=args.steps, quick=args.quick,
-                        workers=args.workers, backend=args.backend, base_seed=args.seed)  # fmt: skip
+        config = Config(
+            seeds=args.seeds,
+            steps=args.steps,
+            quick=args.quick,
+            workers=args.workers,
+            backend=args.backend,
+            base_seed=args.seed,
+        )
         out = Path(args.out) / name
         summary = run_experiment(get_experiment(name), config, out)
         print((out / "report.md").read_text())
@@ -225,14 +262,29 @@ def _bench(args: argparse.Namespace) -> int:
 
 
 def _add_bench_options(parser: argparse.ArgumentParser, default_out: str) -> None:
-    parser.add_argument("--seeds", type=_positive_int, default=None,
-                        help="runs per condition (default: the thesis's, or 2 with --quick)")  # fmt: skip
-    parser.add_argument("--steps", type=_positive_int, default=None,
-                        help="training steps per run (default: the thesis's)")  # fmt: skip
+    """The options ``bench`` and ``reproduce`` share: seeds, steps, workers, output folder."""
+    parser.add_argument(
+        "--seeds",
+        type=_positive_int,
+        default=None,
+        help="runs per condition (default: the thesis's, or 2 with --quick)",
+    )
+    parser.add_argument(
+        "--steps",
+        type=_positive_int,
+        default=None,
+        help="training steps per run (default: the thesis's)",
+    )
     parser.add_argument("--workers", type=_positive_int, default=1, help="parallel processes")
-    parser.add_argument("--backend", choices=BACKENDS, default="loky",
-                        help="joblib backend: loky (default), ray or dask")  # fmt: skip
-    parser.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
+    parser.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        default="loky",
+        help="joblib backend: loky (default), ray or dask",
+    )
+    parser.add_argument(
+        "--seed", type=_non_negative_int, default=0, help="first seed, >= 0 (default 0)"
+    )
     parser.add_argument("--out", default=default_out, help=f"output folder (default {default_out})")
     parser.add_argument("--quick", action="store_true", help="a scaled-down run, in seconds")
 
@@ -245,7 +297,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=delayed_rl.__version__)
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    listing = commands.add_parser("list", help="list the registered envs and the agents")
+    listing = commands.add_parser(
+        "list", help="list the registered envs, the agents and the experiments"
+    )
     listing.set_defaults(run=_list)
     train = commands.add_parser(
         "train",
@@ -264,7 +318,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--agent",
         required=True,
         choices=AGENTS,
-        help="q: Q-learning; fixed: Q-learning assuming --delay; mmq: Multiple "
+        help="q: Q-learning; fixed: Q-learning assuming --delay-estimate; mmq: Multiple "
         "Model Q-learning over delays 0..--max-delay-estimate",
     )
     train.add_argument(
@@ -295,10 +349,20 @@ def build_parser() -> argparse.ArgumentParser:
         help="initial Q-value; above the true values explores optimistically (default 0)",
     )
     train.add_argument(
-        "--delay",
+        "--delay-estimate",
         type=_non_negative_int,
         metavar="K",
-        help="the delay that --agent fixed assumes (required for it)",
+        help="--agent fixed: the constant delay in steps that it assumes (required for it; "
+        "--delay, its old name, still works but is deprecated)",
+    )
+    train.add_argument(
+        "--delay",
+        dest="delay_estimate",
+        action=_DeprecatedAlias,
+        new="--delay-estimate",
+        type=_non_negative_int,
+        metavar="K",
+        help=argparse.SUPPRESS,
     )
     train.add_argument(
         "--max-delay-estimate",
@@ -345,7 +409,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     length = evaluate.add_mutually_exclusive_group()
     length.add_argument(
-        "--episodes", type=_positive_int, default=None, help="run this many episodes (default 10)"
+        "--episodes",
+        type=_positive_int,
+        default=None,
+        help=f"run this many episodes (default {EPISODES})",
     )
     length.add_argument(
         "--steps",
@@ -382,14 +449,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command == "train":
-        if args.agent == "fixed" and args.delay is None:
-            args.parser.error("--agent fixed needs --delay K (the delay it assumes)")
-        if args.agent != "fixed" and args.delay is not None:
-            args.parser.error(f"--delay is for --agent fixed, not --agent {args.agent}")
+        if args.agent == "fixed" and args.delay_estimate is None:
+            args.parser.error("--agent fixed needs --delay-estimate K (the delay it assumes)")
+        if args.agent != "fixed" and args.delay_estimate is not None:
+            args.parser.error(f"--delay-estimate is for --agent fixed, not --agent {args.agent}")
         if args.agent != "mmq" and args.max_delay_estimate is not None:
             args.parser.error(f"--max-delay-estimate is for --agent mmq, not --agent {args.agent}")
-    if args.command == "evaluate" and args.episodes is None and args.steps is None:
-        args.episodes = 10
     level, gym.logger.min_level = gym.logger.min_level, 40  # Gymnasium's warnings stay out
     try:
         return args.run(args)

@@ -96,37 +96,46 @@ def test_non_discrete_spaces_say_how_to_discretise():
 
 
 @pytest.mark.parametrize(
-    ("kwargs", "message"),
+    ("kwargs", "error", "message"),
     [
-        ({"learning_rate": 0.0}, r"learning_rate must be a number in \(0, 1\], got 0.0"),
-        ({"learning_rate": 1.5}, r"learning_rate must be a number in \(0, 1\], got 1.5"),
-        ({"learning_rate": "fast"}, "learning_rate must be a real number"),
-        ({"gamma": 1.2}, r"gamma must be a number in \[0, 1\], got 1.2"),
-        ({"gamma": float("nan")}, "gamma must be a number in"),
-        ({"exploration_initial_eps": -0.1}, "exploration_initial_eps must be a number in"),
-        ({"exploration_final_eps": 2}, "exploration_final_eps must be a number in"),
-        ({"exploration_fraction": 0}, r"exploration_fraction must be a number in \(0, 1\]"),
-        ({"q_init": float("inf")}, "q_init must be a finite real number, got inf"),
-        ({"q_init": "high"}, "q_init must be a finite real number, got 'high'"),
-        ({"seed": -1}, "seed must be None or an integer >= 0, got -1"),
-        ({"seed": 1.5}, "seed must be None or an integer >= 0, got 1.5"),
-        ({"verbose": -1}, "verbose must be an integer >= 0"),
+        ({"learning_rate": 0.0}, ValueError, r"learning_rate must be a number in \(0, 1\], got 0.0"),
+        ({"learning_rate": 1.5}, ValueError, r"learning_rate must be a number in \(0, 1\], got 1.5"),
+        ({"learning_rate": "fast"}, TypeError, r"learning_rate must be a number in \(0, 1\]"),
+        ({"gamma": 1.2}, ValueError, r"gamma must be a number in \[0, 1\], got 1.2"),
+        ({"gamma": "0.5"}, TypeError, r"gamma must be a number in \[0, 1\], got '0.5' \(str\)"),
+        ({"gamma": float("nan")}, ValueError, "gamma must be a number in"),
+        ({"exploration_initial_eps": -0.1}, ValueError, "exploration_initial_eps must be a number"),
+        ({"exploration_final_eps": 2}, ValueError, "exploration_final_eps must be a number in"),
+        ({"exploration_final_eps": None}, TypeError, "exploration_final_eps must be a number in"),
+        ({"exploration_fraction": 0}, ValueError, r"exploration_fraction must be a number in \(0, 1\]"),
+        ({"q_init": float("inf")}, ValueError, "q_init must be a finite number, got inf"),
+        ({"q_init": "high"}, TypeError, "q_init must be a finite number, got 'high'"),
+        ({"q_init": True}, TypeError, "q_init must be a finite number, got True"),
+        ({"seed": -1}, ValueError, "seed must be None or an integer >= 0, got -1"),
+        ({"seed": 1.5}, TypeError, "seed must be None or an integer >= 0, got 1.5"),
+        ({"seed": "5"}, TypeError, "seed must be None or an integer >= 0, got '5'"),
+        ({"verbose": -1}, ValueError, "verbose must be an integer >= 0"),
+        ({"verbose": "1"}, TypeError, "verbose must be an integer >= 0"),
     ],
-)
-def test_bad_hyperparameters_name_argument_and_value(kwargs, message):
-    with pytest.raises((TypeError, ValueError), match=message):
+)  # fmt: skip
+def test_bad_hyperparameters_name_argument_and_value(kwargs, error, message):
+    """Wrong type: TypeError; right type out of range: ValueError; the message names both."""
+    with pytest.raises(error, match=message) as raised:
         MMQ(GRID5, max_delay_estimate=3, **kwargs)
+    assert type(raised.value) is error
 
 
 def test_bad_learn_arguments():
     agent = QLearning(GRID5)
-    for value in (-1, 1.5, True, "10"):
-        with pytest.raises(ValueError, match="total_timesteps must be an integer >= 0"):
+    for value, error in ((-1, ValueError), (1.5, TypeError), (True, TypeError), ("10", TypeError)):
+        with pytest.raises(error, match="total_timesteps must be an integer >= 0"):
             agent.learn(value)
     with pytest.raises(ValueError, match="log_interval must be None or an integer >= 1, got 0"):
         agent.learn(10, log_interval=0)
-    with pytest.raises(ValueError, match="reset_num_timesteps must be a bool, got 1"):
+    with pytest.raises(TypeError, match=r"reset_num_timesteps must be a bool, got 1 \(int\)"):
         agent.learn(10, reset_num_timesteps=1)
+    with pytest.raises(TypeError, match="fused must be a bool, got 'yes'"):
+        agent.learn(10, fused="yes")
     with pytest.raises(TypeError, match="callback must be None, a callback object"):
         agent.learn(10, callback=42)
     with pytest.raises(TypeError, match=r"callback\[1\] must be None"):
@@ -138,13 +147,17 @@ def test_bad_update_arguments():
     agent = QLearning(GRID5)
     with pytest.raises(ValueError, match=r"obs must be an integer in Discrete\(25\), got 25"):
         agent.update(25, 0, 0.0, 1)
+    with pytest.raises(TypeError, match=r"obs must be an integer in Discrete\(25\), got '3'"):
+        agent.update("3", 0, 0.0, 1)
     with pytest.raises(ValueError, match="next_obs must be an integer"):
         agent.update(0, 0, 0.0, -1)
     with pytest.raises(ValueError, match=r"action must be an integer in Discrete\(4\), got 4"):
         agent.update(0, 4, 0.0, 1)
-    with pytest.raises(ValueError, match="reward must be a finite real number, got nan"):
+    with pytest.raises(ValueError, match="reward must be a finite number, got nan"):
         agent.update(0, 0, float("nan"), 1)
-    with pytest.raises(ValueError, match="terminated must be a bool, got 'yes'"):
+    with pytest.raises(TypeError, match="reward must be a finite number, got '1'"):
+        agent.update(0, 0, "1", 1)
+    with pytest.raises(TypeError, match="terminated must be a bool, got 'yes'"):
         agent.update(0, 0, 0.0, 1, terminated="yes")
     assert agent.num_timesteps == 0 and np.all(agent.q_table == 0.0)
 
@@ -161,8 +174,15 @@ def test_predict_single_batched_and_validated():
     np.testing.assert_array_equal(
         agent.predict(np.arange(25), deterministic=True)[0], rows.argmax(axis=1) % 4
     )
-    for bad in (25, -1, 2.5, [[1, 2]], "3", True):
-        with pytest.raises(ValueError, match="observation"):
+    for bad, error in (
+        (25, ValueError),
+        (-1, ValueError),
+        ([[1, 2]], ValueError),
+        (2.5, TypeError),
+        ("3", TypeError),
+        (True, TypeError),
+    ):
+        with pytest.raises(error, match="observation"):
             agent.predict(bad)
 
 
@@ -193,7 +213,7 @@ def test_learn_on_continuing_env_and_record():
     log = agent.training_log
     assert set(log) == set(RECORD_KEYS)
     assert all(len(v) == 3_000 for v in log.values())
-    assert not log["done"].any() and agent.num_timesteps == 3_000
+    assert not log["episode_end"].any() and agent.num_timesteps == 3_000
     # every reward emitted is either delivered or still pending (the wrapper's own books)
     pending = env.get_wrapper_attr("pending_reward")
     assert log["reward"].sum() + pending == pytest.approx(log["undelayed_reward"].sum())
@@ -210,7 +230,7 @@ def test_episode_end_resets_env_and_history():
     agent = MMQ(env, max_delay_estimate=5, q_init=10.0, seed=2).learn(
         1_050, record=True, fused=False
     )
-    done = agent.training_log["done"]
+    done = agent.training_log["episode_end"]
     np.testing.assert_array_equal(np.flatnonzero(done), np.arange(99, 1_000, 100))
     starts = np.flatnonzero(done) + 1
     assert np.all(agent.training_log["obs"][starts] == 24)  # reset to the start cell

@@ -1,5 +1,8 @@
-"""Multiple Model Q-learning's rule, exactly: the thesis's Roulette walk-through, a brute-force
-reference implementation, the cached maxima, and the single-model special cases."""
+"""Multiple Model Q-learning's rule, exactly.
+
+The thesis's Roulette walk-through, a brute-force reference implementation, the cached maxima,
+and the single-model special cases.
+"""
 
 from __future__ import annotations
 
@@ -92,7 +95,7 @@ def test_roulette_round_four_uses_all_models_max():
 
 
 class ReferenceMMQ:
-    """The rule of DESIGN.md, written the slow obvious way (lists, brute-force maxima)."""
+    """MMQ's rule as its module docstring states it, written the slow obvious way (lists, brute-force maxima)."""
 
     def __init__(self, n_states, n_actions, delays, q_init, alpha, gamma):
         self.delays = list(delays)
@@ -208,7 +211,7 @@ def test_q_learning_is_mmq_with_lambda_zero():
 
     q = run(QLearning)
     mmq = run(MMQ, delay_estimates=[0])
-    fixed = run(FixedDelayQLearning, delay=0)
+    fixed = run(FixedDelayQLearning, delay_estimate=0)
     for other in (mmq, fixed):
         np.testing.assert_array_equal(q.q_table, other.q_table)
         for key in ("obs", "action", "reward"):
@@ -219,12 +222,15 @@ def test_q_learning_is_mmq_with_lambda_zero():
 
 @pytest.mark.parametrize("k", [2, 5])
 def test_fixed_delay_learns_optimal_5x5_policy_under_constant_delay(k):
-    """Under a constant delay k, FixedDelayQLearning(delay=k) assigns credit exactly; its greedy
-    policy walks start → reward cell in 2(n−1) moves and collects +10 at step 2(n−1)+1 = 9."""
+    """Under a constant delay k, FixedDelayQLearning(delay_estimate=k) assigns credit exactly.
+
+    Its greedy policy walks start → reward cell in 2(n−1) moves and collects +10 at step
+    2(n−1)+1 = 9.
+    """
     n = 5
     env = RewardDelay(GridWorldEnv(size=n), Constant(k))
-    agent = FixedDelayQLearning(env, delay=k, q_init=20.0, seed=k).learn(30_000)
-    assert agent.delay == k and agent.delay_estimates == [k]
+    agent = FixedDelayQLearning(env, delay_estimate=k, q_init=20.0, seed=k).learn(30_000)
+    assert agent.delay_estimate == k and agent.delay_estimates == [k]
     world = GridWorldEnv(size=n)
     state, _ = world.reset()
     rewards = []
@@ -236,13 +242,15 @@ def test_fixed_delay_learns_optimal_5x5_policy_under_constant_delay(k):
 
 
 def test_q_learning_misses_constant_delay_that_fixed_delay_handles():
-    """Plain Q-learning under the same constant delay credits the wrong steps: it does not learn
-    the route (a control for the test above, so that one cannot pass by luck)."""
+    """Plain Q-learning under the same constant delay credits the wrong steps.
+
+    It does not learn the route (a control for the test above, so that one cannot pass by luck).
+    """
     n, k = 5, 5
     agent = QLearning(RewardDelay(GridWorldEnv(size=n), Constant(k)), q_init=20.0, seed=k)
     agent.learn(30_000, record=True)
     fixed = FixedDelayQLearning(
-        RewardDelay(GridWorldEnv(size=n), Constant(k)), delay=k, q_init=20.0, seed=k
+        RewardDelay(GridWorldEnv(size=n), Constant(k)), delay_estimate=k, q_init=20.0, seed=k
     )
     fixed.learn(30_000, record=True)
     tail = slice(-10_000, None)
@@ -253,7 +261,7 @@ def test_q_learning_misses_constant_delay_that_fixed_delay_handles():
 
 
 def test_fixed_delay_updates_nothing_before_k_steps():
-    agent = FixedDelayQLearning(GridWorldEnv(size=3), delay=3, q_init=1.0)
+    agent = FixedDelayQLearning(GridWorldEnv(size=3), delay_estimate=3, q_init=1.0)
     for t in range(3):
         agent.update(t, 0, 5.0, t + 1)
         np.testing.assert_array_equal(agent.q_table, np.ones((9, 1, 4)))
@@ -279,7 +287,9 @@ def test_acting_picks_best_model_then_best_action():
 
 def test_tie_breaks_are_uniform_at_both_levels():
     """All-equal table: λ̂* uniform over 3 models, then a* uniform over 4 actions (greedy, ε=0).
-    12 cells, 6000 draws: each count ~ Binomial(6000, 1/12), sd ≈ 21.4; 5 sd bound."""
+
+    12 cells, 6000 draws: each count ~ Binomial(6000, 1/12), sd ≈ 21.4; 5 sd bound.
+    """
     agent = MMQ(GridWorldEnv(size=3), delay_estimates=[0, 1, 2], seed=3)
     counts = np.zeros((3, 4))
     for _ in range(6000):
@@ -290,8 +300,11 @@ def test_tie_breaks_are_uniform_at_both_levels():
 
 
 def test_two_level_tie_break_is_over_models_first():
-    """Model 0 ties on 3 actions, model 1 on 1 action: λ̂* is 50/50 (not 3:1 as a flat tie-break
-    over cells would give). 4000 draws, sd of a count = 31.6; 5 sd bound."""
+    """Model 0 ties on 3 actions, model 1 on 1 action: λ̂* is 50/50.
+
+    Not 3:1, as a flat tie-break over cells would give. 4000 draws, sd of a count = 31.6; 5 sd
+    bound.
+    """
     agent = MMQ(GridWorldEnv(size=3), delay_estimates=[0, 1], seed=5)
     agent._q[0] = 0.0
     agent._q[0, 0, :3] = 1.0
@@ -342,5 +355,19 @@ def test_delay_estimate_arguments():
         MMQ(env, max_delay_estimate=-1)
     with pytest.raises(ValueError, match="delay_step must be an integer >= 1, got 0"):
         MMQ(env, delay_step=0)
-    with pytest.raises(ValueError, match="delay must be an integer >= 0, got 2.5"):
-        FixedDelayQLearning(env, delay=2.5)
+    with pytest.raises(TypeError, match="delay_estimate must be an integer >= 0, got 2.5"):
+        FixedDelayQLearning(env, delay_estimate=2.5)
+    with pytest.raises(ValueError, match="delay_estimate must be an integer >= 0, got -1"):
+        FixedDelayQLearning(env, -1)
+
+
+def test_fixed_delay_keeps_its_deprecated_delay_name():
+    """``delay=k`` (the old name of ``delay_estimate``) builds the same agent, with a warning."""
+    env = gym.make("delayed_rl/GridWorld-3x3-v0")
+    with pytest.warns(DeprecationWarning, match="delay_estimate=k"):
+        old = FixedDelayQLearning(env, delay=3)
+    assert old.delay_estimate == 3 and old.delay_estimates == [3]
+    with pytest.warns(DeprecationWarning, match="read delay_estimate"):
+        assert old.delay == 3
+    with pytest.raises(TypeError, match="not both"):
+        FixedDelayQLearning(env, 3, delay=3)

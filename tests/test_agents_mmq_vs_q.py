@@ -1,5 +1,6 @@
-"""MMQ against Q-learning in the thesis's 9×9 grid world with Poisson(13) reward delays
-(thesis section 5.1.1, Fig. 5.9), on the undelayed reward stream.
+"""MMQ against Q-learning in the thesis's 9×9 grid world with Poisson(13) reward delays.
+
+Thesis section 5.1.1, Fig. 5.9, measured on the undelayed reward stream.
 
 Settings (the thesis's where it states them): α = 0.1, γ = 0.9, λ̂max = 50 (51 models),
 ε = 0.1 constant at both levels, optimistic q_init = 20 (above the best discounted value,

@@ -51,14 +51,14 @@ def test_round_trip_predicts_identically(tmp_path):
 def test_every_class_round_trips(tmp_path):
     for agent in (
         QLearning(GRID5, q_init=3.0, seed=1).learn(500),
-        FixedDelayQLearning(GRID5, delay=4, seed=2).learn(500),
+        FixedDelayQLearning(GRID5, delay_estimate=4, seed=2).learn(500),
     ):
         path = agent.save(tmp_path / type(agent).__name__)
         loaded = type(agent).load(path)
         assert type(loaded) is type(agent)
         np.testing.assert_array_equal(loaded.q_table, agent.q_table)
         assert loaded.delay_estimates == agent.delay_estimates
-    assert FixedDelayQLearning.load(tmp_path / "FixedDelayQLearning").delay == 4
+    assert FixedDelayQLearning.load(tmp_path / "FixedDelayQLearning").delay_estimate == 4
     assert type(TabularAgent.load(tmp_path / "QLearning.npz")) is QLearning
     assert QLearning.load(tmp_path / "QLearning.npz").learning_rate == 0.1
     # a QLearning file claiming several delay models is refused
@@ -74,8 +74,10 @@ def test_every_class_round_trips(tmp_path):
 
 
 def test_resumed_training_continues_where_it_stopped(tmp_path):
-    """Saved after 2000 steps, loaded into a fresh env, trained 1000 more: identical to the
-    original agent trained 1000 more after being handed a fresh env the same way."""
+    """Saved after 2000 steps, loaded into a fresh env, trained 1000 more: identical to the original.
+
+    The original is trained 1000 more after being handed a fresh env the same way.
+    """
     original = trained_mmq(seed=5)
     path = original.save(tmp_path / "checkpoint")
     resumed = MMQ.load(path, env=gym.make(GRID5, reward_delay=2))
@@ -189,7 +191,7 @@ def metadata_with(path, **changes):
         ),
         (
             lambda p, t: rewrite(p, t, metadata=metadata_with(p, **{"class": "PPO"})),
-            "holds a PPO model, not a MultipleModelQLearning",
+            "holds an unknown agent class 'PPO': import the module that defines it",
         ),
     ],
 )

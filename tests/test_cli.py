@@ -1,4 +1,7 @@
-"""The ``delayed-rl train`` and ``evaluate`` commands: round trip, exit codes and messages."""
+"""The ``delayed-rl`` commands: the train/evaluate round trip, exit codes and messages.
+
+``bench`` and ``reproduce`` runs are tested with the experiments (``test_experiments.py``).
+"""
 
 from __future__ import annotations
 
@@ -15,8 +18,13 @@ GRID = "delayed_rl/GridWorld-3x3-v0"
 
 
 def _train(tmp_path, *extra: str) -> list[str]:
-    return ["train", "--env", GRID, "--reward-delay", "3", "--steps", "30000", "--seed", "0",
-            "--no-progress", "--save", str(tmp_path / "agent"), *extra]  # fmt: skip
+    """Train on the 3×3 grid under a Poisson(3) reward delay and save to ``tmp_path/agent``."""
+    options = f"--env {GRID} --reward-delay 3 --steps 30000 --seed 0 --no-progress"
+    return ["train", *options.split(), "--save", str(tmp_path / "agent"), *extra]
+
+
+#: A ``train`` command line to append one bad option to (it never gets to train).
+TRAIN = f"train --env {GRID} --agent q --save x "
 
 
 def _average(text: str, unit: str) -> float:
@@ -36,8 +44,8 @@ def test_train_saves_an_agent_that_evaluate_runs_greedily(tmp_path, capsys):
     assert isinstance(agent, QLearning) and agent.num_timesteps == 30_000
     assert agent.gamma == 0.9 and agent.exploration_rate == 0.1
 
-    argv = ["evaluate", str(tmp_path / "agent.npz"), "--env", GRID, "--reward-delay", "3",
-            "--steps", "500", "--seed", "1"]  # fmt: skip
+    options = f"--env {GRID} --reward-delay 3 --steps 500 --seed 1"
+    argv = ["evaluate", str(tmp_path / "agent.npz"), *options.split()]
     assert main(argv) == 0
     out = capsys.readouterr().out
     assert "for 500 steps" in out and "no episode ended" in out
@@ -53,23 +61,29 @@ def test_train_saves_an_agent_that_evaluate_runs_greedily(tmp_path, capsys):
 
 
 def test_train_passes_the_agent_options(tmp_path, capsys):
-    options = ["--agent", "mmq", "--max-delay-estimate", "6", "--learning-rate", "0.2",
-               "--gamma", "0.8", "--epsilon", "0.05", "--q-init", "10"]  # fmt: skip
-    assert main(_train(tmp_path, *options)) == 0
+    options = "--agent mmq --max-delay-estimate 6 --learning-rate 0.2 --gamma 0.8 --epsilon 0.05"
+    assert main(_train(tmp_path, *options.split(), "--q-init", "10")) == 0
     agent = load_agent(tmp_path / "agent.npz")
     assert isinstance(agent, MultipleModelQLearning)
     assert agent.delay_estimates == list(range(7))
     assert (agent.current_learning_rate, agent.gamma, agent.exploration_rate) == (0.2, 0.8, 0.05)
     assert agent.q_init == 10.0
     capsys.readouterr()
-    assert main(_train(tmp_path, "--agent", "fixed", "--delay", "3")) == 0
+    assert main(_train(tmp_path, "--agent", "fixed", "--delay-estimate", "3")) == 0
     assert load_agent(tmp_path / "agent.npz").delay_estimates == [3]
+
+
+def test_delay_is_a_deprecated_alias_of_delay_estimate(tmp_path, capsys):
+    assert main(_train(tmp_path, "--agent", "fixed", "--delay", "2", "--steps", "100")) == 0
+    err = capsys.readouterr().err
+    assert err == "delayed-rl train: warning: --delay is deprecated; use --delay-estimate\n"
+    assert load_agent(tmp_path / "agent.npz").delay_estimates == [2]
 
 
 def test_evaluate_counts_episodes_on_an_episodic_env(tmp_path, capsys):
     env = "delayed_rl/EPuckLineFollow-v0"
-    argv = ["train", "--env", env, "--agent", "q", "--steps", "500", "--seed", "0",
-            "--no-progress", "--save", str(tmp_path / "line")]  # fmt: skip
+    options = f"--env {env} --agent q --steps 500 --seed 0 --no-progress"
+    argv = ["train", *options.split(), "--save", str(tmp_path / "line")]
     assert main(argv) == 0
     capsys.readouterr()
     assert main(["evaluate", str(tmp_path / "line.npz"), "--env", env, "--episodes", "2"]) == 0
@@ -92,40 +106,55 @@ def test_evaluate_with_episodes_on_a_continuing_env_fails_clearly(tmp_path, caps
 
 
 @pytest.mark.parametrize(
-    ("argv", "message"),
+    ("command", "message"),
     [
-        (["train", "--env", "delayed_rl/GridWorld-3x3", "--agent", "q", "--save", "x"],
-         "unknown env id 'delayed_rl/GridWorld-3x3'; did you mean delayed_rl/GridWorld-3x3-v0"),
-        (["train", "--env", GRID, "--agent", "sarsa", "--save", "x"], "invalid choice: 'sarsa'"),
-        (["train", "--env", GRID, "--agent", "q"], "--save"),
-        (["train", "--env", GRID, "--agent", "q", "--steps", "0", "--save", "x"],
-         "--steps: must be an integer >= 1, got '0'"),
-        (["train", "--env", GRID, "--agent", "q", "--steps", "ten", "--save", "x"],
-         "--steps: must be an integer >= 1, got 'ten'"),
-        (["train", "--env", GRID, "--agent", "q", "--gamma", "1.5", "--save", "x"],
-         "--gamma: must be a number in [0.0, 1.0], got '1.5'"),
-        (["train", "--env", GRID, "--agent", "q", "--learning-rate", "0", "--save", "x"],
-         "--learning-rate: must be a number in (0.0, 1.0], got '0'"),
-        (["train", "--env", GRID, "--agent", "q", "--reward-delay", "-2", "--save", "x"],
-         "--reward-delay: must be a number >= 0.0, got '-2'"),
-        (["train", "--env", GRID, "--agent", "q", "--q-init", "nan", "--save", "x"],
-         "--q-init: must be a finite number, got 'nan'"),
-        (["train", "--env", GRID, "--agent", "fixed", "--save", "x"], "--agent fixed needs --delay"),
-        (["train", "--env", GRID, "--agent", "q", "--delay", "2", "--save", "x"],
-         "--delay is for --agent fixed"),
-        (["train", "--env", GRID, "--agent", "q", "--max-delay-estimate", "9", "--save", "x"],
-         "--max-delay-estimate is for --agent mmq"),
-        (["evaluate", "m.npz", "--env", "Nope-v9"], "unknown env id 'Nope-v9'"),
-        (["evaluate", "m.npz", "--env", GRID, "--steps", "5", "--episodes", "2"],
-         "not allowed with argument"),
+        ("frobnicate", "invalid choice: 'frobnicate'"),
+        (
+            "train --env delayed_rl/GridWorld-3x3 --agent q --save x",
+            "unknown env id 'delayed_rl/GridWorld-3x3'; did you mean delayed_rl/GridWorld-3x3-v0",
+        ),
+        (f"train --env {GRID} --agent sarsa --save x", "invalid choice: 'sarsa'"),
+        (f"train --env {GRID} --agent q", "the following arguments are required: --save"),
+        # a value of the wrong type (the checks' TypeError) and one out of range (ValueError)
+        (TRAIN + "--steps abc", "argument --steps: must be an integer >= 1, got 'abc' (str)"),
+        (TRAIN + "--steps 2.5", "argument --steps: must be an integer >= 1, got '2.5' (str)"),
+        (TRAIN + "--steps 0", "argument --steps: must be an integer >= 1, got 0"),
+        (TRAIN + "--gamma high", "argument --gamma: must be a number in [0, 1], got 'high' (str)"),
+        (TRAIN + "--gamma 1.5", "argument --gamma: must be a number in [0, 1], got 1.5"),
+        (TRAIN + "--learning-rate 0", "--learning-rate: must be a number in (0, 1], got 0.0"),
+        (TRAIN + "--reward-delay -2", "argument --reward-delay: must be a number >= 0, got -2.0"),
+        (TRAIN + "--q-init nan", "argument --q-init: must be a finite number, got nan"),
+        (TRAIN + "--seed -1", "argument --seed: must be an integer >= 0, got -1"),
+        (f"train --env {GRID} --agent fixed --save x", "--agent fixed needs --delay-estimate K"),
+        (TRAIN + "--delay-estimate 2", "--delay-estimate is for --agent fixed, not --agent q"),
+        (TRAIN + "--delay 2", "--delay-estimate is for --agent fixed, not --agent q"),
+        (TRAIN + "--max-delay-estimate 9", "--max-delay-estimate is for --agent mmq"),
+        ("evaluate m.npz --env Nope-v9", "unknown env id 'Nope-v9'"),
+        (f"evaluate m.npz --env {GRID} --steps 5 --episodes 2", "not allowed with argument"),
+        (f"evaluate m.npz --env {GRID} --episodes 0", "--episodes: must be an integer >= 1, got 0"),
+        ("bench nope", "argument name: invalid choice: 'nope'"),
+        ("bench delay-sweep --seeds 0", "argument --seeds: must be an integer >= 1, got 0"),
+        ("bench delay-sweep --workers 0", "argument --workers: must be an integer >= 1, got 0"),
+        ("bench delay-sweep --workers two", "--workers: must be an integer >= 1, got 'two' (str)"),
+        ("bench delay-sweep --backend spark", "argument --backend: invalid choice: 'spark'"),
+        ("reproduce --seed -3", "argument --seed: must be an integer >= 0, got -3"),
     ],
-)  # fmt: skip
-def test_bad_usage_exits_with_code_2(argv, message, capsys):
+)
+def test_bad_usage_exits_with_code_2(command, message, capsys):
     with pytest.raises(SystemExit) as exit_info:
-        main(argv)
+        main(command.split())
     assert exit_info.value.code == 2
     err = capsys.readouterr().err
-    assert message in err and "usage: delayed-rl" in err
+    assert "usage: delayed-rl" in err and "Traceback" not in err
+    errors = [line for line in err.splitlines() if "error:" in line]
+    assert len(errors) == 1 and message in errors[0], err
+
+
+def test_list_names_the_envs_agents_and_experiments(capsys):
+    assert main(["list"]) == 0
+    out = capsys.readouterr().out
+    assert "delayed_rl/GridWorld-9x9-v0" in out and "mmq-gridworld" in out
+    assert "  fixed: FixedDelayQLearning" in out
 
 
 def test_every_command_has_help(capsys):
@@ -144,9 +173,8 @@ def test_runtime_failures_exit_with_code_1_and_one_line(tmp_path, capsys):
 
     assert main(_train(tmp_path, "--agent", "q", "--steps", "50")) == 0
     capsys.readouterr()
-    other = ["evaluate", str(tmp_path / "agent.npz"), "--env", "delayed_rl/GridWorld-5x5-v0",
-             "--steps", "5"]  # fmt: skip
-    assert main(other) == 1
+    model = str(tmp_path / "agent.npz")
+    assert main(["evaluate", model, "--env", "delayed_rl/GridWorld-5x5-v0", "--steps", "5"]) == 1
     err = capsys.readouterr().err
     assert err.startswith("error: cannot load") and "Discrete(25)" in err and "Discrete(9)" in err
     assert err.count("\n") == 1
@@ -156,8 +184,8 @@ def test_runtime_failures_exit_with_code_1_and_one_line(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith("error: ") and "junk.npz" in err and err.count("\n") == 1
 
-    continuous = ["train", "--env", "CartPole-v1", "--agent", "q", "--steps", "10",
-                  "--save", str(tmp_path / "cart")]  # fmt: skip
+    cart = str(tmp_path / "cart")
+    continuous = ["train", "--env", "CartPole-v1", "--agent", "q", "--steps", "10", "--save", cart]
     assert main(continuous) == 1
     err = capsys.readouterr().err
     assert err.startswith("error: cannot train QLearning on CartPole-v1") and "Discrete" in err

@@ -1,4 +1,4 @@
-"""The experiment runner and the CLI: every experiment end to end in --quick mode."""
+"""The experiment runner and ``delayed-rl bench``: every experiment end to end in --quick mode."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ import pytest
 from delayed_rl.cli import main
 from delayed_rl.experiments import NAMES, Config, get_experiment, run_experiment
 from delayed_rl.experiments.runner import mean_ci95, run_tasks, running_average
+from delayed_rl.experiments.training import greedy_average_reward, grid_env
 
 
 @pytest.mark.slow
@@ -71,30 +72,55 @@ def test_running_average_is_the_cumulative_mean():
     np.testing.assert_allclose(values, [1.0, 0.5, 1.0, 1.0])
 
 
-def test_bad_runner_arguments():
-    with pytest.raises(ValueError, match="backend"):
-        run_tasks(len, [], 1, "spark")
-    with pytest.raises(ValueError, match="workers"):
-        run_tasks(len, [], 0, "loky")
-    with pytest.raises(ValueError, match="unknown experiment 'nope'"):
-        get_experiment("nope")
-
-
-def test_cli_list(capsys):
-    assert main(["list"]) == 0
-    out = capsys.readouterr().out
-    assert "delayed_rl/GridWorld-9x9-v0" in out and "mmq-gridworld" in out
-
-
 @pytest.mark.parametrize(
-    "argv", [["bench", "nope"], ["bench", "delay-sweep", "--seeds", "0"],
-             ["bench", "delay-sweep", "--backend", "spark"], ["frobnicate"]],
-)  # fmt: skip
-def test_cli_rejects_bad_input_with_exit_code_2(argv, capsys):
-    with pytest.raises(SystemExit) as exit_info:
-        main(argv)
-    assert exit_info.value.code == 2
-    assert "error" in capsys.readouterr().err
+    ("call", "error", "message"),
+    [
+        (lambda: run_tasks(len, [], 1, "spark"), ValueError, "backend must be one of ('loky'"),
+        (lambda: run_tasks(len, [], 1, 3), TypeError, "backend must be one of"),
+        (lambda: run_tasks(len, [], 0, "loky"), ValueError, "workers must be an integer >= 1"),
+        (lambda: run_tasks(len, [], 2.0, "loky"), TypeError, "workers must be an integer >= 1"),
+        (lambda: get_experiment("nope"), ValueError, "experiment must be one of ('delay-sweep'"),
+        (lambda: get_experiment(None), TypeError, "experiment must be one of"),
+        (lambda: running_average(np.ones(3), 0), ValueError, "points must be an integer >= 1"),
+        (lambda: Config(seeds=0), ValueError, "seeds must be None or an integer >= 1, got 0"),
+        (lambda: Config(seeds="3"), TypeError, "seeds must be None or an integer >= 1, got '3'"),
+        (lambda: Config(steps=-5), ValueError, "steps must be None or an integer >= 1, got -5"),
+        (lambda: Config(quick=1), TypeError, "quick must be a bool, got 1 (int)"),
+        (lambda: Config(workers=0), ValueError, "workers must be an integer >= 1, got 0"),
+        (lambda: Config(backend="spark"), ValueError, "backend must be one of"),
+        (lambda: Config(base_seed=-1), ValueError, "base_seed must be an integer >= 0, got -1"),
+    ],
+)
+def test_bad_runner_arguments(call, error, message):
+    with pytest.raises(error) as raised:
+        call()
+    assert str(raised.value).startswith(message)
+
+
+def test_bad_experiment_arguments():
+    from delayed_rl.experiments.linefollow import make_agent
+    from delayed_rl.experiments.mmq_gridworld import behaviour_policy
+
+    with pytest.raises(ValueError, match=r"kind must be one of \('MMQ', 'Q'\), got 'SARSA'"):
+        make_agent("SARSA", None, 0)
+    with pytest.raises(ValueError, match=r"epsilon must be a number in \[0, 1\], got 1.5"):
+        behaviour_policy(np.zeros((2, 1, 4)), epsilon=1.5)
+    with pytest.raises(TypeError, match="steps must be an integer >= 1"):
+        greedy_average_reward(None, 3, steps=10.0)
+
+
+def test_grid_tasks_pair_every_delayed_run_with_a_reference_of_its_world_and_seed():
+    from delayed_rl.experiments import world_size
+
+    tasks = world_size.tasks(Config(quick=True, seeds=2, base_seed=5))
+    references = [(t["size"], t["seed"]) for t in tasks if t.get("reference")]
+    assert references == [(size, seed) for seed in (5, 6) for size in (3, 5, 9)]
+    delayed = [t for t in tasks if not t.get("reference")]
+    assert sorted((t["size"], t["lam"], t["seed"]) for t in delayed) == sorted(
+        (size, lam, seed) for size in (3, 5, 9) for lam in (5, 50) for seed in (5, 6)
+    )
+    assert {t["steps"] for t in tasks} == {25_000}
+    assert all(t["lags"] == [0] and t["condition"].endswith(f"lambda={t['lam']}") for t in delayed)
 
 
 def test_cli_bench_quick_writes_report(tmp_path, capsys):
@@ -119,9 +145,7 @@ def test_line_following_tasks_follow_the_thesis_scale_and_seeds():
     )
     assert {t["steps"] for t in full} == {150_000}
     runs = controllers.tasks(Config(seeds=2, base_seed=3))
-    assert {t["controller"] for t in runs} == {
-        "P undelayed", "P delayed observations", "Q", "MMQ"
-    }  # fmt: skip
+    assert {t["controller"] for t in runs} == {"P undelayed", "P delayed observations", "Q", "MMQ"}
     assert {t["seed"] for t in runs} == {3, 4}
     assert {(t["train_steps"], t["run_steps"]) for t in runs} == {(300_000, 1700)}
     assert {t["steps"] for t in linefollow.tasks(Config(quick=True, seeds=1, steps=123))} == {123}
@@ -167,9 +191,15 @@ def _fake_linefollow(mmq: tuple[float, float], q: tuple[float, float], seeds: in
             tasks.append({"agent": agent, "steps": 10, "seed": seed})
             steps = np.array([5, 10])
             jitter = 0.01 * seed
-            results.append({"steps": steps, "curve": np.full(2, average + jitter),
-                            "error": np.array([error / 2, error]), "average": average + jitter,
-                            "total_error": error * (1 + jitter), "visible": 1.0})  # fmt: skip
+            result = {
+                "steps": steps,
+                "curve": np.full(2, average + jitter),
+                "error": np.array([error / 2, error]),
+                "average": average + jitter,
+                "total_error": error * (1 + jitter),
+                "visible": 1.0,
+            }
+            results.append(result)
     summary = summarize(tasks, results, Config(seeds=seeds))
     return {claim.quantity: claim for claim in summary.claims}
 
@@ -205,8 +235,15 @@ def _value_iteration_policy(env, gamma: float = 0.9, sweeps: int = 200) -> np.nd
     n_states, n_actions = env.observation_space.n, env.action_space.n
     v = np.zeros(n_states)
     for _ in range(sweeps):
-        q = np.array([[sum(p * (r + gamma * v[s2]) for p, s2, r, _ in env.P[s][a])
-                       for a in range(n_actions)] for s in range(n_states)])  # fmt: skip
+        q = np.array(
+            [
+                [
+                    sum(p * (r + gamma * v[s2]) for p, s2, r, _ in env.P[s][a])
+                    for a in range(n_actions)
+                ]
+                for s in range(n_states)
+            ]
+        )
         v = q.max(axis=1)
     return q.argmax(axis=1)
 
@@ -214,7 +251,6 @@ def _value_iteration_policy(env, gamma: float = 0.9, sweeps: int = 200) -> np.nd
 def test_mmq_gridworld_counts_the_optimal_loop_over_a_finite_walk():
     """The optimal policy's 1000-step greedy walk counts as the optimal loop, a detour does not."""
     from delayed_rl.experiments.mmq_gridworld import LOOP_FRACTION, SIZE
-    from delayed_rl.experiments.training import greedy_average_reward, grid_env
 
     env = grid_env(SIZE, 0).unwrapped
     policy = _value_iteration_policy(env)
@@ -229,8 +265,12 @@ def test_mmq_gridworld_counts_the_optimal_loop_over_a_finite_walk():
     # then back on the optimal route: two moves more, the 19-step loop
     size, start = SIZE, env.start_state
     detour = policy.copy()
-    for here, there in [(start - size, start - size - 1), (start - size - 1, start - 1),
-                        (start - 1, start - 2)]:  # fmt: skip
+    moves = [
+        (start - size, start - size - 1),
+        (start - size - 1, start - 1),
+        (start - 1, start - 2),
+    ]
+    for here, there in moves:
         detour[here] = _action(env, here, there)
     assert greedy_average_reward(Greedy(detour), SIZE) < LOOP_FRACTION * optimal
 

@@ -20,6 +20,14 @@ def _cache(q):
     return flat.max(axis=1), np.arange(q.shape[0]) * flat.shape[1] + flat.argmax(axis=1)
 
 
+def _run(run, q, cache, steps, start, alpha, gamma, eps_initial, eps_final, eps_steps):
+    """``run.run`` with the rule's constants in the kernel's order."""
+    return run.run(
+        q, *cache, steps, start_step=start, learning_rate=alpha, gamma=gamma,
+        eps_initial=eps_initial, eps_final=eps_final, eps_steps=eps_steps,
+    )  # fmt: skip
+
+
 def test_roulette_walk_through_tables_3_2_to_3_5():
     """Thesis section 3.2: q_init 50, α 0.1, γ 0.9, Λ = {0, 1, 2}; EVEN = 0, THIRTEEN = 1."""
     rounds = [(0, 0.0), (1, 35.0), (0, -1.0)]  # (wager, payout received that round)
@@ -39,20 +47,21 @@ def test_constant_delay_ring_delivers_k_steps_late():
     env = RewardDelay(gym.make("delayed_rl/GridWorld-3x3-v0").unwrapped, Constant(3))
     run = FusedRun(env, np.array([0]), seed=1)
     q = np.zeros((9, 1, 4))
-    log = run.run(q, *_cache(q), 5000, 0, 0.1, 0.9, 1.0, 1.0, 1)
-    np.testing.assert_array_equal(log["reward"][3:], log["undelayed_reward"][:-3])
-    assert not log["reward"][:3].any()
+    log = _run(run, q, _cache(q), 5000, 0, 0.1, 0.9, 1.0, 1.0, 1)
+    np.testing.assert_array_equal(log.reward[3:], log.undelayed_reward[:-3])
+    assert not log.reward[:3].any()
 
 
 def test_flush_at_episode_end_conserves_each_episode():
     env = gym.make("delayed_rl/GridWorld-v0", size=4, max_steps=50, reward_delay=8)
     run = FusedRun(env, np.array([0, 4]), seed=2)
     q = np.zeros((16, 2, 4))
-    log = run.run(q, *_cache(q), 5000, 0, 0.1, 0.9, 0.5, 0.5, 1)
-    ends = np.flatnonzero(log["episode_end"]) + 1
+    log = _run(run, q, _cache(q), 5000, 0, 0.1, 0.9, 0.5, 0.5, 1)
+    ends = np.flatnonzero(log.episode_end) + 1
     assert ends.size == 100
-    for delivered, undelayed in zip(np.split(log["reward"], ends)[:-1],
-                                    np.split(log["undelayed_reward"], ends)[:-1], strict=True):  # fmt: skip
+    delivered_parts = np.split(log.reward, ends)[:-1]
+    undelayed_parts = np.split(log.undelayed_reward, ends)[:-1]
+    for delivered, undelayed in zip(delivered_parts, undelayed_parts, strict=True):
         assert delivered.sum() == pytest.approx(undelayed.sum())
 
 
@@ -61,13 +70,10 @@ def test_same_seed_same_run_and_tables_follow_the_env():
     logs = []
     for _ in range(2):
         q = np.zeros((1, 1, 2))
-        logs.append(
-            FusedRun(env, np.array([0]), seed=7).run(
-                q, *_cache(q), 38_000, 0, 0.1, 0.9, 1.0, 1.0, 1
-            )
-        )
-    np.testing.assert_array_equal(logs[0]["undelayed_reward"], logs[1]["undelayed_reward"])
-    even = logs[0]["undelayed_reward"][logs[0]["action"] == 0]
+        run = FusedRun(env, np.array([0]), seed=7)
+        logs.append(_run(run, q, _cache(q), 38_000, 0, 0.1, 0.9, 1.0, 1.0, 1))
+    np.testing.assert_array_equal(logs[0].undelayed_reward, logs[1].undelayed_reward)
+    even = logs[0].undelayed_reward[logs[0].action == 0]
     win = (even == 1).mean()
     se = np.sqrt(18 / 38 * 20 / 38 / even.size)
     assert abs(win - 18 / 38) < 4 * se
@@ -89,7 +95,7 @@ def test_cached_maxima_stay_exact(q_init):
     q = np.full((16, 8, 4), q_init)
     qmax, qcell = _cache(q)
     run = FusedRun(env, np.arange(8), seed=3)
-    run.run(q, qmax, qcell, 20_000, 0, 0.3, 0.9, 0.2, 0.2, 1)
+    _run(run, q, (qmax, qcell), 20_000, 0, 0.3, 0.9, 0.2, 0.2, 1)
     brute = q.reshape(16, -1).max(axis=1)
     np.testing.assert_array_equal(qmax, brute)
     np.testing.assert_array_equal(run.tie_counts, (q.reshape(16, -1) == brute[:, None]).sum(1))
@@ -115,13 +121,19 @@ def test_tie_counts_kept_within_a_call_match_a_fresh_count(env_id, kwargs):
         q = np.zeros((env.observation_space.n, 6, env.action_space.n))
         cache = _cache(q)
         run = FusedRun(env, np.arange(6), seed=9)
-        parts = [run.run(q, *cache, chunk, start, 1.0, 0.0, 0.1, 0.1, 1)
-                 for start in range(0, 3000, chunk)]  # fmt: skip
-        logs.append({key: np.concatenate([p[key] for p in parts]) for key in parts[0]})
+        parts = [
+            _run(run, q, cache, chunk, start, 1.0, 0.0, 0.1, 0.1, 1)
+            for start in range(0, 3000, chunk)
+        ]
+        logs.append(
+            {key: np.concatenate([getattr(p, key) for p in parts]) for key in parts[0]._fields}
+        )
         tables.append(q)
         fresh = (q.reshape(q.shape[0], -1) == q.reshape(q.shape[0], -1).max(1)[:, None]).sum(1)
         np.testing.assert_array_equal(run.tie_counts, fresh)
-    assert len(np.unique(logs[0]["model"])) == 6  # ties were broken among all the models
+    assert (
+        len(np.unique(logs[0]["acting_delay_index"])) == 6
+    )  # ties were broken among all the models
     for key in logs[0]:
         np.testing.assert_array_equal(logs[0][key], logs[1][key], err_msg=key)
     np.testing.assert_array_equal(tables[0], tables[1])
@@ -165,9 +177,9 @@ def test_compiled_delay_ring_matches_the_wrapper(mode, delay, max_delay):
     grid = gym.make("delayed_rl/GridWorld-v0", size=4, max_steps=40).unwrapped
     env = RewardDelay(grid, ScriptedDelay(draws), max_delay=max_delay, on_episode_end=mode)
     q = np.zeros((16, 1, 4))
-    log = FusedRun(env, np.array([0]), seed=5).run(q, *_cache(q), 4000, 0, 0.1, 0.9, 1.0, 1.0, 1)
-    assert log["episode_end"].sum() == 100 and np.count_nonzero(log["undelayed_reward"]) > 100
-    replay = _Replay(log["undelayed_reward"], log["episode_end"], log["terminated"])
+    log = _run(FusedRun(env, np.array([0]), seed=5), q, _cache(q), 4000, 0, 0.1, 0.9, 1.0, 1.0, 1)
+    assert log.episode_end.sum() == 100 and np.count_nonzero(log.undelayed_reward) > 100
+    replay = _Replay(log.undelayed_reward, log.episode_end, log.terminated)
     wrapper = RewardDelay(replay, ScriptedDelay(draws), max_delay=max_delay, on_episode_end=mode)
     wrapper.reset(seed=0)
     delivered = []
@@ -176,4 +188,4 @@ def test_compiled_delay_ring_matches_the_wrapper(mode, delay, max_delay):
         delivered.append(reward)
         if terminated or truncated:
             wrapper.reset()
-    np.testing.assert_allclose(log["reward"], delivered, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(log.reward, delivered, rtol=0, atol=1e-9)

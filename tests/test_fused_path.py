@@ -92,7 +92,7 @@ def test_auto_falls_back_and_can_be_switched_off_or_forced():
     plain = QLearning("delayed_rl/GridWorld-3x3-v0", seed=0)
     assert plain.learn(500).last_learn_path == "fused"
     assert plain.learn(500, fused=False).last_learn_path == "python"
-    with pytest.raises(ValueError, match="fused"):
+    with pytest.raises(TypeError, match="fused must be a bool"):
         plain.learn(10, fused="yes")
 
 
@@ -113,7 +113,7 @@ def test_fused_fills_the_diagnostics_and_the_record():
 
 
 def test_grid_dynamics_and_cache_hold_on_the_fused_path():
-    agent = FixedDelayQLearning(gym.make("delayed_rl/GridWorld-3x3-v0"), delay=0, seed=4)
+    agent = FixedDelayQLearning(gym.make("delayed_rl/GridWorld-3x3-v0"), delay_estimate=0, seed=4)
     agent.learn(4000, record=True)
     log = agent.training_log
     env = gym.make("delayed_rl/GridWorld-3x3-v0").unwrapped

@@ -12,16 +12,18 @@ All share :class:`~delayed_rl.agents.base.TabularAgent`: ``learn``, ``predict``,
 ``save``/``load``, ``get_env``/``set_env``, ``logger``, and SB3 callbacks.
 """
 
-from delayed_rl.agents.base import RECORD_KEYS, TabularAgent
+from delayed_rl.agents.base import RECORD_KEYS, TabularAgent, load_agent
+from delayed_rl.agents.defaults import DEFAULTS, AgentDefaults
 from delayed_rl.agents.mmq import MMQ, MultipleModelQLearning
 from delayed_rl.agents.qlearning import FixedDelayQLearning, QLearning
 from delayed_rl.agents.schedules import ConstantSchedule, LinearSchedule
-from delayed_rl.agents.serialization import load_agent
 
 __all__ = [
+    "DEFAULTS",
     "MMQ",
     "ProportionalController",
     "RECORD_KEYS",
+    "AgentDefaults",
     "ConstantSchedule",
     "FixedDelayQLearning",
     "LinearSchedule",

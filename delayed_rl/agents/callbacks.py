@@ -124,24 +124,29 @@ class CallbackList(BaseCallback):
         self.callbacks = list(callbacks)
 
     def init_callback(self, model: Any) -> None:
+        """Remember the agent, in every callback."""
         super().init_callback(model)
         for callback in self.callbacks:
             callback.init_callback(model)
 
     def on_training_start(self, locals_: dict[str, Any], globals_: dict[str, Any]) -> None:
+        """Start every callback."""
         super().on_training_start(locals_, globals_)
         for callback in self.callbacks:
             callback.on_training_start(locals_, globals_)
 
     def on_rollout_start(self) -> None:
+        """Call every callback's ``on_rollout_start``."""
         for callback in self.callbacks:
             callback.on_rollout_start()
 
     def update_locals(self, locals_: dict[str, Any]) -> None:
+        """Refresh every callback's ``locals``."""
         for callback in self.callbacks:
             callback.update_locals(locals_)
 
     def on_step(self) -> bool:
+        """Step every callback (all of them, even after a ``False``); ``False`` if any said so."""
         super().on_step()
         continue_training = True
         for callback in self.callbacks:
@@ -149,10 +154,12 @@ class CallbackList(BaseCallback):
         return continue_training
 
     def on_rollout_end(self) -> None:
+        """Call every callback's ``on_rollout_end``."""
         for callback in self.callbacks:
             callback.on_rollout_end()
 
     def on_training_end(self) -> None:
+        """End every callback."""
         for callback in self.callbacks:
             callback.on_training_end()
 

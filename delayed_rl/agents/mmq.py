@@ -19,14 +19,18 @@ The agent keeps one Q-table per delay hypothesis λ̂ ∈ Λ, stacked as ``q_tab
 from __future__ import annotations
 
 import numbers
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
+from delayed_rl._delay_line import ring_size
 from delayed_rl._validation import check_int
+from delayed_rl.agents._fused import CompiledTables
+from delayed_rl.agents._random import UniformStream
 from delayed_rl.agents.base import TabularAgent
+from delayed_rl.agents.defaults import DEFAULTS
 from delayed_rl.agents.schedules import Schedule
 
 __all__ = ["MMQ", "MultipleModelQLearning", "greedy_actions"]
@@ -105,7 +109,7 @@ class MultipleModelQLearning(TabularAgent):
     λ̂ ∈ Λ. Each step's reward is credited, in table λ̂, to the transition λ̂ steps back; the agent
     acts from the table whose best value is highest, so it learns which delay hypothesis pays
     (see the module docstring for the exact rule). ``QLearning`` is the case Λ = {0} and
-    ``FixedDelayQLearning(delay=k)`` the case Λ = {k}.
+    ``FixedDelayQLearning(delay_estimate=k)`` the case Λ = {k}.
 
     Args:
         env: the training env (``Discrete`` observation and action spaces) or an env id.
@@ -140,19 +144,21 @@ class MultipleModelQLearning(TabularAgent):
     def __init__(
         self,
         env: gym.Env | str,
-        learning_rate: float | Schedule = 0.1,
-        gamma: float = 0.9,
-        exploration_initial_eps: float = 0.1,
-        exploration_final_eps: float = 0.1,
-        exploration_fraction: float = 0.1,
-        q_init: float = 0.0,
+        learning_rate: float | Schedule = DEFAULTS.learning_rate,
+        gamma: float = DEFAULTS.gamma,
+        exploration_initial_eps: float = DEFAULTS.exploration_initial_eps,
+        exploration_final_eps: float = DEFAULTS.exploration_final_eps,
+        exploration_fraction: float = DEFAULTS.exploration_fraction,
+        q_init: float = DEFAULTS.q_init,
         max_delay_estimate: int | None = None,
         delay_step: int | None = None,
         delay_estimates: Sequence[int] | None = None,
         seed: int | None = None,
         verbose: int = 0,
     ):
-        self._delays = check_delay_estimates(max_delay_estimate, delay_step, delay_estimates)
+        self._delay_estimates = check_delay_estimates(
+            max_delay_estimate, delay_step, delay_estimates
+        )
         super().__init__(
             env,
             learning_rate=learning_rate,
@@ -169,7 +175,7 @@ class MultipleModelQLearning(TabularAgent):
     @property
     def delay_estimates(self) -> list[int]:
         """Λ, the delay hypotheses (sorted): ``q_table[:, i, :]`` assumes delay ``Λ[i]``."""
-        return self._delays.tolist()
+        return self._delay_estimates.tolist()
 
     @property
     def q_table(self) -> np.ndarray:
@@ -179,26 +185,26 @@ class MultipleModelQLearning(TabularAgent):
         return view
 
     def _setup_model(self) -> None:
-        n_models = len(self._delays)
-        self._n_models = n_models
+        n_models = len(self._delay_estimates)
+        self.n_models = n_models
         self._q = np.full((self.n_states, n_models, self.n_actions), self.q_init)
         self._q_rows = self._q.reshape(self.n_states, n_models * self.n_actions)  # views
         self._q_flat = self._q.reshape(-1)
         self._row_size = n_models * self.n_actions
         self._model_offset = np.arange(n_models, dtype=np.int64) * self.n_actions
         self._rebuild_cache()
-        self._first_lag = int(self._delays[0])
-        self._max_lag = int(self._delays[-1])
-        history = 1 << int(self._max_lag).bit_length()  # a power of two > the largest lag
+        self._smallest_estimate = int(self._delay_estimates[0])
+        self._largest_estimate = int(self._delay_estimates[-1])
+        history = ring_size(self._largest_estimate + 1)
         self._history_mask = history - 1
         self._hist_s = np.zeros(history, dtype=np.int64)
         self._hist_s2 = np.zeros(history, dtype=np.int64)
         self._hist_cell = np.zeros(history, dtype=np.int64)  # s·|Λ||A| + a: model 0's cell
-        # how many models can learn at episode step t < max lag: those with lag <= t
+        # how many models can learn at episode step t < max Λ: those with λ̂ <= t
         self._n_valid = np.searchsorted(
-            self._delays, np.arange(self._max_lag + 1), side="right"
+            self._delay_estimates, np.arange(self._largest_estimate + 1), side="right"
         ).tolist()
-        self._zero_lag = bool(self._delays[0] == 0)
+        self._has_zero_estimate = bool(self._delay_estimates[0] == 0)
         self._t = 0
 
     def _rebuild_cache(self) -> None:
@@ -210,12 +216,13 @@ class MultipleModelQLearning(TabularAgent):
     def _end_episode(self) -> None:
         self._t = 0
 
-    def _n_models_for_stats(self) -> int:
-        return self._n_models
+    def compiled_tables(self) -> CompiledTables:
+        """The Q-table, its cache and Λ: MMQ's rule runs compiled for every Λ."""
+        return CompiledTables(self._q, self._v_max, self._v_cell, self._delay_estimates)
 
     # ------------------------------------------------------------------ acting
-    def _choose(self, s: int, eps: float, uniform: Callable[[], float]) -> tuple[int, int]:
-        n_actions, n_models = self.n_actions, self._n_models
+    def _choose(self, s: int, eps: float, uniform: UniformStream) -> tuple[int, int]:
+        n_actions, n_models = self.n_actions, self.n_models
         actions: Any = None
         if n_models > 1 and uniform() < eps:
             model = int(uniform() * n_models)
@@ -258,10 +265,10 @@ class MultipleModelQLearning(TabularAgent):
         Ties go to the smallest estimate. Returns an ``int`` for one observation and an ``int64``
         array for a batch.
         """
-        index, single = self._obs_indices(observation)
+        index, single = self._obs_index.indices(observation, "observation")
         flat = index.reshape(-1)
         models = self._q_rows[flat].argmax(axis=1) // self.n_actions
-        delays = self._delays[models]
+        delays = self._delay_estimates[models]
         return int(delays[0]) if single else delays
 
     # ------------------------------------------------------------------ learning
@@ -274,11 +281,11 @@ class MultipleModelQLearning(TabularAgent):
         self._hist_s[j] = s
         self._hist_s2[j] = s2
         self._hist_cell[j] = s * self._row_size + a
-        n = self._n_models if t >= self._max_lag else self._n_valid[t]
+        n = self.n_models if t >= self._largest_estimate else self._n_valid[t]
         if n == 1:
-            self._update_first_model((t - self._first_lag) & mask, r, terminated)
+            self._update_first_model((t - self._smallest_estimate) & mask, r, terminated)
         elif n:
-            self._update_models(n, (t - self._delays[:n]) & mask, r, terminated)
+            self._update_models(n, (t - self._delay_estimates[:n]) & mask, r, terminated)
         self.num_timesteps += 1
         self._t = 0 if (terminated or truncated) else t + 1
 
@@ -288,8 +295,8 @@ class MultipleModelQLearning(TabularAgent):
         states = self._hist_s[positions]
         cells = self._hist_cell[positions] + self._model_offset[:n]
         bootstrap = v_max[self._hist_s2[positions]]
-        if terminated and self._zero_lag:
-            bootstrap[0] = 0.0  # only the current step (lag 0) can be terminal in an episode
+        if terminated and self._has_zero_estimate:
+            bootstrap[0] = 0.0  # only the current step (λ̂ = 0) can be terminal in an episode
         target = r + self.gamma * bootstrap
         q_flat = self._q_flat
         old = q_flat[cells]
@@ -316,7 +323,9 @@ class MultipleModelQLearning(TabularAgent):
         s = self._hist_s.item(position)
         cell = self._hist_cell.item(position)
         bootstrap = (
-            0.0 if terminated and self._zero_lag else v_max.item(self._hist_s2.item(position))
+            0.0
+            if terminated and self._has_zero_estimate
+            else v_max.item(self._hist_s2.item(position))
         )
         target = r + self.gamma * bootstrap
         old = q_flat.item(cell)
@@ -342,28 +351,29 @@ class MultipleModelQLearning(TabularAgent):
 
         Indexed like :attr:`delay_estimates`; all zeros before any training step.
         """
-        counts = np.asarray(self._acting_counts, dtype=np.float64)
+        counts = np.asarray(self._statistics.acting_counts, dtype=np.float64)
         total = counts.sum()
         return counts / total if total else counts
 
     def _record_model_metrics(self, logger: Any) -> None:
-        if self._n_models == 1:
+        if self.n_models == 1:
             return
-        counts = np.asarray(self._acting_counts) - np.asarray(self._log_counts)
-        self._log_counts = list(self._acting_counts)
+        counts = self._statistics.acting_counts_since_log()
         total = counts.sum()
         if total:
-            logger.record("mmq/acting_delay_mean", float(counts @ self._delays / total))
-            logger.record("mmq/acting_delay_mode", int(self._delays[int(np.argmax(counts))]))
+            logger.record("mmq/acting_delay_mean", float(counts @ self._delay_estimates / total))
+            logger.record(
+                "mmq/acting_delay_mode", int(self._delay_estimates[int(np.argmax(counts))])
+            )
             logger.record("mmq/acting_delay_mode_share", float(counts.max() / total))
 
     # ------------------------------------------------------------------ persistence
     def _get_state_arrays(self) -> dict[str, np.ndarray]:
-        return {"q_table": self._q.copy(), "delay_estimates": self._delays.copy()}
+        return {"q_table": self._q.copy(), "delay_estimates": self._delay_estimates.copy()}
 
     def _set_state_arrays(self, arrays: dict[str, np.ndarray], where: str) -> None:
         q = arrays.get("q_table")
-        expected = (self.n_states, self._n_models, self.n_actions)
+        expected = (self.n_states, self.n_models, self.n_actions)
         if q is None or q.dtype != np.float64 or q.shape != expected:
             got = "missing" if q is None else f"{q.dtype} array of shape {q.shape}"
             raise ValueError(
@@ -372,7 +382,7 @@ class MultipleModelQLearning(TabularAgent):
         if not np.all(np.isfinite(q)):
             raise ValueError(f"{where}: q_table holds non-finite values")
         delays = arrays.get("delay_estimates")
-        if delays is None or not np.array_equal(delays, self._delays):
+        if delays is None or not np.array_equal(delays, self._delay_estimates):
             raise ValueError(
                 f"{where}: the delay_estimates array ({delays!r}) does not match the "
                 f"metadata ({self.delay_estimates})"
@@ -382,7 +392,7 @@ class MultipleModelQLearning(TabularAgent):
 
     def _set_hyperparameters(self, *, delay_estimates: Any = None, **kwargs: Any) -> None:
         if delay_estimates is not None:
-            self._delays = check_delay_estimates(None, None, delay_estimates)
+            self._delay_estimates = check_delay_estimates(None, None, delay_estimates)
         super()._set_hyperparameters(**kwargs)
 
 

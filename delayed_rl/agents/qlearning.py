@@ -1,7 +1,7 @@
 """Q-learning and fixed-delay Q-learning: Multiple Model Q-learning with a single model.
 
 ``QLearning`` is MMQ with Λ = {0} (every reward credited to the step that just happened, the
-textbook rule, thesis Eq. 3.2); ``FixedDelayQLearning(delay=k)`` is MMQ with Λ = {k} (every
+textbook rule, thesis Eq. 3.2); ``FixedDelayQLearning(delay_estimate=k)`` is MMQ with Λ = {k} (every
 reward credited to the step ``k`` steps back, the constant-delay agents of thesis Fig. 5.6). Both
 run MMQ's code, so ``QLearning`` and ``MultipleModelQLearning(delay_estimates=[0])`` produce
 identical tables for the same seed and env.
@@ -9,11 +9,13 @@ identical tables for the same seed and env.
 
 from __future__ import annotations
 
+import warnings
 from typing import Any
 
 import gymnasium as gym
 
 from delayed_rl._validation import check_int
+from delayed_rl.agents.defaults import DEFAULTS
 from delayed_rl.agents.mmq import MultipleModelQLearning
 from delayed_rl.agents.schedules import Schedule
 
@@ -50,12 +52,12 @@ class QLearning(MultipleModelQLearning):
     def __init__(
         self,
         env: gym.Env | str,
-        learning_rate: float | Schedule = 0.1,
-        gamma: float = 0.9,
-        exploration_initial_eps: float = 0.1,
-        exploration_final_eps: float = 0.1,
-        exploration_fraction: float = 0.1,
-        q_init: float = 0.0,
+        learning_rate: float | Schedule = DEFAULTS.learning_rate,
+        gamma: float = DEFAULTS.gamma,
+        exploration_initial_eps: float = DEFAULTS.exploration_initial_eps,
+        exploration_final_eps: float = DEFAULTS.exploration_final_eps,
+        exploration_fraction: float = DEFAULTS.exploration_fraction,
+        q_init: float = DEFAULTS.q_init,
         seed: int | None = None,
         verbose: int = 0,
     ):
@@ -79,16 +81,20 @@ class QLearning(MultipleModelQLearning):
 
 
 class FixedDelayQLearning(MultipleModelQLearning):
-    """Q-learning that assumes every reward arrives exactly ``delay`` steps late.
+    """Q-learning that assumes every reward arrives exactly ``delay_estimate`` steps late.
 
-    The reward received at step ``t`` is credited to the transition of step ``t − delay``
-    (steps before the episode's start are not updated). Under a constant delay ``k`` with
-    ``delay=k`` this is exact credit assignment; under random delays it is right only as often as
-    the delay equals ``delay`` (thesis Eq. 3.8 and Fig. 5.6). It acts from its only table.
+    The reward received at step ``t`` is credited to the transition of step
+    ``t − delay_estimate`` (steps before the episode's start are not updated). Under a constant
+    delay ``k`` with ``delay_estimate=k`` this is exact credit assignment; under random delays it
+    is right only as often as the delay equals ``delay_estimate`` (thesis Eq. 3.8 and Fig. 5.6).
+    It acts from its only table: MMQ with Λ = {``delay_estimate``}.
 
     Args:
         env: the training env (``Discrete`` observation and action spaces) or an env id.
-        delay: the assumed delay, an integer >= 0 (0 is plain Q-learning).
+        delay_estimate: the assumed delay, a number of steps (an integer >= 0; 0 is plain
+            Q-learning). Called ``delay`` before version 0.2, a name now kept for delay
+            *distributions* (:mod:`delayed_rl.delays`); ``delay=`` still works, with a
+            ``DeprecationWarning``.
         learning_rate: α in (0, 1], or a schedule of the progress remaining (as in SB3).
         gamma: the discount factor γ in [0, 1].
         exploration_initial_eps: ε at the start of ``learn()``.
@@ -102,17 +108,30 @@ class FixedDelayQLearning(MultipleModelQLearning):
     def __init__(
         self,
         env: gym.Env | str,
-        delay: int,
-        learning_rate: float | Schedule = 0.1,
-        gamma: float = 0.9,
-        exploration_initial_eps: float = 0.1,
-        exploration_final_eps: float = 0.1,
-        exploration_fraction: float = 0.1,
-        q_init: float = 0.0,
+        delay_estimate: int | None = None,
+        learning_rate: float | Schedule = DEFAULTS.learning_rate,
+        gamma: float = DEFAULTS.gamma,
+        exploration_initial_eps: float = DEFAULTS.exploration_initial_eps,
+        exploration_final_eps: float = DEFAULTS.exploration_final_eps,
+        exploration_fraction: float = DEFAULTS.exploration_fraction,
+        q_init: float = DEFAULTS.q_init,
         seed: int | None = None,
         verbose: int = 0,
+        *,
+        delay: int | None = None,
     ):
-        check_int("delay", delay, 0)
+        if delay is not None:
+            if delay_estimate is not None:
+                raise TypeError("give delay_estimate (delay is its deprecated name), not both")
+            warnings.warn(
+                "FixedDelayQLearning(delay=k) is deprecated: use delay_estimate=k",
+                DeprecationWarning,
+                stacklevel=2,
+            )
+            delay_estimate = delay
+        if delay_estimate is None:
+            raise TypeError("FixedDelayQLearning needs delay_estimate, the assumed delay in steps")
+        check_int("delay_estimate", delay_estimate, 0)
         super().__init__(
             env,
             learning_rate=learning_rate,
@@ -121,15 +140,25 @@ class FixedDelayQLearning(MultipleModelQLearning):
             exploration_final_eps=exploration_final_eps,
             exploration_fraction=exploration_fraction,
             q_init=q_init,
-            delay_estimates=[int(delay)],
+            delay_estimates=[int(delay_estimate)],
             seed=seed,
             verbose=verbose,
         )
 
     @property
+    def delay_estimate(self) -> int:
+        """The assumed delay, in steps."""
+        return int(self._delay_estimates[0])
+
+    @property
     def delay(self) -> int:
-        """The assumed delay."""
-        return int(self._delays[0])
+        """Deprecated name of :attr:`delay_estimate`."""
+        warnings.warn(
+            "FixedDelayQLearning.delay is deprecated: read delay_estimate",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return self.delay_estimate
 
     def _set_hyperparameters(self, *, delay_estimates: Any = None, **kwargs: Any) -> None:
         if delay_estimates is not None and len(delay_estimates) != 1:

@@ -10,43 +10,22 @@ A schedule is a callable of ``progress_remaining``, which falls from 1 at the st
 from __future__ import annotations
 
 import math
-import numbers
 from collections.abc import Callable
 from typing import Any
+
+from delayed_rl._validation import check_fraction
 
 __all__ = [
     "ConstantSchedule",
     "LinearSchedule",
     "Schedule",
-    "check_fraction",
-    "check_probability",
+    "as_learning_rate_schedule",
+    "check_schedule_value",
     "schedule_from_json",
     "schedule_to_json",
 ]
 
 Schedule = Callable[[float], float]
-
-
-def _check_real(name: str, value: Any, low: float, high: float, allowed: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise TypeError(f"{name} must be a real number ({allowed}), got {value!r}")
-    value = float(value)
-    if not (low <= value <= high):  # also rejects NaN
-        raise ValueError(f"{name} must be {allowed}, got {value!r}")
-    return value
-
-
-def check_probability(name: str, value: Any) -> float:
-    """Return ``value`` as a float after checking that it lies in [0, 1]."""
-    return _check_real(name, value, 0.0, 1.0, "a number in [0, 1]")
-
-
-def check_fraction(name: str, value: Any) -> float:
-    """Return ``value`` as a float after checking that it lies in (0, 1]."""
-    value = _check_real(name, value, 0.0, 1.0, "a number in (0, 1]")
-    if value == 0.0:
-        raise ValueError(f"{name} must be a number in (0, 1], got {value!r}")
-    return value
 
 
 class ConstantSchedule:
@@ -60,6 +39,7 @@ class ConstantSchedule:
         self.value = float(value)
 
     def __call__(self, progress_remaining: float) -> float:
+        """The value, whatever the progress."""
         return self.value
 
     def __repr__(self) -> str:
@@ -84,6 +64,7 @@ class LinearSchedule:
         self.end_fraction = check_fraction("end_fraction", end_fraction)
 
     def __call__(self, progress_remaining: float) -> float:
+        """The value at ``progress_remaining`` (1 at the start of training, 0 at its end)."""
         progress = 1.0 - progress_remaining
         if progress > self.end_fraction:
             return self.end
@@ -136,8 +117,10 @@ def schedule_to_json(schedule: Schedule, current_value: float) -> dict[str, Any]
 
 
 def schedule_from_json(data: dict[str, Any]) -> Schedule | float:
-    """Rebuild what :func:`schedule_to_json` described: a constant (or a callable schedule,
-    which cannot be stored) comes back as its value."""
+    """Rebuild what :func:`schedule_to_json` described.
+
+    A constant (or a callable schedule, which cannot be stored) comes back as its value.
+    """
     kind = data["type"]
     if kind == "linear":
         return LinearSchedule(data["start"], data["end"], data["end_fraction"])

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib
 
+from delayed_rl._validation import check_choice
 from delayed_rl.experiments.runner import Config, Experiment, Summary, run_experiment
 
 _MODULES = {
@@ -15,13 +16,18 @@ _MODULES = {
     "controllers": "controllers",
     "linefollow": "linefollow",
 }
+#: The experiments' names, as ``delayed-rl bench NAME`` takes them.
 NAMES = tuple(_MODULES)
 
 
 def get_experiment(name: str) -> Experiment:
-    """The experiment called ``name`` (one of :data:`NAMES`)."""
-    if name not in _MODULES:
-        raise ValueError(f"unknown experiment {name!r}; choose one of {', '.join(NAMES)}")
+    """The experiment called ``name`` (one of :data:`NAMES`), its module imported on demand.
+
+    Raises:
+        TypeError: ``name`` is not a string.
+        ValueError: ``name`` is not one of :data:`NAMES`.
+    """
+    check_choice("experiment", name, NAMES)
     return importlib.import_module(f"delayed_rl.experiments.{_MODULES[name]}").EXPERIMENT
 
 

@@ -26,16 +26,16 @@ from __future__ import annotations
 import numpy as np
 
 from delayed_rl.experiments import plotting
-from delayed_rl.experiments.common import claim
-from delayed_rl.experiments.linefollow import LAM, LAMBDA_MAX, line_env, line_error, make_agent
-from delayed_rl.experiments.runner import (
-    Config,
-    Curve,
-    Experiment,
-    Summary,
-    mean_ci95,
-    running_average,
+from delayed_rl.experiments.common import claim, mean_ci_n
+from delayed_rl.experiments.linefollow import (
+    LAM,
+    LAMBDA_MAX,
+    line_env,
+    line_error,
+    line_statistics,
+    make_agent,
 )
+from delayed_rl.experiments.runner import Config, Curve, Experiment, Summary, running_average
 
 RUN_STEPS = 1700
 #: Thesis Fig. 5.19's final average rewards, in the thesis's order of performance.
@@ -44,6 +44,11 @@ TOLERANCE = 0.2
 
 
 def tasks(config: Config) -> list[dict]:
+    """Per seed, one run of each of the four controllers.
+
+    The learners train for 300k steps first (2k with ``config.quick``); every run lasts 1700
+    steps (300 with ``config.quick``).
+    """
     train_steps = config.steps or (2_000 if config.quick else 300_000)
     run_steps = 300 if config.quick else RUN_STEPS
     return [
@@ -52,7 +57,7 @@ def tasks(config: Config) -> list[dict]:
             "train_steps": train_steps,
             "run_steps": run_steps,
             "seed": config.base_seed + i,
-        }  # fmt: skip
+        }
         for i in range(config.seeds)
         for name in THESIS
     ]
@@ -90,6 +95,13 @@ def _run_learner(kind: str, train_steps: int, steps: int, seed: int) -> tuple[np
 
 
 def run_task(task: dict) -> dict:
+    """One controller's run: its running average reward, accumulated error and line visibility.
+
+    Returns:
+        ``steps`` and ``curve`` (the running average reward over the run), ``average`` (its
+        final value), ``total_error`` (Σ|Δ| over the run) and ``visible`` (the fraction of
+        steps whose camera saw the line).
+    """
     name, seed, steps = task["controller"], task["seed"], task["run_steps"]
     if name.startswith("P "):
         rewards, centroids = _run_proportional(name != "P undelayed", steps, seed)
@@ -106,38 +118,51 @@ def run_task(task: dict) -> dict:
 
 
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
+    """Fig. 5.19's claims: each controller's final average reward, and their order."""
     runs: dict[str, list[dict]] = {name: [] for name in THESIS}
     curves = []
     for task, result in zip(task_list, results, strict=True):
         runs[task["controller"]].append(result)
         curves.append(Curve(task["controller"], task["seed"], result["steps"], result["curve"]))
-    stat = {n: mean_ci95([r["average"] for r in rs]) + (len(rs),) for n, rs in runs.items()}
+    stat = {name: mean_ci_n([r["average"] for r in rs]) for name, rs in runs.items()}
+    run_steps = task_list[0]["run_steps"]
     claims = [
-        claim(f"{name}: average reward after {task_list[0]['run_steps']} steps",
-              f"≈ {value:+.1f} (Fig. 5.19)", stat[name],
-              ok=abs(stat[name][0] - value) <= TOLERANCE,
-              note=f"agrees when |measured − thesis| ≤ {TOLERANCE}")
+        claim(
+            f"{name}: average reward after {run_steps} steps",
+            f"≈ {value:+.1f} (Fig. 5.19)",
+            stat[name],
+            ok=abs(stat[name][0] - value) <= TOLERANCE,
+            note=f"agrees when |measured − thesis| ≤ {TOLERANCE}",
+        )
         for name, value in THESIS.items()
-    ]  # fmt: skip
+    ]
     means = [stat[name][0] for name in THESIS]
     in_order = sum(a > b for a, b in zip(means, means[1:], strict=False))
-    claims.append(claim(
-        "ordered pairs in P > MMQ > Q > delayed P (of 3)", "3 (Fig. 5.19)",
-        (float(in_order), 0.0, config.seeds), ok=in_order == 3,
-        note="measured order: " + " > ".join(sorted(THESIS, key=lambda n: -stat[n][0]))))  # fmt: skip
-    groups = {n: [(r["steps"], r["curve"]) for r in rs] for n, rs in runs.items()}
-    figures = {"fig5_19_controllers": lambda path: plotting.learning_curves(
-        path, groups, f"line following, λ = {LAM}: controllers' performance (Fig. 5.19)",
-        "average reward")}  # fmt: skip
+    measured_order = sorted(THESIS, key=lambda name: -stat[name][0])
+    claims.append(
+        claim(
+            "ordered pairs in P > MMQ > Q > delayed P (of 3)",
+            "3 (Fig. 5.19)",
+            (float(in_order), 0.0, config.seeds),
+            ok=in_order == 3,
+            note="measured order: " + " > ".join(measured_order),
+        )
+    )
+    groups = {name: [(r["steps"], r["curve"]) for r in rs] for name, rs in runs.items()}
+    figures = {
+        "fig5_19_controllers": plotting.figure(
+            plotting.learning_curves,
+            groups,
+            f"line following, λ = {LAM}: controllers' performance (Fig. 5.19)",
+            "average reward",
+        )
+    }
     extra = {
         "train_steps": task_list[0]["train_steps"],
-        "run_steps": task_list[0]["run_steps"],
+        "run_steps": run_steps,
         "lambda_max": LAMBDA_MAX,
-        "accumulated_error": {n: mean_ci95([r["total_error"] for r in rs])
-                              for n, rs in runs.items()},
-        "line_visible_fraction": {n: mean_ci95([r["visible"] for r in rs])
-                                  for n, rs in runs.items()},
-    }  # fmt: skip
+        **line_statistics(runs),
+    }
     return Summary(claims, curves, figures, extra)
 
 

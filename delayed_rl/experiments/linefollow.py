@@ -29,8 +29,9 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from delayed_rl._validation import check_choice
 from delayed_rl.experiments import plotting
-from delayed_rl.experiments.common import claim
+from delayed_rl.experiments.common import claim, mean_ci_n
 from delayed_rl.experiments.runner import (
     Config,
     Curve,
@@ -61,23 +62,31 @@ def line_env(reward_delay: float | None = LAM, **kwargs: Any) -> gym.Env:
     """
     import delayed_rl  # noqa: F401  (registers the ids)
 
-    return gym.make(
-        ENV_ID, track=TRACK, lost_line="recover", max_steps=None, reward_delay=reward_delay,
-        **kwargs,
-    )  # fmt: skip
+    options = {"track": TRACK, "lost_line": "recover", "max_steps": None, **kwargs}
+    return gym.make(ENV_ID, reward_delay=reward_delay, **options)
 
 
 def make_agent(kind: str, env: gym.Env, seed: int) -> Any:
-    """A thesis-setting learner: ``"Q"`` (Q-learning) or ``"MMQ"`` (Λ = {0, ..., 150})."""
+    """A thesis-setting learner: ``"Q"`` (Q-learning) or ``"MMQ"`` (Λ = {0, ..., 150}).
+
+    Raises:
+        TypeError: ``kind`` is not a string.
+        ValueError: ``kind`` is not one of :data:`AGENTS`.
+    """
     from delayed_rl.agents import MultipleModelQLearning, QLearning
 
-    common = {"learning_rate": ALPHA, "gamma": GAMMA, "exploration_initial_eps": EPSILON,
-              "exploration_final_eps": EPSILON, "q_init": Q_INIT, "seed": seed}  # fmt: skip
+    check_choice("kind", kind, AGENTS)
+    common = {
+        "learning_rate": ALPHA,
+        "gamma": GAMMA,
+        "exploration_initial_eps": EPSILON,
+        "exploration_final_eps": EPSILON,
+        "q_init": Q_INIT,
+        "seed": seed,
+    }
     if kind == "Q":
         return QLearning(env, **common)
-    if kind == "MMQ":
-        return MultipleModelQLearning(env, max_delay_estimate=LAMBDA_MAX, **common)
-    raise ValueError(f"agent kind must be one of {AGENTS}, got {kind!r}")
+    return MultipleModelQLearning(env, max_delay_estimate=LAMBDA_MAX, **common)
 
 
 def line_error(centroids: np.ndarray) -> np.ndarray:
@@ -86,7 +95,27 @@ def line_error(centroids: np.ndarray) -> np.ndarray:
     return np.where(centroids == 0, UNSEEN_ERROR, np.abs(centroids - CENTRE))
 
 
+def line_statistics(runs: dict[str, list[dict]]) -> dict[str, dict[str, tuple[float, float]]]:
+    """Mean and 95 % CI, per contestant, of the accumulated error and of the line's visibility.
+
+    Args:
+        runs: each contestant's run results, with ``total_error`` (Σ|Δ| over the run) and
+            ``visible`` (the fraction of steps that saw the line).
+
+    Returns:
+        ``{"accumulated_error": {name: (mean, ci)}, "line_visible_fraction": {name: (mean, ci)}}``.
+    """
+    return {
+        summary: {name: mean_ci95([r[key] for r in results]) for name, results in runs.items()}
+        for summary, key in (
+            ("accumulated_error", "total_error"),
+            ("line_visible_fraction", "visible"),
+        )
+    }
+
+
 def tasks(config: Config) -> list[dict]:
+    """Per seed: one Q-learning and one MMQ run, 150k steps each (3k with ``config.quick``)."""
     steps = config.steps or (3_000 if config.quick else 150_000)
     return [
         {"agent": agent, "steps": steps, "seed": config.base_seed + i}
@@ -96,6 +125,13 @@ def tasks(config: Config) -> list[dict]:
 
 
 def run_task(task: dict) -> dict:
+    """Train one learner on the line follower and measure its reward and accumulated error.
+
+    Returns:
+        ``steps``, ``curve`` (the running average reward) and ``error`` (the accumulated error
+        at those steps); ``average`` reward, ``total_error`` and the ``visible`` fraction of
+        steps, over the whole run.
+    """
     agent = make_agent(task["agent"], line_env(), task["seed"])
     agent.learn(task["steps"], log_interval=None, record=True)
     log = agent.training_log
@@ -112,61 +148,95 @@ def run_task(task: dict) -> dict:
 
 
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
-    runs: dict[str, list[tuple[int, dict]]] = {agent: [] for agent in AGENTS}
-    for task, result in zip(task_list, results, strict=True):
-        runs[task["agent"]].append((task["seed"], result))
+    """Figs. 5.22–5.23's claims: each agent's average reward, MMQ − Q, and the error ratio.
+
+    The difference and the ratio are paired by seed (MMQ and Q of one seed start alike).
+    """
+    runs: dict[str, list[dict]] = {agent: [] for agent in AGENTS}
     curves = []
-    for agent, agent_runs in runs.items():
-        for seed, r in agent_runs:
-            curves.append(Curve(agent, seed, r["steps"], r["curve"], "average_reward"))
-            curves.append(Curve(agent, seed, r["steps"], r["error"], "accumulated_error"))
-    stat = {a: mean_ci95([r["average"] for _, r in rs]) + (len(rs),) for a, rs in runs.items()}
-    ratios = [m["total_error"] / q["total_error"]
-              for (_, m), (_, q) in zip(runs["MMQ"], runs["Q"], strict=True)]  # fmt: skip
-    gaps = [m["average"] - q["average"]
-            for (_, m), (_, q) in zip(runs["MMQ"], runs["Q"], strict=True)]  # fmt: skip
-    ratio, gap = mean_ci95(ratios) + (len(ratios),), mean_ci95(gaps) + (len(gaps),)
+    for task, result in zip(task_list, results, strict=True):
+        runs[task["agent"]].append(result)
+        steps = result["steps"]
+        curves.append(Curve(task["agent"], task["seed"], steps, result["curve"]))
+        curves.append(
+            Curve(task["agent"], task["seed"], steps, result["error"], "accumulated_error")
+        )
+    stat = {agent: mean_ci_n([r["average"] for r in rs]) for agent, rs in runs.items()}
+    pairs = list(zip(runs["MMQ"], runs["Q"], strict=True))
+    ratio = mean_ci_n([m["total_error"] / q["total_error"] for m, q in pairs])
+    gap = mean_ci_n([m["average"] - q["average"] for m, q in pairs])
     rule = f"agrees when |measured − thesis| ≤ {REWARD_TOLERANCE}"
     claims = [
-        claim("MMQ average reward during learning", "≈ 0.55 (Fig. 5.22)", stat["MMQ"],
-              ok=abs(stat["MMQ"][0] - 0.55) <= REWARD_TOLERANCE, note=rule),
-        claim("Q average reward during learning", "≈ 0.12 (Fig. 5.22)", stat["Q"],
-              ok=abs(stat["Q"][0] - 0.12) <= REWARD_TOLERANCE, note=rule),
-        claim("MMQ minus Q average reward (paired by seed)", "≈ +0.43, MMQ above Q", gap,
-              ok=gap[0] - gap[1] > 0,
-              note="agrees when the 95 % CI of the paired difference lies above 0"),
-        claim("MMQ accumulated error / Q accumulated error", "≈ 0.4 (Fig. 5.23)", ratio,
-              ok=abs(ratio[0] - 0.4) <= RATIO_TOLERANCE,
-              note=f"paired by seed; agrees when |measured − 0.4| ≤ {RATIO_TOLERANCE}; "
-              f"an unseen line counts |Δ| = {UNSEEN_ERROR}"),
-    ]  # fmt: skip
-    rewards = {a: [(r["steps"], r["curve"]) for _, r in rs] for a, rs in runs.items()}
-    errors = {a: [(r["steps"], r["error"]) for _, r in rs] for a, rs in runs.items()}
-    title = f"line following, λ = {LAM}, λ̂max = {LAMBDA_MAX}"
-    figures = {
-        "fig5_20_single_run_reward": lambda path: plotting.learning_curves(
-            path, {a: rs[:1] for a, rs in rewards.items()},
-            f"{title}: first seed (Fig. 5.20)", "average reward"),
-        "fig5_21_single_run_error": lambda path: plotting.learning_curves(
-            path, {a: rs[:1] for a, rs in errors.items()},
-            f"{title}: first seed (Fig. 5.21)", "accumulated error Σ|Δ| (pixels)"),
-        "fig5_22_average_reward": lambda path: plotting.learning_curves(
-            path, rewards, f"{title}: {config.seeds} runs, 95 % band (Fig. 5.22)",
-            "average reward"),
-        "fig5_23_accumulated_error": lambda path: plotting.learning_curves(
-            path, errors, f"{title}: {config.seeds} runs, 95 % band (Fig. 5.23)",
-            "accumulated error Σ|Δ| (pixels)"),
-    }  # fmt: skip
+        claim(
+            "MMQ average reward during learning",
+            "≈ 0.55 (Fig. 5.22)",
+            stat["MMQ"],
+            ok=abs(stat["MMQ"][0] - 0.55) <= REWARD_TOLERANCE,
+            note=rule,
+        ),
+        claim(
+            "Q average reward during learning",
+            "≈ 0.12 (Fig. 5.22)",
+            stat["Q"],
+            ok=abs(stat["Q"][0] - 0.12) <= REWARD_TOLERANCE,
+            note=rule,
+        ),
+        claim(
+            "MMQ minus Q average reward (paired by seed)",
+            "≈ +0.43, MMQ above Q",
+            gap,
+            ok=gap[0] - gap[1] > 0,
+            note="agrees when the 95 % CI of the paired difference lies above 0",
+        ),
+        claim(
+            "MMQ accumulated error / Q accumulated error",
+            "≈ 0.4 (Fig. 5.23)",
+            ratio,
+            ok=abs(ratio[0] - 0.4) <= RATIO_TOLERANCE,
+            note=f"paired by seed; agrees when |measured − 0.4| ≤ {RATIO_TOLERANCE}; "
+            f"an unseen line counts |Δ| = {UNSEEN_ERROR}",
+        ),
+    ]
     extra = {
-        "accumulated_error": {a: mean_ci95([r["total_error"] for _, r in rs])
-                              for a, rs in runs.items()},
-        "line_visible_fraction": {a: mean_ci95([r["visible"] for _, r in rs])
-                                  for a, rs in runs.items()},
-        "hyperparameters": {"alpha": ALPHA, "gamma": GAMMA, "epsilon": EPSILON,
-                            "q_init": Q_INIT, "lambda": LAM, "lambda_max": LAMBDA_MAX,
-                            "track": TRACK, "lost_line": "recover"},
-    }  # fmt: skip
-    return Summary(claims, curves, figures, extra)
+        **line_statistics(runs),
+        "hyperparameters": {
+            "alpha": ALPHA,
+            "gamma": GAMMA,
+            "epsilon": EPSILON,
+            "q_init": Q_INIT,
+            "lambda": LAM,
+            "lambda_max": LAMBDA_MAX,
+            "track": TRACK,
+            "lost_line": "recover",
+        },
+    }
+    return Summary(claims, curves, _figures(runs, config.seeds), extra)
+
+
+def _figures(runs: dict[str, list[dict]], seeds: int) -> dict:
+    """Figs. 5.20–5.23: reward and accumulated error, of the first seed and of every seed."""
+    rewards = {a: [(r["steps"], r["curve"]) for r in rs] for a, rs in runs.items()}
+    errors = {a: [(r["steps"], r["error"]) for r in rs] for a, rs in runs.items()}
+    first_rewards = {a: rs[:1] for a, rs in rewards.items()}
+    first_errors = {a: rs[:1] for a, rs in errors.items()}
+    title = f"line following, λ = {LAM}, λ̂max = {LAMBDA_MAX}"
+    every = f"{seeds} runs, 95 % band"
+    reward_label, error_label = "average reward", "accumulated error Σ|Δ| (pixels)"
+    curves = plotting.learning_curves
+    return {
+        "fig5_20_single_run_reward": plotting.figure(
+            curves, first_rewards, f"{title}: first seed (Fig. 5.20)", reward_label
+        ),
+        "fig5_21_single_run_error": plotting.figure(
+            curves, first_errors, f"{title}: first seed (Fig. 5.21)", error_label
+        ),
+        "fig5_22_average_reward": plotting.figure(
+            curves, rewards, f"{title}: {every} (Fig. 5.22)", reward_label
+        ),
+        "fig5_23_accumulated_error": plotting.figure(
+            curves, errors, f"{title}: {every} (Fig. 5.23)", error_label
+        ),
+    }
 
 
 EXPERIMENT = Experiment(

@@ -2,10 +2,11 @@
 
 An experiment module defines an :class:`Experiment`: its name, the thesis figure it reproduces,
 ``tasks(config)`` (one picklable task per (condition, seed)), ``run_task(task)`` (a dict of
-results, numbers or numpy arrays) and ``summarize(results, config)`` (the claims checked against
-the thesis, as :class:`Claim` rows, plus figures). :func:`run_experiment` runs the tasks through
-joblib — on its default ``loky`` process pool, or handed to Ray or Dask — and writes
-``curves.csv``, ``summary.json``, the figures and ``report.md`` into the output folder.
+results, numbers or numpy arrays) and ``summarize(tasks, results, config)`` (the claims checked
+against the thesis, as :class:`Claim` rows, plus curves and figures). :func:`run_experiment`
+runs the tasks through joblib — on its default ``loky`` process pool, or handed to Ray or Dask —
+and writes ``curves.csv``, ``summary.json``, the figures and ``report.md`` into the output
+folder.
 
 Every task carries its own seed, so results do not depend on the number of workers.
 """
@@ -24,8 +25,9 @@ from typing import Any
 
 import numpy as np
 
-from delayed_rl._validation import check_int
+from delayed_rl._validation import check_bool, check_choice, check_int
 
+#: The joblib backends :func:`run_tasks` can hand the runs to.
 BACKENDS = ("loky", "ray", "dask")
 # Student t 0.975 quantiles for 1..30 degrees of freedom (no scipy at run time).
 _T975 = (12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179,
@@ -38,12 +40,17 @@ class Config:
     """How to run an experiment.
 
     Attributes:
-        seeds: the number of seeds (independent runs per condition).
+        seeds: the number of seeds, independent runs per condition (``None``: the experiment's
+            default, see :func:`run_experiment`).
         steps: training steps per run (``None``: the experiment's thesis-scale default).
         quick: a scaled-down version that runs in seconds (fewer steps, seeds and conditions).
         workers: parallel worker processes (1 runs in this process).
         backend: ``"loky"`` (joblib's process pool), ``"ray"`` or ``"dask"``.
         base_seed: the first seed; run ``i`` uses ``base_seed + i``.
+
+    Raises:
+        TypeError: a field has the wrong type (e.g. ``seeds="3"``).
+        ValueError: a field is out of range (e.g. ``workers=0``) or ``backend`` is unknown.
     """
 
     seeds: int | None = None
@@ -52,6 +59,14 @@ class Config:
     workers: int = 1
     backend: str = "loky"
     base_seed: int = 0
+
+    def __post_init__(self) -> None:
+        self.seeds = check_int("seeds", self.seeds, 1, optional=True)
+        self.steps = check_int("steps", self.steps, 1, optional=True)
+        self.quick = check_bool("quick", self.quick)
+        self.workers = check_int("workers", self.workers, 1)
+        self.backend = check_choice("backend", self.backend, BACKENDS)
+        self.base_seed = check_int("base_seed", self.base_seed, 0)
 
 
 @dataclass
@@ -120,7 +135,17 @@ def mean_ci95(values: Sequence[float]) -> tuple[float, float]:
 
 
 def running_average(rewards: np.ndarray, points: int = 200) -> tuple[np.ndarray, np.ndarray]:
-    """The average reward from step 1 to step t (the thesis's learning curves), at ``points`` t."""
+    """The average reward from step 1 to step t (the thesis's learning curves), at ``points`` t.
+
+    Args:
+        rewards: the reward of every step, in order.
+        points: how many steps t to sample, spread evenly from 1 to ``rewards.size`` (fewer
+            when the run is shorter than that).
+
+    Returns:
+        The steps t (``int64``, increasing) and the average reward up to each.
+    """
+    check_int("points", points, 1)
     steps = np.unique(np.linspace(1, rewards.size, points).astype(np.int64))
     cumulative = np.cumsum(rewards)
     return steps, cumulative[steps - 1] / steps
@@ -129,9 +154,14 @@ def running_average(rewards: np.ndarray, points: int = 200) -> tuple[np.ndarray,
 def run_tasks(
     run_task: Callable[[dict], dict], tasks: list[dict], workers: int, backend: str
 ) -> list[dict]:
-    """Run ``tasks`` through joblib with ``workers`` processes on ``backend``; keep their order."""
-    if backend not in BACKENDS:
-        raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
+    """Run ``tasks`` through joblib with ``workers`` processes on ``backend``; keep their order.
+
+    Raises:
+        TypeError: ``workers`` is not an integer, or ``backend`` not a string.
+        ValueError: ``workers`` < 1 or ``backend`` is not one of :data:`BACKENDS`.
+        RuntimeError: the backend's package (Ray, Dask) is not installed.
+    """
+    check_choice("backend", backend, BACKENDS)
     check_int("workers", workers, 1)
     if workers == 1 and backend == "loky":
         return [run_task(task) for task in tasks]
@@ -159,7 +189,19 @@ def run_tasks(
 def run_experiment(
     experiment: Experiment, config: Config, out: Path | str | None = None, progress: bool = True
 ) -> Summary:
-    """Run ``experiment`` and, if ``out`` is given, write its files there."""
+    """Run ``experiment`` and, if ``out`` is given, write its files there.
+
+    Args:
+        experiment: what to run.
+        config: how to run it; ``config.seeds`` is set to the experiment's default
+            (``quick_seeds`` with ``config.quick``, else ``default_seeds``) when ``None``.
+        out: the output folder (``None``: write nothing, return the summary only).
+        progress: print a line saying how many runs start on how many workers.
+
+    Returns:
+        The experiment's summary, with ``extra["wall_time_s"]`` the seconds it took.
+    """
+    check_bool("progress", progress)
     if config.seeds is None:
         config.seeds = experiment.quick_seeds if config.quick else experiment.default_seeds
     tasks = experiment.tasks(config)

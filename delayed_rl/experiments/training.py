@@ -13,9 +13,10 @@ On these tabular envs ``learn()`` takes its compiled path (:mod:`delayed_rl.fast
 from __future__ import annotations
 
 import gymnasium as gym
-import numpy as np
 
+from delayed_rl._validation import check_int
 from delayed_rl.agents import MultipleModelQLearning
+from delayed_rl.agents.mmq import greedy_actions
 
 ALPHA, GAMMA, EPSILON, Q_INIT = 0.1, 0.9, 0.1, 25.0
 
@@ -33,25 +34,32 @@ def train(env: gym.Env, lags: list[int], steps: int, seed: int) -> MultipleModel
     The agent's ``training_log`` holds the per-step record (``undelayed_reward``, ``obs``, ...).
     """
     agent = MultipleModelQLearning(
-        env, learning_rate=ALPHA, gamma=GAMMA, exploration_initial_eps=EPSILON,
-        exploration_final_eps=EPSILON, q_init=Q_INIT, delay_estimates=list(lags), seed=seed,
-    )  # fmt: skip
+        env,
+        learning_rate=ALPHA,
+        gamma=GAMMA,
+        exploration_initial_eps=EPSILON,
+        exploration_final_eps=EPSILON,
+        q_init=Q_INIT,
+        delay_estimates=list(lags),
+        seed=seed,
+    )
     return agent.learn(steps, log_interval=None, record=True)
 
 
 def greedy_average_reward(agent: MultipleModelQLearning, size: int, steps: int = 1000) -> float:
-    """Average reward of the deterministic greedy policy over ``steps`` from the start cell."""
+    """Average reward of the deterministic greedy policy over ``steps`` from the start cell.
+
+    Args:
+        agent: the trained agent; only its ``q_table`` is read.
+        size: the side of the undelayed grid world to walk.
+        steps: how many steps to walk.
+    """
+    check_int("steps", steps, 1)
     env = grid_env(size, 0).unwrapped
     env.reset(seed=0)
     state, total = env.start_state, 0.0
-    policy = greedy_policy(agent.q_table)
+    policy = greedy_actions(agent.q_table)
     for _ in range(steps):
         state, reward, *_ = env.step(int(policy[state]))
         total += reward
     return total / steps
-
-
-def greedy_policy(q: np.ndarray) -> np.ndarray:
-    """The deterministic policy: per state, the action of the best (model, action) entry."""
-    flat = q.reshape(q.shape[0], -1)
-    return flat.argmax(axis=1) % q.shape[2]

@@ -2,16 +2,23 @@
 
 One function, :func:`run_chunk`, advances a whole training run by a chunk of steps. All state
 (Q-table, cached maxima, history ring, delay ring, clocks) lives in arrays owned by the caller,
-so a run proceeds chunk by chunk, with callbacks and the progress bar between chunks.
+so a run proceeds chunk by chunk, with callbacks and the progress bar between chunks. Its
+arguments come in named groups (:class:`QCache`, :class:`Rule`, the env's
+:class:`~delayed_rl.fast.tabular.TabularModel`, :class:`DelayLine`, :class:`History`,
+:class:`StepLog`, :class:`Script`), which numba compiles as tuples.
 
-The update rule is the one of :mod:`delayed_rl.agents.mmq` (DESIGN.md, "Multiple Model
-Q-learning, exactly"); the exactness tests drive both on scripted transitions.
+The update rule is the one of :mod:`delayed_rl.agents.mmq` (its module docstring states it
+exactly); the exactness tests drive both on scripted transitions.
 """
 
 # ruff: noqa: NPY002  (numba compiles only the legacy np.random API, one generator per thread)
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
+
+from delayed_rl._delay_line import ring_size
 
 try:
     import numba
@@ -100,44 +107,173 @@ def _count_ties(qf, qmax, row_size, ties):
             ties[s] += qf[i] == qmax[s]
 
 
+class QCache(NamedTuple):
+    """The agent's Q-table and its exact cache, updated in place by :func:`run_chunk`.
+
+    Attributes:
+        q: the Q-values, shape (|S|, |Λ|, |A|).
+        v_max: each state's max over (λ̂, a).
+        v_cell: the flat index into ``q`` of an entry holding it.
+        ties: how many entries of the state's row hold it (counted afresh at the start of each
+            call, then kept exact).
+    """
+
+    q: np.ndarray
+    v_max: np.ndarray
+    v_cell: np.ndarray
+    ties: np.ndarray
+
+
+class Rule(NamedTuple):
+    """The learning rule's constants: Λ, α, γ and the ε schedule.
+
+    Attributes:
+        delay_estimates: Λ, sorted ascending (``int64``).
+        learning_rate: α.
+        gamma: γ.
+        eps_initial: ε at step 0.
+        eps_final: ε from step ``eps_steps`` on (linear in between).
+        eps_steps: the length of the ε ramp, in steps (>= 1).
+    """
+
+    delay_estimates: np.ndarray
+    learning_rate: float
+    gamma: float
+    eps_initial: float
+    eps_final: float
+    eps_steps: int
+
+
+class DelayLine(NamedTuple):
+    """The reward delay: this chunk's delays, the ring of pending rewards, the episode-end mode.
+
+    Attributes:
+        delays: one delay per step of the chunk (its length is the chunk's length).
+        ring: the pending rewards, a power-of-two ring longer than every delay in ``delays``.
+        episode_end_mode: :data:`FLUSH`, :data:`DROP` or :data:`CARRY`.
+    """
+
+    delays: np.ndarray
+    ring: np.ndarray
+    episode_end_mode: int
+
+
+class History(NamedTuple):
+    """The episode's transitions (rings of a power-of-two length > max Λ) and the run's clocks.
+
+    Attributes:
+        s: the state of each step.
+        a: the action.
+        s2: the next state.
+        terminated: whether the step was terminal.
+        clocks: ``[s, history length, episode steps, delay clock]``, carried between chunks.
+    """
+
+    s: np.ndarray
+    a: np.ndarray
+    s2: np.ndarray
+    terminated: np.ndarray
+    clocks: np.ndarray
+
+    @classmethod
+    def empty(cls, longest_delay: int) -> History:
+        """An empty history whose rings hold ``longest_delay + 1`` steps, clocks at 0."""
+        size = ring_size(longest_delay + 1)
+        rings = [np.zeros(size, dtype) for dtype in (np.int64, np.int64, np.int64, np.bool_)]
+        return cls(*rings, np.zeros(4, np.int64))
+
+
+class StepLog(NamedTuple):
+    """One entry per step of a chunk (arrays of the chunk's length, filled by :func:`run_chunk`).
+
+    Attributes:
+        undelayed_reward: the env's reward.
+        reward: the reward delivered (delayed).
+        obs: the state acted in.
+        action: the action.
+        acting_delay_index: the acting model's index into Λ.
+        episode_end: the episode ended at this step (terminated or truncated).
+        terminated: the step was terminal.
+    """
+
+    undelayed_reward: np.ndarray
+    reward: np.ndarray
+    obs: np.ndarray
+    action: np.ndarray
+    acting_delay_index: np.ndarray
+    episode_end: np.ndarray
+    terminated: np.ndarray
+
+    @classmethod
+    def empty(cls, steps: int) -> StepLog:
+        """A log of ``steps`` zeroed entries."""
+        floats = [np.zeros(steps) for _ in range(2)]
+        ints = [np.zeros(steps, np.int64) for _ in range(3)]
+        return cls(*floats, *ints, np.zeros(steps, np.bool_), np.zeros(steps, np.bool_))
+
+
+class Script(NamedTuple):
+    """Scripted transitions replayed instead of acting (empty arrays: act in the env).
+
+    Attributes:
+        transitions: rows ``(s, a, s′)``.
+        terminated: one flag per row.
+        rewards: the reward received at each row's step.
+    """
+
+    transitions: np.ndarray
+    terminated: np.ndarray
+    rewards: np.ndarray
+
+
+NO_SCRIPT = Script(np.zeros((0, 3), np.int64), np.zeros(0, np.bool_), np.zeros(0))
+"""The empty script: :func:`run_chunk` acts in the env."""
+
+
 @_jit
-def run_chunk(
-    q, lags, qmax, qcell, qties,
-    out_cdf, out_next, out_reward, out_term, init_cdf, max_steps,
-    delays, buffer, episode_end_mode,
-    alpha, gamma, eps_initial, eps_final, eps_steps, start_step,
-    hist_s, hist_a, hist_s2, hist_term, state,
-    rec_undelayed, rec_delivered, rec_obs, rec_action, rec_model, rec_episode_end,
-    rec_terminated, script, script_term, script_reward,
-):  # fmt: skip
-    """Advance training by ``delays.shape[0]`` steps.
+def run_chunk(cache, rule, env, line, history, log, script, start_step):
+    """Advance training by ``line.delays.shape[0]`` steps.
 
-    The MMQ update (DESIGN.md, "Multiple Model Q-learning, exactly"): at each step, for every
-    model ``m`` whose step ``t − lags[m]`` is in this episode's history, with (s, a, s′, done) that
-    step's transition, ``target = r_t + γ (1 − done) max Q[s′]``; all targets of a step are
-    computed before its writes. ``lags`` must be sorted ascending (the agents keep Λ sorted).
+    The MMQ update: at each step, for every model ``m`` whose step ``t − Λ[m]`` is in this
+    episode's history, with (s, a, s′, terminated) that step's transition,
+    ``target = r_t + γ (1 − terminated) max Q[s′]``, the max over every (λ̂, a′) of ``s′``; all
+    targets of a step are computed before its writes (a parallel update).
 
-    The cache is kept exact: ``qmax[s]``, the max of ``q[s]``, with ``qcell[s]`` the flat index
-    in ``q`` (the agents' layout) of an entry holding it, and ``qties[s]`` how many entries hold
-    it (counted afresh at the start of each call, then kept up to date). A state's row is
-    rescanned only when the cached arg-max entry decreases; the acting model is read off
-    ``qcell`` unless the max is tied, so ties cost a scan and nothing else does. Random draws
-    happen exactly where the Python path draws: ε tests, uniform choices, and a tie-break only
-    when there is a tie.
+    The cache (:class:`QCache`) is kept exact: a state's row is rescanned only when the cached
+    arg-max entry decreases; the acting model is read off ``v_cell`` unless the max is tied, so
+    ties cost a scan and nothing else does. Random draws happen exactly where the Python path
+    draws: ε tests, uniform choices, and a tie-break only when there is a tie.
 
-    With a non-empty ``script`` (rows ``(s, a, s′)``, with ``script_term`` and ``script_reward``)
-    the steps replay those transitions and received rewards instead of acting in the env:
-    :func:`replay` uses it so that tests drive this very loop with scripted transitions.
+    With a non-empty ``script`` the steps replay its transitions and received rewards instead of
+    acting in the env: :func:`replay` uses it so that tests drive this very loop.
 
-    ``state`` is an int64 array ``[s, hist_count, episode_steps, clock]`` carried between chunks.
-    ``out_*`` are the env's outcome tables of shape (S, A, K): cumulative probabilities, next
-    states, rewards, termination flags. ``init_cdf`` is the cumulative initial-state distribution.
-    ``buffer`` is the reward-delay ring (power-of-two length above every delay in ``delays``).
-    The ``rec_*`` arrays receive one entry per step.
+    Args:
+        cache: the Q-table and its cache (:class:`QCache`), updated in place.
+        rule: Λ, α, γ and the ε schedule (:class:`Rule`).
+        env: the env's outcome tables (:class:`~delayed_rl.fast.tabular.TabularModel`).
+        line: the reward delay (:class:`DelayLine`).
+        history: the episode's transitions and the clocks (:class:`History`), updated in place.
+        log: receives one entry per step (:class:`StepLog`).
+        script: transitions to replay (:class:`Script`), or :data:`NO_SCRIPT`.
+        start_step: the training step of the chunk's first step (for the ε schedule).
 
     Indices into the Q-table and its cache are cast to unsigned integers, which spares the
     compiled code numba's negative-index handling in the innermost loops (about 5%).
     """
+    lags = rule.delay_estimates
+    alpha, gamma = rule.learning_rate, rule.gamma
+    eps_initial, eps_final, eps_steps = rule.eps_initial, rule.eps_final, rule.eps_steps
+    q, qmax, qcell, qties = cache.q, cache.v_max, cache.v_cell, cache.ties
+    out_cdf, out_next, out_reward, out_term = (
+        env.out_cdf,
+        env.out_next,
+        env.out_reward,
+        env.out_term,
+    )
+    init_cdf, max_steps = env.init_cdf, env.max_steps
+    delays, buffer, episode_end_mode = line.delays, line.ring, line.episode_end_mode
+    hist_s, hist_a, hist_s2, hist_term, state = history
+    script_rows, script_term, script_reward = script
     n_models = lags.shape[0]
     n_actions = q.shape[2]
     row_size = n_models * n_actions
@@ -152,12 +288,12 @@ def run_chunk(
     hist_count = state[1]
     episode_steps = state[2]
     clock = state[3]
-    scripted = script.shape[0] > 0
+    scripted = script_rows.shape[0] > 0
     for t in range(delays.shape[0]):
         if scripted:
-            s = script[t, 0]
-            action = script[t, 1]
-            s2 = script[t, 2]
+            s = script_rows[t, 0]
+            action = script_rows[t, 1]
+            s2 = script_rows[t, 2]
             terminated = script_term[t]
             delivered = script_reward[t]
             reward = delivered
@@ -209,13 +345,13 @@ def run_chunk(
                 if episode_end_mode == FLUSH:
                     delivered += total
         # record, remember
-        rec_undelayed[t] = reward
-        rec_delivered[t] = delivered
-        rec_obs[t] = s
-        rec_action[t] = action
-        rec_model[t] = m
-        rec_episode_end[t] = ended
-        rec_terminated[t] = terminated
+        log.undelayed_reward[t] = reward
+        log.reward[t] = delivered
+        log.obs[t] = s
+        log.action[t] = action
+        log.acting_delay_index[t] = m
+        log.episode_end[t] = ended
+        log.terminated[t] = terminated
         pos = hist_count & hmask
         hist_s[pos] = s
         hist_a[pos] = action
@@ -268,37 +404,45 @@ def run_chunk(
 
 
 def replay(
-    q: np.ndarray, lags: np.ndarray, transitions: np.ndarray, terminated: np.ndarray,
-    rewards: np.ndarray, alpha: float, gamma: float,
-) -> None:  # fmt: skip
+    q: np.ndarray,
+    delay_estimates: np.ndarray,
+    transitions: np.ndarray,
+    terminated: np.ndarray,
+    rewards: np.ndarray,
+    learning_rate: float,
+    gamma: float,
+) -> None:
     """Apply the MMQ update of :func:`run_chunk` to scripted transitions, in place on ``q``.
 
     Args:
         q: the Q-table, shape (|S|, |Λ|, |A|), updated in place.
-        lags: Λ, sorted ascending.
+        delay_estimates: Λ, sorted ascending.
         transitions: rows ``(s, a, s′)`` in the order they happened (one episode or several:
             a ``terminated`` row ends its episode and clears the history).
         terminated: one flag per row.
         rewards: the reward received at each row's step.
-        alpha: the learning rate.
-        gamma: the discount factor.
+        learning_rate: α.
+        gamma: γ.
     """
+    from delayed_rl.fast.tabular import TabularModel
+
     n = transitions.shape[0]
-    lags = np.asarray(lags, dtype=np.int64)
+    lags = np.asarray(delay_estimates, dtype=np.int64)
     flat = q.reshape(q.shape[0], -1)
-    qmax = flat.max(axis=1)
-    qcell = np.arange(q.shape[0]) * flat.shape[1] + flat.argmax(axis=1)
-    size = 1 << int(lags.max()).bit_length()
-    history = [np.zeros(size, np.int64), np.zeros(size, np.int64), np.zeros(size, np.int64),
-               np.zeros(size, np.bool_)]  # fmt: skip
-    records = [np.zeros(n), np.zeros(n)] + [np.zeros(n, np.int64) for _ in range(3)]
-    records += [np.zeros(n, np.bool_), np.zeros(n, np.bool_)]
-    none = np.zeros((1, 1, 1))
-    run_chunk(
-        q, lags, qmax, qcell, np.zeros(q.shape[0], np.int64),
-        none, none.astype(np.int64), none, none.astype(np.bool_), np.ones(1), 0,
-        np.zeros(n, np.int64), np.zeros(1), FLUSH, alpha, gamma, 0.0, 0.0, 1, 0,
-        *history, np.zeros(4, np.int64), *records,
-        np.asarray(transitions, np.int64), np.asarray(terminated, np.bool_),
+    cache = QCache(
+        q,
+        flat.max(axis=1),
+        np.arange(q.shape[0]) * flat.shape[1] + flat.argmax(axis=1),
+        np.zeros(q.shape[0], np.int64),
+    )
+    rule = Rule(lags, float(learning_rate), float(gamma), 0.0, 0.0, 1)
+    line = DelayLine(np.zeros(n, np.int64), np.zeros(1), FLUSH)
+    script = Script(
+        np.asarray(transitions, np.int64),
+        np.asarray(terminated, np.bool_),
         np.asarray(rewards, np.float64),
+    )
+    run_chunk(
+        cache, rule, TabularModel.empty(), line, History.empty(int(lags.max())), StepLog.empty(n),
+        script, 0,
     )  # fmt: skip

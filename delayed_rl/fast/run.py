@@ -4,17 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from delayed_rl._delay_line import draw_delays, regrow_ring, ring_size
 from delayed_rl.fast import kernel
 from delayed_rl.fast.tabular import NotCompilable, inspect_stack
 
 _MODES = {"flush": kernel.FLUSH, "drop": kernel.DROP, "carry": kernel.CARRY}
-
-
-_NO_SCRIPT = (np.zeros((0, 3), np.int64), np.zeros(0, np.bool_), np.zeros(0))
-
-
-def _pow2(n: int) -> int:
-    return 1 << max(0, int(n - 1).bit_length())
 
 
 class FusedRun:
@@ -24,7 +18,7 @@ class FusedRun:
 
     Args:
         env: the env stack (see :mod:`delayed_rl.fast.tabular` for what compiles).
-        lags: the delay estimates Λ of the agent, one per Q-table model.
+        delay_estimates: Λ, the agent's delay estimates (sorted), one per Q-table model.
         seed: seeds the compiled generator (actions, env outcomes) and, through a separate
             stream, the reward delays.
 
@@ -38,92 +32,78 @@ class FusedRun:
         NotCompilable: if numba is missing or the stack is outside the protocol.
     """
 
-    def __init__(self, env, lags: np.ndarray, seed: int | None):
+    def __init__(self, env, delay_estimates: np.ndarray, seed: int | None):
         if not kernel.HAVE_NUMBA:
             raise NotCompilable("numba is not installed (a core dependency: pip install numba)")
         self.model, wrapper = inspect_stack(env)
         self.delay = None if wrapper is None else wrapper.delay
         self.max_delay = None if wrapper is None else wrapper.max_delay
         self.mode = _MODES["flush" if wrapper is None else wrapper.on_episode_end]
-        self.lags = np.asarray(lags, dtype=np.int64)
-        self.history = [
-            np.zeros(_pow2(int(self.lags.max()) + 1), dtype=dtype)
-            for dtype in (np.int64, np.int64, np.int64, np.bool_)
-        ]
-        self.buffer = np.zeros(1)
+        self.delay_estimates = np.asarray(delay_estimates, dtype=np.int64)
+        self.history = kernel.History.empty(int(self.delay_estimates.max()))
+        self.state = self.history.clocks
+        self.ring = np.zeros(1)
         self.tie_counts = np.zeros(0, dtype=np.int64)
-        seed_seq = np.random.SeedSequence(seed)
-        kernel_seed, delay_seed = seed_seq.generate_state(2)
+        kernel_seed, delay_seed = np.random.SeedSequence(seed).generate_state(2)
         kernel.seed_kernel(int(kernel_seed) & 0x7FFFFFFF)
         self.delay_rng = np.random.default_rng(delay_seed)
-        self.state = np.zeros(4, dtype=np.int64)
-        self.state[0] = self._initial_state()
-
-    def _initial_state(self) -> int:
-        return int(np.searchsorted(self.model.init_cdf, self.delay_rng.random(), side="right"))
+        self.state[0] = np.searchsorted(self.model.init_cdf, self.delay_rng.random(), side="right")
 
     def _draw_delays(self, n: int) -> np.ndarray:
         if self.delay is None:
             return np.zeros(n, dtype=np.int64)
-        delays = np.asarray(self.delay.sample(self.delay_rng, n), dtype=np.int64)
-        if self.max_delay is not None:
-            delays = np.minimum(delays, self.max_delay)
-        return delays
+        return draw_delays(self.delay, self.delay_rng, n, self.max_delay)
 
-    def _fit_buffer(self, longest: int) -> None:
+    def _fit_ring(self, longest: int) -> None:
         """Grow the delay ring to hold ``longest``, keeping pending rewards at their due steps."""
-        size = _pow2(longest + 1)
-        if size <= self.buffer.shape[0]:
-            return
-        old, clock = self.buffer, int(self.state[3])
-        due = clock + np.arange(old.shape[0])
-        new = np.zeros(size)
-        new[due & (size - 1)] = old[due & (old.shape[0] - 1)]
-        self.buffer = new
+        size = ring_size(longest + 1)
+        if size > self.ring.shape[0]:
+            self.ring = regrow_ring(self.ring, int(self.state[3]), size)
 
     def run(
         self,
         q: np.ndarray,
-        qmax: np.ndarray,
-        qcell: np.ndarray,
+        v_max: np.ndarray,
+        v_cell: np.ndarray,
         steps: int,
+        *,
         start_step: int,
-        alpha: float,
+        learning_rate: float,
         gamma: float,
         eps_initial: float,
         eps_final: float,
         eps_steps: int,
-    ) -> dict:
+    ) -> kernel.StepLog:
         """Advance ``steps`` steps, updating ``q`` and its cache in place; return the step log.
 
-        The log holds one entry per step: ``obs`` (the state acted in), ``action``, ``model``
-        (the acting model's index), ``reward`` (delivered), ``undelayed_reward``,
-        ``episode_end`` and ``terminated``; :attr:`state` ``[0]`` is the state after the last.
+        Args:
+            q: the Q-table, shape (|S|, |Λ|, |A|).
+            v_max: each state's max of ``q[s]`` (the agent's cache, kept exact).
+            v_cell: the flat index into ``q`` of an entry holding it.
+            steps: how many steps.
+            start_step: the training step of the first of them (for the ε schedule).
+            learning_rate: α.
+            gamma: γ.
+            eps_initial: ε at training step 0.
+            eps_final: ε from training step ``eps_steps`` on (linear in between).
+            eps_steps: the length of the ε ramp (>= 1).
 
-        ``qmax[s]`` is the max of ``q[s]`` and ``qcell[s]`` its flat index into ``q`` (the layout
-        of :class:`~delayed_rl.agents.MultipleModelQLearning`'s cache).
+        Returns:
+            One entry per step (:class:`~delayed_rl.fast.kernel.StepLog`); :attr:`state`
+            ``[0]`` is the state after the last.
         """
         delays = self._draw_delays(steps)
-        self._fit_buffer(int(delays.max(initial=0)))
-        log = {
-            "undelayed_reward": np.zeros(steps),
-            "reward": np.zeros(steps),
-            "obs": np.zeros(steps, dtype=np.int64),
-            "action": np.zeros(steps, dtype=np.int64),
-            "model": np.zeros(steps, dtype=np.int64),
-            "episode_end": np.zeros(steps, dtype=np.bool_),
-            "terminated": np.zeros(steps, dtype=np.bool_),
-        }
-        m = self.model
-        if self.tie_counts.shape != qmax.shape:
-            self.tie_counts = np.zeros(qmax.shape, dtype=np.int64)
-        kernel.run_chunk(
-            q, self.lags, qmax, qcell, self.tie_counts,
-            m.out_cdf, m.out_next, m.out_reward, m.out_term, m.init_cdf, m.max_steps,
-            delays, self.buffer, self.mode,
-            float(alpha), float(gamma), float(eps_initial), float(eps_final), int(eps_steps),
-            int(start_step), *self.history, self.state,
-            log["undelayed_reward"], log["reward"], log["obs"], log["action"], log["model"],
-            log["episode_end"], log["terminated"], *_NO_SCRIPT,
+        self._fit_ring(int(delays.max(initial=0)))
+        if self.tie_counts.shape != v_max.shape:
+            self.tie_counts = np.zeros(v_max.shape, dtype=np.int64)
+        cache = kernel.QCache(q, v_max, v_cell, self.tie_counts)
+        rule = kernel.Rule(
+            self.delay_estimates, float(learning_rate), float(gamma), float(eps_initial),
+            float(eps_final), int(eps_steps),
         )  # fmt: skip
+        line = kernel.DelayLine(delays, self.ring, self.mode)
+        log = kernel.StepLog.empty(steps)
+        kernel.run_chunk(
+            cache, rule, self.model, line, self.history, log, kernel.NO_SCRIPT, int(start_step)
+        )
         return log

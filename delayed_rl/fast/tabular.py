@@ -16,7 +16,7 @@ on the Python path instead.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import gymnasium as gym
 import numpy as np
@@ -30,9 +30,17 @@ class NotCompilable(Exception):
     """The env stack cannot run on the compiled path; the message says why."""
 
 
-@dataclass
-class TabularModel:
-    """An env's dynamics as arrays of shape (S, A, K) over its K outcomes per (state, action)."""
+class TabularModel(NamedTuple):
+    """An env's dynamics as arrays of shape (S, A, K) over its K outcomes per (state, action).
+
+    Attributes:
+        out_cdf: the cumulative probabilities of the outcomes.
+        out_next: their next states.
+        out_reward: their rewards.
+        out_term: whether they are terminal.
+        init_cdf: the cumulative initial-state distribution.
+        max_steps: the env truncates its episodes after this many steps (0: never).
+    """
 
     out_cdf: np.ndarray
     out_next: np.ndarray
@@ -40,6 +48,12 @@ class TabularModel:
     out_term: np.ndarray
     init_cdf: np.ndarray
     max_steps: int
+
+    @classmethod
+    def empty(cls) -> TabularModel:
+        """Tables of one state and action (for runs that replay a script instead of acting)."""
+        none = np.zeros((1, 1, 1))
+        return cls(none, none.astype(np.int64), none, none.astype(np.bool_), np.ones(1), 0)
 
     @classmethod
     def from_env(cls, env: gym.Env) -> TabularModel:

@@ -1,0 +1,163 @@
+"""The compiled step loop of :meth:`~delayed_rl.agents.base.TabularAgent.learn`.
+
+An agent whose learning rule has a compiled twin says so through
+:meth:`~delayed_rl.agents.base.TabularAgent.compiled_tables`, which returns the arrays the
+compiled path trains in place (:class:`CompiledTables`); the shell never reaches into an agent's
+internals. :func:`compiled_run` builds (or continues) the :class:`~delayed_rl.fast.FusedRun` of
+the agent's env, and :func:`compiled_loop` runs a ``learn()`` call's steps on it, chunk by chunk,
+replaying each chunk's steps to the callbacks.
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from delayed_rl.agents._loop import LearnRun, step_locals
+
+__all__ = ["CompiledTables", "compiled_loop", "compiled_run"]
+
+
+class CompiledTables(NamedTuple):
+    """What the compiled path needs from an agent: its Q-table, the table's cache and Λ.
+
+    The compiled code updates ``q``, ``v_max`` and ``v_cell`` in place, so they must be the
+    agent's own arrays, not copies.
+
+    Attributes:
+        q: the Q-values, a C-contiguous ``float64`` array of shape (|S|, |Λ|, |A|).
+        v_max: each state's max over (λ̂, a) of ``q[s]``.
+        v_cell: the flat index into ``q`` of an entry holding that max.
+        delay_estimates: Λ, sorted ascending (``int64``).
+    """
+
+    q: np.ndarray
+    v_max: np.ndarray
+    v_cell: np.ndarray
+    delay_estimates: np.ndarray
+
+
+def compiled_run(agent: Any, fused: bool | None, restart: bool) -> Any:
+    """The compiled run to train with, or ``None`` for the Python loop (see ``learn``).
+
+    A run continues (same episode, history and pending rewards) across ``learn()`` calls
+    with ``reset_num_timesteps=False`` on the same env; otherwise a new one starts, seeded
+    from the agent's own generator (so seeded agents are reproducible).
+
+    Raises:
+        NotCompilable: ``fused=True`` and the run cannot be compiled (the message says why).
+    """
+    if fused is False:
+        agent._fused = None
+        return None
+    from delayed_rl.fast import FusedRun, NotCompilable
+
+    try:
+        if not agent._lr_constant:
+            raise NotCompilable("the learning rate is a schedule (only a constant compiles)")
+        tables = agent.compiled_tables()
+        if tables is None:
+            raise NotCompilable(f"{type(agent).__name__} has no compiled learning rule")
+        cached = agent._fused
+        if cached is None or cached[0] is not agent.env or restart:
+            seed = int(agent._uniform.rng.integers(2**63))
+            agent._fused = (agent.env, FusedRun(agent.env, tables.delay_estimates, seed))
+        return agent._fused[1]
+    except NotCompilable:
+        agent._fused = None
+        if fused:
+            raise
+        return None
+
+
+def compiled_loop(agent: Any, fused_run: Any, run: LearnRun) -> None:
+    """Take ``run.n_steps`` steps on the compiled path, in chunks between callbacks and logs."""
+    eps_steps = max(1, round(agent.exploration_fraction * run.total_timesteps))
+    if agent.exploration_initial_eps == agent.exploration_final_eps:
+        eps_steps = 1
+    chunk = agent.fused_chunk if run.callback is not None else run.n_steps
+    if run.log_interval is not None:
+        chunk = min(chunk, run.log_interval)
+    tables = agent.compiled_tables()
+    while run.steps_done < run.n_steps:
+        length = min(chunk, run.n_steps - run.steps_done, run.next_log - run.steps_done)
+        out = fused_run.run(
+            tables.q,
+            tables.v_max,
+            tables.v_cell,
+            length,
+            start_step=run.start_timesteps + run.steps_done,
+            learning_rate=agent._alpha,
+            gamma=agent.gamma,
+            eps_initial=agent.exploration_initial_eps,
+            eps_final=agent.exploration_final_eps,
+            eps_steps=eps_steps,
+        )
+        agent.num_timesteps += length
+        _book_chunk(agent, out, run.log, run.steps_done)
+        run.steps_done += length
+        run.reward_total += float(out.reward.sum())
+        run.undelayed_total += float(out.undelayed_reward.sum())
+        # ε as the Python loop leaves it: the value used at the chunk's last step
+        agent._progress_remaining = 1.0 - (agent.num_timesteps - 1) / run.total_timesteps
+        agent.exploration_rate = agent.exploration_schedule(agent._progress_remaining)
+        if run.callback is not None and not _replay_to_callback(
+            agent, run, out, int(fused_run.state[0]), agent.num_timesteps - length
+        ):
+            break
+        run.log_if_due(agent)
+    agent._episode_ended = True  # the env object was not stepped: reset it next time
+
+
+def _replay_to_callback(agent: Any, run: LearnRun, out: Any, last_obs: int, start: int) -> bool:
+    """Call ``callback.on_step()`` once per step of a compiled chunk, with that step's locals.
+
+    The chunk has already been learned: a callback sees the Q-table of the chunk's end, and
+    a ``False`` from it stops training at the chunk's end.
+    """
+    o0, a0 = agent._obs_index.start, agent._action_index.start
+    obs = (out.obs + o0).tolist()
+    next_obs = [*obs[1:], last_obs + o0]
+    actions = (out.action + a0).tolist()
+    rewards, undelayed = out.reward.tolist(), out.undelayed_reward.tolist()
+    ends, terminals = out.episode_end.tolist(), out.terminated.tolist()
+    acting = out.acting_delay_index.tolist()
+    end = agent.num_timesteps
+    keep_going = True
+    for i, action in enumerate(actions):
+        agent.num_timesteps = start + i + 1
+        info: dict[str, Any] = {"undelayed_reward": undelayed[i]}
+        truncated = ends[i] and not terminals[i]
+        run.locals_.update(
+            step_locals(
+                obs[i],
+                action,
+                rewards[i],
+                undelayed[i],
+                terminals[i],
+                truncated,
+                info,
+                acting[i],
+                next_obs[i],
+            )
+        )
+        run.callback.update_locals(run.locals_)
+        if not run.callback.on_step():
+            keep_going = False
+            break
+    agent.num_timesteps = end
+    return keep_going
+
+
+def _book_chunk(agent: Any, out: Any, log: dict[str, np.ndarray], offset: int) -> None:
+    """Book-keep a compiled chunk: acting counts, episode statistics, the optional record."""
+    agent._statistics.add_chunk(out.acting_delay_index, out.undelayed_reward, out.episode_end)
+    if log:
+        stop = offset + out.reward.size
+        log["obs"][offset:stop] = out.obs + agent._obs_index.start
+        log["action"][offset:stop] = out.action + agent._action_index.start
+        log["reward"][offset:stop] = out.reward
+        log["undelayed_reward"][offset:stop] = out.undelayed_reward
+        log["acting_delay_index"][offset:stop] = out.acting_delay_index
+        log["episode_end"][offset:stop] = out.episode_end

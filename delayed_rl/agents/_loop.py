@@ -1,0 +1,261 @@
+"""The Python training loop of :meth:`~delayed_rl.agents.base.TabularAgent.learn`.
+
+:meth:`~delayed_rl.agents.base.TabularAgent.learn` is split as stable-baselines3 splits its own:
+a setup that checks the arguments and builds a :class:`LearnRun`, one of two step loops —
+:func:`python_loop` here, which runs any ``Discrete`` env, or the compiled loop of
+:mod:`delayed_rl.agents._fused` — and a finish that logs and closes the callbacks.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from delayed_rl._validation import check_bool, check_int
+from delayed_rl.agents._statistics import TrainingStatistics
+from delayed_rl.agents.callbacks import as_callback
+
+__all__ = [
+    "RECORD_DTYPES",
+    "LearnRun",
+    "TrainingLog",
+    "finish_learn",
+    "python_loop",
+    "setup_learn",
+    "step_locals",
+]
+
+RECORD_DTYPES = {
+    "obs": np.int64,
+    "action": np.int64,
+    "reward": np.float64,
+    "undelayed_reward": np.float64,
+    "acting_delay_index": np.int64,
+    "episode_end": np.bool_,
+}
+"""The arrays of ``agent.training_log`` after ``learn(..., record=True)``, and their types."""
+
+
+class TrainingLog(dict):
+    """``agent.training_log``: one array per key of :data:`RECORD_DTYPES`, one entry per step.
+
+    The key ``"done"`` (the name of ``"episode_end"`` before version 0.2) still reads
+    ``"episode_end"``, with a ``DeprecationWarning``.
+    """
+
+    def __missing__(self, key: str) -> Any:
+        if key == "done" and "episode_end" in self:
+            warnings.warn(
+                'training_log["done"] is deprecated: read training_log["episode_end"]',
+                DeprecationWarning,
+                stacklevel=2,
+            )
+            return self["episode_end"]
+        raise KeyError(key)
+
+
+@dataclass
+class LearnRun:
+    """One ``learn()`` call: what it was asked, and what its loop has done so far.
+
+    Attributes:
+        n_steps: how many steps this call takes.
+        start_timesteps: the agent's step count when it started.
+        total_timesteps: the absolute step count at which it ends (SB3's meaning).
+        callback: the callback (``None``: none).
+        locals_: the ``locals`` dict handed to the callback.
+        log_interval: log every this many steps (``None``: only at the end).
+        log: the per-step record (empty without ``record=True``).
+        steps_done: steps taken so far.
+        reward_total: the received rewards since the last log.
+        undelayed_total: the undelayed rewards since the last log.
+        next_log: the ``steps_done`` at which the next log is due.
+    """
+
+    n_steps: int
+    start_timesteps: int
+    total_timesteps: int
+    callback: Any
+    locals_: dict[str, Any]
+    log_interval: int | None
+    log: dict[str, np.ndarray] = field(default_factory=dict)
+    steps_done: int = 0
+    reward_total: float = 0.0
+    undelayed_total: float = 0.0
+    next_log: int = 0
+
+    def __post_init__(self) -> None:
+        self.next_log = self.n_steps + 1 if self.log_interval is None else self.log_interval
+
+    def log_if_due(self, agent: Any) -> None:
+        """Log the metrics since the last log when ``steps_done`` reaches the next log step."""
+        if self.steps_done == self.next_log:
+            self.next_log += self.log_interval
+            agent._log_metrics(self.reward_total, self.undelayed_total)
+            self.reward_total = self.undelayed_total = 0.0
+
+
+def step_locals(
+    obs: int,
+    action: int,
+    reward: float,
+    undelayed: float,
+    terminated: bool,
+    truncated: bool,
+    info: dict[str, Any],
+    acting: int,
+    next_obs: int,
+) -> dict[str, Any]:
+    """A step's variables for ``callback.locals``: SB3's batched names, then the plain values."""
+    return {
+        "obs": obs,
+        "action": action,
+        "reward": reward,
+        "undelayed_reward": undelayed,
+        "terminated": terminated,
+        "truncated": truncated,
+        "info": info,
+        "acting_delay_index": acting,
+        "new_obs": np.array([next_obs]),
+        "actions": np.array([action]),
+        "rewards": np.array([reward]),
+        "dones": np.array([terminated or truncated]),
+        "infos": [info],
+    }
+
+
+def python_loop(agent: Any, run: LearnRun) -> None:
+    """Take ``run.n_steps`` steps of ``agent.env``, learning from each as it happens.
+
+    Each step: ε-greedy choice (``agent._choose``), ``env.step``, one learning step
+    (``agent._learn_transition``), the record, the callback; the env is reset when an episode
+    ends. The ε and α schedules are evaluated per step unless constant. The running sums are
+    kept in locals (the loop is the Python path's hot spot) and written back at the end.
+    """
+    env, stats, callback, log = agent.env, agent._statistics, run.callback, run.log
+    obs_start, action_start = agent._obs_index.start, agent._action_index.start
+    eps_constant = agent.exploration_initial_eps == agent.exploration_final_eps
+    schedules_constant = eps_constant and agent._lr_constant
+    eps, uniform = agent.exploration_rate, agent._uniform
+    choose, learn_transition = agent._choose, agent._learn_transition
+    acting_counts = stats.acting_counts
+    s = agent._obs
+    episode_reward, episode_length = stats.episode_reward, stats.episode_length
+    reward_total, undelayed_total, next_log = run.reward_total, run.undelayed_total, run.next_log
+    steps_done = run.steps_done
+    for step in range(run.n_steps):
+        if not schedules_constant:
+            eps = agent._advance_schedules(run.start_timesteps + step, run.total_timesteps)
+        acting, a = choose(s, eps, uniform)
+        acting_counts[acting] += 1
+        obs, reward, terminated, truncated, info = env.step(a + action_start)
+        s2 = int(obs) - obs_start
+        reward = float(reward)
+        undelayed = info.get("undelayed_reward", reward)
+        learn_transition(s, a, reward, s2, terminated, truncated)
+        episode_end = terminated or truncated
+        steps_done = step + 1
+        reward_total += reward
+        undelayed_total += undelayed
+        episode_reward += undelayed
+        episode_length += 1
+        if log:
+            log["obs"][step] = s + obs_start
+            log["action"][step] = a + action_start
+            log["reward"][step] = reward
+            log["undelayed_reward"][step] = undelayed
+            log["acting_delay_index"][step] = acting
+            log["episode_end"][step] = episode_end
+        if callback is not None:
+            run.locals_.update(
+                step_locals(
+                    s + obs_start,
+                    a + action_start,
+                    reward,
+                    undelayed,
+                    terminated,
+                    truncated,
+                    info,
+                    acting,
+                    obs,
+                )
+            )
+            callback.update_locals(run.locals_)
+        if episode_end:
+            stats.end_episode(episode_reward, episode_length)
+            s = agent._reset_env()
+            episode_reward, episode_length = 0.0, 0
+        else:
+            s = s2
+        if callback is not None:
+            agent._obs = s
+            if not callback.on_step():
+                break
+        if steps_done == next_log:
+            next_log += run.log_interval
+            agent._log_metrics(reward_total, undelayed_total)
+            reward_total = undelayed_total = 0.0
+    agent._obs = s
+    stats.episode_reward, stats.episode_length = episode_reward, episode_length
+    run.reward_total, run.undelayed_total, run.next_log = reward_total, undelayed_total, next_log
+    run.steps_done = steps_done
+
+
+def setup_learn(
+    agent: Any,
+    total_timesteps: int,
+    callback: Any,
+    log_interval: int | None,
+    tb_log_name: str,
+    reset_num_timesteps: bool,
+    progress_bar: bool,
+    record: bool,
+) -> LearnRun:
+    """Check ``learn()``'s arguments, reset what must be, start the callbacks; return the run.
+
+    Raises:
+        TypeError: an argument has the wrong type.
+        ValueError: a bad value, or the agent has no env.
+    """
+    n_steps = check_int("total_timesteps", total_timesteps, 0)
+    log_interval = check_int("log_interval", log_interval, 1, optional=True)
+    check_bool("reset_num_timesteps", reset_num_timesteps)
+    check_bool("progress_bar", progress_bar)
+    check_bool("record", record)
+    if agent.env is None:
+        raise ValueError(
+            "the agent has no env to learn from: pass env= to load() or call set_env(env)"
+        )
+    callback = as_callback(callback, progress_bar)
+    if reset_num_timesteps:
+        agent.num_timesteps = 0
+        agent._statistics = TrainingStatistics(agent.n_models, 0)
+        agent._episode_ended = True
+    start = agent.num_timesteps
+    if agent._episode_ended:
+        agent._obs = agent._reset_env()
+    log = {key: np.zeros(n_steps, dtype) for key, dtype in RECORD_DTYPES.items()} if record else {}
+    locals_ = {"self": agent, "total_timesteps": start + n_steps, "tb_log_name": tb_log_name}
+    if callback is not None:
+        callback.init_callback(agent)
+        callback.on_training_start(locals_, globals())
+        callback.on_rollout_start()
+    agent._statistics.restart_clock(agent.num_timesteps)
+    return LearnRun(n_steps, start, start + n_steps, callback, locals_, log_interval, log)
+
+
+def finish_learn(agent: Any, run: LearnRun) -> None:
+    """What ends every ``learn()``: the record, the last metrics, the callbacks' ends."""
+    agent._progress_remaining = 1.0 - agent.num_timesteps / max(run.total_timesteps, 1)
+    if run.log:
+        agent.training_log = TrainingLog(
+            (key, value[: run.steps_done]) for key, value in run.log.items()
+        )
+    if agent.num_timesteps > agent._statistics.log_start[1]:
+        agent._log_metrics(run.reward_total, run.undelayed_total)
+    if run.callback is not None:
+        run.callback.on_rollout_end()
+        run.callback.on_training_end()

@@ -1,0 +1,59 @@
+"""The agents' random streams: uniform numbers handed out one at a time from blocks.
+
+An agent has two streams from its ``seed``: one for training (``learn``, ``update``) and one for
+``predict`` (spawned apart with :data:`PREDICT_STREAM`), so that calling ``predict`` between
+training calls does not change what training draws.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+__all__ = ["PREDICT_STREAM", "UniformStream"]
+
+PREDICT_STREAM = 0x9E3D
+"""The spawn key that separates ``predict()``'s randomness from training's."""
+
+
+class UniformStream:
+    """Uniform [0, 1) numbers handed out one at a time from blocks of one generator call.
+
+    Args:
+        rng: the generator.
+        block_size: how many numbers to draw per call.
+    """
+
+    __slots__ = ("rng", "block", "i", "block_size")
+
+    def __init__(self, rng: np.random.Generator, block_size: int = 1024):
+        self.rng = rng
+        self.block: list[float] = []
+        self.i = 0
+        self.block_size = block_size
+
+    @classmethod
+    def from_seed(cls, seed: int | None, spawn_key: tuple[int, ...] = ()) -> UniformStream:
+        """A stream whose generator is seeded from ``SeedSequence(seed, spawn_key=spawn_key)``."""
+        if not spawn_key:
+            return cls(np.random.default_rng(seed))
+        return cls(np.random.default_rng(np.random.SeedSequence(seed, spawn_key=spawn_key)))
+
+    def __call__(self) -> float:
+        """The next number."""
+        i = self.i
+        if i == len(self.block):
+            self.block = self.rng.random(self.block_size).tolist()
+            i = 0
+        self.i = i + 1
+        return self.block[i]
+
+    def get_state(self) -> tuple[dict[str, Any], np.ndarray]:
+        """The generator's state and the numbers drawn but not yet handed out."""
+        return self.rng.bit_generator.state, np.asarray(self.block[self.i :], dtype=np.float64)
+
+    def set_state(self, state: dict[str, Any], remaining: np.ndarray) -> None:
+        """Restore what :meth:`get_state` returned."""
+        self.rng.bit_generator.state = state
+        self.block, self.i = [float(x) for x in remaining], 0
