@@ -11,6 +11,8 @@ from delayed_rl.agents.controllers import ProportionalController
 from delayed_rl.envs.linefollow.camera import line_centroid
 from delayed_rl.envs.linefollow.env import WHEEL_SPEED_ACTIONS, EPuckLineFollowEnv
 
+CONTINUOUS = EPuckLineFollowEnv(action_mode="continuous")
+
 
 @pytest.mark.parametrize(
     ("m", "left", "right"),
@@ -23,7 +25,7 @@ from delayed_rl.envs.linefollow.env import WHEEL_SPEED_ACTIONS, EPuckLineFollowE
     ],
 )
 def test_equations_5_8_and_5_9(m, left, right):
-    ctrl = ProportionalController()
+    ctrl = ProportionalController(CONTINUOUS)
     assert ctrl.wheel_speeds(m).tolist() == [left, right]
     action, state = ctrl.predict(m)
     assert action.dtype == np.float32 and action.shape == (2,)
@@ -32,13 +34,13 @@ def test_equations_5_8_and_5_9(m, left, right):
 
 
 def test_gain_and_base_speed():
-    ctrl = ProportionalController(k_p=2.0, base_speed=200)
+    ctrl = ProportionalController(CONTINUOUS, k_p=2.0, base_speed=200)
     assert ctrl.wheel_speeds(30).tolist() == [200, 160]
     assert ctrl.predict(20)[0].tolist() == pytest.approx([2 / 3, 2 / 3])
 
 
 def test_batched_predict_matches_single_predicts():
-    ctrl = ProportionalController()
+    ctrl = ProportionalController(CONTINUOUS)
     obs = np.arange(1, 41)
     actions, states = ctrl.predict(obs)
     assert actions.shape == (40, 2) and states.shape == (40, 2)
@@ -47,7 +49,7 @@ def test_batched_predict_matches_single_predicts():
 
 
 def test_unseen_line_repeats_the_last_command_from_the_state():
-    ctrl = ProportionalController()
+    ctrl = ProportionalController(CONTINUOUS)
     action, state = ctrl.predict(0)  # no state: straight ahead at base speed
     assert action.tolist() == [1.0, 1.0]
     _, state = ctrl.predict(35)
@@ -84,7 +86,7 @@ def test_pixel_env_predicts_from_the_pixels():
     ctrl = ProportionalController(env=env)
     obs, info = env.reset(seed=0)
     action, _ = ctrl.predict(obs)
-    assert np.array_equal(action, ProportionalController().predict(info["centroid"])[0])
+    assert np.array_equal(action, ProportionalController(CONTINUOUS).predict(info["centroid"])[0])
     rows = np.stack([obs, np.zeros(40, np.float32)])
     actions, _ = ctrl.predict(rows)
     assert actions.shape == (2, 2) and line_centroid(rows).tolist() == [info["centroid"], 0]
@@ -112,16 +114,39 @@ def test_predict_on_the_env_turns_towards_the_line():
 @pytest.mark.parametrize(
     ("kwargs", "error", "match"),
     [
-        ({"k_p": -1.0}, ValueError, r"k_p must be a finite number >= 0, got -1.0"),
-        ({"k_p": "6"}, TypeError, r"k_p must be a number, got '6'"),
-        ({"base_speed": 0}, ValueError, r"base_speed must be in \(0, 300\] steps/s, got 0"),
-        ({"base_speed": 301}, ValueError, r"base_speed must be in \(0, 300\]"),
-        ({"base_speed": None}, TypeError, r"base_speed must be a number"),
+        ({"k_p": -1.0}, ValueError, r"k_p must be a number >= 0, got -1.0"),
+        ({"k_p": float("nan")}, ValueError, r"k_p must be a number >= 0, got nan"),
+        ({"k_p": "6"}, TypeError, r"k_p must be a number >= 0, got '6' \(str\)"),
+        ({"base_speed": 0}, ValueError, r"base_speed must be a number in \(0, 300\] steps/s, got 0"),
+        ({"base_speed": 301}, ValueError, r"base_speed must be a number in \(0, 300\]"),
+        ({"base_speed": None}, TypeError, r"base_speed must be a number in"),
+        ({"env": 6.0}, TypeError, r"env must be .* got 6.0 \(since 0.2 the env is the first"),
+        ({"env": [1]}, TypeError, r"env must be an EPuckLineFollow env, its id or None"),
     ],
-)
+)  # fmt: skip
 def test_bad_arguments(kwargs, error, match):
-    with pytest.raises(error, match=match):
+    with pytest.raises(error, match=match) as raised:
         ProportionalController(**kwargs)
+    assert type(raised.value) is error
+
+
+def test_env_first_like_every_agent_and_default_formats_match_the_registered_env():
+    """``ProportionalController(env)`` takes the env first, like every agent.
+
+    With no env it speaks the registered env's default formats (discrete actions, centroid
+    observations).
+    """
+    env = gym.make("delayed_rl/EPuckLineFollow-v0")
+    positional = ProportionalController(env, 6.0, 300.0)
+    assert positional.get_env() is env and positional.discrete_actions
+    default = ProportionalController()
+    obs, _ = env.reset(seed=1)
+    for _ in range(20):
+        action, _ = default.predict(obs)
+        assert env.action_space.contains(action)
+        assert action == positional.predict(obs)[0]
+        obs, *_ = env.step(action)
+    assert ProportionalController.predict.__defaults__[-1] is False  # deterministic=False
 
 
 def test_incompatible_env_is_rejected():

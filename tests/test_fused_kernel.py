@@ -22,10 +22,9 @@ def _cache(q):
 
 def _run(run, q, cache, steps, start, alpha, gamma, eps_initial, eps_final, eps_steps):
     """``run.run`` with the rule's constants in the kernel's order."""
-    return run.run(
-        q, *cache, steps, start_step=start, learning_rate=alpha, gamma=gamma,
-        eps_initial=eps_initial, eps_final=eps_final, eps_steps=eps_steps,
-    )  # fmt: skip
+    rule = {"learning_rate": alpha, "gamma": gamma, "eps_steps": eps_steps}
+    rule.update(eps_initial=eps_initial, eps_final=eps_final)
+    return run.run(q, *cache, steps, start_step=start, **rule)
 
 
 def test_roulette_walk_through_tables_3_2_to_3_5():

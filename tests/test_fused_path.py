@@ -131,8 +131,11 @@ def test_callbacks_see_every_step_and_stop_at_the_chunk_end():
             self.seen = []
 
         def _on_step(self):
-            self.seen.append((self.num_timesteps, self.locals["obs"], self.locals["action"],
-                              self.locals["undelayed_reward"], bool(self.locals["dones"][0])))  # fmt: skip
+            step = self.locals
+            done = bool(step["dones"][0])
+            self.seen.append(
+                (self.num_timesteps, step["obs"], step["action"], step["undelayed_reward"], done)
+            )
             return self.num_timesteps < 2700
 
     recorder = Recorder()

@@ -13,7 +13,7 @@ All share :class:`~delayed_rl.agents.base.TabularAgent`: ``learn``, ``predict``,
 """
 
 from delayed_rl.agents.base import RECORD_KEYS, TabularAgent, load_agent
-from delayed_rl.agents.defaults import DEFAULTS, AgentDefaults
+from delayed_rl.agents.hyperparameters import DEFAULTS, AgentDefaults
 from delayed_rl.agents.mmq import MMQ, MultipleModelQLearning
 from delayed_rl.agents.qlearning import FixedDelayQLearning, QLearning
 from delayed_rl.agents.schedules import ConstantSchedule, LinearSchedule

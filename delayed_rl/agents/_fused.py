@@ -14,9 +14,10 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from delayed_rl._validation import check_bool
 from delayed_rl.agents._loop import LearnRun, step_locals
 
-__all__ = ["CompiledTables", "compiled_loop", "compiled_run"]
+__all__ = ["CompiledTables", "check_fused", "compiled_loop", "compiled_run"]
 
 
 class CompiledTables(NamedTuple):
@@ -36,6 +37,19 @@ class CompiledTables(NamedTuple):
     v_max: np.ndarray
     v_cell: np.ndarray
     delay_estimates: np.ndarray
+
+
+def check_fused(fused: Any, callback: Any) -> bool | None:
+    """``learn()``'s ``fused`` checked; ``None`` (automatic) becomes ``False`` with a callback.
+
+    Callbacks see the exact per-step model on the Python path, so the automatic choice takes it.
+
+    Raises:
+        TypeError: ``fused`` is neither ``None`` nor a bool.
+    """
+    if fused is not None:
+        return check_bool("fused", fused)
+    return False if callback is not None else None
 
 
 def compiled_run(agent: Any, fused: bool | None, restart: bool) -> Any:

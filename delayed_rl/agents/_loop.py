@@ -22,7 +22,9 @@ __all__ = [
     "RECORD_DTYPES",
     "LearnRun",
     "TrainingLog",
+    "advance_schedules",
     "finish_learn",
+    "log_metrics",
     "python_loop",
     "setup_learn",
     "step_locals",
@@ -94,8 +96,25 @@ class LearnRun:
         """Log the metrics since the last log when ``steps_done`` reaches the next log step."""
         if self.steps_done == self.next_log:
             self.next_log += self.log_interval
-            agent._log_metrics(self.reward_total, self.undelayed_total)
+            log_metrics(agent, self.reward_total, self.undelayed_total)
             self.reward_total = self.undelayed_total = 0.0
+
+
+def log_metrics(agent: Any, reward_total: float, undelayed_total: float) -> None:
+    """Record the metrics of the steps since the last log (the agent's own too), then dump."""
+    agent._statistics.record(agent.logger, agent, reward_total, undelayed_total)
+    agent._record_model_metrics(agent.logger)
+    agent.logger.dump(agent.num_timesteps)
+
+
+def advance_schedules(agent: Any, step: int, total_timesteps: int) -> float:
+    """Set the progress, ε and α for training step ``step`` of ``total_timesteps``; return ε."""
+    agent._progress_remaining = 1.0 - step / total_timesteps
+    if agent.exploration_initial_eps != agent.exploration_final_eps:
+        agent.exploration_rate = agent.exploration_schedule(agent._progress_remaining)
+    if not agent._lr_constant:
+        agent._alpha = agent._current_learning_rate()
+    return agent.exploration_rate
 
 
 def step_locals(
@@ -148,7 +167,7 @@ def python_loop(agent: Any, run: LearnRun) -> None:
     steps_done = run.steps_done
     for step in range(run.n_steps):
         if not schedules_constant:
-            eps = agent._advance_schedules(run.start_timesteps + step, run.total_timesteps)
+            eps = advance_schedules(agent, run.start_timesteps + step, run.total_timesteps)
         acting, a = choose(s, eps, uniform)
         acting_counts[acting] += 1
         obs, reward, terminated, truncated, info = env.step(a + action_start)
@@ -196,7 +215,7 @@ def python_loop(agent: Any, run: LearnRun) -> None:
                 break
         if steps_done == next_log:
             next_log += run.log_interval
-            agent._log_metrics(reward_total, undelayed_total)
+            log_metrics(agent, reward_total, undelayed_total)
             reward_total = undelayed_total = 0.0
     agent._obs = s
     stats.episode_reward, stats.episode_length = episode_reward, episode_length
@@ -255,7 +274,7 @@ def finish_learn(agent: Any, run: LearnRun) -> None:
             (key, value[: run.steps_done]) for key, value in run.log.items()
         )
     if agent.num_timesteps > agent._statistics.log_start[1]:
-        agent._log_metrics(run.reward_total, run.undelayed_total)
+        log_metrics(agent, run.reward_total, run.undelayed_total)
     if run.callback is not None:
         run.callback.on_rollout_end()
         run.callback.on_training_end()

@@ -1,13 +1,9 @@
 """The stable-baselines3-like shell shared by the tabular agents.
 
-:class:`TabularAgent` owns everything that is not the learning rule: the env (an instance or an id
-string), argument checks, :meth:`~TabularAgent.learn` with SB3's callback protocol, progress bar
-and logger, :meth:`~TabularAgent.predict`, and saving to / loading from model files. Around it,
-each module has one job: :mod:`~delayed_rl.agents.env_util` makes and checks envs,
-:mod:`~delayed_rl.agents.save_util` reads and writes model files, :mod:`delayed_rl.agents._loop`
-and :mod:`delayed_rl.agents._fused` are the two step loops of ``learn()``.
-
-A subclass supplies the learning rule:
+:class:`TabularAgent` owns everything that is not the learning rule: the env, argument checks,
+:meth:`~TabularAgent.learn` with SB3's callback protocol, logger and progress bar,
+:meth:`~TabularAgent.predict`, and model files (:mod:`~delayed_rl.agents.save_util`); envs are
+made and checked in :mod:`~delayed_rl.agents.env_util`. A subclass supplies the learning rule:
 
 - ``_setup_model()``: allocate the tables (hyper-parameters and spaces are set);
 - ``_choose(s, eps, uniform) -> (acting model index, action index)``: one behaviour choice;
@@ -26,21 +22,16 @@ subclasses included.
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from pathlib import Path
 from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
 
-from delayed_rl._validation import (
-    check_bool,
-    check_fraction,
-    check_int,
-    check_probability,
-    check_real,
-)
+from delayed_rl._validation import check_bool, check_real
 from delayed_rl.agents import _persistence
-from delayed_rl.agents._fused import CompiledTables, compiled_loop, compiled_run
+from delayed_rl.agents._fused import CompiledTables, check_fused, compiled_loop, compiled_run
 from delayed_rl.agents._loop import (
     RECORD_DTYPES,
     TrainingLog,
@@ -48,16 +39,21 @@ from delayed_rl.agents._loop import (
     python_loop,
     setup_learn,
 )
-from delayed_rl.agents._random import PREDICT_STREAM, UniformStream
 from delayed_rl.agents._statistics import TrainingStatistics
-from delayed_rl.agents.defaults import DEFAULTS
-from delayed_rl.agents.env_util import SpaceIndex, check_discrete, make_env, vec_env_view
+from delayed_rl.agents._streams import PREDICT_STREAM, UniformStream
+from delayed_rl.agents.env_util import (
+    SpaceIndex,
+    check_discrete,
+    check_spaces_match,
+    make_env,
+    vec_env_view,
+)
+from delayed_rl.agents.hyperparameters import DEFAULTS, HYPERPARAMETER_NAMES, check_hyperparameters
 from delayed_rl.agents.logger import Logger
 from delayed_rl.agents.schedules import (
     ConstantSchedule,
     LinearSchedule,
     Schedule,
-    as_learning_rate_schedule,
     check_schedule_value,
     schedule_to_json,
 )
@@ -68,7 +64,7 @@ RECORD_KEYS = tuple(RECORD_DTYPES)
 """The arrays of ``agent.training_log`` after ``learn(..., record=True)``."""
 
 
-class TabularAgent:
+class TabularAgent(ABC):
     """Shell of the tabular agents: stable-baselines3's names and semantics on a Q-table.
 
     Args:
@@ -95,16 +91,7 @@ class TabularAgent:
         last_learn_path: ``"fused"`` or ``"python"``: the loop the last ``learn()`` ran on.
     """
 
-    _hyperparameter_names: ClassVar[tuple[str, ...]] = (
-        "learning_rate",
-        "gamma",
-        "exploration_initial_eps",
-        "exploration_final_eps",
-        "exploration_fraction",
-        "q_init",
-        "seed",
-        "verbose",
-    )
+    _hyperparameter_names: ClassVar[tuple[str, ...]] = HYPERPARAMETER_NAMES
     n_models: int = 1
     """How many delay models the agent acts from (|Λ|; 1 for a single Q-table)."""
     fused_chunk: int = 1_000
@@ -143,34 +130,13 @@ class TabularAgent:
         self.set_env(env)
 
     # ------------------------------------------------------------------ construction
-    def _set_hyperparameters(
-        self,
-        learning_rate: float | Schedule,
-        gamma: float,
-        exploration_initial_eps: float,
-        exploration_final_eps: float,
-        exploration_fraction: float,
-        q_init: float,
-        seed: int | None,
-        verbose: int,
-    ) -> None:
-        self.lr_schedule = as_learning_rate_schedule(learning_rate)
+    def _set_hyperparameters(self, **hyperparameters: Any) -> None:
+        """Check and set the constructor's hyper-parameters; reset the clocks and streams."""
+        vars(self).update(check_hyperparameters(**hyperparameters))
         self._lr_constant = isinstance(self.lr_schedule, ConstantSchedule)
-        self.learning_rate = learning_rate
-        self.gamma = check_probability("gamma", gamma)
-        self.exploration_initial_eps = check_probability(
-            "exploration_initial_eps", exploration_initial_eps
-        )
-        self.exploration_final_eps = check_probability(
-            "exploration_final_eps", exploration_final_eps
-        )
-        self.exploration_fraction = check_fraction("exploration_fraction", exploration_fraction)
         self.exploration_schedule = LinearSchedule(
             self.exploration_initial_eps, self.exploration_final_eps, self.exploration_fraction
         )
-        self.q_init = check_real("q_init", q_init)
-        self.seed = check_int("seed", seed, 0, optional=True)
-        self.verbose = check_int("verbose", verbose, 0, note=" (0 silent, 1 info)")
         self._progress_remaining = 1.0
         self._alpha = self._current_learning_rate()
         self.exploration_rate = self.exploration_schedule(1.0)
@@ -196,28 +162,22 @@ class TabularAgent:
         return params
 
     # ------------------------------------------------------------------ the learning rule
-    def _setup_model(self) -> None:
-        raise NotImplementedError
-
-    def _choose(self, s: int, eps: float, uniform: UniformStream) -> tuple[int, int]:
-        raise NotImplementedError
-
+    @abstractmethod
+    def _setup_model(self) -> None: ...
+    @abstractmethod
+    def _choose(self, s: int, eps: float, uniform: UniformStream) -> tuple[int, int]: ...
+    @abstractmethod
     def _learn_transition(
         self, s: int, a: int, r: float, s2: int, terminated: bool, truncated: bool
-    ) -> None:
-        raise NotImplementedError
-
-    def _greedy_actions(self, states: np.ndarray) -> np.ndarray:
-        raise NotImplementedError
-
-    def _end_episode(self) -> None:
-        raise NotImplementedError
-
-    def _get_state_arrays(self) -> dict[str, np.ndarray]:
-        raise NotImplementedError
-
-    def _set_state_arrays(self, arrays: dict[str, np.ndarray], where: str) -> None:
-        raise NotImplementedError
+    ) -> None: ...
+    @abstractmethod
+    def _greedy_actions(self, states: np.ndarray) -> np.ndarray: ...
+    @abstractmethod
+    def _end_episode(self) -> None: ...
+    @abstractmethod
+    def _get_state_arrays(self) -> dict[str, np.ndarray]: ...
+    @abstractmethod
+    def _set_state_arrays(self, arrays: dict[str, np.ndarray], where: str) -> None: ...
 
     def compiled_tables(self) -> CompiledTables | None:
         """The arrays the compiled path trains in place, or ``None`` (no compiled twin).
@@ -252,15 +212,7 @@ class TabularAgent:
             TypeError: ``env`` is not an env, or its spaces are not ``Discrete``.
             ValueError: its spaces differ from the agent's.
         """
-        env = make_env(env)
-        for name in ("observation_space", "action_space"):
-            theirs = check_discrete(getattr(env, name), name)
-            ours = getattr(self, name)
-            if theirs != ours:
-                raise ValueError(
-                    f"the env's {name} is {theirs!r} but the agent was built for {ours!r}"
-                )
-        self.env = env
+        self.env = check_spaces_match(make_env(env), self.observation_space, self.action_space)
         self._vec_env = None
         self._env_seeded = False
         self._episode_ended = True
@@ -295,14 +247,9 @@ class TabularAgent:
         """Write the recorded metrics at the current step (SB3 parity)."""
         self.logger.dump(self.num_timesteps)
 
-    def _log_metrics(self, reward_total: float, undelayed_total: float) -> None:
-        """Record the metrics of the steps since the last log, then dump."""
-        self._statistics.record(self.logger, self, reward_total, undelayed_total)
-        self._record_model_metrics(self.logger)
-        self.logger.dump(self.num_timesteps)
-
     def _record_model_metrics(self, logger: Any) -> None:
-        """Record algorithm-specific metrics (subclasses)."""
+        """Record algorithm-specific metrics (subclasses; none here)."""
+        return None
 
     # ------------------------------------------------------------------ schedules
     def _current_learning_rate(self) -> float:
@@ -312,15 +259,6 @@ class TabularAgent:
             self._progress_remaining,
             allow_zero=False,
         )
-
-    def _advance_schedules(self, step: int, total_timesteps: int) -> float:
-        """Set the progress, ε and α for training step ``step`` of ``total_timesteps``; return ε."""
-        self._progress_remaining = 1.0 - step / total_timesteps
-        if self.exploration_initial_eps != self.exploration_final_eps:
-            self.exploration_rate = self.exploration_schedule(self._progress_remaining)
-        if not self._lr_constant:
-            self._alpha = self._current_learning_rate()
-        return self.exploration_rate
 
     @property
     def current_learning_rate(self) -> float:
@@ -411,13 +349,10 @@ class TabularAgent:
     ) -> TabularAgent:
         """Train for ``total_timesteps`` steps of the env (SB3's signature and semantics).
 
-        Works on continuing envs (which never end an episode): each step acts, steps the env and
-        learns at once. When an episode ends (terminated or truncated) the env is reset and the
-        episode's history is cleared. With ``reset_num_timesteps=True`` (the default)
-        ``num_timesteps`` restarts at 0 and the env is reset first; with ``False`` the step
-        count, the exploration and learning-rate schedules' clock and the current episode
-        continue where the previous ``learn()`` stopped (after ``load`` or ``set_env``, the env is
-        reset).
+        Each step acts, steps the env and learns at once, so continuing envs work; an episode's
+        end resets the env and clears the history. ``reset_num_timesteps=False`` continues the
+        step count, the schedules' clock and the current episode of the previous ``learn()``
+        (after ``load`` or ``set_env``, the env is reset).
 
         Args:
             total_timesteps: how many env steps to take (``reset_num_timesteps=False``: more).
@@ -431,11 +366,9 @@ class TabularAgent:
             reset_num_timesteps: see above.
             progress_bar: show a progress bar (tqdm's when installed, else a text bar).
             record: fill :attr:`training_log` with one entry per step: ``obs``, ``action``,
-                ``reward`` (as received, delayed), ``undelayed_reward`` (``info
-                ["undelayed_reward"]`` of a reward-delay wrapper, else the reward),
-                ``acting_delay_index`` (the index into ``delay_estimates`` of the acting model)
-                and ``episode_end`` (the episode ended at that step) — what experiments need to
-                compute average rewards from the undelayed stream.
+                ``reward`` (received), ``undelayed_reward`` (a reward-delay wrapper's
+                ``info["undelayed_reward"]``, else the reward), ``acting_delay_index`` (into
+                ``delay_estimates``) and ``episode_end``.
             fused: run the whole loop compiled (:mod:`delayed_rl.fast`, which says what
                 compiles and how callbacks see a compiled run): ``None`` (default) does when it
                 can — the agent has :meth:`compiled_tables`, the env stack compiles, the
@@ -452,14 +385,17 @@ class TabularAgent:
             TypeError: an argument has the wrong type.
             ValueError: a bad value, or the agent has no env.
         """
-        if fused is not None:
-            check_bool("fused", fused)
-        elif callback is not None:
-            fused = False  # callbacks see the exact per-step model on the Python path
+        fused = check_fused(fused, callback)
         run = setup_learn(
-            self, total_timesteps, callback, log_interval, tb_log_name, reset_num_timesteps,
-            progress_bar, record,
-        )  # fmt: skip
+            self,
+            total_timesteps,
+            callback,
+            log_interval,
+            tb_log_name,
+            reset_num_timesteps,
+            progress_bar,
+            record,
+        )
         fused_run = compiled_run(self, fused, reset_num_timesteps)
         self.last_learn_path = "python" if fused_run is None else "fused"
         if fused_run is None:

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import numbers
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from numpy.typing import ArrayLike, NDArray
 
+from delayed_rl._validation import check_real
 from delayed_rl.envs.linefollow.camera import CENTRE_PIXEL, N_PIXELS, line_centroid
 from delayed_rl.envs.linefollow.env import MAX_WHEEL_SPEED, WHEEL_SPEED_ACTIONS
 
@@ -34,51 +37,56 @@ class ProportionalController:
     ``episode_start`` is True, there is no last command and the robot drives straight at
     ``base_speed``.
 
-    Actions: on ``action_mode="continuous"`` envs (the default when ``env`` is None) the action is
-    the normalised wheel-speed pair (v_left, v_right) / 300; on ``action_mode="discrete"`` envs,
-    the index of the nearest Table 5.2 pair (Euclidean distance in wheel-speed space).
-    Observations: centroids (``Discrete(41)``, the default) or, on ``observation_mode="pixels"``
-    envs, the 40 pixels, from which m is computed.
+    Actions: on ``action_mode="discrete"`` envs (the registered env's default, and the format
+    used when ``env`` is None) the index of the nearest Table 5.2 pair (Euclidean distance in
+    wheel-speed space); on ``action_mode="continuous"`` envs the normalised wheel-speed pair
+    (v_left, v_right) / 300. Observations: centroids (``Discrete(41)``, the default) or, on
+    ``observation_mode="pixels"`` envs, the 40 pixels, from which m is computed.
 
     Args:
-        k_p: the proportional gain (thesis: 6).
+        env: an :class:`~delayed_rl.envs.linefollow.env.EPuckLineFollowEnv` (possibly wrapped),
+            its id, or ``None`` (the registered env's formats); only its spaces are used, to
+            choose the action and observation format. The first argument, as for every agent.
+        k_p: the proportional gain (thesis: 6), a number >= 0.
         base_speed: wheel speed (steps/s) with the line centred, in (0, 300].
-        env: an :class:`~delayed_rl.envs.linefollow.env.EPuckLineFollowEnv` (possibly wrapped)
-            or its id; only its spaces are used, to choose the action and observation format.
 
     Example:
         >>> ctrl = ProportionalController()
-        >>> ctrl.predict(25)[0]  # line 5 pixels right of centre: slow the right wheel
-        array([1. , 0.8], dtype=float32)
+        >>> ctrl.wheel_speeds(25)  # line 5 pixels right of centre: slow the right wheel
+        array([300., 240.])
+        >>> int(ctrl.predict(25)[0])  # the nearest Table 5.2 pair, (300, 200)
+        4
     """
 
-    def __init__(self, k_p: float = 6.0, base_speed: float = MAX_WHEEL_SPEED, env: Any = None):
-        if isinstance(k_p, bool) or not isinstance(k_p, int | float | np.integer | np.floating):
-            raise TypeError(f"k_p must be a number, got {k_p!r} ({type(k_p).__name__})")
-        if not (np.isfinite(k_p) and k_p >= 0):
-            raise ValueError(f"k_p must be a finite number >= 0, got {k_p!r}")
-        if isinstance(base_speed, bool) or not isinstance(
-            base_speed, int | float | np.integer | np.floating
-        ):
-            raise TypeError(f"base_speed must be a number, got {base_speed!r}")
-        if not (np.isfinite(base_speed) and 0 < base_speed <= MAX_WHEEL_SPEED):
-            raise ValueError(
-                f"base_speed must be in (0, {MAX_WHEEL_SPEED}] steps/s, got {base_speed!r}"
-            )
-        self.k_p = float(k_p)
-        self.base_speed = float(base_speed)
-        self.discrete_actions = False
+    def __init__(self, env: Any = None, k_p: float = 6.0, base_speed: float = MAX_WHEEL_SPEED):
+        self.k_p = check_real("k_p", k_p, 0.0)
+        self.base_speed = check_real(
+            "base_speed", base_speed, 0.0, MAX_WHEEL_SPEED, low_open=True, note=" steps/s"
+        )
+        self.discrete_actions = True
         self.pixel_observations = False
         self.env = None
         if env is not None:
             self.set_env(env)
 
     def set_env(self, env: Any) -> None:
-        """Adopt ``env``'s action and observation formats (an env, a wrapped env or an id)."""
-        if isinstance(env, str):
-            import gymnasium as gym
+        """Adopt ``env``'s action and observation formats (an env, a wrapped env or an id).
 
+        Raises:
+            TypeError: ``env`` is not an env or an id.
+            ValueError: its spaces are not the e-puck env's.
+        """
+        if isinstance(env, str):
             env = gym.make(env)
+        if not isinstance(env, gym.Env):
+            hint = (
+                " (since 0.2 the env is the first argument: pass k_p=...)"
+                if isinstance(env, numbers.Real)
+                else ""
+            )
+            raise TypeError(
+                f"env must be an EPuckLineFollow env, its id or None, got {env!r}{hint}"
+            )
         action_space, observation_space = env.action_space, env.observation_space
         if isinstance(action_space, spaces.Discrete) and action_space.n == len(WHEEL_SPEED_ACTIONS):
             discrete = True
@@ -121,7 +129,7 @@ class ProportionalController:
         observation: ArrayLike,
         state: Any = None,
         episode_start: ArrayLike | None = None,
-        deterministic: bool = True,
+        deterministic: bool = False,
     ) -> tuple[NDArray, NDArray[np.float32]]:
         """The controller's action for one observation or a batch (stable-baselines3 style).
 
@@ -131,7 +139,8 @@ class ProportionalController:
             state: the state returned by the previous call (the last normalised wheel speeds,
                 ``(2,)`` or ``(n, 2)``), or None.
             episode_start: booleans (scalar or ``(n,)``); True forgets the last command.
-            deterministic: ignored (the controller is deterministic).
+            deterministic: ignored (the controller is deterministic; the default, ``False``, is
+                every agent's, as in stable-baselines3).
 
         Returns:
             ``(action, state)``: the action(s) in the env's format, and the new state to pass

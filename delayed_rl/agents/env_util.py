@@ -15,7 +15,14 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-__all__ = ["SingleEnvVecView", "SpaceIndex", "check_discrete", "make_env", "vec_env_view"]
+__all__ = [
+    "SingleEnvVecView",
+    "SpaceIndex",
+    "check_discrete",
+    "check_spaces_match",
+    "make_env",
+    "vec_env_view",
+]
 
 _HINTS = {
     "observation_space": (
@@ -43,6 +50,22 @@ def check_discrete(space: Any, name: str) -> spaces.Discrete:
     if isinstance(space, spaces.Discrete):
         return space
     raise TypeError(f"tabular agents need a Discrete {name}, got {space!r}: {_HINTS[name]}")
+
+
+def check_spaces_match(
+    env: gym.Env, observation_space: spaces.Discrete, action_space: spaces.Discrete
+) -> gym.Env:
+    """Return ``env`` after checking that its spaces are the agent's.
+
+    Raises:
+        TypeError: a space of ``env`` is not ``Discrete``.
+        ValueError: a space differs from the agent's (the message shows both).
+    """
+    for name, ours in (("observation_space", observation_space), ("action_space", action_space)):
+        theirs = check_discrete(getattr(env, name), name)
+        if theirs != ours:
+            raise ValueError(f"the env's {name} is {theirs!r} but the agent was built for {ours!r}")
+    return env
 
 
 def make_env(env: Any) -> gym.Env:

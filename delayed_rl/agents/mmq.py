@@ -28,9 +28,9 @@ import numpy as np
 from delayed_rl._delay_line import ring_size
 from delayed_rl._validation import check_int
 from delayed_rl.agents._fused import CompiledTables
-from delayed_rl.agents._random import UniformStream
+from delayed_rl.agents._streams import UniformStream
 from delayed_rl.agents.base import TabularAgent
-from delayed_rl.agents.defaults import DEFAULTS
+from delayed_rl.agents.hyperparameters import DEFAULTS
 from delayed_rl.agents.schedules import Schedule
 
 __all__ = ["MMQ", "MultipleModelQLearning", "greedy_actions"]

@@ -15,7 +15,7 @@ from typing import Any
 import gymnasium as gym
 
 from delayed_rl._validation import check_int
-from delayed_rl.agents.defaults import DEFAULTS
+from delayed_rl.agents.hyperparameters import DEFAULTS
 from delayed_rl.agents.mmq import MultipleModelQLearning
 from delayed_rl.agents.schedules import Schedule
 

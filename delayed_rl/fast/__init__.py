@@ -1,4 +1,22 @@
-"""The compiled (numba) training path for tabular envs; see :class:`FusedRun`."""
+"""The compiled (numba) training path for tabular envs; see :class:`FusedRun`.
+
+``agent.learn()`` runs on it by itself when it can (``learn(fused=None)``, the default): the
+agent's rule has a compiled twin (``agent.compiled_tables()`` is not ``None``: MMQ, Q-learning and
+fixed-delay Q-learning), the env stack compiles (:mod:`delayed_rl.fast.tabular` states the
+protocol), the learning rate is constant and no callback is given (a progress bar is fine).
+``learn(fused=False)`` never does and ``learn(fused=True)`` must (else
+:class:`NotCompilable` says why).
+
+- The update rule is the Python path's; the random streams differ, so seeded runs agree in
+  distribution, not step by step. Each path is reproducible from the agent's seed.
+- The env object is not stepped: the compiled loop reads the env's tables. The next Python-path
+  ``learn()`` resets the env.
+- Callbacks (with ``fused=True``) still get one ``on_step()`` per step, with that step's
+  ``locals`` (``info`` holds only ``undelayed_reward``), but they run after each compiled chunk
+  of ``agent.fused_chunk`` steps: the model they see (an ``EvalCallback``'s evaluation, a
+  ``CheckpointCallback``'s file) is the one at the chunk's end, and a callback's ``False`` stops
+  training at the end of its chunk.
+"""
 
 from delayed_rl.fast.kernel import HAVE_NUMBA
 from delayed_rl.fast.run import FusedRun

@@ -442,7 +442,5 @@ def replay(
         np.asarray(terminated, np.bool_),
         np.asarray(rewards, np.float64),
     )
-    run_chunk(
-        cache, rule, TabularModel.empty(), line, History.empty(int(lags.max())), StepLog.empty(n),
-        script, 0,
-    )  # fmt: skip
+    history = History.empty(int(lags.max()))
+    run_chunk(cache, rule, TabularModel.empty(), line, history, StepLog.empty(n), script, 0)

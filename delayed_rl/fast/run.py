@@ -98,9 +98,13 @@ class FusedRun:
             self.tie_counts = np.zeros(v_max.shape, dtype=np.int64)
         cache = kernel.QCache(q, v_max, v_cell, self.tie_counts)
         rule = kernel.Rule(
-            self.delay_estimates, float(learning_rate), float(gamma), float(eps_initial),
-            float(eps_final), int(eps_steps),
-        )  # fmt: skip
+            delay_estimates=self.delay_estimates,
+            learning_rate=float(learning_rate),
+            gamma=float(gamma),
+            eps_initial=float(eps_initial),
+            eps_final=float(eps_final),
+            eps_steps=int(eps_steps),
+        )
         line = kernel.DelayLine(delays, self.ring, self.mode)
         log = kernel.StepLog.empty(steps)
         kernel.run_chunk(
