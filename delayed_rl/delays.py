@@ -25,8 +25,11 @@ import math
 import numbers
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
+
+from delayed_rl._validation import check_fraction, check_int, check_real
 
 __all__ = [
     "AliasTable",
@@ -40,23 +43,27 @@ __all__ = [
 ]
 
 
-def _check_real(name: str, value: object, *, low: float, allowed: str) -> float:
-    """Return ``value`` as a float after checking that it is a finite real ``>= low``."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise TypeError(f"{name} must be a real number ({allowed}), got {value!r}")
-    value = float(value)
-    if not math.isfinite(value) or value < low:
-        raise ValueError(f"{name} must be {allowed}, got {value!r}")
-    return value
+def _as_pmf(pmf: Any) -> np.ndarray:
+    """``pmf`` as a 1-D float array of finite weights ``>= 0`` (not yet normalised).
 
-
-def _check_int(name: str, value: object, *, low: int, allowed: str) -> int:
-    """Return ``value`` as an int after checking that it is an integer ``>= low``."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise TypeError(f"{name} must be an integer ({allowed}), got {value!r}")
-    if value < low:
-        raise ValueError(f"{name} must be {allowed}, got {value!r}")
-    return int(value)
+    Raises:
+        TypeError: ``pmf`` does not hold numbers (strings, ``None``, bools...).
+        ValueError: ``pmf`` is empty, not 1-D, or has a negative or non-finite entry.
+    """
+    try:
+        probs = np.asarray(pmf)
+    except ValueError:  # a ragged nesting of sequences
+        raise ValueError(f"pmf must be a non-empty 1-D sequence of numbers, got {pmf!r}") from None
+    if probs.dtype.kind not in "iuf":
+        raise TypeError(
+            f"pmf must be a non-empty 1-D sequence of numbers, got {pmf!r} ({type(pmf).__name__})"
+        )
+    probs = probs.astype(float)
+    if probs.ndim != 1 or probs.size == 0:
+        raise ValueError(f"pmf must be a non-empty 1-D sequence of numbers, got {pmf!r}")
+    if not np.all(np.isfinite(probs)) or np.any(probs < 0):
+        raise ValueError(f"pmf must hold finite numbers >= 0, got {pmf!r}")
+    return probs
 
 
 class Delay(ABC):
@@ -103,13 +110,13 @@ class AliasTable:
         pmf: non-negative probabilities; they are normalised to sum to one.
 
     Raises:
-        ValueError: if ``pmf`` is empty, has a negative or non-finite entry, or sums to zero.
+        TypeError: if ``pmf`` does not hold numbers.
+        ValueError: if ``pmf`` is empty or not 1-D, has a negative or non-finite entry, or sums
+            to zero.
     """
 
     def __init__(self, pmf: Sequence[float] | np.ndarray):
-        pmf = np.asarray(pmf, dtype=float)
-        if pmf.ndim != 1 or pmf.size == 0 or not np.all(np.isfinite(pmf)) or np.any(pmf < 0):
-            raise ValueError(f"pmf must be a non-empty 1-d array of finite values >= 0, got {pmf}")
+        pmf = _as_pmf(pmf)
         total = pmf.sum()
         if total <= 0:
             raise ValueError(f"pmf must have positive mass, got {pmf}")
@@ -146,6 +153,10 @@ class Poisson(Delay):
 
     Args:
         lam: the mean (and variance) λ ≥ 0, any finite real; λ = 0 means no delay.
+
+    Raises:
+        TypeError: ``lam`` is not a real number (a bool or a string included).
+        ValueError: ``lam`` is negative, NaN or infinite.
     """
 
     TAIL = 1e-20
@@ -155,9 +166,15 @@ class Poisson(Delay):
     """The largest table built."""
 
     def __init__(self, lam: float):
-        self.lam = _check_real("lam", lam, low=0.0, allowed="a finite number >= 0")
+        self.lam = check_real("lam", lam, 0.0)
 
     def sample(self, rng, size=None):
+        """Draw delays by alias-table look-up (numpy's ``poisson`` when there is no table).
+
+        Args:
+            rng: the generator to draw from.
+            size: how many delays (an int or a shape), or ``None`` for one ``int``.
+        """
         table = self.table
         if table is None:
             return self._finish(rng.poisson(self.lam, size), size)
@@ -172,6 +189,7 @@ class Poisson(Delay):
         return AliasTable(self.pmf(np.arange(end))) if end <= self.MAX_TABLE else None
 
     def pmf(self, k):
+        """``λ^k e^{-λ} / k!`` (computed in log space), 0 for negative ``k``; vectorised."""
         k = np.asarray(k)
         if self.lam == 0.0:
             out = (k == 0).astype(float)
@@ -183,6 +201,7 @@ class Poisson(Delay):
 
     @property
     def mean(self) -> float:
+        """λ."""
         return self.lam
 
     def __repr__(self) -> str:
@@ -194,24 +213,32 @@ class Constant(Delay):
 
     Args:
         k: the delay, an integer ≥ 0.
+
+    Raises:
+        TypeError: ``k`` is not an integer (``2.0`` included).
+        ValueError: ``k`` is negative.
     """
 
     def __init__(self, k: int):
-        self.k = _check_int("k", k, low=0, allowed="an integer >= 0")
+        self.k = check_int("k", k, 0)
 
     def sample(self, rng, size=None):
+        """``size`` copies of ``k`` (``rng`` is not used, so its stream does not advance)."""
         return self._finish(np.full(() if size is None else size, self.k), size)
 
     def pmf(self, k):
+        """1 at ``k == self.k``, 0 elsewhere; vectorised."""
         out = (np.asarray(k) == self.k).astype(float)
         return float(out) if out.ndim == 0 else out
 
     @property
     def mean(self) -> float:
+        """``k``."""
         return float(self.k)
 
     @property
     def support_max(self) -> int:
+        """``k``."""
         return self.k
 
     def __repr__(self) -> str:
@@ -223,28 +250,33 @@ class Geometric(Delay):
 
     Args:
         p: the per-step arrival probability, ``0 < p <= 1``; the mean is ``(1 − p) / p``.
+
+    Raises:
+        TypeError: ``p`` is not a real number.
+        ValueError: ``p`` is outside ``(0, 1]`` or NaN.
     """
 
     def __init__(self, p: float):
-        p = _check_real("p", p, low=0.0, allowed="a probability in (0, 1]")
-        if not 0.0 < p <= 1.0:
-            raise ValueError(f"p must be a probability in (0, 1], got {p!r}")
-        self.p = p
+        self.p = check_fraction("p", p)
 
     def sample(self, rng, size=None):
+        """Draw with numpy's ``geometric`` (trials up to a success) minus one."""
         return self._finish(rng.geometric(self.p, size) - 1, size)
 
     def pmf(self, k):
+        """``p (1 − p)^k`` for ``k >= 0``, else 0; vectorised."""
         k = np.asarray(k)
         out = np.where(k >= 0, self.p * (1.0 - self.p) ** np.where(k >= 0, k, 0), 0.0)
         return float(out) if out.ndim == 0 else out
 
     @property
     def mean(self) -> float:
+        """``(1 − p) / p``."""
         return (1.0 - self.p) / self.p
 
     @property
     def support_max(self) -> int | None:
+        """0 when ``p == 1`` (every delay is 0), else ``None`` (unbounded)."""
         return 0 if self.p == 1.0 else None
 
     def __repr__(self) -> str:
@@ -257,28 +289,34 @@ class Uniform(Delay):
     Args:
         low: the smallest delay, an integer ≥ 0.
         high: the largest delay, an integer ≥ ``low``.
+
+    Raises:
+        TypeError: ``low`` or ``high`` is not an integer.
+        ValueError: ``low`` is negative or ``high`` is below ``low``.
     """
 
     def __init__(self, low: int, high: int):
-        self.low = _check_int("low", low, low=0, allowed="an integer >= 0")
-        self.high = _check_int("high", high, low=0, allowed="an integer >= 0")
-        if self.high < self.low:
-            raise ValueError(f"high must be >= low (= {self.low}), got high={self.high!r}")
+        self.low = check_int("low", low, 0)
+        self.high = check_int("high", high, self.low)
 
     def sample(self, rng, size=None):
+        """Draw with ``rng.integers(low, high + 1)``."""
         return self._finish(rng.integers(self.low, self.high + 1, size), size)
 
     def pmf(self, k):
+        """``1 / (high − low + 1)`` on ``low..high``, 0 elsewhere; vectorised."""
         k = np.asarray(k)
         out = np.where((k >= self.low) & (k <= self.high), 1.0 / (self.high - self.low + 1), 0.0)
         return float(out) if out.ndim == 0 else out
 
     @property
     def mean(self) -> float:
+        """``(low + high) / 2``."""
         return (self.low + self.high) / 2.0
 
     @property
     def support_max(self) -> int:
+        """``high``."""
         return self.high
 
     def __repr__(self) -> str:
@@ -292,14 +330,15 @@ class Empirical(Delay):
         pmf: non-negative finite weights for delays 0, 1, ..., len(pmf) − 1, summing to 1
             (within 1e-9; they are then renormalised exactly). Use it for measured latency
             histograms.
+
+    Raises:
+        TypeError: ``pmf`` does not hold numbers.
+        ValueError: ``pmf`` is empty or not 1-D, has a negative or non-finite entry, or does not
+            sum to 1.
     """
 
     def __init__(self, pmf: Sequence[float] | np.ndarray):
-        probs = np.asarray(pmf, dtype=float)
-        if probs.ndim != 1 or probs.size == 0:
-            raise ValueError(f"pmf must be a non-empty 1-D sequence of probabilities, got {pmf!r}")
-        if not np.all(np.isfinite(probs)) or np.any(probs < 0):
-            raise ValueError(f"pmf must hold finite probabilities >= 0, got {pmf!r}")
+        probs = _as_pmf(pmf)
         total = probs.sum()
         if abs(total - 1.0) > 1e-9:
             raise ValueError(f"pmf must sum to 1, got a sum of {total!r}")
@@ -308,10 +347,12 @@ class Empirical(Delay):
         self._cdf[-1] = 1.0
 
     def sample(self, rng, size=None):
+        """Draw by inverting the cumulative table with one uniform per delay."""
         draws = np.searchsorted(self._cdf, rng.random(size), side="right")
         return self._finish(draws, size)
 
     def pmf(self, k):
+        """``probs[k]`` inside the table, 0 outside; vectorised."""
         k = np.asarray(k)
         inside = (k >= 0) & (k < self.probs.size)
         out = np.where(inside, self.probs[np.where(inside, k, 0)], 0.0)
@@ -319,10 +360,12 @@ class Empirical(Delay):
 
     @property
     def mean(self) -> float:
+        """``Σ k · probs[k]``."""
         return float(np.dot(np.arange(self.probs.size), self.probs))
 
     @property
     def support_max(self) -> int:
+        """The largest ``k`` with ``probs[k] > 0``."""
         return int(np.flatnonzero(self.probs)[-1])
 
     def __repr__(self) -> str:
@@ -330,16 +373,20 @@ class Empirical(Delay):
 
 
 def _log_factorial(k: np.ndarray) -> np.ndarray:
-    from math import lgamma
-
-    return np.vectorize(lambda x: lgamma(x + 1.0), otypes=[float])(k)
+    """``log(k!)`` elementwise, as ``lgamma(k + 1)``."""
+    return np.vectorize(lambda x: math.lgamma(x + 1.0), otypes=[float])(k)
 
 
 def as_delay(delay: Delay | float, name: str = "delay") -> Delay:
     """Turn ``delay`` into a :class:`Delay`: a number is read as a Poisson mean λ.
 
+    Args:
+        delay: a :class:`Delay` (returned as it is) or a real number λ (``Poisson(λ)``).
+        name: the argument's name in the caller, for the error message.
+
     Raises:
-        TypeError: if ``delay`` is neither a :class:`Delay` nor a real number.
+        TypeError: if ``delay`` is neither a :class:`Delay` nor a real number (a bool is not).
+        ValueError: if ``delay`` is a number that is not a valid λ (negative, NaN, infinite).
     """
     if isinstance(delay, Delay):
         return delay
@@ -347,5 +394,5 @@ def as_delay(delay: Delay | float, name: str = "delay") -> Delay:
         return Poisson(delay)
     raise TypeError(
         f"{name} must be a delayed_rl.delays.Delay (Poisson, Constant, Geometric, Uniform, "
-        f"Empirical) or a number read as a Poisson mean, got {delay!r}"
+        f"Empirical) or a number read as a Poisson mean, got {delay!r} ({type(delay).__name__})"
     )

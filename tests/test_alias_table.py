@@ -69,8 +69,7 @@ def test_poisson_scalar_and_shaped_draws():
 
 @pytest.mark.parametrize("max_delay", [None, 6])
 def test_fused_run_draws_poisson_delays(max_delay):
-    """The compiled run's delays are Poisson(λ), capped like the wrapper's: the whole tail at the
-    cap."""
+    """The compiled run's delays are Poisson(λ), capped like the wrapper's (the tail at the cap)."""
     env = RewardDelay(gym.make("delayed_rl/GridWorld-3x3-v0").unwrapped, 9.0, max_delay=max_delay)
     run = FusedRun(env, np.array([0]), seed=4)
     draws = np.concatenate([run._draw_delays(10_000) for _ in range(5)])

@@ -16,7 +16,16 @@ import pytest
 from scipy import stats
 from support import binned_chisquare
 
-from delayed_rl.delays import Constant, Delay, Empirical, Geometric, Poisson, Uniform, as_delay
+from delayed_rl.delays import (
+    AliasTable,
+    Constant,
+    Delay,
+    Empirical,
+    Geometric,
+    Poisson,
+    Uniform,
+    as_delay,
+)
 from delayed_rl.wrappers import PoissonRewardDelay, RewardDelay
 
 ALPHA = 1e-3
@@ -160,11 +169,44 @@ def test_as_delay() -> None:
         (lambda: Empirical([float("nan"), 1.0]), ValueError, "pmf"),
         (lambda: Empirical([]), ValueError, "pmf"),
         (lambda: Empirical([[0.5, 0.5]]), ValueError, "pmf"),
+        (lambda: Empirical([[0.5], [0.3, 0.2]]), ValueError, "pmf"),
+        (lambda: Empirical(["a", "b"]), TypeError, "pmf"),
+        (lambda: Empirical([0.5, None]), TypeError, "pmf"),
+        (lambda: Empirical([True, False]), TypeError, "pmf"),
     ],
 )
 def test_invalid_arguments_raise_naming_them(factory, exc, name) -> None:
     with pytest.raises(exc, match=name):
         factory()
+
+
+@pytest.mark.parametrize(
+    ("cls", "name", "wrong_type", "bad_value"),
+    [
+        (Poisson, "lam", "5", -1.0),
+        (Constant, "k", 2.0, -1),
+        (Geometric, "p", "0.5", 0.0),
+        (lambda low: Uniform(low, 3), "low", 1.5, -1),
+        (lambda high: Uniform(2, high), "high", 2.5, 1),
+        (Empirical, "pmf", "0.5", [0.5, 0.4]),
+        (AliasTable, "pmf", ["x"], [0.0, 0.0]),
+    ],
+)
+def test_each_argument_refuses_a_wrong_type_and_a_bad_value(
+    cls, name, wrong_type, bad_value
+) -> None:
+    """The library's policy: TypeError for the wrong type, ValueError for a bad value."""
+    with pytest.raises(TypeError, match=rf"\b{name}\b"):
+        cls(wrong_type)
+    with pytest.raises(ValueError, match=rf"\b{name}\b"):
+        cls(bad_value)
+
+
+def test_valid_argument_types_are_normalised() -> None:
+    assert Poisson(np.float32(2.5)).lam == 2.5 and type(Poisson(3).lam) is float
+    assert Constant(np.int64(4)).k == 4 and type(Constant(np.int64(4)).k) is int
+    assert Uniform(np.int32(1), 3).low == 1 and Geometric(1).p == 1.0
+    assert Empirical(np.array([1, 0])).probs.tolist() == [1.0, 0.0]
 
 
 # --- the delays the reward wrapper actually applies (the info["reward_delay"] stream) ---------

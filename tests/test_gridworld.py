@@ -145,19 +145,36 @@ def test_render_ansi() -> None:
 
 
 @pytest.mark.parametrize(
-    ("kwargs", "name"),
+    ("kwargs", "exc", "name"),
     [
-        ({"size": 1}, "size"),
-        ({"size": 3.0}, "size"),
-        ({"size": True}, "size"),
-        ({"max_steps": 0}, "max_steps"),
-        ({"max_steps": 2.5}, "max_steps"),
-        ({"render_mode": "human"}, "render_mode"),
+        ({"size": 1}, ValueError, "size"),
+        ({"size": 3.0}, TypeError, "size"),
+        ({"size": True}, TypeError, "size"),
+        ({"max_steps": 0}, ValueError, "max_steps"),
+        ({"max_steps": 2.5}, TypeError, "max_steps"),
+        ({"render_mode": "human"}, ValueError, "render_mode"),
     ],
 )
-def test_invalid_arguments(kwargs, name) -> None:
-    with pytest.raises(ValueError, match=name):
+def test_invalid_arguments(kwargs, exc, name) -> None:
+    with pytest.raises(exc, match=name):
         GridWorldEnv(**kwargs)
+
+
+@pytest.mark.parametrize(
+    ("name", "wrong_type", "bad_value"),
+    [("size", "5", 1), ("max_steps", "5", -1), ("render_mode", 1, "human")],
+)
+def test_each_argument_refuses_a_wrong_type_and_a_bad_value(name, wrong_type, bad_value) -> None:
+    with pytest.raises(TypeError, match=name):
+        GridWorldEnv(**{name: wrong_type})
+    with pytest.raises(ValueError, match=name):
+        GridWorldEnv(**{name: bad_value})
+
+
+def test_valid_argument_types() -> None:
+    env = GridWorldEnv(size=np.int64(3), max_steps=np.int32(4))
+    assert (type(env.size), type(env.max_steps)) == (int, int)
+    assert env.observation_space.n == 9
 
 
 def test_invalid_action_and_start_state() -> None:
@@ -167,4 +184,7 @@ def test_invalid_action_and_start_state() -> None:
         env.step(4)
     with pytest.raises(ValueError, match="state"):
         env.reset(options={"state": 9})
+    with pytest.raises(TypeError, match="state"):
+        env.reset(options={"state": "3"})
+    assert env.reset(options={"state": np.int64(4)})[0] == 4
     np.testing.assert_array_equal(env.initial_state_distrib, np.eye(9)[8])

@@ -167,7 +167,7 @@ def test_a_tilted_line_is_seen_wider(straight):
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [
-        ({"look_ahead": 0.0}, "look_ahead must be a finite number > 0"),
+        ({"look_ahead": 0.0}, r"look_ahead must be a number > 0 \(m\), got 0.0"),
         ({"field_width": float("nan")}, "field_width"),
         ({"line_width": -1.0}, "line_width"),
         ({"field_width": 0.2}, "track index's reach"),
@@ -176,6 +176,16 @@ def test_a_tilted_line_is_seen_wider(straight):
 def test_camera_rejects_bad_geometry(kwargs, match):
     with pytest.raises(ValueError, match=match):
         Camera(**kwargs)
+
+
+@pytest.mark.parametrize("name", ["look_ahead", "field_width", "line_width"])
+def test_camera_arguments_refuse_a_wrong_type_and_a_bad_value(name):
+    with pytest.raises(TypeError, match=name):
+        Camera(**{name: "0.01"})
+    with pytest.raises(TypeError, match=name):
+        Camera(**{name: True})
+    with pytest.raises(ValueError, match=name):
+        Camera(**{name: -0.01})
 
 
 @given(st.lists(st.booleans(), min_size=N_PIXELS, max_size=N_PIXELS))

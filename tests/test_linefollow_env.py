@@ -18,6 +18,7 @@ from gymnasium.utils.env_checker import check_env  # noqa: E402
 
 import delayed_rl  # noqa: E402, F401  (registers the ids)
 from delayed_rl.agents.controllers import ProportionalController  # noqa: E402
+from delayed_rl.envs.linefollow.camera import Camera  # noqa: E402
 from delayed_rl.envs.linefollow.env import (  # noqa: E402
     CONTROL_PERIOD,
     MAX_WHEEL_SPEED,
@@ -25,7 +26,12 @@ from delayed_rl.envs.linefollow.env import (  # noqa: E402
     WHEEL_SPEED_ACTIONS,
     EPuckLineFollowEnv,
 )
-from delayed_rl.envs.linefollow.robot import AXLE_LENGTH, METRES_PER_STEP  # noqa: E402
+from delayed_rl.envs.linefollow.render import Renderer  # noqa: E402
+from delayed_rl.envs.linefollow.robot import (  # noqa: E402
+    AXLE_LENGTH,
+    METRES_PER_STEP,
+    EPuckRobot,
+)
 from delayed_rl.envs.linefollow.track import Track, make_track  # noqa: E402
 
 ENV_ID = "delayed_rl/EPuckLineFollow-v0"
@@ -515,27 +521,70 @@ def test_human_render_opens_and_closes_a_window():
     ("kwargs", "error", "match"),
     [
         ({"track": "square"}, ValueError, r"track must be one of .*'oval'.*got 'square'"),
-        ({"track": 5}, ValueError, r"track: .*shape \(n, 2\)"),
+        ({"track": 5}, TypeError, r"track: points must be an array-like of \(x, y\) points"),
+        ({"track": None}, TypeError, r"track: points must be an array-like"),
+        ({"track": [1.0, 2.0, 3.0]}, ValueError, r"track: .*shape \(n, 2\)"),
         ({"track_seed": 3}, ValueError, r"track_seed is only used with track='random'"),
-        ({"track": "random", "track_seed": -1}, ValueError, r"track_seed must be an int >= 0"),
-        ({"track": "random", "track_seed": 1.5}, TypeError, r"track_seed must be an int >= 0"),
+        ({"track": "random", "track_seed": -1}, ValueError, r"track_seed must be None or an in"),
+        ({"track": "random", "track_seed": 1.5}, TypeError, r"track_seed must be None or an in"),
         ({"observation_mode": "image"}, ValueError, r"observation_mode must be one of.*'image'"),
         ({"action_mode": 1}, TypeError, r"action_mode must be one of.*got 1 \(int\)"),
-        ({"max_steps": 0}, ValueError, r"max_steps must be an int >= 1 or None, got 0"),
-        ({"max_steps": 10.0}, TypeError, r"max_steps must be an int >= 1 or None, got 10.0"),
+        ({"max_steps": 0}, ValueError, r"max_steps must be None or an integer >= 1, got 0"),
+        ({"max_steps": 10.0}, TypeError, r"max_steps must be None or an integer >= 1, got 10.0"),
         ({"lost_line": "reset"}, ValueError, r"lost_line must be one of.*'recover'.*'reset'"),
-        ({"lost_line_steps": None}, TypeError, r"lost_line_steps must be an int >= 1, got None"),
-        ({"lost_line_steps": True}, TypeError, r"lost_line_steps must be an int >= 1"),
-        ({"motor_lag": -0.1}, ValueError, r"motor_lag must be a finite number in \[0.0, inf\)"),
-        ({"wheel_slip": 1.0}, ValueError, r"wheel_slip must be .* \[0.0, 1.0\), got 1.0"),
-        ({"camera_noise": "x"}, TypeError, r"camera_noise must be a number, got 'x'"),
-        ({"camera_noise": float("nan")}, ValueError, r"camera_noise .* \[0.0, 1.0\], got nan"),
+        ({"lost_line_steps": None}, TypeError, r"lost_line_steps must be an integer >= 1, got N"),
+        ({"lost_line_steps": True}, TypeError, r"lost_line_steps must be an integer >= 1"),
+        ({"motor_lag": -0.1}, ValueError, r"motor_lag must be a number >= 0, got -0.1"),
+        ({"motor_lag": float("inf")}, ValueError, r"motor_lag must be a number >= 0, got inf"),
+        ({"wheel_slip": 1.0}, ValueError, r"wheel_slip must be a number in \[0, 1\), got 1.0"),
+        ({"camera_noise": "x"}, TypeError, r"camera_noise must be a number in \[0, 1\], got 'x'"),
+        ({"camera_noise": float("nan")}, ValueError, r"camera_noise .* \[0, 1\], got nan"),
         ({"render_mode": "ansi"}, ValueError, r"render_mode must be one of.*'ansi'"),
+        ({"render_mode": 0}, TypeError, r"render_mode must be one of"),
     ],
 )
 def test_bad_arguments_raise_clear_errors(kwargs, error, match):
     with pytest.raises(error, match=match):
         EPuckLineFollowEnv(**kwargs)
+
+
+@pytest.mark.parametrize(
+    ("name", "wrong_type", "bad_value"),
+    [
+        ("track", 5, "square"),
+        ("observation_mode", 0, "image"),
+        ("action_mode", None, "box"),
+        ("max_steps", "5", -1),
+        ("lost_line", True, "reset"),
+        ("lost_line_steps", "5", 0),
+        ("motor_lag", "0.1", -0.1),
+        ("wheel_slip", True, 1.5),
+        ("camera_noise", "0.1", 1.5),
+        ("render_mode", 1, "ansi"),
+    ],
+)
+def test_each_argument_refuses_a_wrong_type_and_a_bad_value(name, wrong_type, bad_value):
+    """The grid world's policy too: ``max_steps="5"`` is a TypeError, ``-1`` a ValueError."""
+    with pytest.raises(TypeError, match=name):
+        EPuckLineFollowEnv(**{name: wrong_type})
+    with pytest.raises(ValueError, match=name):
+        EPuckLineFollowEnv(**{name: bad_value})
+
+
+def test_track_seed_refuses_a_wrong_type_and_a_bad_value():
+    with pytest.raises(TypeError, match="track_seed"):
+        EPuckLineFollowEnv("random", track_seed="3")
+    with pytest.raises(ValueError, match="track_seed"):
+        EPuckLineFollowEnv("random", track_seed=-3)
+
+
+def test_valid_argument_types_are_normalised():
+    env = EPuckLineFollowEnv(max_steps=np.int64(10), lost_line_steps=np.int32(3), motor_lag=0)
+    assert (type(env.max_steps), type(env.lost_line_steps), type(env.motor_lag)) == (
+        int,
+        int,
+        float,
+    )
 
 
 @pytest.mark.parametrize(
@@ -550,6 +599,29 @@ def test_bad_arguments_raise_clear_errors(kwargs, error, match):
 def test_bad_reset_options_raise(options, match):
     with pytest.raises(ValueError, match=match):
         EPuckLineFollowEnv().reset(seed=0, options=options)
+
+
+def test_start_progress_of_the_wrong_type_is_a_type_error():
+    with pytest.raises(TypeError, match="start_progress"):
+        EPuckLineFollowEnv().reset(seed=0, options={"start_progress": "0.5"})
+
+
+@pytest.mark.parametrize(
+    ("name", "wrong_type", "bad_value"),
+    [("physics_dt", "0.016", 0.0), ("motor_lag", None, -0.05)],
+)
+def test_robot_arguments_refuse_a_wrong_type_and_a_bad_value(name, wrong_type, bad_value):
+    with pytest.raises(TypeError, match=name):
+        EPuckRobot(**{name: wrong_type})
+    with pytest.raises(ValueError, match=name):
+        EPuckRobot(**{name: bad_value})
+
+
+def test_renderer_size_refuses_a_wrong_type_and_a_bad_value():
+    with pytest.raises(TypeError, match="size"):
+        Renderer(make_track("oval"), Camera(), size=640.0)
+    with pytest.raises(ValueError, match="size"):
+        Renderer(make_track("oval"), Camera(), size=0)
 
 
 def test_max_wheel_speed_constant():

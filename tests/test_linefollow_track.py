@@ -27,8 +27,11 @@ def circle(radius: float, n: int, centre=(0.0, 0.0), closed: bool = True) -> np.
 
 
 def stadium(half_straight: float = 1.0, radius: float = 0.5, n_arc: int = 64) -> np.ndarray:
-    """A closed polyline: the straight y = 0 from x = −half to x = +half (driven towards +x),
-    then a half circle, the straight y = 2r back, and another half circle."""
+    """A closed stadium-shaped polyline, driven counter-clockwise.
+
+    The straight y = 0 from x = −half to x = +half (towards +x), then a half circle, the straight
+    y = 2r back, and another half circle.
+    """
     a = np.linspace(-np.pi / 2, np.pi / 2, n_arc + 1)
     right = np.column_stack([half_straight + radius * np.cos(a), radius + radius * np.sin(a)])
     left = np.column_stack(
@@ -102,8 +105,10 @@ def test_random_tracks_depend_on_the_seed_only():
 
 
 def test_make_track_rejects_unknown_names():
-    with pytest.raises(ValueError, match=r"unknown track name 'ovl'.*oval"):
+    with pytest.raises(ValueError, match=r"name must be one of \('oval'.*got 'ovl'"):
         make_track("ovl")
+    with pytest.raises(TypeError, match="name"):
+        make_track(None)
     assert set(TRACK_NAMES) == {"oval", "racetrack", "figure8", "random"}
 
 
@@ -114,6 +119,32 @@ def test_random_track_argument_checks():
         random_track(0, mean_radius=0.1)
     with pytest.raises(ValueError, match="harmonics"):
         random_track(0, harmonics=1)
+
+
+@pytest.mark.parametrize(
+    ("name", "wrong_type", "bad_value"),
+    [
+        ("seed", "3", -3),
+        ("min_turn_radius", "0.2", 0.05),
+        ("clearance", None, -0.1),
+        ("mean_radius", "1", 0.3),
+        ("harmonics", 5.0, 1),
+        ("max_tries", True, 0),
+    ],
+)
+def test_random_track_arguments_refuse_a_wrong_type_and_a_bad_value(name, wrong_type, bad_value):
+    with pytest.raises(TypeError, match=name):
+        random_track(**{name: wrong_type})
+    with pytest.raises(ValueError, match=name):
+        random_track(**{name: bad_value})
+
+
+def test_make_track_checks_the_random_seed():
+    with pytest.raises(TypeError, match="seed"):
+        make_track("random", 1.5)
+    with pytest.raises(ValueError, match="seed"):
+        make_track("random", -1)
+    assert make_track("random", np.int64(3)) is make_track("random", 3)
 
 
 def test_turn_radii_of_a_circle_is_its_radius():
@@ -183,6 +214,38 @@ def test_from_polyline_rejects_self_intersection_unless_allowed():
     with pytest.raises(ValueError, match=r"crosses itself.*allow_crossings=True"):
         Track.from_polyline(eight)
     assert Track.from_polyline(eight, allow_crossings=True).allow_crossings
+
+
+@pytest.mark.parametrize(
+    ("name", "wrong_type", "bad_value"),
+    [
+        ("points", 5, [[0.0, 0.0, 0.0]]),
+        ("min_turn_radius", "0.1", -1.0),
+        ("max_corner_angle", None, 181.0),
+        ("allow_crossings", 1, None),  # any bool is allowed: no bad value of the right type
+    ],
+)
+def test_from_polyline_arguments_refuse_a_wrong_type_and_a_bad_value(name, wrong_type, bad_value):
+    kwargs = {"points": circle(0.5, 48)}
+    with pytest.raises(TypeError, match=name):
+        Track.from_polyline(**{**kwargs, name: wrong_type})
+    if bad_value is not None:
+        with pytest.raises(ValueError, match=name if name != "points" else r"shape \(n, 2\)"):
+            Track.from_polyline(**{**kwargs, name: bad_value})
+
+
+def test_track_constructor_checks_its_arguments():
+    points = circle(0.5, 48)[:-1]
+    with pytest.raises(TypeError, match="min_turn_radius"):
+        Track(points, min_turn_radius="0.1")
+    with pytest.raises(ValueError, match="min_turn_radius"):
+        Track(points, min_turn_radius=-0.1)
+    with pytest.raises(TypeError, match="allow_crossings"):
+        Track(points, allow_crossings="yes")
+    with pytest.raises(TypeError, match="points"):
+        Track(None)
+    with pytest.raises(ValueError, match="points"):
+        Track(np.zeros((4, 3)))
 
 
 def test_from_polyline_checks_its_own_arguments():

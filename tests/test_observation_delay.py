@@ -142,8 +142,18 @@ def test_box_observations_match_an_undelayed_twin() -> None:
         ({"delay": "3"}, TypeError, "delay"),
         ({"delay": 2, "max_delay": -1}, ValueError, "max_delay"),
         ({"delay": 2, "max_delay": 1.5}, TypeError, "max_delay"),
+        ({"delay": 2, "max_delay": "3"}, TypeError, "max_delay"),
+        ({"delay": True}, TypeError, "delay"),
+        ({"delay": Constant(1), "max_delay": -2}, ValueError, "max_delay"),
     ],
 )
 def test_invalid_arguments(kwargs, exc, name) -> None:
     with pytest.raises(exc, match=name):
         ObservationDelay(CounterEnv(), **kwargs)
+
+
+def test_history_reaches_the_delay_bound() -> None:
+    """``max_delay + 1`` observations, else the support's end, else mean + 10·√mean + 20."""
+    assert ObservationDelay(CounterEnv(), Poisson(9.0), max_delay=4).history == 5
+    assert ObservationDelay(CounterEnv(), Uniform(1, 6)).history == 7
+    assert ObservationDelay(CounterEnv(), Poisson(9.0)).history == 9 + 30 + 20 + 1

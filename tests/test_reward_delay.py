@@ -101,7 +101,11 @@ class ConstantRewardEnv(gym.Env):
 
 
 class Reference:
-    """The DESIGN.md semantics, written plainly: a schedule keyed by the wrapper's step clock."""
+    """The wrapper's semantics, written plainly: a schedule keyed by the wrapper's step clock.
+
+    Each reward is due at its emission clock plus its delay; at an episode's end what is still
+    due is flushed into the last step, dropped, or carried over, as ``on_episode_end`` says.
+    """
 
     def __init__(self, mode: str):
         self.mode = mode
@@ -598,7 +602,7 @@ def _env():
         ),
         (
             lambda: RewardDelay(_env(), Constant(1), on_episode_end=None),
-            ValueError,
+            TypeError,
             "on_episode_end",
         ),
         (lambda: RewardDelay(_env(), Constant(1), record_arrivals=1), TypeError, "record_arrivals"),
@@ -616,9 +620,53 @@ def test_invalid_arguments(make, exc, name) -> None:
         make()
 
 
-def test_valid_max_delay_types() -> None:
+WRONG_TYPE_AND_BAD_VALUE = [
+    # (argument, a value of the wrong type, a value of the right type that is not allowed)
+    ("max_delay", "5", -1),
+    ("max_delay", 2.0, -3),
+    ("on_episode_end", 1, "keep"),
+    ("record_arrivals", "yes", None),  # any bool is allowed: no bad value of the right type
+]
+
+
+@pytest.mark.parametrize(("name", "wrong_type", "bad_value"), WRONG_TYPE_AND_BAD_VALUE)
+@pytest.mark.parametrize("wrapper", ["RewardDelay", "PoissonRewardDelay"])
+def test_each_argument_refuses_a_wrong_type_and_a_bad_value(
+    wrapper, name, wrong_type, bad_value
+) -> None:
+    def make(value):
+        if wrapper == "RewardDelay":
+            return RewardDelay(_env(), Constant(1), **{name: value})
+        return PoissonRewardDelay(_env(), 2.0, **{name: value})
+
+    with pytest.raises(TypeError, match=name):
+        make(wrong_type)
+    if bad_value is not None:
+        with pytest.raises(ValueError, match=name):
+            make(bad_value)
+
+
+@pytest.mark.parametrize(("wrong_type", "bad_value"), [("5", -1.0), (True, float("inf"))])
+def test_the_delay_argument_refuses_a_wrong_type_and_a_bad_value(wrong_type, bad_value) -> None:
+    with pytest.raises(TypeError, match="delay"):
+        RewardDelay(_env(), wrong_type)
+    with pytest.raises(ValueError, match="lam"):
+        RewardDelay(_env(), bad_value)
+    with pytest.raises(TypeError, match="lam"):
+        PoissonRewardDelay(_env(), wrong_type)
+    with pytest.raises(ValueError, match="lam"):
+        PoissonRewardDelay(_env(), bad_value)
+    with pytest.raises(TypeError, match="reward_delay"):
+        wrap_reward_delay(_env(), wrong_type)
+    with pytest.raises(ValueError, match="lam"):
+        wrap_reward_delay(_env(), bad_value)
+
+
+def test_valid_argument_types() -> None:
     assert PoissonRewardDelay(_env(), 2, max_delay=np.int64(3)).max_delay == 3
     assert PoissonRewardDelay(_env(), 2, max_delay=0).max_delay == 0
+    assert type(PoissonRewardDelay(_env(), 2, max_delay=np.int64(3)).max_delay) is int
+    assert RewardDelay(_env(), 1, record_arrivals=np.bool_(True)).record_arrivals is True
 
 
 def test_wrap_reward_delay_dispatch() -> None:

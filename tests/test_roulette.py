@@ -115,16 +115,27 @@ def test_pickle_round_trip_mid_episode() -> None:
 
 
 @pytest.mark.parametrize(
-    ("kwargs", "name"),
+    ("kwargs", "exc", "name"),
     [
-        ({"max_steps": 0}, "max_steps"),
-        ({"max_steps": 1.5}, "max_steps"),
-        ({"render_mode": "ansi"}, "render_mode"),
+        ({"max_steps": 0}, ValueError, "max_steps"),
+        ({"max_steps": 1.5}, TypeError, "max_steps"),
+        ({"render_mode": "ansi"}, ValueError, "render_mode"),
     ],
 )
-def test_invalid_arguments(kwargs, name) -> None:
-    with pytest.raises(ValueError, match=name):
+def test_invalid_arguments(kwargs, exc, name) -> None:
+    with pytest.raises(exc, match=name):
         RouletteEnv(**kwargs)
+
+
+@pytest.mark.parametrize(
+    ("name", "wrong_type", "bad_value"),
+    [("max_steps", "5", -1), ("render_mode", 1, "human")],
+)
+def test_each_argument_refuses_a_wrong_type_and_a_bad_value(name, wrong_type, bad_value) -> None:
+    with pytest.raises(TypeError, match=name):
+        RouletteEnv(**{name: wrong_type})
+    with pytest.raises(ValueError, match=name):
+        RouletteEnv(**{name: bad_value})
 
 
 def test_invalid_action() -> None:

@@ -144,6 +144,12 @@ def test_vec_reward_delay_non_finite_reward_raises(bad) -> None:
         ({"delay": "x"}, TypeError, "delay"),
         ({"delay": 1, "max_delay": -1}, ValueError, "max_delay"),
         ({"delay": 1, "on_episode_end": "nope"}, ValueError, "on_episode_end"),
+        ({"delay": 1, "max_delay": "5"}, TypeError, "max_delay"),
+        ({"delay": 1, "on_episode_end": 0}, TypeError, "on_episode_end"),
+        ({"delay": 1, "seed": "5"}, TypeError, "seed"),
+        ({"delay": 1, "seed": 1.0}, TypeError, "seed"),
+        ({"delay": 1, "seed": -1}, ValueError, "seed"),
+        ({"delay": True}, TypeError, "delay"),
     ],
 )
 def test_vec_reward_delay_invalid_arguments(kwargs, exc, name) -> None:

@@ -241,8 +241,21 @@ def test_non_finite_reward_raises(autoreset, bad) -> None:
         ({"delay": 1, "max_delay": -2}, ValueError, "max_delay"),
         ({"delay": 1, "max_delay": 2.0}, TypeError, "max_delay"),
         ({"delay": 1, "on_episode_end": "later"}, ValueError, "on_episode_end"),
+        ({"delay": 1, "max_delay": "5"}, TypeError, "max_delay"),
+        ({"delay": 1, "on_episode_end": None}, TypeError, "on_episode_end"),
+        ({"delay": True}, TypeError, "delay"),
     ],
 )
 def test_invalid_arguments(kwargs, exc, name) -> None:
     with pytest.raises(exc, match=name):
         VectorRewardDelay(make_vec(2, AutoresetMode.NEXT_STEP), **kwargs)
+
+
+def test_records_its_constructor_arguments() -> None:
+    """Like RewardDelay, the wrapper keeps its arguments (``gym.utils.RecordConstructorArgs``)."""
+    delay = Empirical([0.5, 0.5])
+    env = VectorRewardDelay(make_vec(2, AutoresetMode.NEXT_STEP), delay, 3, on_episode_end="drop")
+    assert isinstance(env, gym.utils.RecordConstructorArgs)
+    assert env._saved_kwargs == {"delay": delay, "max_delay": 3, "on_episode_end": "drop"}
+    rebuilt = VectorRewardDelay(make_vec(2, AutoresetMode.NEXT_STEP), **env._saved_kwargs)
+    assert (rebuilt.delay, rebuilt.max_delay, rebuilt.on_episode_end) == (delay, 3, "drop")

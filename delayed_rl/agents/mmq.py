@@ -18,7 +18,6 @@ The agent keeps one Q-table per delay hypothesis λ̂ ∈ Λ, stacked as ``q_tab
 
 from __future__ import annotations
 
-import numbers
 from collections.abc import Sequence
 from typing import Any
 
@@ -61,14 +60,10 @@ def check_delay_estimates(
                 "delay_estimates must be a sequence of distinct integers >= 0, "
                 f"got {delay_estimates!r}"
             )
-        values = list(delay_estimates)
-        if not values or any(
-            isinstance(v, (bool, np.bool_)) or not isinstance(v, numbers.Integral) or v < 0
-            for v in values
-        ):
+        values = [check_int(f"delay_estimates[{i}]", v, 0) for i, v in enumerate(delay_estimates)]
+        if not values:
             raise ValueError(
-                "delay_estimates must be a non-empty sequence of distinct integers >= 0, "
-                f"got {delay_estimates!r}"
+                "delay_estimates must be a non-empty sequence of distinct integers >= 0"
             )
         if len(set(values)) != len(values):
             raise ValueError(f"delay_estimates must be distinct, got {delay_estimates!r}")
@@ -225,29 +220,29 @@ class MultipleModelQLearning(TabularAgent):
         n_actions, n_models = self.n_actions, self.n_models
         actions: Any = None
         if n_models > 1 and uniform() < eps:
-            model = int(uniform() * n_models)
+            acting = int(uniform() * n_models)
         else:
             ties = self._ties(s)
             if len(ties) == 1:
-                model, action = divmod(int(ties[0]), n_actions)
+                acting, action = divmod(int(ties[0]), n_actions)
                 actions = (action,)
             elif n_models == 1:
-                model, actions = 0, ties
+                acting, actions = 0, ties
             else:
                 ties = np.asarray(ties)
                 models = ties // n_actions
                 candidates = np.unique(models)
-                model = int(candidates[0])
+                acting = int(candidates[0])
                 if candidates.size > 1:
-                    model = int(candidates[int(uniform() * candidates.size)])
-                actions = ties[models == model] - model * n_actions
+                    acting = int(candidates[int(uniform() * candidates.size)])
+                actions = ties[models == acting] - acting * n_actions
         if uniform() < eps:
-            return model, int(uniform() * n_actions)
-        if actions is None:  # the model was explored: act greedily within its table
-            row = self._q[s, model]
+            return acting, int(uniform() * n_actions)
+        if actions is None:  # the acting model was explored: act greedily within its table
+            row = self._q[s, acting]
             actions = np.flatnonzero(row == row.max())
         n = len(actions)
-        return model, int(actions[0] if n == 1 else actions[int(uniform() * n)])
+        return acting, int(actions[0] if n == 1 else actions[int(uniform() * n)])
 
     def _ties(self, s: int) -> Any:
         """The positions in state ``s``'s row (λ̂-major) that hold its max, ascending."""

@@ -9,6 +9,7 @@ _ENTRY = "delayed_rl.envs.registration:"
 
 
 def _register(env_id: str, entry: str, **kwargs) -> None:
+    """Register ``delayed_rl/<env_id>`` (if not yet registered) with entry point ``entry``."""
     full_id = f"{NAMESPACE}/{env_id}"
     if full_id not in registry:
         register(id=full_id, entry_point=_ENTRY + entry, **kwargs)

@@ -6,7 +6,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from delayed_rl._validation import check_int
+from delayed_rl._validation import check_choice, check_int
 
 UP, RIGHT, DOWN, LEFT = 0, 1, 2, 3
 _MOVES = {UP: (-1, 0), RIGHT: (0, 1), DOWN: (1, 0), LEFT: (0, -1)}
@@ -52,6 +52,9 @@ class GridWorldEnv(gym.Env):
     - ``max_steps``: truncate after this many steps (``None``, the default, never truncates).
     - ``render_mode``: ``None`` or ``"ansi"`` (a text picture of the grid).
 
+    A wrong type (``size=3.0``, ``max_steps="5"``) raises ``TypeError``, a value out of range
+    (``size=1``, ``max_steps=0``, ``render_mode="human"``) ``ValueError``.
+
     ## Registered Configurations
     - ``delayed_rl/GridWorld-3x3-v0``, ``delayed_rl/GridWorld-5x5-v0``,
       ``delayed_rl/GridWorld-9x9-v0``: the thesis's three worlds;
@@ -64,16 +67,11 @@ class GridWorldEnv(gym.Env):
     metadata = {"render_modes": ["ansi"], "render_fps": 4}
 
     def __init__(self, size: int = 9, max_steps: int | None = None, render_mode: str | None = None):
-        size = check_int("size", size, 2)
-        max_steps = check_int("max_steps", max_steps, 1, optional=True)
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(
-                f"render_mode must be None or one of {self.metadata['render_modes']}, "
-                f"got {render_mode!r}"
-            )
-        self.size = size
-        self.max_steps = max_steps
-        self.render_mode = render_mode
+        self.size = check_int("size", size, 2)
+        self.max_steps = check_int("max_steps", max_steps, 1, optional=True)
+        self.render_mode = check_choice(
+            "render_mode", render_mode, (None, *self.metadata["render_modes"])
+        )
         self.n_states = self.size * self.size
         self.start_state = self.n_states - 1
         self.reward_state = 0
@@ -98,6 +96,7 @@ class GridWorldEnv(gym.Env):
         return 10.0 / (2 * (self.size - 1) + 1)
 
     def _build_tables(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(next_state, reward)``, each ``(n_states, 4)``: the deterministic dynamics."""
         next_state = np.zeros((self.n_states, 4), dtype=np.int64)
         reward = np.zeros((self.n_states, 4), dtype=np.float64)
         for s in range(self.n_states):
@@ -112,19 +111,22 @@ class GridWorldEnv(gym.Env):
         return next_state, reward
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """Put the agent on the start cell, or on cell ``options["state"]`` if given.
+
+        Raises:
+            TypeError: ``options["state"]`` is not an integer.
+            ValueError: ``options["state"]`` is not a cell index.
+        """
         super().reset(seed=seed)
         state = self.start_state
         if options and "state" in options:
-            state = options["state"]
-            if not self.observation_space.contains(state):
-                raise ValueError(
-                    f"options['state'] must be a cell in [0, {self.n_states}), got {state!r}"
-                )
+            state = check_int("options['state']", options["state"], 0, self.n_states - 1)
         self.state = int(state)
         self.steps = 0
         return self.state, {}
 
     def step(self, action):
+        """Move (or collect the +10 and warp home); truncate after ``max_steps`` if set."""
         if not self.action_space.contains(action):
             raise ValueError(
                 f"action must be in Discrete(4) (0 up, 1 right, 2 down, 3 left), got {action!r}"
@@ -136,6 +138,7 @@ class GridWorldEnv(gym.Env):
         return self.state, reward, False, truncated, {}
 
     def render(self) -> str | None:
+        """The grid as text (``R`` the reward cell, ``A`` the agent) in ``"ansi"`` mode, else None."""
         if self.render_mode != "ansi":
             return None
         cells = np.full((self.size, self.size), ".", dtype="<U1")

@@ -22,6 +22,7 @@ import gymnasium as gym
 
 
 def _load(path: str) -> Any:
+    """The object named by ``"module:attribute"``, importing the module."""
     module_name, attr = path.split(":")
     return getattr(importlib.import_module(module_name), attr)
 
@@ -47,6 +48,19 @@ class DelayableEntryPoint:
         return self.env_cls.metadata
 
     def __call__(self, reward_delay: Any = None, **kwargs: Any) -> gym.Env:
+        """Build the env from ``kwargs``, wrapped for ``reward_delay`` when it is not None.
+
+        Args:
+            reward_delay: ``None`` (no wrapper), a number λ (``PoissonRewardDelay``) or a
+                :class:`~delayed_rl.delays.Delay` (``RewardDelay``).
+            **kwargs: the env class's own arguments.
+
+        Raises:
+            TypeError: ``reward_delay`` is neither a number nor a ``Delay`` (or the env refuses
+                the type of one of its arguments).
+            ValueError: ``reward_delay`` is not a valid Poisson mean (or the env refuses the
+                value of one of its arguments).
+        """
         env = self.env_cls(**kwargs)
         if reward_delay is None:
             return env

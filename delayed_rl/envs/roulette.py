@@ -5,7 +5,7 @@ from __future__ import annotations
 import gymnasium as gym
 from gymnasium import spaces
 
-from delayed_rl._validation import check_int
+from delayed_rl._validation import check_choice, check_int
 
 BET_EVEN, BET_13 = 0, 1
 POCKETS = 38  # an American wheel: 1-36, 0 and 00
@@ -44,6 +44,10 @@ class RouletteEnv(gym.Env):
 
     ## Arguments
     - ``max_steps``: truncate after this many rounds (``None``, the default, never truncates).
+    - ``render_mode``: ``None`` only (Roulette does not render).
+
+    A wrong type (``max_steps="5"``, ``render_mode=1``) raises ``TypeError``, a value out of
+    range (``max_steps=0``, ``render_mode="ansi"``) ``ValueError``.
 
     ## Registered Configurations
     ``delayed_rl/Roulette-v0`` (takes ``reward_delay=λ`` like every delayed-rl id).
@@ -52,13 +56,12 @@ class RouletteEnv(gym.Env):
     metadata = {"render_modes": []}
 
     def __init__(self, max_steps: int | None = None, render_mode: str | None = None):
-        max_steps = check_int("max_steps", max_steps, 1, optional=True)
-        if render_mode is not None:
+        self.max_steps = check_int("max_steps", max_steps, 1, optional=True)
+        if isinstance(render_mode, str):  # a mode's name, but Roulette has no mode
             raise ValueError(
                 f"render_mode must be None (Roulette does not render), got {render_mode!r}"
             )
-        self.max_steps = max_steps
-        self.render_mode = None
+        self.render_mode = check_choice("render_mode", render_mode, (None,))
         self.observation_space = spaces.Discrete(1)
         self.action_space = spaces.Discrete(2)
         self.P = {
@@ -74,11 +77,13 @@ class RouletteEnv(gym.Env):
         self.steps = 0
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """Start a new session at the table (state 0); ``seed`` seeds the wheel."""
         super().reset(seed=seed)
         self.steps = 0
         return 0, {}
 
     def step(self, action):
+        """Spin the wheel for one $1 bet; ``info["pocket"]`` names the pocket (``"00"``...)."""
         if not self.action_space.contains(action):
             raise ValueError(f"action must be 0 (bet even) or 1 (bet 13), got {action!r}")
         pocket = int(self.np_random.integers(POCKETS))  # 0..35 stand for 1..36; 36, 37 are 0, 00
@@ -92,4 +97,5 @@ class RouletteEnv(gym.Env):
 
 
 def _pocket_name(pocket: int) -> str:
+    """The label of pocket index ``pocket``: ``"1"``..``"36"``, ``"0"`` (36) or ``"00"`` (37)."""
     return {36: "0", 37: "00"}.get(pocket, str(pocket + 1))

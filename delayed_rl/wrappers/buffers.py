@@ -6,20 +6,18 @@ import math
 
 import numpy as np
 
+from delayed_rl._delay_line import delay_bound, draw_delays, regrow_ring, ring_size
 from delayed_rl.delays import Delay
 from delayed_rl.wrappers.reward_delay import _BLOCK, delay_rng
-
-
-def _ring_size(n: int) -> int:
-    """The smallest power of two ``>= n`` (so slots are found with a bit mask)."""
-    return 1 << max(0, int(n - 1).bit_length())
 
 
 class RewardBuffers:
     """``num_envs`` independent reward-delay buffers, advanced together with numpy.
 
     Each env has its own clock (it advances only on the steps that env really takes) and its own
-    ring buffer of pending rewards; delays are drawn in blocks of shape ``(1024, num_envs)``.
+    ring buffer of pending rewards; delays are drawn in blocks of shape ``(1024, num_envs)``. The
+    rings start long enough for all but a negligible tail of the delays and grow (keeping what is
+    pending in place) when a longer delay comes.
 
     Args:
         num_envs: how many envs.
@@ -31,10 +29,14 @@ class RewardBuffers:
         self.num_envs = num_envs
         self.delay = delay
         self.max_delay = max_delay
-        bound = delay.support_max if max_delay is None else max_delay
-        if bound is None:
+        if max_delay is None and delay.support_max is None:
+            # Not delay_bound's longer reach: the rings' length is part of a seeded run's result.
+            # ``pending`` sums whole rings and numpy's pairwise sum groups the entries by slot, so
+            # another length can change the last bits of the pending, flushed and dropped sums.
             bound = int(delay.mean + 6.0 * math.sqrt(delay.mean) + 8.0)
-        self.buffer = np.zeros((num_envs, _ring_size(bound + 1)))
+        else:
+            bound = delay_bound(delay, max_delay)
+        self.buffer = np.zeros((num_envs, ring_size(bound + 1)))
         self.clock = np.zeros(num_envs, dtype=np.int64)
         self.rows = np.arange(num_envs)
         self.seed(None)
@@ -51,11 +53,10 @@ class RewardBuffers:
         return self.buffer.sum(axis=1)
 
     def _draw(self) -> np.ndarray:
+        """This step's delays, one per env (the next row of the current block)."""
         if self._next == len(self._block):
-            block = self.delay.sample(self.rng, (_BLOCK, self.num_envs))
-            if self.max_delay is not None:
-                block = np.minimum(block, self.max_delay)
-            self._block, self._next = block, 0
+            self._block = draw_delays(self.delay, self.rng, (_BLOCK, self.num_envs), self.max_delay)
+            self._next = 0
         delays = self._block[self._next]
         self._next += 1
         return delays
@@ -92,11 +93,5 @@ class RewardBuffers:
         return amounts
 
     def _grow(self, delay: int) -> None:
-        old = self.buffer
-        old_size, size = old.shape[1], _ring_size(delay + 1)
-        new = np.zeros((self.num_envs, size))
-        offsets = np.arange(old_size)
-        for env in range(self.num_envs):
-            when = self.clock[env] + offsets
-            new[env, when & (size - 1)] = old[env, when & (old_size - 1)]
-        self.buffer = new
+        """Lengthen the rings to hold ``delay``, every pending reward kept at its due step."""
+        self.buffer = regrow_ring(self.buffer, self.clock, ring_size(delay + 1))

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import math
 from collections import deque
 from typing import Any
 
 import gymnasium as gym
 
+from delayed_rl._delay_line import delay_bound
 from delayed_rl.delays import Delay, as_delay
 from delayed_rl.wrappers.reward_delay import DelaySampler, check_max_delay
 
@@ -34,6 +34,12 @@ class ObservationDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
         env: the env whose observations to delay.
         delay: a :class:`~delayed_rl.delays.Delay`, or a number read as a Poisson mean.
         max_delay: clip delays to at most this many steps (``None``: unbounded).
+
+    Raises:
+        TypeError: ``delay`` is neither a ``Delay`` nor a number, or ``max_delay`` is not an
+            integer.
+        ValueError: ``delay`` is a number that is not a valid Poisson mean, or ``max_delay`` is
+            negative.
     """
 
     def __init__(self, env: gym.Env, delay: Delay | float, max_delay: int | None = None):
@@ -42,13 +48,14 @@ class ObservationDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.delay = as_delay(delay)
         self.max_delay = check_max_delay(max_delay)
         self._sampler = DelaySampler(self.delay, self.max_delay)
-        bound = self.delay.support_max if self.max_delay is None else self.max_delay
-        if bound is None:
-            bound = int(self.delay.mean + 10.0 * math.sqrt(self.delay.mean) + 20.0)
-        self.history = bound + 1
+        self.history = delay_bound(self.delay, self.max_delay) + 1
         self._observations: deque = deque(maxlen=self.history)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        """Reset the env and the history; ``seed`` also reseeds the delay generator.
+
+        The reset observation is returned undelayed, with ``info["observation_delay"] = 0``.
+        """
         obs, info = self.env.reset(seed=seed, options=options)
         if seed is not None:
             self._sampler.seed(seed)
@@ -58,6 +65,7 @@ class ObservationDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
         return obs, info
 
     def step(self, action):
+        """Step the env; return an older observation (see the class docstring) with its reward."""
         obs, reward, terminated, truncated, info = self.env.step(action)
         self._observations.append(obs)
         applied = min(self._sampler(), len(self._observations) - 1)

@@ -10,9 +10,19 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from delayed_rl._delay_line import draw_delays
+from delayed_rl._validation import check_bool, check_choice, check_int
 from delayed_rl.delays import Delay, Poisson, as_delay
 
-__all__ = ["EPISODE_END_MODES", "PoissonRewardDelay", "RewardDelay", "delay_rng"]
+__all__ = [
+    "EPISODE_END_MODES",
+    "PoissonRewardDelay",
+    "RewardDelay",
+    "check_episode_end",
+    "check_max_delay",
+    "delay_rng",
+    "wrap_reward_delay",
+]
 
 EPISODE_END_MODES = ("flush", "drop", "carry")
 _BLOCK = 1024  # delays drawn per call to the generator
@@ -25,23 +35,23 @@ def delay_rng(seed: int | None) -> np.random.Generator:
 
 
 def check_max_delay(max_delay: Any) -> int | None:
-    """Validate ``max_delay``: ``None`` or an integer ``>= 0``."""
-    if max_delay is None:
-        return None
-    if isinstance(max_delay, bool) or not isinstance(max_delay, numbers.Integral):
-        raise TypeError(f"max_delay must be None or an integer >= 0, got {max_delay!r}")
-    if max_delay < 0:
-        raise ValueError(f"max_delay must be None or an integer >= 0, got {max_delay!r}")
-    return int(max_delay)
+    """Return ``max_delay`` (``None`` or an integer ``>= 0``) as an ``int`` or ``None``.
+
+    Raises:
+        TypeError: ``max_delay`` is not an integer (``3.0``, ``"3"`` and ``True`` included).
+        ValueError: ``max_delay`` is negative.
+    """
+    return check_int("max_delay", max_delay, 0, optional=True)
 
 
 def check_episode_end(on_episode_end: Any) -> str:
-    """Validate ``on_episode_end``: one of :data:`EPISODE_END_MODES`."""
-    if on_episode_end not in EPISODE_END_MODES:
-        raise ValueError(
-            f"on_episode_end must be one of {EPISODE_END_MODES}, got {on_episode_end!r}"
-        )
-    return on_episode_end
+    """Return ``on_episode_end`` after checking that it is one of :data:`EPISODE_END_MODES`.
+
+    Raises:
+        TypeError: ``on_episode_end`` is not a string.
+        ValueError: ``on_episode_end`` is a string but not one of the modes.
+    """
+    return check_choice("on_episode_end", on_episode_end, EPISODE_END_MODES)
 
 
 class DelaySampler:
@@ -58,21 +68,17 @@ class DelaySampler:
     def __init__(self, delay: Delay, max_delay: int | None):
         self.delay = delay
         self.max_delay = max_delay
+        self.block: list[int] = []
         self.seed(None)
 
     def seed(self, seed: int | None) -> None:
         """Restart the delay stream from ``seed`` and discard delays drawn ahead."""
         self.rng = delay_rng(seed)
-        if not hasattr(self, "block"):
-            self.block: list[int] = []
         self.block.clear()
 
     def refill(self) -> list[int]:
         """Draw the next block of delays into ``block`` (the same list, reversed for ``pop()``)."""
-        draws = self.delay.sample(self.rng, _BLOCK)
-        if self.max_delay is not None:
-            draws = np.minimum(draws, self.max_delay)
-        self.block[:] = draws[::-1].tolist()
+        self.block[:] = draw_delays(self.delay, self.rng, _BLOCK, self.max_delay)[::-1].tolist()
         return self.block
 
     def __call__(self) -> int:
@@ -158,17 +164,15 @@ class RewardDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.delay = as_delay(delay)
         self.max_delay = check_max_delay(max_delay)
         self.on_episode_end = check_episode_end(on_episode_end)
-        if not isinstance(record_arrivals, bool):
-            raise TypeError(f"record_arrivals must be a bool, got {record_arrivals!r}")
-        self.record_arrivals = record_arrivals
+        self.record_arrivals = check_bool("record_arrivals", record_arrivals)
         self._sampler = DelaySampler(self.delay, self.max_delay)
         self._delays = self._sampler.block  # the sampler refills this very list
         self._due: dict[int, float] = {}  # clock step -> sum of the rewards due then
         self._arrivals: dict[int, list[tuple[int, float]]] = {}
-        self._clock = 0  # steps since construction: the ring buffer's index
+        self._clock = 0  # steps since construction: the keys of _due are on this clock
         self._episode_start = 0  # the clock at this episode's first step
         self._pending = 0.0
-        self._episode_over = True
+        self._episode_ended = True  # from an episode's end (or construction) to the next reset
 
     @property
     def pending_reward(self) -> float:
@@ -176,11 +180,16 @@ class RewardDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
         return self._pending
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        """Reset the env; ``seed`` also reseeds the delay generator."""
+        """Reset the env; ``seed`` also reseeds the delay generator.
+
+        A reset in the middle of an episode discards the pending rewards (except under
+        ``"carry"``), reports them as ``info["dropped_reward"]`` and warns if they were not zero.
+        ``info["pending_reward"]`` is what is still pending (nonzero only under ``"carry"``).
+        """
         obs, info = self.env.reset(seed=seed, options=options)
         if seed is not None:
             self._sampler.seed(seed)
-        if not self._episode_over and self.on_episode_end != "carry":
+        if not self._episode_ended and self.on_episode_end != "carry":
             lost = self._clear_pending()
             info["dropped_reward"] = lost
             self._arrivals.clear()
@@ -192,7 +201,7 @@ class RewardDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
                     stacklevel=2,
                 )
         self._episode_start = self._clock
-        self._episode_over = False
+        self._episode_ended = False
         info["pending_reward"] = self._pending
         return obs, info
 
@@ -218,7 +227,7 @@ class RewardDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
         else:
             delivered = 0.0
         if terminated or truncated:
-            self._episode_over = True
+            self._episode_ended = True
             if self.on_episode_end == "flush":
                 flushed = self._clear_pending()
                 info["flushed_reward"] = flushed
@@ -235,8 +244,10 @@ class RewardDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
         return obs, delivered, terminated, truncated, info
 
     def _checked_reward(self, reward: Any) -> float:
-        """``reward`` as a Python float (numpy-typed rewards, e.g. float32, are then summed in
-        double precision); a NaN or infinite reward raises ``ValueError``."""
+        """``reward`` as a Python float; a NaN or infinite reward raises ``ValueError``.
+
+        Numpy-typed rewards (e.g. float32) are thereby summed in double precision.
+        """
         reward = float(reward)
         if not math.isfinite(reward):
             raise ValueError(
@@ -304,12 +315,22 @@ class PoissonRewardDelay(RewardDelay):
 
 
 def wrap_reward_delay(env: gym.Env, reward_delay: Delay | float) -> RewardDelay:
-    """Wrap ``env`` for ``gym.make(id, reward_delay=...)``: a number means Poisson(λ)."""
+    """Wrap ``env`` for ``gym.make(id, reward_delay=...)``: a number means Poisson(λ).
+
+    Args:
+        env: the env to wrap.
+        reward_delay: a :class:`~delayed_rl.delays.Delay` (gives a :class:`RewardDelay`) or a
+            number λ (gives a :class:`PoissonRewardDelay`, whose ``lam`` is recorded).
+
+    Raises:
+        TypeError: ``reward_delay`` is neither a number nor a ``Delay``.
+        ValueError: ``reward_delay`` is a number that is not a valid λ (negative, NaN, infinite).
+    """
     if isinstance(reward_delay, Delay):
         return RewardDelay(env, reward_delay)
     if isinstance(reward_delay, numbers.Real) and not isinstance(reward_delay, bool):
         return PoissonRewardDelay(env, lam=reward_delay)
     raise TypeError(
         "reward_delay must be a number (the Poisson mean λ) or a delayed_rl.delays.Delay, "
-        f"got {reward_delay!r}"
+        f"got {reward_delay!r} ({type(reward_delay).__name__})"
     )

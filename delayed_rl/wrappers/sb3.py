@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
+from delayed_rl._validation import check_int
 from delayed_rl.delays import Delay, as_delay
 from delayed_rl.wrappers.buffers import RewardBuffers
 from delayed_rl.wrappers.reward_delay import check_episode_end, check_max_delay
@@ -30,7 +31,13 @@ class VecRewardDelay(VecEnvWrapper):
         delay: a :class:`~delayed_rl.delays.Delay`, or a number read as a Poisson mean.
         max_delay: clip delays to at most this many steps (``None``: unbounded).
         on_episode_end: ``"flush"`` (default), ``"drop"`` or ``"carry"``.
-        seed: seed of the delay generator (``None``: fresh entropy).
+        seed: seed of the delay generator, an integer ``>= 0`` (``None``: fresh entropy).
+
+    Raises:
+        TypeError: ``delay`` is neither a ``Delay`` nor a number, ``max_delay`` or ``seed`` is
+            not an integer, or ``on_episode_end`` is not a string.
+        ValueError: ``delay`` is a number that is not a valid Poisson mean, ``max_delay`` or
+            ``seed`` is negative, or ``on_episode_end`` is not one of the modes.
     """
 
     def __init__(
@@ -46,7 +53,7 @@ class VecRewardDelay(VecEnvWrapper):
         self.max_delay = check_max_delay(max_delay)
         self.on_episode_end = check_episode_end(on_episode_end)
         self.buffers = RewardBuffers(self.num_envs, self.delay, self.max_delay)
-        self.buffers.seed(seed)
+        self.buffers.seed(check_int("seed", seed, 0, optional=True))
         self._pending_seed: int | None = None
         self._all = np.ones(self.num_envs, dtype=bool)
 
@@ -56,6 +63,10 @@ class VecRewardDelay(VecEnvWrapper):
         return self.venv.seed(seed)
 
     def reset(self):
+        """Reset the envs; a seed set by :meth:`seed` reseeds the delays too.
+
+        Pending rewards are discarded, except under ``"carry"``.
+        """
         obs = self.venv.reset()
         if self._pending_seed is not None:
             self.buffers.seed(self._pending_seed)
@@ -65,6 +76,7 @@ class VecRewardDelay(VecEnvWrapper):
         return obs
 
     def step_wait(self):
+        """Finish the step; return the rewards due now, as ``float32`` (see the class docstring)."""
         obs, rewards, dones, infos = self.venv.step_wait()
         delivered, delays = self.buffers.push(rewards, self._all)
         ended = np.asarray(dones, dtype=bool)

@@ -19,7 +19,7 @@ def _with_mask(info: dict[str, Any], key: str, values: np.ndarray, mask: np.ndar
     info["_" + key] = mask
 
 
-class VectorRewardDelay(gym.vector.VectorWrapper):
+class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArgs):
     """Delays each sub-env's rewards independently, with the semantics of :class:`RewardDelay`.
 
     Every sub-env has its own buffer and clock; ``on_episode_end`` applies per sub-env when its
@@ -43,6 +43,13 @@ class VectorRewardDelay(gym.vector.VectorWrapper):
         delay: a :class:`~delayed_rl.delays.Delay`, or a number read as a Poisson mean.
         max_delay: clip delays to at most this many steps (``None``: unbounded).
         on_episode_end: ``"flush"`` (default), ``"drop"`` or ``"carry"``.
+
+    Raises:
+        TypeError: ``delay`` is neither a ``Delay`` nor a number, ``max_delay`` is not an integer
+            or ``on_episode_end`` is not a string.
+        ValueError: ``delay`` is a number that is not a valid Poisson mean, ``max_delay`` is
+            negative, ``on_episode_end`` is not one of the modes, or the env's
+            ``metadata["autoreset_mode"]`` is not a ``gymnasium.vector.AutoresetMode``.
     """
 
     def __init__(
@@ -52,7 +59,10 @@ class VectorRewardDelay(gym.vector.VectorWrapper):
         max_delay: int | None = None,
         on_episode_end: str = "flush",
     ):
-        super().__init__(env)
+        gym.utils.RecordConstructorArgs.__init__(
+            self, delay=delay, max_delay=max_delay, on_episode_end=on_episode_end
+        )
+        gym.vector.VectorWrapper.__init__(self, env)
         self.delay = as_delay(delay)
         self.max_delay = check_max_delay(max_delay)
         self.on_episode_end = check_episode_end(on_episode_end)
@@ -66,24 +76,31 @@ class VectorRewardDelay(gym.vector.VectorWrapper):
         self.autoreset_mode = mode
         self.buffers = RewardBuffers(self.num_envs, self.delay, self.max_delay)
         self._resetting = np.zeros(self.num_envs, dtype=bool)
-        self._episode_over = np.ones(self.num_envs, dtype=bool)
+        # per sub-env: from its episode's end (or construction) to its next reset
+        self._episode_ended = np.ones(self.num_envs, dtype=bool)
 
     def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
-        """Reset (all sub-envs, or those in ``options["reset_mask"]``); ``seed`` reseeds delays."""
+        """Reset all sub-envs, or those in ``options["reset_mask"]``; ``seed`` reseeds the delays.
+
+        The delay generator is seeded with ``seed`` (its first entry if it is a list). A reset
+        sub-env whose episode had not ended loses its pending rewards (except under
+        ``"carry"``), reported as ``info["dropped_reward"]``.
+        """
         envs = np.ones(self.num_envs, dtype=bool)
         if options and "reset_mask" in options:  # read first: SyncVectorEnv.reset pops it
             envs = np.array(options["reset_mask"], dtype=bool)
         obs, info = self.env.reset(seed=seed, options=options)
         if seed is not None:
             self.buffers.seed(seed if isinstance(seed, int) else int(seed[0]))
-        cut_short = envs & ~self._episode_over
+        cut_short = envs & ~self._episode_ended
         if self.on_episode_end != "carry" and cut_short.any():
             _with_mask(info, "dropped_reward", self.buffers.clear(cut_short), cut_short)
-        self._episode_over[envs] = False
+        self._episode_ended[envs] = False
         self._resetting[envs] = False
         return obs, info
 
     def step(self, actions):
+        """Step every sub-env; return the rewards due now (see the class docstring)."""
         obs, rewards, terminated, truncated, info = self.env.step(actions)
         active = ~self._resetting
         delivered, delays = self.buffers.push(rewards, active)
@@ -96,12 +113,12 @@ class VectorRewardDelay(gym.vector.VectorWrapper):
             elif self.on_episode_end == "drop":
                 _with_mask(info, "dropped_reward", self.buffers.clear(ended), ended)
         if self.autoreset_mode == AutoresetMode.NEXT_STEP:
-            self._episode_over = ended.copy()  # until the reset step starts a new episode
+            self._episode_ended = ended.copy()  # until the reset step starts a new episode
             self._resetting = ended.copy()
         elif self.autoreset_mode == AutoresetMode.SAME_STEP:
-            self._episode_over[:] = False
+            self._episode_ended[:] = False
         else:
-            self._episode_over |= ended
+            self._episode_ended |= ended
         _with_mask(info, "undelayed_reward", np.where(active, rewards, 0.0), active)
         _with_mask(info, "reward_delay", delays, active)
         _with_mask(info, "pending_reward", self.buffers.pending, np.ones(self.num_envs, bool))

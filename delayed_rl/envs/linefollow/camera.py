@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from delayed_rl._validation import check_real
 from delayed_rl.envs.linefollow.track import CELL_SIZE, Track
 
 __all__ = [
@@ -86,8 +87,10 @@ def line_centroid(pixels: ArrayLike) -> int | NDArray[np.int64]:
 
 
 def _round_half_down(total: Any, count: Any) -> Any:
-    """total / count rounded to the nearest integer, ties down: ceil((2·total − count) / (2·count)),
-    in exact integer arithmetic (ints or integer arrays)."""
+    """Total / count rounded to the nearest integer, ties down, in exact integer arithmetic.
+
+    That is ``ceil((2·total − count) / (2·count))``, for ints or integer arrays.
+    """
     return -((count - 2 * total) // (2 * count))
 
 
@@ -98,6 +101,12 @@ class Camera:
         look_ahead: distance (m) from the body centre to the scanline.
         field_width: width (m) of floor the scanline covers.
         line_width: width (m) of the line on the floor.
+
+    Raises:
+        TypeError: an argument is not a number.
+        ValueError: an argument is not finite and positive, or the scanline reaches further
+            sideways (``field_width / 2 + line_width / 2``) than the track index answers for
+            (``CELL_SIZE``, 0.04 m).
     """
 
     def __init__(
@@ -106,21 +115,15 @@ class Camera:
         field_width: float = FIELD_WIDTH,
         line_width: float = LINE_WIDTH,
     ):
-        for name, value in (
-            ("look_ahead", look_ahead),
-            ("field_width", field_width),
-            ("line_width", line_width),
-        ):
-            if not (isinstance(value, int | float) and np.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be a finite number > 0 (m), got {value!r}")
-        if field_width / 2 + line_width / 2 > CELL_SIZE:
+        self.look_ahead = check_real("look_ahead", look_ahead, 0.0, low_open=True, note=" (m)")
+        self.field_width = check_real("field_width", field_width, 0.0, low_open=True, note=" (m)")
+        self.line_width = check_real("line_width", line_width, 0.0, low_open=True, note=" (m)")
+        reach = self.field_width / 2 + self.line_width / 2
+        if reach > CELL_SIZE:
             raise ValueError(
                 f"field_width / 2 + line_width / 2 must be <= {CELL_SIZE} m (the track index's "
-                f"reach), got {field_width / 2 + line_width / 2}"
+                f"reach), got {reach}"
             )
-        self.look_ahead = float(look_ahead)
-        self.field_width = float(field_width)
-        self.line_width = float(line_width)
         #: Width (m) of one pixel's footprint.
         self.pixel_width = self.field_width / N_PIXELS
         #: Lateral offset (m, positive to the robot's left) of each pixel's sample point.

@@ -11,6 +11,7 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import ArrayLike, NDArray
 
+from delayed_rl._validation import check_choice, check_int, check_probability, check_real
 from delayed_rl.envs.linefollow.camera import CENTRE_PIXEL, N_PIXELS, Camera, line_centroid
 from delayed_rl.envs.linefollow.robot import EPuckRobot
 from delayed_rl.envs.linefollow.track import TRACK_NAMES, Track, make_track
@@ -44,40 +45,6 @@ _OBSERVATION_MODES = ("centroid", "pixels")
 _ACTION_MODES = ("discrete", "continuous")
 _LOST_LINE_MODES = ("terminate", "recover")
 _RESET_OPTIONS = ("start_progress", "pose")
-
-
-def _is_int(value: Any) -> bool:
-    return isinstance(value, int | np.integer) and not isinstance(value, bool)
-
-
-def _is_number(value: Any) -> bool:
-    return isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
-
-
-def _check_choice(name: str, value: Any, allowed: tuple[str, ...]) -> None:
-    if not isinstance(value, str):
-        raise TypeError(f"{name} must be one of {allowed}, got {value!r} ({type(value).__name__})")
-    if value not in allowed:
-        raise ValueError(f"{name} must be one of {allowed}, got {value!r}")
-
-
-def _check_number(name: str, value: Any, low: float, high: float, high_open: bool) -> None:
-    if not _is_number(value):
-        raise TypeError(f"{name} must be a number, got {value!r} ({type(value).__name__})")
-    ok = math.isfinite(value) and low <= value and (value < high if high_open else value <= high)
-    if not ok:
-        interval = f"[{low}, {high})" if high_open else f"[{low}, {high}]"
-        raise ValueError(f"{name} must be a finite number in {interval}, got {value!r}")
-
-
-def _check_count(name: str, value: Any, allow_none: bool) -> None:
-    if allow_none and value is None:
-        return
-    allowed = "an int >= 1" + (" or None" if allow_none else "")
-    if not _is_int(value):
-        raise TypeError(f"{name} must be {allowed}, got {value!r} ({type(value).__name__})")
-    if value < 1:
-        raise ValueError(f"{name} must be {allowed}, got {value!r}")
 
 
 class EPuckLineFollowEnv(gym.Env):
@@ -205,6 +172,10 @@ class EPuckLineFollowEnv(gym.Env):
 
     Noise is drawn from the env's ``np_random``, so seeded resets reproduce it.
 
+    An argument of the wrong type (``max_steps="5"``, ``motor_lag=True``, ``action_mode=1``)
+    raises ``TypeError``; one of the right type but out of range (``max_steps=0``,
+    ``wheel_slip=1.0``, ``lost_line="reset"``) raises ``ValueError``. Messages name the argument.
+
     ## Registered Configurations
 
     - ``delayed_rl/EPuckLineFollow-v0``: the defaults above. Pass any argument to
@@ -229,43 +200,30 @@ class EPuckLineFollowEnv(gym.Env):
         camera_noise: float = 0.0,
         render_mode: str | None = None,
     ):
-        _check_choice("observation_mode", observation_mode, _OBSERVATION_MODES)
-        _check_choice("action_mode", action_mode, _ACTION_MODES)
-        _check_count("max_steps", max_steps, allow_none=True)
-        _check_choice("lost_line", lost_line, _LOST_LINE_MODES)
-        _check_count("lost_line_steps", lost_line_steps, allow_none=False)
-        _check_number("motor_lag", motor_lag, 0.0, math.inf, high_open=True)
-        _check_number("wheel_slip", wheel_slip, 0.0, 1.0, high_open=True)
-        _check_number("camera_noise", camera_noise, 0.0, 1.0, high_open=False)
-        if render_mode is not None:
-            _check_choice("render_mode", render_mode, tuple(self.metadata["render_modes"]))
-        if track_seed is not None:
-            if not _is_int(track_seed):
-                raise TypeError(f"track_seed must be an int >= 0 or None, got {track_seed!r}")
-            if track_seed < 0:
-                raise ValueError(f"track_seed must be an int >= 0 or None, got {track_seed!r}")
-            if not (isinstance(track, str) and track == "random"):
-                raise ValueError(
-                    f"track_seed is only used with track='random', got track={track!r}"
-                )
+        self.observation_mode = check_choice(
+            "observation_mode", observation_mode, _OBSERVATION_MODES
+        )
+        self.action_mode = check_choice("action_mode", action_mode, _ACTION_MODES)
+        self.max_steps = check_int("max_steps", max_steps, 1, optional=True)
+        self.lost_line = check_choice("lost_line", lost_line, _LOST_LINE_MODES)
+        self.lost_line_steps = check_int("lost_line_steps", lost_line_steps, 1)
+        self.motor_lag = check_real("motor_lag", motor_lag, 0.0)
+        self.wheel_slip = check_real("wheel_slip", wheel_slip, 0.0, 1.0, high_open=True)
+        self.camera_noise = check_probability("camera_noise", camera_noise)
+        self.render_mode = check_choice(
+            "render_mode", render_mode, (None, *self.metadata["render_modes"])
+        )
+        track_seed = check_int("track_seed", track_seed, 0, optional=True)
+        if track_seed is not None and not (isinstance(track, str) and track == "random"):
+            raise ValueError(f"track_seed is only used with track='random', got track={track!r}")
         self._random_tracks = isinstance(track, str) and track == "random" and track_seed is None
         self.track = self._make_track(track, track_seed)
 
-        self.observation_mode = observation_mode
-        self.action_mode = action_mode
-        self.max_steps = max_steps
-        self.lost_line = lost_line
-        self.lost_line_steps = int(lost_line_steps)
-        self.motor_lag = float(motor_lag)
-        self.wheel_slip = float(wheel_slip)
-        self.camera_noise = float(camera_noise)
-        self.render_mode = render_mode
-
-        if observation_mode == "centroid":
+        if self.observation_mode == "centroid":
             self.observation_space: spaces.Space = spaces.Discrete(N_PIXELS + 1)
         else:
             self.observation_space = spaces.Box(0.0, 1.0, (N_PIXELS,), np.float32)
-        if action_mode == "discrete":
+        if self.action_mode == "discrete":
             self.action_space: spaces.Space = spaces.Discrete(len(WHEEL_SPEED_ACTIONS))
         else:
             self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
@@ -284,14 +242,11 @@ class EPuckLineFollowEnv(gym.Env):
 
     @staticmethod
     def _make_track(track: Any, track_seed: int | None) -> Track:
+        """The track for the ``track`` argument (see the class docstring's "Arguments")."""
         if isinstance(track, Track):
             return track
         if isinstance(track, str):
-            if track not in TRACK_NAMES:
-                raise ValueError(
-                    f"track must be one of {TRACK_NAMES}, a Track or an (n, 2) closed polyline, "
-                    f"got {track!r}"
-                )
+            check_choice("track", track, TRACK_NAMES)
             # A random track without track_seed is redrawn at every reset; seed 0 until then.
             return make_track(track, 0 if track_seed is None else track_seed)
         try:
@@ -327,9 +282,9 @@ class EPuckLineFollowEnv(gym.Env):
             fraction = options.get("start_progress")
             if fraction is None:
                 fraction = float(self.np_random.uniform())
-            elif not (_is_number(fraction) and 0.0 <= fraction < 1.0):
-                raise ValueError(
-                    f"options['start_progress'] must be a number in [0, 1), got {fraction!r}"
+            else:
+                fraction = check_real(
+                    "options['start_progress']", fraction, 0.0, 1.0, high_open=True
                 )
             x, y, heading = track.point_at(fraction * track.length)
         self.robot.reset(x, y, heading)

@@ -1,5 +1,4 @@
-"""Drawing the line-following scene with numpy (``rgb_array``) and showing it with pygame
-(``human``).
+"""Drawing the line-following scene: with numpy (``rgb_array``), shown with pygame (``human``).
 
 pygame is imported only when a window is first shown, so ``rgb_array`` rendering needs numpy
 alone.
@@ -13,6 +12,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from delayed_rl._validation import check_int
 from delayed_rl.envs.linefollow.camera import Camera
 from delayed_rl.envs.linefollow.robot import BODY_RADIUS
 from delayed_rl.envs.linefollow.track import Track
@@ -31,17 +31,23 @@ MARGIN = 0.12  # metres of floor around the track
 
 
 class Renderer:
-    """Draws a track, the robot's trail, the robot, its camera scanline (on the floor: green where
-    a pixel sees the line, amber where not) and, magnified in the top-left corner, the camera's
-    view.
+    """Draws the track, the robot, its trail and its camera scanline, and the camera's view.
+
+    The scanline is drawn on the floor, green where a pixel sees the line and amber where not;
+    the camera's view is magnified in the top-left corner.
 
     Args:
         track: the track to draw (drawn once, then reused).
         camera: the robot's camera (for the scanline).
-        size: the longer side of the image (pixels).
+        size: the longer side of the image (pixels), an integer ``>= 1``.
+
+    Raises:
+        TypeError: ``size`` is not an integer.
+        ValueError: ``size`` is below 1.
     """
 
     def __init__(self, track: Track, camera: Camera, size: int = 640):
+        size = check_int("size", size, 1)
         self.track = track
         self.camera = camera
         low, high = track.bounds
@@ -114,8 +120,10 @@ class Renderer:
 
     @staticmethod
     def _draw_camera_view(frame: NDArray[np.uint8], seen: NDArray[np.bool_]) -> None:
-        """The 40 pixels as the robot sees them (pixel 1 left), magnified in the top-left corner
-        (like thesis Fig. 5.17): dark where the line is seen."""
+        """Draw the 40 pixels as the robot sees them, magnified in the top-left corner.
+
+        Pixel 1 is on the left and a pixel is dark where it sees the line (like thesis Fig. 5.17).
+        """
         cell, height, x0, y0 = 6, 14, 8, 8
         width = cell * len(seen)
         if frame.shape[0] < y0 + height + 2 or frame.shape[1] < x0 + width + 2:

@@ -32,6 +32,8 @@ from typing import Any
 
 import pymunk
 
+from delayed_rl._validation import check_real
+
 __all__ = [
     "AXLE_LENGTH",
     "BODY_RADIUS",
@@ -66,13 +68,20 @@ class EPuckRobot:
     Args:
         physics_dt: the physics sub-step (s).
         motor_lag: first-order time constant (s) of the wheel speeds; 0 = instantaneous.
+
+    Raises:
+        TypeError: an argument is not a number.
+        ValueError: ``physics_dt`` is not positive or ``motor_lag`` is negative (or either is
+            not finite).
     """
 
     def __init__(self, physics_dt: float = 0.016, motor_lag: float = 0.0):
-        self.physics_dt = float(physics_dt)
-        self.motor_lag = float(motor_lag)
+        self.physics_dt = check_real("physics_dt", physics_dt, 0.0, low_open=True, note=" (s)")
+        self.motor_lag = check_real("motor_lag", motor_lag, 0.0, note=" (s)")
         #: Fraction of the gap to the commanded speed closed per sub-step.
-        self._lag_gain = 1.0 if motor_lag == 0 else 1.0 - math.exp(-physics_dt / motor_lag)
+        self._lag_gain = (
+            1.0 if self.motor_lag == 0 else 1.0 - math.exp(-self.physics_dt / self.motor_lag)
+        )
         #: Current (lagged) wheel speeds (steps/s).
         self.wheel_speeds = (0.0, 0.0)
         self._build({})
@@ -146,7 +155,8 @@ class EPuckRobot:
         """Drive for ``substeps`` physics sub-steps with commanded wheel speeds (steps/s).
 
         Args:
-            v_left, v_right: commanded wheel speeds (steps/s).
+            v_left: the commanded left wheel speed (steps/s).
+            v_right: the commanded right wheel speed (steps/s).
             substeps: number of physics sub-steps of ``physics_dt``.
             slip: factors scaling each wheel's ground speed during these sub-steps.
         """

@@ -30,6 +30,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from delayed_rl._validation import check_bool, check_choice, check_int, check_real
+
 __all__ = [
     "MAX_CORNER_ANGLE",
     "MIN_TURN_RADIUS",
@@ -65,12 +67,23 @@ FloatArray = NDArray[np.float64]
 
 
 def _as_points(points: ArrayLike, name: str = "points") -> FloatArray:
+    """``points`` as an ``(n, 2)`` float array.
+
+    Raises:
+        TypeError: ``points`` is not an array-like of numbers (a single number included).
+        ValueError: it is, but not of shape ``(n, 2)``.
+    """
     try:
         arr = np.asarray(points, dtype=np.float64)
     except (TypeError, ValueError) as exc:
         raise TypeError(
             f"{name} must be an array-like of (x, y) points in metres, got {points!r}"
         ) from exc
+    if arr.ndim == 0:  # a number (or None, which numpy reads as NaN) is no polyline
+        raise TypeError(
+            f"{name} must be an array-like of (x, y) points in metres, got {points!r} "
+            f"({type(points).__name__})"
+        )
     if arr.ndim != 2 or arr.shape[1] != 2:
         raise ValueError(
             f"{name} must have shape (n, 2) (a polyline of (x, y) points), got shape {arr.shape}"
@@ -209,6 +222,11 @@ class Track:
         min_turn_radius: the smallest turning radius (m) of the track as given (before
             densification).
         allow_crossings: whether the track may cross itself (the figure-eight).
+
+    The constructor takes ``points`` and the attributes above as keyword arguments; it does not
+    validate the geometry (:meth:`from_polyline` does), but refuses points that are not an
+    ``(n, 2)`` array (``TypeError``/``ValueError``), a ``min_turn_radius`` that is not a number
+    ``>= 0`` and an ``allow_crossings`` that is not a bool.
     """
 
     def __init__(
@@ -219,6 +237,8 @@ class Track:
         min_turn_radius: float | None = None,
         allow_crossings: bool = False,
     ):
+        min_turn_radius = check_real("min_turn_radius", min_turn_radius, 0.0, optional=True)
+        allow_crossings = check_bool("allow_crossings", allow_crossings)
         p = _as_points(points)
         if np.linalg.norm(np.roll(p, -1, axis=0) - p, axis=1).max() > SAMPLE_SPACING * (1 + 1e-9):
             p = _resample(p, SAMPLE_SPACING)  # the spatial index relies on short segments
@@ -270,11 +290,19 @@ class Track:
             allow_crossings: allow the line to cross itself (as a figure-eight does).
 
         Raises:
-            ValueError: if the polyline is not closed, has fewer than 3 distinct vertices, holds
-                non-finite values or repeated consecutive vertices, crosses itself (unless
-                ``allow_crossings``), turns more tightly than ``min_turn_radius`` or kinks by
-                more than ``max_corner_angle``.
+            TypeError: if ``points`` is not an array-like of numbers, ``min_turn_radius`` or
+                ``max_corner_angle`` is not a number or ``allow_crossings`` is not a bool.
+            ValueError: if the polyline is not of shape ``(n + 1, 2)``, is not closed, has fewer
+                than 3 distinct vertices, holds non-finite values or repeated consecutive
+                vertices, crosses itself (unless ``allow_crossings``), turns more tightly than
+                ``min_turn_radius`` or kinks by more than ``max_corner_angle``; if
+                ``min_turn_radius`` is negative or ``max_corner_angle`` outside ``(0, 180]``.
         """
+        min_turn_radius = check_real("min_turn_radius", min_turn_radius, 0.0)
+        max_corner_angle = check_real(
+            "max_corner_angle", max_corner_angle, 0.0, 180.0, low_open=True, note=" (degrees)"
+        )
+        allow_crossings = check_bool("allow_crossings", allow_crossings)
         p = _as_points(points)
         if not np.all(np.isfinite(p)):
             bad = np.argwhere(~np.isfinite(p))[0, 0]
@@ -296,12 +324,6 @@ class Track:
             raise ValueError(
                 f"track polyline has repeated consecutive points at index {bad}: "
                 f"{p[bad].tolist()}; every segment must have a positive length"
-            )
-        if not (np.isfinite(min_turn_radius) and min_turn_radius >= 0):
-            raise ValueError(f"min_turn_radius must be a finite number >= 0, got {min_turn_radius}")
-        if not (np.isfinite(max_corner_angle) and 0 < max_corner_angle <= 180):
-            raise ValueError(
-                f"max_corner_angle must be in (0, 180] degrees, got {max_corner_angle}"
             )
         radii = turn_radii(p)
         worst = int(np.argmin(radii))
@@ -337,10 +359,13 @@ class Track:
         )
 
     def _build_index(self) -> None:
-        """Spatial grid: each segment is registered (by its midpoint's cell) in that cell's 3×3
-        neighbourhood; per cell, its segments' data are stored contiguously (CSR), so a query is
-        a slice. A window of :data:`LOCAL_WINDOW` segments either side of each segment, stored
-        contiguously too (wrapping round the track), serves hinted :meth:`locate` queries."""
+        """Build the spatial grid and the padded segment windows behind the queries.
+
+        Each segment is registered (by its midpoint's cell) in that cell's 3×3 neighbourhood; per
+        cell, its segments' data are stored contiguously (CSR), so a query is a slice. A window of
+        :data:`LOCAL_WINDOW` segments either side of each segment, stored contiguously too
+        (wrapping round the track), serves hinted :meth:`locate` queries.
+        """
         n = len(self._a)
         mid = self._a + 0.5 * self._d
         self._origin = (mid.real.min() - 2 * CELL_SIZE, mid.imag.min() - 2 * CELL_SIZE)
@@ -365,19 +390,13 @@ class Track:
 
     # ------------------------------------------------------------------ queries
     def _cell(self, x: float, y: float) -> slice:
+        """The slice of the CSR arrays holding the segments registered in (x, y)'s cell."""
         ix = int((x - self._origin[0]) // CELL_SIZE)
         iy = int((y - self._origin[1]) // CELL_SIZE)
         if not (0 <= ix < self._nx and 0 <= iy < self._ny):
             return slice(0, 0)
         k = ix * self._ny + iy
         return slice(self._cell_start[k], self._cell_start[k + 1])
-
-    def candidates(self, x: float, y: float) -> NDArray[np.int64]:
-        """Indices of segments that may lie within :data:`CELL_SIZE` of (x, y).
-
-        Every segment within that distance is included; far from the track the answer is empty.
-        """
-        return self._cell_segs[self._cell(x, y)]
 
     def near_line(self, points: NDArray[np.complex128], half_width: float, centre: complex) -> Any:
         """Which ``points`` lie within ``half_width`` of the centreline.
@@ -417,7 +436,8 @@ class Track:
         """The nearest centreline point to (x, y).
 
         Args:
-            x, y: the query point (m).
+            x: the query point's x (m).
+            y: the query point's y (m).
             hint: the segment of the previous answer. When given, the nearest point among the
                 :data:`LOCAL_WINDOW` segments either side of it is used if it is inside that
                 window and within :data:`CELL_SIZE` of (x, y), so a robot crossing a
@@ -577,21 +597,24 @@ def random_track(
         max_tries: draws before giving up.
 
     Raises:
-        ValueError: for invalid arguments, or if no acceptable track was drawn.
+        TypeError: for an argument of the wrong type (a seed that is neither an int, a
+            generator nor None; a radius or clearance that is not a number; a count that is not
+            an int).
+        ValueError: for an argument out of range (a negative seed, ``min_turn_radius`` below
+            :data:`MIN_TURN_RADIUS`, ``mean_radius`` below ``2 * min_turn_radius``, a negative
+            ``clearance``, ``harmonics < 2``, ``max_tries < 1``), or if no acceptable track was
+            drawn.
     """
-    if not (np.isfinite(min_turn_radius) and min_turn_radius >= MIN_TURN_RADIUS):
-        raise ValueError(
-            f"min_turn_radius must be >= MIN_TURN_RADIUS ({MIN_TURN_RADIUS} m), "
-            f"got {min_turn_radius}"
-        )
-    if not (np.isfinite(mean_radius) and mean_radius >= 2 * min_turn_radius):
-        raise ValueError(
-            f"mean_radius must be >= 2 * min_turn_radius ({2 * min_turn_radius} m), "
-            f"got {mean_radius}"
-        )
-    if not (isinstance(harmonics, int | np.integer) and harmonics >= 2):
-        raise ValueError(f"harmonics must be an int >= 2, got {harmonics!r}")
-    name = f"random-{seed}" if isinstance(seed, int | np.integer) else "random"
+    if not isinstance(seed, np.random.Generator):
+        seed = check_int("seed", seed, 0, optional=True)
+    min_turn_radius = check_real("min_turn_radius", min_turn_radius, MIN_TURN_RADIUS, note=" (m)")
+    clearance = check_real("clearance", clearance, 0.0, note=" (m)")
+    mean_radius = check_real(
+        "mean_radius", mean_radius, 2 * min_turn_radius, note=" (2 * min_turn_radius, m)"
+    )
+    harmonics = check_int("harmonics", harmonics, 2)
+    max_tries = check_int("max_tries", max_tries, 1)
+    name = "random" if seed is None or isinstance(seed, np.random.Generator) else f"random-{seed}"
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     theta = np.linspace(0.0, 2 * np.pi, 16384, endpoint=False)
     k = np.arange(2, harmonics + 1)
@@ -617,6 +640,7 @@ def random_track(
 
 @functools.lru_cache(maxsize=64)
 def _seeded_random_track(seed: int) -> Track:
+    """``random_track(seed)``, cached (a track takes tens of milliseconds to draw and check)."""
     return random_track(seed)
 
 
@@ -625,16 +649,19 @@ def make_track(name: str, seed: int | np.random.Generator | None = None) -> Trac
 
     Args:
         name: one of :data:`TRACK_NAMES`.
-        seed: for ``"random"`` only: an int (cached), a generator, or None.
+        seed: for ``"random"`` only: an int ``>= 0`` (the track is cached), a generator, or
+            None.
 
     Raises:
-        ValueError: for an unknown name.
+        TypeError: ``name`` is not a string, or (for ``"random"``) ``seed`` is neither an int,
+            a generator nor None.
+        ValueError: ``name`` is not one of :data:`TRACK_NAMES`, or ``seed`` is negative.
     """
+    check_choice("name", name, TRACK_NAMES)
     if name == "random":
-        if isinstance(seed, int | np.integer):
-            return _seeded_random_track(int(seed))
-        return random_track(seed)
+        if isinstance(seed, np.random.Generator):
+            return random_track(seed)
+        seed = check_int("seed", seed, 0, optional=True)
+        return random_track() if seed is None else _seeded_random_track(seed)
     builders = {"oval": oval_track, "racetrack": racetrack_track, "figure8": figure8_track}
-    if name not in builders:
-        raise ValueError(f"unknown track name {name!r}; allowed: {', '.join(TRACK_NAMES)}")
     return builders[name]()
