@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import ast
+import inspect
 import warnings
+from dataclasses import asdict
 from pathlib import Path
 
 import gymnasium as gym
@@ -11,7 +13,15 @@ import numpy as np
 import pytest
 
 import delayed_rl
-from delayed_rl.agents import MMQ, QLearning, TabularAgent, load_agent
+from delayed_rl.agents import (
+    DEFAULTS,
+    MMQ,
+    FixedDelayQLearning,
+    QLearning,
+    TabularAgent,
+    load_agent,
+)
+from delayed_rl.agents.hyperparameters import HYPERPARAMETER_NAMES
 
 PACKAGE = Path(delayed_rl.__file__).parent
 
@@ -173,3 +183,22 @@ def test_deprecated_names_still_work(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert type(load_agent(path)) is QLearning
+
+
+@pytest.mark.parametrize("cls", [MMQ, QLearning, FixedDelayQLearning])
+def test_every_agent_shows_the_shared_hyperparameters_with_the_one_set_of_defaults(cls):
+    shown = inspect.signature(cls).parameters
+    for name, default in {**asdict(DEFAULTS), "seed": None, "verbose": 0}.items():
+        assert shown[name].default == default, name
+    base = inspect.signature(TabularAgent.__init__).parameters
+    assert {name: base[name].default for name in HYPERPARAMETER_NAMES} == {
+        name: shown[name].default for name in HYPERPARAMETER_NAMES
+    }
+    agent = cls("delayed_rl/GridWorld-3x3-v0", gamma=0.5, q_init=2.0, **_own_arguments(cls))
+    assert agent.gamma == 0.5 and agent.q_init == 2.0
+    with pytest.raises(TypeError, match="unexpected keyword argument 'gammma'"):
+        cls("delayed_rl/GridWorld-3x3-v0", gammma=0.5, **_own_arguments(cls))
+
+
+def _own_arguments(cls):
+    return {"delay_estimate": 1} if cls is FixedDelayQLearning else {}

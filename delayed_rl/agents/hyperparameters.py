@@ -2,13 +2,21 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
-from typing import Any
+import inspect
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from typing import Any, TypeVar
 
 from delayed_rl._validation import check_fraction, check_int, check_probability, check_real
 from delayed_rl.agents.schedules import Schedule, as_learning_rate_schedule
 
-__all__ = ["DEFAULTS", "HYPERPARAMETER_NAMES", "AgentDefaults", "check_hyperparameters"]
+__all__ = [
+    "DEFAULTS",
+    "HYPERPARAMETER_NAMES",
+    "AgentDefaults",
+    "check_hyperparameters",
+    "shares_hyperparameters",
+]
 
 
 @dataclass(frozen=True)
@@ -35,8 +43,27 @@ class AgentDefaults:
 DEFAULTS = AgentDefaults()
 """The defaults the agents' constructors use."""
 
-HYPERPARAMETER_NAMES = (*(field.name for field in fields(AgentDefaults)), "seed", "verbose")
+_SHARED = {**asdict(DEFAULTS), "seed": None, "verbose": 0}
+HYPERPARAMETER_NAMES = tuple(_SHARED)
 """The constructor arguments every tabular agent shares (and saves)."""
+
+_Init = TypeVar("_Init", bound=Callable[..., None])
+
+
+def shares_hyperparameters(init: _Init) -> _Init:
+    """Mark ``__init__(self, env, ..., **hyperparameters)`` as taking the shared hyper-parameters.
+
+    The constructor passes ``**hyperparameters`` on to
+    :class:`~delayed_rl.agents.base.TabularAgent`, so their defaults live in one place
+    (:data:`DEFAULTS`); its signature, as ``help()``, ``inspect`` and the documentation show it,
+    lists them by name, keyword-only, with those defaults.
+    """
+    signature = inspect.signature(init)
+    own = [p for p in signature.parameters.values() if p.kind is not p.VAR_KEYWORD]
+    shared = [inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=default)
+              for name, default in _SHARED.items()]  # fmt: skip
+    init.__signature__ = signature.replace(parameters=own + shared)
+    return init
 
 
 def check_hyperparameters(

@@ -29,8 +29,7 @@ from delayed_rl._validation import check_int
 from delayed_rl.agents._fused import CompiledTables
 from delayed_rl.agents._streams import UniformStream
 from delayed_rl.agents.base import TabularAgent
-from delayed_rl.agents.hyperparameters import DEFAULTS
-from delayed_rl.agents.schedules import Schedule
+from delayed_rl.agents.hyperparameters import shares_hyperparameters
 
 __all__ = ["MMQ", "MultipleModelQLearning", "greedy_actions"]
 
@@ -108,21 +107,17 @@ class MultipleModelQLearning(TabularAgent):
 
     Args:
         env: the training env (``Discrete`` observation and action spaces) or an env id.
-        learning_rate: α in (0, 1], or a schedule of the progress remaining (as in SB3).
-        gamma: the discount factor γ in [0, 1].
-        exploration_initial_eps: ε at the start of ``learn()`` (applies at both levels).
-        exploration_final_eps: ε after ``exploration_fraction`` of ``learn()``; equal to the
-            initial value (default 0.1 for both) for a constant ε, as in the thesis.
-        exploration_fraction: the fraction of training over which ε moves, in (0, 1].
-        q_init: the initial value of every entry; set it above the achievable values for
-            optimistic exploration (the thesis does; e.g. 50 in the Roulette example).
         max_delay_estimate: λ̂max; Λ = {0, delay_step, 2·delay_step, ...} up to λ̂max
             (default 50, the thesis's grid-world setting).
         delay_step: the resolution of Λ (default 1).
         delay_estimates: Λ given explicitly (distinct integers ≥ 0; stored sorted), instead of
             ``max_delay_estimate``/``delay_step``.
-        seed: seeds the agent's random choices and the env's first reset.
-        verbose: 0 silent, 1 prints the logged metrics.
+        **hyperparameters: the hyper-parameters every agent shares, by keyword
+            (``learning_rate``, ``gamma``, ``exploration_initial_eps``,
+            ``exploration_final_eps``, ``exploration_fraction``, ``q_init``, ``seed``,
+            ``verbose``): see :class:`~delayed_rl.agents.base.TabularAgent`. ε applies at both
+            levels; set ``q_init`` above the achievable values for optimistic exploration (the
+            thesis does; e.g. 50 in the Roulette example).
 
     Example:
         >>> import gymnasium as gym
@@ -136,35 +131,19 @@ class MultipleModelQLearning(TabularAgent):
 
     _hyperparameter_names = (*TabularAgent._hyperparameter_names, "delay_estimates")
 
+    @shares_hyperparameters
     def __init__(
         self,
         env: gym.Env | str,
-        learning_rate: float | Schedule = DEFAULTS.learning_rate,
-        gamma: float = DEFAULTS.gamma,
-        exploration_initial_eps: float = DEFAULTS.exploration_initial_eps,
-        exploration_final_eps: float = DEFAULTS.exploration_final_eps,
-        exploration_fraction: float = DEFAULTS.exploration_fraction,
-        q_init: float = DEFAULTS.q_init,
         max_delay_estimate: int | None = None,
         delay_step: int | None = None,
         delay_estimates: Sequence[int] | None = None,
-        seed: int | None = None,
-        verbose: int = 0,
+        **hyperparameters: Any,
     ):
         self._delay_estimates = check_delay_estimates(
             max_delay_estimate, delay_step, delay_estimates
         )
-        super().__init__(
-            env,
-            learning_rate=learning_rate,
-            gamma=gamma,
-            exploration_initial_eps=exploration_initial_eps,
-            exploration_final_eps=exploration_final_eps,
-            exploration_fraction=exploration_fraction,
-            q_init=q_init,
-            seed=seed,
-            verbose=verbose,
-        )
+        super().__init__(env, **hyperparameters)
 
     # ------------------------------------------------------------------ model
     @property

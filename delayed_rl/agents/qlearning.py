@@ -15,9 +15,8 @@ from typing import Any
 import gymnasium as gym
 
 from delayed_rl._validation import check_int
-from delayed_rl.agents.hyperparameters import DEFAULTS
+from delayed_rl.agents.hyperparameters import shares_hyperparameters
 from delayed_rl.agents.mmq import MultipleModelQLearning
-from delayed_rl.agents.schedules import Schedule
 
 __all__ = ["FixedDelayQLearning", "QLearning"]
 
@@ -31,15 +30,8 @@ class QLearning(MultipleModelQLearning):
 
     Args:
         env: the training env (``Discrete`` observation and action spaces) or an env id.
-        learning_rate: α in (0, 1], or a schedule of the progress remaining (as in SB3).
-        gamma: the discount factor γ in [0, 1].
-        exploration_initial_eps: ε at the start of ``learn()``.
-        exploration_final_eps: ε after ``exploration_fraction`` of ``learn()`` (equal to the
-            initial value, the default 0.1, for a constant ε).
-        exploration_fraction: the fraction of training over which ε moves, in (0, 1].
-        q_init: the initial value of every entry (optimistic when above the achievable values).
-        seed: seeds the agent's random choices and the env's first reset.
-        verbose: 0 silent, 1 prints the logged metrics.
+        **hyperparameters: the hyper-parameters every agent shares, by keyword: see
+            :class:`~delayed_rl.agents.base.TabularAgent`.
 
     Example:
         >>> import delayed_rl
@@ -49,30 +41,9 @@ class QLearning(MultipleModelQLearning):
         True
     """
 
-    def __init__(
-        self,
-        env: gym.Env | str,
-        learning_rate: float | Schedule = DEFAULTS.learning_rate,
-        gamma: float = DEFAULTS.gamma,
-        exploration_initial_eps: float = DEFAULTS.exploration_initial_eps,
-        exploration_final_eps: float = DEFAULTS.exploration_final_eps,
-        exploration_fraction: float = DEFAULTS.exploration_fraction,
-        q_init: float = DEFAULTS.q_init,
-        seed: int | None = None,
-        verbose: int = 0,
-    ):
-        super().__init__(
-            env,
-            learning_rate=learning_rate,
-            gamma=gamma,
-            exploration_initial_eps=exploration_initial_eps,
-            exploration_final_eps=exploration_final_eps,
-            exploration_fraction=exploration_fraction,
-            q_init=q_init,
-            delay_estimates=[0],
-            seed=seed,
-            verbose=verbose,
-        )
+    @shares_hyperparameters
+    def __init__(self, env: gym.Env | str, **hyperparameters: Any):
+        super().__init__(env, delay_estimates=[0], **hyperparameters)
 
     def _set_hyperparameters(self, *, delay_estimates: Any = None, **kwargs: Any) -> None:
         if delay_estimates is not None and list(delay_estimates) != [0]:
@@ -95,30 +66,19 @@ class FixedDelayQLearning(MultipleModelQLearning):
             Q-learning). Called ``delay`` before version 0.2, a name now kept for delay
             *distributions* (:mod:`delayed_rl.delays`); ``delay=`` still works, with a
             ``DeprecationWarning``.
-        learning_rate: α in (0, 1], or a schedule of the progress remaining (as in SB3).
-        gamma: the discount factor γ in [0, 1].
-        exploration_initial_eps: ε at the start of ``learn()``.
-        exploration_final_eps: ε after ``exploration_fraction`` of ``learn()``.
-        exploration_fraction: the fraction of training over which ε moves, in (0, 1].
-        q_init: the initial value of every entry.
-        seed: seeds the agent's random choices and the env's first reset.
-        verbose: 0 silent, 1 prints the logged metrics.
+        delay: the deprecated name of ``delay_estimate`` (keyword only).
+        **hyperparameters: the hyper-parameters every agent shares, by keyword: see
+            :class:`~delayed_rl.agents.base.TabularAgent`.
     """
 
+    @shares_hyperparameters
     def __init__(
         self,
         env: gym.Env | str,
         delay_estimate: int | None = None,
-        learning_rate: float | Schedule = DEFAULTS.learning_rate,
-        gamma: float = DEFAULTS.gamma,
-        exploration_initial_eps: float = DEFAULTS.exploration_initial_eps,
-        exploration_final_eps: float = DEFAULTS.exploration_final_eps,
-        exploration_fraction: float = DEFAULTS.exploration_fraction,
-        q_init: float = DEFAULTS.q_init,
-        seed: int | None = None,
-        verbose: int = 0,
         *,
         delay: int | None = None,
+        **hyperparameters: Any,
     ):
         if delay is not None:
             if delay_estimate is not None:
@@ -132,18 +92,7 @@ class FixedDelayQLearning(MultipleModelQLearning):
         if delay_estimate is None:
             raise TypeError("FixedDelayQLearning needs delay_estimate, the assumed delay in steps")
         check_int("delay_estimate", delay_estimate, 0)
-        super().__init__(
-            env,
-            learning_rate=learning_rate,
-            gamma=gamma,
-            exploration_initial_eps=exploration_initial_eps,
-            exploration_final_eps=exploration_final_eps,
-            exploration_fraction=exploration_fraction,
-            q_init=q_init,
-            delay_estimates=[int(delay_estimate)],
-            seed=seed,
-            verbose=verbose,
-        )
+        super().__init__(env, delay_estimates=[int(delay_estimate)], **hyperparameters)
 
     @property
     def delay_estimate(self) -> int:
