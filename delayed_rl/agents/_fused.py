@@ -17,7 +17,11 @@ import numpy as np
 from delayed_rl._validation import check_bool
 from delayed_rl.agents._loop import LearnRun, step_locals
 
-__all__ = ["CompiledTables", "check_fused", "compiled_loop", "compiled_run"]
+__all__ = ["MAX_CHUNK", "CompiledTables", "check_fused", "compiled_loop", "compiled_run"]
+
+MAX_CHUNK = 1 << 16
+"""The most steps one compiled call takes: its step log (42 bytes a step) stays a few MiB
+however long ``learn()`` runs. A seeded run does not depend on the chunking."""
 
 
 class CompiledTables(NamedTuple):
@@ -90,7 +94,7 @@ def compiled_loop(agent: Any, fused_run: Any, run: LearnRun) -> None:
     eps_steps = max(1, round(agent.exploration_fraction * run.total_timesteps))
     if agent.exploration_initial_eps == agent.exploration_final_eps:
         eps_steps = 1
-    chunk = agent.fused_chunk if run.callback is not None else run.n_steps
+    chunk = agent.fused_chunk if run.callback is not None else MAX_CHUNK
     if run.log_interval is not None:
         chunk = min(chunk, run.log_interval)
     tables = agent.compiled_tables()

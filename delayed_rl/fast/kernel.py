@@ -11,7 +11,6 @@ The update rule is the one of :mod:`delayed_rl.agents.mmq` (its module docstring
 exactly); the exactness tests drive both on scripted transitions.
 """
 
-# ruff: noqa: NPY002  (numba compiles only the legacy np.random API, one generator per thread)
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -36,10 +35,48 @@ except ImportError:  # pragma: no cover - exercised where numba is absent
 FLUSH, DROP, CARRY = 0, 1, 2
 
 
+_MULTIPLIER_5, _MULTIPLIER_9 = np.uint64(5), np.uint64(9)
+_TO_UNIT = 1.0 / 9007199254740992.0  # 2**-53: 53 random bits as a float in [0, 1)
+
+
 @_jit
-def seed_kernel(seed):
-    """Seed the compiled code's own random generator (numba keeps one per thread)."""
-    np.random.seed(seed)
+def _rotl(x, k):
+    return (x << np.uint64(k)) | (x >> np.uint64(64 - k))
+
+
+@_jit
+def next_uniform(rng):
+    """The next number in [0, 1) of a run's own generator, xoshiro256** (Blackman and Vigna).
+
+    ``rng`` is the generator's state, four ``uint64`` words (not all zero), advanced in place: a
+    run owns its generator, so no other run, thread or copy changes what it draws, and copying or
+    saving the four words copies or saves the stream.
+    """
+    s0, s1, s2, s3 = rng[0], rng[1], rng[2], rng[3]
+    result = _rotl(s1 * _MULTIPLIER_5, 7) * _MULTIPLIER_9
+    t = s1 << np.uint64(17)
+    s2 ^= s0
+    s3 ^= s1
+    s1 ^= s2
+    s0 ^= s3
+    s2 ^= t
+    s3 = _rotl(s3, 45)
+    rng[0], rng[1], rng[2], rng[3] = s0, s1, s2, s3
+    return (result >> np.uint64(11)) * _TO_UNIT
+
+
+@_jit
+def _below(rng, n):
+    """A uniform integer in ``0..n−1`` (``int(u·n)``, as the Python path draws)."""
+    return int(next_uniform(rng) * n)
+
+
+def generator_state(seed_sequence: np.random.SeedSequence) -> np.ndarray:
+    """A fresh xoshiro256** state (four ``uint64`` words, not all zero) from ``seed_sequence``."""
+    state = seed_sequence.generate_state(4, dtype=np.uint64)
+    if not state.any():  # the one state the generator cannot leave (probability 2**-256)
+        state[0] = 1
+    return state
 
 
 @_jit
@@ -74,10 +111,10 @@ def _nth_equal(qf, base, size, best, k):
 
 
 @_jit
-def _pick_model(qf, base, n_models, n_actions, best):
+def _pick_model(qf, base, n_models, n_actions, best, rng):
     """A uniformly random model among those holding ``best`` somewhere in their row.
 
-    ``qf[base:]`` is the state's rows, model after model (one draw).
+    ``qf[base:]`` is the state's rows, model after model (one draw from ``rng``).
     """
     holders = 0
     for m in range(n_models):
@@ -86,7 +123,7 @@ def _pick_model(qf, base, n_models, n_actions, best):
             if qf[i] == best:
                 holders += 1
                 break
-    k = np.random.randint(holders)
+    k = _below(rng, holders)
     for m in range(n_models):
         row = base + m * n_actions
         for i in range(row, row + n_actions):
@@ -231,7 +268,7 @@ NO_SCRIPT = Script(np.zeros((0, 3), np.int64), np.zeros(0, np.bool_), np.zeros(0
 
 
 @_jit
-def run_chunk(cache, rule, env, line, history, log, script, start_step):
+def run_chunk(cache, rule, env, line, history, log, script, start_step, rng):
     """Advance training by ``line.delays.shape[0]`` steps.
 
     One loop, written out: splitting its step into compiled helpers (choose, env step, delay,
@@ -259,6 +296,7 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step):
         log: receives one entry per step (:class:`StepLog`).
         script: transitions to replay (:class:`Script`), or :data:`NO_SCRIPT`.
         start_step: the training step of the chunk's first step (for the ε schedule).
+        rng: the run's generator state (:func:`next_uniform`), advanced in place.
 
     Indices into the Q-table and its cache are cast to unsigned integers, which spares the
     compiled code numba's negative-index handling in the innermost loops (about 5%).
@@ -307,22 +345,22 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step):
             # the acting model, then the action (two ε-greedy levels, random tie-breaks)
             if n_models == 1:
                 acting = 0
-            elif np.random.random() < eps:
-                acting = np.random.randint(n_models)
+            elif next_uniform(rng) < eps:
+                acting = _below(rng, n_models)
             elif qties[s] == 1:  # the one model holding the state's max
                 acting = (qcell[s] // n_actions) % n_models
             else:  # a uniformly random model among those holding it
-                acting = _pick_model(qf, s * row_size, n_models, n_actions, qmax[s])
-            if np.random.random() < eps:
-                action = np.random.randint(n_actions)
+                acting = _pick_model(qf, s * row_size, n_models, n_actions, qmax[s], rng)
+            if next_uniform(rng) < eps:
+                action = _below(rng, n_actions)
             else:  # a uniformly random action among the model's best
                 row = s * row_size + acting * n_actions
                 best, first, ties = _scan_max(qf, row, n_actions)
                 if ties > 1:
-                    first = _nth_equal(qf, row, n_actions, best, np.random.randint(ties))
+                    first = _nth_equal(qf, row, n_actions, best, _below(rng, ties))
                 action = first - row
             # the env
-            u = np.random.random()
+            u = next_uniform(rng)
             k = 0
             while k < out_cdf.shape[2] - 1 and out_cdf[s, action, k] <= u:
                 k += 1
@@ -388,7 +426,7 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step):
                     qmax[sj], qcell[sj], qties[sj] = _scan_max(qf, sj * row_size, row_size)
         if ended:
             if not scripted:
-                u = np.random.random()
+                u = next_uniform(rng)
                 s = 0
                 while s < init_cdf.shape[0] - 1 and init_cdf[s] <= u:
                     s += 1
@@ -442,4 +480,7 @@ def replay(
         np.asarray(rewards, np.float64),
     )
     history = History.empty(int(estimates.max()))
-    run_chunk(cache, rule, TabularModel.empty(), line, history, StepLog.empty(n), script, 0)
+    no_draws = np.ones(4, np.uint64)  # a script draws nothing
+    run_chunk(
+        cache, rule, TabularModel.empty(), line, history, StepLog.empty(n), script, 0, no_draws
+    )

@@ -4,11 +4,23 @@ from __future__ import annotations
 
 import numpy as np
 
-from delayed_rl._delay_line import draw_delays, regrow_ring, ring_size
+from delayed_rl._delay_line import delay_bound, draw_delays, regrow_ring, ring_size
 from delayed_rl.fast import kernel
 from delayed_rl.fast.tabular import NotCompilable, inspect_stack
 
 _MODES = {"flush": kernel.FLUSH, "drop": kernel.DROP, "carry": kernel.CARRY}
+
+RING_LIMIT = 1 << 22
+"""The most pending-reward slots a compiled run keeps (32 MiB of float64).
+
+A compiled run holds its pending rewards in a ring as long as the longest delay it can draw. A
+delay distribution that can reach further (e.g. ``Uniform(0, 2**27)`` on a continuing env) runs on
+the Python path instead, whose buffer holds only the rewards actually pending.
+"""
+
+DELAY_BLOCK = 4096
+"""Delays are drawn in blocks of this many, whatever the chunks: a seeded run does not depend on
+how ``learn()`` splits it (``log_interval``, callbacks)."""
 
 
 class FusedRun:
@@ -19,11 +31,14 @@ class FusedRun:
     Args:
         env: the env stack (see :mod:`delayed_rl.fast.tabular` for what compiles).
         delay_estimates: Λ, the agent's delay estimates (sorted), one per Q-table model.
-        seed: seeds the compiled generator (actions, env outcomes) and, through a separate
-            stream, the reward delays.
+        seed: seeds the run's own generators: one in the compiled code (actions, env
+            outcomes: :func:`~delayed_rl.fast.kernel.next_uniform`) and, apart from it, the
+            reward delays'. No other run, thread or copy draws from them.
 
     Attributes:
         state: ``[s, history length, episode steps, clock]``, carried from one call to the next.
+        rng_state: the compiled generator's state (four ``uint64`` words).
+        delay_rng: the generator of the reward delays.
         tie_counts: after :meth:`run`, how many entries of each state's Q-row hold its max (the
             compiled code keeps them to read the acting model off the cached arg-max unless the
             max is tied).
@@ -39,20 +54,58 @@ class FusedRun:
         self.delay = None if wrapper is None else wrapper.delay
         self.max_delay = None if wrapper is None else wrapper.max_delay
         self.mode = _MODES["flush" if wrapper is None else wrapper.on_episode_end]
+        self.delay_clip = self._delay_clip()
         self.delay_estimates = np.asarray(delay_estimates, dtype=np.int64)
         self.history = kernel.History.empty(int(self.delay_estimates.max()))
         self.state = self.history.clocks
         self.ring = np.zeros(1)
         self.tie_counts = np.zeros(0, dtype=np.int64)
-        kernel_seed, delay_seed = np.random.SeedSequence(seed).generate_state(2)
-        kernel.seed_kernel(int(kernel_seed) & 0x7FFFFFFF)
-        self.delay_rng = np.random.default_rng(delay_seed)
+        kernel_seeds, delay_seeds = np.random.SeedSequence(seed).spawn(2)
+        self.rng_state = kernel.generator_state(kernel_seeds)
+        self.delay_rng = np.random.default_rng(delay_seeds)
         self.state[0] = np.searchsorted(self.model.init_cdf, self.delay_rng.random(), side="right")
+        self._delay_block = np.zeros(0, dtype=np.int64)
+
+    def _delay_clip(self) -> int | None:
+        """The longest delay the ring must hold, or ``None`` (no reward delay).
+
+        ``max_delay`` clips every delay. When the env ends its own episodes after ``max_steps``
+        and pending rewards do not outlive an episode (``"flush"``, ``"drop"``), a delay of
+        ``max_steps`` or more comes due after the episode's end either way, so delays are
+        clipped there too: that changes no delivery, only how far the ring must reach.
+
+        Raises:
+            NotCompilable: the delays can reach further than :data:`RING_LIMIT` slots.
+        """
+        if self.delay is None:
+            return None
+        clip = self.max_delay
+        if self.model.max_steps > 0 and self.mode != kernel.CARRY:
+            clip = self.model.max_steps if clip is None else min(clip, self.model.max_steps)
+        reach = delay_bound(self.delay, clip)
+        if reach >= RING_LIMIT:
+            raise NotCompilable(
+                f"the reward delay ({self.delay!r}) can reach {reach} steps: the compiled ring "
+                f"would take {ring_size(reach + 1) * 8 / 2**20:.0f} MiB (the limit is "
+                f"{RING_LIMIT} slots); the Python path keeps only the rewards pending"
+            )
+        return clip
 
     def _draw_delays(self, n: int) -> np.ndarray:
+        """The next ``n`` delays of the run's stream, drawn in blocks of :data:`DELAY_BLOCK`."""
         if self.delay is None:
             return np.zeros(n, dtype=np.int64)
-        return draw_delays(self.delay, self.delay_rng, n, self.max_delay)
+        parts, needed = [], n
+        while needed > 0:
+            if not self._delay_block.size:
+                self._delay_block = draw_delays(
+                    self.delay, self.delay_rng, DELAY_BLOCK, self.delay_clip
+                )
+            take = self._delay_block[:needed]
+            self._delay_block = self._delay_block[needed:]
+            parts.append(take)
+            needed -= take.size
+        return np.concatenate(parts) if len(parts) > 1 else parts[0]
 
     def _fit_ring(self, longest: int) -> None:
         """Grow the delay ring to hold ``longest``, keeping pending rewards at their due steps."""
@@ -108,6 +161,14 @@ class FusedRun:
         line = kernel.DelayLine(delays, self.ring, self.mode)
         log = kernel.StepLog.empty(steps)
         kernel.run_chunk(
-            cache, rule, self.model, line, self.history, log, kernel.NO_SCRIPT, int(start_step)
+            cache,
+            rule,
+            self.model,
+            line,
+            self.history,
+            log,
+            kernel.NO_SCRIPT,
+            int(start_step),
+            self.rng_state,
         )
         return log

@@ -81,12 +81,55 @@ class TabularModel(NamedTuple):
                 for i, (p, s2, r, term) in enumerate(table[s][a]):
                     prob[s, a, i], out_next[s, a, i] = p, s2
                     out_reward[s, a, i], out_term[s, a, i] = r, term
+        _check_tables(type(env).__name__, prob, out_next, out_reward, n_states)
+        init = np.asarray(init, dtype=float)
+        if init.shape != (n_states,) or not np.all(np.isfinite(init)) or np.any(init < 0):
+            raise ValueError(
+                f"{type(env).__name__}.initial_state_distrib must hold {n_states} finite "
+                f"probabilities >= 0, got {init!r}"
+            )
         cdf = np.cumsum(prob, axis=2)
         cdf[:, :, -1] = 1.0 + 1e-12  # every uniform draw falls inside the last outcome
-        init_cdf = np.cumsum(np.asarray(init, dtype=float))
+        init_cdf = np.cumsum(init)
         init_cdf[-1] = 1.0 + 1e-12
         max_steps = getattr(env, "max_steps", None) or 0
         return cls(cdf, out_next, out_reward, out_term, init_cdf, int(max_steps))
+
+
+def _check_tables(
+    name: str, prob: np.ndarray, out_next: np.ndarray, out_reward: np.ndarray, n_states: int
+) -> None:
+    """Refuse tables the compiled loop would run wrong: it reads them without checks.
+
+    Raises:
+        ValueError: a reward that is not finite (the Python path raises when it meets one; the
+            compiled path checks every entry once, before it runs), a probability that is not a
+            number in [0, 1], outcomes of a (state, action) that do not sum to 1, or a next state
+            outside the observation space. The message names the first bad entry.
+    """
+    problems = (
+        (~np.isfinite(out_reward), "a non-finite reward", out_reward),
+        (~np.isfinite(prob) | (prob < 0) | (prob > 1), "a probability outside [0, 1]", prob),
+        (
+            (out_next < 0) | (out_next >= n_states),
+            f"a next state outside 0..{n_states - 1}",
+            out_next,
+        ),
+    )
+    for bad, what, values in problems:
+        if bad.any():
+            s, a, k = (int(i) for i in np.argwhere(bad)[0])
+            raise ValueError(
+                f"{name}.P[{s}][{a}][{k}] holds {what} ({values[s, a, k].item()!r}): the compiled path "
+                "refuses tables it would run wrong"
+            )
+    totals = prob.sum(axis=2)
+    off = np.abs(totals - 1.0) > 1e-6
+    if off.any():
+        s, a = (int(i) for i in np.argwhere(off)[0])
+        raise ValueError(
+            f"{name}.P[{s}][{a}]'s probabilities sum to {totals[s, a].item()!r}, not 1"
+        )
 
 
 def inspect_stack(env: gym.Env) -> tuple[TabularModel, RewardDelay | None]:
