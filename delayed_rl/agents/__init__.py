@@ -4,6 +4,8 @@
 - :class:`FixedDelayQLearning`: Q-learning that assumes a constant delay ``k``;
 - :class:`MultipleModelQLearning` (alias :class:`MMQ`): Multiple Model Q-learning, which learns
   over parallel delay hypotheses (thesis section 3.2);
+- :class:`DeconvolutionQLearning` (alias :class:`DeconvQ`): Q-learning on mean rewards estimated
+  by deconvolving the delayed reward stream, with the delay known or learned;
 - :func:`load_agent`: load any of them from a file, whatever its class;
 - ``ProportionalController`` (thesis Eqs. 5.8–5.9), imported from
   :mod:`delayed_rl.agents.controllers` on first access.
@@ -13,6 +15,7 @@ All share :class:`~delayed_rl.agents.base.TabularAgent`: ``learn``, ``predict``,
 """
 
 from delayed_rl.agents.base import RECORD_KEYS, TabularAgent, load_agent
+from delayed_rl.agents.deconvolution import DeconvolutionQLearning, DeconvQ
 from delayed_rl.agents.hyperparameters import DEFAULTS, AgentDefaults
 from delayed_rl.agents.mmq import MMQ, MultipleModelQLearning
 from delayed_rl.agents.qlearning import FixedDelayQLearning, QLearning
@@ -25,6 +28,8 @@ __all__ = [
     "RECORD_KEYS",
     "AgentDefaults",
     "ConstantSchedule",
+    "DeconvQ",
+    "DeconvolutionQLearning",
     "FixedDelayQLearning",
     "LinearSchedule",
     "MultipleModelQLearning",

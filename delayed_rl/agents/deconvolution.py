@@ -1,0 +1,307 @@
+"""Deconvolution Q-learning: regress the received rewards on the past, then Q-learn on the estimate.
+
+Under rewards delayed independently by ``d ~ p`` (:class:`~delayed_rl.wrappers.RewardDelay`),
+the reward received at step ``t`` has expectation ``Σ_k p(k) · R(s_{t−k}, a_{t−k})``: a
+convolution of the delay pmf with the mean rewards ``R`` of the (state, action) pairs visited.
+:class:`DeconvolutionQLearning` undoes it:
+
+1. it keeps the sufficient statistics of that regression (:mod:`delayed_rl.agents._regression`:
+   ``O(K)`` per step, never the history) and, every ``solve_interval`` steps, solves the least
+   squares for ``R̂`` — with the delay pmf known (``delay=``), or estimated with it (``delay=None``:
+   ``p`` on ``0..max_delay`` and ``R`` alternate, ``p`` kept a distribution);
+2. it runs Q-learning on the observed, undelayed transitions ``(s, a, s′)`` with reward
+   ``R̂(s, a)``: ``Q(s, a) += α (R̂(s, a) + γ (1 − terminated) max_a′ Q(s′, a′) − Q(s, a))``.
+
+It is anonymous: it reads only the reward delivered at each step, the observations, actions and
+episode ends — never ``info["undelayed_reward"]``, ``reward_delay`` or ``reward_arrivals``.
+"""
+
+from __future__ import annotations
+
+import numbers
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from delayed_rl._validation import check_choice, check_int, check_real
+from delayed_rl.agents._regression import RewardRegression
+from delayed_rl.agents.hyperparameters import shares_hyperparameters
+from delayed_rl.agents.qlearning import QLearning
+from delayed_rl.delays import Delay, Empirical
+
+__all__ = ["DeconvQ", "DeconvolutionQLearning"]
+
+EPISODE_END_MODES = ("flush", "drop", "carry")
+DEFAULT_MAX_DELAY = 50  # as MMQ's λ̂max: the thesis's grid-world cut-off
+TAIL = 1e-6  # a known unbounded delay is modelled up to where less than this mass is left
+_OWN_NAMES = {  # this class's own constructor arguments, and their defaults
+    "delay": None,
+    "max_delay": None,
+    "solve_interval": 5_000,
+    "ridge": 1e-3,
+    "delay_iterations": 3,
+    "on_episode_end": None,
+}
+
+
+class DeconvolutionQLearning(QLearning):
+    """Q-learning on mean rewards estimated by deconvolving the delayed reward stream.
+
+    See the module docstring for the rule. The reward model ``R̂`` is 0 until the first solve, so
+    an optimistic ``q_init`` explores meanwhile, as for the other agents.
+
+    **Episode ends.** How a reward-delay wrapper treats pending rewards at an episode's end
+    changes what the last step delivers, and the model follows it (``on_episode_end``):
+    ``"flush"`` (the last step carries every pending reward: the pair ``k`` steps back weighs
+    ``P(D ≥ k)``), ``"drop"`` (those rewards never come), ``"carry"`` (they come in the next
+    episode: the regression runs over the whole stream). ``None`` reads the mode of the
+    :class:`~delayed_rl.wrappers.RewardDelay` in the env's stack, else assumes ``"flush"`` (the
+    wrapper's default).
+
+    Args:
+        env: the training env (``Discrete`` spaces) or an env id.
+        delay: the delay distribution when it is known (a :class:`~delayed_rl.delays.Delay`, or a
+            number read as a Poisson mean), modelled on ``0..K`` with ``K`` its largest value (or,
+            for an unbounded one, where less than 1e-6 of its mass is left, at most
+            ``max_delay``); ``None`` (default) learns it on ``0..max_delay``.
+        max_delay: ``K`` for a learned delay, the longest delay modelled (the designer's cut-off,
+            like MMQ's λ̂max; default 50); with a known delay, a cap on its support.
+        solve_interval: steps between least-squares solves (default 5000).
+        ridge: the ridge added to the normal equations' diagonal (default 1e-3): pairs never
+            visited get ``R̂ = 0`` and rarely visited ones are pulled towards it.
+        delay_iterations: with a learned delay, the alternations of the ``R`` and ``p`` solves
+            at each solve (warm-started from the last estimate; default 3).
+        on_episode_end: ``"flush"``, ``"drop"``, ``"carry"`` or ``None`` (see above).
+        **hyperparameters: the hyper-parameters every agent shares, by keyword: see
+            :class:`~delayed_rl.agents.base.TabularAgent`.
+
+    Example:
+        >>> import gymnasium as gym
+        >>> import delayed_rl
+        >>> from delayed_rl.agents import DeconvQ
+        >>> env = gym.make("delayed_rl/GridWorld-3x3-v0", reward_delay=2)
+        >>> agent = DeconvQ(env, max_delay=8, solve_interval=1000, q_init=10.0, seed=0)
+        >>> agent = agent.learn(6_000)
+        >>> round(agent.mean_delay)
+        2
+    """
+
+    _hyperparameter_names = (*QLearning._hyperparameter_names, *_OWN_NAMES)
+
+    @shares_hyperparameters
+    def __init__(
+        self,
+        env: gym.Env | str,
+        delay: Delay | float | None = None,
+        max_delay: int | None = None,
+        solve_interval: int = 5_000,
+        ridge: float = 1e-3,
+        delay_iterations: int = 3,
+        on_episode_end: str | None = None,
+        **hyperparameters: Any,
+    ):
+        self._set_deconvolution(
+            delay, max_delay, solve_interval, ridge, delay_iterations, on_episode_end
+        )
+        super().__init__(env, **hyperparameters)
+
+    # ------------------------------------------------------------------ construction
+    def _set_deconvolution(
+        self,
+        delay: Any,
+        max_delay: Any,
+        solve_interval: Any,
+        ridge: Any,
+        delay_iterations: Any,
+        on_episode_end: Any,
+    ) -> None:
+        self.delay = _as_known_delay(delay)
+        self.max_delay = check_int("max_delay", max_delay, 0, optional=True)
+        self.solve_interval = check_int("solve_interval", solve_interval, 1)
+        self.ridge = check_real("ridge", ridge, 0.0, low_open=True)
+        self.delay_iterations = check_int("delay_iterations", delay_iterations, 1)
+        if on_episode_end is not None:
+            check_choice("on_episode_end", on_episode_end, EPISODE_END_MODES)
+        self.on_episode_end = on_episode_end
+
+    def _set_hyperparameters(self, **hyperparameters: Any) -> None:
+        if any(name in hyperparameters for name in _OWN_NAMES):  # loading: they come along
+            own = {name: hyperparameters.pop(name, default) for name, default in _OWN_NAMES.items()}
+            self._set_deconvolution(**own)
+        super()._set_hyperparameters(**hyperparameters)
+
+    def _get_hyperparameters(self) -> dict[str, Any]:
+        params = super()._get_hyperparameters()
+        if self.delay is not None:  # a known delay is saved as the pmf it is modelled by
+            params["delay"] = self._pmf.tolist()
+        return params
+
+    def _setup_model(self) -> None:
+        super()._setup_model()
+        self._support = self._delay_support()
+        self._reward_model = np.zeros(self.n_states * self.n_actions)
+        self._pmf = (
+            np.full(self._support + 1, 1.0 / (self._support + 1))
+            if self.delay is None
+            else _truncated_pmf(self.delay, self._support)
+        )
+        self._regression = self._new_regression(self.on_episode_end or "flush")
+        self._since_solve = 0
+
+    def _new_regression(self, mode: str) -> RewardRegression:
+        self.assumed_episode_end = mode
+        return RewardRegression(
+            self.n_states * self.n_actions, self._support, mode == "flush", mode == "carry"
+        )
+
+    def _delay_support(self) -> int:
+        """``K``: the longest delay modelled (see the class docstring)."""
+        if self.delay is None:
+            return DEFAULT_MAX_DELAY if self.max_delay is None else self.max_delay
+        k = self.delay.support_max
+        if k is None:
+            cdf = np.cumsum(self.delay.pmf(np.arange(100_000)))
+            k = int(np.searchsorted(cdf, 1.0 - TAIL))
+        return k if self.max_delay is None else min(k, self.max_delay)
+
+    def set_env(self, env: gym.Env | str) -> None:
+        """Train on ``env`` from now on (see ``TabularAgent.set_env``); reads its episode-end mode.
+
+        Raises:
+            ValueError: the env's reward-delay wrapper treats episode ends otherwise than the
+                data the reward model holds (pass ``on_episode_end`` to say which applies).
+        """
+        super().set_env(env)
+        if self.on_episode_end is not None:
+            return
+        mode = _wrapper_mode(self.env) or "flush"
+        if mode == self.assumed_episode_end:
+            return
+        if self._regression.steps:
+            raise ValueError(
+                f"the reward model holds {self._regression.steps} steps under "
+                f"on_episode_end={self.assumed_episode_end!r} but this env's RewardDelay uses "
+                f"{mode!r}: pass on_episode_end= to say which applies"
+            )
+        self._regression = self._new_regression(mode)
+
+    def compiled_tables(self) -> None:
+        """``None``: this rule has no compiled twin yet; ``learn()`` runs the Python loop."""
+        return None
+
+    # ------------------------------------------------------------------ learning
+    def _learn_transition(
+        self, s: int, a: int, r: float, s2: int, terminated: bool, truncated: bool
+    ) -> None:
+        pair = s * self.n_actions + a
+        self._regression.observe(pair, r, terminated or truncated)
+        self._since_solve += 1
+        if self._since_solve >= self.solve_interval:
+            self.solve()
+        super()._learn_transition(s, a, float(self._reward_model[pair]), s2, terminated, truncated)
+
+    def solve(self) -> None:
+        """Re-estimate ``R̂`` (and, for a learned delay, the pmf) from everything seen so far."""
+        self._since_solve = 0
+        if self.delay is not None:
+            self._reward_model = self._regression.solve_rewards(self._pmf, self.ridge)
+            return
+        for _ in range(self.delay_iterations):
+            self._reward_model = self._regression.solve_rewards(self._pmf, self.ridge)
+            self._pmf = self._regression.solve_delay(self._reward_model, self._pmf)
+
+    # ------------------------------------------------------------------ persistence
+    def _get_state_arrays(self) -> dict[str, np.ndarray]:
+        arrays = super()._get_state_arrays()
+        regression = self._regression
+        arrays.update(
+            reward_model=self._reward_model.copy(),
+            delay_pmf=self._pmf.copy(),
+            since_solve=np.array(self._since_solve),
+            assumed_episode_end=np.array(EPISODE_END_MODES.index(self.assumed_episode_end)),
+            **{f"regression_{name}": value for name, value in regression.state().items()},
+        )
+        return arrays
+
+    def _set_state_arrays(self, arrays: dict[str, np.ndarray], where: str) -> None:
+        super()._set_state_arrays(arrays, where)
+        try:
+            mode = EPISODE_END_MODES[int(arrays["assumed_episode_end"])]
+            self._regression = self._new_regression(mode)
+            self._regression.restore(
+                {
+                    name[len("regression_") :]: value
+                    for name, value in arrays.items()
+                    if name.startswith("regression_")
+                }
+            )
+            reward_model, pmf = arrays["reward_model"], arrays["delay_pmf"]
+            if reward_model.shape != self._reward_model.shape or pmf.shape != self._pmf.shape:
+                raise ValueError("reward_model or delay_pmf has the wrong shape")
+            if not (np.all(np.isfinite(reward_model)) and np.all(np.isfinite(pmf))):
+                raise ValueError("reward_model or delay_pmf holds non-finite values")
+            self._reward_model = reward_model.astype(np.float64)
+            self._pmf = pmf.astype(np.float64)
+            self._since_solve = check_int("since_solve", int(arrays["since_solve"]), 0)
+        except (KeyError, IndexError, TypeError, ValueError) as error:
+            raise ValueError(f"{where}: malformed deconvolution state: {error}") from None
+
+    # ------------------------------------------------------------------ diagnostics
+    @property
+    def delay_pmf(self) -> np.ndarray:
+        """The delay pmf on ``0..K`` the agent uses: the known one, or its current estimate."""
+        return self._pmf.copy()
+
+    @property
+    def mean_delay(self) -> float:
+        """The mean of :attr:`delay_pmf`."""
+        return float(self._pmf @ np.arange(self._pmf.size))
+
+    @property
+    def reward_model(self) -> np.ndarray:
+        """``R̂``, the estimated mean reward of each (state, action), shape ``(|S|, |A|)``."""
+        return self._reward_model.reshape(self.n_states, self.n_actions).copy()
+
+    def _record_model_metrics(self, logger: Any) -> None:
+        logger.record("deconv/mean_delay", self.mean_delay)
+        logger.record("deconv/reward_model_max", float(self._reward_model.max()))
+
+
+DeconvQ = DeconvolutionQLearning
+"""Short alias of :class:`DeconvolutionQLearning`."""
+
+
+def _as_known_delay(delay: Any) -> Delay | None:
+    """``None``, a :class:`Delay`, a Poisson mean, or a saved pmf (a list), as a ``Delay``."""
+    if delay is None or isinstance(delay, Delay):
+        return delay
+    if isinstance(delay, list):
+        return Empirical(delay)
+    if isinstance(delay, numbers.Real) and not isinstance(delay, bool):
+        from delayed_rl.delays import as_delay
+
+        return as_delay(delay, "delay")
+    raise TypeError(
+        "delay must be None (learn it), a delayed_rl.delays.Delay or a number read as a Poisson "
+        f"mean, got {delay!r} ({type(delay).__name__})"
+    )
+
+
+def _truncated_pmf(delay: Delay, support: int) -> np.ndarray:
+    """``delay``'s pmf on ``0..support``, the mass beyond folded into the last value."""
+    pmf = np.asarray(delay.pmf(np.arange(support + 1)), dtype=np.float64)
+    pmf[-1] += max(0.0, 1.0 - pmf.sum())
+    return pmf / pmf.sum()
+
+
+def _wrapper_mode(env: gym.Env) -> str | None:
+    """The ``on_episode_end`` of the first reward-delay wrapper in ``env``'s stack, if any."""
+    from delayed_rl.wrappers import RewardDelay
+
+    layer = env
+    while isinstance(layer, gym.Wrapper):
+        if isinstance(layer, RewardDelay):
+            return layer.on_episode_end
+        layer = layer.env
+    return None
