@@ -102,10 +102,12 @@ def test_the_agent_finds_the_optimal_loop_where_q_learning_does_not(known):
         delay = Poisson(4.0) if known else None
         agent = DeconvQ(_grid(lam=4.0), delay=delay, max_delay=20, q_init=25.0, seed=seed)
         agent.learn(60_000, log_interval=None)
-        assert agent.last_learn_path == "python"
+        assert agent.last_learn_path == "fused"
         assert greedy_average_reward(agent, 5) == pytest.approx(optimum, abs=0.002)
-        if not known:
-            assert abs(agent.mean_delay - 4.0) < 1.0
+        if not known:  # the learned pmf is close to Poisson(4) (its mean is pulled up by thin
+            # spurious mass in the long tail, which more steps wear away)
+            true = Poisson(4.0).pmf(np.arange(21))
+            assert 0.5 * np.abs(agent.delay_pmf - true / true.sum()).sum() < 0.15
     q_results = [
         greedy_average_reward(QLearning(_grid(lam=4.0), q_init=25.0, seed=seed).learn(60_000), 5)
         for seed in range(3)
@@ -128,7 +130,7 @@ def test_it_is_anonymous_the_oracle_keys_change_nothing():
     for wrap in (lambda env: env, _StripOracleKeys):
         env = wrap(RewardDelay(GridWorldEnv(size=4), Poisson(3.0), record_arrivals=True))
         agent = DeconvQ(env, max_delay=12, solve_interval=2_000, q_init=20.0, seed=4)
-        agent.learn(10_000)
+        agent.learn(10_000, fused=False)  # the Python path: the one that sees info at all
         tables.append((agent.q_table.copy(), agent.delay_pmf))
     np.testing.assert_array_equal(tables[0][0], tables[1][0])
     np.testing.assert_array_equal(tables[0][1], tables[1][1])
@@ -188,3 +190,40 @@ def test_statistics_beyond_the_memory_limit_are_refused_at_construction():
         DeconvQ(big, max_delay=50)
     assert STATISTICS_LIMIT == 256 * 2**20
     DeconvQ(big, max_delay=5)
+
+
+def test_the_compiled_and_python_paths_learn_the_same_from_the_same_steps():
+    """Scripted steps through the compiled loop (``replay``) and through ``update()``.
+
+    The same Q-table, statistics, reward model and learned pmf, to the last bit.
+    """
+    from delayed_rl.fast.kernel import replay
+
+    rng = np.random.default_rng(11)
+    n = 7_000
+    rows = np.column_stack(
+        [rng.integers(16, size=n), rng.integers(4, size=n), rng.integers(16, size=n)]
+    )
+    ends = rng.random(n) < 0.02
+    rewards = np.where(rng.random(n) < 0.1, rng.choice([-1.0, 10.0], size=n), 0.0)
+    env = RewardDelay(GridWorldEnv(size=4), Poisson(2.0), on_episode_end="drop")
+    python, compiled = (
+        DeconvQ(env, max_delay=8, solve_interval=2_500, q_init=5.0, seed=0) for _ in range(2)
+    )
+    for (s, a, s2), reward, end in zip(rows.tolist(), rewards.tolist(), ends.tolist(), strict=True):
+        python.update(s, a, reward, s2, terminated=end)
+    done = 0
+    while done < n:
+        tables = compiled.compiled_tables()
+        stop = done + tables.chunk_limit
+        replay(
+            tables.q, tables.delay_estimates, rows[done:stop], ends[done:stop],
+            rewards[done:stop], compiled.learning_rate, compiled.gamma, tables.reward_model,
+        )  # fmt: skip
+        tables.after_chunk(min(stop, n) - done)
+        done = min(stop, n)
+    np.testing.assert_array_equal(python.q_table, compiled.q_table)
+    np.testing.assert_array_equal(python.reward_model, compiled.reward_model)
+    np.testing.assert_array_equal(python.delay_pmf, compiled.delay_pmf)
+    for ours, theirs in zip(python._regression.state().values(), compiled._regression.state().values(), strict=True):  # fmt: skip
+        np.testing.assert_array_equal(ours, theirs)

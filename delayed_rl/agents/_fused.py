@@ -10,6 +10,7 @@ replaying each chunk's steps to the callbacks.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -28,19 +29,26 @@ class CompiledTables(NamedTuple):
     """What the compiled path needs from an agent: its Q-table, the table's cache and Λ.
 
     The compiled code updates ``q``, ``v_max`` and ``v_cell`` in place, so they must be the
-    agent's own arrays, not copies.
+    agent's own arrays, not copies. :func:`compiled_loop` asks for them again before each chunk.
 
     Attributes:
         q: the Q-values, a C-contiguous ``float64`` array of shape (|S|, |Λ|, |A|).
         v_max: each state's max over (λ̂, a) of ``q[s]``.
         v_cell: the flat index into ``q`` of an entry holding that max.
         delay_estimates: Λ, sorted ascending (``int64``).
+        reward_model: learn from estimated mean rewards, fed the steps
+            (:class:`~delayed_rl.fast.kernel.RewardModel`); ``None``: the delivered rewards.
+        chunk_limit: the most steps the next chunk may take (``None``: no limit).
+        after_chunk: called with each chunk's length once it has run (``None``: nothing).
     """
 
     q: np.ndarray
     v_max: np.ndarray
     v_cell: np.ndarray
     delay_estimates: np.ndarray
+    reward_model: Any = None
+    chunk_limit: int | None = None
+    after_chunk: Callable[[int], None] | None = None
 
 
 def check_fused(fused: Any, callback: Any) -> bool | None:
@@ -97,9 +105,11 @@ def compiled_loop(agent: Any, fused_run: Any, run: LearnRun) -> None:
     chunk = agent.fused_chunk if run.callback is not None else MAX_CHUNK
     if run.log_interval is not None:
         chunk = min(chunk, run.log_interval)
-    tables = agent.compiled_tables()
     while run.steps_done < run.n_steps:
+        tables = agent.compiled_tables()
         length = min(chunk, run.n_steps - run.steps_done, run.next_log - run.steps_done)
+        if tables.chunk_limit is not None:
+            length = min(length, tables.chunk_limit)
         out = fused_run.run(
             tables.q,
             tables.v_max,
@@ -111,8 +121,11 @@ def compiled_loop(agent: Any, fused_run: Any, run: LearnRun) -> None:
             eps_initial=agent.exploration_initial_eps,
             eps_final=agent.exploration_final_eps,
             eps_steps=eps_steps,
+            reward_model=tables.reward_model,
         )
         agent.num_timesteps += length
+        if tables.after_chunk is not None:
+            tables.after_chunk(length)
         _book_chunk(agent, out, run.log, run.steps_done)
         run.steps_done += length
         run.reward_total += float(out.reward.sum())

@@ -29,7 +29,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from delayed_rl.fast.kernel import HAVE_NUMBA
+from delayed_rl.fast._numba import jit as _jit
+from delayed_rl.fast.statistics import Statistics, observe
 
 __all__ = ["STATISTICS_LIMIT", "RewardRegression", "project_to_simplex"]
 
@@ -40,34 +41,49 @@ GridWorld-9x9 with delays up to 50 steps takes 21 MiB; an env with many (state, 
 needs a shorter ``max_delay``, and the constructor says which.
 """
 
-if HAVE_NUMBA:
-    import numba
 
-    _jit = numba.njit(cache=True, nogil=True)
-else:  # pragma: no cover - numba is a core dependency
+@_jit
+def _lag_weighted_counts(cooc, weights):
+    """``Σ_m weights[m] · cooc[m]`` for ``m >= 1``, and ``weights[0]`` times ``cooc[0]``'s diagonal.
 
-    def _jit(function):
-        return function
+    One pass over the counts, skipping zero weights and zero counts (most of them).
+    """
+    k1, n, _ = cooc.shape
+    out = np.zeros((n, n))
+    for m in range(1, k1):
+        w = weights[m]
+        if w == 0.0:
+            continue
+        for i in range(n):
+            for j in range(n):
+                c = cooc[m, i, j]
+                if c:
+                    out[i, j] += w * c
+    diagonal = np.zeros(n)
+    for i in range(n):
+        diagonal[i] = weights[0] * cooc[0, i, i]
+    return out, diagonal
 
 
 @_jit
-def _observe(cooc, by_lag, window, length, x, y, flush_last):
-    """Count pair ``x`` after the segment's ``window`` (most recent first) and credit ``y``.
-
-    ``window[:length]`` holds the segment's last pairs, ``window[0]`` the latest. Returns the
-    new length. ``flush_last``: the step ends a flushed segment, whose reward is kept apart.
-    """
-    k_max = window.shape[0] - 1
-    n = min(length, k_max)
-    for u in range(n, 0, -1):  # shift the window: the new pair goes first
-        window[u] = window[u - 1]
-    window[0] = x
-    length = n + 1
-    for m in range(length):
-        cooc[m, window[m], x] += 1
-        if not flush_last:
-            by_lag[m, window[m]] += y
-    return length
+def _lag_quadratic_forms(cooc, reward):
+    """``q[m] = rewardᵀ · cooc[m] · reward`` for every lag ``m``."""
+    k1, n, _ = cooc.shape
+    q = np.zeros(k1)
+    for m in range(k1):
+        total = 0.0
+        for i in range(n):
+            ri = reward[i]
+            if ri == 0.0:
+                continue
+            row = 0.0
+            for j in range(n):
+                c = cooc[m, i, j]
+                if c:
+                    row += c * reward[j]
+            total += ri * row
+        q[m] = total
+    return q
 
 
 @_jit
@@ -122,13 +138,25 @@ def _delay_gram_corrections(g, z, windows, lengths, finals, flushed, reward):
                     g[k, m] += zf[k] * zf[m] - zp[k] * zp[m]
 
 
+@_jit
 def project_to_simplex(v: np.ndarray) -> np.ndarray:
     """The Euclidean projection of ``v`` onto the probability simplex (Held et al.'s algorithm)."""
     u = np.sort(v)[::-1]
     cumulative = np.cumsum(u) - 1.0
-    index = np.arange(1, v.size + 1)
-    rho = np.nonzero(u - cumulative / index > 0)[0][-1]
-    return np.maximum(v - cumulative[rho] / (rho + 1.0), 0.0)
+    theta = cumulative[0]
+    for rho in range(v.size):
+        if u[rho] - cumulative[rho] / (rho + 1.0) > 0:
+            theta = cumulative[rho] / (rho + 1.0)
+    return np.maximum(v - theta, 0.0)
+
+
+@_jit
+def _projected_gradient(g, z, start, scale, iterations):
+    """Minimise ``½ pᵀGp − zᵀp`` over the simplex from ``start``, with steps ``1 / scale``."""
+    p = start.copy()
+    for _ in range(iterations):
+        p = project_to_simplex(p - (g @ p - z) / scale)
+    return p
 
 
 class RewardRegression:
@@ -154,31 +182,49 @@ class RewardRegression:
                 f"{STATISTICS_LIMIT / 2**20:.0f} MiB: choose a shorter max_delay"
             )
         self.n_pairs, self.max_delay, self.flush, self.carry = n_pairs, max_delay, flush, carry
-        self.cooc = np.zeros((max_delay + 1, n_pairs, n_pairs), dtype=np.int32)
-        self.by_lag = np.zeros((max_delay + 1, n_pairs))
-        self.window = np.zeros(max_delay + 1, dtype=np.int64)
-        self.length = 0
-        self.end_windows = np.zeros((0, max_delay + 1), dtype=np.int64)
-        self.end_lengths = np.zeros(0, dtype=np.int64)
-        self.end_rewards = np.zeros(0)
-        self.end_flushed = np.zeros(0, dtype=np.bool_)
-        self.steps = 0
+        k = max_delay + 1
+        self.stats = Statistics(
+            np.zeros((k, n_pairs, n_pairs), dtype=np.int32),
+            np.zeros((k, n_pairs)),
+            np.zeros(k, dtype=np.int64),
+            np.array([0, 0, 0, int(flush), int(carry)], dtype=np.int64),
+            np.zeros((1, k), dtype=np.int64),
+            np.zeros(1, dtype=np.int64),
+            np.zeros(1),
+            np.zeros(1, dtype=np.bool_),
+        )
 
-    _STATE = (
-        "cooc",
-        "by_lag",
-        "window",
-        "end_windows",
-        "end_lengths",
-        "end_rewards",
-        "end_flushed",
-    )
+    @property
+    def steps(self) -> int:
+        """How many steps the statistics hold."""
+        return int(self.stats.counters[1])
+
+    @property
+    def cooc(self) -> np.ndarray:
+        """``cooc[m, i, j]``: pair ``i`` followed ``m`` steps later by pair ``j``."""
+        return self.stats.cooc
+
+    def reserve(self, ends: int) -> None:
+        """Make room for ``ends`` more segment ends (the end arrays double as they fill)."""
+        stats = self.stats
+        needed = int(stats.counters[2]) + ends
+        if needed <= stats.end_lengths.shape[0]:
+            return
+        size = max(needed, 2 * stats.end_lengths.shape[0])
+        grown = [np.zeros((size,) + array.shape[1:], dtype=array.dtype) for array in stats[4:]]
+        for new, old in zip(grown, stats[4:], strict=True):
+            new[: old.shape[0]] = old
+        self.stats = stats._replace(
+            end_windows=grown[0], end_lengths=grown[1], end_rewards=grown[2], end_flushed=grown[3]
+        )
 
     def state(self) -> dict[str, np.ndarray]:
-        """The statistics as arrays (for a model file)."""
-        arrays = {name: getattr(self, name).copy() for name in self._STATE}
-        arrays["counters"] = np.array([self.length, self.steps], dtype=np.int64)
-        return arrays
+        """The statistics as arrays (for a model file), the end arrays cut to their use."""
+        ends = int(self.stats.counters[2])
+        return {
+            name: (value[:ends] if index >= 4 else value).copy()
+            for index, (name, value) in enumerate(zip(Statistics._fields, self.stats, strict=True))
+        }
 
     def restore(self, arrays: dict[str, np.ndarray]) -> None:
         """Restore what :meth:`state` returned, checking every array's shape and type.
@@ -186,53 +232,41 @@ class RewardRegression:
         Raises:
             ValueError: an array is missing, of the wrong shape or type, or out of range.
         """
-        for name in self._STATE:
-            value, ours = arrays[name], getattr(self, name)
-            if value.dtype != ours.dtype or value.shape[1:] != ours.shape[1:]:
-                raise ValueError(f"{name} must be a {ours.dtype} array like {ours.shape}")
-            if name in ("cooc", "by_lag", "window") and value.shape != ours.shape:
-                raise ValueError(f"{name} must have shape {ours.shape}, got {value.shape}")
-        ends = arrays["end_windows"].shape[0]
-        if any(arrays[name].shape != (ends,) for name in self._STATE[4:]):
-            raise ValueError("the end_* arrays disagree on the number of segment ends")
+        ends = arrays["end_lengths"].shape[0]
+        for index, (name, ours) in enumerate(zip(Statistics._fields, self.stats, strict=True)):
+            value = arrays[name]
+            shape = (ends,) + ours.shape[1:] if index >= 4 else ours.shape
+            if value.dtype != ours.dtype or value.shape != shape:
+                raise ValueError(f"{name} must be a {ours.dtype} array of shape {shape}")
+        counters = arrays["counters"]
+        length, steps, n_ends, flush, carry = (int(v) for v in counters)
+        if not 0 <= length <= self.max_delay + 1 or steps < 0 or n_ends != ends:
+            raise ValueError(f"counters out of range: {counters.tolist()}")
+        if (flush, carry) != (int(self.flush), int(self.carry)):
+            raise ValueError("counters disagree with the episode-end mode")
         indices = np.concatenate([arrays["window"], arrays["end_windows"].ravel()])
         if indices.size and (indices.min() < 0 or indices.max() >= self.n_pairs):
             raise ValueError("a window holds a pair outside the env's pairs")
-        length, steps = (int(v) for v in arrays["counters"])
-        if not 0 <= length <= self.max_delay + 1 or steps < 0:
-            raise ValueError(f"counters out of range: {length}, {steps}")
-        for name in self._STATE:
-            setattr(self, name, arrays[name].copy())
-        self.length, self.steps = length, steps
+        if np.any(arrays["cooc"] < 0) or not np.all(np.isfinite(arrays["by_lag"])):
+            raise ValueError("negative counts or non-finite reward sums")
+        self.stats = Statistics(*(arrays[name].copy() for name in Statistics._fields))
+        self.reserve(1)
 
     # ------------------------------------------------------------------ observing
     def observe(self, pair: int, reward: float, episode_end: bool) -> None:
         """Add one step: the pair acted in, the reward received, whether the episode ended."""
-        ends = episode_end and not self.carry
-        flush_last = ends and self.flush
-        self.length = _observe(
-            self.cooc, self.by_lag, self.window, self.length, pair, reward, flush_last
-        )
-        self.steps += 1
-        if ends:
-            self._close_segment(reward if flush_last else 0.0, flush_last)
-
-    def _close_segment(self, final_reward: float, flushed: bool) -> None:
-        self.end_windows = np.vstack([self.end_windows, self.window[None, :]])
-        self.end_lengths = np.append(self.end_lengths, self.length)
-        self.end_rewards = np.append(self.end_rewards, final_reward)
-        self.end_flushed = np.append(self.end_flushed, flushed)
-        self.length = 0
+        self.reserve(1)
+        observe(self.stats, pair, reward, episode_end)
 
     def _windows(self) -> tuple[np.ndarray, ...]:
         """The ended segments' windows, and the open segment's (it ends, for now, here)."""
-        windows = np.vstack([self.end_windows, self.window[None, :]])
-        lengths = np.append(self.end_lengths, self.length)
+        stats = self.stats
+        ends = int(stats.counters[2])
         return (
-            windows,
-            lengths,
-            np.append(self.end_rewards, 0.0),
-            np.append(self.end_flushed, False),
+            np.vstack([stats.end_windows[:ends], stats.window[None, :]]),
+            np.append(stats.end_lengths[:ends], stats.counters[0]),
+            np.append(stats.end_rewards[:ends], 0.0),
+            np.append(stats.end_flushed[:ends], False),
         )
 
     # ------------------------------------------------------------------ solving
@@ -240,13 +274,10 @@ class RewardRegression:
         """``(A, b)`` of the least-squares problem for the mean rewards, given the delay pmf."""
         k = self.max_delay
         c = np.array([pmf[: k + 1 - m] @ pmf[m:] for m in range(k + 1)])
-        counts = np.zeros((self.n_pairs, self.n_pairs))
-        for m in range(1, k + 1):
-            if c[m] != 0.0:
-                counts += c[m] * self.cooc[m]
+        counts, diagonal = _lag_weighted_counts(self.stats.cooc, c)
         a = counts + counts.T
-        a[np.diag_indices_from(a)] += c[0] * np.diagonal(self.cooc[0])
-        b = pmf @ self.by_lag
+        a[np.diag_indices_from(a)] += diagonal
+        b = pmf @ self.stats.by_lag
         survival = np.cumsum(pmf[::-1])[::-1]
         _window_corrections(a, b, *self._windows(), pmf, survival)
         return a, b
@@ -260,10 +291,10 @@ class RewardRegression:
     def delay_gram(self, reward: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(G, z)`` of the least-squares problem for the pmf, given the mean rewards."""
         k = self.max_delay
-        q = np.array([reward @ (self.cooc[m] @ reward) for m in range(k + 1)])
+        q = _lag_quadratic_forms(self.stats.cooc, reward)
         lags = np.abs(np.subtract.outer(np.arange(k + 1), np.arange(k + 1)))
         g = q[lags]
-        z = self.by_lag @ reward
+        z = self.stats.by_lag @ reward
         _delay_gram_corrections(g, z, *self._windows(), reward)
         return g, z
 
@@ -279,7 +310,4 @@ class RewardRegression:
         scale = np.linalg.eigvalsh(g)[-1]
         if not scale > 0:
             return start
-        p = start.copy()
-        for _ in range(iterations):
-            p = project_to_simplex(p - (g @ p - z) / scale)
-        return p
+        return _projected_gradient(g, z, start, scale, iterations)

@@ -6,7 +6,8 @@ convolution of the delay pmf with the mean rewards ``R`` of the (state, action) 
 :class:`DeconvolutionQLearning` undoes it:
 
 1. it keeps the sufficient statistics of that regression (:mod:`delayed_rl.agents._regression`:
-   ``O(K)`` per step, never the history) and, every ``solve_interval`` steps, solves the least
+   ``O(K)`` per step, never the history) and, after 1000, 2000, 4000, ... steps and then every
+   ``solve_interval`` steps (the gaps double until they reach it), solves the least
    squares for ``R̂`` — with the delay pmf known (``delay=``), or estimated with it (``delay=None``:
    ``p`` on ``0..max_delay`` and ``R`` alternate, ``p`` kept a distribution);
 2. it runs Q-learning on the observed, undelayed transitions ``(s, a, s′)`` with reward
@@ -25,22 +26,26 @@ import gymnasium as gym
 import numpy as np
 
 from delayed_rl._validation import check_choice, check_int, check_real
+from delayed_rl.agents._fused import CompiledTables
 from delayed_rl.agents._regression import RewardRegression
 from delayed_rl.agents.hyperparameters import shares_hyperparameters
 from delayed_rl.agents.qlearning import QLearning
 from delayed_rl.delays import Delay, Empirical
+from delayed_rl.fast.kernel import RewardModel
 
 __all__ = ["DeconvQ", "DeconvolutionQLearning"]
 
 EPISODE_END_MODES = ("flush", "drop", "carry")
 DEFAULT_MAX_DELAY = 50  # as MMQ's λ̂max: the thesis's grid-world cut-off
 TAIL = 1e-6  # a known unbounded delay is modelled up to where less than this mass is left
+_CHUNK = 4096  # compiled steps between two looks at the statistics' room for segment ends
+_FIRST_SOLVE = 1_000  # steps before the first solve; the gaps then double to solve_interval
 _OWN_NAMES = {  # this class's own constructor arguments, and their defaults
     "delay": None,
     "max_delay": None,
-    "solve_interval": 5_000,
+    "solve_interval": 20_000,
     "ridge": 1e-3,
-    "delay_iterations": 3,
+    "delay_iterations": 2,
     "on_episode_end": None,
 }
 
@@ -67,11 +72,13 @@ class DeconvolutionQLearning(QLearning):
             ``max_delay``); ``None`` (default) learns it on ``0..max_delay``.
         max_delay: ``K`` for a learned delay, the longest delay modelled (the designer's cut-off,
             like MMQ's λ̂max; default 50); with a known delay, a cap on its support.
-        solve_interval: steps between least-squares solves (default 5000).
+        solve_interval: the longest gap between two least-squares solves (default 20,000); the
+            first solve comes after 1000 steps (or ``solve_interval``, if shorter) and the gaps
+            double up to it, so early estimates come fast and long runs pay little for them.
         ridge: the ridge added to the normal equations' diagonal (default 1e-3): pairs never
             visited get ``R̂ = 0`` and rarely visited ones are pulled towards it.
         delay_iterations: with a learned delay, the alternations of the ``R`` and ``p`` solves
-            at each solve (warm-started from the last estimate; default 3).
+            at each solve (warm-started from the last estimate; default 2).
         on_episode_end: ``"flush"``, ``"drop"``, ``"carry"`` or ``None`` (see above).
         **hyperparameters: the hyper-parameters every agent shares, by keyword: see
             :class:`~delayed_rl.agents.base.TabularAgent`.
@@ -95,9 +102,9 @@ class DeconvolutionQLearning(QLearning):
         env: gym.Env | str,
         delay: Delay | float | None = None,
         max_delay: int | None = None,
-        solve_interval: int = 5_000,
+        solve_interval: int = 20_000,
         ridge: float = 1e-3,
-        delay_iterations: int = 3,
+        delay_iterations: int = 2,
         on_episode_end: str | None = None,
         **hyperparameters: Any,
     ):
@@ -148,6 +155,7 @@ class DeconvolutionQLearning(QLearning):
         )
         self._regression = self._new_regression(self.on_episode_end or "flush")
         self._since_solve = 0
+        self._solve_after = min(self.solve_interval, _FIRST_SOLVE)
 
     def _new_regression(self, mode: str) -> RewardRegression:
         self.assumed_episode_end = mode
@@ -186,29 +194,45 @@ class DeconvolutionQLearning(QLearning):
             )
         self._regression = self._new_regression(mode)
 
-    def compiled_tables(self) -> None:
-        """``None``: this rule has no compiled twin yet; ``learn()`` runs the Python loop."""
-        return None
+    def compiled_tables(self) -> CompiledTables:
+        """Q-learning's tables with the reward model: the compiled loop feeds the statistics.
+
+        A chunk runs up to the next solve; the solve itself runs between chunks, as in
+        :meth:`solve`, so both paths learn the same from the same steps.
+        """
+        until_solve = min(self._solve_after - self._since_solve, _CHUNK)
+        self._regression.reserve(until_solve)  # room for a segment end at every step
+        model = RewardModel(self._reward_model, self._regression.stats)
+        tables = super().compiled_tables()
+        return tables._replace(
+            reward_model=model, chunk_limit=until_solve, after_chunk=self._after_chunk
+        )
+
+    def _after_chunk(self, steps: int) -> None:
+        self._since_solve += steps
+        if self._since_solve >= self._solve_after:
+            self.solve()
 
     # ------------------------------------------------------------------ learning
     def _learn_transition(
         self, s: int, a: int, r: float, s2: int, terminated: bool, truncated: bool
     ) -> None:
         pair = s * self.n_actions + a
+        super()._learn_transition(s, a, float(self._reward_model[pair]), s2, terminated, truncated)
         self._regression.observe(pair, r, terminated or truncated)
         self._since_solve += 1
-        if self._since_solve >= self.solve_interval:
+        if self._since_solve >= self._solve_after:
             self.solve()
-        super()._learn_transition(s, a, float(self._reward_model[pair]), s2, terminated, truncated)
 
     def solve(self) -> None:
         """Re-estimate ``R̂`` (and, for a learned delay, the pmf) from everything seen so far."""
         self._since_solve = 0
+        self._solve_after = min(self.solve_interval, max(_FIRST_SOLVE, self._regression.steps))
         if self.delay is not None:
-            self._reward_model = self._regression.solve_rewards(self._pmf, self.ridge)
+            self._reward_model[:] = self._regression.solve_rewards(self._pmf, self.ridge)
             return
         for _ in range(self.delay_iterations):
-            self._reward_model = self._regression.solve_rewards(self._pmf, self.ridge)
+            self._reward_model[:] = self._regression.solve_rewards(self._pmf, self.ridge)
             self._pmf = self._regression.solve_delay(self._reward_model, self._pmf)
 
     # ------------------------------------------------------------------ persistence
@@ -218,7 +242,7 @@ class DeconvolutionQLearning(QLearning):
         arrays.update(
             reward_model=self._reward_model.copy(),
             delay_pmf=self._pmf.copy(),
-            since_solve=np.array(self._since_solve),
+            solve_clock=np.array([self._since_solve, self._solve_after]),
             assumed_episode_end=np.array(EPISODE_END_MODES.index(self.assumed_episode_end)),
             **{f"regression_{name}": value for name, value in regression.state().items()},
         )
@@ -243,7 +267,9 @@ class DeconvolutionQLearning(QLearning):
                 raise ValueError("reward_model or delay_pmf holds non-finite values")
             self._reward_model = reward_model.astype(np.float64)
             self._pmf = pmf.astype(np.float64)
-            self._since_solve = check_int("since_solve", int(arrays["since_solve"]), 0)
+            since, after = (int(v) for v in arrays["solve_clock"])
+            self._since_solve = check_int("solve_clock[0]", since, 0)
+            self._solve_after = check_int("solve_clock[1]", after, 1)
         except (KeyError, IndexError, TypeError, ValueError) as error:
             raise ValueError(f"{where}: malformed deconvolution state: {error}") from None
 

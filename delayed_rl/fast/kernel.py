@@ -18,18 +18,9 @@ from typing import NamedTuple
 import numpy as np
 
 from delayed_rl._delay_line import ring_size
-
-try:
-    import numba
-
-    HAVE_NUMBA = True
-    _jit = numba.njit(cache=True, nogil=True)
-except ImportError:  # pragma: no cover - exercised where numba is absent
-    HAVE_NUMBA = False
-
-    def _jit(function):
-        return function
-
+from delayed_rl.fast._numba import HAVE_NUMBA  # noqa: F401  (re-exported: delayed_rl.fast)
+from delayed_rl.fast._numba import jit as _jit
+from delayed_rl.fast.statistics import EMPTY_STATISTICS, observe
 
 # Episode-end modes of the reward buffer, as integers for the compiled code.
 FLUSH, DROP, CARRY = 0, 1, 2
@@ -267,8 +258,26 @@ NO_SCRIPT = Script(np.zeros((0, 3), np.int64), np.zeros(0, np.bool_), np.zeros(0
 """The empty script: :func:`run_chunk` acts in the env."""
 
 
+class RewardModel(NamedTuple):
+    """Learn from estimated mean rewards instead of the delivered ones (deconvolution).
+
+    Attributes:
+        rewards: ``R̂`` per (state, action) pair ``s·|A| + a``; empty: learn from the delivered
+            reward (MMQ, Q-learning).
+        stats: the regression's statistics, fed every step's pair, delivered reward and
+            episode end (:func:`delayed_rl.fast.statistics.observe`).
+    """
+
+    rewards: np.ndarray
+    stats: tuple
+
+
+NO_REWARD_MODEL = RewardModel(np.zeros(0), EMPTY_STATISTICS)
+"""No reward model: targets use the delivered reward."""
+
+
 @_jit
-def run_chunk(cache, rule, env, line, history, log, script, start_step, rng):
+def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, model):
     """Advance training by ``line.delays.shape[0]`` steps.
 
     One loop, written out: splitting its step into compiled helpers (choose, env step, delay,
@@ -297,6 +306,8 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng):
         script: transitions to replay (:class:`Script`), or :data:`NO_SCRIPT`.
         start_step: the training step of the chunk's first step (for the ε schedule).
         rng: the run's generator state (:func:`next_uniform`), advanced in place.
+        model: a reward model (:class:`RewardModel`; Λ must then be {0}), or
+            :data:`NO_REWARD_MODEL`.
 
     Indices into the Q-table and its cache are cast to unsigned integers, which spares the
     compiled code numba's negative-index handling in the innermost loops (about 5%).
@@ -326,6 +337,7 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng):
     episode_steps = state[2]
     clock = state[3]
     scripted = script_rows.shape[0] > 0
+    has_model = model.rewards.shape[0] > 0
     for t in range(delays.shape[0]):
         if scripted:
             s = script_rows[t, 0]
@@ -403,7 +415,10 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng):
                 break
             pos = np.uint64((hist_count - 1 - estimate) & hmask)
             bootstrap = 0.0 if hist_term[pos] else gamma * qmax[np.uint64(hist_s2[pos])]
-            targets[j] = delivered + bootstrap
+            credited = delivered
+            if has_model:  # the estimated mean reward of the pair (Λ = {0}: this step's)
+                credited = model.rewards[hist_s[pos] * n_actions + hist_a[pos]]
+            targets[j] = credited + bootstrap
             states[j] = hist_s[pos]
             cells[j] = hist_s[pos] * row_size + j * n_actions + hist_a[pos]
             count += 1
@@ -424,6 +439,8 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng):
                     qties[sj] -= 1
                 else:  # the cached arg-max itself: rescan the state's row
                     qmax[sj], qcell[sj], qties[sj] = _scan_max(qf, sj * row_size, row_size)
+        if has_model:  # after the update, as the Python path: this step informs the next solve
+            observe(model.stats, s * n_actions + action, delivered, ended)
         if ended:
             if not scripted:
                 u = next_uniform(rng)
@@ -448,6 +465,7 @@ def replay(
     rewards: np.ndarray,
     learning_rate: float,
     gamma: float,
+    model: RewardModel = NO_REWARD_MODEL,
 ) -> None:
     """Apply the MMQ update of :func:`run_chunk` to scripted transitions, in place on ``q``.
 
@@ -460,6 +478,7 @@ def replay(
         rewards: the reward received at each row's step.
         learning_rate: α.
         gamma: γ.
+        model: a reward model whose statistics are fed (and whose rewards are credited).
     """
     from delayed_rl.fast.tabular import TabularModel
 
@@ -482,5 +501,6 @@ def replay(
     history = History.empty(int(estimates.max()))
     no_draws = np.ones(4, np.uint64)  # a script draws nothing
     run_chunk(
-        cache, rule, TabularModel.empty(), line, history, StepLog.empty(n), script, 0, no_draws
-    )
+        cache, rule, TabularModel.empty(), line, history, StepLog.empty(n), script, 0, no_draws,
+        model,
+    )  # fmt: skip

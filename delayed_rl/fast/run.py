@@ -126,6 +126,7 @@ class FusedRun:
         eps_initial: float,
         eps_final: float,
         eps_steps: int,
+        reward_model: kernel.RewardModel | None = None,
     ) -> kernel.StepLog:
         """Advance ``steps`` steps, updating ``q`` and its cache in place; return the step log.
 
@@ -140,6 +141,8 @@ class FusedRun:
             eps_initial: ε at training step 0.
             eps_final: ε from training step ``eps_steps`` on (linear in between).
             eps_steps: the length of the ε ramp (>= 1).
+            reward_model: learn from estimated mean rewards (see
+                :class:`~delayed_rl.fast.kernel.RewardModel`); ``None``: the delivered rewards.
 
         Returns:
             One entry per step (:class:`~delayed_rl.fast.kernel.StepLog`); :attr:`state`
@@ -169,6 +172,6 @@ class FusedRun:
             log,
             kernel.NO_SCRIPT,
             int(start_step),
-            self.rng_state,
-        )
+            self.rng_state, reward_model or kernel.NO_REWARD_MODEL,
+        )  # fmt: skip
         return log

@@ -1,0 +1,21 @@
+"""numba, compiled with one set of options for the whole library (``cache=True``, ``nogil=True``).
+
+``jit`` compiles a function; where numba is missing (it is a core dependency, so only in odd
+installs) it returns the function as it is, and ``HAVE_NUMBA`` says so.
+"""
+
+from __future__ import annotations
+
+__all__ = ["HAVE_NUMBA", "jit"]
+
+try:
+    import numba
+
+    HAVE_NUMBA = True
+    jit = numba.njit(cache=True, nogil=True)
+except ImportError:  # pragma: no cover - exercised where numba is absent
+    HAVE_NUMBA = False
+
+    def jit(function):
+        """Return ``function`` uncompiled (numba is not installed)."""
+        return function
