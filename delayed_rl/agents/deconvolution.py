@@ -88,10 +88,11 @@ class DeconvolutionQLearning(QLearning):
         >>> import delayed_rl
         >>> from delayed_rl.agents import DeconvQ
         >>> env = gym.make("delayed_rl/GridWorld-3x3-v0", reward_delay=2)
-        >>> agent = DeconvQ(env, max_delay=8, solve_interval=1000, q_init=10.0, seed=0)
-        >>> agent = agent.learn(6_000)
-        >>> round(agent.mean_delay)
-        2
+        >>> agent = DeconvQ(env, max_delay=8, q_init=10.0, seed=0).learn(20_000)
+        >>> agent.predict(8, deterministic=True)[0] in (0, 3)  # from the start: up or left
+        True
+        >>> agent.delay_pmf.shape  # the learned pmf on 0..max_delay
+        (9,)
     """
 
     _hyperparameter_names = (*QLearning._hyperparameter_names, *_OWN_NAMES)
