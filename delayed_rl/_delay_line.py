@@ -7,7 +7,8 @@ compiled training path.
 - :func:`draw_delays`: a block of delays from a distribution, clipped to ``max_delay``;
 - :func:`delay_bound`: how far back a delay can practically reach (for sizing histories);
 - :func:`ring_size`: the power-of-two length of a ring buffer (slots found with a bit mask);
-- :func:`regrow_ring`: a longer ring holding the same pending entries at the same due steps.
+- :func:`regrow_ring`: a longer ring holding the same pending entries at the same due steps;
+- :func:`exact_sum`: a sum of rewards rounded once, or a clear error when float64 cannot hold it.
 
 Example:
     >>> import numpy as np
@@ -21,6 +22,9 @@ Example:
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
+from decimal import Decimal
+from fractions import Fraction
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -28,7 +32,7 @@ import numpy as np
 if TYPE_CHECKING:
     from delayed_rl.delays import Delay
 
-__all__ = ["delay_bound", "draw_delays", "regrow_ring", "ring_size"]
+__all__ = ["delay_bound", "draw_delays", "exact_sum", "regrow_ring", "ring_size"]
 
 
 def draw_delays(
@@ -88,3 +92,33 @@ def regrow_ring(ring: np.ndarray, clock: int | np.ndarray, size: int) -> np.ndar
     grown = np.zeros((rows.shape[0], size), dtype=ring.dtype)
     np.put_along_axis(grown, due & (size - 1), np.take_along_axis(rows, due & (old - 1), 1), 1)
     return grown.reshape(ring.shape[:-1] + (size,))
+
+
+def exact_sum(values: Iterable[float], what: str = "the pending rewards") -> float:
+    """The exact sum of finite floats ``values``, rounded once to float64.
+
+    ``math.fsum`` gives it, except that it gives up ("intermediate overflow") when partial sums
+    pass float64's range even if the total does not (``1e308 + 1e308 − 1e308``); the sum is then
+    taken in exact rationals.
+
+    Args:
+        values: finite floats.
+        what: what they are, for the message (``"the pending rewards"``).
+
+    Raises:
+        ValueError: the sum itself is beyond float64's range (about ±1.8e308): the message says
+            ``"<what> sum to more than float64 can hold"`` and about how much.
+    """
+    values = list(values)
+    try:
+        return math.fsum(values)
+    except OverflowError:
+        total = sum(map(Fraction, values), Fraction(0))
+    try:
+        return float(total)
+    except OverflowError:
+        size = Decimal(total.numerator) / Decimal(total.denominator)
+        raise ValueError(
+            f"{what} sum to more than float64 can hold (about {size:.3e}; the largest float is "
+            f"about 1.798e+308): rescale the env's rewards"
+        ) from None

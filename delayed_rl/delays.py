@@ -6,7 +6,12 @@ Every distribution draws non-negative integer delays and exposes the same small 
   at once instead of calling the generator every step);
 - ``pmf(k)``: the probability of delay ``k`` (vectorised over ``k``);
 - ``mean``: the expected delay;
-- ``support_max``: the largest delay it can produce (``None`` when unbounded, as for Poisson).
+- ``support_max``: the largest delay it can produce (``None`` when unbounded, as for Poisson);
+- ``to_dict()``: a JSON-able description, ``{"type": "Constant", "k": 2}``, which :func:`as_delay`
+  reads back (so a delay survives an env spec's JSON round trip).
+
+Every delay fits ``int64``: parameters that would produce delays beyond :data:`MAX_DELAY`
+(``Constant(2**63)``, ``Poisson(1e19)``...) are refused at construction.
 
 The thesis assumes Poisson delays; its future work asks for other statistics, so the wrappers and
 agents accept any :class:`Delay`.
@@ -21,17 +26,19 @@ Example:
 from __future__ import annotations
 
 import functools
+import inspect
 import math
 import numbers
 from abc import ABC, abstractmethod
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
-from delayed_rl._validation import check_fraction, check_int, check_real
+from delayed_rl._validation import check_int, check_real
 
 __all__ = [
+    "MAX_DELAY",
     "AliasTable",
     "Constant",
     "Delay",
@@ -40,7 +47,17 @@ __all__ = [
     "Poisson",
     "Uniform",
     "as_delay",
+    "delay_spec",
 ]
+
+MAX_DELAY = int(np.iinfo(np.int64).max)
+"""The largest delay (steps) any distribution may produce: ``2**63 − 1``, the ``int64`` limit.
+
+Delays are drawn as ``int64`` and added to step clocks; a larger one would wrap round to a
+negative delay. A parameter whose delays cannot fit is refused at construction."""
+
+_TAIL = 1e-20  # the probability of a delay beyond MAX_DELAY that an unbounded distribution may have
+_FITS = f" (delays must fit int64: at most {MAX_DELAY})"
 
 
 def _as_pmf(pmf: Any) -> np.ndarray:
@@ -86,6 +103,24 @@ class Delay(ABC):
     def support_max(self) -> int | None:
         """The largest possible delay, or ``None`` if the support is unbounded."""
         return None
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-able description, ``{"type": <class name>, <parameter>: <value>, ...}``.
+
+        :func:`as_delay` turns it back into an equal distribution, so wrappers record delays in
+        env specs in this form.
+
+        Raises:
+            NotImplementedError: for a subclass of your own (only the library's distributions
+                are read back by :func:`as_delay`); a wrapper then records the object itself.
+        """
+        if _DELAY_TYPES.get(type(self).__name__) is not type(self):
+            raise NotImplementedError(
+                f"{type(self).__name__} is not one of the library's distributions "
+                f"{tuple(_DELAY_TYPES)}: it has no JSON description"
+            )
+        names = inspect.signature(type(self)).parameters
+        return {"type": type(self).__name__, **{name: getattr(self, name) for name in names}}
 
     def _finish(self, draws: np.ndarray, size: int | None) -> np.ndarray | int:
         draws = np.asarray(draws, dtype=np.int64)
@@ -152,11 +187,12 @@ class Poisson(Delay):
     Beyond λ ≈ 30 000 the table would pass 65 536 entries and numpy's ``poisson`` draws instead.
 
     Args:
-        lam: the mean (and variance) λ ≥ 0, any finite real; λ = 0 means no delay.
+        lam: the mean (and variance) λ ≥ 0, any finite real up to :attr:`MAX_LAM`; λ = 0 means
+            no delay.
 
     Raises:
         TypeError: ``lam`` is not a real number (a bool or a string included).
-        ValueError: ``lam`` is negative, NaN or infinite.
+        ValueError: ``lam`` is negative, NaN, infinite or above :attr:`MAX_LAM`.
     """
 
     TAIL = 1e-20
@@ -165,8 +201,11 @@ class Poisson(Delay):
     MAX_TABLE = 1 << 16
     """The largest table built."""
 
+    MAX_LAM = MAX_DELAY - 10.0 * math.sqrt(MAX_DELAY)
+    """The largest λ (about 9.2e18): numpy's own limit, ten standard deviations below ``MAX_DELAY``."""
+
     def __init__(self, lam: float):
-        self.lam = check_real("lam", lam, 0.0)
+        self.lam = check_real("lam", lam, 0.0, self.MAX_LAM, note=_FITS)
 
     def sample(self, rng, size=None):
         """Draw delays by alias-table look-up (numpy's ``poisson`` when there is no table).
@@ -212,15 +251,15 @@ class Constant(Delay):
     """Every delay is exactly ``k`` steps (the constant-delay MDP of the literature).
 
     Args:
-        k: the delay, an integer ≥ 0.
+        k: the delay, an integer in ``[0, MAX_DELAY]``.
 
     Raises:
         TypeError: ``k`` is not an integer (``2.0`` included).
-        ValueError: ``k`` is negative.
+        ValueError: ``k`` is negative or above :data:`MAX_DELAY`.
     """
 
     def __init__(self, k: int):
-        self.k = check_int("k", k, 0)
+        self.k = check_int("k", k, 0, MAX_DELAY, note=_FITS)
 
     def sample(self, rng, size=None):
         """``size`` copies of ``k`` (``rng`` is not used, so its stream does not advance)."""
@@ -249,15 +288,21 @@ class Geometric(Delay):
     """Geometric delays on {0, 1, 2, ...}: ``P(d = k) = p (1 − p)^k`` (failures before a success).
 
     Args:
-        p: the per-step arrival probability, ``0 < p <= 1``; the mean is ``(1 − p) / p``.
+        p: the per-step arrival probability, ``MIN_P <= p <= 1``; the mean is ``(1 − p) / p``.
 
     Raises:
         TypeError: ``p`` is not a real number.
-        ValueError: ``p`` is outside ``(0, 1]`` or NaN.
+        ValueError: ``p`` is outside ``[MIN_P, 1]`` or NaN.
     """
 
+    MIN_P = -math.log(_TAIL) / MAX_DELAY
+    """The smallest ``p`` (about 5e-18): below it a delay passes ``MAX_DELAY`` with probability
+    above 1e-20 (numpy would clip it there, distorting the distribution)."""
+
     def __init__(self, p: float):
-        self.p = check_fraction("p", p)
+        self.p = check_real(
+            "p", p, self.MIN_P, 1.0, note=" (delays must fit int64, except with probability 1e-20)"
+        )
 
     def sample(self, rng, size=None):
         """Draw with numpy's ``geometric`` (trials up to a success) minus one."""
@@ -288,16 +333,17 @@ class Uniform(Delay):
 
     Args:
         low: the smallest delay, an integer ≥ 0.
-        high: the largest delay, an integer ≥ ``low``.
+        high: the largest delay, an integer in ``[low, MAX_DELAY]``.
 
     Raises:
         TypeError: ``low`` or ``high`` is not an integer.
-        ValueError: ``low`` is negative or ``high`` is below ``low``.
+        ValueError: ``low`` is negative or above :data:`MAX_DELAY`, or ``high`` is below ``low``
+            or above :data:`MAX_DELAY`.
     """
 
     def __init__(self, low: int, high: int):
-        self.low = check_int("low", low, 0)
-        self.high = check_int("high", high, self.low)
+        self.low = check_int("low", low, 0, MAX_DELAY, note=_FITS)
+        self.high = check_int("high", high, self.low, MAX_DELAY, note=_FITS)
 
     def sample(self, rng, size=None):
         """Draw with ``rng.integers(low, high + 1)``."""
@@ -342,6 +388,7 @@ class Empirical(Delay):
         total = probs.sum()
         if abs(total - 1.0) > 1e-9:
             raise ValueError(f"pmf must sum to 1, got a sum of {total!r}")
+        self._weights = probs.tolist()  # as given: to_dict() rebuilds the very same probs
         self.probs = probs / total
         self._cdf = np.cumsum(self.probs)
         self._cdf[-1] = 1.0
@@ -368,6 +415,10 @@ class Empirical(Delay):
         """The largest ``k`` with ``probs[k] > 0``."""
         return int(np.flatnonzero(self.probs)[-1])
 
+    def to_dict(self) -> dict[str, Any]:
+        """``{"type": "Empirical", "pmf": [...]}``, the weights as given."""
+        return {"type": "Empirical", "pmf": list(self._weights)}
+
     def __repr__(self) -> str:
         return f"Empirical(pmf={self.probs.tolist()!r})"
 
@@ -377,22 +428,73 @@ def _log_factorial(k: np.ndarray) -> np.ndarray:
     return np.vectorize(lambda x: math.lgamma(x + 1.0), otypes=[float])(k)
 
 
-def as_delay(delay: Delay | float, name: str = "delay") -> Delay:
+_DELAY_TYPES: dict[str, type[Delay]] = {
+    cls.__name__: cls for cls in (Poisson, Constant, Geometric, Uniform, Empirical)
+}
+
+
+def _from_dict(description: Mapping[str, Any], name: str) -> Delay:
+    """The distribution a :meth:`Delay.to_dict` description stands for."""
+    kind = description.get("type")
+    allowed = f"a dict with a 'type' in {tuple(_DELAY_TYPES)} and its parameters"
+    if kind is None:
+        raise ValueError(f"{name} must be {allowed}, got {dict(description)!r} (no 'type')")
+    if not isinstance(kind, str):
+        raise TypeError(f"{name} must be {allowed}, got 'type' {kind!r} ({type(kind).__name__})")
+    if kind not in _DELAY_TYPES:
+        raise ValueError(f"{name} must be {allowed}, got 'type' {kind!r}")
+    cls = _DELAY_TYPES[kind]
+    params = {key: value for key, value in description.items() if key != "type"}
+    expected = list(inspect.signature(cls).parameters)
+    if sorted(params) != sorted(expected):
+        raise ValueError(
+            f"{name}: a {kind} description takes the parameters {expected}, got {sorted(params)}"
+        )
+    return cls(**params)
+
+
+def as_delay(delay: Delay | float | Mapping[str, Any], name: str = "delay") -> Delay:
     """Turn ``delay`` into a :class:`Delay`: a number is read as a Poisson mean λ.
 
     Args:
-        delay: a :class:`Delay` (returned as it is) or a real number λ (``Poisson(λ)``).
+        delay: a :class:`Delay` (returned as it is), a real number λ (``Poisson(λ)``) or a
+            description made by :meth:`Delay.to_dict` (``{"type": "Constant", "k": 2}``).
         name: the argument's name in the caller, for the error message.
 
     Raises:
-        TypeError: if ``delay`` is neither a :class:`Delay` nor a real number (a bool is not).
-        ValueError: if ``delay`` is a number that is not a valid λ (negative, NaN, infinite).
+        TypeError: if ``delay`` is neither a :class:`Delay`, a real number (a bool is not) nor a
+            dict, or a description's parameter has the wrong type.
+        ValueError: if ``delay`` is a number that is not a valid λ (negative, NaN, infinite), or a
+            dict that describes no distribution (no or an unknown ``"type"``, missing or extra
+            parameters, a parameter's bad value).
     """
     if isinstance(delay, Delay):
         return delay
     if isinstance(delay, numbers.Real) and not isinstance(delay, bool):
         return Poisson(delay)
+    if isinstance(delay, Mapping):
+        return _from_dict(delay, name)
     raise TypeError(
         f"{name} must be a delayed_rl.delays.Delay (Poisson, Constant, Geometric, Uniform, "
-        f"Empirical) or a number read as a Poisson mean, got {delay!r} ({type(delay).__name__})"
+        f"Empirical), a number read as a Poisson mean or a Delay.to_dict() description, got "
+        f"{delay!r} ({type(delay).__name__})"
     )
+
+
+def delay_spec(delay: Any) -> Any:
+    """The JSON-able form of a delay argument, as wrappers record it for env specs.
+
+    A :class:`Delay` becomes its :meth:`~Delay.to_dict` description (kept as it is if it cannot
+    describe itself), a number a plain ``int`` or ``float``; anything else is returned unchanged
+    (the wrapper's own check refuses it). :func:`as_delay` reads every form back.
+    """
+    if isinstance(delay, Delay):
+        try:
+            return delay.to_dict()
+        except NotImplementedError:
+            return delay
+    if isinstance(delay, numbers.Integral) and not isinstance(delay, (bool, np.bool_)):
+        return int(delay)
+    if isinstance(delay, numbers.Real) and not isinstance(delay, (bool, np.bool_)):
+        return float(delay)
+    return delay

@@ -167,3 +167,30 @@ def test_exported_from_agents():
     from delayed_rl.agents import ProportionalController as Exported
 
     assert Exported is ProportionalController
+
+
+@pytest.mark.parametrize(
+    ("state", "error", "match"),
+    [
+        ([float("nan"), 0.0], ValueError, r"state must be .*finite"),
+        ([float("inf"), 0.0], ValueError, r"state must be .*finite"),
+        ([1.0, 0.5, 0.2], ValueError, r"state must have shape"),
+        ([[1.0, 0.5], [0.2, 0.1]], ValueError, r"state must have shape"),
+        ("fast", TypeError, r"state must be"),
+        ([None, 1.0], TypeError, r"state must be"),
+    ],
+)
+def test_bad_states_are_rejected(state, error, match):
+    with pytest.raises(error, match=match) as raised:
+        ProportionalController().predict(0, state=state)
+    assert type(raised.value) is error
+
+
+def test_batched_states_must_match_the_batch():
+    ctrl = ProportionalController()
+    action, state = ctrl.predict(np.array([0, 20]), state=np.array([[1.0, 0.2], [0.5, 0.5]]))
+    assert state.shape == (2, 2) and np.isfinite(state).all()
+    with pytest.raises(ValueError, match=r"state must have shape"):
+        ctrl.predict(np.array([0, 20]), state=np.ones((3, 2)))
+    with pytest.raises(ValueError, match=r"state must be .*finite"):
+        ctrl.predict(np.array([0, 20]), state=np.array([[1.0, 0.2], [np.nan, 0.5]]))

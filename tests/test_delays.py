@@ -264,3 +264,83 @@ def test_max_delay_puts_the_tail_mass_at_the_clip(lam: float, clip: int) -> None
     p_clip = ref.sf(clip - 1)
     count = int((draws == clip).sum())
     assert abs(count - N_DRAWS * p_clip) <= N_SE * math.sqrt(N_DRAWS * p_clip * (1 - p_clip))
+
+
+# --- delays that fit int64, and JSON descriptions ---------------------------------------------
+
+INT64_MAX = 2**63 - 1
+
+
+@pytest.mark.parametrize(
+    ("factory", "name"),
+    [
+        (lambda: Constant(2**63), "k"),
+        (lambda: Constant(2**70), "k"),
+        (lambda: Uniform(0, 2**63), "high"),
+        (lambda: Uniform(2**63, 2**64), "low"),
+        (lambda: Poisson(1e19), "lam"),
+        (lambda: Poisson(1e300), "lam"),
+        (lambda: Geometric(1e-19), r"\bp\b"),
+        (lambda: Geometric(5e-324), r"\bp\b"),
+    ],
+)
+def test_delays_beyond_int64_are_refused_at_construction(factory, name) -> None:
+    with pytest.raises(ValueError, match=name):
+        factory()
+
+
+@pytest.mark.parametrize(
+    "dist",
+    [Constant(INT64_MAX), Uniform(INT64_MAX - 3, INT64_MAX), Poisson(9e18), Geometric(1e-17)],
+    ids=repr,
+)
+def test_delays_at_the_int64_limit_stay_non_negative(dist) -> None:
+    draws = dist.sample(np.random.default_rng(0), 64)
+    assert draws.dtype == np.int64 and draws.min() >= 0
+
+
+DESCRIBED = [
+    Poisson(3.5),
+    Poisson(0),
+    Constant(2),
+    Geometric(0.25),
+    Uniform(1, 7),
+    Empirical([0.1, 0.0, 0.45, 0.25, 0.2]),
+    Empirical([1 / 3, 1 / 3, 1 / 3]),
+]
+
+
+@pytest.mark.parametrize("dist", DESCRIBED, ids=repr)
+def test_to_dict_is_json_and_as_delay_reads_it_back(dist) -> None:
+    import json
+
+    description = dist.to_dict()
+    assert description["type"] == type(dist).__name__
+    text = json.dumps(description)
+    rebuilt = as_delay(json.loads(text))
+    assert type(rebuilt) is type(dist) and rebuilt == dist
+    rng_a, rng_b = np.random.default_rng(4), np.random.default_rng(4)
+    np.testing.assert_array_equal(dist.sample(rng_a, 100), rebuilt.sample(rng_b, 100))
+
+
+def test_constant_to_dict_is_the_plain_dict() -> None:
+    assert Constant(2).to_dict() == {"type": "Constant", "k": 2}
+    assert as_delay({"type": "Constant", "k": 2}) == Constant(2)
+
+
+@pytest.mark.parametrize(
+    ("description", "exc", "match"),
+    [
+        ({"k": 2}, ValueError, "type"),
+        ({"type": "Lognormal", "mu": 1}, ValueError, "Lognormal"),
+        ({"type": 3}, TypeError, "type"),
+        ({"type": "Constant"}, ValueError, "k"),
+        ({"type": "Constant", "k": 2, "extra": 1}, ValueError, "extra"),
+        ({"type": "Constant", "k": -2}, ValueError, r"\bk\b"),
+        ({"type": "Constant", "k": "2"}, TypeError, r"\bk\b"),
+        ({"type": "Poisson", "lam": -1}, ValueError, "lam"),
+    ],
+)
+def test_as_delay_refuses_bad_descriptions(description, exc, match) -> None:
+    with pytest.raises(exc, match=match):
+        as_delay(description)

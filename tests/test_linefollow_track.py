@@ -320,3 +320,31 @@ def test_coarse_points_are_densified_for_the_index():
     # The middle of a 1 m side is found by the spatial index.
     assert track.near_line(np.array([0.5 + 0.001j]), 0.005, 0.5 + 0.0j).tolist() == [True]
     assert track.locate(0.5, 0.01, None)[:2] == pytest.approx((0.5, 0.01))
+
+
+def _brute_force_clearance(track: Track, exclude_arc: float) -> float:
+    """Every pair of vertices compared: the definition of :meth:`Track.clearance`."""
+    p, s = track.points, track._s0
+    d2 = ((p[:, None, :] - p[None, :, :]) ** 2).sum(axis=2)
+    ds = np.abs(s[:, None] - s[None, :])
+    far = np.minimum(ds, track.length - ds) > exclude_arc
+    return float(np.sqrt(d2[far].min())) if far.any() else math.inf
+
+
+@pytest.mark.parametrize("name", ["oval", "racetrack", "figure8", "stadium", "random"])
+@pytest.mark.parametrize("exclude_arc", [0.0, 0.01, 0.3, 0.5, 1.2, 2.6, 100.0])
+def test_clearance_equals_the_all_pairs_definition(name, exclude_arc):
+    if name == "stadium":
+        track = Track.from_polyline(stadium())
+    elif name == "random":
+        track = random_track(3)
+    else:
+        track = make_track(name)
+    assert track.clearance(exclude_arc) == _brute_force_clearance(track, exclude_arc)
+
+
+def test_the_spatial_index_stores_only_the_cells_near_the_line():
+    small, large = Track.from_polyline(circle(0.5, 400)), Track.from_polyline(circle(8.0, 4000))
+    # 16 times the length, 256 times the bounding box: the index grows with the length
+    assert len(large._cells) < 20 * len(small._cells)
+    assert len(large._cells) < 0.1 * large._nx * large._ny

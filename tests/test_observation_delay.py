@@ -157,3 +157,22 @@ def test_history_reaches_the_delay_bound() -> None:
     assert ObservationDelay(CounterEnv(), Poisson(9.0), max_delay=4).history == 5
     assert ObservationDelay(CounterEnv(), Uniform(1, 6)).history == 7
     assert ObservationDelay(CounterEnv(), Poisson(9.0)).history == 9 + 30 + 20 + 1
+
+
+def test_observations_are_fresh_objects_check_env_passes() -> None:
+    from gymnasium.utils.env_checker import check_env
+
+    check_env(ObservationDelay(gym.make("CartPole-v1"), Constant(3)), skip_render_check=True)
+
+
+def test_mutating_a_returned_observation_changes_no_other() -> None:
+    env = ObservationDelay(gym.make("CartPole-v1"), Constant(3))
+    o1, _ = env.reset(seed=0)
+    o2 = env.step(0)[0]  # the reset observation again (the delay reaches back past it)
+    kept = o2.copy()
+    o1 *= 0
+    np.testing.assert_array_equal(o2, kept)
+    o3 = env.step(0)[0]
+    np.testing.assert_array_equal(o3, kept)
+    o3 += 1
+    np.testing.assert_array_equal(env.step(0)[0], kept)

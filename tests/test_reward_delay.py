@@ -674,3 +674,62 @@ def test_wrap_reward_delay_dispatch() -> None:
     assert type(env) is PoissonRewardDelay and env.lam == 2.5
     env = wrap_reward_delay(_env(), Geometric(0.5))
     assert type(env) is RewardDelay and env.delay == Geometric(0.5)
+
+
+# --- sums beyond float64, and the env spec's JSON round trip ----------------------------------
+
+
+@pytest.mark.parametrize("mode", EPISODE_END_MODES)
+def test_pending_sum_beyond_float64_is_a_clear_error_not_inf(mode: str) -> None:
+    env = RewardDelay(
+        ScriptedEnv([1e308, 1e308, 0.0], lengths=[3]), Constant(5), on_episode_end=mode
+    )
+    env.reset(seed=0)
+    _, reward, *_, info = env.step(0)
+    assert reward == 0.0 and info["pending_reward"] == 1e308
+    with pytest.raises(ValueError, match="float64"):
+        env.step(0)
+
+
+def test_rewards_due_at_one_step_beyond_float64_are_a_clear_error() -> None:
+    env = RewardDelay(ScriptedEnv([1e308, 1e308]), ScriptedDelay([1, 0]))
+    env.reset(seed=0)
+    env.step(0)
+    with pytest.raises(ValueError, match="float64"):
+        env.step(0)
+
+
+def test_huge_rewards_whose_sum_fits_are_summed_exactly() -> None:
+    """The pending sum never leaves float64, though a plain ``math.fsum`` of it overflows."""
+    rewards = [1e308, 1.0, -1e308, 1e308]  # due at steps 20, 21, 22 and again 21
+    env = RewardDelay(ScriptedEnv(rewards, lengths=[4]), ScriptedDelay([20, 20, 20, 18]))
+    env.reset(seed=0)
+    got = [env.step(0) for _ in rewards]
+    assert all(math.isfinite(g[4]["pending_reward"]) for g in got)
+    assert [g[1] for g in got] == [0.0, 0.0, 0.0, 1e308]
+    assert got[-1][4]["flushed_reward"] == 1e308
+
+
+def test_spec_of_a_wrapper_with_a_delay_object_is_json() -> None:
+    env = RewardDelay(gym.make("CartPole-v1"), Constant(2), max_delay=7)
+    spec = gym.envs.registration.EnvSpec.from_json(env.spec.to_json())
+    rebuilt = gym.make(spec)
+    layer = rebuilt
+    while not isinstance(layer, RewardDelay):
+        layer = layer.env
+    assert (layer.delay, layer.max_delay) == (Constant(2), 7)
+    assert trajectory(env, 5, 200) == trajectory(rebuilt, 5, 200)
+
+
+@pytest.mark.parametrize(
+    "delay", [Constant(2), Poisson(3.5), Uniform(0, 4), Geometric(0.5), Empirical([0.5, 0.5])]
+)
+def test_registered_reward_delay_survives_the_json_round_trip(delay) -> None:
+    env = gym.make("delayed_rl/GridWorld-3x3-v0", reward_delay=delay, max_steps=30)
+    text = env.spec.to_json()
+    rebuilt = gym.make(gym.envs.registration.EnvSpec.from_json(text))
+    layer = rebuilt
+    while not isinstance(layer, RewardDelay):
+        layer = layer.env
+    assert type(layer) is RewardDelay and layer.delay == delay
+    assert trajectory(env, 3, 200) == trajectory(rebuilt, 3, 200)

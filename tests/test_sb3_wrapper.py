@@ -188,3 +188,107 @@ def test_ppo_trains_through_vec_reward_delay() -> None:
     returns = [(ep["r"], ep["l"]) for ep in model.ep_info_buffer]
     assert len(returns) >= 10
     assert all(r == pytest.approx(length, rel=1e-5) for r, length in returns)
+
+
+# --- reset infos, per-sub-env seeds, precision ------------------------------------------------
+
+
+def test_mid_episode_reset_reports_dropped_reward_in_reset_infos() -> None:
+    env = VecRewardDelay(DummyVecEnv([lambda: RandomEndEnv(0.0, 1.0)] * 2), Constant(5), seed=0)
+    env.reset()
+    assert all("dropped_reward" not in info for info in env.reset_infos)  # no episode yet
+    for _ in range(3):
+        env.step(np.zeros(2, dtype=int))
+    with pytest.warns(UserWarning, match="discarded"):
+        env.reset()
+    assert [info["dropped_reward"] for info in env.reset_infos] == [3.0, 3.0]
+    assert [info["pending_reward"] for info in env.reset_infos] == [0.0, 0.0]
+    _, _, _, infos = env.step(np.zeros(2, dtype=int))
+    assert [info["pending_reward"] for info in infos] == [1.0, 1.0]
+
+
+def test_mid_episode_reset_with_nothing_pending_reports_zero_without_warning() -> None:
+    import warnings
+
+    env = VecRewardDelay(DummyVecEnv([lambda: RandomEndEnv(0.0, 0.0)]), Constant(5), seed=0)
+    env.reset()
+    env.step(np.zeros(1, dtype=int))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        env.reset()
+    assert env.reset_infos[0]["dropped_reward"] == 0.0
+
+
+def test_mid_episode_reset_under_carry_keeps_pending() -> None:
+    env = VecRewardDelay(
+        DummyVecEnv([lambda: RandomEndEnv(0.0, 1.0)]), Constant(5), on_episode_end="carry", seed=0
+    )
+    env.reset()
+    for _ in range(3):
+        env.step(np.zeros(1, dtype=int))
+    env.reset()
+    assert "dropped_reward" not in env.reset_infos[0]
+    assert env.reset_infos[0]["pending_reward"] == 3.0
+
+
+def sb3_delays(seed=None, n_envs=2, via_seed_method=False, steps=60):
+    venv = DummyVecEnv([lambda: RandomEndEnv(0.0, 1.0) for _ in range(n_envs)])
+    env = VecRewardDelay(venv, 5, seed=None if via_seed_method else seed)
+    if via_seed_method:
+        env.seed(seed)
+    env.reset()
+    return np.array(
+        [
+            [info["reward_delay"] for info in env.step(np.zeros(n_envs, int))[3]]
+            for _ in range(steps)
+        ]
+    )
+
+
+def test_sub_env_i_gets_seed_plus_i_like_sb3_vec_env_seed() -> None:
+    from delayed_rl.wrappers import RewardDelay
+
+    for via in (False, True):
+        d = sb3_delays(20, n_envs=3, via_seed_method=via)
+        for i in range(3):
+            single = RewardDelay(RandomEndEnv(0.0, 1.0), 5)
+            single.reset(seed=20 + i)
+            expected = [single.step(0)[4]["reward_delay"] for _ in range(60)]
+            assert d[:, i].tolist() == expected
+    assert not np.array_equal(sb3_delays(20)[:, 0], sb3_delays(20)[:, 1])
+
+
+class Float64VecEnv(DummyVecEnv):
+    """A VecEnv whose rewards are float64 (DummyVecEnv's own buffer is float32)."""
+
+    def step_wait(self):
+        obs, _, dones, infos = super().step_wait()
+        return obs, np.full(self.num_envs, 0.1, dtype=np.float64), dones, infos
+
+
+def test_delivered_sums_keep_float64_until_sb3_casts() -> None:
+    env = VecRewardDelay(Float64VecEnv([lambda: RandomEndEnv(0.0, 0.0)]), Constant(0), seed=0)
+    env.reset()
+    _, rewards, _, _ = env.step(np.zeros(1, dtype=int))
+    assert rewards.dtype == np.float64 and rewards[0] == 0.1
+    env = VecRewardDelay(DummyVecEnv([lambda: RandomEndEnv(0.0, 0.1)]), Constant(0), seed=0)
+    env.reset()
+    _, rewards, _, infos = env.step(np.zeros(1, dtype=int))
+    assert rewards.dtype == np.float32 and rewards[0] == np.float32(0.1)  # DummyVecEnv's float32
+    assert isinstance(infos[0]["pending_reward"], float)
+
+
+def test_sb3_pending_sum_beyond_float64_is_a_clear_error_not_inf() -> None:
+    env = VecRewardDelay(
+        Float64VecEnv([lambda: RandomEndEnv(0.0, 0.0)]), Constant(5), seed=0
+    )  # float64 rewards of 0.1 ...
+    env.venv.step_wait = lambda: (
+        np.zeros((1, 2), np.float32),
+        np.array([1e308]),
+        np.array([False]),
+        [{}],
+    )
+    env.reset()
+    env.step(np.zeros(1, dtype=int))
+    with pytest.raises(ValueError, match="float64"):
+        env.step(np.zeros(1, dtype=int))

@@ -256,6 +256,98 @@ def test_records_its_constructor_arguments() -> None:
     delay = Empirical([0.5, 0.5])
     env = VectorRewardDelay(make_vec(2, AutoresetMode.NEXT_STEP), delay, 3, on_episode_end="drop")
     assert isinstance(env, gym.utils.RecordConstructorArgs)
-    assert env._saved_kwargs == {"delay": delay, "max_delay": 3, "on_episode_end": "drop"}
+    assert env._saved_kwargs == {  # the delay as its JSON description
+        "delay": {"type": "Empirical", "pmf": [0.5, 0.5]},
+        "max_delay": 3,
+        "on_episode_end": "drop",
+    }
     rebuilt = VectorRewardDelay(make_vec(2, AutoresetMode.NEXT_STEP), **env._saved_kwargs)
     assert (rebuilt.delay, rebuilt.max_delay, rebuilt.on_episode_end) == (delay, 3, "drop")
+
+
+# --- per-sub-env seeding -------------------------------------------------------------------------
+
+
+def vector_delays(seed, n_envs=2, steps=60, delay=5, mode=AutoresetMode.NEXT_STEP):
+    env = VectorRewardDelay(make_vec(n_envs, mode, p_end=0.0), delay)
+    env.reset(seed=seed)
+    return np.array(
+        [env.step(np.zeros(n_envs, dtype=int))[4]["reward_delay"] for _ in range(steps)]
+    )
+
+
+def single_delays(seed, steps=60, delay=5):
+    from delayed_rl.wrappers import RewardDelay
+
+    env = RewardDelay(RandomEndEnv(p_end=0.0), delay)
+    env.reset(seed=seed)
+    return np.array([env.step(0)[4]["reward_delay"] for _ in range(steps)])
+
+
+def test_each_sub_env_follows_its_own_seed() -> None:
+    a, b = vector_delays([0, 1]), vector_delays([0, 7])
+    np.testing.assert_array_equal(a[:, 0], b[:, 0])
+    assert not np.array_equal(a[:, 1], b[:, 1])
+    np.testing.assert_array_equal(a[:, 1], vector_delays([1, 0])[:, 0])
+
+
+def test_an_int_seed_seeds_sub_env_i_with_seed_plus_i_like_sync_vector_env() -> None:
+    d = vector_delays(10, n_envs=3)
+    np.testing.assert_array_equal(d, vector_delays([10, 11, 12], n_envs=3))
+    for i in range(3):  # the same stream as a single RewardDelay reset with that seed
+        np.testing.assert_array_equal(d[:, i], single_delays(10 + i))
+
+
+def test_a_none_entry_leaves_that_sub_env_unseeded() -> None:
+    env = VectorRewardDelay(make_vec(2, AutoresetMode.NEXT_STEP, p_end=0.0), 5)
+    env.reset(seed=[3, 4])
+    first = np.array([env.step(np.zeros(2, dtype=int))[4]["reward_delay"] for _ in range(30)])
+    env.reset(seed=[3, None])  # sub-env 0 starts over, sub-env 1 continues its stream
+    again = np.array([env.step(np.zeros(2, dtype=int))[4]["reward_delay"] for _ in range(30)])
+    np.testing.assert_array_equal(again[:, 0], first[:, 0])
+    np.testing.assert_array_equal(again[:, 1], single_delays(4, steps=60)[30:])
+
+
+def test_reset_mask_seeds_only_the_reset_sub_envs() -> None:
+    env = VectorRewardDelay(make_vec(2, AutoresetMode.DISABLED, p_end=0.0), 5)
+    env.reset(seed=[3, 4])
+    first = np.array([env.step(np.zeros(2, dtype=int))[4]["reward_delay"] for _ in range(30)])
+    env.reset(seed=[3, 3], options={"reset_mask": np.array([False, True])})
+    again = np.array([env.step(np.zeros(2, dtype=int))[4]["reward_delay"] for _ in range(30)])
+    np.testing.assert_array_equal(again[:, 0], single_delays(3, steps=60)[30:])
+    np.testing.assert_array_equal(again[:, 1], first[:, 0])
+
+
+@pytest.mark.parametrize(
+    ("seed", "exc"),
+    [("3", TypeError), (-1, ValueError), ([0], ValueError), ([0, "1"], TypeError),
+     ([0, -1], ValueError), (1.5, TypeError), (True, TypeError)],
+)  # fmt: skip
+def test_bad_seeds_are_refused_naming_seed(seed, exc) -> None:
+    env = VectorRewardDelay(make_vec(2, AutoresetMode.NEXT_STEP), 5)
+    with pytest.raises(exc, match="seed"):
+        env.reset(seed=seed)
+
+
+@pytest.mark.parametrize("on_episode_end", EPISODE_END_MODES)
+def test_pending_sum_beyond_float64_is_a_clear_error_not_inf(on_episode_end) -> None:
+    env = VectorRewardDelay(
+        make_vec(2, AutoresetMode.NEXT_STEP, p_end=0.0, reward=1e308),
+        Constant(5),
+        on_episode_end=on_episode_end,
+    )
+    env.reset(seed=0)
+    *_, info = env.step(np.zeros(2, dtype=int))
+    np.testing.assert_array_equal(info["pending_reward"], [1e308, 1e308])
+    with pytest.raises(ValueError, match="float64"):
+        env.step(np.zeros(2, dtype=int))
+
+
+def test_huge_rewards_whose_sum_fits_are_exact_in_the_vector_buffers() -> None:
+    from delayed_rl.wrappers.buffers import RewardBuffers
+
+    buffers = RewardBuffers(1, Constant(20), None)
+    for reward in (1e308, 1.0, -1e308, 1e308):
+        delivered, _ = buffers.push(np.array([reward]), np.array([True]))
+        assert delivered[0] == 0.0 and np.isfinite(buffers.pending).all()
+    np.testing.assert_array_equal(buffers.clear(np.array([True])), [1e308])

@@ -137,7 +137,7 @@ class ProportionalController:
             observation: a centroid (int) or a batch ``(n,)`` of them; with a pixels env, a
                 ``(40,)`` pixel row or an ``(n, 40)`` batch.
             state: the state returned by the previous call (the last normalised wheel speeds,
-                ``(2,)`` or ``(n, 2)``), or None.
+                finite numbers of shape ``(2,)``, or ``(n, 2)`` for a batch of ``n``), or None.
             episode_start: booleans (scalar or ``(n,)``); True forgets the last command.
             deterministic: ignored (the controller is deterministic; the default, ``False``, is
                 every agent's, as in stable-baselines3).
@@ -145,8 +145,21 @@ class ProportionalController:
         Returns:
             ``(action, state)``: the action(s) in the env's format, and the new state to pass
             back next time.
+
+        Raises:
+            TypeError: ``observation`` (centroids) or ``state`` does not hold numbers.
+            ValueError: ``observation`` is not centroids in 0..40 (or pixel rows), or ``state``
+                has the wrong shape or a NaN or infinite entry.
         """
         obs = np.asarray(observation)
+        if not self.pixel_observations and (
+            obs.dtype.kind not in "iuf" or (obs.dtype.kind == "f" and not np.all(obs == obs // 1))
+        ):
+            error = TypeError if obs.dtype.kind not in "iuf" else ValueError
+            raise error(
+                f"observation must be line centroids in 0..{N_PIXELS} (scalar or 1-D batch), "
+                f"got {observation!r} ({type(observation).__name__})"
+            )
         batched = obs.ndim == (2 if self.pixel_observations else 1)
         m = np.atleast_1d(line_centroid(obs) if self.pixel_observations else obs).astype(np.int64)
         if m.ndim != 1 or np.any((m < 0) | (m > N_PIXELS)):
@@ -154,13 +167,14 @@ class ProportionalController:
                 f"observation must be line centroids in 0..{N_PIXELS} (scalar or 1-D batch), "
                 f"got {observation!r}"
             )
+        last_command = None if state is None else self._check_state(state, len(m), batched)
         speeds = self.wheel_speeds(m) / MAX_WHEEL_SPEED
         unseen = m == 0
         if unseen.any():  # repeat the last command (see the class docstring)
             straight = self.base_speed / MAX_WHEEL_SPEED
             last = np.full((len(m), 2), straight)
-            if state is not None:
-                last[:] = np.asarray(state, dtype=np.float64)
+            if last_command is not None:
+                last[:] = last_command
             if episode_start is not None:
                 last[np.broadcast_to(np.asarray(episode_start, dtype=bool), (len(m),))] = straight
             speeds[unseen] = last[unseen]
@@ -174,3 +188,27 @@ class ProportionalController:
         if not batched:
             return action[0], new_state[0]
         return action, new_state
+
+    @staticmethod
+    def _check_state(state: Any, n: int, batched: bool) -> NDArray[np.float64]:
+        """``state`` as a float array after checking it: finite, ``(2,)`` or ``(n, 2)``."""
+        allowed = f"the last normalised wheel speeds, finite numbers of shape (2,){' or (n, 2)' if batched else ''}"
+        try:
+            raw = np.asarray(state)
+        except ValueError:  # a ragged nesting
+            raw = np.asarray(state, dtype=object)
+        if raw.dtype.kind not in "iuf":  # strings, None, bools, ragged lists...
+            raise TypeError(
+                f"state must be {allowed} (the state returned by predict), got {state!r} "
+                f"({type(state).__name__})"
+            )
+        last = raw.astype(np.float64)
+        shapes = [(2,), (n, 2)] if batched else [(2,)]
+        if last.shape not in shapes:
+            raise ValueError(
+                f"state must have shape {' or '.join(map(str, shapes))} (the state returned by "
+                f"predict), got shape {last.shape}"
+            )
+        if not np.all(np.isfinite(last)):
+            raise ValueError(f"state must be {allowed}, got {state!r}")
+        return last

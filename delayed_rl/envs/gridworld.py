@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
@@ -10,6 +12,17 @@ from delayed_rl._validation import check_choice, check_int
 
 UP, RIGHT, DOWN, LEFT = 0, 1, 2, 3
 _MOVES = {UP: (-1, 0), RIGHT: (0, 1), DOWN: (1, 0), LEFT: (0, -1)}
+
+MAX_STATES = 1 << 16
+"""The most cells a grid may have: 65 536, a 256 × 256 grid (the thesis's largest is 9 × 9).
+
+The env builds its dynamics for every cell: ``next_state`` and ``reward`` arrays and the toy-text
+``P`` dict, about :data:`BYTES_PER_STATE` bytes a cell (some 85 MB at the limit, built in about a
+second), and tabular agents then hold a table per cell. A larger ``size`` is refused at
+construction, before anything is allocated."""
+
+BYTES_PER_STATE = 1_300
+"""About what one cell's tables take (measured: the ``P`` dict's lists and tuples dominate)."""
 
 
 class GridWorldEnv(gym.Env):
@@ -48,12 +61,13 @@ class GridWorldEnv(gym.Env):
     may read the dynamics from it.
 
     ## Arguments
-    - ``size``: the side length, an integer ≥ 2 (default 9).
+    - ``size``: the side length, an integer ≥ 2 (default 9) with ``size² <= MAX_STATES``
+      (``size <= 256``).
     - ``max_steps``: truncate after this many steps (``None``, the default, never truncates).
     - ``render_mode``: ``None`` or ``"ansi"`` (a text picture of the grid).
 
     A wrong type (``size=3.0``, ``max_steps="5"``) raises ``TypeError``, a value out of range
-    (``size=1``, ``max_steps=0``, ``render_mode="human"``) ``ValueError``.
+    (``size=1``, ``size=1000``, ``max_steps=0``, ``render_mode="human"``) ``ValueError``.
 
     ## Registered Configurations
     - ``delayed_rl/GridWorld-3x3-v0``, ``delayed_rl/GridWorld-5x5-v0``,
@@ -68,6 +82,13 @@ class GridWorldEnv(gym.Env):
 
     def __init__(self, size: int = 9, max_steps: int | None = None, render_mode: str | None = None):
         self.size = check_int("size", size, 2)
+        if self.size * self.size > MAX_STATES:
+            states = self.size * self.size
+            raise ValueError(
+                f"size={self.size} would build tables of {states:,} states (about "
+                f"{states * BYTES_PER_STATE / 1e9:.2g} GB); the limit is {MAX_STATES:,} states "
+                f"(size <= {math.isqrt(MAX_STATES)}): see delayed_rl.envs.gridworld.MAX_STATES"
+            )
         self.max_steps = check_int("max_steps", max_steps, 1, optional=True)
         self.render_mode = check_choice(
             "render_mode", render_mode, (None, *self.metadata["render_modes"])
@@ -79,11 +100,13 @@ class GridWorldEnv(gym.Env):
         self.action_space = spaces.Discrete(4)
         self.next_state, self.reward_table = self._build_tables()
         self.P = {
-            s: {
-                a: [(1.0, int(self.next_state[s, a]), float(self.reward_table[s, a]), False)]
-                for a in range(4)
-            }
-            for s in range(self.n_states)
+            s: {a: [(1.0, nxt, reward, False)] for a, (nxt, reward) in enumerate(moves)}
+            for s, moves in enumerate(
+                zip(row_next, row_reward, strict=True)
+                for row_next, row_reward in zip(
+                    self.next_state.tolist(), self.reward_table.tolist(), strict=True
+                )
+            )
         }
         self.initial_state_distrib = np.zeros(self.n_states)
         self.initial_state_distrib[self.start_state] = 1.0
@@ -97,17 +120,16 @@ class GridWorldEnv(gym.Env):
 
     def _build_tables(self) -> tuple[np.ndarray, np.ndarray]:
         """``(next_state, reward)``, each ``(n_states, 4)``: the deterministic dynamics."""
-        next_state = np.zeros((self.n_states, 4), dtype=np.int64)
+        states = np.arange(self.n_states)
+        row, col = np.divmod(states, self.size)
+        next_state = np.empty((self.n_states, 4), dtype=np.int64)
         reward = np.zeros((self.n_states, 4), dtype=np.float64)
-        for s in range(self.n_states):
-            row, col = divmod(s, self.size)
-            for a, (d_row, d_col) in _MOVES.items():
-                if s == self.reward_state:
-                    next_state[s, a], reward[s, a] = self.start_state, 10.0
-                elif 0 <= row + d_row < self.size and 0 <= col + d_col < self.size:
-                    next_state[s, a] = (row + d_row) * self.size + col + d_col
-                else:
-                    next_state[s, a], reward[s, a] = s, -1.0
+        for a, (d_row, d_col) in _MOVES.items():
+            inside = (row + d_row >= 0) & (row + d_row < self.size)
+            inside &= (col + d_col >= 0) & (col + d_col < self.size)
+            next_state[:, a] = np.where(inside, (row + d_row) * self.size + col + d_col, states)
+            reward[:, a] = np.where(inside, 0.0, -1.0)  # a wall: stay put, pay -1
+        next_state[self.reward_state], reward[self.reward_state] = self.start_state, 10.0
         return next_state, reward
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):

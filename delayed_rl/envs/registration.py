@@ -5,7 +5,10 @@ env class. It builds the env from the remaining keyword arguments and, when ``re
 given, wraps it in :class:`~delayed_rl.wrappers.PoissonRewardDelay` (a number, read as the Poisson
 mean λ) or :class:`~delayed_rl.wrappers.RewardDelay` (a :mod:`delayed_rl.delays` distribution).
 Because ``reward_delay`` is an ordinary keyword argument, it is recorded in ``env.spec.kwargs`` and
-``gym.make(env.spec)`` rebuilds the same stack.
+``gym.make(env.spec)`` rebuilds the same stack. A distribution is recorded there (by the delay
+wrapper's ``spec``) as its JSON description, ``{"type": "Constant", "k": 2}``
+(:meth:`~delayed_rl.delays.Delay.to_dict`), which the entry points accept back, so the spec also
+survives ``EnvSpec.to_json`` / ``EnvSpec.from_json``.
 
 Gymnasium applies its own wrappers (``PassiveEnvChecker``, ``OrderEnforcing`` and, when
 ``max_episode_steps`` is passed to ``gym.make``, ``TimeLimit``) *outside* the delay wrapper. The
@@ -32,9 +35,25 @@ class DelayableEntryPoint:
 
     Args:
         env_path: ``"module:ClassName"`` of the env class, imported on first use.
+
+    Raises:
+        TypeError: ``env_path`` is not a string.
+        ValueError: ``env_path`` is not of the form ``"module:ClassName"``.
     """
 
+    reads_delay_descriptions = True
+    """``reward_delay`` may be a ``Delay.to_dict()`` description: the delay wrapper records a
+    distribution in the env spec's kwargs that way (see the module docstring)."""
+
     def __init__(self, env_path: str):
+        if not isinstance(env_path, str):
+            raise TypeError(
+                f"env_path must be a 'module:ClassName' string, got {env_path!r} "
+                f"({type(env_path).__name__})"
+            )
+        module, _, attr = env_path.partition(":")
+        if not module or not attr or ":" in attr:
+            raise ValueError(f"env_path must be a 'module:ClassName' string, got {env_path!r}")
         self.env_path = env_path
 
     @property
@@ -51,15 +70,16 @@ class DelayableEntryPoint:
         """Build the env from ``kwargs``, wrapped for ``reward_delay`` when it is not None.
 
         Args:
-            reward_delay: ``None`` (no wrapper), a number λ (``PoissonRewardDelay``) or a
-                :class:`~delayed_rl.delays.Delay` (``RewardDelay``).
+            reward_delay: ``None`` (no wrapper), a number λ (``PoissonRewardDelay``), a
+                :class:`~delayed_rl.delays.Delay` or its ``to_dict()`` description
+                (``RewardDelay``).
             **kwargs: the env class's own arguments.
 
         Raises:
-            TypeError: ``reward_delay`` is neither a number nor a ``Delay`` (or the env refuses
-                the type of one of its arguments).
-            ValueError: ``reward_delay`` is not a valid Poisson mean (or the env refuses the
-                value of one of its arguments).
+            TypeError: ``reward_delay`` is neither a number, a ``Delay`` nor a dict (or the env
+                refuses the type of one of its arguments).
+            ValueError: ``reward_delay`` is not a valid Poisson mean or describes no
+                distribution (or the env refuses the value of one of its arguments).
         """
         env = self.env_cls(**kwargs)
         if reward_delay is None:

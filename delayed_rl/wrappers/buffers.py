@@ -2,22 +2,48 @@
 
 from __future__ import annotations
 
-import math
+from collections.abc import Sequence
 
 import numpy as np
 
-from delayed_rl._delay_line import delay_bound, draw_delays, regrow_ring, ring_size
+from delayed_rl._delay_line import delay_bound, draw_delays, exact_sum, regrow_ring, ring_size
 from delayed_rl.delays import Delay
 from delayed_rl.wrappers.reward_delay import _BLOCK, delay_rng
+
+__all__ = ["INITIAL_RING", "MAX_RING_ENTRIES", "RING_PER_STEP", "RewardBuffers"]
+
+MAX_RING_ENTRIES = 1 << 22
+"""The most ring slots the buffers of one wrapper hold in all (float64: 32 MiB).
+
+Each sub-env's ring is at most the largest power of two ``<= MAX_RING_ENTRIES // num_envs``
+slots long (65 536 for 64 sub-envs, more than 400 times the thesis's longest mean delay, λ = 150).
+A reward whose delay does not fit its ring is kept in a small dict keyed by due step instead (as
+:class:`~delayed_rl.wrappers.RewardDelay` keeps all of them), so no delay is refused and memory
+stays proportional to what is pending: ``Poisson(1e9)`` costs what ``Poisson(5)`` does."""
+
+INITIAL_RING = 64
+"""The rings' length at construction (shorter for a delay bounded below it); they grow to hold the
+delays actually drawn, up to the limit set by :data:`MAX_RING_ENTRIES`."""
+
+RING_PER_STEP = 8
+"""How far a ring may outgrow the steps taken: at most ``8 × steps`` slots (rounded up to a power
+of two), so a ring is never mostly empty space. A slot costs 8 bytes and a reward kept in a dict
+about 100: past this the dict is the cheaper of the two."""
 
 
 class RewardBuffers:
     """``num_envs`` independent reward-delay buffers, advanced together with numpy.
 
-    Each env has its own clock (it advances only on the steps that env really takes) and its own
-    ring buffer of pending rewards; delays are drawn in blocks of shape ``(1024, num_envs)``. The
-    rings start long enough for all but a negligible tail of the delays and grow (keeping what is
-    pending in place) when a longer delay comes.
+    Each env has its own clock (it advances only on the steps that env really takes), its own
+    delay generator (one stream per env, seeded by :meth:`seed`) and its own ring buffer of
+    pending rewards. The rings start short (:data:`INITIAL_RING`) and grow, keeping what is
+    pending in place, when a longer delay is drawn; a delay longer than the largest ring allowed
+    (:data:`MAX_RING_ENTRIES`, :data:`RING_PER_STEP`) puts its reward in a per-env dict keyed by
+    due step.
+
+    Each env's pending sum is kept as a running sum (exactly 0 once nothing is pending, as in
+    :class:`RewardDelay`); the amounts flushed or dropped by :meth:`clear` are exact sums rounded
+    once. A sum beyond float64's range raises ``ValueError``.
 
     Args:
         num_envs: how many envs.
@@ -29,43 +55,83 @@ class RewardBuffers:
         self.num_envs = num_envs
         self.delay = delay
         self.max_delay = max_delay
-        if max_delay is None and delay.support_max is None:
-            # Not delay_bound's longer reach: the rings' length is part of a seeded run's result.
-            # ``pending`` sums whole rings and numpy's pairwise sum groups the entries by slot, so
-            # another length can change the last bits of the pending, flushed and dropped sums.
-            bound = int(delay.mean + 6.0 * math.sqrt(delay.mean) + 8.0)
-        else:
-            bound = delay_bound(delay, max_delay)
-        self.buffer = np.zeros((num_envs, ring_size(bound + 1)))
+        per_env = max(1, MAX_RING_ENTRIES // max(1, num_envs))
+        self.max_ring = 1 << (per_env.bit_length() - 1)  # a power of two <= per_env
+        bound = delay_bound(delay, max_delay)
+        length = min(ring_size(min(bound, INITIAL_RING - 1) + 1), self.max_ring)
+        self.buffer = np.zeros((num_envs, length))
         self.clock = np.zeros(num_envs, dtype=np.int64)
         self.rows = np.arange(num_envs)
-        self.seed(None)
+        self._pending = np.zeros(num_envs)  # running sums, as RewardDelay._pending
+        self._nonzero = np.zeros(num_envs, dtype=np.int64)  # nonzero slots in each ring
+        self.far: list[dict[int, float]] = [{} for _ in range(num_envs)]  # beyond the ring
+        self._far_envs: set[int] = set()  # the envs whose ``far`` dict is not empty
+        self.rngs = [delay_rng(None) for _ in range(num_envs)]
+        self._block = np.zeros((_BLOCK, num_envs), dtype=np.int64)  # column i: env i's delays
+        self._next = np.full(num_envs, _BLOCK, dtype=np.int64)  # _BLOCK: draw a new block
+        self._sync: int | None = _BLOCK  # while every env is at the same ``_next``: that index
 
-    def seed(self, seed: int | None) -> None:
-        """Restart the delay stream from ``seed``."""
-        self.rng = delay_rng(seed)
-        self._block = np.zeros((0, self.num_envs), dtype=np.int64)
-        self._next = 0
+    def seed(self, seeds: Sequence[int | None]) -> None:
+        """Restart env ``i``'s delay stream from ``seeds[i]``; a ``None`` entry leaves it going.
+
+        Env ``i`` seeded with ``s`` draws the delays of a :class:`RewardDelay` reset with
+        ``seed=s``.
+        """
+        self._unsync()
+        for i, seed in enumerate(seeds):
+            if seed is not None:
+                self.rngs[i] = delay_rng(seed)
+                self._next[i] = _BLOCK
+        self._resync()
 
     @property
     def pending(self) -> np.ndarray:
-        """Each env's sum of rewards emitted but not yet delivered."""
-        return self.buffer.sum(axis=1)
+        """Each env's sum of rewards emitted but not yet delivered (a copy)."""
+        return self._pending.copy()
 
-    def _draw(self) -> np.ndarray:
-        """This step's delays, one per env (the next row of the current block)."""
-        if self._next == len(self._block):
-            self._block = draw_delays(self.delay, self.rng, (_BLOCK, self.num_envs), self.max_delay)
-            self._next = 0
-        delays = self._block[self._next]
-        self._next += 1
+    def _unsync(self) -> None:
+        """Write the shared block index back to ``_next``: the envs may part from here."""
+        if self._sync is not None:
+            self._next[:] = self._sync
+            self._sync = None
+
+    def _resync(self) -> None:
+        """Share one block index again if every env is at the same one."""
+        if self.num_envs and (self._next == self._next[0]).all():
+            self._sync = int(self._next[0])
+
+    def _draw(self, active: np.ndarray, every: bool) -> np.ndarray:
+        """This step's delays: the next of each active env's stream, 0 for the others."""
+        if every and self._sync is not None:  # the common case: one row of the block
+            if self._sync == _BLOCK:  # once every 1024 steps
+                for i in range(self.num_envs):
+                    self._block[:, i] = draw_delays(
+                        self.delay, self.rngs[i], _BLOCK, self.max_delay
+                    )
+                self._sync = 0
+            delays = self._block[self._sync].copy()
+            self._sync += 1
+            return delays
+        self._unsync()
+        empty = active & (self._next == _BLOCK)
+        if empty.any():  # once every 1024 steps of each env
+            for i in np.flatnonzero(empty):
+                self._block[:, i] = draw_delays(self.delay, self.rngs[i], _BLOCK, self.max_delay)
+            self._next[empty] = 0
+        delays = np.where(active, self._block[np.minimum(self._next, _BLOCK - 1), self.rows], 0)
+        self._next += active
+        self._resync()
         return delays
 
     def push(self, rewards: np.ndarray, active: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Schedule this step's ``rewards`` and return ``(delivered, delays)``.
 
-        Envs with ``active`` False (an autoreset step) emit nothing, deliver nothing and keep their
-        clocks; their delay is reported as 0.
+        Envs with ``active`` False (an autoreset step) emit nothing, deliver nothing, keep their
+        clocks and draw no delay; their delay is reported as 0.
+
+        Raises:
+            ValueError: a reward is NaN or infinite, or the rewards due at one step or all those
+                pending in an env sum to more than float64 can hold.
         """
         rewards = np.asarray(rewards, dtype=np.float64)
         if not np.all(np.isfinite(rewards)):
@@ -74,24 +140,141 @@ class RewardBuffers:
                 f"sub-envs {bad} returned non-finite rewards {rewards[bad].tolist()}; "
                 "the reward-delay buffer refuses to store them"
             )
-        delays = np.where(active, self._draw(), 0)
-        if delays.max(initial=0) >= self.buffer.shape[1]:
-            self._grow(int(delays.max()))
+        with np.errstate(over="ignore", invalid="ignore"):  # overflows are checked below
+            return self._push(rewards, np.asarray(active, dtype=bool))
+
+    def _push(self, rewards: np.ndarray, active: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`push` once the rewards are known to be finite."""
+        every = bool(active.all())
+        if not every:
+            rewards = np.where(active, rewards, 0.0)
+        delays = self._draw(active, every)
+        longest = int(delays.max(initial=0))
+        if longest >= self.buffer.shape[1]:
+            self._make_room(delays)
         mask = self.buffer.shape[1] - 1
-        rows = self.rows[active]
-        self.buffer[rows, (self.clock[active] + delays[active]) & mask] += rewards[active]
-        slots = self.clock & mask
-        delivered = np.where(active, self.buffer[self.rows, slots], 0.0)
-        self.buffer[rows, slots[active]] = 0.0
+        if every and longest <= mask:  # the common case: every env schedules into its ring
+            rows, slots, added = self.rows, (self.clock + delays) & mask, rewards
+        else:
+            far = delays > mask
+            near = active & ~far
+            rows = self.rows[near]
+            slots = (self.clock[near] + delays[near]) & mask
+            added = rewards[near]
+            if far.any():
+                self._push_far(np.flatnonzero(far & (rewards != 0.0)), rewards, delays)
+        old = self.buffer[rows, slots]
+        new = old + added
+        check = float(new.sum())
+        if check - check and not np.all(np.isfinite(new)):
+            self._overflow(rows[~np.isfinite(new)], "the rewards due at one step")
+        self.buffer[rows, slots] = new
+        if len(rows) == self.num_envs:
+            self._nonzero += new != 0.0
+            self._nonzero -= old != 0.0
+        else:
+            self._nonzero[rows] += (new != 0.0).astype(np.int64) - (old != 0.0)
+        self._pending += rewards
+        now = self.clock & mask
+        if every:
+            delivered = self.buffer[self.rows, now]
+            self.buffer[self.rows, now] = 0.0
+        else:
+            delivered = np.where(active, self.buffer[self.rows, now], 0.0)
+            self.buffer[self.rows[active], now[active]] = 0.0
+        self._nonzero -= delivered != 0.0
+        if self._far_envs:
+            self._deliver_far(active, delivered)
+        self._pending -= delivered
+        check = float(self._pending.sum())
+        if check - check and not np.all(np.isfinite(self._pending)):
+            for i in np.flatnonzero(~np.isfinite(self._pending)):
+                self._pending[i] = self._exact(i)
+        if not self._nonzero.all():
+            empty = self._nonzero == 0
+            for i in self._far_envs:
+                empty[i] = False
+            self._pending[empty] = 0.0  # exactly 0 once nothing is pending
         self.clock += active
         return delivered, delays
 
+    def _push_far(self, envs: np.ndarray, rewards: np.ndarray, delays: np.ndarray) -> None:
+        """File the rewards of ``envs`` (delays beyond their rings) by due step in ``far``."""
+        for i in envs.tolist():
+            when = int(self.clock[i]) + int(delays[i])  # a Python int: no int64 overflow
+            book = self.far[i]
+            value = book.get(when, 0.0) + float(rewards[i])
+            if value - value:  # NaN: the sum passed float64's range
+                self._overflow([i], "the rewards due at one step")
+            book[when] = value
+            self._far_envs.add(i)
+
+    def _deliver_far(self, active: np.ndarray, delivered: np.ndarray) -> None:
+        """Add what ``far`` holds for this step to ``delivered`` (in place)."""
+        for i in list(self._far_envs):
+            if not active[i]:
+                continue
+            book = self.far[i]
+            value = book.pop(int(self.clock[i]), None)
+            if value is not None:
+                total = delivered[i] + value
+                if total - total:
+                    self._overflow([i], "the rewards due at one step")
+                delivered[i] = total
+            if not book:
+                self._far_envs.discard(i)
+
+    def _exact(self, env: int) -> float:
+        """The exact pending sum of ``env``, rounded once (``ValueError`` beyond float64)."""
+        row = self.buffer[env]
+        values = [*row[row != 0.0].tolist(), *self.far[env].values()]
+        return exact_sum(values, f"sub-env {env}'s pending rewards")
+
+    def _overflow(self, envs: Sequence[int] | np.ndarray, what: str) -> None:
+        """Raise the ``ValueError`` for a sum of ``what`` beyond float64's range in ``envs``."""
+        raise ValueError(
+            f"{what} of sub-envs {list(map(int, envs))} sum to more than float64 can hold; "
+            "rescale the env's rewards"
+        )
+
     def clear(self, envs: np.ndarray) -> np.ndarray:
-        """Empty the buffers of the envs selected by the boolean mask ``envs``; return their sums."""
-        amounts = np.where(envs, self.pending, 0.0)
+        """Empty the buffers of the envs selected by the boolean mask ``envs``.
+
+        Returns:
+            Each env's exact pending sum (rounded once), 0 for the envs not selected.
+
+        Raises:
+            ValueError: a selected env's pending rewards sum beyond float64's range.
+        """
+        envs = np.asarray(envs, dtype=bool)
+        amounts = np.zeros(self.num_envs)
+        for i in np.flatnonzero(envs).tolist():
+            if self._nonzero[i] or i in self._far_envs:
+                amounts[i] = self._exact(i)
+            self.far[i].clear()
+            self._far_envs.discard(i)
         self.buffer[envs] = 0.0
+        self._nonzero[envs] = 0
+        self._pending[envs] = 0.0
         return amounts
 
-    def _grow(self, delay: int) -> None:
-        """Lengthen the rings to hold ``delay``, every pending reward kept at its due step."""
-        self.buffer = regrow_ring(self.buffer, self.clock, ring_size(delay + 1))
+    def _make_room(self, delays: np.ndarray) -> None:
+        """Lengthen the rings for this step's longest delay that a ring allowed can hold.
+
+        A ring may grow to at most :data:`RING_PER_STEP` slots per step taken (and at most
+        ``max_ring``): a few long delays early on (``Geometric(1e-9)``) go to the dicts rather
+        than make rings that would stay nearly empty.
+        """
+        steps = int(self.clock.max(initial=0)) + 1
+        allowed = min(self.max_ring, max(INITIAL_RING, ring_size(RING_PER_STEP * steps)))
+        fitting = delays[delays < allowed]
+        longest = int(fitting.max(initial=0))
+        if longest >= self.buffer.shape[1]:
+            self.buffer = regrow_ring(self.buffer, self.clock, ring_size(longest + 1))
+
+    def __repr__(self) -> str:
+        return (
+            f"RewardBuffers(num_envs={self.num_envs}, delay={self.delay!r}, "
+            f"max_delay={self.max_delay!r}, ring={self.buffer.shape[1]}, "
+            f"far={sum(map(len, self.far))})"
+        )

@@ -6,10 +6,26 @@ from collections import deque
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 
 from delayed_rl._delay_line import delay_bound
-from delayed_rl.delays import Delay, as_delay
+from delayed_rl.delays import MAX_DELAY, Delay, as_delay, delay_spec
 from delayed_rl.wrappers.reward_delay import DelaySampler, check_max_delay
+
+
+def _fresh(obs: Any) -> Any:
+    """``obs`` itself, or a copy where it is (or holds) a numpy array, which callers may modify.
+
+    Numbers and strings are immutable and returned as they are; dicts and tuples (Gymnasium's
+    ``Dict`` and ``Tuple`` spaces) are rebuilt around copies of their arrays.
+    """
+    if isinstance(obs, np.ndarray):
+        return obs.copy()
+    if isinstance(obs, dict):
+        return type(obs)((key, _fresh(value)) for key, value in obs.items())
+    if isinstance(obs, tuple):
+        return tuple(_fresh(value) for value in obs)
+    return obs
 
 
 class ObservationDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
@@ -30,9 +46,17 @@ class ObservationDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
     observation kept, and ``info["observation_delay"]`` says so. Seeded by ``reset(seed=...)`` from
     the same independent delay stream as :class:`~delayed_rl.wrappers.RewardDelay`.
 
+    The same observation can be shown at several steps (a delay reaching back past the episode's
+    start, or two delays pointing at one step), so array observations are handed out as copies:
+    modifying one changes neither the history nor any other observation returned, as
+    ``gymnasium.utils.env_checker.check_env`` requires. (Integer observations need no copy.)
+    The history is kept in a ``deque`` that holds only the observations seen, so a long delay
+    bound costs no memory until the steps are taken.
+
     Args:
         env: the env whose observations to delay.
-        delay: a :class:`~delayed_rl.delays.Delay`, or a number read as a Poisson mean.
+        delay: a :class:`~delayed_rl.delays.Delay`, its ``to_dict()`` description, or a number
+            read as a Poisson mean.
         max_delay: clip delays to at most this many steps (``None``: unbounded).
 
     Raises:
@@ -43,18 +67,19 @@ class ObservationDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """
 
     def __init__(self, env: gym.Env, delay: Delay | float, max_delay: int | None = None):
-        gym.utils.RecordConstructorArgs.__init__(self, delay=delay, max_delay=max_delay)
+        gym.utils.RecordConstructorArgs.__init__(self, delay=delay_spec(delay), max_delay=max_delay)
         gym.Wrapper.__init__(self, env)
         self.delay = as_delay(delay)
         self.max_delay = check_max_delay(max_delay)
         self._sampler = DelaySampler(self.delay, self.max_delay)
-        self.history = delay_bound(self.delay, self.max_delay) + 1
+        self.history = min(delay_bound(self.delay, self.max_delay), MAX_DELAY - 1) + 1
         self._observations: deque = deque(maxlen=self.history)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Reset the env and the history; ``seed`` also reseeds the delay generator.
 
-        The reset observation is returned undelayed, with ``info["observation_delay"] = 0``.
+        The reset observation is returned undelayed (a copy, if it is an array), with
+        ``info["observation_delay"] = 0``.
         """
         obs, info = self.env.reset(seed=seed, options=options)
         if seed is not None:
@@ -62,7 +87,7 @@ class ObservationDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self._observations.clear()
         self._observations.append(obs)
         info["observation_delay"] = 0
-        return obs, info
+        return _fresh(obs), info
 
     def step(self, action):
         """Step the env; return an older observation (see the class docstring) with its reward."""
@@ -70,4 +95,4 @@ class ObservationDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self._observations.append(obs)
         applied = min(self._sampler(), len(self._observations) - 1)
         info["observation_delay"] = applied
-        return self._observations[-1 - applied], reward, terminated, truncated, info
+        return _fresh(self._observations[-1 - applied]), reward, terminated, truncated, info

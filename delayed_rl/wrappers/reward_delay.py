@@ -5,14 +5,15 @@ from __future__ import annotations
 import math
 import numbers
 import warnings
+from collections.abc import Mapping
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
-from delayed_rl._delay_line import draw_delays
+from delayed_rl._delay_line import draw_delays, exact_sum
 from delayed_rl._validation import check_bool, check_choice, check_int
-from delayed_rl.delays import Delay, Poisson, as_delay
+from delayed_rl.delays import MAX_DELAY, Delay, Poisson, as_delay, delay_spec
 
 __all__ = [
     "EPISODE_END_MODES",
@@ -30,18 +31,44 @@ _DELAY_STREAM = 0x5DE1A7  # spawn key separating the delay stream from the env's
 
 
 def delay_rng(seed: int | None) -> np.random.Generator:
-    """The delay generator for ``seed``: independent of the env's ``np_random`` for that seed."""
+    """The delay generator for ``seed``: independent of the env's ``np_random`` for that seed.
+
+    Raises:
+        TypeError: ``seed`` is neither ``None`` nor an integer.
+        ValueError: ``seed`` is negative.
+    """
+    seed = check_int("seed", seed, 0, optional=True)
     return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(_DELAY_STREAM,)))
 
 
 def check_max_delay(max_delay: Any) -> int | None:
-    """Return ``max_delay`` (``None`` or an integer ``>= 0``) as an ``int`` or ``None``.
+    """Return ``max_delay`` (``None`` or an integer in ``[0, MAX_DELAY]``) as an ``int`` or ``None``.
 
     Raises:
         TypeError: ``max_delay`` is not an integer (``3.0``, ``"3"`` and ``True`` included).
-        ValueError: ``max_delay`` is negative.
+        ValueError: ``max_delay`` is negative or above :data:`~delayed_rl.delays.MAX_DELAY`.
     """
-    return check_int("max_delay", max_delay, 0, optional=True)
+    return check_int(
+        "max_delay", max_delay, 0, MAX_DELAY, optional=True, note=" (delays must fit int64)"
+    )
+
+
+def _json_reward_delay(spec: Any) -> None:
+    """Record a registered env's ``reward_delay`` Delay in ``spec.kwargs`` as its JSON dict.
+
+    ``gym.make(id, reward_delay=Constant(2))`` keeps the object in the env spec's kwargs, which
+    ``EnvSpec.to_json`` cannot write; the library's entry points read the dict back.
+    """
+    value = spec.kwargs.get("reward_delay") if isinstance(spec.kwargs, dict) else None
+    if not isinstance(value, Delay):
+        return
+    entry = spec.entry_point
+    try:  # a "module:attribute" string names the entry point (its module is loaded already)
+        entry = gym.envs.registration.load_env_creator(entry) if isinstance(entry, str) else entry
+    except (ImportError, AttributeError, ValueError):
+        return
+    if getattr(entry, "reads_delay_descriptions", False):  # a DelayableEntryPoint
+        spec.kwargs = {**spec.kwargs, "reward_delay": delay_spec(value)}
 
 
 def check_episode_end(on_episode_end: Any) -> str:
@@ -122,18 +149,30 @@ class RewardDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
     independent of the inner env's, so delays do not correlate with the env's own randomness): the
     same seed gives the same delays. Delays are drawn in blocks of 1024 and pending rewards are kept in a
     dict keyed by due step (zero rewards are never stored), so the per-step cost stays close to
-    that of Gymnasium's ``RecordEpisodeStatistics``.
+    that of Gymnasium's ``RecordEpisodeStatistics``, and memory follows what is pending (a delay
+    of 10⁹ steps costs no more than one of 10).
+
+    Sums are checked: rewards due at one step, or all the rewards pending, that sum to more than
+    float64 can hold (finite rewards near 1e308) raise ``ValueError`` instead of becoming ``inf``;
+    flushed and dropped amounts are exact sums rounded once.
+
+    The wrapper records its arguments (``gym.utils.RecordConstructorArgs``) with the delay as its
+    JSON description (:meth:`~delayed_rl.delays.Delay.to_dict`), so ``env.spec.to_json()`` works
+    and ``gym.make`` of the spec read back rebuilds the same stack; a registered env's
+    ``reward_delay`` kwarg is recorded in that form too.
 
     Args:
         env: the env whose rewards to delay (any reward type convertible to ``float``).
-        delay: a :class:`~delayed_rl.delays.Delay`, or a number read as a Poisson mean.
+        delay: a :class:`~delayed_rl.delays.Delay`, its ``to_dict()`` description, or a number
+            read as a Poisson mean.
         max_delay: clip delays to at most this many steps (``None``: unbounded).
         on_episode_end: ``"flush"``, ``"drop"`` or ``"carry"`` (see above).
         record_arrivals: add ``info["reward_arrivals"]`` on every step.
 
     Raises:
         TypeError, ValueError: at construction, for an invalid argument (the message names it).
-        ValueError: at a step where the inner env returns a NaN or infinite reward.
+        ValueError: at a step where the inner env returns a NaN or infinite reward, or where the
+            rewards due at one step or all those pending sum beyond float64's range.
 
     Example:
         >>> import gymnasium as gym
@@ -155,7 +194,7 @@ class RewardDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
     ):
         gym.utils.RecordConstructorArgs.__init__(
             self,
-            delay=delay,
+            delay=delay_spec(delay),
             max_delay=max_delay,
             on_episode_end=on_episode_end,
             record_arrivals=record_arrivals,
@@ -178,6 +217,14 @@ class RewardDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
     def pending_reward(self) -> float:
         """The sum of rewards emitted but not yet delivered."""
         return self._pending
+
+    @property
+    def spec(self):
+        """The env spec with this wrapper's ``WrapperSpec``, JSON-able (see the class docstring)."""
+        spec = gym.Wrapper.spec.fget(self)
+        if spec is not None:
+            _json_reward_delay(spec)
+        return spec
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Reset the env; ``seed`` also reseeds the delay generator.
@@ -219,11 +266,17 @@ class RewardDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
         due = self._due
         if reward:  # a zero reward changes no sum: nothing to schedule
             when = clock + delay
-            due[when] = due.get(when, 0.0) + reward
-            self._pending += reward
+            slot = due.get(when, 0.0) + reward
+            pending = self._pending + reward
+            if slot - slot or pending - pending:  # NaN (true) once a sum passed float64's range
+                pending = self._checked_pending(when, slot)
+            due[when] = slot
+            self._pending = pending
         if clock in due:
             delivered = due.pop(clock)
             self._pending = self._pending - delivered if due else 0.0  # exact 0 once all is in
+            if self._pending - self._pending:
+                self._pending = exact_sum(due.values())
         else:
             delivered = 0.0
         if terminated or truncated:
@@ -232,6 +285,11 @@ class RewardDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
                 flushed = self._clear_pending()
                 info["flushed_reward"] = flushed
                 delivered += flushed
+                if delivered - delivered:
+                    raise ValueError(
+                        "the rewards delivered at the episode's last step (due then, plus the "
+                        "flushed rest) sum to more than float64 can hold; rescale the env's rewards"
+                    )
             elif self.on_episode_end == "drop":
                 info["dropped_reward"] = self._clear_pending()
         info["undelayed_reward"] = reward
@@ -256,6 +314,21 @@ class RewardDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
             )
         return reward
 
+    def _checked_pending(self, when: int, slot: float) -> float:
+        """The exact pending sum once ``slot`` is due at ``when``, after a float sum overflowed.
+
+        Raises:
+            ValueError: the rewards due at ``when`` (``slot`` overflowed), or all those pending,
+                sum to more than float64 can hold.
+        """
+        if slot - slot:
+            raise ValueError(
+                f"the rewards due at episode step {when - self._episode_start} sum to more than "
+                "float64 can hold; rescale the env's rewards"
+            )
+        others = (value for key, value in self._due.items() if key != when)
+        return exact_sum([*others, slot])
+
     def _arrivals_now(
         self, clock: int, delay: int, reward: float, episode_ended: bool
     ) -> list[tuple[int, float]]:
@@ -271,8 +344,12 @@ class RewardDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
         return arrivals
 
     def _clear_pending(self) -> float:
-        """Empty the buffer and return the exact sum that was in it."""
-        total = math.fsum(self._due.values())
+        """Empty the buffer and return the exact sum that was in it (rounded once).
+
+        Raises:
+            ValueError: the sum is beyond float64's range.
+        """
+        total = exact_sum(self._due.values())
         self._due.clear()
         self._pending = 0.0
         return total
@@ -314,23 +391,27 @@ class PoissonRewardDelay(RewardDelay):
         self.lam = self.delay.lam
 
 
-def wrap_reward_delay(env: gym.Env, reward_delay: Delay | float) -> RewardDelay:
+def wrap_reward_delay(env: gym.Env, reward_delay: Delay | float | Mapping[str, Any]) -> RewardDelay:
     """Wrap ``env`` for ``gym.make(id, reward_delay=...)``: a number means Poisson(λ).
 
     Args:
         env: the env to wrap.
-        reward_delay: a :class:`~delayed_rl.delays.Delay` (gives a :class:`RewardDelay`) or a
-            number λ (gives a :class:`PoissonRewardDelay`, whose ``lam`` is recorded).
+        reward_delay: a :class:`~delayed_rl.delays.Delay` or its
+            :meth:`~delayed_rl.delays.Delay.to_dict` description (gives a :class:`RewardDelay`),
+            or a number λ (gives a :class:`PoissonRewardDelay`, whose ``lam`` is recorded).
 
     Raises:
-        TypeError: ``reward_delay`` is neither a number nor a ``Delay``.
-        ValueError: ``reward_delay`` is a number that is not a valid λ (negative, NaN, infinite).
+        TypeError: ``reward_delay`` is neither a number, a ``Delay`` nor a dict.
+        ValueError: ``reward_delay`` is a number that is not a valid λ (negative, NaN, infinite),
+            or a dict that describes no distribution.
     """
     if isinstance(reward_delay, Delay):
         return RewardDelay(env, reward_delay)
+    if isinstance(reward_delay, Mapping):
+        return RewardDelay(env, as_delay(reward_delay, "reward_delay"))
     if isinstance(reward_delay, numbers.Real) and not isinstance(reward_delay, bool):
         return PoissonRewardDelay(env, lam=reward_delay)
     raise TypeError(
-        "reward_delay must be a number (the Poisson mean λ) or a delayed_rl.delays.Delay, "
-        f"got {reward_delay!r} ({type(reward_delay).__name__})"
+        "reward_delay must be a number (the Poisson mean λ), a delayed_rl.delays.Delay or its "
+        f"to_dict() description, got {reward_delay!r} ({type(reward_delay).__name__})"
     )

@@ -6,6 +6,8 @@ This module imports stable-baselines3 (and so torch) when it is imported; nothin
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
@@ -23,15 +25,33 @@ class VecRewardDelay(VecEnvWrapper):
     at that step. Each ``infos[i]`` gets ``undelayed_reward``, ``reward_delay``,
     ``pending_reward``, and at an episode end ``flushed_reward`` or ``dropped_reward``.
 
-    Delays come from the wrapper's own generator: seed it with ``seed`` here or ``venv.seed(s)``
-    followed by ``reset()`` (both reseed the delays as well as the envs).
+    Nothing is lost silently. SB3's ``reset()`` returns only observations and keeps the reset
+    infos in ``reset_infos`` (as ``DummyVecEnv`` does): this wrapper's ``reset_infos[i]`` is the
+    inner env's plus ``pending_reward`` and, for a ``reset()`` in the middle of the episodes
+    (every ``reset()`` after the first: SB3 sub-envs are always in an episode), the rewards it
+    discarded under ``"flush"``/``"drop"`` as ``dropped_reward``, with a warning when they are not
+    zero (``"carry"`` keeps them). An autoreset at an episode's end updates ``reset_infos[i]``
+    too.
+
+    Delays come from the wrapper's own generators, one per sub-env: ``seed=s`` here, or
+    ``venv.seed(s)`` followed by ``reset()``, seeds sub-env ``i``'s delays with ``s + i``, as
+    ``VecEnv.seed`` seeds the envs; sub-env ``i`` then draws the delays of a
+    :class:`~delayed_rl.wrappers.RewardDelay` reset with ``seed=s + i``. (Since 0.2; before,
+    all sub-envs drew from one stream, so seeded runs changed.)
+
+    Pending rewards are summed in float64; the rewards returned have the inner ``VecEnv``'s
+    floating dtype (float32 for SB3's ``DummyVecEnv`` and ``SubprocVecEnv``, whose reward buffers
+    are float32: the point where SB3 itself casts), never less than float32. Sums beyond float64's
+    range raise ``ValueError``; the rings that hold pending rewards grow with the delays drawn
+    (see :data:`~delayed_rl.wrappers.buffers.MAX_RING_ENTRIES`).
 
     Args:
         venv: the SB3 ``VecEnv`` to wrap.
-        delay: a :class:`~delayed_rl.delays.Delay`, or a number read as a Poisson mean.
+        delay: a :class:`~delayed_rl.delays.Delay`, its ``to_dict()`` description, or a number
+            read as a Poisson mean.
         max_delay: clip delays to at most this many steps (``None``: unbounded).
         on_episode_end: ``"flush"`` (default), ``"drop"`` or ``"carry"``.
-        seed: seed of the delay generator, an integer ``>= 0`` (``None``: fresh entropy).
+        seed: seed of the delay generators, an integer ``>= 0`` (``None``: fresh entropy).
 
     Raises:
         TypeError: ``delay`` is neither a ``Delay`` nor a number, ``max_delay`` or ``seed`` is
@@ -53,31 +73,65 @@ class VecRewardDelay(VecEnvWrapper):
         self.max_delay = check_max_delay(max_delay)
         self.on_episode_end = check_episode_end(on_episode_end)
         self.buffers = RewardBuffers(self.num_envs, self.delay, self.max_delay)
-        self.buffers.seed(check_int("seed", seed, 0, optional=True))
-        self._pending_seed: int | None = None
+        seed = check_int("seed", seed, 0, optional=True)
+        if seed is not None:
+            self.buffers.seed(self._seeds_from(seed))
+        self._pending_seeds: list[int] | None = None
+        self._started = False  # True from the first reset: the sub-envs are in episodes
         self._all = np.ones(self.num_envs, dtype=bool)
 
+    def _seeds_from(self, seed: int) -> list[int]:
+        """Each sub-env's delay seed for ``seed``: ``seed + i``, as ``VecEnv.seed`` does."""
+        return [seed + i for i in range(self.num_envs)]
+
     def seed(self, seed: int | None = None):
-        """Seed the envs (at the next reset, as SB3 does) and the delay generator."""
-        self._pending_seed = seed
+        """Seed the envs and, at the next reset (as SB3 does), sub-env ``i``'s delays with ``seed + i``.
+
+        Raises:
+            TypeError: ``seed`` is neither ``None`` nor an integer.
+            ValueError: ``seed`` is negative.
+        """
+        seed = check_int("seed", seed, 0, optional=True)
+        if seed is not None:
+            self._pending_seeds = self._seeds_from(seed)
         return self.venv.seed(seed)
 
     def reset(self):
         """Reset the envs; a seed set by :meth:`seed` reseeds the delays too.
 
-        Pending rewards are discarded, except under ``"carry"``.
+        Pending rewards are discarded, except under ``"carry"``; ``reset_infos`` reports them as
+        ``dropped_reward`` (see the class docstring), with a warning if they are not zero.
         """
         obs = self.venv.reset()
-        if self._pending_seed is not None:
-            self.buffers.seed(self._pending_seed)
-            self._pending_seed = None
+        if self._pending_seeds is not None:
+            self.buffers.seed(self._pending_seeds)
+            self._pending_seeds = None
+        infos = [dict(info) for info in self.venv.reset_infos]
         if self.on_episode_end != "carry":
-            self.buffers.clear(self._all)
+            dropped = self.buffers.clear(self._all)
+            if self._started:
+                for info, lost in zip(infos, dropped, strict=True):
+                    info["dropped_reward"] = float(lost)
+                lost_envs = np.flatnonzero(dropped != 0.0).tolist()
+                if lost_envs:
+                    warnings.warn(
+                        f"reset() in the middle of the episodes discarded "
+                        f"{dropped[lost_envs].tolist()} of pending reward in sub-envs {lost_envs} "
+                        f"(on_episode_end={self.on_episode_end!r}, reported in "
+                        "reset_infos[i]['dropped_reward']); let episodes end in the sub-envs to "
+                        "have them flushed",
+                        stacklevel=2,
+                    )
+        for info, pending in zip(infos, self.buffers.pending, strict=True):
+            info["pending_reward"] = float(pending)
+        self.reset_infos = infos
+        self._started = True
         return obs
 
     def step_wait(self):
-        """Finish the step; return the rewards due now, as ``float32`` (see the class docstring)."""
+        """Finish the step; return the rewards due now (see the class docstring)."""
         obs, rewards, dones, infos = self.venv.step_wait()
+        rewards = np.asarray(rewards)
         delivered, delays = self.buffers.push(rewards, self._all)
         ended = np.asarray(dones, dtype=bool)
         amounts = None
@@ -85,6 +139,12 @@ class VecRewardDelay(VecEnvWrapper):
             amounts = self.buffers.clear(ended)
             if self.on_episode_end == "flush":
                 delivered = delivered + amounts
+                if not np.all(np.isfinite(delivered)):
+                    raise ValueError(
+                        f"the rewards delivered at the last step of sub-envs "
+                        f"{np.flatnonzero(~np.isfinite(delivered)).tolist()} (due then, plus the "
+                        "flushed rest) sum to more than float64 can hold; rescale the rewards"
+                    )
         pending = self.buffers.pending
         key = "flushed_reward" if self.on_episode_end == "flush" else "dropped_reward"
         for i, info in enumerate(infos):
@@ -93,4 +153,7 @@ class VecRewardDelay(VecEnvWrapper):
             info["pending_reward"] = float(pending[i])
             if amounts is not None and ended[i]:
                 info[key] = float(amounts[i])
-        return obs, delivered.astype(np.float32), dones, infos
+        for i in np.flatnonzero(ended).tolist():  # the autoreset's info, as the inner VecEnv's
+            self.reset_infos[i] = {**self.venv.reset_infos[i], "pending_reward": float(pending[i])}
+        kind = rewards.dtype if rewards.dtype.kind == "f" else np.float32
+        return obs, delivered.astype(np.promote_types(kind, np.float32)), dones, infos

@@ -2,15 +2,48 @@
 
 from __future__ import annotations
 
+import numbers
+from collections.abc import Sequence
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 
-from delayed_rl.delays import Delay, as_delay
+from delayed_rl._validation import check_int
+from delayed_rl.delays import Delay, as_delay, delay_spec
 from delayed_rl.wrappers.buffers import RewardBuffers
 from delayed_rl.wrappers.reward_delay import check_episode_end, check_max_delay
+
+
+def sub_env_seeds(seed: Any, num_envs: int) -> list[int | None]:
+    """The seed of each sub-env for ``reset(seed=seed)``, as Gymnasium's vector envs read it.
+
+    ``None`` leaves every sub-env unseeded; an int ``s`` seeds sub-env ``i`` with ``s + i`` (as
+    ``SyncVectorEnv`` and ``AsyncVectorEnv`` do); a sequence gives each sub-env its entry
+    (``None`` entries: unseeded).
+
+    Raises:
+        TypeError: ``seed`` is neither ``None``, an integer nor a sequence, or an entry is
+            neither ``None`` nor an integer.
+        ValueError: ``seed`` or an entry is negative, or the sequence's length is not
+            ``num_envs``.
+    """
+    if seed is None:
+        return [None] * num_envs
+    if isinstance(seed, numbers.Integral) and not isinstance(seed, (bool, np.bool_)):
+        first = check_int("seed", seed, 0)
+        return [first + i for i in range(num_envs)]
+    if isinstance(seed, (str, bytes)) or not isinstance(seed, (Sequence, np.ndarray)):
+        raise TypeError(
+            f"seed must be None, an integer >= 0 or a list of {num_envs} of them, "
+            f"got {seed!r} ({type(seed).__name__})"
+        )
+    if len(seed) != num_envs:
+        raise ValueError(
+            f"seed must be a list of one seed per sub-env ({num_envs}), got {len(seed)}: {seed!r}"
+        )
+    return [check_int(f"seed[{i}]", entry, 0, optional=True) for i, entry in enumerate(seed)]
 
 
 def _with_mask(info: dict[str, Any], key: str, values: np.ndarray, mask: np.ndarray) -> None:
@@ -38,9 +71,22 @@ class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
     ``pending_reward`` on every step; ``flushed_reward`` or ``dropped_reward`` for the sub-envs
     whose episode ended at this step.
 
+    Each sub-env has its own delay stream, seeded as Gymnasium's vector envs seed their sub-envs:
+    ``reset(seed=s)`` seeds sub-env ``i`` with ``s + i``, ``reset(seed=[s0, s1, ...])`` with its
+    entry (``None``: left unseeded, its stream goes on); only the sub-envs being reset are
+    reseeded. Sub-env ``i`` seeded with ``s`` draws exactly the delays of a
+    :class:`~delayed_rl.wrappers.RewardDelay` reset with ``seed=s``. (Since 0.2; before, every
+    sub-env drew from one stream seeded with the first seed, so seeded vector runs changed.)
+
+    The rings that hold pending rewards start short and grow with the delays drawn, up to
+    :data:`~delayed_rl.wrappers.buffers.MAX_RING_ENTRIES` slots in all; a longer delay keeps its
+    reward in a dict, so memory stays proportional to what is pending whatever the delay
+    (``Poisson(1e9)`` included). Sums beyond float64's range raise ``ValueError``.
+
     Args:
         env: a Gymnasium ``VectorEnv``.
-        delay: a :class:`~delayed_rl.delays.Delay`, or a number read as a Poisson mean.
+        delay: a :class:`~delayed_rl.delays.Delay`, its ``to_dict()`` description, or a number
+            read as a Poisson mean.
         max_delay: clip delays to at most this many steps (``None``: unbounded).
         on_episode_end: ``"flush"`` (default), ``"drop"`` or ``"carry"``.
 
@@ -60,7 +106,7 @@ class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
         on_episode_end: str = "flush",
     ):
         gym.utils.RecordConstructorArgs.__init__(
-            self, delay=delay, max_delay=max_delay, on_episode_end=on_episode_end
+            self, delay=delay_spec(delay), max_delay=max_delay, on_episode_end=on_episode_end
         )
         gym.vector.VectorWrapper.__init__(self, env)
         self.delay = as_delay(delay)
@@ -82,16 +128,21 @@ class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
     def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
         """Reset all sub-envs, or those in ``options["reset_mask"]``; ``seed`` reseeds the delays.
 
-        The delay generator is seeded with ``seed`` (its first entry if it is a list). A reset
-        sub-env whose episode had not ended loses its pending rewards (except under
-        ``"carry"``), reported as ``info["dropped_reward"]``.
+        Each reset sub-env's delay stream is reseeded with its own seed (see the class
+        docstring: an int ``s`` gives sub-env ``i`` the seed ``s + i``). A reset sub-env whose
+        episode had not ended loses its pending rewards (except under ``"carry"``), reported as
+        ``info["dropped_reward"]``.
+
+        Raises:
+            TypeError, ValueError: ``seed`` is not ``None``, an integer ``>= 0`` or a list of
+                ``num_envs`` of them (or ``None``).
         """
+        seeds = sub_env_seeds(seed, self.num_envs)
         envs = np.ones(self.num_envs, dtype=bool)
         if options and "reset_mask" in options:  # read first: SyncVectorEnv.reset pops it
             envs = np.array(options["reset_mask"], dtype=bool)
         obs, info = self.env.reset(seed=seed, options=options)
-        if seed is not None:
-            self.buffers.seed(seed if isinstance(seed, int) else int(seed[0]))
+        self.buffers.seed([s if reset else None for s, reset in zip(seeds, envs, strict=True)])
         cut_short = envs & ~self._episode_ended
         if self.on_episode_end != "carry" and cut_short.any():
             _with_mask(info, "dropped_reward", self.buffers.clear(cut_short), cut_short)
@@ -109,6 +160,12 @@ class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
             if self.on_episode_end == "flush":
                 flushed = self.buffers.clear(ended)
                 delivered = delivered + flushed
+                if not np.all(np.isfinite(delivered)):
+                    raise ValueError(
+                        f"the rewards delivered at the last step of sub-envs "
+                        f"{np.flatnonzero(~np.isfinite(delivered)).tolist()} (due then, plus the "
+                        "flushed rest) sum to more than float64 can hold; rescale the rewards"
+                    )
                 _with_mask(info, "flushed_reward", flushed, ended)
             elif self.on_episode_end == "drop":
                 _with_mask(info, "dropped_reward", self.buffers.clear(ended), ended)

@@ -20,6 +20,12 @@ and tangent on a circle of radius R still sees the line while R ≥ (0.05² + 0.
 0.1 m leaves a margin for the controller's lag; random tracks use 0.2 m by default. A user's
 polyline is drawn straight between its vertices, so it must also not kink by more than
 :data:`MAX_CORNER_ANGLE` (60°) at any vertex.
+
+A track's memory is proportional to its length (about :data:`BYTES_PER_VERTEX` bytes per dense
+vertex, one every 5 mm; the spatial grid stores only the cells the line passes through), and no
+track may have more than :data:`MAX_TRACK_VERTICES` dense vertices (200 m of line, forty times
+the 5.1 m racetrack): a longer one (a circle of radius 1000 m, ``random_track(mean_radius=50)``)
+is refused at construction, before anything is allocated.
 """
 
 from __future__ import annotations
@@ -33,7 +39,9 @@ from numpy.typing import ArrayLike, NDArray
 from delayed_rl._validation import check_bool, check_choice, check_int, check_real
 
 __all__ = [
+    "BYTES_PER_VERTEX",
     "MAX_CORNER_ANGLE",
+    "MAX_TRACK_VERTICES",
     "MIN_TURN_RADIUS",
     "SAMPLE_SPACING",
     "TRACK_NAMES",
@@ -62,8 +70,19 @@ CELL_SIZE = 0.04
 LOCAL_WINDOW = 20
 #: Names accepted by :func:`make_track`.
 TRACK_NAMES = ("oval", "racetrack", "figure8", "random")
+#: The most vertices a track's dense centreline may have: 200 m of line at
+#: :data:`SAMPLE_SPACING`. A 2000-step episode drives at most 4.9 m (300 steps/s ≈ 3.9 cm/s for
+#: 128 s) and the thesis's track is 5.1 m long, so every realistic track is far below it; at the
+#: limit a track takes about 25 MB and builds and checks in a few seconds.
+MAX_TRACK_VERTICES = 40_000
+#: About what one dense vertex costs (its geometry, its nine entries in the spatial grid and
+#: its window for hinted lookups).
+BYTES_PER_VERTEX = 640
+#: Candidate pairs examined at once by :meth:`Track.clearance` (bounds its temporary arrays).
+_PAIR_CHUNK = 1 << 21
 
 FloatArray = NDArray[np.float64]
+_EMPTY = slice(0, 0)
 
 
 def _as_points(points: ArrayLike, name: str = "points") -> FloatArray:
@@ -184,6 +203,32 @@ def self_intersections(points: ArrayLike) -> list[tuple[int, int]]:
     return sorted(pairs)
 
 
+def _dense_vertices(points: FloatArray) -> tuple[int, float]:
+    """``(vertices, length)`` of the closed polyline ``points`` once densified for a track."""
+    lengths = np.linalg.norm(np.roll(points, -1, axis=0) - points, axis=1)
+    length = float(lengths.sum())
+    if lengths.max(initial=0.0) <= SAMPLE_SPACING * (1 + 1e-9):
+        return len(points), length
+    pieces = np.maximum(1.0, np.ceil(lengths / SAMPLE_SPACING - 1e-9))
+    return int(pieces.sum()), length
+
+
+def _check_size(points: FloatArray, name: str = "points") -> None:
+    """Refuse a polyline whose dense track would pass :data:`MAX_TRACK_VERTICES`.
+
+    Raises:
+        ValueError: naming ``name``, the track's length, the vertices it would need and the limit.
+    """
+    vertices, length = _dense_vertices(points)
+    if vertices > MAX_TRACK_VERTICES:
+        raise ValueError(
+            f"{name}: the track is {length:,.0f} m long and would need {vertices:,} vertices of "
+            f"at most {SAMPLE_SPACING * 1000:g} mm (about {vertices * BYTES_PER_VERTEX / 1e6:,.0f}"
+            f" MB); the limit is {MAX_TRACK_VERTICES:,} vertices "
+            f"({MAX_TRACK_VERTICES * SAMPLE_SPACING:g} m of track, MAX_TRACK_VERTICES)"
+        )
+
+
 def _resample(points: FloatArray, spacing: float) -> FloatArray:
     """A closed polyline through every vertex of ``points`` with segments at most ``spacing``."""
     q = np.roll(points, -1, axis=0)
@@ -224,9 +269,10 @@ class Track:
         allow_crossings: whether the track may cross itself (the figure-eight).
 
     The constructor takes ``points`` and the attributes above as keyword arguments; it does not
-    validate the geometry (:meth:`from_polyline` does), but refuses points that are not an
-    ``(n, 2)`` array (``TypeError``/``ValueError``), a ``min_turn_radius`` that is not a number
-    ``>= 0`` and an ``allow_crossings`` that is not a bool.
+    validate the geometry (:meth:`from_polyline` does), but refuses points that are not a finite
+    ``(n, 2)`` array (``TypeError``/``ValueError``) or would need more than
+    :data:`MAX_TRACK_VERTICES` dense vertices (``ValueError``), a ``min_turn_radius`` that is not
+    a number ``>= 0`` and an ``allow_crossings`` that is not a bool.
     """
 
     def __init__(
@@ -240,6 +286,9 @@ class Track:
         min_turn_radius = check_real("min_turn_radius", min_turn_radius, 0.0, optional=True)
         allow_crossings = check_bool("allow_crossings", allow_crossings)
         p = _as_points(points)
+        if len(p) == 0 or not np.all(np.isfinite(p)):
+            raise ValueError(f"points must be a non-empty array of finite (x, y) points, got {p}")
+        _check_size(p)
         if np.linalg.norm(np.roll(p, -1, axis=0) - p, axis=1).max() > SAMPLE_SPACING * (1 + 1e-9):
             p = _resample(p, SAMPLE_SPACING)  # the spatial index relies on short segments
         self.name = name
@@ -295,8 +344,10 @@ class Track:
             ValueError: if the polyline is not of shape ``(n + 1, 2)``, is not closed, has fewer
                 than 3 distinct vertices, holds non-finite values or repeated consecutive
                 vertices, crosses itself (unless ``allow_crossings``), turns more tightly than
-                ``min_turn_radius`` or kinks by more than ``max_corner_angle``; if
-                ``min_turn_radius`` is negative or ``max_corner_angle`` outside ``(0, 180]``.
+                ``min_turn_radius``, kinks by more than ``max_corner_angle`` or would need more
+                than :data:`MAX_TRACK_VERTICES` dense vertices (checked first, before any
+                costly check); if ``min_turn_radius`` is negative or ``max_corner_angle``
+                outside ``(0, 180]``.
         """
         min_turn_radius = check_real("min_turn_radius", min_turn_radius, 0.0)
         max_corner_angle = check_real(
@@ -318,6 +369,7 @@ class Track:
                 f"first point {p[0].tolist()} (repeat the first point at the end)"
             )
         p = p[:-1]
+        _check_size(p)
         seg = np.linalg.norm(np.roll(p, -1, axis=0) - p, axis=1)
         if np.any(seg <= 1e-9):
             bad = int(np.argmax(seg <= 1e-9))
@@ -362,7 +414,9 @@ class Track:
         """Build the spatial grid and the padded segment windows behind the queries.
 
         Each segment is registered (by its midpoint's cell) in that cell's 3×3 neighbourhood; per
-        cell, its segments' data are stored contiguously (CSR), so a query is a slice. A window of
+        cell, its segments' data are stored contiguously (CSR), so a query is a slice, found in a
+        dict holding only the cells the line passes near (memory follows the track's length, not
+        the area it spans). A window of
         :data:`LOCAL_WINDOW` segments either side of each segment, stored contiguously too
         (wrapping round the track), serves hinted :meth:`locate` queries.
         """
@@ -378,7 +432,14 @@ class Track:
         segs = np.tile(np.arange(n), len(offsets))
         order = np.argsort(keys, kind="stable")
         keys, segs = keys[order], segs[order]
-        self._cell_start = np.searchsorted(keys, np.arange(self._nx * self._ny + 1)).tolist()
+        cells, starts = np.unique(keys, return_index=True)
+        stops = np.append(starts[1:], len(keys))
+        self._cells = {
+            key: slice(start, stop)
+            for key, start, stop in zip(
+                cells.tolist(), starts.tolist(), stops.tolist(), strict=True
+            )
+        }
         self._cell_segs = segs
         self._cell_a = self._a[segs]
         self._cell_d = self._d[segs]
@@ -394,9 +455,8 @@ class Track:
         ix = int((x - self._origin[0]) // CELL_SIZE)
         iy = int((y - self._origin[1]) // CELL_SIZE)
         if not (0 <= ix < self._nx and 0 <= iy < self._ny):
-            return slice(0, 0)
-        k = ix * self._ny + iy
-        return slice(self._cell_start[k], self._cell_start[k + 1])
+            return _EMPTY
+        return self._cells.get(ix * self._ny + iy, _EMPTY)
 
     def near_line(self, points: NDArray[np.complex128], half_width: float, centre: complex) -> Any:
         """Which ``points`` lie within ``half_width`` of the centreline.
@@ -486,19 +546,66 @@ class Track:
         """Smallest distance between two vertices more than ``exclude_arc`` apart along the track.
 
         A measure of how close distinct parts of the track come to each other (the camera sees
-        only one line while this exceeds its field width).
+        only one line while this exceeds its field width); ``inf`` if no two vertices are that
+        far apart. Pairs are found with a grid whose cells double until the closest pair found is
+        within one cell (so it is the closest of all): the cost follows the track's length times
+        the vertices near each vertex, not the square of the vertex count.
+
+        Args:
+            exclude_arc: the arc length (m, ``>= 0``) within which pairs are not compared.
+
+        Raises:
+            TypeError: ``exclude_arc`` is not a number.
+            ValueError: ``exclude_arc`` is negative, NaN or infinite.
         """
+        exclude_arc = check_real("exclude_arc", exclude_arc, 0.0, note=" (m)")
         p = self.points
-        s = self._s0
+        span = float((p.max(axis=0) - p.min(axis=0)).max())
+        cell = CELL_SIZE
+        while True:
+            best = self._closest_far_pair(cell, exclude_arc)
+            if best <= cell * cell or cell > 2.0 * span:  # the grid then pairs every vertex
+                return float(np.sqrt(best))
+            cell *= 2.0
+
+    def _closest_far_pair(self, cell: float, exclude_arc: float) -> float:
+        """The smallest squared distance of the pairs more than ``exclude_arc`` apart in arc.
+
+        Only pairs in neighbouring cells of a grid of side ``cell`` are compared: every pair
+        closer than ``cell`` is among them.
+        """
+        p, s, length = self.points, self._s0, self.length
+        cx = np.floor((p[:, 0] - p[:, 0].min()) / cell).astype(np.int64)
+        cy = np.floor((p[:, 1] - p[:, 1].min()) / cell).astype(np.int64) + 1
+        ny = int(cy.max()) + 2  # a free row either side: cy ± 1 never wraps to the next column
+        keys = cx * ny + cy
+        order = np.argsort(keys, kind="stable")
+        sorted_keys = keys[order]
         best = np.inf
-        chunk = max(1, 2_000_000 // len(p))
-        for start in range(0, len(p), chunk):
-            d2 = ((p[start : start + chunk, None, :] - p[None, :, :]) ** 2).sum(axis=2)
-            ds = np.abs(s[start : start + chunk, None] - s[None, :])
-            far = np.minimum(ds, self.length - ds) > exclude_arc
-            if far.any():
-                best = min(best, float(d2[far].min()))
-        return float(np.sqrt(best))
+        for dx, dy in ((0, 0), (0, 1), (1, -1), (1, 0), (1, 1)):  # each neighbour pair once
+            target = keys + (dx * ny + dy)
+            lo = np.searchsorted(sorted_keys, target, side="left")
+            counts = np.searchsorted(sorted_keys, target, side="right") - lo
+            ends = np.cumsum(counts)
+            start = 0
+            while start < len(p):
+                base = int(ends[start - 1]) if start else 0
+                stop = max(start + 1, int(np.searchsorted(ends, base + _PAIR_CHUNK, "right")))
+                chunk_counts = counts[start:stop]
+                total = int(chunk_counts.sum())
+                if total:
+                    i = np.repeat(np.arange(start, stop), chunk_counts)
+                    offset = np.arange(total) - np.repeat(
+                        ends[start:stop] - chunk_counts - base, chunk_counts
+                    )
+                    j = order[np.repeat(lo[start:stop], chunk_counts) + offset]
+                    d2 = ((p[i] - p[j]) ** 2).sum(axis=1)
+                    ds = np.abs(s[i] - s[j])
+                    far = np.minimum(ds, length - ds) > exclude_arc
+                    if far.any():
+                        best = min(best, float(d2[far].min()))
+                start = stop
+        return best
 
     def __repr__(self) -> str:
         return (
@@ -592,7 +699,9 @@ def random_track(
         min_turn_radius: smallest turning radius (m), at least :data:`MIN_TURN_RADIUS`.
         clearance: smallest distance (m) between parts of the track more than half a metre
             apart along it.
-        mean_radius: R, the mean distance (m) from the centre.
+        mean_radius: R, the mean distance (m) from the centre; the track is about 2πR long, so R
+            may be at most ``MAX_TRACK_VERTICES * SAMPLE_SPACING / 2π`` (31.8 m); draws longer
+            than :data:`MAX_TRACK_VERTICES` vertices are rejected like the others.
         harmonics: the highest harmonic k.
         max_tries: draws before giving up.
 
@@ -601,9 +710,10 @@ def random_track(
             generator nor None; a radius or clearance that is not a number; a count that is not
             an int).
         ValueError: for an argument out of range (a negative seed, ``min_turn_radius`` below
-            :data:`MIN_TURN_RADIUS`, ``mean_radius`` below ``2 * min_turn_radius``, a negative
-            ``clearance``, ``harmonics < 2``, ``max_tries < 1``), or if no acceptable track was
-            drawn.
+            :data:`MIN_TURN_RADIUS`, ``mean_radius`` below ``2 * min_turn_radius`` or so large
+            that the track would pass :data:`MAX_TRACK_VERTICES` (checked first, at once), a
+            negative ``clearance``, ``harmonics < 2``, ``max_tries < 1``), or if no acceptable
+            track was drawn.
     """
     if not isinstance(seed, np.random.Generator):
         seed = check_int("seed", seed, 0, optional=True)
@@ -612,6 +722,15 @@ def random_track(
     mean_radius = check_real(
         "mean_radius", mean_radius, 2 * min_turn_radius, note=" (2 * min_turn_radius, m)"
     )
+    circumference = 2 * np.pi * mean_radius
+    if circumference / SAMPLE_SPACING > MAX_TRACK_VERTICES:
+        largest = MAX_TRACK_VERTICES * SAMPLE_SPACING / (2 * np.pi)
+        raise ValueError(
+            f"mean_radius={mean_radius:g} would draw a track about {circumference:,.0f} m long "
+            f"({circumference / SAMPLE_SPACING:,.0f} vertices of {SAMPLE_SPACING * 1000:g} mm); "
+            f"the limit is {MAX_TRACK_VERTICES:,} vertices (MAX_TRACK_VERTICES): mean_radius "
+            f"must be at most {largest:.3g} m"
+        )
     harmonics = check_int("harmonics", harmonics, 2)
     max_tries = check_int("max_tries", max_tries, 1)
     name = "random" if seed is None or isinstance(seed, np.random.Generator) else f"random-{seed}"
@@ -629,6 +748,8 @@ def random_track(
         curve = np.column_stack([r * np.cos(theta), r * np.sin(theta)])
         if turn_radii(curve).min() < min_turn_radius:
             continue
+        if _dense_vertices(curve)[1] / SAMPLE_SPACING > MAX_TRACK_VERTICES:
+            continue  # too long a track (only near the largest mean_radius)
         track = _smooth_track(curve, name)
         if track.min_turn_radius >= min_turn_radius and track.clearance(0.5) >= clearance:
             return track
