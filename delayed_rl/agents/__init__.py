@@ -4,6 +4,10 @@
 - :class:`FixedDelayQLearning`: Q-learning that assumes a constant delay ``k``;
 - :class:`MultipleModelQLearning` (alias :class:`MMQ`): Multiple Model Q-learning, which learns
   over parallel delay hypotheses (thesis section 3.2);
+- :class:`ExpectedCreditQLearning`: Q-learning that spreads each received reward over the past
+  steps by a known delay distribution's pmf (the cheap anonymous baseline);
+- :class:`OracleQLearning`: Q-learning that credits each reward to the transition that emitted
+  it, read from ``RewardDelay(..., record_arrivals=True)`` (the non-anonymous upper bound);
 - :class:`DeconvolutionQLearning` (alias :class:`DeconvQ`): Q-learning on mean rewards estimated
   by deconvolving the delayed reward stream, with the delay known or learned;
 - :func:`load_agent`: load any of them from a file, whatever its class;
@@ -16,8 +20,10 @@ All share :class:`~delayed_rl.agents.base.TabularAgent`: ``learn``, ``predict``,
 
 from delayed_rl.agents.base import RECORD_KEYS, TabularAgent, load_agent
 from delayed_rl.agents.deconvolution import DeconvolutionQLearning, DeconvQ
+from delayed_rl.agents.expected_credit import ExpectedCreditQLearning
 from delayed_rl.agents.hyperparameters import DEFAULTS, AgentDefaults
 from delayed_rl.agents.mmq import MMQ, MultipleModelQLearning
+from delayed_rl.agents.oracle import OracleQLearning
 from delayed_rl.agents.qlearning import FixedDelayQLearning, QLearning
 from delayed_rl.agents.schedules import ConstantSchedule, LinearSchedule
 
@@ -30,9 +36,11 @@ __all__ = [
     "ConstantSchedule",
     "DeconvQ",
     "DeconvolutionQLearning",
+    "ExpectedCreditQLearning",
     "FixedDelayQLearning",
     "LinearSchedule",
     "MultipleModelQLearning",
+    "OracleQLearning",
     "QLearning",
     "TabularAgent",
     "load_agent",

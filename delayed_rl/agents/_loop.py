@@ -153,6 +153,9 @@ def python_loop(agent: Any, run: LearnRun) -> None:
     (``agent._learn_transition``), the record, the callback; the env is reset when an episode
     ends. The ε and α schedules are evaluated per step unless constant. The running sums are
     kept in locals (the loop is the Python path's hot spot) and written back at the end.
+
+    An agent that defines ``_observe_info(info)`` is handed each step's ``info`` just before
+    that step's ``_learn_transition`` (the oracle reads ``info["reward_arrivals"]`` so).
     """
     env, stats, callback, log = agent.env, agent._statistics, run.callback, run.log
     obs_start, action_start = agent._obs_index.start, agent._action_index.start
@@ -160,6 +163,7 @@ def python_loop(agent: Any, run: LearnRun) -> None:
     schedules_constant = eps_constant and agent._lr_constant
     eps, uniform = agent.exploration_rate, agent._uniform
     choose, learn_transition = agent._choose, agent._learn_transition
+    observe_info = getattr(agent, "_observe_info", None)
     acting_counts = stats.acting_counts
     s = agent._obs
     episode_reward, episode_length = stats.episode_reward, stats.episode_length
@@ -174,6 +178,8 @@ def python_loop(agent: Any, run: LearnRun) -> None:
         s2 = int(obs) - obs_start
         reward = float(reward)
         undelayed = info.get("undelayed_reward", reward)
+        if observe_info is not None:
+            observe_info(info)
         learn_transition(s, a, reward, s2, terminated, truncated)
         episode_end = terminated or truncated
         steps_done = step + 1

@@ -1,0 +1,273 @@
+"""Expected-credit Q-learning: each received reward spread over the past by the delay's pmf.
+
+The cheap, anonymous baseline for rewards delayed by a known distribution ``p``: the reward
+``r_t`` received at episode step ``t`` came from the transition ``k`` steps back with probability
+``p(k)``, so every recent transition gets a share of the step's TD update in proportion.
+
+**Rule.** With ``w`` the credit weights (below), at every step ``t``, for every lag ``k`` with
+``w(k) > 0`` whose step ``j = t − k`` is in this episode's history, with
+``(s_j, a_j, s′_j)`` that step's transition::
+
+    δ_k = r_t + γ (1 − terminated_j) max_a′ Q(s′_j, a′) − Q(s_j, a_j)
+    Q(s_j, a_j) += α w(k) δ_k
+
+All the ``δ_k`` of a step are computed from the table before any of its writes, and the
+increments to the same entry add up (the parallel update of MMQ, here in one table). Only the
+current step (``k = 0``) can be terminal within an episode. With ``p = Constant(k)`` there is one
+lag of weight 1: this is :class:`~delayed_rl.agents.FixedDelayQLearning` ``(delay_estimate=k)``,
+update for update, and with ``Constant(0)`` (or ``Poisson(0)``) it is
+:class:`~delayed_rl.agents.QLearning`.
+
+**Credit weights.** ``w`` is the pmf of the delay clipped to ``K`` lags, ``min(d, K)``:
+``w(k) = p(k)`` for ``k < K`` and ``w(K) = P(d ≥ K)``. ``K`` is the distribution's largest value
+or, for an unbounded one such as Poisson, the smallest ``K`` with ``P(d ≤ K) ≥ 1 − 1e-6``
+(:data:`TAIL`); a ``max_delay`` below that is ``K`` instead (the wrappers' ``max_delay`` clips
+delays so: the last weight is then the clipped mass). At most :data:`MAX_LAGS` lags. A step costs
+O(number of lags with ``w > 0``).
+
+**Saving.** The delay is saved as its JSON description
+(:meth:`~delayed_rl.delays.Delay.to_dict`), so a loaded agent has an equal ``delay`` and the same
+weights. A ``Delay`` subclass of your own has no description: it is saved as ``Empirical`` of the
+credit weights (normalised) and comes back as that.
+"""
+
+from __future__ import annotations
+
+import numbers
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from delayed_rl._delay_line import ring_size
+from delayed_rl._validation import check_int, check_real
+from delayed_rl.agents.hyperparameters import shares_hyperparameters
+from delayed_rl.agents.qlearning import QLearning
+from delayed_rl.delays import Delay, Empirical, as_delay
+
+__all__ = ["ExpectedCreditQLearning", "credit_weights"]
+
+TAIL = 1e-6
+"""An unbounded delay is credited up to where less than this much of its mass is left."""
+
+MAX_LAGS = 1 << 16
+"""The most lags credited (a delay that reaches further needs ``max_delay``)."""
+
+
+def credit_weights(delay: Delay, max_delay: int | None = None) -> np.ndarray:
+    """The pmf of ``min(d, K)`` on ``0..K`` for ``d ~ delay`` (``K`` as the module says).
+
+    Args:
+        delay: the delay distribution.
+        max_delay: clip at this many steps (``None``: no clip).
+
+    Returns:
+        A ``float64`` array of length ``K + 1`` summing to 1 (up to rounding).
+
+    Raises:
+        ValueError: ``K`` would pass :data:`MAX_LAGS` (give a smaller ``max_delay``), or the
+            distribution's ``pmf`` does not give one probability in [0, 1] per lag summing to 1.
+    """
+    limit = MAX_LAGS if max_delay is None else min(max_delay + 1, MAX_LAGS)
+    bounded = delay.support_max is not None
+    top = delay.support_max if bounded else _tail_end(delay, limit)
+    if max_delay is not None and (top is None or top > max_delay):
+        top = max_delay
+    if top is None or top >= MAX_LAGS:
+        raise ValueError(
+            f"delay must be credited on at most {MAX_LAGS} lags, got {delay!r}, which reaches "
+            f"{'further' if top is None else top}: give a max_delay below {MAX_LAGS}"
+        )
+    weights = _pmf(delay, top + 1)
+    total = weights.sum()
+    if bounded and top == delay.support_max and abs(total - 1.0) > TAIL:
+        raise ValueError(
+            f"delay's pmf must sum to 1 on 0..{top}, got a sum of {total!r} for {delay!r}"
+        )
+    weights[-1] += max(0.0, 1.0 - total)
+    return weights
+
+
+def _tail_end(delay: Delay, limit: int) -> int | None:
+    """The smallest ``K < limit`` with ``P(d ≤ K) ≥ 1 − TAIL``, or ``None``."""
+    n = min(256, limit)
+    while True:
+        cdf = np.cumsum(_pmf(delay, n))
+        end = int(np.searchsorted(cdf, 1.0 - TAIL))
+        if end < n:
+            return end
+        if n >= limit:
+            return None
+        n = min(4 * n, limit)
+
+
+def _pmf(delay: Delay, n: int) -> np.ndarray:
+    """``delay.pmf`` on ``0..n−1``, checked to be one probability per lag."""
+    values = np.asarray(delay.pmf(np.arange(n)), dtype=np.float64)
+    if values.shape != (n,) or not np.all((values >= 0.0) & (values <= 1.0)):
+        raise ValueError(
+            f"delay's pmf must give one probability in [0, 1] per lag, got {values!r} for {delay!r}"
+        )
+    return values
+
+
+def _describe(delay: Delay, weights: np.ndarray) -> dict[str, Any]:
+    """``delay``'s JSON description; a ``Delay`` of your own as ``Empirical`` of ``weights``."""
+    try:
+        return delay.to_dict()
+    except NotImplementedError:
+        return Empirical(weights / weights.sum()).to_dict()
+
+
+def _check_delay(delay: Any) -> Delay:
+    """``delay`` as a :class:`Delay` (a number ``>= 0`` is a Poisson mean, a dict a description)."""
+    if isinstance(delay, numbers.Real) and not isinstance(delay, (bool, np.bool_)):
+        check_real("delay", delay, 0.0, note=" (a Poisson mean)")
+    return as_delay(delay, "delay")
+
+
+class ExpectedCreditQLearning(QLearning):
+    """Q-learning that spreads every received reward over the past by the delay's pmf.
+
+    For rewards delayed by a known distribution (e.g. :class:`~delayed_rl.wrappers.RewardDelay`
+    with ``delay``): the TD update of each step is shared among the transitions 1, 2, ... steps
+    back in proportion to the probability that the reward came from them (see the module
+    docstring for the exact rule and the weights). It is anonymous: it reads only the received
+    reward, never the wrapper's ``info``. ``q_table`` has shape ``(|S|, 1, |A|)`` and acting is
+    Q-learning's, so ``predict``, ``greedy_actions`` and ``save``/``load`` work as for
+    :class:`~delayed_rl.agents.QLearning`. ``learn()`` runs on the Python path only.
+
+    Args:
+        env: the training env (``Discrete`` observation and action spaces) or an env id.
+        delay: the delay distribution, a :class:`~delayed_rl.delays.Delay`, a number ``>= 0``
+            read as a Poisson mean (as ``gym.make(id, reward_delay=...)`` reads it) or a
+            :meth:`~delayed_rl.delays.Delay.to_dict` description.
+        max_delay: the wrapper's ``max_delay`` when delays are clipped (the weight of the last
+            lag is then the clipped mass); also a cap on the lags credited. ``None``: no clip.
+        **hyperparameters: the hyper-parameters every agent shares, by keyword: see
+            :class:`~delayed_rl.agents.base.TabularAgent`.
+
+    Raises:
+        TypeError: ``delay`` is neither a ``Delay``, a number nor a description, or
+            ``max_delay`` is not an integer.
+        ValueError: ``delay`` is a negative or non-finite number or describes no distribution,
+            ``max_delay`` is negative, or the delay reaches too far (see
+            :func:`credit_weights`).
+
+    Example:
+        >>> import gymnasium as gym
+        >>> import delayed_rl
+        >>> from delayed_rl.agents import ExpectedCreditQLearning
+        >>> env = gym.make("delayed_rl/GridWorld-3x3-v0", reward_delay=2)
+        >>> agent = ExpectedCreditQLearning(env, delay=2, q_init=20.0, seed=0)
+        >>> agent.credit_weights.round(3)[:4]  # Poisson(2): p(0), p(1), p(2), p(3)
+        array([0.135, 0.271, 0.271, 0.18 ])
+        >>> agent = agent.learn(3_000)
+        >>> agent.predict(8, deterministic=True)[0] in (0, 3)  # from the start: up or left
+        True
+    """
+
+    _hyperparameter_names = (*QLearning._hyperparameter_names, "delay", "max_delay")
+
+    @shares_hyperparameters
+    def __init__(
+        self,
+        env: gym.Env | str,
+        delay: Delay | float,
+        max_delay: int | None = None,
+        **hyperparameters: Any,
+    ):
+        self._set_credit(_check_delay(delay), max_delay)
+        super().__init__(env, **hyperparameters)
+
+    def _set_credit(self, delay: Delay, max_delay: Any) -> None:
+        self.max_delay = check_int("max_delay", max_delay, 0, optional=True)
+        weights = credit_weights(delay, self.max_delay)
+        self.delay = delay
+        self._weights = weights
+        lags = np.flatnonzero(weights > 0.0)
+        self._lags = lags.astype(np.int64)
+        self._lag_weights = weights[lags]
+        self._first_lag = int(lags[0])
+        self._first_weight = float(weights[lags[0]])
+        self._last_lag = int(lags[-1])
+        # how many lags can be credited at episode step t < the last lag: those with k <= t
+        self._credit_valid = np.searchsorted(
+            lags, np.arange(self._last_lag + 1), side="right"
+        ).tolist()
+
+    def _set_hyperparameters(
+        self, *, delay: Any = None, max_delay: Any = None, **kwargs: Any
+    ) -> None:
+        if delay is not None:  # loading: they come along
+            self._set_credit(_check_delay(delay), max_delay)
+        super()._set_hyperparameters(**kwargs)
+
+    def _get_hyperparameters(self) -> dict[str, Any]:
+        params = super()._get_hyperparameters()
+        params["delay"] = _describe(self.delay, self._weights)
+        return params
+
+    @property
+    def credit_weights(self) -> np.ndarray:
+        """``w(k)`` for ``k = 0..K``: the share of a received reward credited ``k`` steps back."""
+        return self._weights.copy()
+
+    # ------------------------------------------------------------------ model
+    def _setup_model(self) -> None:
+        super()._setup_model()
+        size = ring_size(self._last_lag + 1)
+        self._credit_mask = size - 1
+        self._credit_s = np.zeros(size, dtype=np.int64)
+        self._credit_s2 = np.zeros(size, dtype=np.int64)
+        self._credit_cell = np.zeros(size, dtype=np.int64)  # s·|A| + a
+
+    def compiled_tables(self) -> None:
+        """``None``: this rule has no compiled twin; ``learn()`` runs the Python loop."""
+        return None
+
+    # ------------------------------------------------------------------ learning
+    def _learn_transition(
+        self, s: int, a: int, r: float, s2: int, terminated: bool, truncated: bool
+    ) -> None:
+        t = self._t
+        j = t & self._credit_mask
+        self._credit_s[j] = s
+        self._credit_s2[j] = s2
+        self._credit_cell[j] = s * self.n_actions + a
+        n = self._lags.size if t >= self._last_lag else self._credit_valid[t]
+        if n == 1:
+            self._credit_one(t, r, terminated)
+        elif n:
+            self._credit_many(t, n, r, terminated)
+        self.num_timesteps += 1
+        self._t = 0 if (terminated or truncated) else t + 1
+
+    def _credit_one(self, t: int, r: float, terminated: bool) -> None:
+        """The update of the one creditable lag, the smallest (Python scalars, faster)."""
+        lag, v_max, v_cell, q_flat = self._first_lag, self._v_max, self._v_cell, self._q_flat
+        position = (t - lag) & self._credit_mask
+        s = self._credit_s.item(position)
+        cell = self._credit_cell.item(position)
+        bootstrap = 0.0 if terminated and lag == 0 else v_max.item(self._credit_s2.item(position))
+        target = r + self.gamma * bootstrap
+        old = q_flat.item(cell)
+        new = old + (self._alpha * self._first_weight) * (target - old)
+        q_flat[cell] = new
+        if new > v_max.item(s):
+            v_max[s] = new
+            v_cell[s] = cell
+        elif new < old and v_cell.item(s) == cell:
+            self._repair(np.array([s]))
+
+    def _credit_many(self, t: int, n: int, r: float, terminated: bool) -> None:
+        """The updates of the first ``n`` lags: all TD errors first, increments summed."""
+        positions = (t - self._lags[:n]) & self._credit_mask
+        states = self._credit_s[positions]
+        cells = self._credit_cell[positions]
+        bootstrap = self._v_max[self._credit_s2[positions]]
+        if terminated and self._first_lag == 0:
+            bootstrap[0] = 0.0  # only the current step can be terminal in an episode
+        errors = r + self.gamma * bootstrap - self._q_flat[cells]
+        np.add.at(self._q_flat, cells, (self._alpha * self._lag_weights[:n]) * errors)
+        self._repair(np.unique(states))

@@ -1,0 +1,294 @@
+"""Oracle Q-learning: every delayed reward credited to the transition that emitted it.
+
+The non-anonymous upper bound for delayed rewards. :class:`~delayed_rl.wrappers.RewardDelay`
+with ``record_arrivals=True`` reports, at every step, the list ``info["reward_arrivals"]`` of the
+``(emission_step, value)`` pairs delivered at that step, ``emission_step`` on the episode's clock.
+It holds one entry for *every* transition, zero rewards included, delivered once when the
+transition's delay has run out (under ``"flush"``, at the latest at the episode's last step; under
+``"carry"``, possibly in a later episode, with a negative ``emission_step``; under ``"drop"``,
+never if the episode ended first). So the agent knows each transition's own reward ``r_e``
+exactly, at the step it arrives.
+
+**Rule.** At each step the agent stores the transition ``(s_t, a_t, s′_t, terminated_t)``; then,
+for every arrival ``(e, r_e)`` of the step, in the order of the emission steps ``e``, it makes the
+textbook Q-learning update of transition ``e`` with its own reward::
+
+    Q(s_e, a_e) += α (r_e + γ (1 − terminated_e) max_a′ Q(s′_e, a′) − Q(s_e, a_e))
+
+with α and the bootstrap ``max Q(s′_e)`` as they are at the arrival step. Each transition is
+updated exactly once, when its reward is known: Q-learning on the transitions in the order their
+rewards arrive. Under no delay (``Constant(0)``) that is :class:`~delayed_rl.agents.QLearning`
+and under ``Constant(k)`` in a continuing task :class:`~delayed_rl.agents.FixedDelayQLearning`
+``(delay_estimate=k)``, update for update. A transition whose reward is dropped (``"drop"``) is
+never updated: its reward is unknown, and leaving it out biases nothing, since delays do not
+depend on rewards.
+
+**History.** The agent keeps the last ``delay_bound + 1`` transitions, ``delay_bound`` being how
+far the wrapper's delays reach (its ``max_delay``, else the distribution's largest value, else
+for an unbounded one such as Poisson(λ) ``λ + 10√λ + 20``, beyond which the tail weighs less
+than 1e-20: see :func:`delayed_rl._delay_line.delay_bound`). An arrival whose transition it does
+not hold (emitted before :meth:`~OracleQLearning.set_env`, or further back than that) is ignored.
+"""
+
+from __future__ import annotations
+
+import numbers
+from collections.abc import Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from delayed_rl._delay_line import delay_bound, ring_size
+from delayed_rl._validation import check_real
+from delayed_rl.agents.env_util import make_env
+from delayed_rl.agents.hyperparameters import shares_hyperparameters
+from delayed_rl.agents.qlearning import QLearning
+from delayed_rl.wrappers.reward_delay import RewardDelay
+
+__all__ = ["OracleQLearning", "find_reward_delay"]
+
+
+def find_reward_delay(env: gym.Env) -> Any:
+    """The outermost :class:`~delayed_rl.wrappers.RewardDelay` in ``env``'s wrapper stack, or ``None``.
+
+    The stack is walked from ``env`` down its ``.env`` chain (Gymnasium wrappers).
+    """
+    layer = env
+    while isinstance(layer, gym.Env):
+        if isinstance(layer, RewardDelay):
+            return layer
+        layer = getattr(layer, "env", None)
+    return None
+
+
+class OracleQLearning(QLearning):
+    """Q-learning that credits every delayed reward to the transition that emitted it.
+
+    The upper bound of what any delayed-reward agent can learn from the same experience: it reads
+    the wrapper's non-anonymous view ``info["reward_arrivals"]`` (who emitted each reward that
+    arrives) and makes, for each transition, one textbook Q-learning update with that
+    transition's own reward, when the reward arrives (see the module docstring for the exact
+    rule and the history kept). It never reads ``info["undelayed_reward"]``; the received reward
+    itself is not used either (the arrivals carry the values). ``q_table`` has shape
+    ``(|S|, 1, |A|)`` and acting is Q-learning's (ε-greedy, random tie-breaks), so
+    ``predict``, ``greedy_actions`` and ``save``/``load`` work as for
+    :class:`~delayed_rl.agents.QLearning`. ``learn()`` runs on the Python path only.
+
+    Args:
+        env: the training env, wrapped in ``RewardDelay(env, delay, record_arrivals=True)``
+            (anywhere in its wrapper stack). ``gym.make(id, reward_delay=...)`` does not record
+            arrivals: wrap ``gym.make(id)`` yourself.
+        **hyperparameters: the hyper-parameters every agent shares, by keyword: see
+            :class:`~delayed_rl.agents.base.TabularAgent`.
+
+    Raises:
+        ValueError: the env has no ``RewardDelay`` with ``record_arrivals=True`` (also from
+            :meth:`set_env` and ``load(path, env=...)``).
+
+    Example:
+        >>> import gymnasium as gym
+        >>> import delayed_rl
+        >>> from delayed_rl.agents import OracleQLearning
+        >>> from delayed_rl.delays import Poisson
+        >>> from delayed_rl.wrappers import RewardDelay
+        >>> grid = gym.make("delayed_rl/GridWorld-3x3-v0")
+        >>> env = RewardDelay(grid, Poisson(3.0), record_arrivals=True)
+        >>> agent = OracleQLearning(env, q_init=20.0, seed=0).learn(2_000)
+        >>> agent.predict(8, deterministic=True)[0] in (0, 3)  # from the start: up or left
+        True
+    """
+
+    @shares_hyperparameters
+    def __init__(self, env: gym.Env | str, **hyperparameters: Any):
+        super().__init__(env, **hyperparameters)
+
+    # ------------------------------------------------------------------ model
+    def _setup_model(self) -> None:
+        super()._setup_model()
+        self._allocate_history(1)  # set_env sizes it for the env's delays
+
+    def _allocate_history(self, length: int) -> None:
+        """An empty ring of at least ``length`` transitions; the clocks restart."""
+        size = ring_size(length)
+        self._ring_mask = size - 1
+        self._past_step = np.full(size, -1, dtype=np.int64)  # the transition's clock, -1: none
+        self._past_s2 = np.zeros(size, dtype=np.int64)
+        self._past_cell = np.zeros(size, dtype=np.int64)  # s·|A| + a
+        self._past_terminated = np.zeros(size, dtype=np.bool_)
+        self._clock = 0  # transitions learned since the history was allocated
+        self._episode_start = 0  # the clock at the current episode's first step
+        self._arrivals: Any = None  # the current step's arrivals, until it is learned
+
+    @property
+    def history_length(self) -> int:
+        """How many past transitions the agent holds (0 before it has an env)."""
+        return 0 if self.env is None else self._ring_mask + 1
+
+    def _end_episode(self) -> None:
+        # the next transition is step 0 of a new episode; older transitions are kept (under
+        # "carry" their rewards still come, with negative emission steps)
+        self._episode_start = self._clock
+        self._arrivals = None
+
+    def compiled_tables(self) -> None:
+        """``None``: the oracle has no compiled twin; ``learn()`` runs the Python loop."""
+        return None
+
+    # ------------------------------------------------------------------ env
+    def set_env(self, env: gym.Env | str) -> None:
+        """Train on ``env`` from now on (see ``TabularAgent.set_env``); the history restarts.
+
+        Raises:
+            TypeError: ``env`` is not an env, or its spaces are not ``Discrete``.
+            ValueError: its spaces differ from the agent's, or it has no ``RewardDelay`` with
+                ``record_arrivals=True``.
+        """
+        env = make_env(env)
+        wrapper = find_reward_delay(env)
+        if wrapper is None or not wrapper.record_arrivals:
+            found = (
+                "has no RewardDelay wrapper"
+                if wrapper is None
+                else "has a RewardDelay with record_arrivals=False"
+            )
+            raise ValueError(
+                f"{type(self).__name__} needs the reward-delay wrapper's record of who emitted "
+                f"each reward: wrap the env as RewardDelay(env, delay, record_arrivals=True) "
+                f"(gym.make(id, reward_delay=...) does not record arrivals: use "
+                f"RewardDelay(gym.make(id), delay, record_arrivals=True)); got {env}, which "
+                f"{found}"
+            )
+        super().set_env(env)
+        self._allocate_history(delay_bound(wrapper.delay, wrapper.max_delay) + 1)
+
+    # ------------------------------------------------------------------ learning
+    def _observe_info(self, info: dict[str, Any]) -> None:
+        """Take the step's arrivals from its ``info`` (the Python loop calls this first)."""
+        arrivals = info.get("reward_arrivals")
+        if arrivals is None:
+            raise ValueError(
+                "the step's info has no 'reward_arrivals': the env's RewardDelay must have "
+                "record_arrivals=True and be the wrapper whose info reaches the agent"
+            )
+        self._arrivals = arrivals
+
+    def update(
+        self,
+        obs: Any,
+        action: Any,
+        reward: float,
+        next_obs: Any,
+        terminated: bool = False,
+        truncated: bool = False,
+        *,
+        arrivals: Sequence[tuple[int, float]] | None = None,
+    ) -> None:
+        """One learning step from a transition you drove yourself, with its reward arrivals.
+
+        As ``TabularAgent.update``, plus the step's ``arrivals``: the oracle learns from them,
+        not from ``reward`` (which is checked but not used). The agent must have its env (the
+        ``RewardDelay`` sets how much history it keeps), and transitions must come in the order
+        they happened, episodes ending with ``terminated`` or ``truncated``, so that the episode
+        clock is the wrapper's.
+
+        Args:
+            obs: the observation the action was taken in.
+            action: the action taken.
+            reward: the reward received at this step.
+            next_obs: the observation after the action.
+            terminated: the episode ended in a terminal state.
+            truncated: the episode was cut short.
+            arrivals: the step's ``info["reward_arrivals"]``: ``(emission_step, value)`` pairs,
+                ``emission_step`` an integer on the episode's clock, at most this step's.
+
+        Raises:
+            TypeError: an argument has the wrong type, or ``arrivals`` is missing.
+            ValueError: an argument is outside its space, an arrival comes from a later step or
+                has a non-finite value, or the agent has no env.
+        """
+        if self.env is None:
+            raise ValueError(
+                f"{type(self).__name__}.update needs the agent's env (its RewardDelay sets the "
+                "history kept): pass env= to load() or call set_env(env) first"
+            )
+        checked = self._check_arrivals(arrivals)
+        self._arrivals = checked
+        try:
+            super().update(obs, action, reward, next_obs, terminated, truncated)
+        finally:
+            self._arrivals = None
+
+    def _check_arrivals(self, arrivals: Any) -> list[tuple[int, float]]:
+        """``arrivals`` as a list of ``(int, float)`` pairs, checked against the episode's clock."""
+        allowed = "a sequence of (emission_step, value) pairs, the step's info['reward_arrivals']"
+        if arrivals is None:
+            raise TypeError(f"{type(self).__name__}.update needs arrivals: {allowed}")
+        if isinstance(arrivals, (str, bytes)) or not isinstance(arrivals, Sequence):
+            raise TypeError(f"arrivals must be {allowed}, got {arrivals!r}")
+        step = self._clock - self._episode_start
+        checked = []
+        for i, pair in enumerate(arrivals):
+            if isinstance(pair, (str, bytes)) or not isinstance(pair, Sequence) or len(pair) != 2:
+                raise TypeError(
+                    f"arrivals[{i}] must be an (emission_step, value) pair, got {pair!r}"
+                )
+            emitted, value = pair
+            if isinstance(emitted, (bool, np.bool_)) or not isinstance(emitted, numbers.Integral):
+                raise TypeError(
+                    f"arrivals[{i}][0] must be an integer (the emission step), got {emitted!r} "
+                    f"({type(emitted).__name__})"
+                )
+            if emitted > step:
+                raise ValueError(
+                    f"arrivals[{i}][0] must be an emission step <= {step} (this step's), "
+                    f"got {emitted!r}"
+                )
+            checked.append((int(emitted), check_real(f"arrivals[{i}][1]", value)))
+        return checked
+
+    def _learn_transition(
+        self, s: int, a: int, r: float, s2: int, terminated: bool, truncated: bool
+    ) -> None:
+        arrivals, self._arrivals = self._arrivals, None
+        if arrivals is None:
+            raise RuntimeError(
+                f"{type(self).__name__} got no reward arrivals for this step: learn() hands "
+                "them over from info, update() takes them as arrivals="
+            )
+        clock, mask = self._clock, self._ring_mask
+        j = clock & mask
+        self._past_step[j] = clock
+        self._past_s2[j] = s2
+        self._past_cell[j] = s * self.n_actions + a
+        self._past_terminated[j] = terminated
+        if arrivals:
+            self._credit(sorted(arrivals) if len(arrivals) > 1 else arrivals)
+        self.num_timesteps += 1
+        self._clock = clock + 1
+        if terminated or truncated:
+            self._episode_start = self._clock
+
+    def _credit(self, arrivals: Sequence[tuple[int, float]]) -> None:
+        """The update of each arrival's transition, one after the other (see the module)."""
+        start, mask, n_actions = self._episode_start, self._ring_mask, self.n_actions
+        steps, v_max, v_cell, q_flat = self._past_step, self._v_max, self._v_cell, self._q_flat
+        alpha, gamma = self._alpha, self.gamma
+        for emitted, value in arrivals:
+            clock = start + emitted
+            j = clock & mask
+            if clock < 0 or steps.item(j) != clock:
+                continue  # a transition the agent does not hold
+            steps[j] = -1  # each transition has one reward: it is updated once
+            cell = self._past_cell.item(j)
+            s = cell // n_actions
+            bootstrap = 0.0 if self._past_terminated.item(j) else v_max.item(self._past_s2.item(j))
+            target = value + gamma * bootstrap
+            old = q_flat.item(cell)
+            new = old + alpha * (target - old)
+            q_flat[cell] = new
+            if new > v_max.item(s):
+                v_max[s] = new
+                v_cell[s] = cell
+            elif new < old and v_cell.item(s) == cell:
+                self._repair(np.array([s]))
