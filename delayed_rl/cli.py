@@ -7,8 +7,9 @@
 - ``delayed-rl reproduce``: every experiment.
 
 Exit codes: 0 success, 2 bad usage (unknown names, bad values; argparse's usage and one
-``error:`` line), 1 a failure while running (a missing or unreadable model file, an env the
-agent cannot use, ...), reported as one ``error: ...`` line on stderr, without a traceback.
+``error:`` line), 1 a failure while running (a missing, corrupt or oversized model file, an env
+the agent cannot use, tables over ``delayed_rl.agents.mmq.MAX_TABLE_BYTES``, running out of
+memory, ...), reported as one ``error: ...`` line on stderr, without a traceback.
 
 Option values are checked by :mod:`delayed_rl._validation`, the library's own checks, so the
 command line and the Python API refuse the same values with the same words.
@@ -20,6 +21,7 @@ import argparse
 import difflib
 import sys
 import time
+import zlib
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -83,6 +85,29 @@ EPISODES = 10
 
 class CommandError(Exception):
     """A failure while running a command: reported as ``error: ...`` with exit code 1."""
+
+
+#: What a command may fail with, reported as one ``error:`` line and exit code 1 (a corrupt file
+#: or a request too large for the machine included: ``zlib.error``, ``MemoryError``, ...).
+FAILURES = (
+    CommandError,
+    OSError,
+    ValueError,
+    TypeError,
+    RuntimeError,
+    OverflowError,
+    MemoryError,
+    zlib.error,
+    gym.error.Error,
+)
+
+
+def _one_line(error: BaseException) -> str:
+    """``error`` as the text of one ``error:`` line."""
+    text = " ".join(str(error).split()) or type(error).__name__
+    if isinstance(error, MemoryError):
+        return f"out of memory: {text}"
+    return text
 
 
 class _DeprecatedAlias(argparse.Action):
@@ -458,8 +483,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     level, gym.logger.min_level = gym.logger.min_level, 40  # Gymnasium's warnings stay out
     try:
         return args.run(args)
-    except (CommandError, OSError, ValueError, TypeError, RuntimeError, gym.error.Error) as error:
-        print(f"error: {error}", file=sys.stderr)
+    except FAILURES as error:
+        print(f"error: {_one_line(error)}", file=sys.stderr)
         return 1
     finally:
         gym.logger.min_level = level  # main() may be called from a program: leave it as it was

@@ -378,3 +378,64 @@ def test_works_without_stable_baselines3_or_tqdm():
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip() == "ok"
     assert "100%" in result.stderr and "500/500 steps" in result.stderr
+
+
+class HugeEnv(gym.Env):
+    """10⁸ states: its spaces are cheap, a Q-table of it is not."""
+
+    observation_space = spaces.Discrete(10**8)
+    action_space = spaces.Discrete(4)
+
+
+@pytest.mark.parametrize(
+    ("make", "message"),
+    [
+        (
+            lambda: FixedDelayQLearning(GRID5, delay_estimate=10**9),
+            r"delay_estimate must keep the tables within MAX_TABLE_BYTES = 1 GiB .*got 1000000000",
+        ),
+        (
+            lambda: MMQ(GRID5, max_delay_estimate=10**7),
+            r"max_delay_estimate must keep the tables .*got 10000000: 10000001 delay model",
+        ),
+        (
+            lambda: MMQ(GRID5, max_delay_estimate=10**30, delay_step=10**29),
+            r"max_delay_estimate must keep the tables .* GiB",
+        ),
+        (
+            lambda: MMQ(GRID5, delay_estimates=[0, 10**30]),
+            r"delay_estimates must keep the tables .*got \[0, 10+\]",
+        ),
+        (
+            lambda: MMQ(GRID5, delay_estimates=range(0, 10**8, 10**3)),
+            r"delay_estimates must keep the tables .*got \[0, \.\.\., 99999000\] \(100000 values\)",
+        ),
+        (
+            lambda: MMQ(HugeEnv()),
+            r"MultipleModelQLearning\(max_delay_estimate=50\) on an env of 100000000 states and 4 "
+            r"actions needs 15\d GiB of tables .*over MAX_TABLE_BYTES",
+        ),
+        (lambda: QLearning(HugeEnv()), r"^QLearning on an env of 100000000 states .* 4.4\d GiB"),
+    ],
+)
+def test_tables_over_the_limit_are_refused_before_allocating(make, message):
+    import tracemalloc
+
+    tracemalloc.start()
+    try:
+        with pytest.raises(ValueError, match=message):
+            make()
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 64 * 2**20
+
+
+def test_the_table_limit_fits_the_thesis_and_far_larger():
+    from delayed_rl.agents.mmq import MAX_TABLE_BYTES, table_bytes
+
+    assert table_bytes(81, 4, 51, 50) < 2**18  # the thesis's 9×9 grid world, Λ = 0..50
+    assert table_bytes(10**5, 10, 101, 100) < MAX_TABLE_BYTES  # 10⁵ states, 101 delay models
+    agent = MMQ("delayed_rl/GridWorld-9x9-v0", max_delay_estimate=50)
+    assert agent.q_table.nbytes == 81 * 51 * 4 * 8
+    QLearning(DiscretizeObservation(gym.make("MountainCar-v0"), bins=300))  # 90 000 states

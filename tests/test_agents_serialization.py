@@ -182,7 +182,7 @@ def metadata_with(path, **changes):
             lambda p, t: rewrite(p, t, delay_estimates=np.arange(1, 7)),
             "does not match the metadata",
         ),
-        (lambda p, t: rewrite(p, t, rng_block=None), "malformed training state"),
+        (lambda p, t: rewrite(p, t, rng_block=None), "rng_block must be .*, got missing"),
         (
             lambda p, t: rewrite(
                 p, t, metadata=metadata_with(p, observation_space={"type": "Box"})
@@ -223,3 +223,27 @@ def test_pickled_arrays_are_never_loaded(tmp_path):
         np.savez(file, **arrays)
     with pytest.raises(ValueError, match="allow_pickle=False"):
         MMQ.load(target)
+
+
+def test_sb3_eval_callback_best_model_loads_by_its_sb3_name(tmp_path):
+    """EvalCallback saves ``best_model`` (written ``best_model.npz``); ``.zip`` finds it.
+
+    SB3 users load ``best_model.zip``; ``best_model`` works too.
+    """
+    from stable_baselines3.common.callbacks import EvalCallback
+    from stable_baselines3.common.monitor import Monitor
+
+    from delayed_rl.envs.gridworld import GridWorldEnv
+
+    agent = QLearning(GridWorldEnv(size=3, max_steps=30), q_init=20.0, seed=0)
+    callback = EvalCallback(
+        Monitor(GridWorldEnv(size=3, max_steps=30)),
+        eval_freq=200,
+        n_eval_episodes=1,
+        best_model_save_path=str(tmp_path),
+        verbose=0,
+    )
+    agent.learn(600, callback=callback)
+    assert [p.name for p in tmp_path.iterdir()] == ["best_model.npz"]
+    for name in ("best_model.zip", "best_model", "best_model.npz"):
+        assert QLearning.load(tmp_path / name).num_timesteps in (200, 400, 600)

@@ -6,6 +6,8 @@
 from __future__ import annotations
 
 import re
+import tracemalloc
+import zipfile
 
 import gymnasium as gym
 import numpy as np
@@ -138,6 +140,8 @@ def test_evaluate_with_episodes_on_a_continuing_env_fails_clearly(tmp_path, caps
         ("bench delay-sweep --workers two", "--workers: must be an integer >= 1, got 'two' (str)"),
         ("bench delay-sweep --backend spark", "argument --backend: invalid choice: 'spark'"),
         ("reproduce --seed -3", "argument --seed: must be an integer >= 0, got -3"),
+        ("bench delay-sweep --seed -5", "argument --seed: must be an integer >= 0, got -5"),
+        ("bench --seed -5 delay-sweep", "argument --seed: must be an integer >= 0, got -5"),
     ],
 )
 def test_bad_usage_exits_with_code_2(command, message, capsys):
@@ -169,7 +173,7 @@ def test_runtime_failures_exit_with_code_1_and_one_line(tmp_path, capsys):
     missing = ["evaluate", str(tmp_path / "missing"), "--env", GRID, "--steps", "5"]
     assert main(missing) == 1
     err = capsys.readouterr().err
-    assert err == f"error: no model file at {tmp_path / 'missing'} (nor {tmp_path}/missing.npz)\n"
+    assert err == f"error: no model file at {tmp_path / 'missing'} (nor missing.npz, missing.zip)\n"
 
     assert main(_train(tmp_path, "--agent", "q", "--steps", "50")) == 0
     capsys.readouterr()
@@ -199,3 +203,69 @@ def test_train_fails_before_training_when_it_cannot_save(tmp_path, capsys):
     argv[argv.index("--save") + 1] = str(blocker / "agent")
     assert main(argv) == 1
     assert capsys.readouterr().err.startswith("error: cannot create the folder of --save")
+
+
+def _one_error_line(capsys) -> str:
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and err.count("\n") == 1 and "Traceback" not in err, err
+    return err
+
+
+def _corrupt(path, target):
+    """``path`` with garbage in the middle of its deflated q_table (zlib cannot inflate it)."""
+    data = bytearray(path.read_bytes())
+    with zipfile.ZipFile(path) as archive:
+        info = archive.getinfo("q_table.npy")
+    start = info.header_offset + 30 + len(info.filename) + len(info.extra)
+    data[start + 2 : start + 60] = b"\xff" * 58
+    target.write_bytes(bytes(data))
+    return target
+
+
+def test_a_corrupt_model_file_exits_1_with_one_line(tmp_path, capsys):
+    assert main(_train(tmp_path, "--agent", "q", "--steps", "50")) == 0
+    capsys.readouterr()
+    bad = _corrupt(tmp_path / "agent.npz", tmp_path / "bad.npz")
+    assert main(["evaluate", str(bad), "--env", GRID, "--steps", "5"]) == 1
+    assert str(bad) in _one_error_line(capsys)
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ("--agent fixed --delay-estimate 1000000000", "delay_estimate must keep the tables"),
+        ("--agent mmq --max-delay-estimate 10000000", "max_delay_estimate must keep the tables"),
+    ],
+)
+def test_tables_too_large_are_refused_before_allocating(tmp_path, capsys, options, message):
+    tracemalloc.start()
+    try:
+        code = main(_train(tmp_path, *options.split()))
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert code == 1 and peak < 64 * 2**20
+    err = _one_error_line(capsys)
+    assert message in err and "MAX_TABLE_BYTES" in err and "GiB" in err
+    assert not (tmp_path / "agent.npz").exists()
+
+
+@pytest.mark.parametrize(
+    "error",
+    [
+        MemoryError("Unable to allocate 7.28 TiB for an array\nwith shape (10**12,)"),
+        MemoryError(),
+        OverflowError("Python int too large to convert to C long"),
+        RecursionError("maximum recursion depth exceeded"),
+    ],
+    ids=["memory", "memory-no-message", "overflow", "recursion"],
+)
+def test_any_failure_while_running_exits_1_with_one_line(tmp_path, capsys, monkeypatch, error):
+    def fail(*args, **kwargs):
+        raise error
+
+    monkeypatch.setattr(QLearning, "learn", fail)
+    assert main(_train(tmp_path, "--agent", "q")) == 1
+    err = _one_error_line(capsys)
+    if isinstance(error, MemoryError):
+        assert err.startswith("error: out of memory")

@@ -149,13 +149,9 @@ def step_locals(
 def python_loop(agent: Any, run: LearnRun) -> None:
     """Take ``run.n_steps`` steps of ``agent.env``, learning from each as it happens.
 
-    Each step: ε-greedy choice (``agent._choose``), ``env.step``, one learning step
-    (``agent._learn_transition``), the record, the callback; the env is reset when an episode
-    ends. The ε and α schedules are evaluated per step unless constant. The running sums are
-    kept in locals (the loop is the Python path's hot spot) and written back at the end.
-
-    An agent that defines ``_observe_info(info)`` is handed each step's ``info`` just before
-    that step's ``_learn_transition`` (the oracle reads ``info["reward_arrivals"]`` so).
+    Each step: ``agent._choose``, ``env.step``, ``agent._observe_info(info)`` if the agent has it
+    (the oracle reads the arrivals there), ``agent._learn_transition``, the record, the callback;
+    an episode's end resets the env. Running sums live in locals (the hot spot), written back.
     """
     env, stats, callback, log = agent.env, agent._statistics, run.callback, run.log
     obs_start, action_start = agent._obs_index.start, agent._action_index.start

@@ -26,8 +26,10 @@ class UniformStream:
     """
 
     __slots__ = ("rng", "block", "i", "block_size")
+    BLOCK_SIZE = 1024
+    """The default ``block_size``: the most numbers a stream holds drawn but not handed out."""
 
-    def __init__(self, rng: np.random.Generator, block_size: int = 1024):
+    def __init__(self, rng: np.random.Generator, block_size: int = BLOCK_SIZE):
         self.rng = rng
         self.block: list[float] = []
         self.i = 0

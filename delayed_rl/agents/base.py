@@ -11,7 +11,8 @@ made and checked in :mod:`~delayed_rl.agents.env_util`. A subclass supplies the 
   ``learn()`` and ``update()``; it advances ``num_timesteps``;
 - ``_greedy_actions(states)``: the deterministic policy;
 - ``_end_episode()``: forget the episode's history;
-- ``_get_state_arrays()`` / ``_set_state_arrays(arrays, where)``: what a model file holds;
+- ``_get_state_arrays()`` / ``_set_state_arrays(arrays, where)``: what a model file holds
+  (optional, see :mod:`._persistence`: ``_state_array_specs``, ``_derived``, ``_rebuild_derived``);
 - ``n_models`` (default 1): how many delay models it acts from, for the acting counts;
 - :meth:`~TabularAgent.compiled_tables` (optional): the arrays of its compiled twin.
 
@@ -64,7 +65,7 @@ RECORD_KEYS = tuple(RECORD_DTYPES)
 """The arrays of ``agent.training_log`` after ``learn(..., record=True)``."""
 
 
-class TabularAgent(ABC):
+class TabularAgent(_persistence.CopyProtocol, ABC):
     """Shell of the tabular agents: stable-baselines3's names and semantics on a Q-table.
 
     Args:
@@ -89,6 +90,11 @@ class TabularAgent(ABC):
         training_log: after ``learn(..., record=True)``, one array per step for each key of
             :data:`RECORD_KEYS`.
         last_learn_path: ``"fused"`` or ``"python"``: the loop the last ``learn()`` ran on.
+
+    ``copy.deepcopy`` and ``pickle`` give an independent agent that resumes exactly (own tables,
+    streams, env, compiled run); what cannot be copied is dropped: an env (with a warning: call
+    ``set_env``), the compiled run (a new one starts), a logger (a default one replaces it).
+    ``copy.copy`` shares everything, tables and env included: train only one of the two.
     """
 
     _hyperparameter_names: ClassVar[tuple[str, ...]] = HYPERPARAMETER_NAMES
@@ -410,12 +416,10 @@ class TabularAgent(ABC):
         """Save the agent to a ``.npz`` file (arrays plus JSON metadata, no pickles).
 
         ``path`` is used as given when it has a suffix (SB3's ``CheckpointCallback`` passes
-        ``.zip`` names: the file is still an ``.npz`` archive); otherwise ``.npz`` is appended.
-        The file holds the learned arrays, the acting counts, both random streams and the
-        training clock, so a loaded agent resumes exactly.
-
-        Returns:
-            The path written.
+        ``.zip`` names: the file is still an ``.npz`` archive); otherwise ``.npz`` is appended
+        (``load`` finds it by either name). The file holds the learned arrays, the acting counts,
+        both random streams and the training clock, so a loaded agent resumes exactly. Returns
+        the path written; raises ``ValueError`` above ``save_util.MAX_MODEL_BYTES``.
         """
         return _persistence.save(self, path)
 
@@ -429,7 +433,9 @@ class TabularAgent(ABC):
         """Load an agent that :meth:`save` wrote, as the class that saved it.
 
         Args:
-            path: the file (``.npz`` is tried when the path as given does not exist).
+            path: the file: as given, else with ``.npz`` or ``.zip`` appended, else with its
+                ``.zip``/``.npz`` suffix swapped (``load("best_model.zip")`` finds the
+                ``best_model.npz`` that SB3's ``EvalCallback`` had this agent write).
             env: the env to train on next (its spaces must match the saved ones); ``None``
                 gives an agent that can predict and be given an env later with ``set_env``.
             custom_objects: constructor arguments to override, e.g. a ``learning_rate``
@@ -437,17 +443,13 @@ class TabularAgent(ABC):
 
         Raises:
             FileNotFoundError: there is no such file.
-            ValueError: the file is corrupt, not a delayed-rl agent, holds a class that is not
-                ``cls`` or a subclass of it (or is not defined in this process: import its
-                module first), or ``env``'s spaces do not match (the message says which).
+            ValueError: the file is corrupt (every field is checked, sizes before allocating;
+                one message names the file and the field), too large (``save_util``'s
+                ``MAX_MODEL_BYTES``), holds a class that is not ``cls`` or a subclass of it (or
+                is not defined in this process: import its module first), or ``env``'s spaces
+                do not match (the message says which).
         """
-        agent, where = _persistence.load_as(cls, path, custom_objects)
-        if env is not None:
-            try:
-                agent.set_env(env)
-            except ValueError as error:
-                raise ValueError(f"cannot load {where} into this env: {error}") from None
-        return agent
+        return _persistence.load_as(cls, path, custom_objects, env)
 
 
 load_agent = TabularAgent.load

@@ -18,6 +18,7 @@ The agent keeps one Q-table per delay hypothesis λ̂ ∈ Λ, stacked as ``q_tab
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Sequence
 from typing import Any
 
@@ -31,16 +32,119 @@ from delayed_rl.agents._streams import UniformStream
 from delayed_rl.agents.base import TabularAgent
 from delayed_rl.agents.hyperparameters import shares_hyperparameters
 
-__all__ = ["MMQ", "MultipleModelQLearning", "greedy_actions"]
+__all__ = ["MAX_TABLE_BYTES", "MMQ", "MultipleModelQLearning", "greedy_actions", "table_bytes"]
 
 DEFAULT_MAX_DELAY_ESTIMATE = 50  # the thesis's λ̂max in the 9×9 grid world (section 5.1.1)
+MAX_TABLE_BYTES = 2**30
+"""The most memory an agent's tables may take (1 GiB), refused at construction above it.
+
+The tables: the Q-table (|S|·|Λ|·|A| float64), its cache, the episode histories of both training
+paths (rings of the next power of two above max Λ) and the per-model arrays (see
+:func:`table_bytes`). The thesis's 9×9 grid world with |Λ| = 51 takes 0.2 MiB; 10⁵ states × 101
+delay models × 10 actions, 0.8 GiB. A request above (``FixedDelayQLearning(delay_estimate=10**9)``,
+``MMQ(max_delay_estimate=10**7)``) is refused with the size it would take, before anything is
+allocated; a model file declaring such tables is refused the same way. Raise it (with
+``save_util.MAX_MODEL_BYTES``, so files load back) for larger tables.
+"""
 _SMALL_ROW = 16  # rows up to this many entries are scanned in Python (cheaper than numpy calls)
 
 
+def table_bytes(n_states: int, n_actions: int, n_models: int, largest_delay: int) -> int:
+    """The bytes MMQ's tables take (to within a few per cent), before any is allocated.
+
+    Args:
+        n_states: |S|.
+        n_actions: |A|.
+        n_models: |Λ|.
+        largest_delay: max Λ.
+    """
+    history = ring_size(largest_delay + 1)
+    # Q (float64), cache (max and cell), per model (Λ, offsets, counts), histories (Python 3
+    # int64 rings, compiled 3 int64 + 1 bool), the valid-model count of each early episode step
+    return (
+        8 * n_states * n_models * n_actions
+        + 16 * n_states
+        + 32 * n_models
+        + 49 * history
+        + 8 * (largest_delay + 1)
+    )
+
+
+def check_table_size(
+    name: str | None,
+    value: Any,
+    n_models: int,
+    largest: int,
+    env: tuple[Any, int, int] | None = None,
+) -> None:
+    """Refuse tables above :data:`MAX_TABLE_BYTES`, before any is allocated.
+
+    Args:
+        name: the argument that sets Λ (``None``: none, as ``QLearning``'s).
+        value: its value, for the message.
+        n_models: |Λ|.
+        largest: max Λ.
+        env: ``(agent class, |S|, |A|)``; ``None`` checks Λ alone (one state, one action).
+
+    Raises:
+        ValueError: the message names the argument and the memory the tables would take.
+    """
+    n_states, n_actions = (1, 1) if env is None else env[1:]
+    size = table_bytes(n_states, n_actions, n_models, largest)
+    if size <= MAX_TABLE_BYTES:
+        return
+    limit = (
+        f"MAX_TABLE_BYTES = {MAX_TABLE_BYTES / 2**30:g} GiB (delayed_rl.agents.mmq.MAX_TABLE_BYTES)"
+    )
+    models = f"{n_models} delay model(s) up to {largest} steps"
+    if env is None:
+        raise ValueError(
+            f"{name} must keep the tables within {limit}, got {value}: {models} would take "
+            f"{size / 2**30:.3g} GiB"
+        )
+    agent = env[0].__name__ + ("" if name is None else f"({name}={value})")
+    raise ValueError(
+        f"{agent} on an env of {n_states} states and {n_actions} actions needs "
+        f"{size / 2**30:.3g} GiB of tables ({models}), over {limit}: use fewer delay estimates "
+        "or a smaller state space"
+    )
+
+
+def _delay_argument_name(cls: type, delay_estimates: Any) -> str | None:
+    """The constructor argument of ``cls`` that set Λ, for messages (``None``: none sets it).
+
+    ``delay_estimates`` when given and ``cls`` takes it (MMQ), ``delay_estimate`` when ``cls``
+    takes that instead (``FixedDelayQLearning``), none when ``cls`` fixes Λ itself
+    (``QLearning``); else ``max_delay_estimate``.
+    """
+    if delay_estimates is None:
+        return "max_delay_estimate"
+    parameters = inspect.signature(cls).parameters
+    for name in ("delay_estimates", "delay_estimate"):
+        if name in parameters:
+            return name
+    return None
+
+
+def _shown(values: Any) -> str:
+    """``values`` for a message, shortened when long."""
+    values = list(values)
+    return (
+        repr(values)
+        if len(values) <= 8
+        else f"[{values[0]}, ..., {values[-1]}] ({len(values)} values)"
+    )
+
+
 def check_delay_estimates(
-    max_delay_estimate: Any, delay_step: Any, delay_estimates: Any
+    max_delay_estimate: Any, delay_step: Any, delay_estimates: Any, name: str | None = None
 ) -> np.ndarray:
     """Λ from MMQ's three ways of giving it, validated; sorted ``int64`` array of distinct values.
+
+    Λ must fit :data:`MAX_TABLE_BYTES` (checked before anything is allocated, with one state
+    and one action; the constructor checks again with the env's spaces). ``name`` is the
+    argument a message about it names when ``delay_estimates`` is given (default
+    ``"delay_estimates"``; ``"delay_estimate"`` shows its one value).
 
     Raises:
         TypeError, ValueError: an invalid or contradictory argument (the message names it).
@@ -66,13 +170,18 @@ def check_delay_estimates(
             )
         if len(set(values)) != len(values):
             raise ValueError(f"delay_estimates must be distinct, got {delay_estimates!r}")
-        return np.array(sorted(int(v) for v in values), dtype=np.int64)
+        name = name or "delay_estimates"
+        value = values[0] if name == "delay_estimate" else _shown(values)
+        check_table_size(name, value, len(values), max(values))
+        return np.array(sorted(values), dtype=np.int64)
     if max_delay_estimate is None:
         max_delay_estimate = DEFAULT_MAX_DELAY_ESTIMATE
     if delay_step is None:
         delay_step = 1
     max_delay_estimate = check_int("max_delay_estimate", max_delay_estimate, 0)
     delay_step = check_int("delay_step", delay_step, 1)
+    largest = max_delay_estimate - max_delay_estimate % delay_step
+    check_table_size("max_delay_estimate", max_delay_estimate, largest // delay_step + 1, largest)
     return np.arange(0, max_delay_estimate + 1, delay_step, dtype=np.int64)
 
 
@@ -130,6 +239,7 @@ class MultipleModelQLearning(TabularAgent):
     """
 
     _hyperparameter_names = (*TabularAgent._hyperparameter_names, "delay_estimates")
+    _derived = (*TabularAgent._derived, "_q_rows", "_q_flat")  # views of _q: rebuilt on copies
 
     @shares_hyperparameters
     def __init__(
@@ -140,9 +250,16 @@ class MultipleModelQLearning(TabularAgent):
         delay_estimates: Sequence[int] | None = None,
         **hyperparameters: Any,
     ):
+        name = _delay_argument_name(type(self), delay_estimates)
         self._delay_estimates = check_delay_estimates(
-            max_delay_estimate, delay_step, delay_estimates
+            max_delay_estimate, delay_step, delay_estimates, name
         )
+        value: Any = _shown(self.delay_estimates)
+        if name == "max_delay_estimate":
+            value = self.delay_estimates[-1] if max_delay_estimate is None else max_delay_estimate
+        elif name == "delay_estimate":
+            value = self.delay_estimates[0]
+        self._delay_argument = (name, value)  # what a message about the tables' size names
         super().__init__(env, **hyperparameters)
 
     # ------------------------------------------------------------------ model
@@ -158,12 +275,23 @@ class MultipleModelQLearning(TabularAgent):
         view.flags.writeable = False
         return view
 
+    def _state_array_specs(self) -> dict[str, tuple[tuple[int, ...], Any]]:
+        n_models = len(self._delay_estimates)
+        return {
+            "q_table": ((self.n_states, n_models, self.n_actions), np.float64),
+            "delay_estimates": ((n_models,), np.int64),
+        }
+
     def _setup_model(self) -> None:
         n_models = len(self._delay_estimates)
+        name, value = getattr(
+            self, "_delay_argument", ("delay_estimates", _shown(self.delay_estimates))
+        )
+        env = (type(self), self.n_states, self.n_actions)
+        check_table_size(name, value, n_models, int(self._delay_estimates[-1]), env)
         self.n_models = n_models
         self._q = np.full((self.n_states, n_models, self.n_actions), self.q_init)
-        self._q_rows = self._q.reshape(self.n_states, n_models * self.n_actions)  # views
-        self._q_flat = self._q.reshape(-1)
+        self._rebuild_derived()
         self._row_size = n_models * self.n_actions
         self._model_offset = np.arange(n_models, dtype=np.int64) * self.n_actions
         self._rebuild_cache()
@@ -180,6 +308,11 @@ class MultipleModelQLearning(TabularAgent):
         ).tolist()
         self._has_zero_estimate = bool(self._delay_estimates[0] == 0)
         self._t = 0
+
+    def _rebuild_derived(self) -> None:
+        super()._rebuild_derived()
+        self._q_rows = self._q.reshape(self.n_states, self.n_models * self.n_actions)  # views
+        self._q_flat = self._q.reshape(-1)
 
     def _rebuild_cache(self) -> None:
         """Recompute every state's max over (λ̂, a) (``_v_max``) and its cell (``_v_cell``)."""
@@ -365,8 +498,13 @@ class MultipleModelQLearning(TabularAgent):
         self._rebuild_cache()
 
     def _set_hyperparameters(self, *, delay_estimates: Any = None, **kwargs: Any) -> None:
+        """Also Λ, when loading (the constructor sets it itself and passes ``None``)."""
         if delay_estimates is not None:
             self._delay_estimates = check_delay_estimates(None, None, delay_estimates)
+        elif "_delay_estimates" not in vars(self):
+            raise TypeError(
+                "delay_estimates must be a sequence of distinct integers >= 0, got None"
+            )
         super()._set_hyperparameters(**kwargs)
 
 
