@@ -245,20 +245,12 @@ class ExpectedCreditQLearning(QLearning):
 
     def _credit_one(self, t: int, r: float, terminated: bool) -> None:
         """The update of the one creditable lag, the smallest (Python scalars, faster)."""
-        lag, v_max, v_cell, q_flat = self._first_lag, self._v_max, self._v_cell, self._q_flat
+        lag, v_max = self._first_lag, self._v_max
         position = (t - lag) & self._credit_mask
         s = self._credit_s.item(position)
         cell = self._credit_cell.item(position)
         bootstrap = 0.0 if terminated and lag == 0 else v_max.item(self._credit_s2.item(position))
-        target = r + self.gamma * bootstrap
-        old = q_flat.item(cell)
-        new = old + (self._alpha * self._first_weight) * (target - old)
-        q_flat[cell] = new
-        if new > v_max.item(s):
-            v_max[s] = new
-            v_cell[s] = cell
-        elif new < old and v_cell.item(s) == cell:
-            self._repair(np.array([s]))
+        self._write_entry(s, cell, r + self.gamma * bootstrap, self._alpha * self._first_weight)
 
     def _credit_many(self, t: int, n: int, r: float, terminated: bool) -> None:
         """The updates of the first ``n`` lags: all TD errors first, increments summed."""

@@ -426,7 +426,7 @@ class MultipleModelQLearning(TabularAgent):
 
     def _update_first_model(self, position: int, r: float, terminated: bool) -> None:
         """:meth:`_update_models` for the one model that can learn (Python scalars, faster)."""
-        v_max, v_cell, q_flat = self._v_max, self._v_cell, self._q_flat
+        v_max = self._v_max
         s = self._hist_s.item(position)
         cell = self._hist_cell.item(position)
         bootstrap = (
@@ -434,14 +434,22 @@ class MultipleModelQLearning(TabularAgent):
             if terminated and self._has_zero_estimate
             else v_max.item(self._hist_s2.item(position))
         )
-        target = r + self.gamma * bootstrap
+        self._write_entry(s, cell, r + self.gamma * bootstrap, self._alpha)
+
+    def _write_entry(self, s: int, cell: int, target: float, rate: float) -> None:
+        """``Q[cell] += rate · (target − Q[cell])`` for an entry of state ``s``, cache kept exact.
+
+        The one-entry update every single-table rule shares (Q-learning, fixed delay, the oracle,
+        expected credit): Python scalars, cheaper than numpy calls for one entry.
+        """
+        q_flat, v_max = self._q_flat, self._v_max
         old = q_flat.item(cell)
-        new = old + self._alpha * (target - old)
+        new = old + rate * (target - old)
         q_flat[cell] = new
         if new > v_max.item(s):
             v_max[s] = new
-            v_cell[s] = cell
-        elif new < old and v_cell.item(s) == cell:
+            self._v_cell[s] = cell
+        elif new < old and self._v_cell.item(s) == cell:
             self._repair(np.array([s]))
 
     def _repair(self, states: np.ndarray) -> None:

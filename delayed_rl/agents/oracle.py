@@ -272,7 +272,7 @@ class OracleQLearning(QLearning):
     def _credit(self, arrivals: Sequence[tuple[int, float]]) -> None:
         """The update of each arrival's transition, one after the other (see the module)."""
         start, mask, n_actions = self._episode_start, self._ring_mask, self.n_actions
-        steps, v_max, v_cell, q_flat = self._past_step, self._v_max, self._v_cell, self._q_flat
+        steps, v_max = self._past_step, self._v_max
         alpha, gamma = self._alpha, self.gamma
         for emitted, value in arrivals:
             clock = start + emitted
@@ -283,12 +283,4 @@ class OracleQLearning(QLearning):
             cell = self._past_cell.item(j)
             s = cell // n_actions
             bootstrap = 0.0 if self._past_terminated.item(j) else v_max.item(self._past_s2.item(j))
-            target = value + gamma * bootstrap
-            old = q_flat.item(cell)
-            new = old + alpha * (target - old)
-            q_flat[cell] = new
-            if new > v_max.item(s):
-                v_max[s] = new
-                v_cell[s] = cell
-            elif new < old and v_cell.item(s) == cell:
-                self._repair(np.array([s]))
+            self._write_entry(s, cell, value + gamma * bootstrap, alpha)
