@@ -46,7 +46,7 @@ needs a shorter ``max_delay``, and the constructor says which.
 def _lag_weighted_counts(cooc, weights):
     """``Σ_m weights[m] · cooc[m]`` for ``m >= 1``, and ``weights[0]`` times ``cooc[0]``'s diagonal.
 
-    One pass over the counts, skipping zero weights and zero counts (most of them).
+    One pass over the counts, skipping lags of zero weight.
     """
     k1, n, _ = cooc.shape
     out = np.zeros((n, n))
@@ -55,10 +55,8 @@ def _lag_weighted_counts(cooc, weights):
         if w == 0.0:
             continue
         for i in range(n):
-            for j in range(n):
-                c = cooc[m, i, j]
-                if c:
-                    out[i, j] += w * c
+            for j in range(n):  # no branch on zero counts: the loop vectorises
+                out[i, j] += w * cooc[m, i, j]
     diagonal = np.zeros(n)
     for i in range(n):
         diagonal[i] = weights[0] * cooc[0, i, i]
@@ -77,10 +75,8 @@ def _lag_quadratic_forms(cooc, reward):
             if ri == 0.0:
                 continue
             row = 0.0
-            for j in range(n):
-                c = cooc[m, i, j]
-                if c:
-                    row += c * reward[j]
+            for j in range(n):  # no branch on zero counts: the loop vectorises
+                row += cooc[m, i, j] * reward[j]
             total += ri * row
         q[m] = total
     return q
