@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gymnasium as gym
 import numpy as np
 from scipy import stats
 
@@ -60,3 +61,17 @@ def binned_chisquare(draws: np.ndarray, pmf) -> float:
     exp_arr = np.asarray(exp_bins)
     exp_arr *= n / exp_arr.sum()
     return float(stats.chisquare(np.asarray(obs_bins), exp_arr).pvalue)
+
+
+class NeverEndingEnv(gym.Env):
+    """Reward 1 every step, never ends: the cheapest env to drive a delay wrapper."""
+
+    observation_space = gym.spaces.Discrete(1)
+    action_space = gym.spaces.Discrete(1)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        return 0, {}
+
+    def step(self, action):
+        return 0, 1.0, False, False, {}

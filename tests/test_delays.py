@@ -14,7 +14,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from scipy import stats
-from support import binned_chisquare
+from support import NeverEndingEnv, binned_chisquare
 
 from delayed_rl.delays import (
     AliasTable,
@@ -210,20 +210,6 @@ def test_valid_argument_types_are_normalised() -> None:
 
 
 # --- the delays the reward wrapper actually applies (the info["reward_delay"] stream) ---------
-
-
-class NeverEndingEnv(gym.Env):
-    """Reward 1 every step, never ends: the cheapest env to drive a delay wrapper."""
-
-    observation_space = gym.spaces.Discrete(1)
-    action_space = gym.spaces.Discrete(1)
-
-    def reset(self, *, seed=None, options=None):
-        super().reset(seed=seed)
-        return 0, {}
-
-    def step(self, action):
-        return 0, 1.0, False, False, {}
 
 
 def delay_stream(env: gym.Env, n: int, seed: int) -> np.ndarray:

@@ -16,6 +16,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
+from support import NeverEndingEnv
 
 from delayed_rl.delays import Constant, Geometric, Poisson
 from delayed_rl.envs.gridworld import MAX_STATES, GridWorldEnv
@@ -31,20 +32,6 @@ from delayed_rl.wrappers import ObservationDelay, RewardDelay, VectorRewardDelay
 from delayed_rl.wrappers.buffers import MAX_RING_ENTRIES
 
 MB = 1 << 20
-
-
-class OneEnv(gym.Env):
-    """Reward 1 every step, never ends."""
-
-    observation_space = gym.spaces.Discrete(1)
-    action_space = gym.spaces.Discrete(1)
-
-    def reset(self, *, seed=None, options=None):
-        super().reset(seed=seed)
-        return 0, {}
-
-    def step(self, action):
-        return 0, 1.0, False, False, {}
 
 
 def peak_of(make):
@@ -80,7 +67,9 @@ def circle(radius: float, n: int = 2000) -> np.ndarray:
 @pytest.mark.parametrize("delay", [Poisson(1e9), Constant(2**63 - 1), Geometric(1e-9)], ids=repr)
 def test_vector_rings_start_small_and_hold_only_what_is_pending(delay) -> None:
     def run():
-        vec = SyncVectorEnv([OneEnv, OneEnv], autoreset_mode=AutoresetMode.NEXT_STEP)
+        vec = SyncVectorEnv(
+            [NeverEndingEnv, NeverEndingEnv], autoreset_mode=AutoresetMode.NEXT_STEP
+        )
         env = VectorRewardDelay(vec, delay)
         env.reset(seed=0)
         for _ in range(2000):
@@ -93,7 +82,7 @@ def test_vector_rings_start_small_and_hold_only_what_is_pending(delay) -> None:
 
 
 def test_vector_ring_grows_with_the_delays_drawn_and_stops_at_its_limit() -> None:
-    vec = SyncVectorEnv([OneEnv] * 4, autoreset_mode=AutoresetMode.NEXT_STEP)
+    vec = SyncVectorEnv([NeverEndingEnv] * 4, autoreset_mode=AutoresetMode.NEXT_STEP)
     env = VectorRewardDelay(vec, Poisson(1e6))
     env.reset(seed=0)
     assert env.buffers.buffer.size <= 4 * 64  # small at first
@@ -109,7 +98,7 @@ def test_sb3_rings_start_small() -> None:
     from delayed_rl.wrappers.sb3 import VecRewardDelay
 
     def run():
-        env = VecRewardDelay(DummyVecEnv([OneEnv, OneEnv]), Poisson(1e9), seed=0)
+        env = VecRewardDelay(DummyVecEnv([NeverEndingEnv, NeverEndingEnv]), Poisson(1e9), seed=0)
         env.reset()
         for _ in range(500):
             *_, infos = env.step(np.zeros(2, dtype=int))
@@ -123,7 +112,7 @@ def test_sb3_rings_start_small() -> None:
 @pytest.mark.parametrize("delay", [Poisson(1e9), Constant(2**63 - 1)], ids=repr)
 def test_single_env_wrappers_hold_only_what_is_pending(delay) -> None:
     def run():
-        env = ObservationDelay(RewardDelay(OneEnv(), delay), delay)
+        env = ObservationDelay(RewardDelay(NeverEndingEnv(), delay), delay)
         env.reset(seed=0)
         for _ in range(2000):
             info = env.step(0)[4]
