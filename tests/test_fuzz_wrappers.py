@@ -136,6 +136,16 @@ def test_single_env_conserves_every_reward(
 # --- the gymnasium vector env ------------------------------------------------------------------
 
 
+def _sub_env(script, inside):
+    """A thunk making the scripted sub-env, behind a ``TimeLimit(inside)`` unless ``None``."""
+
+    def thunk():
+        env = ScriptEnv(script)
+        return env if inside is None else TimeLimit(env, inside)
+
+    return thunk
+
+
 @FUZZ
 @given(
     data=st.data(),
@@ -153,14 +163,7 @@ def test_vector_env_conserves_every_sub_envs_rewards(
 ) -> None:
     sub_scripts = [data.draw(scripts) for _ in range(n_envs)]
 
-    def make(script):
-        def thunk():
-            env = ScriptEnv(script)
-            return env if inside is None else TimeLimit(env, inside)
-
-        return thunk
-
-    vec = SyncVectorEnv([make(s) for s in sub_scripts], autoreset_mode=autoreset)
+    vec = SyncVectorEnv([_sub_env(s, inside) for s in sub_scripts], autoreset_mode=autoreset)
     env = VectorRewardDelay(vec, delay, max_delay=max_delay, on_episode_end=mode)
     emitted, delivered, dropped = np.zeros(n_envs), np.zeros(n_envs), np.zeros(n_envs)
 
@@ -214,15 +217,8 @@ def test_sb3_vec_env_conserves_every_sub_envs_rewards(
 
     sub_scripts = [data.draw(scripts) for _ in range(n_envs)]
 
-    def make(script):
-        def thunk():
-            env = ScriptEnv(script)
-            return env if inside is None else TimeLimit(env, inside)
-
-        return thunk
-
     env = VecRewardDelay(
-        DummyVecEnv([make(s) for s in sub_scripts]), delay, max_delay, mode, seed=seed
+        DummyVecEnv([_sub_env(s, inside) for s in sub_scripts]), delay, max_delay, mode, seed=seed
     )
     emitted, delivered, dropped = np.zeros(n_envs), np.zeros(n_envs), np.zeros(n_envs)
 
