@@ -76,7 +76,14 @@ _non_negative_int = _checked(int, check_int, 0)
 _positive_int = _checked(int, check_int, 1)
 
 #: ``--agent`` choices: the agent class for each.
-AGENTS = {"q": "QLearning", "fixed": "FixedDelayQLearning", "mmq": "MultipleModelQLearning"}
+AGENTS = {
+    "q": "QLearning",
+    "fixed": "FixedDelayQLearning",
+    "mmq": "MultipleModelQLearning",
+    "deconv": "DeconvolutionQLearning",
+}
+#: The agents that take ``--max-delay-estimate``: MMQ's λ̂max, deconvolution's longest delay.
+_MAX_DELAY_AGENTS = ("mmq", "deconv")
 #: What ``--episodes`` waits for an episode to end before calling the env continuing.
 MAX_EPISODE_STEPS = 100_000
 #: How many episodes ``evaluate`` runs when given neither ``--episodes`` nor ``--steps``.
@@ -196,6 +203,8 @@ def _train(args: argparse.Namespace) -> int:
         options["delay_estimate"] = args.delay_estimate
     elif args.agent == "mmq":
         options["max_delay_estimate"] = args.max_delay_estimate
+    elif args.agent == "deconv":  # the delay learned on 0..--max-delay-estimate
+        options["max_delay"] = args.max_delay_estimate
     save = Path(args.save)
     try:  # fail before training, not after, when the model cannot be written there
         save.parent.mkdir(parents=True, exist_ok=True)
@@ -344,7 +353,8 @@ def build_parser() -> argparse.ArgumentParser:
         required=True,
         choices=AGENTS,
         help="q: Q-learning; fixed: Q-learning assuming --delay-estimate; mmq: Multiple "
-        "Model Q-learning over delays 0..--max-delay-estimate",
+        "Model Q-learning over delays 0..--max-delay-estimate; deconv: deconvolution "
+        "Q-learning, the delay learned on 0..--max-delay-estimate",
     )
     train.add_argument(
         "--reward-delay",
@@ -393,7 +403,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--max-delay-estimate",
         type=_non_negative_int,
         metavar="N",
-        help="--agent mmq: the largest delay estimate λ̂max (default 50)",
+        help="--agent mmq: the largest delay estimate λ̂max; --agent deconv: the longest delay "
+        "its learned pmf covers (default 50 for both)",
     )
     train.add_argument(
         "--seed",
@@ -478,8 +489,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             args.parser.error("--agent fixed needs --delay-estimate K (the delay it assumes)")
         if args.agent != "fixed" and args.delay_estimate is not None:
             args.parser.error(f"--delay-estimate is for --agent fixed, not --agent {args.agent}")
-        if args.agent != "mmq" and args.max_delay_estimate is not None:
-            args.parser.error(f"--max-delay-estimate is for --agent mmq, not --agent {args.agent}")
+        if args.agent not in _MAX_DELAY_AGENTS and args.max_delay_estimate is not None:
+            args.parser.error(
+                f"--max-delay-estimate is for --agent mmq or deconv, not --agent {args.agent}"
+            )
     level, gym.logger.min_level = gym.logger.min_level, 40  # Gymnasium's warnings stay out
     try:
         return args.run(args)

@@ -130,7 +130,7 @@ def test_evaluate_with_episodes_on_a_continuing_env_fails_clearly(tmp_path, caps
         (f"train --env {GRID} --agent fixed --save x", "--agent fixed needs --delay-estimate K"),
         (TRAIN + "--delay-estimate 2", "--delay-estimate is for --agent fixed, not --agent q"),
         (TRAIN + "--delay 2", "--delay-estimate is for --agent fixed, not --agent q"),
-        (TRAIN + "--max-delay-estimate 9", "--max-delay-estimate is for --agent mmq"),
+        (TRAIN + "--max-delay-estimate 9", "--max-delay-estimate is for --agent mmq or deconv"),
         ("evaluate m.npz --env Nope-v9", "unknown env id 'Nope-v9'"),
         (f"evaluate m.npz --env {GRID} --steps 5 --episodes 2", "not allowed with argument"),
         (f"evaluate m.npz --env {GRID} --episodes 0", "--episodes: must be an integer >= 1, got 0"),
@@ -269,3 +269,18 @@ def test_any_failure_while_running_exits_1_with_one_line(tmp_path, capsys, monke
     err = _one_error_line(capsys)
     if isinstance(error, MemoryError):
         assert err.startswith("error: out of memory")
+
+
+def test_train_deconvolution_learns_the_delay_and_saves_an_agent_that_loads(tmp_path, capsys):
+    """``--agent deconv``: the delay learned on 0..--max-delay-estimate, saved and loaded back."""
+    from delayed_rl.agents import DeconvolutionQLearning, load_agent
+
+    save = tmp_path / "deconv"
+    argv = (
+        "train --env delayed_rl/GridWorld-3x3-v0 --agent deconv --reward-delay 2 "
+        f"--max-delay-estimate 8 --q-init 10 --steps 6000 --seed 0 --save {save}"
+    ).split()
+    assert main(argv) == 0
+    assert "trained DeconvolutionQLearning" in capsys.readouterr().out
+    agent = load_agent(save.with_suffix(".npz"))
+    assert type(agent) is DeconvolutionQLearning and agent.delay_pmf.shape == (9,)
