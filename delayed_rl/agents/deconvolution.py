@@ -28,16 +28,17 @@ import numpy as np
 from delayed_rl._validation import check_choice, check_int, check_real
 from delayed_rl.agents._fused import CompiledTables
 from delayed_rl.agents._regression import RewardRegression
+from delayed_rl.agents.expected_credit import credit_weights
 from delayed_rl.agents.hyperparameters import shares_hyperparameters
 from delayed_rl.agents.qlearning import QLearning
 from delayed_rl.delays import Delay, Empirical
 from delayed_rl.fast.kernel import RewardModel
+from delayed_rl.wrappers.reward_delay import find_reward_delay
 
 __all__ = ["DeconvQ", "DeconvolutionQLearning"]
 
 EPISODE_END_MODES = ("flush", "drop", "carry")
 DEFAULT_MAX_DELAY = 50  # as MMQ's λ̂max: the thesis's grid-world cut-off
-TAIL = 1e-6  # a known unbounded delay is modelled up to where less than this mass is left
 _CHUNK = 4096  # compiled steps between two looks at the statistics' room for segment ends
 _FIRST_SOLVE = 1_000  # steps before the first solve; the gaps then double to solve_interval
 _OWN_NAMES = {  # this class's own constructor arguments, and their defaults
@@ -147,13 +148,13 @@ class DeconvolutionQLearning(QLearning):
 
     def _setup_model(self) -> None:
         super()._setup_model()
-        self._support = self._delay_support()
+        if self.delay is None:
+            self._support = DEFAULT_MAX_DELAY if self.max_delay is None else self.max_delay
+            self._pmf = np.full(self._support + 1, 1.0 / (self._support + 1))
+        else:  # expected credit's weights: the pmf of min(d, K), K as the class docstring says
+            weights = credit_weights(self.delay, self.max_delay)
+            self._pmf, self._support = weights / weights.sum(), weights.size - 1
         self._reward_model = np.zeros(self.n_states * self.n_actions)
-        self._pmf = (
-            np.full(self._support + 1, 1.0 / (self._support + 1))
-            if self.delay is None
-            else _truncated_pmf(self.delay, self._support)
-        )
         self._regression = self._new_regression(self.on_episode_end or "flush")
         self._since_solve = 0
         self._solve_after = min(self.solve_interval, _FIRST_SOLVE)
@@ -163,16 +164,6 @@ class DeconvolutionQLearning(QLearning):
         return RewardRegression(
             self.n_states * self.n_actions, self._support, mode == "flush", mode == "carry"
         )
-
-    def _delay_support(self) -> int:
-        """``K``: the longest delay modelled (see the class docstring)."""
-        if self.delay is None:
-            return DEFAULT_MAX_DELAY if self.max_delay is None else self.max_delay
-        k = self.delay.support_max
-        if k is None:
-            cdf = np.cumsum(self.delay.pmf(np.arange(100_000)))
-            k = int(np.searchsorted(cdf, 1.0 - TAIL))
-        return k if self.max_delay is None else min(k, self.max_delay)
 
     def set_env(self, env: gym.Env | str) -> None:
         """Train on ``env`` from now on (see ``TabularAgent.set_env``); reads its episode-end mode.
@@ -184,7 +175,8 @@ class DeconvolutionQLearning(QLearning):
         super().set_env(env)
         if self.on_episode_end is not None:
             return
-        mode = _wrapper_mode(self.env) or "flush"
+        wrapper = find_reward_delay(self.env)
+        mode = "flush" if wrapper is None else wrapper.on_episode_end
         if mode == self.assumed_episode_end:
             return
         if self._regression.steps:
@@ -313,22 +305,3 @@ def _as_known_delay(delay: Any) -> Delay | None:
         "delay must be None (learn it), a delayed_rl.delays.Delay or a number read as a Poisson "
         f"mean, got {delay!r} ({type(delay).__name__})"
     )
-
-
-def _truncated_pmf(delay: Delay, support: int) -> np.ndarray:
-    """``delay``'s pmf on ``0..support``, the mass beyond folded into the last value."""
-    pmf = np.asarray(delay.pmf(np.arange(support + 1)), dtype=np.float64)
-    pmf[-1] += max(0.0, 1.0 - pmf.sum())
-    return pmf / pmf.sum()
-
-
-def _wrapper_mode(env: gym.Env) -> str | None:
-    """The ``on_episode_end`` of the first reward-delay wrapper in ``env``'s stack, if any."""
-    from delayed_rl.wrappers import RewardDelay
-
-    layer = env
-    while isinstance(layer, gym.Wrapper):
-        if isinstance(layer, RewardDelay):
-            return layer.on_episode_end
-        layer = layer.env
-    return None

@@ -44,22 +44,9 @@ from delayed_rl._validation import check_real
 from delayed_rl.agents.env_util import make_env
 from delayed_rl.agents.hyperparameters import shares_hyperparameters
 from delayed_rl.agents.qlearning import QLearning
-from delayed_rl.wrappers.reward_delay import RewardDelay
+from delayed_rl.wrappers.reward_delay import find_reward_delay
 
-__all__ = ["OracleQLearning", "find_reward_delay"]
-
-
-def find_reward_delay(env: gym.Env) -> Any:
-    """The outermost :class:`~delayed_rl.wrappers.RewardDelay` in ``env``'s wrapper stack, or ``None``.
-
-    The stack is walked from ``env`` down its ``.env`` chain (Gymnasium wrappers).
-    """
-    layer = env
-    while isinstance(layer, gym.Env):
-        if isinstance(layer, RewardDelay):
-            return layer
-        layer = getattr(layer, "env", None)
-    return None
+__all__ = ["OracleQLearning"]
 
 
 class OracleQLearning(QLearning):

@@ -17,6 +17,7 @@ from delayed_rl.delays import MAX_DELAY, Delay, Poisson, as_delay, delay_spec
 
 __all__ = [
     "EPISODE_END_MODES",
+    "find_reward_delay",
     "PoissonRewardDelay",
     "RewardDelay",
     "check_episode_end",
@@ -415,3 +416,16 @@ def wrap_reward_delay(env: gym.Env, reward_delay: Delay | float | Mapping[str, A
         "reward_delay must be a number (the Poisson mean λ), a delayed_rl.delays.Delay or its "
         f"to_dict() description, got {reward_delay!r} ({type(reward_delay).__name__})"
     )
+
+
+def find_reward_delay(env: gym.Env) -> Any:
+    """The outermost :class:`RewardDelay` in ``env``'s wrapper stack, or ``None``.
+
+    The stack is walked from ``env`` down its ``.env`` chain (Gymnasium wrappers).
+    """
+    layer = env
+    while isinstance(layer, gym.Env):
+        if isinstance(layer, RewardDelay):
+            return layer
+        layer = getattr(layer, "env", None)
+    return None
