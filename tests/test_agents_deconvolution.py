@@ -8,7 +8,7 @@ import pytest
 
 import delayed_rl  # noqa: F401  (registers the ids)
 from delayed_rl.agents import QLearning, load_agent
-from delayed_rl.agents._regression import STATISTICS_LIMIT, RewardRegression, project_to_simplex
+from delayed_rl.agents._regression import RewardRegression, project_to_simplex
 from delayed_rl.agents.deconvolution import DeconvolutionQLearning, DeconvQ
 from delayed_rl.delays import Constant, Empirical, Geometric, Poisson
 from delayed_rl.envs.gridworld import GridWorldEnv
@@ -184,12 +184,86 @@ def test_bad_arguments(kwargs, error, match):
         DeconvQ(GridWorldEnv(size=3), **kwargs)
 
 
-def test_statistics_beyond_the_memory_limit_are_refused_at_construction():
-    big = GridWorldEnv(size=20)  # 1600 pairs: 1600² · 4 bytes = 9.8 MiB per lag
-    with pytest.raises(ValueError, match=r"max_delay=50 with 1600 \(state, action\) pairs needs"):
-        DeconvQ(big, max_delay=50)
-    assert STATISTICS_LIMIT == 256 * 2**20
-    DeconvQ(big, max_delay=5)
+def _fed(layout, steps, mode="flush", support=6, seed=3):
+    """A regression of ``layout`` fed a random walk on 4×4 grids of 11-step episodes."""
+    env = RewardDelay(GridWorldEnv(size=4, max_steps=11), Poisson(2.5), on_episode_end=mode)
+    walk, _ = _random_walk(env, steps, seed=seed)
+    regression = RewardRegression(64, support, mode == "flush", mode == "carry", layout=layout)
+    for pair, reward, ended in walk:
+        regression.observe(pair, reward, ended)
+    return regression
+
+
+@pytest.mark.parametrize("mode", ["flush", "drop", "carry"])
+def test_the_hashed_layout_holds_the_same_counts_and_gives_the_same_solves(mode):
+    """Both layouts, the same steps: equal counts per lag, normal equations, R̂ and pmf."""
+    direct, hashed = _fed("direct", 3000, mode), _fed("hashed", 3000, mode)
+    assert (direct.layout, hashed.layout) == ("direct", "hashed")
+    for lag in range(direct.max_delay + 1):
+        np.testing.assert_array_equal(direct.counts(lag), hashed.counts(lag))
+    pmf = Poisson(2.5).pmf(np.arange(7))
+    pmf = pmf / pmf.sum()
+    for ours, theirs in zip(
+        direct.normal_equations(pmf), hashed.normal_equations(pmf), strict=True
+    ):
+        np.testing.assert_allclose(ours, theirs, rtol=1e-12, atol=1e-9)
+    rewards = direct.solve_rewards(pmf, 1e-3)
+    np.testing.assert_allclose(hashed.solve_rewards(pmf, 1e-3), rewards, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(
+        hashed.solve_delay(rewards, pmf), direct.solve_delay(rewards, pmf), atol=1e-12
+    )
+
+
+def test_conjugate_gradients_agree_with_the_dense_solve(monkeypatch):
+    """Above DENSE_SOLVE_PAIRS pairs R̂ comes from CG: the same solution as LU, to 1e-7."""
+    from delayed_rl.agents import _regression
+
+    regression = _fed("hashed", 4000, "flush")
+    pmf = Poisson(2.5).pmf(np.arange(7))
+    dense = regression.solve_rewards(pmf, 1e-3)
+    monkeypatch.setattr(_regression, "DENSE_SOLVE_PAIRS", 10)
+    regression._last_rewards = np.zeros(64)  # a cold start
+    np.testing.assert_allclose(regression.solve_rewards(pmf, 1e-3), dense, atol=1e-7)
+
+
+def test_the_layout_is_chosen_by_size_and_the_hashed_table_grows_with_what_is_seen():
+    """Direct while the counts fit DIRECT_LIMIT; hashed above, sized by the couples that occur."""
+    assert RewardRegression(100, 50).layout == "direct"
+    big = GridWorldEnv(size=20)  # 1600 pairs: 1600² · 51 · 4 bytes = 498 MiB direct
+    agent = DeconvQ(big, max_delay=50, q_init=20.0, seed=0)
+    assert agent._regression.layout == "hashed"
+    agent.learn(3_000)
+    regression = agent._regression
+    used = int(regression.stats.counters[6])
+    assert 0 < used <= 3_000 * 51  # at most K + 1 new couples a step
+    assert regression.stats.keys.size <= 4 * (used + 256 * 51)  # half full after a chunk's room
+    assert regression.nbytes < 2**30 / 16  # far below the direct layout's 498 MiB
+    with pytest.raises(ValueError, match="direct layout, more than the limit"):
+        RewardRegression(1600, 50, layout="direct")
+
+
+def test_a_hashed_table_that_would_outgrow_the_limit_is_refused(monkeypatch):
+    from delayed_rl.agents import _regression
+
+    monkeypatch.setattr(_regression, "STATISTICS_LIMIT", 2**20)
+    agent = DeconvQ(GridWorldEnv(size=20), max_delay=50, q_init=20.0, seed=0)
+    with pytest.raises(ValueError, match=r"max_delay=50: the co-occurrence rows .* MiB"):
+        agent.learn(20_000)
+
+
+def test_statistics_of_earlier_versions_load():
+    """A saved ``cooc[m, i, j]`` with five counters restores to the same solves."""
+    regression = _fed("direct", 2000, "drop")
+    old = regression.state()
+    old["cooc"] = np.stack([regression.counts(m) for m in range(7)]).astype(np.int32)
+    old["counters"] = old["counters"][:5]
+    del old["keys"]
+    restored = RewardRegression(64, 6, flush=False)
+    restored.restore(old)
+    pmf = np.full(7, 1 / 7)
+    np.testing.assert_array_equal(
+        restored.normal_equations(pmf)[0], regression.normal_equations(pmf)[0]
+    )
 
 
 def test_the_compiled_and_python_paths_learn_the_same_from_the_same_steps():

@@ -3,107 +3,200 @@
 With each reward delayed independently by ``d ~ p``, the reward received at step ``t`` satisfies
 ``E[y_t | history] = Σ_k p(k) · R(x_{t−k})``, with ``x_j`` the (state, action) pair of step ``j``
 and ``R`` the unknown mean rewards: a linear model in ``R`` for a known ``p``, and in ``p`` for a
-known ``R``. :class:`RewardRegression` keeps sufficient statistics of that regression, so a
-least-squares solve never revisits the history:
+known ``R``. :class:`RewardRegression` keeps sufficient statistics of that regression
+(:mod:`delayed_rl.fast.statistics`), so a least-squares solve never revisits the history:
 
-- ``cooc[m, i, j]``: how often pair ``i`` was followed ``m`` steps later by pair ``j`` (``m`` in
-  ``0..K``), within a segment (an episode, or the whole stream when pending rewards carry over);
+- ``cooc``: for each ordered couple of pairs, how often the earlier was followed ``m`` steps
+  later by the later one (``m`` in ``0..K``), within a segment (an episode, or the whole stream
+  when pending rewards carry over) — one row of ``K + 1`` counts per couple that occurred;
 - ``by_lag[k, i]``: the sum of the rewards received ``k`` steps after pair ``i``;
 - the last ``K + 1`` pairs of every segment that ended (its *window*), and under ``"flush"`` the
   reward of its last step, which also carries every reward still pending (expected weight
   ``P(D ≥ k)`` for the pair ``k`` steps back, instead of ``p(k)``).
 
 The normal equations follow: for rows ``φ_t = Σ_k p(k) e_{x_{t−k}}``,
-``A = Σ_t φ_t φ_tᵀ = Σ_m c(m) (cooc[m] + cooc[m]ᵀ)`` (``c(m) = Σ_k p(k) p(k + m)``, the lag-0
-term once), less the rows after each segment's end that this sum counts but that never happened,
-and with each flushed last row replaced by its survival-weighted one; ``b = Σ_k p(k) by_lag[k]``
-plus the flushed rows. For a learned ``p``, the same statistics give the Gram matrix of the
-regression on ``p`` for a given ``R``; the two least-squares problems alternate, ``p`` on the
-simplex (a delay distribution), ``R`` with a small ridge that pulls unvisited pairs to 0.
+``A = Σ_t φ_t φ_tᵀ = Σ_m c(m) (C_m + C_mᵀ)`` (``C_m`` the lag-``m`` counts,
+``c(m) = Σ_k p(k) p(k + m)``, the lag-0 term once), less the rows after each segment's end that
+this sum counts but that never happened, and with each flushed last row replaced by its
+survival-weighted one; ``b = Σ_k p(k) by_lag[k]`` plus the flushed rows. For a learned ``p``, the
+same statistics give the Gram matrix of the regression on ``p`` for a given ``R``; the two
+least-squares problems alternate, ``p`` on the simplex (a delay distribution), ``R`` with a
+small ridge that pulls unvisited pairs to 0.
 
-Each step costs ``O(K)`` (``K + 1`` counts and sums); memory is ``(K + 1)·P²`` 4-byte counts for
-``P`` pairs, checked against :data:`STATISTICS_LIMIT` when the regression is built.
+**Sizes.** Each step costs ``O(K)`` (``K + 1`` counts and sums). The counts take ``(K + 1)·P²``
+4-byte integers in the direct layout, used while that is at most :data:`DIRECT_LIMIT`; above it
+(envs with many pairs, e.g. Taxi's 3000) a hashed layout keeps a row only for the couples that
+occurred, so memory follows what the agent has seen, up to :data:`STATISTICS_LIMIT`. ``R`` is
+solved by dense LU up to :data:`DENSE_SOLVE_PAIRS` pairs, and above by conjugate gradients on
+the sparse couplings, warm-started from the last estimate.
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from delayed_rl.fast._numba import jit as _jit
-from delayed_rl.fast.statistics import Statistics, observe
+from delayed_rl.fast.statistics import Statistics, _slot, find_row, observe
 
-__all__ = ["STATISTICS_LIMIT", "RewardRegression", "project_to_simplex"]
+__all__ = [
+    "DENSE_SOLVE_PAIRS",
+    "DIRECT_LIMIT",
+    "STATISTICS_LIMIT",
+    "RewardRegression",
+    "project_to_simplex",
+]
 
 STATISTICS_LIMIT = 256 * 2**20
-"""The most bytes the co-occurrence counts may take (``(K + 1)·P²·4``): 256 MiB.
+"""The most bytes the co-occurrence counts may take, in either layout: 256 MiB.
 
-GridWorld-9x9 with delays up to 50 steps takes 21 MiB; an env with many (state, action) pairs
-needs a shorter ``max_delay``, and the constructor says which.
+GridWorld-9x9 with delays up to 50 steps takes 21 MiB (direct). In the hashed layout the table
+grows with the couples seen; a run that would take it past the limit stops with an error that
+names ``max_delay``.
 """
+DIRECT_LIMIT = 64 * 2**20
+"""The direct layout (``(K + 1)·P²`` counts, no lookups) is used up to this many bytes: 64 MiB."""
+DENSE_SOLVE_PAIRS = 512
+"""Up to this many (state, action) pairs ``R̂`` is solved by dense LU; above, by sparse CG."""
+_CG_TOLERANCE = 1e-10  # relative residual at which conjugate gradients stop
+_CG_MAX_ITERATIONS = 2_000
+_FIRST_ROWS = 1024  # the hashed table's first size
 
 
 @_jit
-def _lag_weighted_counts(cooc, weights):
-    """``Σ_m weights[m] · cooc[m]`` for ``m >= 1``, and ``weights[0]`` times ``cooc[0]``'s diagonal.
+def _tail_products(p):
+    """``T[u, v] = Σ_h p(h + u) p(h + v)`` over ``h = 1..K − max(u, v)``: rows after an end.
 
-    One pass over the counts, skipping lags of zero weight.
+    The row ``h`` steps after a segment's end would weigh the window's pair ``u`` steps before
+    the end by ``p(h + u)``; the sums over ``h`` of those rows' products, one per (u, v).
     """
-    k1, n, _ = cooc.shape
-    out = np.zeros((n, n))
-    for m in range(1, k1):
-        w = weights[m]
-        if w == 0.0:
-            continue
-        for i in range(n):
-            for j in range(n):  # no branch on zero counts: the loop vectorises
-                out[i, j] += w * cooc[m, i, j]
-    diagonal = np.zeros(n)
-    for i in range(n):
-        diagonal[i] = weights[0] * cooc[0, i, i]
-    return out, diagonal
+    k1 = p.shape[0]
+    t = np.zeros((k1, k1))
+    for u in range(k1):
+        for v in range(u, k1):
+            total = 0.0
+            for h in range(1, k1 - v):
+                total += p[h + u] * p[h + v]
+            t[u, v] = total
+            t[v, u] = total
+    return t
 
 
 @_jit
-def _lag_quadratic_forms(cooc, reward):
-    """``q[m] = rewardᵀ · cooc[m] · reward`` for every lag ``m``."""
-    k1, n, _ = cooc.shape
-    q = np.zeros(k1)
-    for m in range(k1):
-        total = 0.0
-        for i in range(n):
-            ri = reward[i]
-            if ri == 0.0:
-                continue
-            row = 0.0
-            for j in range(n):  # no branch on zero counts: the loop vectorises
-                row += cooc[m, i, j] * reward[j]
-            total += ri * row
-        q[m] = total
-    return q
+def _add_coupling(vals, diag, position, stats, x, y, value):
+    """Add ``value`` to ``A[x, y]`` and ``A[y, x]``: to the couple's row, or twice to ``A[x, x]``."""
+    if x == y:
+        diag[x] += 2.0 * value
+        return
+    row = find_row(stats, x, y)
+    if row < 0 or position[row] < 0:
+        row = find_row(stats, y, x)
+    if row < 0 or position[row] < 0:
+        raise ValueError("a window couples two pairs the statistics never counted")
+    vals[position[row]] += value
 
 
 @_jit
-def _window_corrections(a, b, windows, lengths, finals, flushed, p, survival):
+def _window_corrections(vals, diag, b, position, stats, windows, lengths, finals, flushed, p):
     """Subtract the rows after each window's segment end; swap flushed last rows for ψ rows.
 
-    ``a`` (P×P) and ``b`` (P) are corrected in place for the ``p``-weighted normal equations.
+    ``vals`` (one coupling per row in use, at ``position[row]``), ``diag`` and ``b`` are
+    corrected in place for the ``p``-weighted normal equations; a flushed last row weighs the
+    pair ``u`` steps back by ``P(D ≥ u)`` instead of ``p(u)``.
     """
-    k_max = p.shape[0] - 1
+    tail = _tail_products(p)
+    survival = np.zeros(p.shape[0])
+    total = 0.0
+    for k in range(p.shape[0] - 1, -1, -1):
+        total += p[k]
+        survival[k] = total
     for w in range(windows.shape[0]):
         length = lengths[w]
         window = windows[w]
-        for h in range(1, k_max + 1):  # rows h steps after the end: lags h..K reach the window
-            for u in range(min(length, k_max + 1 - h)):
-                wu = p[h + u]
-                if wu == 0.0:
-                    continue
-                for v in range(min(length, k_max + 1 - h)):
-                    a[window[u], window[v]] -= wu * p[h + v]
-        if flushed[w]:
-            for u in range(length):
-                for v in range(length):
-                    a[window[u], window[v]] += survival[u] * survival[v] - p[u] * p[v]
-                b[window[u]] += finals[w] * survival[u]
+        for u in range(length):
+            x = window[u]
+            change = -tail[u, u]
+            if flushed[w]:
+                change += survival[u] * survival[u] - p[u] * p[u]
+                b[x] += finals[w] * survival[u]
+            diag[x] += change
+            for v in range(u + 1, length):
+                change = -tail[u, v]
+                if flushed[w]:
+                    change += survival[u] * survival[v] - p[u] * p[v]
+                if change != 0.0:
+                    _add_coupling(vals, diag, position, stats, x, window[v], change)
+
+
+@_jit
+def _coupled_product(later, earlier, vals, diag, v, out):
+    """``out = A v`` for ``A = Σ_n vals[n] (e_later e_earlierᵀ + e_earlier e_laterᵀ) + diag(diag)``."""
+    for i in range(v.shape[0]):
+        out[i] = diag[i] * v[i]
+    for n in range(vals.shape[0]):
+        i, j, w = later[n], earlier[n], vals[n]
+        out[i] += w * v[j]
+        out[j] += w * v[i]
+
+
+@_jit
+def _conjugate_gradient(later, earlier, vals, diag, b, start, tolerance, max_iterations):
+    """Solve ``A x = b`` (``A`` as in :func:`_coupled_product`, positive definite) from ``start``.
+
+    Jacobi-preconditioned conjugate gradients, until the residual is below ``tolerance · |b|``.
+    """
+    n = b.shape[0]
+    precondition = diag.copy()
+    for m in range(vals.shape[0]):
+        if later[m] == earlier[m]:
+            precondition[later[m]] += 2.0 * vals[m]
+    x = start.copy()
+    product = np.zeros(n)
+    _coupled_product(later, earlier, vals, diag, x, product)
+    residual = b - product
+    z = residual / precondition
+    direction = z.copy()
+    rz = residual @ z
+    goal = tolerance * np.sqrt(b @ b)
+    for _ in range(max_iterations):
+        if np.sqrt(residual @ residual) <= goal:
+            break
+        _coupled_product(later, earlier, vals, diag, direction, product)
+        step = rz / (direction @ product)
+        x += step * direction
+        residual -= step * product
+        z = residual / precondition
+        rz_next = residual @ z
+        direction = z + (rz_next / rz) * direction
+        rz = rz_next
+    return x
+
+
+@_jit
+def _rows_in_use(stats):
+    """The rows holding counts: their indices and their couples' later and earlier pairs."""
+    keys = stats.keys
+    n_pairs = stats.counters[5]
+    cooc = stats.cooc
+    hashed = keys.shape[0] > 0
+    rows = np.zeros(cooc.shape[0], dtype=np.int64)
+    n = 0
+    for row in range(cooc.shape[0]):
+        if hashed:
+            used = keys[row] != -1
+        else:
+            used = False
+            for m in range(cooc.shape[1]):
+                if cooc[row, m] != 0:
+                    used = True
+                    break
+        if used:
+            rows[n] = row
+            n += 1
+    rows = rows[:n]
+    couples = keys[rows] if hashed else rows
+    return rows, couples // n_pairs, couples % n_pairs
 
 
 @_jit
@@ -164,31 +257,55 @@ class RewardRegression:
         flush: the last step of an ending segment carries every pending reward (the reward-delay
             wrapper's ``"flush"``); ``False`` for ``"drop"`` (those rewards never come).
         carry: pending rewards carry over episode ends (``"carry"``): the stream is one segment.
+        layout: ``"direct"``, ``"hashed"`` or ``None`` (default: direct while its counts fit
+            :data:`DIRECT_LIMIT`).
 
     Raises:
-        ValueError: the counts would take more than :data:`STATISTICS_LIMIT` bytes.
+        ValueError: the direct layout would take more than :data:`STATISTICS_LIMIT` bytes, or
+            ``layout`` is unknown.
     """
 
-    def __init__(self, n_pairs: int, max_delay: int, flush: bool = True, carry: bool = False):
-        size = (max_delay + 1) * n_pairs * n_pairs * 4
-        if size > STATISTICS_LIMIT:
+    def __init__(
+        self,
+        n_pairs: int,
+        max_delay: int,
+        flush: bool = True,
+        carry: bool = False,
+        layout: str | None = None,
+    ):
+        k = max_delay + 1
+        direct = k * n_pairs * n_pairs * 4
+        if layout is None:
+            layout = "direct" if direct <= DIRECT_LIMIT else "hashed"
+        if layout not in ("direct", "hashed"):
+            raise ValueError(f"layout must be 'direct', 'hashed' or None, got {layout!r}")
+        if layout == "direct" and direct > STATISTICS_LIMIT:
             raise ValueError(
                 f"max_delay={max_delay} with {n_pairs} (state, action) pairs needs "
-                f"{size / 2**20:,.0f} MiB of co-occurrence counts, more than the limit of "
-                f"{STATISTICS_LIMIT / 2**20:.0f} MiB: choose a shorter max_delay"
+                f"{direct / 2**20:,.0f} MiB of co-occurrence counts in the direct layout, more "
+                f"than the limit of {STATISTICS_LIMIT / 2**20:.0f} MiB: choose a shorter "
+                "max_delay or the hashed layout"
             )
         self.n_pairs, self.max_delay, self.flush, self.carry = n_pairs, max_delay, flush, carry
-        k = max_delay + 1
+        rows = n_pairs * n_pairs if layout == "direct" else _FIRST_ROWS
+        keys = np.zeros(0, np.int64) if layout == "direct" else np.full(rows, -1, np.int64)
         self.stats = Statistics(
-            np.zeros((k, n_pairs, n_pairs), dtype=np.int32),
+            np.zeros((rows, k), dtype=np.int32),
+            keys,
             np.zeros((k, n_pairs)),
             np.zeros(k, dtype=np.int64),
-            np.array([0, 0, 0, int(flush), int(carry)], dtype=np.int64),
+            np.array([0, 0, 0, int(flush), int(carry), n_pairs, 0], dtype=np.int64),
             np.zeros((1, k), dtype=np.int64),
             np.zeros(1, dtype=np.int64),
             np.zeros(1),
             np.zeros(1, dtype=np.bool_),
         )
+        self._last_rewards = np.zeros(n_pairs)  # the conjugate gradients' warm start
+
+    @property
+    def layout(self) -> str:
+        """``"direct"`` or ``"hashed"`` (see the module docstring)."""
+        return "hashed" if self.stats.keys.size else "direct"
 
     @property
     def steps(self) -> int:
@@ -196,52 +313,109 @@ class RewardRegression:
         return int(self.stats.counters[1])
 
     @property
-    def cooc(self) -> np.ndarray:
-        """``cooc[m, i, j]``: pair ``i`` followed ``m`` steps later by pair ``j``."""
-        return self.stats.cooc
+    def nbytes(self) -> int:
+        """The bytes the co-occurrence rows take (counts and, hashed, keys)."""
+        return self.stats.cooc.nbytes + self.stats.keys.nbytes
 
-    def reserve(self, ends: int) -> None:
-        """Make room for ``ends`` more segment ends (the end arrays double as they fill)."""
+    def counts(self, lag: int) -> np.ndarray:
+        """``C[i, j]``: how often pair ``i`` was followed ``lag`` steps later by pair ``j``."""
+        rows, later, earlier = _rows_in_use(self.stats)
+        out = np.zeros((self.n_pairs, self.n_pairs), dtype=np.int64)
+        out[earlier, later] = self.stats.cooc[rows, lag]
+        return out
+
+    def reserve(self, steps: int) -> None:
+        """Make room for ``steps`` more steps: their segment ends and, hashed, their new rows.
+
+        Raises:
+            ValueError: the hashed table would grow past :data:`STATISTICS_LIMIT` (the message
+                names ``max_delay``).
+        """
         stats = self.stats
-        needed = int(stats.counters[2]) + ends
-        if needed <= stats.end_lengths.shape[0]:
-            return
-        size = max(needed, 2 * stats.end_lengths.shape[0])
-        grown = [np.zeros((size,) + array.shape[1:], dtype=array.dtype) for array in stats[4:]]
-        for new, old in zip(grown, stats[4:], strict=True):
-            new[: old.shape[0]] = old
-        self.stats = stats._replace(
-            end_windows=grown[0], end_lengths=grown[1], end_rewards=grown[2], end_flushed=grown[3]
-        )
+        needed = int(stats.counters[2]) + steps
+        if needed > stats.end_lengths.shape[0]:
+            size = max(needed, 2 * stats.end_lengths.shape[0])
+            grown = [np.zeros((size,) + a.shape[1:], dtype=a.dtype) for a in stats[5:]]
+            for new, old in zip(grown, stats[5:], strict=True):
+                new[: old.shape[0]] = old
+            stats = stats._replace(
+                end_windows=grown[0],
+                end_lengths=grown[1],
+                end_rewards=grown[2],
+                end_flushed=grown[3],
+            )
+        if stats.keys.size:  # at most half full after the steps' new rows
+            rows = 2 * (int(stats.counters[6]) + steps * (self.max_delay + 1))
+            if rows > stats.keys.size:
+                size = 1 << (rows - 1).bit_length()
+                nbytes = size * (stats.cooc.shape[1] * 4 + 8)
+                if nbytes > STATISTICS_LIMIT:
+                    raise ValueError(
+                        f"max_delay={self.max_delay}: the co-occurrence rows of "
+                        f"{self.steps:,} steps over {self.n_pairs} (state, action) pairs would "
+                        f"take {nbytes / 2**20:,.0f} MiB, more than the limit of "
+                        f"{STATISTICS_LIMIT / 2**20:.0f} MiB: choose a shorter max_delay"
+                    )
+                keys, cooc = _rehash(stats.keys, stats.cooc, size)
+                stats = stats._replace(keys=keys, cooc=cooc)
+        self.stats = stats
 
     def state(self) -> dict[str, np.ndarray]:
         """The statistics as arrays (for a model file), the end arrays cut to their use."""
         ends = int(self.stats.counters[2])
         return {
-            name: (value[:ends] if index >= 4 else value).copy()
+            name: (value[:ends] if index >= 5 else value).copy()
             for index, (name, value) in enumerate(zip(Statistics._fields, self.stats, strict=True))
         }
 
     def restore(self, arrays: dict[str, np.ndarray]) -> None:
         """Restore what :meth:`state` returned, checking every array's shape and type.
 
+        Either layout loads, whichever the agent would choose; so do the statistics of earlier
+        versions (counts as ``cooc[m, i, j]``, five counters, no keys).
+
         Raises:
             ValueError: an array is missing, of the wrong shape or type, or out of range.
         """
+        arrays = _upgraded(dict(arrays), self.n_pairs)
+        k1, n_pairs = self.max_delay + 1, self.n_pairs
+        keys = arrays["keys"]
+        if keys.dtype != np.int64 or keys.ndim != 1:
+            raise ValueError("keys must be a 1-d int64 array")
+        hashed = keys.size > 0
+        if hashed and keys.size & (keys.size - 1):
+            raise ValueError(f"keys must have a power-of-two length, got {keys.size}")
         ends = arrays["end_lengths"].shape[0]
-        for index, (name, ours) in enumerate(zip(Statistics._fields, self.stats, strict=True)):
+        shapes = {
+            "cooc": (keys.size if hashed else n_pairs * n_pairs, k1),
+            "keys": keys.shape,
+            "by_lag": (k1, n_pairs),
+            "window": (k1,),
+            "counters": (7,),
+            "end_windows": (ends, k1),
+            "end_lengths": (ends,),
+            "end_rewards": (ends,),
+            "end_flushed": (ends,),
+        }
+        for name, ours in zip(Statistics._fields, self.stats, strict=True):
             value = arrays[name]
-            shape = (ends,) + ours.shape[1:] if index >= 4 else ours.shape
-            if value.dtype != ours.dtype or value.shape != shape:
-                raise ValueError(f"{name} must be a {ours.dtype} array of shape {shape}")
-        counters = arrays["counters"]
-        length, steps, n_ends, flush, carry = (int(v) for v in counters)
-        if not 0 <= length <= self.max_delay + 1 or steps < 0 or n_ends != ends:
-            raise ValueError(f"counters out of range: {counters.tolist()}")
+            if value.dtype != ours.dtype or value.shape != shapes[name]:
+                raise ValueError(f"{name} must be a {ours.dtype} array of shape {shapes[name]}")
+        length, steps, n_ends, flush, carry, pairs, used = (int(v) for v in arrays["counters"])
+        if not 0 <= length <= k1 or steps < 0 or n_ends != ends or pairs != n_pairs:
+            raise ValueError(f"counters out of range: {arrays['counters'].tolist()}")
         if (flush, carry) != (int(self.flush), int(self.carry)):
             raise ValueError("counters disagree with the episode-end mode")
+        if hashed:
+            in_use = keys != -1
+            if used != int(in_use.sum()) or 2 * used > keys.size:
+                raise ValueError("the hashed table's count of rows in use is wrong")
+            if np.any(keys[in_use] < 0) or np.any(keys[in_use] >= n_pairs * n_pairs):
+                raise ValueError("a key names a couple outside the env's pairs")
+            if not _all_found(keys):
+                raise ValueError("the hashed table's keys are not where lookups find them")
         indices = np.concatenate([arrays["window"], arrays["end_windows"].ravel()])
-        if indices.size and (indices.min() < 0 or indices.max() >= self.n_pairs):
+        if indices.size and (indices.min() < 0 or indices.max() >= n_pairs):
             raise ValueError("a window holds a pair outside the env's pairs")
         if np.any(arrays["cooc"] < 0) or not np.all(np.isfinite(arrays["by_lag"])):
             raise ValueError("negative counts or non-finite reward sums")
@@ -266,28 +440,64 @@ class RewardRegression:
         )
 
     # ------------------------------------------------------------------ solving
-    def normal_equations(self, pmf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(A, b)`` of the least-squares problem for the mean rewards, given the delay pmf."""
+    def _couplings(self, pmf: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The normal equations for the mean rewards as couplings: ``(later, earlier, vals, d, b)``.
+
+        ``A = Σ_n vals[n] (e_later e_earlierᵀ + e_earlier e_laterᵀ) + diag(d)``.
+        """
         k = self.max_delay
         c = np.array([pmf[: k + 1 - m] @ pmf[m:] for m in range(k + 1)])
-        counts, diagonal = _lag_weighted_counts(self.stats.cooc, c)
-        a = counts + counts.T
-        a[np.diag_indices_from(a)] += diagonal
-        b = pmf @ self.stats.by_lag
-        survival = np.cumsum(pmf[::-1])[::-1]
-        _window_corrections(a, b, *self._windows(), pmf, survival)
+        stats = self.stats
+        rows, later, earlier = _rows_in_use(stats)
+        counts = stats.cooc[rows].astype(np.float64)
+        vals = counts[:, 1:] @ c[1:]
+        diag = np.zeros(self.n_pairs)
+        same = later == earlier
+        np.add.at(diag, later[same], c[0] * counts[same, 0])
+        b = pmf @ stats.by_lag
+        position = np.full(stats.cooc.shape[0], -1, dtype=np.int64)
+        position[rows] = np.arange(rows.size)
+        _window_corrections(vals, diag, b, position, stats, *self._windows(), pmf)
+        return later, earlier, vals, diag, b
+
+    def normal_equations(self, pmf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(A, b)`` of the least-squares problem for the mean rewards, given the delay pmf.
+
+        ``A`` dense (``P × P``): for inspection and the dense solve.
+        """
+        later, earlier, vals, diag, b = self._couplings(pmf)
+        half = np.zeros((self.n_pairs, self.n_pairs))
+        half[later, earlier] = vals  # each ordered couple has one row
+        a = half + half.T
+        a[np.diag_indices_from(a)] += diag
         return a, b
 
     def solve_rewards(self, pmf: np.ndarray, ridge: float) -> np.ndarray:
         """The ridge least-squares mean rewards ``R̂`` (one per pair) for the delay pmf."""
-        a, b = self.normal_equations(pmf)
-        a[np.diag_indices_from(a)] += ridge
-        return np.linalg.solve(a, b)
+        if self.n_pairs <= DENSE_SOLVE_PAIRS:
+            a, b = self.normal_equations(pmf)
+            a[np.diag_indices_from(a)] += ridge
+            rewards = np.linalg.solve(a, b)
+        else:
+            later, earlier, vals, diag, b = self._couplings(pmf)
+            rewards = _conjugate_gradient(
+                later,
+                earlier,
+                vals,
+                diag + ridge,
+                b,
+                self._last_rewards,
+                _CG_TOLERANCE,
+                _CG_MAX_ITERATIONS,
+            )
+        self._last_rewards = rewards
+        return rewards.copy()
 
     def delay_gram(self, reward: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(G, z)`` of the least-squares problem for the pmf, given the mean rewards."""
         k = self.max_delay
-        q = _lag_quadratic_forms(self.stats.cooc, reward)
+        rows, later, earlier = _rows_in_use(self.stats)
+        q = (reward[later] * reward[earlier]) @ self.stats.cooc[rows]
         lags = np.abs(np.subtract.outer(np.arange(k + 1), np.arange(k + 1)))
         g = q[lags]
         z = self.stats.by_lag @ reward
@@ -307,3 +517,40 @@ class RewardRegression:
         if not scale > 0:
             return start
         return _projected_gradient(g, z, start, scale, iterations)
+
+
+@_jit
+def _rehash(keys, cooc, size):
+    """The hashed table's rows moved into a table of ``size`` rows (a power of two)."""
+    new_keys = np.full(size, -1, dtype=np.int64)
+    new_cooc = np.zeros((size, cooc.shape[1]), dtype=np.int32)
+    for row in range(keys.shape[0]):
+        key = keys[row]
+        if key == -1:
+            continue
+        slot = _slot(new_keys, key)
+        new_keys[slot] = key
+        new_cooc[slot] = cooc[row]
+    return new_keys, new_cooc
+
+
+@_jit
+def _all_found(keys):
+    """Whether a lookup of every key in the hashed table ``keys`` finds it where it is."""
+    for row in range(keys.shape[0]):
+        if keys[row] != -1 and _slot(keys, keys[row]) != row:
+            return False
+    return True
+
+
+def _upgraded(arrays: dict[str, Any], n_pairs: int) -> dict[str, Any]:
+    """Statistics saved by earlier versions (``cooc[m, i, j]``, no keys) in today's layout."""
+    cooc = arrays.get("cooc")
+    if "keys" in arrays or not isinstance(cooc, np.ndarray) or cooc.ndim != 3:
+        return arrays
+    arrays["cooc"] = np.ascontiguousarray(cooc.transpose(2, 1, 0)).reshape(-1, cooc.shape[0])
+    arrays["keys"] = np.zeros(0, dtype=np.int64)
+    counters = np.asarray(arrays["counters"])
+    if counters.shape == (5,):
+        arrays["counters"] = np.append(counters, [n_pairs, 0]).astype(counters.dtype)
+    return arrays

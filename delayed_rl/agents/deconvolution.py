@@ -40,6 +40,7 @@ __all__ = ["DeconvQ", "DeconvolutionQLearning"]
 EPISODE_END_MODES = ("flush", "drop", "carry")
 DEFAULT_MAX_DELAY = 50  # as MMQ's λ̂max: the thesis's grid-world cut-off
 _CHUNK = 4096  # compiled steps between two looks at the statistics' room for segment ends
+_HASHED_CHUNK = 256  # the same with hashed statistics: each step may claim K + 1 new rows
 _FIRST_SOLVE = 1_000  # steps before the first solve; the gaps then double to solve_interval
 _OWN_NAMES = {  # this class's own constructor arguments, and their defaults
     "delay": None,
@@ -193,8 +194,9 @@ class DeconvolutionQLearning(QLearning):
         A chunk runs up to the next solve; the solve itself runs between chunks, as in
         :meth:`solve`, so both paths learn the same from the same steps.
         """
-        until_solve = min(self._solve_after - self._since_solve, _CHUNK)
-        self._regression.reserve(until_solve)  # room for a segment end at every step
+        chunk = _CHUNK if self._regression.layout == "direct" else _HASHED_CHUNK
+        until_solve = min(self._solve_after - self._since_solve, chunk)
+        self._regression.reserve(until_solve)  # room for what every step may add
         model = RewardModel(self._reward_model, self._regression.stats)
         tables = super().compiled_tables()
         return tables._replace(

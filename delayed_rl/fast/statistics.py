@@ -5,6 +5,17 @@ on the (state, action) pairs of the steps before it (see :mod:`delayed_rl.agents
 for the model and the solves). :func:`observe` adds one step to the statistics; the Python path
 calls it once a step, and the compiled loop (:func:`delayed_rl.fast.kernel.run_chunk`) inlines the
 same function, so both paths keep identical statistics.
+
+**Co-occurrence rows.** The counts of "pair ``i`` followed ``m`` steps later by pair ``j``" are
+kept as rows of ``K + 1`` lags, one row per ordered couple ``(j, i)`` — the later pair first, so
+that the ``K + 1`` counts a step adds all fall in the current pair's block of rows. Two layouts
+share one type:
+
+- *direct* (``keys`` empty): the row of ``(j, i)`` is ``j·P + i`` — ``P²`` rows, no lookups;
+- *hashed* (``keys`` of a power-of-two length): a row only for each couple that occurred, found
+  by open addressing (linear probing from the upper bits of a multiplicative hash of ``j·P + i``;
+  ``-1`` marks a free slot). Memory follows the couples seen, not ``P²``: the layout for envs with many pairs. The
+  caller keeps the table at most half full (:meth:`~delayed_rl.agents._regression.RewardRegression.reserve`).
 """
 
 from __future__ import annotations
@@ -15,17 +26,22 @@ import numpy as np
 
 from delayed_rl.fast._numba import jit as _jit
 
-__all__ = ["EMPTY_STATISTICS", "Statistics", "observe"]
+__all__ = ["EMPTY_STATISTICS", "Statistics", "find_row", "observe"]
+
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)  # Fibonacci hashing: 2**64 / the golden ratio
+_SHIFT = np.uint64(32)  # the hash's upper half indexes the table (up to 2**32 rows)
 
 
 class Statistics(NamedTuple):
     """The regression's sufficient statistics, as arrays (updated in place by :func:`observe`).
 
     Attributes:
-        cooc: ``cooc[m, i, j]``, pair ``i`` followed ``m`` steps later by pair ``j`` (int32).
+        cooc: ``cooc[row, m]``, how often the row's earlier pair was followed ``m`` steps later
+            by its later pair (int32; rows as the module docstring says).
+        keys: the hashed layout's keys (``j·P + i`` per row, ``-1`` free); empty: direct layout.
         by_lag: ``by_lag[k, i]``, the rewards received ``k`` steps after pair ``i``.
         window: the open segment's last pairs, the latest first.
-        counters: ``[window length, steps, segment ends, flush, carry]``.
+        counters: ``[window length, steps, segment ends, flush, carry, P, rows in use]``.
         end_windows: the windows of the segments that ended (the first ``counters[2]`` rows).
         end_lengths: their lengths.
         end_rewards: the reward of a flushed last step (kept apart from ``by_lag``).
@@ -33,6 +49,7 @@ class Statistics(NamedTuple):
     """
 
     cooc: np.ndarray
+    keys: np.ndarray
     by_lag: np.ndarray
     window: np.ndarray
     counters: np.ndarray
@@ -43,14 +60,50 @@ class Statistics(NamedTuple):
 
 
 @_jit
+def _slot(keys, key):
+    """Where ``key`` is or would go in the hashed table ``keys`` (a power-of-two length)."""
+    mask = keys.shape[0] - 1
+    i = np.int64((np.uint64(key) * _GOLDEN) >> _SHIFT) & mask
+    while keys[i] != key and keys[i] != -1:
+        i = (i + 1) & mask
+    return i
+
+
+@_jit
+def find_row(stats, later, earlier):
+    """The row of the couple (``later``, ``earlier``), or -1 if it never occurred."""
+    n_pairs = stats.counters[5]
+    key = later * n_pairs + earlier
+    if stats.keys.shape[0] == 0:
+        return key
+    i = _slot(stats.keys, key)
+    return i if stats.keys[i] == key else -1
+
+
+@_jit
+def _row_for_update(stats, key):
+    """The row of ``key``, claimed in the hashed table if new (the caller kept room)."""
+    keys = stats.keys
+    if keys.shape[0] == 0:
+        return key
+    i = _slot(keys, key)
+    if keys[i] == -1:
+        keys[i] = key
+        stats.counters[6] += 1
+    return i
+
+
+@_jit
 def observe(stats, pair, reward, episode_end):
     """Add one step to the statistics: the pair acted in, the reward received, the episode end.
 
     The caller keeps room for one more segment end (``end_windows`` longer than
-    ``counters[2]``); compiled runs and the Python path both step through this function.
+    ``counters[2]``) and, in the hashed layout, for ``K + 1`` more rows; compiled runs and the
+    Python path both step through this function.
     """
     window, counters = stats.window, stats.counters
     k_max = window.shape[0] - 1
+    n_pairs = counters[5]
     ends = episode_end and counters[4] == 0  # "carry": the stream is one segment
     flush_last = ends and counters[3] == 1
     n = min(counters[0], k_max)
@@ -58,8 +111,9 @@ def observe(stats, pair, reward, episode_end):
         window[u] = window[u - 1]
     window[0] = pair
     length = n + 1
+    base = pair * n_pairs
     for m in range(length):
-        stats.cooc[m, window[m], pair] += 1
+        stats.cooc[_row_for_update(stats, base + window[m]), m] += 1
         if not flush_last:
             stats.by_lag[m, window[m]] += reward
     counters[1] += 1
@@ -75,10 +129,11 @@ def observe(stats, pair, reward, episode_end):
 
 
 EMPTY_STATISTICS = Statistics(
-    np.zeros((1, 1, 1), dtype=np.int32),
+    np.zeros((1, 1), dtype=np.int32),
+    np.zeros(0, dtype=np.int64),
     np.zeros((1, 1)),
     np.zeros(1, dtype=np.int64),
-    np.zeros(5, dtype=np.int64),
+    np.array([0, 0, 0, 0, 0, 1, 0], dtype=np.int64),
     np.zeros((1, 1), dtype=np.int64),
     np.zeros(1, dtype=np.int64),
     np.zeros(1),
