@@ -40,6 +40,11 @@ class CompiledTables(NamedTuple):
             (:class:`~delayed_rl.fast.kernel.RewardModel`); ``None``: the delivered rewards.
         chunk_limit: the most steps the next chunk may take (``None``: no limit).
         after_chunk: called with each chunk's length once it has run (``None``: nothing).
+        credit_kernel: MMQ's reward kernel, a weight per distance ``|λ̂ − λ̂*|`` in steps
+            (:func:`~delayed_rl.fast.kernel.credit_kernel`); ``None``: off.
+        trace_decay: β of MMQ's delay trace; ``None``: off.
+        trace: the delay trace (one float64 per model, the agent's own: updated in place);
+            read only with ``trace_decay``.
     """
 
     q: np.ndarray
@@ -49,6 +54,9 @@ class CompiledTables(NamedTuple):
     reward_model: Any = None
     chunk_limit: int | None = None
     after_chunk: Callable[[int], None] | None = None
+    credit_kernel: np.ndarray | None = None
+    trace_decay: float | None = None
+    trace: np.ndarray | None = None
 
 
 def check_fused(fused: Any, callback: Any) -> bool | None:
@@ -122,6 +130,9 @@ def compiled_loop(agent: Any, fused_run: Any, run: LearnRun) -> None:
             eps_final=agent.exploration_final_eps,
             eps_steps=eps_steps,
             reward_model=tables.reward_model,
+            credit_kernel=tables.credit_kernel,
+            trace_decay=tables.trace_decay,
+            trace=tables.trace,
         )
         agent.num_timesteps += length
         if tables.after_chunk is not None:

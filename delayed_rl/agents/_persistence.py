@@ -220,6 +220,7 @@ def _hyperparameters(
         if unknown:
             raise ValueError(f"unknown hyper-parameters {sorted(unknown)}")
         missing = set(names) - set(saved) - set(custom_objects)
+        missing -= set(getattr(cls, "_optional_hyperparameter_names", ()))
         if missing:
             raise ValueError(f"missing hyper-parameters {sorted(missing)}")
         if "learning_rate" in saved:

@@ -98,6 +98,8 @@ class TabularAgent(_persistence.CopyProtocol, ABC):
     """
 
     _hyperparameter_names: ClassVar[tuple[str, ...]] = HYPERPARAMETER_NAMES
+    _optional_hyperparameter_names: ClassVar[tuple[str, ...]] = ()
+    """Those a model file may lack (added since files were first written): their defaults apply."""
     n_models: int = 1
     """How many delay models the agent acts from (|Λ|; 1 for a single Q-table)."""
     fused_chunk: int = 1_000

@@ -8,9 +8,14 @@ The agent keeps one Q-table per delay hypothesis λ̂ ∈ Λ, stacked as ``q_tab
   level is skipped and draws no random numbers.
 - **Learning** at episode step ``t`` from the received reward ``r_t``: for every λ̂ whose step
   ``t − λ̂`` is in this episode's history, with (s, a, s′, done) the transition of that step,
-  ``Q(s, a, λ̂) += α (r_t + γ (1 − done) max_{λ̂′, a′} Q(s′, a′, λ̂′) − Q(s, a, λ̂))``. The max spans
-  all models, and all targets of a step are computed before any of its writes (the parallel
-  update of the thesis's Roulette walk-through, Tables 3.2–3.5).
+  ``Q(s, a, λ̂) += α (w_t(λ̂) r_t + γ (1 − done) max_{λ̂′, a′} Q(s′, a′, λ̂′) − Q(s, a, λ̂))``. The
+  max spans all models, and all targets of a step are computed before any of its writes (the
+  parallel update of the thesis's Roulette walk-through, Tables 3.2–3.5). The thesis's rule has
+  ``w_t(λ̂) = 1``; the options multiply it, with λ̂*_t the acting model of step ``t``, by the
+  reward kernel ``exp(−(λ̂ − λ̂*_t)² / (2σ²))`` (``reward_kernel=σ``) and by the delay trace
+  ``e_t(λ̂)`` (``delay_trace=β``: ``e ← β e`` for every model, then ``e(λ̂*_t) ← 1``, each step).
+- **Greedy readout**: the deterministic policy reads the current table (the thesis), or, with
+  ``greedy_window=W``, an exponential moving average of it over about ``W`` training steps.
 - **Cost** O(|Λ|) per step: each state's max over (λ̂, a) is cached with its position and
   recomputed only when the entry at that position decreases; the |Λ| updates of a step are one
   batch of numpy gathers and scatters over a ring buffer of the episode's transitions.
@@ -26,11 +31,12 @@ import gymnasium as gym
 import numpy as np
 
 from delayed_rl._delay_line import ring_size
-from delayed_rl._validation import check_int
+from delayed_rl._validation import check_int, check_real
 from delayed_rl.agents._fused import CompiledTables
 from delayed_rl.agents._streams import UniformStream
 from delayed_rl.agents.base import TabularAgent
 from delayed_rl.agents.hyperparameters import shares_hyperparameters
+from delayed_rl.fast.kernel import credit_kernel
 
 __all__ = ["MAX_TABLE_BYTES", "MMQ", "MultipleModelQLearning", "greedy_actions", "table_bytes"]
 
@@ -47,9 +53,21 @@ allocated; a model file declaring such tables is refused the same way. Raise it 
 ``save_util.MAX_MODEL_BYTES``, so files load back) for larger tables.
 """
 _SMALL_ROW = 16  # rows up to this many entries are scanned in Python (cheaper than numpy calls)
+OPTION_NAMES = ("reward_kernel", "delay_trace", "greedy_window")
+"""MMQ's own options beyond the thesis's rule (constructor arguments, saved with the agent)."""
+_GREEDY_UPDATES = 100  # the averaged table is updated about this many times per window
 
 
-def table_bytes(n_states: int, n_actions: int, n_models: int, largest_delay: int) -> int:
+def table_bytes(
+    n_states: int,
+    n_actions: int,
+    n_models: int,
+    largest_delay: int,
+    *,
+    averaged_table: bool = False,
+    reward_kernel: bool = False,
+    delay_trace: bool = False,
+) -> int:
     """The bytes MMQ's tables take (to within a few per cent), before any is allocated.
 
     Args:
@@ -57,16 +75,19 @@ def table_bytes(n_states: int, n_actions: int, n_models: int, largest_delay: int
         n_actions: |A|.
         n_models: |Λ|.
         largest_delay: max Λ.
+        averaged_table: count the greedy readout's averaged Q-table (``greedy_window``).
+        reward_kernel: count the reward kernel's weights (one per step of Λ's span).
+        delay_trace: count the delay trace (one per model).
     """
     history = ring_size(largest_delay + 1)
     # Q (float64), cache (max and cell), per model (Λ, offsets, counts), histories (Python 3
     # int64 rings, compiled 3 int64 + 1 bool), the valid-model count of each early episode step
     return (
-        8 * n_states * n_models * n_actions
+        8 * n_states * n_models * n_actions * (2 if averaged_table else 1)
         + 16 * n_states
-        + 32 * n_models
+        + (40 if delay_trace else 32) * n_models
         + 49 * history
-        + 8 * (largest_delay + 1)
+        + 8 * (largest_delay + 1) * (2 if reward_kernel else 1)
     )
 
 
@@ -76,6 +97,7 @@ def check_table_size(
     n_models: int,
     largest: int,
     env: tuple[Any, int, int] | None = None,
+    **options: bool,
 ) -> None:
     """Refuse tables above :data:`MAX_TABLE_BYTES`, before any is allocated.
 
@@ -85,12 +107,13 @@ def check_table_size(
         n_models: |Λ|.
         largest: max Λ.
         env: ``(agent class, |S|, |A|)``; ``None`` checks Λ alone (one state, one action).
+        **options: the options' tables to count (:func:`table_bytes`'s keywords).
 
     Raises:
         ValueError: the message names the argument and the memory the tables would take.
     """
     n_states, n_actions = (1, 1) if env is None else env[1:]
-    size = table_bytes(n_states, n_actions, n_models, largest)
+    size = table_bytes(n_states, n_actions, n_models, largest, **options)
     if size <= MAX_TABLE_BYTES:
         return
     limit = (
@@ -221,12 +244,42 @@ class MultipleModelQLearning(TabularAgent):
         delay_step: the resolution of Λ (default 1).
         delay_estimates: Λ given explicitly (distinct integers ≥ 0; stored sorted), instead of
             ``max_delay_estimate``/``delay_step``.
+        reward_kernel: ``None`` (default: the thesis's rule, every table is credited the
+            received reward ``r_t``) or a width σ > 0, in steps of delay: at step ``t`` the
+            table of λ̂ is credited ``r_t · exp(−(λ̂ − λ̂*_t)² / (2σ²))`` instead, λ̂*_t the
+            acting model that chose ``a_t`` (full credit to the hypothesis that drives
+            behaviour, less the farther a hypothesis is from it). Only the reward is scaled:
+            every table that can learn at step ``t`` still updates, bootstrapping as before. A
+            σ far above the span of Λ is the thesis's rule.
+        delay_trace: ``None`` (default: no trace) or a decay β in [0, 1]: an eligibility trace
+            over the models, ``e(λ̂)``, that shares the reward with the hypotheses that acted
+            recently. Each training step first decays it, ``e(λ̂) ← β·e(λ̂)`` for every model,
+            then sets ``e(λ̂*_t) ← 1`` (a replacing trace); the reward credited to table λ̂ is
+            then multiplied by ``e_t(λ̂)``. β = 0 credits only the acting model's table; β = 1
+            credits every model that has ever acted in full. The trace starts at 0 for every
+            model and is carried over episode ends and across ``learn()`` calls (the delay is a
+            property of the env, not of an episode); it is saved and copied with the agent
+            (:attr:`delay_trace_values`). With ``reward_kernel`` too, the two weights multiply.
+        greedy_window: ``None`` (default: the deterministic policy reads the current table, as
+            in the thesis) or a window ``W`` ≥ 1, in training steps: ``predict(...,
+            deterministic=True)`` then reads :attr:`greedy_table`, an exponential moving
+            average of the Q-table with time constant ``W``: every ``max(1, W // 100)``
+            training steps (counted from the agent's construction, by ``learn()`` and
+            ``update()`` alike), ``G ← G + (interval / W)·(Q − G)``, the first update setting
+            ``G = Q``; before it the greedy policy reads ``Q``. Acting while training and the
+            exploring ``predict`` still use the current table. The averaged table doubles the
+            Q-table's memory (counted against :data:`MAX_TABLE_BYTES`); on the compiled path,
+            chunks stop at each update, so a small ``W`` costs speed.
         **hyperparameters: the hyper-parameters every agent shares, by keyword
             (``learning_rate``, ``gamma``, ``exploration_initial_eps``,
             ``exploration_final_eps``, ``exploration_fraction``, ``q_init``, ``seed``,
             ``verbose``): see :class:`~delayed_rl.agents.base.TabularAgent`. ε applies at both
             levels; set ``q_init`` above the achievable values for optimistic exploration (the
             thesis does; e.g. 50 in the Roulette example).
+
+    The acting model λ̂*_t is the one the behaviour policy chose at step ``t`` in ``learn()``;
+    for a transition given to :meth:`update`, which the agent did not choose, it is the greedy
+    model of the transition's state (:meth:`preferred_delay`), read before the update.
 
     Example:
         >>> import gymnasium as gym
@@ -238,7 +291,8 @@ class MultipleModelQLearning(TabularAgent):
         (25, 11, 4)
     """
 
-    _hyperparameter_names = (*TabularAgent._hyperparameter_names, "delay_estimates")
+    _hyperparameter_names = (*TabularAgent._hyperparameter_names, "delay_estimates", *OPTION_NAMES)
+    _optional_hyperparameter_names = OPTION_NAMES  # files written before the options lack them
     _derived = (*TabularAgent._derived, "_q_rows", "_q_flat")  # views of _q: rebuilt on copies
 
     @shares_hyperparameters
@@ -248,8 +302,20 @@ class MultipleModelQLearning(TabularAgent):
         max_delay_estimate: int | None = None,
         delay_step: int | None = None,
         delay_estimates: Sequence[int] | None = None,
+        *,
+        reward_kernel: float | None = None,
+        delay_trace: float | None = None,
+        greedy_window: int | None = None,
         **hyperparameters: Any,
     ):
+        given = zip(OPTION_NAMES, (reward_kernel, delay_trace, greedy_window), strict=True)
+        for option, given_value in given:  # a subclass that does not take them (QLearning)
+            if given_value is not None and option not in self._hyperparameter_names:
+                raise TypeError(
+                    f"{type(self).__name__}.__init__() got an unexpected keyword argument "
+                    f"{option!r}"
+                )
+        self._set_options(reward_kernel, delay_trace, greedy_window)
         name = _delay_argument_name(type(self), delay_estimates)
         self._delay_estimates = check_delay_estimates(
             max_delay_estimate, delay_step, delay_estimates, name
@@ -261,6 +327,21 @@ class MultipleModelQLearning(TabularAgent):
             value = self.delay_estimates[0]
         self._delay_argument = (name, value)  # what a message about the tables' size names
         super().__init__(env, **hyperparameters)
+
+    def _set_options(
+        self, reward_kernel: Any = None, delay_trace: Any = None, greedy_window: Any = None
+    ) -> None:
+        """Check and set the options (see the class docstring).
+
+        Raises:
+            TypeError: an option of the wrong type (the message names it).
+            ValueError: an option out of range.
+        """
+        self.reward_kernel = check_real(
+            "reward_kernel", reward_kernel, 0.0, low_open=True, optional=True
+        )
+        self.delay_trace = check_real("delay_trace", delay_trace, 0.0, 1.0, optional=True)
+        self.greedy_window = check_int("greedy_window", greedy_window, 1, optional=True)
 
     # ------------------------------------------------------------------ model
     @property
@@ -275,12 +356,44 @@ class MultipleModelQLearning(TabularAgent):
         view.flags.writeable = False
         return view
 
+    @property
+    def greedy_table(self) -> np.ndarray:
+        """The table the deterministic policy reads, shape ``(|S|, |Λ|, |A|)`` (read-only view).
+
+        :attr:`q_table` itself without ``greedy_window`` (and before the average's first
+        update); else the moving average of the Q-table (see the class docstring).
+        """
+        view = self._greedy_source().view()
+        view.flags.writeable = False
+        return view
+
+    @property
+    def delay_trace_values(self) -> np.ndarray | None:
+        """The delay trace ``e(λ̂)``, indexed like :attr:`delay_estimates` (a copy).
+
+        ``None`` without ``delay_trace``.
+        """
+        return None if self._trace is None else self._trace.copy()
+
+    def _greedy_source(self) -> np.ndarray:
+        """The array :attr:`greedy_table` shows."""
+        if self._greedy_q is None or not self._greedy_clock[1]:
+            return self._q
+        return self._greedy_q
+
     def _state_array_specs(self) -> dict[str, tuple[tuple[int, ...], Any]]:
         n_models = len(self._delay_estimates)
-        return {
-            "q_table": ((self.n_states, n_models, self.n_actions), np.float64),
+        shape = (self.n_states, n_models, self.n_actions)
+        specs: dict[str, tuple[tuple[int, ...], Any]] = {
+            "q_table": (shape, np.float64),
             "delay_estimates": ((n_models,), np.int64),
         }
+        if self.delay_trace is not None:
+            specs["delay_trace"] = ((n_models,), np.float64)
+        if self.greedy_window is not None:
+            specs["greedy_table"] = (shape, np.float64)
+            specs["greedy_clock"] = ((2,), np.int64)
+        return specs
 
     def _setup_model(self) -> None:
         n_models = len(self._delay_estimates)
@@ -288,7 +401,16 @@ class MultipleModelQLearning(TabularAgent):
             self, "_delay_argument", ("delay_estimates", _shown(self.delay_estimates))
         )
         env = (type(self), self.n_states, self.n_actions)
-        check_table_size(name, value, n_models, int(self._delay_estimates[-1]), env)
+        check_table_size(
+            name,
+            value,
+            n_models,
+            int(self._delay_estimates[-1]),
+            env,
+            averaged_table=self.greedy_window is not None,
+            reward_kernel=self.reward_kernel is not None,
+            delay_trace=self.delay_trace is not None,
+        )
         self.n_models = n_models
         self._q = np.full((self.n_states, n_models, self.n_actions), self.q_init)
         self._rebuild_derived()
@@ -308,6 +430,22 @@ class MultipleModelQLearning(TabularAgent):
         ).tolist()
         self._has_zero_estimate = bool(self._delay_estimates[0] == 0)
         self._t = 0
+        self._setup_options()
+
+    def _setup_options(self) -> None:
+        """The options' arrays: the kernel's weights, the trace, the averaged table."""
+        self._credit_kernel = (
+            None
+            if self.reward_kernel is None
+            else credit_kernel(self._delay_estimates, self.reward_kernel)
+        )
+        self._trace = None if self.delay_trace is None else np.zeros(self.n_models)
+        window = self.greedy_window
+        self._greedy_interval = 0 if window is None else max(1, window // _GREEDY_UPDATES)
+        self._greedy_q = None if window is None else np.zeros_like(self._q)
+        self._greedy_clock = np.zeros(2, dtype=np.int64)  # [steps since an update, updates]
+        self._weighted = self.reward_kernel is not None or self.delay_trace is not None
+        self._acting: int | None = None  # the acting model _choose picked for the next step
 
     def _rebuild_derived(self) -> None:
         super()._rebuild_derived()
@@ -324,8 +462,36 @@ class MultipleModelQLearning(TabularAgent):
         self._t = 0
 
     def compiled_tables(self) -> CompiledTables:
-        """The Q-table, its cache and Λ: MMQ's rule runs compiled for every Λ."""
-        return CompiledTables(self._q, self._v_max, self._v_cell, self._delay_estimates)
+        """The Q-table, its cache and Λ: MMQ's rule runs compiled for every Λ, options included.
+
+        With ``greedy_window``, a chunk runs up to the next update of the averaged table, which
+        runs between chunks: both paths average at the same training steps.
+        """
+        tables = CompiledTables(self._q, self._v_max, self._v_cell, self._delay_estimates)
+        if not (self._weighted or self._greedy_interval):
+            return tables
+        tables = tables._replace(
+            credit_kernel=self._credit_kernel, trace_decay=self.delay_trace, trace=self._trace
+        )
+        if self._greedy_interval:
+            until = max(1, self._greedy_interval - int(self._greedy_clock[0]))
+            tables = tables._replace(chunk_limit=until, after_chunk=self._after_greedy_chunk)
+        return tables
+
+    def _after_greedy_chunk(self, steps: int) -> None:
+        self._greedy_clock[0] += steps
+        if self._greedy_clock[0] >= self._greedy_interval:
+            self._average_greedy()
+
+    def _average_greedy(self) -> None:
+        """One update of the averaged table: ``G ← G + (interval / W)(Q − G)`` (first: ``Q``)."""
+        clock, greedy = self._greedy_clock, self._greedy_q
+        if clock[1]:
+            greedy += (self._greedy_interval / self.greedy_window) * (self._q - greedy)
+        else:
+            greedy[...] = self._q
+        clock[0] = 0
+        clock[1] += 1
 
     # ------------------------------------------------------------------ acting
     def _choose(self, s: int, eps: float, uniform: UniformStream) -> tuple[int, int]:
@@ -348,6 +514,7 @@ class MultipleModelQLearning(TabularAgent):
                 if candidates.size > 1:
                     acting = int(candidates[int(uniform() * candidates.size)])
                 actions = ties[models == acting] - acting * n_actions
+        self._acting = acting  # the reward kernel and the delay trace centre on it
         if uniform() < eps:
             return acting, int(uniform() * n_actions)
         if actions is None:  # the acting model was explored: act greedily within its table
@@ -364,7 +531,7 @@ class MultipleModelQLearning(TabularAgent):
         return np.flatnonzero(self._q_rows[s] == best)
 
     def _greedy_actions(self, states: np.ndarray) -> np.ndarray:
-        return greedy_actions(self._q, states)
+        return greedy_actions(self._greedy_source(), states)
 
     def preferred_delay(self, observation: Any) -> Any:
         """λ̂* at ``observation``: the delay estimate whose table holds the state's best value.
@@ -379,9 +546,27 @@ class MultipleModelQLearning(TabularAgent):
         return int(delays[0]) if single else delays
 
     # ------------------------------------------------------------------ learning
+    def update(
+        self,
+        obs: Any,
+        action: Any,
+        reward: float,
+        next_obs: Any,
+        terminated: bool = False,
+        truncated: bool = False,
+    ) -> None:
+        """One learning step from a transition you drove yourself (see ``TabularAgent.update``).
+
+        The reward kernel and the delay trace take the greedy model of ``obs``
+        (:meth:`preferred_delay`, before the update) as the acting model.
+        """
+        self._acting = None
+        super().update(obs, action, reward, next_obs, terminated, truncated)
+
     def _learn_transition(
         self, s: int, a: int, r: float, s2: int, terminated: bool, truncated: bool
     ) -> None:
+        weights = self._step_weights(s) if self._weighted else None
         t = self._t
         mask = self._history_mask
         j = t & mask
@@ -390,14 +575,52 @@ class MultipleModelQLearning(TabularAgent):
         self._hist_cell[j] = s * self._row_size + a
         n = self.n_models if t >= self._largest_estimate else self._n_valid[t]
         if n == 1:
-            self._update_first_model((t - self._smallest_estimate) & mask, r, terminated)
+            credited = r if weights is None else float(r * weights[0])
+            self._update_first_model((t - self._smallest_estimate) & mask, credited, terminated)
         elif n:
-            self._update_models(n, (t - self._delay_estimates[:n]) & mask, r, terminated)
+            credited_all = r if weights is None else r * weights[:n]
+            self._update_models(n, (t - self._delay_estimates[:n]) & mask, credited_all, terminated)
         self.num_timesteps += 1
         self._t = 0 if (terminated or truncated) else t + 1
+        if self._greedy_interval:
+            self._greedy_clock[0] += 1
+            if self._greedy_clock[0] >= self._greedy_interval:
+                self._average_greedy()
 
-    def _update_models(self, n: int, positions: np.ndarray, r: float, terminated: bool) -> None:
-        """Update Q(s_{t−λ̂}, a_{t−λ̂}, λ̂) for the first ``n`` models, all targets first."""
+    def _step_weights(self, s: int) -> np.ndarray:
+        """This step's share of the reward per model (the options), about the acting model.
+
+        The acting model is the one :meth:`_choose` picked, or for a transition the agent did
+        not choose (:meth:`update`) the greedy model of ``s``.
+        """
+        acting = self._acting
+        if acting is None:
+            acting = int(self._q_rows[s].argmax()) // self.n_actions
+        self._acting = None
+        return self._credit_weights(acting)
+
+    def _credit_weights(self, acting: int) -> np.ndarray:
+        """Advance the delay trace to this step; each model's share of the reward, ``w_t``.
+
+        The products are the compiled loop's, in its order (kernel weight, then trace).
+        """
+        trace = self._trace
+        if trace is not None:
+            trace *= self.delay_trace
+            trace[acting] = 1.0
+        if self._credit_kernel is None:
+            return trace
+        estimates = self._delay_estimates
+        weights = self._credit_kernel[np.abs(estimates - estimates[acting])]
+        return weights if trace is None else weights * trace
+
+    def _update_models(
+        self, n: int, positions: np.ndarray, r: float | np.ndarray, terminated: bool
+    ) -> None:
+        """Update Q(s_{t−λ̂}, a_{t−λ̂}, λ̂) for the first ``n`` models, all targets first.
+
+        ``r`` is the reward credited to every model, or one per model (the options).
+        """
         v_max, v_cell = self._v_max, self._v_cell
         states = self._hist_s[positions]
         cells = self._hist_cell[positions] + self._model_offset[:n]
@@ -484,7 +707,13 @@ class MultipleModelQLearning(TabularAgent):
 
     # ------------------------------------------------------------------ persistence
     def _get_state_arrays(self) -> dict[str, np.ndarray]:
-        return {"q_table": self._q.copy(), "delay_estimates": self._delay_estimates.copy()}
+        arrays = {"q_table": self._q.copy(), "delay_estimates": self._delay_estimates.copy()}
+        if self._trace is not None:
+            arrays["delay_trace"] = self._trace.copy()
+        if self._greedy_q is not None:
+            arrays["greedy_table"] = self._greedy_q.copy()
+            arrays["greedy_clock"] = self._greedy_clock.copy()
+        return arrays
 
     def _set_state_arrays(self, arrays: dict[str, np.ndarray], where: str) -> None:
         q = arrays.get("q_table")
@@ -502,17 +731,37 @@ class MultipleModelQLearning(TabularAgent):
                 f"{where}: the delay_estimates array ({delays!r}) does not match the "
                 f"metadata ({self.delay_estimates})"
             )
+        self._set_option_arrays(arrays, where)
         self._q[...] = q
         self._rebuild_cache()
 
+    def _set_option_arrays(self, arrays: dict[str, np.ndarray], where: str) -> None:
+        """Check and set the options' state (the trace, the averaged table and its clock)."""
+        if self._trace is not None:
+            trace = arrays["delay_trace"]
+            if not np.all((trace >= 0.0) & (trace <= 1.0)):
+                raise ValueError(f"{where}: delay_trace must hold numbers in [0, 1]")
+            self._trace[...] = trace
+        if self._greedy_q is not None:
+            greedy, clock = arrays["greedy_table"], arrays["greedy_clock"]
+            if not np.all(np.isfinite(greedy)):
+                raise ValueError(f"{where}: greedy_table holds non-finite values")
+            if np.any(clock < 0):
+                raise ValueError(f"{where}: greedy_clock must hold counts >= 0, got {clock!r}")
+            self._greedy_q[...] = greedy
+            self._greedy_clock[...] = clock
+
     def _set_hyperparameters(self, *, delay_estimates: Any = None, **kwargs: Any) -> None:
-        """Also Λ, when loading (the constructor sets it itself and passes ``None``)."""
+        """Also Λ and the options, when loading (the constructor sets them itself)."""
         if delay_estimates is not None:
             self._delay_estimates = check_delay_estimates(None, None, delay_estimates)
         elif "_delay_estimates" not in vars(self):
             raise TypeError(
                 "delay_estimates must be a sequence of distinct integers >= 0, got None"
             )
+        options = {name: kwargs.pop(name) for name in OPTION_NAMES if name in kwargs}
+        if options or "greedy_window" not in vars(self):  # loading (a file may lack them)
+            self._set_options(**options)
         super()._set_hyperparameters(**kwargs)
 
 

@@ -16,9 +16,13 @@ import gymnasium as gym
 
 from delayed_rl._validation import check_int
 from delayed_rl.agents.hyperparameters import shares_hyperparameters
-from delayed_rl.agents.mmq import MultipleModelQLearning
+from delayed_rl.agents.mmq import OPTION_NAMES, MultipleModelQLearning
 
 __all__ = ["FixedDelayQLearning", "QLearning"]
+
+_SINGLE_MODEL_NAMES = tuple(
+    name for name in MultipleModelQLearning._hyperparameter_names if name not in OPTION_NAMES
+)  # MMQ's options are not exposed: with one model, the kernel and the trace are moot
 
 
 class QLearning(MultipleModelQLearning):
@@ -40,6 +44,8 @@ class QLearning(MultipleModelQLearning):
         >>> agent.predict(8, deterministic=True)[0] in (0, 3)  # from the start: up or left
         True
     """
+
+    _hyperparameter_names = _SINGLE_MODEL_NAMES
 
     @shares_hyperparameters
     def __init__(self, env: gym.Env | str, **hyperparameters: Any):
@@ -70,6 +76,8 @@ class FixedDelayQLearning(MultipleModelQLearning):
         **hyperparameters: the hyper-parameters every agent shares, by keyword: see
             :class:`~delayed_rl.agents.base.TabularAgent`.
     """
+
+    _hyperparameter_names = _SINGLE_MODEL_NAMES
 
     @shares_hyperparameters
     def __init__(

@@ -8,7 +8,8 @@ arguments come in named groups (:class:`QCache`, :class:`Rule`, the env's
 :class:`StepLog`, :class:`Script`), which numba compiles as tuples.
 
 The update rule is the one of :mod:`delayed_rl.agents.mmq` (its module docstring states it
-exactly); the exactness tests drive both on scripted transitions.
+exactly), options included (the reward kernel and the delay trace, :class:`Rule`); the exactness
+tests drive both on scripted transitions.
 """
 
 from __future__ import annotations
@@ -135,6 +136,14 @@ def _count_ties(qf, qmax, row_size, ties):
             ties[s] += qf[i] == qmax[s]
 
 
+NO_KERNEL = np.zeros(0)
+"""The empty reward kernel (:attr:`Rule.credit_kernel`): every model is credited the reward."""
+NO_TRACE = np.zeros(0)
+"""The empty delay trace (:attr:`QCache.trace`), for a rule without one."""
+TRACE_OFF = -1.0
+"""The :attr:`Rule.trace_decay` of a rule without a delay trace."""
+
+
 class QCache(NamedTuple):
     """The agent's Q-table and its exact cache, updated in place by :func:`run_chunk`.
 
@@ -144,16 +153,24 @@ class QCache(NamedTuple):
         v_cell: the flat index into ``q`` of an entry holding it.
         ties: how many entries of the state's row hold it (counted afresh at the start of each
             call, then kept exact).
+        trace: the delay trace ``e(λ̂)``, one value per model, updated in place when
+            :attr:`Rule.trace_decay` is on (else unread: :data:`NO_TRACE`).
     """
 
     q: np.ndarray
     v_max: np.ndarray
     v_cell: np.ndarray
     ties: np.ndarray
+    trace: np.ndarray = NO_TRACE
 
 
 class Rule(NamedTuple):
-    """The learning rule's constants: Λ, α, γ and the ε schedule.
+    """The learning rule's constants: Λ, α, γ, the ε schedule and MMQ's credit options.
+
+    With both options off (the defaults) every model is credited the delivered reward ``r_t``
+    (the thesis's rule). Otherwise model ``j`` is credited ``r_t · w_t(j)``, ``w_t(j)`` the
+    product of the options that are on: the kernel's ``credit_kernel[|Λ[j] − Λ[m_t]|]`` and the
+    trace's ``e_t(j)``, ``m_t`` the acting model of step ``t``.
 
     Attributes:
         delay_estimates: Λ, sorted ascending (``int64``).
@@ -162,6 +179,10 @@ class Rule(NamedTuple):
         eps_initial: ε at step 0.
         eps_final: ε from step ``eps_steps`` on (linear in between).
         eps_steps: the length of the ε ramp, in steps (>= 1).
+        credit_kernel: the reward kernel's weight by the distance ``|λ̂ − λ̂*|`` in steps (index
+            0 to ``max Λ − min Λ``, from :func:`credit_kernel`); empty (:data:`NO_KERNEL`): off.
+        trace_decay: β of the delay trace (each step ``e ← β e``, then ``e(m_t) ← 1``; the
+            trace is :attr:`QCache.trace`); negative (:data:`TRACE_OFF`): off.
     """
 
     delay_estimates: np.ndarray
@@ -170,6 +191,25 @@ class Rule(NamedTuple):
     eps_initial: float
     eps_final: float
     eps_steps: int
+    credit_kernel: np.ndarray = NO_KERNEL
+    trace_decay: float = TRACE_OFF
+
+
+def credit_kernel(delay_estimates: np.ndarray, width: float) -> np.ndarray:
+    """The reward kernel's weights ``exp(−d² / (2σ²))`` for ``d = 0 .. max Λ − min Λ`` steps.
+
+    Both training paths read a model's weight off this one array (so they agree to the bit):
+    the weight of model λ̂ when λ̂* acts is ``weights[|λ̂ − λ̂*|]``.
+
+    Args:
+        delay_estimates: Λ, sorted ascending.
+        width: σ > 0, in steps (so large that ``σ²`` overflows: every weight 1).
+    """
+    distance = np.arange(int(delay_estimates[-1] - delay_estimates[0]) + 1, dtype=np.float64)
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        weights = np.exp(-(distance * distance) / (2.0 * width * width))
+    weights[0] = 1.0  # d = 0 is full credit, even where σ² underflows to 0
+    return weights
 
 
 class DelayLine(NamedTuple):
@@ -247,11 +287,16 @@ class Script(NamedTuple):
         transitions: rows ``(s, a, s′)``.
         terminated: one flag per row.
         rewards: the reward received at each row's step.
+        acting: the acting model's index into Λ at each row's step (what the reward kernel
+            centres on and the delay trace marks); empty: the greedy model of the row's state,
+            the lowest index whose table holds the state's max (as MMQ's ``update()``), looked
+            up only when a credit option is on (else 0).
     """
 
     transitions: np.ndarray
     terminated: np.ndarray
     rewards: np.ndarray
+    acting: np.ndarray = np.zeros(0, np.int64)
 
 
 NO_SCRIPT = Script(np.zeros((0, 3), np.int64), np.zeros(0, np.bool_), np.zeros(0))
@@ -296,9 +341,13 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, mod
     With a non-empty ``script`` the steps replay its transitions and received rewards instead of
     acting in the env: :func:`replay` uses it so that tests drive this very loop.
 
+    MMQ's credit options (:class:`Rule`): the delay trace is decayed and the acting model's entry
+    set to 1 at every step, before the step's update; the per-model weight of the reward is
+    computed only when an option is on, so the thesis's rule pays nothing for them.
+
     Args:
-        cache: the Q-table and its cache (:class:`QCache`), updated in place.
-        rule: Λ, α, γ and the ε schedule (:class:`Rule`).
+        cache: the Q-table, its cache and the delay trace (:class:`QCache`), updated in place.
+        rule: Λ, α, γ, the ε schedule and the credit options (:class:`Rule`).
         env: the env's outcome tables (:class:`~delayed_rl.fast.tabular.TabularModel`).
         line: the reward delay (:class:`DelayLine`).
         history: the episode's transitions and the clocks (:class:`History`), updated in place.
@@ -315,13 +364,17 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, mod
     estimates = rule.delay_estimates
     alpha, gamma = rule.learning_rate, rule.gamma
     eps_initial, eps_final, eps_steps = rule.eps_initial, rule.eps_final, rule.eps_steps
-    q, qmax, qcell, qties = cache.q, cache.v_max, cache.v_cell, cache.ties
+    q, qmax, qcell, qties, trace = cache.q, cache.v_max, cache.v_cell, cache.ties, cache.trace
+    kernel_weights, decay = rule.credit_kernel, rule.trace_decay
+    has_kernel = kernel_weights.shape[0] > 0
+    has_trace = decay >= 0.0
+    weighted = has_kernel or has_trace
     out_cdf, out_next, out_reward = env.out_cdf, env.out_next, env.out_reward
     out_term = env.out_term
     init_cdf, max_steps = env.init_cdf, env.max_steps
     delays, buffer, episode_end_mode = line.delays, line.ring, line.episode_end_mode
     hist_s, hist_a, hist_s2, hist_term, state = history
-    script_rows, script_term, script_reward = script
+    script_rows, script_term, script_reward, script_acting = script
     n_models = estimates.shape[0]
     n_actions = q.shape[2]
     row_size = n_models * n_actions
@@ -347,6 +400,11 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, mod
             delivered = script_reward[t]
             reward = delivered
             acting = 0
+            if script_acting.shape[0] > 0:
+                acting = script_acting[t]
+            elif weighted:  # the greedy model: the lowest index holding the state's max
+                first = _scan_max(qf, s * row_size, row_size)[1]
+                acting = (first - s * row_size) // n_actions
             ended = terminated
         else:
             step = start_step + t
@@ -407,6 +465,10 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, mod
         hist_s2[pos] = s2
         hist_term[pos] = terminated
         hist_count += 1
+        if has_trace:  # the delay trace: decay every model's, mark the acting model's
+            for j in range(n_models):
+                trace[j] *= decay
+            trace[acting] = 1.0
         # learn: every target first (each reads the cached max of its next state) ...
         count = 0  # the models whose step t − λ̂ is in this episode: a prefix (Λ is sorted)
         for j in range(n_models):
@@ -418,6 +480,13 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, mod
             credited = delivered
             if has_model:  # the estimated mean reward of the pair (Λ = {0}: this step's)
                 credited = model.rewards[hist_s[pos] * n_actions + hist_a[pos]]
+            elif weighted:  # r_t · kernel(|λ̂ − λ̂*|) · e(λ̂), the options that are on
+                weight = 1.0
+                if has_kernel:
+                    weight = kernel_weights[abs(estimate - estimates[acting])]
+                if has_trace:
+                    weight *= trace[j]
+                credited = delivered * weight
             targets[j] = credited + bootstrap
             states[j] = hist_s[pos]
             cells[j] = hist_s[pos] * row_size + j * n_actions + hist_a[pos]
@@ -466,8 +535,17 @@ def replay(
     learning_rate: float,
     gamma: float,
     model: RewardModel = NO_REWARD_MODEL,
+    *,
+    reward_kernel: float | None = None,
+    delay_trace: float | None = None,
+    trace: np.ndarray | None = None,
+    acting: np.ndarray | None = None,
 ) -> None:
     """Apply the MMQ update of :func:`run_chunk` to scripted transitions, in place on ``q``.
+
+    By default, the thesis's rule (every model credited the reward). MMQ's credit options apply
+    as the agent's ``reward_kernel`` and ``delay_trace`` do; the acting model of each step is
+    ``acting``'s, or else the greedy model of the step's state, as MMQ's ``update()`` takes it.
 
     Args:
         q: the Q-table, shape (|S|, |Λ|, |A|), updated in place.
@@ -479,24 +557,49 @@ def replay(
         learning_rate: α.
         gamma: γ.
         model: a reward model whose statistics are fed (and whose rewards are credited).
+        reward_kernel: σ of the reward kernel (``None``: off).
+        delay_trace: β of the delay trace (``None``: off).
+        trace: the delay trace to start from, one float64 per model, updated in place
+            (``None``: zeros; only read with ``delay_trace``).
+        acting: the acting model's index into Λ at each row (``None``: the greedy model).
     """
     from delayed_rl.fast.tabular import TabularModel
 
     n = transitions.shape[0]
     estimates = np.asarray(delay_estimates, dtype=np.int64)
     flat = q.reshape(q.shape[0], -1)
+    n_models = estimates.shape[0]
+    if delay_trace is not None and trace is None:
+        trace = np.zeros(n_models)
+    if trace is not None and (trace.dtype != np.float64 or trace.shape != (n_models,)):
+        raise ValueError(f"trace must be a float64 array of shape ({n_models},)")
+    if acting is not None:
+        acting = np.asarray(acting, np.int64)
+        if acting.shape != (n,) or (n and not 0 <= acting.min() <= acting.max() < n_models):
+            raise ValueError(f"acting must hold one model index in 0..{n_models - 1} per row")
     cache = QCache(
         q,
         flat.max(axis=1),
         np.arange(q.shape[0]) * flat.shape[1] + flat.argmax(axis=1),
         np.zeros(q.shape[0], np.int64),
+        NO_TRACE if delay_trace is None else trace,
     )
-    rule = Rule(estimates, float(learning_rate), float(gamma), 0.0, 0.0, 1)
+    rule = Rule(
+        estimates,
+        float(learning_rate),
+        float(gamma),
+        0.0,
+        0.0,
+        1,
+        NO_KERNEL if reward_kernel is None else credit_kernel(estimates, reward_kernel),
+        TRACE_OFF if delay_trace is None else float(delay_trace),
+    )
     line = DelayLine(np.zeros(n, np.int64), np.zeros(1), FLUSH)
     script = Script(
         np.asarray(transitions, np.int64),
         np.asarray(terminated, np.bool_),
         np.asarray(rewards, np.float64),
+        np.zeros(0, np.int64) if acting is None else acting,
     )
     history = History.empty(int(estimates.max()))
     no_draws = np.ones(4, np.uint64)  # a script draws nothing

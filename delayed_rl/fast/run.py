@@ -127,6 +127,9 @@ class FusedRun:
         eps_final: float,
         eps_steps: int,
         reward_model: kernel.RewardModel | None = None,
+        credit_kernel: np.ndarray | None = None,
+        trace_decay: float | None = None,
+        trace: np.ndarray | None = None,
     ) -> kernel.StepLog:
         """Advance ``steps`` steps, updating ``q`` and its cache in place; return the step log.
 
@@ -143,23 +146,45 @@ class FusedRun:
             eps_steps: the length of the ε ramp (>= 1).
             reward_model: learn from estimated mean rewards (see
                 :class:`~delayed_rl.fast.kernel.RewardModel`); ``None``: the delivered rewards.
+            credit_kernel: the reward kernel's weights by distance in steps
+                (:func:`~delayed_rl.fast.kernel.credit_kernel`); ``None``: off.
+            trace_decay: β of the delay trace (``None``: off; then ``trace`` is not read).
+            trace: the delay trace, one float64 per model, updated in place (the agent's).
 
         Returns:
             One entry per step (:class:`~delayed_rl.fast.kernel.StepLog`); :attr:`state`
             ``[0]`` is the state after the last.
+
+        Raises:
+            ValueError: ``credit_kernel`` is shorter than Λ's span, or ``trace_decay`` is given
+                without a ``trace`` of one float64 per model (the compiled code does not check
+                its indices).
         """
         delays = self._draw_delays(steps)
         self._fit_ring(int(delays.max(initial=0)))
         if self.tie_counts.shape != v_max.shape:
             self.tie_counts = np.zeros(v_max.shape, dtype=np.int64)
-        cache = kernel.QCache(q, v_max, v_cell, self.tie_counts)
+        estimates = self.delay_estimates
+        if credit_kernel is None:
+            credit_kernel = kernel.NO_KERNEL
+        elif credit_kernel.dtype != np.float64 or credit_kernel.shape[0] <= int(
+            estimates[-1] - estimates[0]
+        ):
+            raise ValueError("credit_kernel must hold a float64 weight per distance in Λ's span")
+        if trace_decay is None:
+            trace_decay, trace = kernel.TRACE_OFF, kernel.NO_TRACE
+        elif trace is None or trace.dtype != np.float64 or trace.shape != estimates.shape:
+            raise ValueError(f"trace must be a float64 array of shape {estimates.shape}")
+        cache = kernel.QCache(q, v_max, v_cell, self.tie_counts, trace)
         rule = kernel.Rule(
-            delay_estimates=self.delay_estimates,
+            delay_estimates=estimates,
             learning_rate=float(learning_rate),
             gamma=float(gamma),
             eps_initial=float(eps_initial),
             eps_final=float(eps_final),
             eps_steps=int(eps_steps),
+            credit_kernel=credit_kernel,
+            trace_decay=float(trace_decay),
         )
         line = kernel.DelayLine(delays, self.ring, self.mode)
         log = kernel.StepLog.empty(steps)
