@@ -84,27 +84,28 @@ def _tail_products(p):
 
 
 @_jit
-def _add_coupling(vals, diag, position, stats, x, y, value):
+def _add_coupling(vals, diag, keys, n_pairs, x, y, value):
     """Add ``value`` to ``A[x, y]`` and ``A[y, x]``: to the couple's row, or twice to ``A[x, x]``."""
     if x == y:
         diag[x] += 2.0 * value
         return
-    row = find_row(stats, x, y)
-    if row < 0 or position[row] < 0:
-        row = find_row(stats, y, x)
-    if row < 0 or position[row] < 0:
+    row = find_row(keys, n_pairs, x, y)  # a window's couples occurred, (later, earlier) first
+    if row < 0:
+        row = find_row(keys, n_pairs, y, x)
+    if row < 0:
         raise ValueError("a window couples two pairs the statistics never counted")
-    vals[position[row]] += value
+    vals[row] += value
 
 
 @_jit
-def _window_corrections(vals, diag, b, position, stats, windows, lengths, finals, flushed, p):
+def _window_corrections(vals, diag, b, stats, windows, lengths, finals, flushed, p):
     """Subtract the rows after each window's segment end; swap flushed last rows for ψ rows.
 
-    ``vals`` (one coupling per row in use, at ``position[row]``), ``diag`` and ``b`` are
+    ``vals`` (one coupling per row of the statistics), ``diag`` and ``b`` are
     corrected in place for the ``p``-weighted normal equations; a flushed last row weighs the
     pair ``u`` steps back by ``P(D ≥ u)`` instead of ``p(u)``.
     """
+    keys, n_pairs = stats.keys, stats.counters[5]
     tail = _tail_products(p)
     survival = np.zeros(p.shape[0])
     total = 0.0
@@ -126,7 +127,7 @@ def _window_corrections(vals, diag, b, position, stats, windows, lengths, finals
                 if flushed[w]:
                     change += survival[u] * survival[v] - p[u] * p[v]
                 if change != 0.0:
-                    _add_coupling(vals, diag, position, stats, x, window[v], change)
+                    _add_coupling(vals, diag, keys, n_pairs, x, window[v], change)
 
 
 @_jit
@@ -174,29 +175,150 @@ def _conjugate_gradient(later, earlier, vals, diag, b, start, tolerance, max_ite
 
 
 @_jit
-def _rows_in_use(stats):
-    """The rows holding counts: their indices and their couples' later and earlier pairs."""
-    keys = stats.keys
-    n_pairs = stats.counters[5]
+def _couple(keys, row):
+    """The key ``later·P + earlier`` of a row of statistics of hashed ``keys`` (-1: a free row)."""
+    return keys[row] if keys.shape[0] else row
+
+
+@_jit
+def _row_couplings(stats, c):
+    """Each row's coupling ``Σ_{m ≥ 1} c(m) · cooc[row, m]``, and the lag-0 diagonal ``c(0)·n``.
+
+    A lag-0 count only ever pairs a step with itself, so it lies on ``A``'s diagonal.
+    """
     cooc = stats.cooc
-    hashed = keys.shape[0] > 0
-    rows = np.zeros(cooc.shape[0], dtype=np.int64)
-    n = 0
+    n_pairs = stats.counters[5]
+    vals = np.zeros(cooc.shape[0])
+    diag = np.zeros(n_pairs)
+    k1 = cooc.shape[1]
     for row in range(cooc.shape[0]):
-        if hashed:
-            used = keys[row] != -1
-        else:
-            used = False
+        s0 = s1 = s2 = s3 = 0.0  # four running sums: a fixed order, four times the ILP
+        m = 1
+        while m + 4 <= k1:
+            s0 += c[m] * cooc[row, m]
+            s1 += c[m + 1] * cooc[row, m + 1]
+            s2 += c[m + 2] * cooc[row, m + 2]
+            s3 += c[m + 3] * cooc[row, m + 3]
+            m += 4
+        while m < k1:
+            s0 += c[m] * cooc[row, m]
+            m += 1
+        vals[row] = (s0 + s1) + (s2 + s3)
+        if cooc[row, 0]:
+            diag[_couple(stats.keys, row) // n_pairs] += c[0] * cooc[row, 0]
+    return vals, diag
+
+
+@_jit
+def _dense_matrix(stats, vals, diag):
+    """``A = Σ_rows vals (e_later e_earlierᵀ + e_earlier e_laterᵀ) + diag(diag)``, dense."""
+    n_pairs = stats.counters[5]
+    a = np.zeros((n_pairs, n_pairs))
+    for row in range(vals.shape[0]):
+        if vals[row] != 0.0:
+            key = _couple(stats.keys, row)
+            later, earlier = key // n_pairs, key % n_pairs
+            a[later, earlier] += vals[row]
+            a[earlier, later] += vals[row]
+    for x in range(n_pairs):
+        a[x, x] += diag[x]
+    return a
+
+
+@_jit
+def _prefix_dot(a, i, j, n):
+    """``Σ_{k < n} a[i, k] · a[j, k]`` in four running sums (a fixed order, four times the ILP)."""
+    s0 = s1 = s2 = s3 = 0.0
+    k = 0
+    while k + 4 <= n:
+        s0 += a[i, k] * a[j, k]
+        s1 += a[i, k + 1] * a[j, k + 1]
+        s2 += a[i, k + 2] * a[j, k + 2]
+        s3 += a[i, k + 3] * a[j, k + 3]
+        k += 4
+    while k < n:
+        s0 += a[i, k] * a[j, k]
+        k += 1
+    return (s0 + s1) + (s2 + s3)
+
+
+@_jit
+def _cholesky_solve(a, b):
+    """``x`` with ``a x = b`` for a symmetric positive definite ``a`` (overwritten), by Cholesky.
+
+    Written out rather than LAPACK's: single-threaded, so a solve never waits on BLAS threads
+    that compete with other work for the cores, and its result does not depend on their number.
+    """
+    n = a.shape[0]
+    for j in range(n):  # a's lower triangle becomes L, row by row (contiguous inner products)
+        for i in range(j, n):
+            total = a[i, j] - _prefix_dot(a, i, j, j)
+            if i == j:
+                if total <= 0.0:
+                    raise ValueError("the normal equations are not positive definite")
+                a[j, j] = np.sqrt(total)
+            else:
+                a[i, j] = total / a[j, j]
+    x = b.copy()
+    for i in range(n):  # L y = b
+        total = x[i]
+        for k in range(i):
+            total -= a[i, k] * x[k]
+        x[i] = total / a[i, i]
+    for i in range(n - 1, -1, -1):  # Lᵀ x = y
+        total = x[i]
+        for k in range(i + 1, n):
+            total -= a[k, i] * x[k]
+        x[i] = total / a[i, i]
+    return x
+
+
+@_jit
+def _sparse_couplings(stats, vals):
+    """The rows of non-zero coupling as ``(later, earlier, value)`` arrays (for CG)."""
+    n_pairs = stats.counters[5]
+    n = 0
+    for row in range(vals.shape[0]):
+        n += vals[row] != 0.0
+    later = np.zeros(n, dtype=np.int64)
+    earlier = np.zeros(n, dtype=np.int64)
+    values = np.zeros(n)
+    i = 0
+    for row in range(vals.shape[0]):
+        if vals[row] != 0.0:
+            key = _couple(stats.keys, row)
+            later[i], earlier[i], values[i] = key // n_pairs, key % n_pairs, vals[row]
+            i += 1
+    return later, earlier, values
+
+
+@_jit
+def _lag_quadratic_forms(stats, reward):
+    """``q[m] = Σ_rows cooc[row, m] · R(later) · R(earlier)``: ``Rᵀ C_m R`` for every lag."""
+    cooc = stats.cooc
+    n_pairs = stats.counters[5]
+    q = np.zeros(cooc.shape[1])
+    for row in range(cooc.shape[0]):
+        key = _couple(stats.keys, row)
+        if key < 0:
+            continue
+        weight = reward[key // n_pairs] * reward[key % n_pairs]
+        if weight != 0.0:
             for m in range(cooc.shape[1]):
-                if cooc[row, m] != 0:
-                    used = True
-                    break
-        if used:
-            rows[n] = row
-            n += 1
-    rows = rows[:n]
-    couples = keys[rows] if hashed else rows
-    return rows, couples // n_pairs, couples % n_pairs
+                q[m] += weight * cooc[row, m]
+    return q
+
+
+@_jit
+def _counts_at_lag(stats, lag):
+    """``C[i, j]`` for one lag: pair ``i`` followed ``lag`` steps later by pair ``j``."""
+    n_pairs = stats.counters[5]
+    out = np.zeros((n_pairs, n_pairs), dtype=np.int64)
+    for row in range(stats.cooc.shape[0]):
+        key = _couple(stats.keys, row)
+        if key >= 0 and stats.cooc[row, lag]:
+            out[key % n_pairs, key // n_pairs] = stats.cooc[row, lag]
+    return out
 
 
 @_jit
@@ -319,10 +441,7 @@ class RewardRegression:
 
     def counts(self, lag: int) -> np.ndarray:
         """``C[i, j]``: how often pair ``i`` was followed ``lag`` steps later by pair ``j``."""
-        rows, later, earlier = _rows_in_use(self.stats)
-        out = np.zeros((self.n_pairs, self.n_pairs), dtype=np.int64)
-        out[earlier, later] = self.stats.cooc[rows, lag]
-        return out
+        return _counts_at_lag(self.stats, lag)
 
     def reserve(self, steps: int) -> None:
         """Make room for ``steps`` more steps: their segment ends and, hashed, their new rows.
@@ -440,50 +559,44 @@ class RewardRegression:
         )
 
     # ------------------------------------------------------------------ solving
-    def _couplings(self, pmf: np.ndarray) -> tuple[np.ndarray, ...]:
-        """The normal equations for the mean rewards as couplings: ``(later, earlier, vals, d, b)``.
+    def _couplings(self, pmf: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The normal equations for the mean rewards as ``(vals, diag, b)``.
 
-        ``A = Σ_n vals[n] (e_later e_earlierᵀ + e_earlier e_laterᵀ) + diag(d)``.
+        ``A = Σ_rows vals[row] (e_later e_earlierᵀ + e_earlier e_laterᵀ) + diag(diag)``, one
+        coupling per row of the statistics.
         """
         k = self.max_delay
         c = np.array([pmf[: k + 1 - m] @ pmf[m:] for m in range(k + 1)])
-        stats = self.stats
-        rows, later, earlier = _rows_in_use(stats)
-        counts = stats.cooc[rows].astype(np.float64)
-        vals = counts[:, 1:] @ c[1:]
-        diag = np.zeros(self.n_pairs)
-        same = later == earlier
-        np.add.at(diag, later[same], c[0] * counts[same, 0])
-        b = pmf @ stats.by_lag
-        position = np.full(stats.cooc.shape[0], -1, dtype=np.int64)
-        position[rows] = np.arange(rows.size)
-        _window_corrections(vals, diag, b, position, stats, *self._windows(), pmf)
-        return later, earlier, vals, diag, b
+        vals, diag = _row_couplings(self.stats, c)
+        b = pmf @ self.stats.by_lag
+        _window_corrections(vals, diag, b, self.stats, *self._windows(), pmf)
+        return vals, diag, b
 
     def normal_equations(self, pmf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(A, b)`` of the least-squares problem for the mean rewards, given the delay pmf.
 
         ``A`` dense (``P × P``): for inspection and the dense solve.
         """
-        later, earlier, vals, diag, b = self._couplings(pmf)
-        half = np.zeros((self.n_pairs, self.n_pairs))
-        half[later, earlier] = vals  # each ordered couple has one row
+        vals, diag, b = self._couplings(pmf)
+        return self._dense(vals, diag), b
+
+    def _dense(self, vals: np.ndarray, diag: np.ndarray) -> np.ndarray:
+        """The dense ``A`` of :meth:`_couplings`' ``(vals, diag)``."""
+        if self.layout == "hashed":
+            return _dense_matrix(self.stats, vals, diag)
+        half = vals.reshape(self.n_pairs, self.n_pairs)  # the direct layout: row later·P + earlier
         a = half + half.T
         a[np.diag_indices_from(a)] += diag
-        return a, b
+        return a
 
     def solve_rewards(self, pmf: np.ndarray, ridge: float) -> np.ndarray:
         """The ridge least-squares mean rewards ``R̂`` (one per pair) for the delay pmf."""
+        vals, diag, b = self._couplings(pmf)
         if self.n_pairs <= DENSE_SOLVE_PAIRS:
-            a, b = self.normal_equations(pmf)
-            a[np.diag_indices_from(a)] += ridge
-            rewards = np.linalg.solve(a, b)
+            rewards = _cholesky_solve(self._dense(vals, diag + ridge), b)
         else:
-            later, earlier, vals, diag, b = self._couplings(pmf)
             rewards = _conjugate_gradient(
-                later,
-                earlier,
-                vals,
+                *_sparse_couplings(self.stats, vals),
                 diag + ridge,
                 b,
                 self._last_rewards,
@@ -496,8 +609,7 @@ class RewardRegression:
     def delay_gram(self, reward: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(G, z)`` of the least-squares problem for the pmf, given the mean rewards."""
         k = self.max_delay
-        rows, later, earlier = _rows_in_use(self.stats)
-        q = (reward[later] * reward[earlier]) @ self.stats.cooc[rows]
+        q = _lag_quadratic_forms(self.stats, reward)
         lags = np.abs(np.subtract.outer(np.arange(k + 1), np.arange(k + 1)))
         g = q[lags]
         z = self.stats.by_lag @ reward

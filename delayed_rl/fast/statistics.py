@@ -70,27 +70,19 @@ def _slot(keys, key):
 
 
 @_jit
-def find_row(stats, later, earlier):
-    """The row of the couple (``later``, ``earlier``), or -1 if it never occurred."""
-    n_pairs = stats.counters[5]
+def find_row(keys, n_pairs, later, earlier):
+    """The row of the couple (``later``, ``earlier``), or -1 if it never occurred.
+
+    ``keys`` are the statistics' hashed keys (empty: the direct layout).
+
+    Takes the arrays it needs rather than the :class:`Statistics` tuple: a compiled call that
+    passes the whole tuple pays a reference count per array, per call.
+    """
     key = later * n_pairs + earlier
-    if stats.keys.shape[0] == 0:
-        return key
-    i = _slot(stats.keys, key)
-    return i if stats.keys[i] == key else -1
-
-
-@_jit
-def _row_for_update(stats, key):
-    """The row of ``key``, claimed in the hashed table if new (the caller kept room)."""
-    keys = stats.keys
     if keys.shape[0] == 0:
         return key
     i = _slot(keys, key)
-    if keys[i] == -1:
-        keys[i] = key
-        stats.counters[6] += 1
-    return i
+    return i if keys[i] == key else -1
 
 
 @_jit
@@ -112,8 +104,17 @@ def observe(stats, pair, reward, episode_end):
     window[0] = pair
     length = n + 1
     base = pair * n_pairs
+    keys, cooc = stats.keys, stats.cooc
+    hashed = keys.shape[0] > 0
     for m in range(length):
-        stats.cooc[_row_for_update(stats, base + window[m]), m] += 1
+        row = base + window[m]
+        if hashed:  # the couple's row, claimed if new (the caller kept room)
+            key = row
+            row = _slot(keys, key)
+            if keys[row] == -1:
+                keys[row] = key
+                counters[6] += 1
+        cooc[row, m] += 1
         if not flush_last:
             stats.by_lag[m, window[m]] += reward
     counters[1] += 1
