@@ -21,7 +21,7 @@ this sum counts but that never happened, and with each flushed last row replaced
 survival-weighted one; ``b = Σ_k p(k) by_lag[k]`` plus the flushed rows. For a learned ``p``, the
 same statistics give the Gram matrix of the regression on ``p`` for a given ``R``; the two
 least-squares problems alternate, ``p`` on the simplex (a delay distribution), ``R`` with a
-small ridge that pulls unvisited pairs to 0.
+ridge that pulls pairs of little evidence towards a prior value.
 
 **Sizes.** Each step costs ``O(K)`` (``K + 1`` counts and sums). The counts take ``(K + 1)·P²``
 4-byte integers in the direct layout, used while that is at most :data:`DIRECT_LIMIT`; above it
@@ -589,9 +589,22 @@ class RewardRegression:
         a[np.diag_indices_from(a)] += diag
         return a
 
-    def solve_rewards(self, pmf: np.ndarray, ridge: float) -> np.ndarray:
-        """The ridge least-squares mean rewards ``R̂`` (one per pair) for the delay pmf."""
+    @property
+    def mean_reward(self) -> float:
+        """The mean reward received per step so far (0 before any step)."""
+        stats = self.stats
+        ends = int(stats.counters[2])
+        total = stats.by_lag[0].sum() + stats.end_rewards[:ends].sum()
+        return float(total / self.steps) if self.steps else 0.0
+
+    def solve_rewards(self, pmf: np.ndarray, ridge: float, prior: float = 0.0) -> np.ndarray:
+        """The ridge least-squares mean rewards ``R̂`` (one per pair) for the delay pmf.
+
+        Minimises ``Σ_t (y_t − φ_tᵀ R)² + ridge · |R − prior|²``: a pair with little evidence
+        stays near ``prior``.
+        """
         vals, diag, b = self._couplings(pmf)
+        b = b + ridge * prior
         if self.n_pairs <= DENSE_SOLVE_PAIRS:
             rewards = _cholesky_solve(self._dense(vals, diag + ridge), b)
         else:

@@ -15,6 +15,9 @@ _MODULES = {
     "roulette": "roulette",
     "controllers": "controllers",
     "linefollow": "linefollow",
+    "anonymous-delay": "anonymous_delay",
+    "future-work": "future_work",
+    "linefollow-deconv": "linefollow_deconv",
 }
 #: The experiments' names, as ``delayed-rl bench NAME`` takes them.
 NAMES = tuple(_MODULES)

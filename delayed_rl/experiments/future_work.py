@@ -1,0 +1,168 @@
+"""``future-work`` (beyond the thesis): variants of MMQ on the ``anonymous-delay`` settings.
+
+Each variant changes one piece of MMQ's rule (:class:`~delayed_rl.agents.MMQ`'s keyword
+arguments; ``None`` keeps the thesis's rule), all with Λ = {0, ..., 50} and the thesis's
+hyper-parameters (α = 0.1, γ = 0.9, constant ε = 0.1, ``q_init`` = 25):
+
+- ``MMQ (thesis)``: the thesis's rule;
+- ``MMQ kernel σ=2``, ``MMQ kernel σ=5``: ``reward_kernel=σ``, each reward credited to the
+  models λ̂ near the acting one with a Gaussian kernel of width σ over λ̂;
+- ``MMQ trace β=0.9``: ``delay_trace=0.9``, a replacing trace along λ̂;
+- ``MMQ Λ step 3``: ``delay_step=3``, Λ = {0, 3, ..., 48} (a third of the models);
+- ``MMQ greedy window 100k``: ``greedy_window=W``, the greedy policy read from an average of
+  the Q-table over the last W steps (``greedy_table``), W = ``steps // 10``: 100k at 1M steps,
+  30k at 300k, 3k in the quick run.
+
+Settings, seeds, metrics, snapshots and figures are ``anonymous-delay``'s
+(:mod:`.anonymous_delay`, whose functions this module calls): the 9×9 grid with λ = 13 (1M
+steps) and the 7×7 grid with λ = 8 (300k steps), each under Poisson, geometric and bimodal
+delays of mean λ, 20 seeds; 720 tasks at full size. ``--quick``: 7×7 under Poisson, 2 seeds,
+30k steps. The greedy policy of every variant is what its ``greedy_table`` (or ``predict``)
+gives; the delay estimate is the acting-delay share (drawn per unit of λ̂ for the Λ-step-3
+variant, so it is on the other curves' scale).
+
+The claims, per setting and variant, with verdicts computed from the runs:
+
+- the variant walks the optimal loop on at least 95 % of the seeds;
+- its greedy snapshots after half the run are optimal at least 90 % of the time (does the
+  variant stop the greedy policy flipping between routes?);
+- (the variants that act otherwise than the thesis's rule: all but the greedy window, which
+  learns and acts exactly as the thesis's rule) its training reward minus the thesis rule's,
+  paired by seed: agrees when the 95 % CI lies above 0, i.e. the variant earns more while
+  learning.
+
+``summary.json``'s ``table`` holds every metric per (setting, variant).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from delayed_rl._validation import check_choice
+from delayed_rl.experiments import anonymous_delay as shared
+from delayed_rl.experiments.runner import Claim, Config, Experiment, Summary
+
+THESIS = "MMQ (thesis)"
+VARIANTS: dict[str, dict[str, Any]] = {
+    THESIS: {},
+    "MMQ kernel σ=2": {"reward_kernel": 2.0},
+    "MMQ kernel σ=5": {"reward_kernel": 5.0},
+    "MMQ trace β=0.9": {"delay_trace": 0.9},
+    "MMQ Λ step 3": {"delay_step": 3},
+    "MMQ greedy window 100k": {"greedy_window": None},  # steps // WINDOW_DIVISOR
+}
+"""Each variant's keyword arguments to ``MMQ`` (the greedy window's is set from the steps)."""
+GREEDY_ONLY = ("MMQ greedy window 100k",)
+"""Variants that act as the thesis's rule (only their greedy policy differs): no training-reward
+claim, and no curve of their own in the learning-curve and delay-estimate figures (they are the
+thesis rule's)."""
+WINDOW_DIVISOR = 10
+"""The greedy window is ``steps // WINDOW_DIVISOR`` steps (100k of 1M)."""
+
+
+def options(variant: str, steps: int) -> dict[str, Any]:
+    """The ``MMQ`` keyword arguments of ``variant`` for a run of ``steps`` steps.
+
+    Raises:
+        TypeError: ``variant`` is not a string.
+        ValueError: ``variant`` is not one of :data:`VARIANTS`.
+    """
+    check_choice("variant", variant, tuple(VARIANTS))
+    chosen = dict(VARIANTS[variant])
+    if "greedy_window" in chosen:
+        chosen["greedy_window"] = max(1, steps // WINDOW_DIVISOR)
+    return chosen
+
+
+def make_variant(variant: str, size: int, delay: Any, steps: int, seed: int) -> Any:
+    """MMQ with Λ = {0..50} and ``variant``'s options on the ``size`` grid under ``delay``."""
+    from delayed_rl.agents import MMQ
+
+    return MMQ(
+        shared.grid(size, delay),
+        max_delay_estimate=shared.LAMBDA_MAX,
+        **options(variant, steps),
+        **shared.hyperparameters(seed),
+    )
+
+
+def tasks(config: Config) -> list[dict]:
+    """Every (setting, variant, seed), as ``anonymous-delay``'s (:func:`.grid_tasks`)."""
+    return shared.grid_tasks(config, tuple(VARIANTS))
+
+
+def run_task(task: dict) -> dict:
+    """Train one variant in its setting and measure it as ``anonymous-delay`` does."""
+    delay = shared.make_delay(task["delay"], task["lam"])
+    size, steps, seed = task["size"], task["steps"], task["seed"]
+    shared.warm_up(lambda: make_variant(task["agent"], size, delay, steps, seed + 1), steps)
+    return shared.measure(make_variant(task["agent"], size, delay, steps, seed), task)
+
+
+def _setting_claims(setting: str, by_variant: dict[str, list[tuple]]) -> list[Claim]:
+    """Per variant: optimal seeds, second-half stability and (variants) reward against the thesis."""
+    claims = []
+    thesis = by_variant.get(THESIS)
+    for variant, runs in by_variant.items():
+        is_thesis = variant == THESIS
+        claims.append(
+            shared.optimal_seeds_claim(
+                variant,
+                runs,
+                "near-optimal greedy policy (Fig. 5.9)"
+                if is_thesis and "Poisson" in setting
+                else "future work: ≥ 95 % of seeds",
+            )
+        )
+        claims.append(
+            shared.stability_claim(variant, runs, "future work: a settled greedy policy (≥ 90 %)")
+        )
+        if not is_thesis and thesis and variant not in GREEDY_ONLY:
+            claims.append(
+                shared.paired_gap_claim(
+                    f"{setting}: {variant} minus {THESIS} training reward",
+                    "future work: above the thesis rule",
+                    runs,
+                    thesis,
+                )
+            )
+    return claims
+
+
+def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
+    """The claims per setting and variant, the full table (``extra["table"]``), the figures."""
+    groups = shared.group_runs(task_list, results)
+    claims = [c for setting, runs in groups.items() for c in _setting_claims(setting, runs)]
+    extra = {
+        "table": shared.result_table(groups),
+        "variants": {
+            name: options(name, task_list[0]["steps"]) if task_list else VARIANTS[name]
+            for name in VARIANTS
+        },
+        "rules": {
+            "loop_fraction": shared.LOOP_FRACTION,
+            "seed_share": shared.SEED_SHARE,
+            "stable_share": shared.STABLE_SHARE,
+            "snapshots": shared.SNAPSHOTS,
+            "lambda_max": shared.LAMBDA_MAX,
+        },
+    }
+    estimators = tuple(name for name in VARIANTS if name not in GREEDY_ONLY)
+    figures = shared.setting_figures(groups, estimators=estimators, same_curves=GREEDY_ONLY)
+    return Summary(claims, shared.curves_of(task_list, results), figures, extra)
+
+
+EXPERIMENT = Experiment(
+    name="future-work",
+    thesis="beyond the thesis (its future work)",
+    description="MMQ (Λ = {0..50}) with the thesis's rule against five variants — a Gaussian "
+    "reward kernel over λ̂ (σ = 2, 5), a replacing trace along λ̂ (β = 0.9), Λ in steps of 3, "
+    "and a greedy policy read from the Q-table averaged over steps/10 — on anonymous-delay's "
+    "settings: 9×9 (λ = 13, 1M steps) and 7×7 (λ = 8, 300k steps) under Poisson, geometric and "
+    "bimodal delays of mean λ; greedy 1000-step walks, 50 greedy snapshots a run, acting-delay "
+    "shares, ns/step. The full table is summary.json's `table`.",
+    tasks=tasks,
+    run_task=run_task,
+    summarize=summarize,
+    default_seeds=20,
+)

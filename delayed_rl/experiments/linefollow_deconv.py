@@ -1,0 +1,259 @@
+"""``linefollow-deconv`` (beyond the thesis): deconvolution Q-learning on the e-puck line follower.
+
+A module of its own (not a setting of ``anonymous-delay``): the e-puck runs share nothing with
+the grid worlds but the agents. The setting is ``linefollow``'s (:mod:`.linefollow`, whose env,
+constants and metrics this module reuses): ``delayed_rl/EPuckLineFollow-v0`` on the racetrack,
+discrete Table 5.2 actions, centroid states, put back on the track after 50 line-less steps,
+Poisson(90) reward delays, 150k steps a run, 5 seeds; α = 0.1, γ = 0.9, constant ε = 0.1,
+``q_init`` = 10. Three learners:
+
+- ``MMQ``: Λ = {0, ..., 150} (the thesis's λ̂max = 150);
+- ``DeconvQ learned``: :class:`~delayed_rl.agents.DeconvQ` learning the delay on 0..150
+  (``max_delay`` = 150, the same horizon), never told it is Poisson;
+- ``Q``: Q-learning on the delayed reward.
+
+``--quick``: 2 seeds, 5k steps. 15 tasks at full size.
+
+Metrics, as ``linefollow``'s: the average reward during learning (the undelayed reward's
+running mean) and the accumulated error Σ|Δ| (an unseen line counted as |Δ| = 20), plus the
+delay estimate (DeconvQ's ``delay_pmf`` and ``mean_delay``, MMQ's acting-delay share and its
+mean) and ns/step (``learn``'s wall time over the steps; this env runs on the Python path).
+
+The claims, with verdicts computed from the runs:
+
+- MMQ's and Q's average rewards against the thesis's ≈ 0.55 and ≈ 0.12 (Fig. 5.22), and
+  MMQ's accumulated error over Q's against ≈ 0.4 (Fig. 5.23): ``linefollow``'s rules;
+- DeconvQ learned minus MMQ, and minus Q, average reward (paired by seed): agrees when the
+  95 % CI of the difference lies above 0;
+- DeconvQ learned's accumulated error over MMQ's (paired by seed): agrees when the 95 % CI
+  lies below 1 (DeconvQ keeps closer to the line);
+- DeconvQ learned's mean delay within 10 % of λ = 90.
+
+Whichever way they fall, the numbers are in the report and in ``summary.json``.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from delayed_rl._validation import check_choice
+from delayed_rl.experiments import linefollow, plotting
+from delayed_rl.experiments.anonymous_delay import DELAY_TOLERANCE, delay_estimate, estimate_plot
+from delayed_rl.experiments.common import claim, mean_ci_n
+from delayed_rl.experiments.runner import Config, Curve, Experiment, Summary, running_average
+
+AGENTS = ("MMQ", "DeconvQ learned", "Q")
+QUICK_STEPS, STEPS = 5_000, 150_000
+
+
+def make_agent(kind: str, seed: int) -> Any:
+    """One of :data:`AGENTS` on a fresh ``linefollow`` env (Poisson(90) reward delays).
+
+    Raises:
+        TypeError: ``kind`` is not a string.
+        ValueError: ``kind`` is not one of :data:`AGENTS`.
+    """
+    check_choice("kind", kind, AGENTS)
+    env = linefollow.line_env()
+    if kind != "DeconvQ learned":
+        return linefollow.make_agent(kind, env, seed)
+    from delayed_rl.agents import DeconvQ
+
+    return DeconvQ(
+        env,
+        delay=None,
+        max_delay=linefollow.LAMBDA_MAX,
+        learning_rate=linefollow.ALPHA,
+        gamma=linefollow.GAMMA,
+        exploration_initial_eps=linefollow.EPSILON,
+        exploration_final_eps=linefollow.EPSILON,
+        q_init=linefollow.Q_INIT,
+        seed=seed,
+    )
+
+
+def tasks(config: Config) -> list[dict]:
+    """Per seed, one run of each of :data:`AGENTS`: 150k steps (5k with ``config.quick``)."""
+    steps = config.steps or (QUICK_STEPS if config.quick else STEPS)
+    return [
+        {"agent": agent, "steps": steps, "seed": config.base_seed + i}
+        for i in range(config.seeds)
+        for agent in AGENTS
+    ]
+
+
+def run_task(task: dict) -> dict:
+    """Train one learner on the line follower; measure reward, error, delay estimate and cost.
+
+    Returns:
+        ``linefollow``'s results (``steps``, ``curve``, ``error``, ``average``,
+        ``total_error``, ``visible``), ``ns_per_step`` and the delay estimate
+        (:func:`~delayed_rl.experiments.anonymous_delay.delay_estimate`).
+    """
+    agent = make_agent(task["agent"], task["seed"])
+    started = time.perf_counter()
+    agent.learn(task["steps"], log_interval=None, record=True)
+    seconds = time.perf_counter() - started
+    log = agent.training_log
+    steps, curve = running_average(log["undelayed_reward"])
+    error = np.cumsum(linefollow.line_error(log["obs"]))
+    return {
+        "steps": steps,
+        "curve": curve,
+        "error": error[steps - 1].astype(np.float64),
+        "average": float(log["undelayed_reward"].mean()),
+        "total_error": float(error[-1]),
+        "visible": float(np.mean(log["obs"] != 0)),
+        "ns_per_step": 1e9 * seconds / task["steps"],
+        "path": agent.last_learn_path,
+        **delay_estimate(agent),
+    }
+
+
+def _paired(runs: dict[str, list[dict]], ours: str, theirs: str, how: str) -> tuple:
+    """(mean, CI, n) of ``ours − theirs`` (``how="difference"``) or ``ours / theirs`` by seed."""
+    pairs = list(zip(runs[ours], runs[theirs], strict=True))
+    if how == "difference":
+        return mean_ci_n([a["average"] - b["average"] for a, b in pairs])
+    return mean_ci_n([a["total_error"] / b["total_error"] for a, b in pairs])
+
+
+def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
+    """The claims of the module docstring, per-agent statistics in ``extra`` and the figures."""
+    runs: dict[str, list[dict]] = {agent: [] for agent in AGENTS}
+    curves = []
+    for task, result in zip(task_list, results, strict=True):
+        runs[task["agent"]].append(result)
+        agent, seed, steps = task["agent"], task["seed"], result["steps"]
+        curves.append(Curve(agent, seed, steps, result["curve"]))
+        curves.append(Curve(agent, seed, steps, result["error"], "accumulated_error"))
+    stat = {agent: mean_ci_n([r["average"] for r in rs]) for agent, rs in runs.items()}
+    tolerance = linefollow.REWARD_TOLERANCE
+    above = "paired by seed; agrees when the 95 % CI of the difference lies above 0"
+    over_mmq = _paired(runs, "DeconvQ learned", "MMQ", "difference")
+    over_q = _paired(runs, "DeconvQ learned", "Q", "difference")
+    error_ratio = _paired(runs, "DeconvQ learned", "MMQ", "ratio")
+    thesis_ratio = _paired(runs, "MMQ", "Q", "ratio")
+    delays = mean_ci_n([r["mean_delay"] for r in runs["DeconvQ learned"]])
+    lam = linefollow.LAM
+    claims = [
+        claim(
+            "MMQ average reward during learning",
+            "≈ 0.55 (Fig. 5.22)",
+            stat["MMQ"],
+            ok=abs(stat["MMQ"][0] - 0.55) <= tolerance,
+            note=f"agrees when |measured − thesis| ≤ {tolerance}",
+        ),
+        claim(
+            "Q average reward during learning",
+            "≈ 0.12 (Fig. 5.22)",
+            stat["Q"],
+            ok=abs(stat["Q"][0] - 0.12) <= tolerance,
+            note=f"agrees when |measured − thesis| ≤ {tolerance}",
+        ),
+        claim(
+            "DeconvQ learned average reward during learning",
+            "extension: above Q (next row)",
+            stat["DeconvQ learned"],
+            ok=over_q[0] - over_q[1] > 0,
+            note="the verdict is the next row's",
+        ),
+        claim(
+            "DeconvQ learned minus Q average reward",
+            "extension: DeconvQ above Q",
+            over_q,
+            ok=over_q[0] - over_q[1] > 0,
+            note=above,
+        ),
+        claim(
+            "DeconvQ learned minus MMQ average reward",
+            "extension: DeconvQ above MMQ",
+            over_mmq,
+            ok=over_mmq[0] - over_mmq[1] > 0,
+            note=above,
+        ),
+        claim(
+            "DeconvQ learned accumulated error / MMQ accumulated error",
+            "extension: below 1",
+            error_ratio,
+            ok=error_ratio[0] + error_ratio[1] < 1,
+            note="paired by seed; agrees when the 95 % CI lies below 1",
+        ),
+        claim(
+            "MMQ accumulated error / Q accumulated error",
+            "≈ 0.4 (Fig. 5.23)",
+            thesis_ratio,
+            ok=abs(thesis_ratio[0] - 0.4) <= linefollow.RATIO_TOLERANCE,
+            note=f"paired by seed; agrees when |measured − 0.4| ≤ {linefollow.RATIO_TOLERANCE}",
+        ),
+        claim(
+            "DeconvQ learned mean delay",
+            f"extension: the true mean {lam}",
+            delays,
+            ok=abs(delays[0] - lam) <= DELAY_TOLERANCE * lam,
+            note=f"agrees when |estimate − {lam}| ≤ {DELAY_TOLERANCE:.0%} of it",
+        ),
+    ]
+    extra = {
+        **linefollow.line_statistics(runs),
+        "average_reward": {agent: stat[agent][:2] for agent in AGENTS},
+        "ns_per_step": {a: mean_ci_n([r["ns_per_step"] for r in rs])[:2] for a, rs in runs.items()},
+        "mean_delay": {
+            a: mean_ci_n([r["mean_delay"] for r in rs])[:2]
+            for a, rs in runs.items()
+            if rs and all("mean_delay" in r for r in rs)
+        },
+        "paths": {a: sorted({r["path"] for r in rs}) for a, rs in runs.items()},
+    }
+    return Summary(claims, curves, _figures(runs), extra)
+
+
+def _figures(runs: dict[str, list[dict]]) -> dict:
+    """Reward and accumulated-error curves with 95 % bands; the delay estimates over Poisson(90)."""
+    from delayed_rl.delays import Poisson
+
+    title = f"line following, λ = {linefollow.LAM}"
+    rewards = {a: [(r["steps"], r["curve"]) for r in rs] for a, rs in runs.items()}
+    errors = {a: [(r["steps"], r["error"]) for r in rs] for a, rs in runs.items()}
+    labels = {"MMQ": "MMQ acting share", "DeconvQ learned": "DeconvQ learned pmf"}
+    estimates = {
+        labels[a]: [(r["estimate_support"], r["estimate"]) for r in runs[a]]
+        for a in labels
+        if runs[a] and all("estimate" in r for r in runs[a])
+    }
+    true_pmf = np.asarray(Poisson(linefollow.LAM).pmf(np.arange(linefollow.LAMBDA_MAX + 1)))
+    return {
+        "average_reward": plotting.figure(
+            plotting.learning_curves, rewards, f"{title}: 95 % band", "average reward"
+        ),
+        "accumulated_error": plotting.figure(
+            plotting.learning_curves,
+            errors,
+            f"{title}: 95 % band",
+            "accumulated error Σ|Δ| (pixels)",
+        ),
+        "delay_estimate": plotting.figure(
+            estimate_plot,
+            estimates,
+            true_pmf,
+            f"{title}: delay estimates (mean over seeds, 95 % band)",
+        ),
+    }
+
+
+EXPERIMENT = Experiment(
+    name="linefollow-deconv",
+    thesis="beyond the thesis (Figs. 5.22–5.23's setting)",
+    description="MMQ (λ̂max = 150) against deconvolution Q-learning (delay learned on 0..150) "
+    "and Q-learning on the e-puck line follower (linefollow's setting: racetrack, discrete "
+    "actions, centroid states, Poisson(90) reward delays), 150k steps per run; α = 0.1, "
+    "γ = 0.9, ε = 0.1, q_init = 10. Average reward during learning and accumulated error "
+    "Σ|Δ|, paired by seed; delay estimates; ns/step.",
+    tasks=tasks,
+    run_task=run_task,
+    summarize=summarize,
+    default_seeds=5,
+)
