@@ -10,8 +10,8 @@ import pytest
 
 from delayed_rl.cli import main
 from delayed_rl.experiments import NAMES, Config, get_experiment, run_experiment
-from delayed_rl.experiments.runner import mean_ci95, run_tasks, running_average
-from delayed_rl.experiments.training import greedy_average_reward, grid_env
+from delayed_rl.experiments.runner import VERDICTS, mean_ci95, run_tasks, running_average
+from delayed_rl.experiments.training import greedy_average_reward, grid_env, train
 
 
 @pytest.mark.slow
@@ -28,9 +28,11 @@ def test_quick_run_writes_every_file(name, tmp_path):
     payload = json.loads((tmp_path / "summary.json").read_text())
     assert payload["experiment"] == name and payload["claims"]
     for claim in payload["claims"]:
-        assert claim["verdict"] in {"agrees", "differs"} and np.isfinite(claim["mean"])
+        assert claim["verdict"] in VERDICTS and claim["criterion"]
+        assert np.isfinite(claim["mean"]) or claim["verdict"] == "inconclusive"
     report = (tmp_path / "report.md").read_text()
-    assert "| quantity | thesis value | measured mean ± 95 % CI | seeds | verdict |" in report
+    header = "| quantity | thesis value | measured mean ± 95 % CI | seeds | verdict | criterion |"
+    assert header in report
     assert len(list(tmp_path.glob("*.png"))) == len(summary.figures) > 0
 
 
@@ -48,6 +50,26 @@ def test_mmq_gridworld_quick_separates_the_agents(tmp_path):
     mmq = by_quantity["MMQ average reward during learning"].mean
     q = by_quantity["Q average reward during learning"].mean
     assert mmq > q + 0.1  # Fig. 5.9: MMQ learns the route, delayed Q-learning does not
+    assert by_quantity["MMQ seeds whose final greedy policy is optimal"].note.endswith(
+        "of the 17-step loop"
+    )
+    assert summary.extra["optimal_seeds"]["MMQ"][1] == 2
+    assert "greedy_optimal_snapshots" in summary.figures
+
+
+def test_mmq_gridworld_learns_in_pieces_as_in_one_run():
+    from delayed_rl.experiments.mmq_gridworld import SIZE, run_task
+
+    task = {"agent": "MMQ", "lags": list(range(51)), "lam": 13, "steps": 20_000, "seed": 3}
+    pieces = run_task(task)
+    whole = train(grid_env(SIZE, 13), task["lags"], task["steps"], task["seed"])
+    log = whole.training_log
+    assert pieces["average"] == float(log["undelayed_reward"].mean())
+    assert pieces["greedy"] == greedy_average_reward(whole, SIZE)
+    np.testing.assert_array_equal(pieces["visits"].ravel(), np.bincount(log["obs"], minlength=81))
+    np.testing.assert_array_equal(pieces["model_share"], whole.acting_delay_share)
+    assert pieces["snapshot_steps"].size == 50 and pieces["snapshot_steps"][-1] == 20_000
+    assert pieces["optimal"] == bool(pieces["snapshot_optimal"][-1])
 
 
 def test_results_do_not_depend_on_the_number_of_workers():

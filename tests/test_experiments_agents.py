@@ -12,6 +12,7 @@ from delayed_rl.experiments import NAMES, Config, get_experiment, run_experiment
 from delayed_rl.experiments import anonymous_delay as ad
 from delayed_rl.experiments import future_work as fw
 from delayed_rl.experiments import linefollow_deconv as lfd
+from delayed_rl.experiments.runner import VERDICTS
 from delayed_rl.experiments.training import greedy_average_reward
 
 UP, RIGHT, DOWN, LEFT = 0, 1, 2, 3
@@ -164,7 +165,8 @@ def test_anonymous_delay_small_run_writes_table_claims_and_figures(tmp_path):
     assert "mean_delay" not in rows["Q"]
     quantities = [claim.quantity for claim in summary.claims]
     assert len(quantities) == 6 and all(q.startswith("7×7 Poisson(8): ") for q in quantities)
-    assert {claim.verdict for claim in summary.claims} <= {"agrees", "differs"}
+    assert {claim.verdict for claim in summary.claims} <= set(VERDICTS)
+    assert all(claim.criterion for claim in summary.claims)
     assert sorted(p.name for p in tmp_path.glob("*.png")) == [
         "delay_estimate_7x7_poisson.png",
         "learning_curves_7x7_poisson.png",
@@ -255,28 +257,32 @@ def _verdicts(good: bool, seeds: int = 4) -> dict[str, str]:
 def test_anonymous_delay_verdicts_are_computed_from_the_runs():
     good, bad = _verdicts(True), _verdicts(False)
     assert set(good) == set(bad) and len(good) == 6
-    assert set(good.values()) == {"agrees"}
+    counts = {q for q in good if q.endswith("seeds whose greedy policy is optimal")}
+    assert len(counts) == 2 and {good[q] for q in counts} == {"inconclusive"}  # 4 of 4 < 95 %
+    assert {v for q, v in good.items() if q not in counts} == {"agrees"}
     assert set(bad.values()) == {"differs"}
 
 
-def test_one_seed_short_of_the_share_differs():
+def test_the_share_of_optimal_seeds_reads_its_wilson_interval():
     tasks, results = [], []
     for seed in range(20):
         task, result = _fake("DeconvQ learned", seed, seed != 0, 0.7, 8, 1.0)
         tasks.append(task)
         results.append(result)
     claim = ad.optimal_seeds_claim("DeconvQ learned", list(zip(tasks, results, strict=True)), "")
-    assert claim.verdict == "agrees" and claim.note.startswith("19 of 20 seeds")
-    results[1]["optimal"] = False
+    # 19 of 20: Wilson [0.76, 0.99], neither inside nor wholly outside [0.95, 1]
+    assert claim.verdict == "inconclusive" and claim.note.startswith("19 of 20 seeds")
+    for result in results[1:9]:
+        result["optimal"] = False
     claim = ad.optimal_seeds_claim("DeconvQ learned", list(zip(tasks, results, strict=True)), "")
-    assert claim.verdict == "differs" and claim.mean == pytest.approx(0.9)
+    assert claim.verdict == "differs" and claim.mean == pytest.approx(0.55)
 
 
-def test_relative_gap_is_nan_and_differs_when_the_oracle_earns_nothing():
+def test_relative_gap_is_nan_and_inconclusive_when_the_oracle_earns_nothing():
     ours = [_fake("DeconvQ learned", s, True, 0.1, 8, 1.0) for s in range(3)]
     oracle = [_fake("oracle", s, True, -0.1, 0, 1.0) for s in range(3)]
     claim = ad.relative_gap_claim("q", "t", ours, oracle, 0.05)
-    assert np.isnan(claim.mean) and claim.verdict == "differs"
+    assert np.isnan(claim.mean) and claim.verdict == "inconclusive"
 
 
 def _lfd_verdicts(deconv_average: float, deconv_error: float, deconv_delay: float):
@@ -313,10 +319,12 @@ def _lfd_verdicts(deconv_average: float, deconv_error: float, deconv_delay: floa
 
 def test_linefollow_deconv_verdicts_flip_with_the_data(tmp_path):
     better, summary = _lfd_verdicts(0.8, 200.0, 90.0)
-    assert set(better.values()) == {"agrees"}
+    reference = "DeconvQ learned average reward during learning"
+    assert better.pop(reference) == "reference" and set(better.values()) == {"agrees"}
     worse, _ = _lfd_verdicts(0.1, 900.0, 40.0)
+    assert worse.pop(reference) == "reference"
     deconv = [q for q in worse if q.startswith("DeconvQ")]
-    assert len(deconv) == 5 and all(worse[q] == "differs" for q in deconv)
+    assert len(deconv) == 4 and all(worse[q] == "differs" for q in deconv)
     assert worse["MMQ average reward during learning"] == "agrees"  # MMQ's rows unchanged
     assert set(summary.extra["accumulated_error"]) == set(lfd.AGENTS)
     for name, draw in summary.figures.items():

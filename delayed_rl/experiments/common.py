@@ -1,45 +1,326 @@
-"""Pieces shared by the experiments: report rows, and the grid-world runs normalised by Eq. 5.3.
+"""Pieces shared by the experiments: verdict rules, and the grid-world runs normalised by Eq. 5.3.
 
-The grid-world experiments (``delay-sweep``, ``world-size``, ``estimate-error``) share one
-design: for every seed and world size, an undelayed Q-learning *reference* run, and delayed runs
-whose average reward is divided by the reference's (the thesis's Eq. 5.3). :func:`grid_tasks`
-builds those tasks, :func:`grid_task` runs one, and :func:`normalised` pairs each delayed run
-with its reference.
+**Verdicts.** Every report row is built by one of the helpers below, which compute its verdict
+from the measurement's 95 % interval and the thesis's value by a stated rule, and write that
+rule into the row's ``criterion``:
+
+- :func:`band_claim` / :func:`range_claim`: a value against a band (the thesis's value ± a
+  tolerance, or a range such as "in (0, 1)"): ``agrees`` when the 95 % CI lies inside the band,
+  ``differs`` when it lies wholly outside, ``inconclusive`` when it straddles an edge;
+- :func:`direction_claim`: a sign or a side ("MMQ above Q", "a ratio below 1"): ``agrees``
+  when the CI lies wholly on the claimed side of the reference value, ``differs`` when it lies
+  wholly on the other side (the reference value itself counts as the other side),
+  ``inconclusive`` otherwise;
+- :func:`count_claim`: k of n seeds, against a band of the share: the rule of
+  :func:`range_claim` applied to the Wilson 95 % interval of k / n;
+- :func:`trend_claim`: a trend: :func:`direction_claim` on the least-squares slope fitted per
+  seed (:func:`per_seed_slopes`), its CI over the seeds;
+- :func:`reference_row`: a number shown for context with no thesis value to test (verdict
+  ``reference``, see :mod:`.runner`).
+
+An interval that is NaN (no data, or a quantity that could not be formed) is ``inconclusive``.
+Differences and ratios of two conditions are formed per seed first (:func:`paired`), so their CI
+is over seeds too.
+
+**Normalised grid-world runs.** The grid-world experiments (``delay-sweep``, ``world-size``,
+``estimate-error``) share one design: for every seed and world size, an undelayed Q-learning
+*reference* run, and delayed runs whose average reward is divided by the reference's (the
+thesis's Eq. 5.3). :func:`grid_tasks` builds those tasks, :func:`grid_task` runs one, and
+:func:`normalised` pairs each delayed run with its reference.
 """
 
 from __future__ import annotations
 
+import math
 from collections import defaultdict
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from delayed_rl.experiments.runner import Claim, Config, Curve, mean_ci95, running_average
+from delayed_rl.experiments.runner import (
+    AGREES,
+    DIFFERS,
+    INCONCLUSIVE,
+    REFERENCE,
+    Claim,
+    Config,
+    Curve,
+    mean_ci95,
+    running_average,
+)
 from delayed_rl.experiments.training import grid_env, train
+
+#: The standard normal 0.975 quantile, of the Wilson interval.
+_Z975 = 1.959964
 
 
 def mean_ci_n(values: Sequence[float]) -> tuple[float, float, int]:
     """The mean, the half-width of its 95 % confidence interval and the count of ``values``.
 
-    This is the ``stats`` triple that :func:`claim` reports.
+    This is the ``stats`` triple the claim helpers take.
     """
     return (*mean_ci95(values), len(values))
 
 
-def claim(
-    quantity: str, thesis: str, stats: tuple[float, float, int], ok: bool, note: str = ""
+def _fmt(value: float) -> str:
+    """A band edge in a criterion: ``0.55``, ``49.215``, ``-inf``."""
+    return f"{value:.6g}"
+
+
+def interval_verdict(low: float, high: float, band_low: float, band_high: float) -> str:
+    """The verdict of an interval ``[low, high]`` against the band ``[band_low, band_high]``.
+
+    ``agrees`` when the interval lies inside the band (edges included), ``differs`` when it
+    lies wholly outside (no point in common), ``inconclusive`` otherwise or when the interval
+    is NaN.
+
+    >>> interval_verdict(0.4, 0.5, 0.35, 0.75), interval_verdict(0.1, 0.2, 0.35, 0.75)
+    ('agrees', 'differs')
+    >>> interval_verdict(0.3, 0.4, 0.35, 0.75)
+    'inconclusive'
+    """
+    if math.isnan(low) or math.isnan(high):
+        return INCONCLUSIVE
+    if band_low <= low and high <= band_high:
+        return AGREES
+    if high < band_low or low > band_high:
+        return DIFFERS
+    return INCONCLUSIVE
+
+
+def range_claim(
+    quantity: str,
+    thesis: str,
+    stats: tuple[float, float, int],
+    low: float,
+    high: float,
+    criterion: str = "",
+    note: str = "",
 ) -> Claim:
-    """A report row with verdict ``agrees`` (when ``ok``) or ``differs``.
+    """A value against the range ``[low, high]`` (either end may be infinite).
 
     Args:
         quantity: what is measured, e.g. ``"MMQ average reward during learning"``.
         thesis: the thesis's value or statement, with its figure or table.
         stats: the measurement as (mean, 95 % CI half-width, number of runs).
-        ok: whether the measurement agrees with the thesis, by the experiment's rule.
-        note: how the verdict is decided, or anything else the report should say about the row.
+        low: the lower edge of the band the CI must lie in.
+        high: the upper edge.
+        criterion: the rule in words (default: built from the band).
+        note: anything else the report should say about the row.
+
+    Returns:
+        The row, its verdict by :func:`interval_verdict` on mean ± CI.
     """
     mean, ci, n = stats
-    return Claim(quantity, thesis, mean, ci, n, "agrees" if ok else "differs", note)
+    criterion = criterion or (
+        f"differs if the 95 % CI lies wholly outside [{_fmt(low)}, {_fmt(high)}]; "
+        "agrees if it lies inside"
+    )
+    verdict = interval_verdict(mean - ci, mean + ci, low, high)
+    return Claim(quantity, thesis, mean, ci, n, verdict, criterion, note, mean - ci, mean + ci)
+
+
+def band_claim(
+    quantity: str,
+    thesis: str,
+    stats: tuple[float, float, int],
+    target: float,
+    tolerance: float,
+    note: str = "",
+) -> Claim:
+    """A value against the thesis's ``target`` ± ``tolerance`` (:func:`range_claim`'s rule).
+
+    >>> band_claim("MMQ reward", "≈ 0.55", (0.5, 0.1, 5), 0.55, 0.2).verdict
+    'agrees'
+    >>> band_claim("MMQ − Q", "≈ +0.43", (0.11, 0.05, 5), 0.43, 0.2).criterion
+    'differs if the 95 % CI lies wholly outside 0.43 ± 0.2 = [0.23, 0.63]; agrees if it lies inside'
+    """
+    low, high = target - tolerance, target + tolerance
+    criterion = (
+        f"differs if the 95 % CI lies wholly outside {_fmt(target)} ± {_fmt(tolerance)} = "
+        f"[{_fmt(low)}, {_fmt(high)}]; agrees if it lies inside"
+    )
+    return range_claim(quantity, thesis, stats, low, high, criterion, note)
+
+
+def direction_claim(
+    quantity: str,
+    thesis: str,
+    stats: tuple[float, float, int],
+    side: str,
+    reference: float = 0.0,
+    note: str = "",
+) -> Claim:
+    """A side claim: the value above (``side="above"``) or below (``"below"``) ``reference``.
+
+    ``agrees`` when the 95 % CI lies wholly on the claimed side, ``differs`` when it lies wholly
+    on the other side, the ``reference`` value included (a difference that is exactly 0 is not
+    "above 0"), ``inconclusive`` when the CI holds points of both sides, or is NaN.
+
+    Raises:
+        ValueError: ``side`` is neither ``"above"`` nor ``"below"``.
+
+    >>> direction_claim("MMQ − Q", "MMQ above Q", (0.11, 0.05, 5), "above").verdict
+    'agrees'
+    >>> direction_claim("ratio", "below 1", (0.9, 0.2, 5), "below", 1.0).verdict
+    'inconclusive'
+    """
+    if side not in ("above", "below"):
+        raise ValueError(f"side must be 'above' or 'below', got {side!r}")
+    mean, ci, n = stats
+    low, high = mean - ci, mean + ci
+    if math.isnan(low) or math.isnan(high):
+        verdict = INCONCLUSIVE
+    elif (low > reference) if side == "above" else (high < reference):
+        verdict = AGREES
+    elif (high <= reference) if side == "above" else (low >= reference):
+        verdict = DIFFERS
+    else:
+        verdict = INCONCLUSIVE
+    other = "at or below" if side == "above" else "at or above"
+    criterion = (
+        f"differs if the 95 % CI lies wholly {other} {_fmt(reference)}; agrees if it lies "
+        f"wholly {side} it"
+    )
+    return Claim(quantity, thesis, mean, ci, n, verdict, criterion, note, low, high)
+
+
+def wilson_interval(k: int, n: int) -> tuple[float, float]:
+    """The Wilson score 95 % interval of a binomial share ``k / n`` (NaN for ``n = 0``).
+
+    >>> [round(x, 3) for x in wilson_interval(19, 20)]
+    [0.764, 0.991]
+    """
+    if n == 0:
+        return math.nan, math.nan
+    z2 = _Z975**2
+    centre = (k + z2 / 2) / (n + z2)
+    half = _Z975 / (n + z2) * math.sqrt(k * (n - k) / n + z2 / 4)
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def count_claim(
+    quantity: str,
+    thesis: str,
+    k: int,
+    n: int,
+    low: float,
+    high: float = 1.0,
+    what: str = "seeds",
+    note: str = "",
+) -> Claim:
+    """``k`` of ``n`` (seeds, say) against a band ``[low, high]`` of the share ``k / n``.
+
+    The Wilson 95 % interval of the share takes the place of mean ± CI in
+    :func:`interval_verdict`; the row's ``mean`` is ``k / n`` and its ``ci95`` half the
+    interval's width (the report prints the interval itself).
+
+    Args:
+        quantity: what is counted.
+        thesis: the thesis's value or statement.
+        k: how many of the ``n`` have the property.
+        n: how many there are.
+        low: the lower edge of the share's band.
+        high: its upper edge.
+        what: what is counted, for the note (``"seeds"``).
+        note: anything else the report should say (after ``"k of n seeds"``).
+
+    >>> count_claim("optimal seeds", "most", 15, 20, 0.5).verdict
+    'agrees'
+    >>> count_claim("optimal seeds", "≥ 95 %", 20, 20, 0.95).verdict  # 20 seeds cannot show it
+    'inconclusive'
+    """
+    share = k / n if n else math.nan
+    lo, hi = wilson_interval(k, n)
+    criterion = (
+        f"differs if the Wilson 95 % interval of the share lies wholly outside "
+        f"[{_fmt(low)}, {_fmt(high)}]; agrees if it lies inside"
+    )
+    note = f"{k} of {n} {what}" + (f"; {note}" if note else "")
+    verdict = interval_verdict(lo, hi, low, high)
+    return Claim(quantity, thesis, share, (hi - lo) / 2, n, verdict, criterion, note, lo, hi)
+
+
+def per_seed_slopes(x: Sequence[float], ys: Sequence[Sequence[float]]) -> list[float]:
+    """The least-squares slope of each seed's ``y`` against ``x`` (NaN where ``y`` has NaN).
+
+    Args:
+        x: the abscissae, shared by every seed (at least two distinct values).
+        ys: one sequence of ordinates per seed, aligned with ``x``.
+
+    >>> per_seed_slopes([0, 1, 2], [[0, 1, 2], [2, 1, 0]])
+    [1.0, -1.0]
+    """
+    x = np.asarray(x, dtype=float)
+    centred = x - x.mean()
+    slopes = []
+    for y in ys:
+        y = np.asarray(y, dtype=float)
+        slopes.append(float(centred @ (y - y.mean()) / (centred @ centred)))
+    return slopes
+
+
+def trend_claim(
+    quantity: str,
+    thesis: str,
+    x: Sequence[float],
+    ys: Sequence[Sequence[float]],
+    side: str,
+    x_label: str,
+    note: str = "",
+) -> Claim:
+    """A trend: the per-seed slope of ``ys`` against ``x``, its 95 % CI over the seeds.
+
+    The verdict is :func:`direction_claim`'s on the slopes: ``side="below"`` claims a falling
+    trend (slope below 0), ``"above"`` a rising one.
+
+    Args:
+        quantity: what trend is measured (the row shows the mean slope).
+        thesis: the thesis's statement.
+        x: the abscissae, e.g. the mean delays λ or their logarithms.
+        ys: per seed, the measurement at each ``x``.
+        side: ``"below"`` (falls with ``x``) or ``"above"`` (rises).
+        x_label: what ``x`` is, for the criterion (e.g. ``"log10 λ"``).
+        note: anything else the report should say.
+    """
+    row = direction_claim(quantity, thesis, mean_ci_n(per_seed_slopes(x, ys)), side, 0.0, note)
+    row.criterion = f"least-squares slope against {x_label} per seed; " + row.criterion.replace(
+        "95 % CI", "95 % CI of the slope over seeds"
+    )
+    return row
+
+
+def paired(
+    ours: Mapping[int, float], theirs: Mapping[int, float], how: str = "difference"
+) -> list[float]:
+    """Per seed present in both, ``ours − theirs`` (``how="difference"``) or ``ours / theirs``.
+
+    Args:
+        ours: ``{seed: value}``.
+        theirs: ``{seed: value}``, the baseline.
+        how: ``"difference"`` or ``"ratio"`` (NaN where the baseline is 0).
+
+    Raises:
+        ValueError: ``how`` is neither.
+    """
+    if how not in ("difference", "ratio"):
+        raise ValueError(f"how must be 'difference' or 'ratio', got {how!r}")
+    seeds = [seed for seed in ours if seed in theirs]
+    if how == "difference":
+        return [float(ours[s] - theirs[s]) for s in seeds]
+    return [float(ours[s] / theirs[s]) if theirs[s] != 0 else math.nan for s in seeds]
+
+
+def reference_row(
+    quantity: str,
+    stats: tuple[float, float, int],
+    thesis: str = "reference (no thesis value)",
+    note: str = "",
+) -> Claim:
+    """A row shown for context, with no thesis value to test: verdict ``reference``."""
+    mean, ci, n = stats
+    criterion = "none: a reference, not tested"
+    return Claim(quantity, thesis, mean, ci, n, REFERENCE, criterion, note, mean - ci, mean + ci)
 
 
 def grid_tasks(config: Config, steps: int, runs: Sequence[dict]) -> list[dict]:

@@ -21,15 +21,17 @@ delays of mean λ, 20 seeds; 720 tasks at full size. ``--quick``: 7×7 under Poi
 gives; the delay estimate is the acting-delay share (drawn per unit of λ̂ for the Λ-step-3
 variant, so it is on the other curves' scale).
 
-The claims, per setting and variant, with verdicts computed from the runs:
+The claims, per setting and variant, with verdicts computed from the runs by
+:mod:`.common`'s rules (each row's ``criterion`` states its own), as ``anonymous-delay``'s:
 
-- the variant walks the optimal loop on at least 95 % of the seeds;
+- the variant walks the optimal loop on at least 95 % of the seeds: the Wilson 95 % interval
+  of the share of optimal seeds inside [0.95, 1] (at 20 seeds at best ``inconclusive``);
 - its greedy snapshots after half the run are optimal at least 90 % of the time (does the
-  variant stop the greedy policy flipping between routes?);
+  variant stop the greedy policy flipping between routes?): the per-seed share's CI inside
+  [0.9, 1];
 - (the variants that act otherwise than the thesis's rule: all but the greedy window, which
   learns and acts exactly as the thesis's rule) its training reward minus the thesis rule's,
-  paired by seed: agrees when the 95 % CI lies above 0, i.e. the variant earns more while
-  learning.
+  paired by seed: the direction rule, above 0 (the variant earns more while learning).
 
 ``summary.json``'s ``table`` holds every metric per (setting, variant).
 """

@@ -9,6 +9,21 @@ and writes ``curves.csv``, ``summary.json``, the figures and ``report.md`` into 
 folder.
 
 Every task carries its own seed, so results do not depend on the number of workers.
+
+**Verdicts.** A claim's verdict is one of :data:`VERDICTS`, computed from the measurement's
+95 % interval and the thesis's value by the rule its ``criterion`` states (the helpers of
+:mod:`.common` build every row and its criterion):
+
+- ``agrees``: the interval lies inside the thesis's band, or wholly on the claimed side;
+- ``differs``: it lies wholly outside the band, or wholly on the other side;
+- ``inconclusive``: it straddles an edge (too few seeds, or too much spread, to tell), or the
+  measurement could not be formed (NaN);
+- ``reference``: the row is a number shown for context (e.g. undelayed Q-learning's reward)
+  with no thesis value to test. Such rows stay in the report's table, beside the claims they
+  explain, and are never counted as agreeing.
+
+A deterministic measurement (e.g. ``roulette``'s hand-traced Q-tables, the same for every seed)
+has a CI of 0 and ``n`` = 1: its interval is a point, so it is never ``inconclusive``.
 """
 
 from __future__ import annotations
@@ -29,6 +44,9 @@ from delayed_rl._validation import check_bool, check_choice, check_int
 
 #: The joblib backends :func:`run_tasks` can hand the runs to.
 BACKENDS = ("loky", "ray", "dask")
+AGREES, DIFFERS, INCONCLUSIVE, REFERENCE = "agrees", "differs", "inconclusive", "reference"
+#: A claim's possible verdicts (see the module docstring).
+VERDICTS = (AGREES, DIFFERS, INCONCLUSIVE, REFERENCE)
 # Student t 0.975 quantiles for 1..30 degrees of freedom (no scipy at run time).
 _T975 = (12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179,
          2.160, 2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064,
@@ -71,7 +89,24 @@ class Config:
 
 @dataclass
 class Claim:
-    """One thesis number beside the measurement: a row of ``report.md``."""
+    """One thesis number beside the measurement: a row of ``report.md``.
+
+    Attributes:
+        quantity: what is measured.
+        thesis: the thesis's value or statement, with its figure or table.
+        mean: the measurement (a share ``k / n`` for counts).
+        ci95: the half-width of its 95 % interval.
+        n: the number of runs (seeds) behind it.
+        verdict: one of :data:`VERDICTS`.
+        criterion: the rule of the verdict in words: what would make the row disagree.
+        note: anything else the report should say about the row.
+        low: the lower end of the 95 % interval the verdict read (``None``: ``mean − ci95``;
+            an asymmetric interval, such as a share's Wilson interval, sets it).
+        high: the upper end (``None``: ``mean + ci95``).
+
+    Raises:
+        ValueError: ``verdict`` is not one of :data:`VERDICTS`.
+    """
 
     quantity: str
     thesis: str
@@ -79,7 +114,25 @@ class Claim:
     ci95: float
     n: int
     verdict: str
+    criterion: str = ""
     note: str = ""
+    low: float | None = None
+    high: float | None = None
+
+    def __post_init__(self) -> None:
+        check_choice("verdict", self.verdict, VERDICTS)
+        self.mean, self.ci95 = float(self.mean), float(self.ci95)
+        self.low = self.mean - self.ci95 if self.low is None else float(self.low)
+        self.high = self.mean + self.ci95 if self.high is None else float(self.high)
+
+    def interval_text(self) -> str:
+        """The measurement as the report prints it: ``mean ± ci``, or ``mean [low, high]``."""
+        symmetric = math.isclose(self.low, self.mean - self.ci95, abs_tol=1e-9) and math.isclose(
+            self.high, self.mean + self.ci95, abs_tol=1e-9
+        )
+        if symmetric or math.isnan(self.mean):
+            return f"{self.mean:.3f} ± {self.ci95:.3f}"
+        return f"{self.mean:.3f} [{self.low:.3f}, {self.high:.3f}]"
 
 
 @dataclass
@@ -256,7 +309,11 @@ def _json_default(value: Any) -> Any:
 def render_report(
     experiment: Experiment, config: Config, summary: Summary, figures: list[str]
 ) -> str:
-    """The Markdown report: thesis value beside measured mean ± 95 % CI, per claim."""
+    """The Markdown report: per claim, the thesis value, the measurement, verdict and criterion.
+
+    The measurement is its mean ± 95 % CI, or its mean and the ends of an asymmetric 95 %
+    interval in brackets (a share's Wilson interval).
+    """
     lines = [
         f"# {experiment.name} — {experiment.thesis}",
         "",
@@ -266,14 +323,16 @@ def render_report(
         f"{config.steps or 'thesis default'}; quick: {config.quick}; "
         f"wall time: {summary.extra.get('wall_time_s', '?')} s.",
         "",
-        "| quantity | thesis value | measured mean ± 95 % CI | seeds | verdict |",
-        "|---|---|---|---|---|",
+        "| quantity | thesis value | measured mean ± 95 % CI | seeds | verdict | criterion |",
+        "|---|---|---|---|---|---|",
     ]
     for claim in summary.claims:
         lines.append(
-            f"| {claim.quantity} | {claim.thesis} | {claim.mean:.3f} ± {claim.ci95:.3f} | "
-            f"{claim.n} | {claim.verdict} |"
+            f"| {claim.quantity} | {claim.thesis} | {claim.interval_text()} | "
+            f"{claim.n} | {claim.verdict} | {claim.criterion} |"
         )
+    counts = {v: sum(c.verdict == v for c in summary.claims) for v in VERDICTS}
+    lines += ["", "Verdicts: " + ", ".join(f"{k} {v}" for k, v in counts.items()) + "."]
     notes = [f"- {claim.quantity}: {claim.note}" for claim in summary.claims if claim.note]
     if notes:
         lines += ["", "Notes:", *notes]
