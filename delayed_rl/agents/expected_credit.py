@@ -44,6 +44,7 @@ from delayed_rl._validation import check_int, check_real
 from delayed_rl.agents.hyperparameters import shares_hyperparameters
 from delayed_rl.agents.qlearning import QLearning
 from delayed_rl.delays import Delay, Empirical, as_delay
+from delayed_rl.fast._numba import jit as _jit
 
 __all__ = ["ExpectedCreditQLearning", "credit_weights"]
 
@@ -254,12 +255,56 @@ class ExpectedCreditQLearning(QLearning):
 
     def _credit_many(self, t: int, n: int, r: float, terminated: bool) -> None:
         """The updates of the first ``n`` lags: all TD errors first, increments summed."""
-        positions = (t - self._lags[:n]) & self._credit_mask
-        states = self._credit_s[positions]
-        cells = self._credit_cell[positions]
-        bootstrap = self._v_max[self._credit_s2[positions]]
-        if terminated and self._first_lag == 0:
-            bootstrap[0] = 0.0  # only the current step can be terminal in an episode
-        errors = r + self.gamma * bootstrap - self._q_flat[cells]
-        np.add.at(self._q_flat, cells, (self._alpha * self._lag_weights[:n]) * errors)
-        self._repair(np.unique(states))
+        _credit_lags(
+            self._q_flat,
+            self._v_max,
+            self._v_cell,
+            (self._credit_s, self._credit_s2, self._credit_cell),
+            self._lags[:n],
+            self._alpha * self._lag_weights[:n],
+            t,
+            self._credit_mask,
+            r,
+            self.gamma,
+            terminated and self._first_lag == 0,  # only the current step can be terminal
+        )
+
+
+@_jit
+def _credit_lags(q_flat, v_max, v_cell, history, lags, rates, t, mask, r, gamma, terminal_first):
+    """:meth:`ExpectedCreditQLearning._credit_many`, compiled (one call a step, not a dozen).
+
+    Every TD error first (each bootstrapping from the cached max), then the increments
+    ``rates[j] · δ_j`` added in lag order, then each touched state's max and its first arg-max
+    recomputed: the order of operations of the numpy version it replaced, to the last bit.
+    """
+    hist_s, hist_s2, hist_cell = history
+    n = lags.shape[0]
+    n_actions = q_flat.shape[0] // v_max.shape[0]
+    errors = np.empty(n)
+    cells = np.empty(n, dtype=np.int64)
+    states = np.empty(n, dtype=np.int64)
+    for j in range(n):
+        position = (t - lags[j]) & mask
+        cells[j] = hist_cell[position]
+        states[j] = hist_s[position]
+        bootstrap = 0.0 if j == 0 and terminal_first else v_max[hist_s2[position]]
+        errors[j] = r + gamma * bootstrap - q_flat[cells[j]]
+    for j in range(n):
+        q_flat[cells[j]] += rates[j] * errors[j]
+    for j in range(n):
+        s = states[j]
+        seen = False
+        for i in range(j):
+            if states[i] == s:
+                seen = True
+                break
+        if seen:
+            continue
+        base = s * n_actions
+        best, arg = q_flat[base], 0
+        for a in range(1, n_actions):
+            if q_flat[base + a] > best:
+                best, arg = q_flat[base + a], a
+        v_max[s] = best
+        v_cell[s] = base + arg
