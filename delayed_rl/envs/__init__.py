@@ -22,6 +22,7 @@ def register_envs() -> None:
         _register(f"GridWorld-{size}x{size}-v0", "GridWorld", kwargs={"size": size})
     _register("Roulette-v0", "Roulette")
     _register("EPuckLineFollow-v0", "EPuckLineFollow")
+    _register("EPuckLineFollowReal-v0", "EPuckLineFollowReal")
 
 
 def env_ids() -> list[str]:

@@ -35,26 +35,32 @@ class DelayableEntryPoint:
 
     Args:
         env_path: ``"module:ClassName"`` of the env class, imported on first use.
+        preset: ``"module:NAME"`` of a mapping of default keyword arguments (a registered
+            configuration of the class), imported on first use; the caller's arguments override
+            it. ``None``: no preset.
 
     Raises:
-        TypeError: ``env_path`` is not a string.
-        ValueError: ``env_path`` is not of the form ``"module:ClassName"``.
+        TypeError: ``env_path`` (or ``preset``) is not a string.
+        ValueError: ``env_path`` (or ``preset``) is not of the form ``"module:Name"``.
     """
 
     reads_delay_descriptions = True
     """``reward_delay`` may be a ``Delay.to_dict()`` description: the delay wrapper records a
     distribution in the env spec's kwargs that way (see the module docstring)."""
 
-    def __init__(self, env_path: str):
-        if not isinstance(env_path, str):
-            raise TypeError(
-                f"env_path must be a 'module:ClassName' string, got {env_path!r} "
-                f"({type(env_path).__name__})"
-            )
-        module, _, attr = env_path.partition(":")
-        if not module or not attr or ":" in attr:
-            raise ValueError(f"env_path must be a 'module:ClassName' string, got {env_path!r}")
+    def __init__(self, env_path: str, preset: str | None = None):
+        for name, path in (("env_path", env_path), ("preset", preset)):
+            if path is None and name == "preset":
+                continue
+            if not isinstance(path, str):
+                raise TypeError(
+                    f"{name} must be a 'module:Name' string, got {path!r} ({type(path).__name__})"
+                )
+            module, _, attr = path.partition(":")
+            if not module or not attr or ":" in attr:
+                raise ValueError(f"{name} must be a 'module:Name' string, got {path!r}")
         self.env_path = env_path
+        self.preset = preset
 
     @property
     def env_cls(self) -> type[gym.Env]:
@@ -81,6 +87,8 @@ class DelayableEntryPoint:
             ValueError: ``reward_delay`` is not a valid Poisson mean or describes no
                 distribution (or the env refuses the value of one of its arguments).
         """
+        if self.preset is not None:
+            kwargs = {**_load(self.preset), **kwargs}
         env = self.env_cls(**kwargs)
         if reward_delay is None:
             return env
@@ -89,9 +97,14 @@ class DelayableEntryPoint:
         return wrap_reward_delay(env, reward_delay)
 
     def __repr__(self) -> str:
-        return f"DelayableEntryPoint({self.env_path!r})"
+        preset = "" if self.preset is None else f", preset={self.preset!r}"
+        return f"DelayableEntryPoint({self.env_path!r}{preset})"
 
 
 GridWorld = DelayableEntryPoint("delayed_rl.envs.gridworld:GridWorldEnv")
 Roulette = DelayableEntryPoint("delayed_rl.envs.roulette:RouletteEnv")
 EPuckLineFollow = DelayableEntryPoint("delayed_rl.envs.linefollow.env:EPuckLineFollowEnv")
+EPuckLineFollowReal = DelayableEntryPoint(
+    "delayed_rl.envs.linefollow.env:EPuckLineFollowEnv",
+    preset="delayed_rl.envs.linefollow.env:REAL_ROBOT",
+)

@@ -18,6 +18,7 @@ _MODULES = {
     "anonymous-delay": "anonymous_delay",
     "future-work": "future_work",
     "linefollow-deconv": "linefollow_deconv",
+    "real-robot": "real_robot",
 }
 #: The experiments' names, as ``delayed-rl bench NAME`` takes them.
 NAMES = tuple(_MODULES)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from types import MappingProxyType
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -11,23 +12,45 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import ArrayLike, NDArray
 
-from delayed_rl._validation import check_choice, check_int, check_probability, check_real
+from delayed_rl._validation import (
+    check_choice,
+    check_fraction,
+    check_int,
+    check_probability,
+    check_real,
+)
 from delayed_rl.envs.linefollow.camera import CENTRE_PIXEL, N_PIXELS, Camera, line_centroid
 from delayed_rl.envs.linefollow.robot import EPuckRobot
 from delayed_rl.envs.linefollow.track import TRACK_NAMES, Track, make_track
 
 __all__ = [
     "CONTROL_PERIOD",
+    "MAX_PHYSICS_DT",
     "MAX_WHEEL_SPEED",
     "PHYSICS_SUBSTEPS",
+    "REAL_ROBOT",
     "WHEEL_SPEED_ACTIONS",
     "EPuckLineFollowEnv",
 ]
 
-#: Seconds of simulated time per env step.
+#: Seconds of simulated time per env step (the default ``control_period``).
 CONTROL_PERIOD = 0.064
-#: Physics sub-steps per env step (each CONTROL_PERIOD / PHYSICS_SUBSTEPS = 16 ms long).
+#: Physics sub-steps per env step at the default period (each CONTROL_PERIOD / 4 = 16 ms long).
 PHYSICS_SUBSTEPS = 4
+#: The longest physics sub-step (s): a step of ``control_period`` T has ⌈T / 0.016⌉ sub-steps.
+MAX_PHYSICS_DT = 0.016
+#: The arguments of ``delayed_rl/EPuckLineFollowReal-v0``, the stand-in for the thesis's real
+#: e-puck on a paper print of the track (section 5.3); the class docstring gives their sources.
+REAL_ROBOT = MappingProxyType(
+    {
+        "control_period": 0.2,
+        "command_latency": 0.1,
+        "motor_lag": 0.05,
+        "wheel_slip": 0.1,
+        "camera_noise": 0.01,
+        "line_contrast": 0.9,
+    }
+)
 #: v_max of Eq. 5.7 and the top wheel speed of every action (steps/s).
 MAX_WHEEL_SPEED = 300
 #: Thesis Table 5.2: (left, right) wheel speeds (steps/s) of discrete actions 0..6 (thesis 1..7).
@@ -60,16 +83,18 @@ class EPuckLineFollowEnv(gym.Env):
     (:mod:`~delayed_rl.envs.linefollow.robot`); wheel speeds are in e-puck units (steps/s,
     1000 steps per wheel turn, so 300 ≈ 0.0386 m/s).
 
-    Each step lasts ``CONTROL_PERIOD`` = 0.064 s of simulated time (4 physics sub-steps of 16 ms,
-    a multiple of the 16–32 ms ``basicTimeStep`` of Webots' e-puck worlds). At full speed the
+    Each step lasts ``control_period`` = 0.064 s of simulated time by default (4 physics
+    sub-steps of 16 ms, a multiple of the 16–32 ms ``basicTimeStep`` of Webots' e-puck worlds;
+    another period T gets ⌈T / 16 ms⌉ equal sub-steps). At full speed the
     robot then moves 2.5 mm and turns at most 2.7° per step, which shifts the line in the camera
     by one or two pixels: each of the 7 actions leads to distinguishable next states (a
     learnable tabular task) and the line never jumps out of view within one step. A 1700-step
     run (thesis Fig. 5.19) lasts 109 s, about four-fifths of a lap of the 5.1 m racetrack. (The
     thesis's real robot stepped every ~200 ms; there a sharp turn shifts the line ~5 pixels per
-    step and a tabular agent sees far coarser dynamics.) A new command moves the robot from the second
-    sub-step on (pymunk integrates positions before it solves the friction joints): 16 ms of
-    actuation latency.
+    step and a tabular agent sees far coarser dynamics; ``control_period=0.2`` simulates that.)
+    A new command moves the robot from the second sub-step on (pymunk integrates positions
+    before it solves the friction joints): one sub-step (16 ms) of actuation latency, to which
+    ``command_latency`` adds the command link's.
 
     Camera (:mod:`~delayed_rl.envs.linefollow.camera`): the scanline is 0.05 m ahead of the body
     centre, 0.064 m wide (1.6 mm per pixel), across the heading; **pixel 1 is on the robot's
@@ -167,20 +192,50 @@ class EPuckLineFollowEnv(gym.Env):
       uniformly from [1 − wheel_slip, 1]; 0 = off.
     - ``camera_noise``: in [0, 1]: each pixel is flipped with this probability each step;
       0 = off.
+    - ``line_contrast``: in (0, 1]: each pixel over the line reads as line with this
+      probability each reading (a grey print instead of black tape: some of its pixels stay
+      above the camera's binarisation threshold), before ``camera_noise``; 1 = off.
+    - ``control_period``: seconds of simulated time per step (> 0; default 0.064), split into
+      ⌈control_period / 0.016⌉ equal physics sub-steps.
+    - ``command_latency``: seconds (≥ 0) between an action and the moment the robot starts
+      executing it (a radio link's delay), rounded up to whole physics sub-steps; until then
+      the previous command goes on (wheels stopped after a reset or a recovery). It may exceed
+      ``control_period`` (a command then lands in a later step). The reward still uses the
+      commanded speeds of the step's action (the controller computes it from what it sent);
+      ``info["wheel_speeds"]`` reports them too. 0 = off.
     - ``render_mode``: None, ``"rgb_array"`` (numpy-drawn track, trail, robot and scanline) or
       ``"human"`` (a pygame window; needs the ``render`` extra).
 
-    Noise is drawn from the env's ``np_random``, so seeded resets reproduce it.
+    Noise (slip, contrast, camera flips) is drawn from the env's ``np_random``, so seeded
+    resets reproduce it; with every one of them off the env draws nothing per step.
 
     An argument of the wrong type (``max_steps="5"``, ``motor_lag=True``, ``action_mode=1``)
     raises ``TypeError``; one of the right type but out of range (``max_steps=0``,
-    ``wheel_slip=1.0``, ``lost_line="reset"``) raises ``ValueError``. Messages name the argument.
+    ``wheel_slip=1.0``, ``lost_line="reset"``, ``control_period=0``) raises ``ValueError``.
+    Messages name the argument.
 
     ## Registered Configurations
 
-    - ``delayed_rl/EPuckLineFollow-v0``: the defaults above. Pass any argument to
-      ``gym.make``, and ``reward_delay=λ`` to get the env already wrapped in
+    - ``delayed_rl/EPuckLineFollow-v0``: the defaults above (the clean simulation). Pass any
+      argument to ``gym.make``, and ``reward_delay=λ`` to get the env already wrapped in
       :class:`~delayed_rl.wrappers.PoissonRewardDelay`.
+    - ``delayed_rl/EPuckLineFollowReal-v0``: a stand-in for the thesis's real e-puck on a paper
+      print of the racetrack (section 5.3), the defaults above with :data:`REAL_ROBOT`'s
+      arguments (any of them can still be passed to ``gym.make``):
+
+      | argument | value | source |
+      |---|---|---|
+      | ``track`` | ``"racetrack"`` | thesis 5.3: "a scale print out of the Webots racetracks" (same shape; the scale is not given, 1:1 here) |
+      | ``control_period`` | 0.2 s | thesis 5.3: "one time step being approximately 200 ms" |
+      | ``command_latency`` | 0.1 s (7 sub-steps of 15.4 ms = 108 ms) | a guess: commands went over Bluetooth from MATLAB (thesis 5.3), sent after the camera line came back within the ~200 ms step; no latency is given |
+      | ``wheel_slip`` | 0.1 | a guess: the thesis names "wheel slippage on paper" as what the simulation lacked but gives no number; up to 10 % (mean 5 %) of each wheel's ground speed lost per step |
+      | ``motor_lag`` | 0.05 s | a guess: the e-puck's stepper motors (data sheet: 1000 steps per wheel turn, wheels 41 mm, axle 53 mm) follow their step rate open-loop; what lags is the 150 g body on compliant tyres |
+      | ``camera_noise`` | 0.01 | a guess: the e-puck's CMOS camera on paper under room light; one reading in three has a flipped pixel (1 − 0.99⁴⁰) |
+      | ``line_contrast`` | 0.9 | a guess: a printed line is dark grey, not black tape; one line pixel in ten stays above the threshold |
+
+      The thesis's λ = 90 reward delay is in steps, as in the simulation; at 200 ms a step it
+      is 18 s. ``lost_line``, ``lost_line_steps`` and ``max_steps`` keep their defaults (the
+      ``real-robot`` experiment passes ``lost_line="recover"``, ``max_steps=None``).
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": round(1 / CONTROL_PERIOD)}
@@ -198,6 +253,9 @@ class EPuckLineFollowEnv(gym.Env):
         motor_lag: float = 0.0,
         wheel_slip: float = 0.0,
         camera_noise: float = 0.0,
+        line_contrast: float = 1.0,
+        control_period: float = CONTROL_PERIOD,
+        command_latency: float = 0.0,
         render_mode: str | None = None,
     ):
         self.observation_mode = check_choice(
@@ -210,6 +268,17 @@ class EPuckLineFollowEnv(gym.Env):
         self.motor_lag = check_real("motor_lag", motor_lag, 0.0)
         self.wheel_slip = check_real("wheel_slip", wheel_slip, 0.0, 1.0, high_open=True)
         self.camera_noise = check_probability("camera_noise", camera_noise)
+        self.line_contrast = check_fraction("line_contrast", line_contrast)
+        self.control_period = check_real(
+            "control_period", control_period, 0.0, low_open=True, note=" (s)"
+        )
+        self.command_latency = check_real("command_latency", command_latency, 0.0, note=" (s)")
+        #: Physics sub-steps per step, and the sub-steps a command waits before it applies.
+        self.physics_substeps = max(1, math.ceil(self.control_period / MAX_PHYSICS_DT - 1e-9))
+        physics_dt = self.control_period / self.physics_substeps
+        self.latency_substeps = math.ceil(self.command_latency / physics_dt - 1e-9)
+        if self.control_period != CONTROL_PERIOD:
+            self.metadata = {**self.metadata, "render_fps": round(1 / self.control_period)}
         self.render_mode = check_choice(
             "render_mode", render_mode, (None, *self.metadata["render_modes"])
         )
@@ -229,7 +298,9 @@ class EPuckLineFollowEnv(gym.Env):
             self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
 
         self.camera = Camera()
-        self.robot = EPuckRobot(CONTROL_PERIOD / PHYSICS_SUBSTEPS, self.motor_lag)
+        self.robot = EPuckRobot(physics_dt, self.motor_lag)
+        #: Commands on their way to the robot, one per physics sub-step still to come.
+        self._in_flight: deque[tuple[float, float]] = deque()
         self._renderer: Any = None
         self._trail: deque[tuple[float, float]] = deque(maxlen=4000)
         self._pixels = np.zeros(N_PIXELS, dtype=bool)
@@ -288,6 +359,7 @@ class EPuckLineFollowEnv(gym.Env):
                 )
             x, y, heading = track.point_at(fraction * track.length)
         self.robot.reset(x, y, heading)
+        self._stop_commands()
         self._s, _, self._segment = track.locate(x, y)
         self._progress = 0.0
         self._lost = 0
@@ -301,11 +373,22 @@ class EPuckLineFollowEnv(gym.Env):
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         """Drive for one control period with the action's wheel speeds."""
         v_left, v_right = self._wheel_speeds(action)
+        substeps = self.physics_substeps
+        slip = (1.0, 1.0)
         if self.wheel_slip > 0:
-            slip = self.np_random.uniform(1.0 - self.wheel_slip, 1.0, size=2)
-            self.robot.step(v_left, v_right, PHYSICS_SUBSTEPS, (float(slip[0]), float(slip[1])))
+            factors = self.np_random.uniform(1.0 - self.wheel_slip, 1.0, size=2)
+            slip = (float(factors[0]), float(factors[1]))
+        if self.latency_substeps == 0:
+            self.robot.step(v_left, v_right, substeps, slip)
         else:
-            self.robot.step(v_left, v_right, PHYSICS_SUBSTEPS)
+            in_flight = self._in_flight
+            in_flight.extend([(v_left, v_right)] * substeps)
+            applied = [in_flight.popleft() for _ in range(substeps)]
+            start = 0
+            for i in range(1, substeps + 1):  # one robot.step per run of equal commands
+                if i == substeps or applied[i] != applied[start]:
+                    self.robot.step(*applied[start], i - start, slip)
+                    start = i
         self._steps += 1
         x, y, heading = self.robot.pose
         m = self._read(x, y, heading)
@@ -326,6 +409,7 @@ class EPuckLineFollowEnv(gym.Env):
             else:
                 x, y, heading = self.track.point_at(self._s)
                 self.robot.reset(x, y, heading)
+                self._stop_commands()
                 m = self._read(x, y, heading)
                 self._lost = 0 if m else self._lost
                 recovered = True
@@ -334,6 +418,11 @@ class EPuckLineFollowEnv(gym.Env):
         if self.render_mode == "human":
             self.render()
         return obs, float(reward), terminated, truncated, info
+
+    def _stop_commands(self) -> None:
+        """Fill the command link with "wheels stopped" (after a reset or a recovery)."""
+        self._in_flight.clear()
+        self._in_flight.extend([(0.0, 0.0)] * self.latency_substeps)
 
     def _wheel_speeds(self, action: Any) -> tuple[float, float]:
         if self.action_mode == "discrete":
@@ -364,6 +453,8 @@ class EPuckLineFollowEnv(gym.Env):
         """Read the camera at a pose and update the track position; returns the centroid m."""
         track = self.track
         pixels = self.camera.read(track, x, y, heading)
+        if self.line_contrast < 1:
+            pixels &= self.np_random.random(N_PIXELS) < self.line_contrast
         if self.camera_noise > 0:
             pixels ^= self.np_random.random(N_PIXELS) < self.camera_noise
         self._pixels = pixels

@@ -1,0 +1,434 @@
+"""``real-robot`` (thesis section 5.3, Figs. 5.24–5.27): simulation-trained agents on a stand-in robot.
+
+The thesis's protocol: MMQ (Λ = {0, ..., 150}) and Q-learning are trained in simulation for
+500,000 steps with Poisson(90) reward delays, then put on a paper print of the racetrack with
+a real e-puck for 1,500 steps, learning on (two runs, Figs. 5.24–5.27). Here the "real robot"
+is ``delayed_rl/EPuckLineFollowReal-v0``
+(:class:`~delayed_rl.envs.linefollow.env.EPuckLineFollowEnv`, whose docstring gives every value
+and its source): 200 ms steps instead of the simulation's 64 ms, 0.1 s of command-link
+latency, wheel slip on paper, motor lag, camera noise and a grey printed line.
+
+Per seed and agent, one task:
+
+1. pretraining: ``linefollow``'s setting (:mod:`.linefollow`, whose env, agents, constants and
+   metrics this module reuses): the clean simulation on the racetrack, discrete Table 5.2
+   actions, centroid states, put back on the track after 50 line-less steps, Poisson(90)
+   reward delays, α = 0.1, γ = 0.9, constant ε = 0.1, ``q_init`` = 10; 500k steps;
+2. the **real** run: a copy of the pretrained agent (``copy.deepcopy``) moved to the real
+   configuration (``set_env``), same Poisson(90) delay, learning on for 1,500 steps
+   (``learn(1500, reset_num_timesteps=False)``);
+3. the **control** run: another copy of the same pretrained agent, 1,500 steps on a fresh clean
+   simulation: the same protocol with no reality gap (the thesis's Fig. 5.19 runs pretrained
+   agents this way in simulation). Control minus real is what the gap costs; the control
+   against ``linefollow`` is what the delay costs.
+
+Both continuations start from the same agent state and the same env seed (the first reset
+after ``set_env`` uses the agent's seed), so their difference is paired. Agents: ``MMQ``,
+``Q`` and, beyond the thesis, ``DeconvQ learned`` (:class:`~delayed_rl.agents.DeconvQ`
+learning the delay on 0..150, as in ``linefollow-deconv``). Default 4 seeds (the thesis's two
+runs are seeds ``base_seed`` and ``base_seed + 1``, drawn alone in the figures' first panels;
+all four give the 95 % CIs, with 3 degrees of freedom: the most that keeps the experiment near
+a quarter of an hour on two cores; ``--seeds`` takes more); ``--steps`` sets the pretraining steps. ``--quick``: 2 seeds,
+5k pretraining steps, 300 steps per continuation.
+
+Metrics of each 1,500-step continuation, from its own ``training_log``: the average reward (the
+running mean of the undelayed reward, Figs. 5.24, 5.26) and the accumulated error Σ|Δ| (an
+unseen line counted as |Δ| = 20, :func:`.linefollow.line_error`; Figs. 5.25, 5.27).
+
+Claims, verdicts from the 95 % CIs over seeds (:mod:`.common`'s rules):
+
+- on the real configuration, MMQ's average reward against the thesis's ≈ 0.2 (run 1 just
+  over, run 2 just under) and Q's against ≈ −0.25 (−0.2 and just under −0.3), each
+  ± ``linefollow.REWARD_TOLERANCE``; MMQ above Q (paired by seed);
+- Q's accumulated error over MMQ's (paired by seed) against the thesis's 1.55–1.7 (run 2,
+  run 1), widened by :data:`ERROR_RATIO_TOLERANCE`;
+- the control runs' average rewards against Fig. 5.19's pretrained agents in simulation (MMQ
+  just over 0.6, Q ≈ 0.3), ± the same tolerance;
+- the gap's cost, control minus real average reward (paired by seed), above 0 for MMQ and for
+  Q (the thesis: both "performed worse in experiment than they did in simulation");
+- DeconvQ learned minus Q on the real configuration, above 0 (an extension), and DeconvQ's
+  average reward there as a reference row.
+
+Cost: pretraining dominates (the e-puck env runs on the Python path, ~0.2–0.3 ms a step):
+500k steps took 131 s for MMQ on one core of a loaded 2-core machine, about as long for Q
+and DeconvQ learned, so a seed costs ~6 core-minutes and the default 4 seeds ~13 minutes on
+2 workers; the continuations take about a second each. ``summary.json`` records each
+pretraining's wall time (``pretrain_seconds``).
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from delayed_rl.experiments import linefollow, linefollow_deconv, plotting
+from delayed_rl.experiments.common import (
+    band_claim,
+    direction_claim,
+    mean_ci_n,
+    paired,
+    range_claim,
+    reference_row,
+)
+from delayed_rl.experiments.runner import Config, Curve, Experiment, Summary, running_average
+
+REAL_ENV_ID = "delayed_rl/EPuckLineFollowReal-v0"
+AGENTS = ("MMQ", "Q", "DeconvQ learned")
+CONDITIONS = ("real", "control")
+PRETRAIN_STEPS, QUICK_PRETRAIN_STEPS = 500_000, 5_000
+RUN_STEPS, QUICK_RUN_STEPS = 1_500, 300
+#: Thesis section 5.3: average reward of each agent in each of the two robot runs.
+THESIS_RUNS = {"run 1": {"MMQ": 0.2, "Q": -0.2}, "run 2": {"MMQ": 0.2, "Q": -0.3}}
+#: The mean of the two runs, the target of the average-reward claims.
+THESIS_REAL = {"MMQ": 0.2, "Q": -0.25}
+#: Thesis Fig. 5.19: pretrained agents' average reward over 1,700 steps in simulation.
+THESIS_SIM = {"MMQ": 0.6, "Q": 0.3}
+#: Thesis section 5.3: Q's accumulated error over MMQ's in run 1 and run 2.
+THESIS_ERROR_RATIOS = {"run 1": 1.7, "run 2": 1.55}
+#: The error-ratio claim's band: the thesis's range [1.55, 1.7] widened by this on each side.
+ERROR_RATIO_TOLERANCE = 0.25
+_COLOURS = {"MMQ": "C0", "Q": "C1", "DeconvQ learned": "C2"}
+
+
+def real_env(reward_delay: float | None = linefollow.LAM, **kwargs: Any) -> gym.Env:
+    """The stand-in robot: ``EPuckLineFollowReal-v0`` in ``linefollow``'s setting, delay λ.
+
+    Args:
+        reward_delay: the Poisson mean λ of the reward delay (``None``: undelayed).
+        **kwargs: other ``EPuckLineFollow`` arguments, overriding the real configuration's.
+    """
+    import delayed_rl  # noqa: F401  (registers the ids)
+
+    options = {"track": linefollow.TRACK, "lost_line": "recover", "max_steps": None, **kwargs}
+    return gym.make(REAL_ENV_ID, reward_delay=reward_delay, **options)
+
+
+def tasks(config: Config) -> list[dict]:
+    """Per seed, one task per agent: pretraining, then the real and the control runs."""
+    pretrain = config.steps or (QUICK_PRETRAIN_STEPS if config.quick else PRETRAIN_STEPS)
+    run = QUICK_RUN_STEPS if config.quick else RUN_STEPS
+    return [
+        {"agent": agent, "seed": config.base_seed + i, "pretrain_steps": pretrain, "steps": run}
+        for i in range(config.seeds)
+        for agent in AGENTS
+    ]
+
+
+def continuation(log: Any) -> dict:
+    """The metrics of one continuation from its ``training_log``.
+
+    Returns:
+        ``steps`` and ``curve`` (the running average reward), ``error`` (the accumulated error
+        at those steps), and over the whole run the ``average`` reward, ``total_error`` and
+        the ``visible`` fraction of steps.
+    """
+    rewards = log["undelayed_reward"]
+    steps, curve = running_average(rewards)
+    error = np.cumsum(linefollow.line_error(log["obs"]))
+    return {
+        "steps": steps,
+        "curve": curve,
+        "error": error[steps - 1].astype(np.float64),
+        "average": float(rewards.mean()),
+        "total_error": float(error[-1]),
+        "visible": float(np.mean(log["obs"] != 0)),
+    }
+
+
+def run_task(task: dict) -> dict:
+    """Pretrain one agent in the clean simulation, then continue a copy on each condition.
+
+    Returns:
+        ``{"real": ..., "control": ...}`` (:func:`continuation`'s metrics) and
+        ``pretrain_seconds``, the wall time of the pretraining.
+    """
+    agent = linefollow_deconv.make_agent(task["agent"], task["seed"])
+    started = time.perf_counter()
+    agent.learn(task["pretrain_steps"], log_interval=None)
+    out: dict[str, Any] = {"pretrain_seconds": time.perf_counter() - started}
+    for condition in CONDITIONS:
+        learner = copy.deepcopy(agent)
+        learner.set_env(real_env() if condition == "real" else linefollow.line_env())
+        learner.learn(task["steps"], log_interval=None, reset_num_timesteps=False, record=True)
+        out[condition] = continuation(learner.training_log)
+    return out
+
+
+def _by_seed(runs: dict, agent: str, condition: str, key: str) -> dict[int, float]:
+    """``{seed: result[condition][key]}`` of one agent's runs."""
+    return {seed: result[condition][key] for seed, result in runs[agent].items()}
+
+
+def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
+    """The claims of the module docstring, statistics in ``extra``, and the figures."""
+    runs: dict[str, dict[int, dict]] = {agent: {} for agent in AGENTS}
+    curves = []
+    for task, result in zip(task_list, results, strict=True):
+        agent, seed = task["agent"], task["seed"]
+        runs[agent][seed] = result
+        for condition in CONDITIONS:
+            r = result[condition]
+            name = f"{agent} {condition}"
+            curves.append(Curve(name, seed, r["steps"], r["curve"]))
+            curves.append(Curve(name, seed, r["steps"], r["error"], "accumulated_error"))
+
+    def stats(agent: str, condition: str, key: str = "average") -> tuple[float, float, int]:
+        return mean_ci_n(list(_by_seed(runs, agent, condition, key).values()))
+
+    def gap(agent: str) -> tuple[float, float, int]:
+        control = _by_seed(runs, agent, "control", "average")
+        return mean_ci_n(paired(control, _by_seed(runs, agent, "real", "average")))
+
+    mmq_over_q = mean_ci_n(
+        paired(_by_seed(runs, "MMQ", "real", "average"), _by_seed(runs, "Q", "real", "average"))
+    )
+    error_ratio = mean_ci_n(
+        paired(
+            _by_seed(runs, "Q", "real", "total_error"),
+            _by_seed(runs, "MMQ", "real", "total_error"),
+            "ratio",
+        )
+    )
+    deconv_over_q = mean_ci_n(
+        paired(
+            _by_seed(runs, "DeconvQ learned", "real", "average"),
+            _by_seed(runs, "Q", "real", "average"),
+        )
+    )
+    tolerance = linefollow.REWARD_TOLERANCE
+    low = min(THESIS_ERROR_RATIOS.values()) - ERROR_RATIO_TOLERANCE
+    high = max(THESIS_ERROR_RATIOS.values()) + ERROR_RATIO_TOLERANCE
+    claims = [
+        band_claim(
+            "MMQ average reward on the real robot",
+            "≈ 0.2 (run 1 just over, run 2 just under; Figs. 5.24, 5.26)",
+            stats("MMQ", "real"),
+            THESIS_REAL["MMQ"],
+            tolerance,
+        ),
+        band_claim(
+            "Q average reward on the real robot",
+            "≈ −0.25 (run 1 −0.2, run 2 just under −0.3; Figs. 5.24, 5.26)",
+            stats("Q", "real"),
+            THESIS_REAL["Q"],
+            tolerance,
+        ),
+        direction_claim(
+            "MMQ minus Q average reward on the real robot (paired by seed)",
+            "> 0: MMQ above Q in both runs (≈ +0.4, +0.5)",
+            mmq_over_q,
+            "above",
+        ),
+        range_claim(
+            "Q accumulated error / MMQ accumulated error on the real robot",
+            "1.7 (run 1), 1.55 (run 2) (Figs. 5.25, 5.27)",
+            error_ratio,
+            low,
+            high,
+            note=f"paired by seed; the thesis's range [1.55, 1.7] ± {ERROR_RATIO_TOLERANCE}; "
+            f"an unseen line counts |Δ| = {linefollow.UNSEEN_ERROR}",
+        ),
+        band_claim(
+            "MMQ average reward, control (clean simulation)",
+            "just over 0.6 (Fig. 5.19, pretrained MMQ in simulation, 1,700 steps)",
+            stats("MMQ", "control"),
+            THESIS_SIM["MMQ"],
+            tolerance,
+        ),
+        band_claim(
+            "Q average reward, control (clean simulation)",
+            "≈ 0.3 (Fig. 5.19, pretrained Q in simulation, 1,700 steps)",
+            stats("Q", "control"),
+            THESIS_SIM["Q"],
+            tolerance,
+        ),
+        direction_claim(
+            "MMQ gap cost: control minus real average reward (paired by seed)",
+            "> 0: worse on the robot than in simulation (section 5.3; ≈ 0.6 − 0.2)",
+            gap("MMQ"),
+            "above",
+        ),
+        direction_claim(
+            "Q gap cost: control minus real average reward (paired by seed)",
+            "> 0: worse on the robot than in simulation (section 5.3; ≈ 0.3 + 0.25)",
+            gap("Q"),
+            "above",
+        ),
+        direction_claim(
+            "DeconvQ learned minus Q average reward on the real robot (paired by seed)",
+            "extension: DeconvQ above Q",
+            deconv_over_q,
+            "above",
+        ),
+        reference_row(
+            "DeconvQ learned average reward on the real robot",
+            stats("DeconvQ learned", "real"),
+            note=f"control: {stats('DeconvQ learned', 'control')[0]:.3f}",
+        ),
+    ]
+    seeds = sorted(runs["MMQ"])
+    extra = {
+        "average_reward": {f"{a} {c}": stats(a, c)[:2] for a in AGENTS for c in CONDITIONS},
+        "accumulated_error": {
+            f"{a} {c}": stats(a, c, "total_error")[:2] for a in AGENTS for c in CONDITIONS
+        },
+        "line_visible_fraction": {
+            f"{a} {c}": stats(a, c, "visible")[:2] for a in AGENTS for c in CONDITIONS
+        },
+        "gap_cost": {a: gap(a)[:2] for a in AGENTS},
+        "thesis_runs": {
+            name: {
+                "seed": seed,
+                **{a: runs[a][seed]["real"]["average"] for a in AGENTS},
+                "error_ratio_Q_over_MMQ": runs["Q"][seed]["real"]["total_error"]
+                / runs["MMQ"][seed]["real"]["total_error"],
+            }
+            for name, seed in zip(THESIS_RUNS, seeds, strict=False)
+        },
+        "pretrain_seconds": {
+            a: mean_ci_n([r["pretrain_seconds"] for r in runs[a].values()])[:2] for a in AGENTS
+        },
+        "protocol": {
+            "pretrain_steps": task_list[0]["pretrain_steps"],
+            "run_steps": task_list[0]["steps"],
+            "lambda": linefollow.LAM,
+            "lambda_max": linefollow.LAMBDA_MAX,
+            "real_env": REAL_ENV_ID,
+            "real_config": _real_config(),
+        },
+    }
+    return Summary(claims, curves, _figures(runs, seeds), extra)
+
+
+def _real_config() -> dict[str, float]:
+    """The real configuration's arguments (``REAL_ROBOT``), for ``summary.json``."""
+    from delayed_rl.envs.linefollow.env import REAL_ROBOT
+
+    return dict(REAL_ROBOT)
+
+
+def _figures(runs: dict, seeds: list[int]) -> dict:
+    """Figs. 5.24–5.27: average reward and accumulated error, runs 1–2 and every seed."""
+    panels: dict[str, list] = {"reward": [], "error": []}
+    for (name, thesis), seed in zip(THESIS_RUNS.items(), seeds, strict=False):
+        ratio = THESIS_ERROR_RATIOS[name]
+        for metric, key in (("reward", "curve"), ("error", "error")):
+            groups = {
+                a: [(runs[a][seed]["real"]["steps"], runs[a][seed]["real"][key])] for a in AGENTS
+            }
+            lines = (
+                [(a, thesis[a], f"thesis {a} ({name})") for a in thesis]
+                if metric == "reward"
+                else [("Q", ratio, f"thesis Q = {ratio}× MMQ ({name})")]
+            )
+            panels[metric].append((f"{name} (seed {seed}), real robot", groups, lines))
+    n = len(seeds)
+    for condition in CONDITIONS:
+        for metric, key in (("reward", "curve"), ("error", "error")):
+            groups = {
+                a: [(r[condition]["steps"], r[condition][key]) for r in runs[a].values()]
+                for a in AGENTS
+            }
+            if metric == "reward":
+                values = THESIS_REAL if condition == "real" else THESIS_SIM
+                source = "runs 1–2 mean" if condition == "real" else "Fig. 5.19, simulation"
+                lines = [(a, values[a], f"thesis {a} ({source})") for a in values]
+            else:
+                mean = float(np.mean(list(THESIS_ERROR_RATIOS.values())))
+                lines = [("Q", mean, f"thesis Q = {mean:g}× MMQ")] if condition == "real" else []
+            label = "real robot" if condition == "real" else "control: clean simulation"
+            panels[metric].append((f"{n} seeds, {label}, 95 % band", groups, lines))
+    title = f"λ = {linefollow.LAM}: pretrained in simulation, then learning on the"
+    return {
+        "fig5_24_26_average_reward": plotting.figure(
+            thesis_panels,
+            panels["reward"],
+            f"{title} stand-in robot: average reward",
+            "average reward",
+            "level",
+        ),
+        "fig5_25_27_accumulated_error": plotting.figure(
+            thesis_panels,
+            panels["error"],
+            f"{title} stand-in robot: accumulated error",
+            "accumulated error Σ|Δ| (pixels)",
+            "ratio",
+        ),
+    }
+
+
+def thesis_panels(path: Any, panels: list, title: str, ylabel: str, lines: str) -> None:
+    """Panels of mean curves (95 % band over seeds) with the thesis's values dashed.
+
+    Args:
+        path: where to save the PNG.
+        panels: ``[(panel title, {agent: [(steps, values), ...]}, thesis lines), ...]``; a
+            thesis line is ``(agent, value, label)``.
+        title: the figure's title.
+        ylabel: the y axis label.
+        lines: ``"level"``: a thesis line is a horizontal line at ``value``; ``"ratio"``: it
+            is MMQ's mean curve of the panel times ``value`` (the thesis gives error ratios).
+    """
+    plt = plotting._pyplot()
+    columns = 2
+    rows = (len(panels) + columns - 1) // columns
+    fig, axes = plt.subplots(rows, columns, figsize=(12, 4.2 * rows), squeeze=False)
+    for ax, (panel_title, groups, thesis) in zip(axes.flat, panels, strict=False):
+        means = {}
+        for agent, agent_runs in groups.items():
+            steps = agent_runs[0][0]
+            values = np.vstack([v for _, v in agent_runs])
+            means[agent] = (steps, values.mean(axis=0))
+            colour = _COLOURS[agent]
+            if len(agent_runs) > 1:
+                half = 1.96 * values.std(axis=0, ddof=1) / np.sqrt(len(agent_runs))
+                ax.fill_between(
+                    steps, means[agent][1] - half, means[agent][1] + half, color=colour, alpha=0.2
+                )
+            ax.plot(steps, means[agent][1], color=colour, label=agent)
+        for agent, value, label in thesis:
+            if lines == "level":
+                ax.axhline(value, color=_COLOURS[agent], linestyle="--", linewidth=1.2, label=label)
+            else:
+                steps, mmq = means["MMQ"]
+                ax.plot(
+                    steps,
+                    value * mmq,
+                    color=_COLOURS[agent],
+                    linestyle="--",
+                    linewidth=1.2,
+                    label=label,
+                )
+        ax.set_title(panel_title, fontsize=10)
+        ax.set_xlabel("time step on the robot")
+        ax.set_ylabel(ylabel)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    for ax in list(axes.flat)[len(panels) :]:
+        ax.set_visible(False)
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+EXPERIMENT = Experiment(
+    name="real-robot",
+    thesis="section 5.3, Figs. 5.24–5.27",
+    description="MMQ (λ̂max = 150), Q-learning and DeconvQ learned, pretrained in the clean "
+    "e-puck simulation (linefollow's setting: racetrack, Poisson(90) reward delays, "
+    "α = 0.1, γ = 0.9, ε = 0.1, q_init = 10) for 500k steps (--steps), then 1,500 steps "
+    "learning on the stand-in real robot (EPuckLineFollowReal-v0: 200 ms steps, 0.1 s command "
+    "latency, wheel slip, motor lag, camera noise, grey line) and, as a control, on the clean "
+    "simulation; both continuations copy one pretrained agent. Average reward and accumulated "
+    "error Σ|Δ| of each continuation, paired by seed. --quick: 5k pretraining steps, 300 per "
+    "continuation; --steps sets the pretraining steps.",
+    tasks=tasks,
+    run_task=run_task,
+    summarize=summarize,
+    default_seeds=4,
+)
