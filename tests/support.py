@@ -75,3 +75,51 @@ class NeverEndingEnv(gym.Env):
 
     def step(self, action):
         return 0, 1.0, False, False, {}
+
+
+def fake_grid_run(
+    agent: str,
+    seed: int,
+    optimal: bool,
+    average: float,
+    mean_delay: float | None,
+    late: float,
+) -> tuple[dict, dict]:
+    """A ``(task, result)`` pair shaped like ``anonymous_delay.run_task``'s, for summaries.
+
+    One 100-step run on the 7×7 grid under Poisson(8): its greedy policy ``optimal`` (or not) at
+    the end, ``average`` its training reward, ``late`` the share of second-half snapshots
+    optimal; with a delay estimate of mean ``mean_delay`` (``None``: the agent holds none).
+    """
+    task = {
+        "setting": "7×7 Poisson(8)",
+        "size": 7,
+        "lam": 8,
+        "delay": "Poisson",
+        "agent": agent,
+        "steps": 100,
+        "seed": seed,
+    }
+    greedy = 0.76 if optimal else 0.0
+    result = {
+        "steps": np.array([50, 100]),
+        "curve": np.full(2, average),
+        "average": average,
+        "greedy": greedy,
+        "optimal": optimal,
+        "second_half_optimal": late,
+        "ns_per_step": 100.0,
+        "path": "fused",
+        "snapshot_steps": np.array([50, 100]),
+        "snapshot_optimal": np.array([False, optimal]),
+        "snapshot_greedy": np.array([0.0, greedy]),
+    }
+    if mean_delay is not None:
+        support = np.arange(51)
+        estimate = np.exp(-0.5 * (support - mean_delay) ** 2)
+        result |= {
+            "estimate_support": support,
+            "estimate": estimate / estimate.sum(),
+            "mean_delay": mean_delay,
+        }
+    return task, result

@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+from support import fake_grid_run
 
 from delayed_rl.cli import main
 from delayed_rl.experiments import NAMES, Config, get_experiment, run_experiment
@@ -202,38 +203,9 @@ def test_anonymous_delay_quick_run(tmp_path):
 
 # ---------------------------------------------------------------------- computed verdicts
 def _fake(agent: str, seed: int, optimal: bool, average: float, mean_delay: float, late: float):
-    task = {
-        "setting": "7×7 Poisson(8)",
-        "size": 7,
-        "lam": 8,
-        "delay": "Poisson",
-        "agent": agent,
-        "steps": 100,
-        "seed": seed,
-    }
-    snaps = np.array([50, 100])
-    result = {
-        "steps": np.array([50, 100]),
-        "curve": np.full(2, average),
-        "average": average,
-        "greedy": 0.76 if optimal else 0.0,
-        "optimal": optimal,
-        "second_half_optimal": late,
-        "ns_per_step": 100.0,
-        "path": "fused",
-        "snapshot_steps": snaps,
-        "snapshot_optimal": np.array([False, optimal]),
-        "snapshot_greedy": np.array([0.0, 0.76 if optimal else 0.0]),
-    }
-    if agent in ("MMQ", "DeconvQ learned"):
-        support = np.arange(51)
-        estimate = np.exp(-0.5 * (support - mean_delay) ** 2)
-        result |= {
-            "estimate_support": support,
-            "estimate": estimate / estimate.sum(),
-            "mean_delay": mean_delay,
-        }
-    return task, result
+    """:func:`support.fake_grid_run`, a delay estimate only for the agents that hold one."""
+    holds = agent in ("MMQ", "DeconvQ learned")
+    return fake_grid_run(agent, seed, optimal, average, mean_delay if holds else None, late)
 
 
 def _verdicts(good: bool, seeds: int = 4) -> dict[str, str]:

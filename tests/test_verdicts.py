@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 import pytest
+from support import fake_grid_run
 
 from delayed_rl.experiments import (
     anonymous_delay,
@@ -345,35 +346,6 @@ def test_linefollow_gap_is_tested_against_plus_0_43_not_only_its_sign():
     assert small["MMQ above Q: MMQ minus Q average reward (paired by seed)"] == "agrees"
 
 
-def _fake_grid_run(agent: str, seed: int, optimal: bool, average: float, delay: float, late: float):
-    task = {
-        "setting": "7×7 Poisson(8)",
-        "size": 7,
-        "lam": 8,
-        "delay": "Poisson",
-        "agent": agent,
-        "steps": 100,
-        "seed": seed,
-    }
-    result = {
-        "steps": np.array([50, 100]),
-        "curve": np.full(2, average),
-        "average": average,
-        "greedy": 0.76 if optimal else 0.0,
-        "optimal": optimal,
-        "second_half_optimal": late,
-        "ns_per_step": 100.0,
-        "path": "fused",
-        "snapshot_steps": np.array([50, 100]),
-        "snapshot_optimal": np.array([False, optimal]),
-        "snapshot_greedy": np.array([0.0, 0.76 if optimal else 0.0]),
-        "estimate_support": np.arange(51),
-        "estimate": np.full(51, 1 / 51),
-        "mean_delay": delay,
-    }
-    return task, result
-
-
 def _anonymous_summary(deconv_optimal: int, deconv_delay: float, seeds: int = 20):
     tasks, results = [], []
     for seed in range(seeds):
@@ -385,7 +357,7 @@ def _anonymous_summary(deconv_optimal: int, deconv_delay: float, seeds: int = 20
             "oracle": (True, 0.71 + jitter, 0.0, 1.0),
         }
         for agent, values in runs.items():
-            task, result = _fake_grid_run(agent, seed, *values)
+            task, result = fake_grid_run(agent, seed, *values)
             tasks.append(task)
             results.append(result)
     summary = anonymous_delay.summarize(tasks, results, Config(seeds=seeds))
@@ -410,7 +382,7 @@ def test_future_work_rows_flip():
         for variant in future_work.VARIANTS:
             worse = variant == "MMQ trace β=0.9"
             values = (not worse, (0.3 if worse else 0.6) + 0.001 * seed, 8.0, 0.0 if worse else 1.0)
-            task, result = _fake_grid_run(variant, seed, *values)
+            task, result = fake_grid_run(variant, seed, *values)
             tasks.append(task)
             results.append(result)
     summary = future_work.summarize(tasks, results, Config(seeds=6))
