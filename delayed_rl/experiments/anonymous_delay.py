@@ -672,15 +672,15 @@ def band_plot(
         reference: ``(y, label)`` of a horizontal dashed line, e.g. the optimum.
     """
     plt = plotting._pyplot()
-    fig, ax = plt.subplots(figsize=(7.5, 4.5))
+    fig, ax = plt.subplots(figsize=(9.5, 4.5))
     for label, runs in groups.items():
         x = runs[0][0]
         values = np.vstack([y for _, y in runs]).astype(float)
         mean = values.mean(axis=0)
+        (line,) = ax.plot(x, mean, label=plotting.band_label(label, len(runs)))
         if len(runs) > 1:
             half = 1.96 * values.std(axis=0, ddof=1) / np.sqrt(len(runs))
-            ax.fill_between(x, mean - half, mean + half, alpha=0.2)
-        ax.plot(x, mean, label=f"{label} (n={len(runs)})")
+            ax.fill_between(x, mean - half, mean + half, alpha=0.18, color=line.get_color())
     if reference is not None:
         ax.axhline(reference[0], color="black", linestyle="--", linewidth=1, label=reference[1])
     if ylim is None and reference is not None:  # the optimum in view, the first 5 % cut off
@@ -690,7 +690,7 @@ def band_plot(
         ylim = (low - 0.05 * (high - low), high + 0.08 * (high - low))
     if ylim is not None:
         ax.set_ylim(*ylim)
-    ax.legend(fontsize=7, loc="best")
+    plotting.outside_legend(ax)
     plotting._finish(fig, ax, path, title, xlabel, ylabel)
 
 
@@ -712,7 +712,7 @@ def estimate_plot(
         title: the title.
     """
     plt = plotting._pyplot()
-    fig, ax = plt.subplots(figsize=(7.5, 4.5))
+    fig, ax = plt.subplots(figsize=(9.5, 4.5))
     ax.bar(np.arange(true_pmf.size), true_pmf, color="0.8", width=1.0, label="true pmf")
     top = float(true_pmf.max())
     for label, runs in estimates.items():
@@ -720,15 +720,18 @@ def estimate_plot(
         spacing = float(np.diff(support).min()) if support.size > 1 else 1.0
         values = np.vstack([y for _, y in runs]) / spacing
         mean = values.mean(axis=0)
+        (line,) = ax.plot(
+            support, mean, marker=".", markersize=3, label=plotting.band_label(label, len(runs))
+        )
         if len(runs) > 1:
             half = 1.96 * values.std(axis=0, ddof=1) / np.sqrt(len(runs))
-            ax.fill_between(support, np.maximum(mean - half, 0), mean + half, alpha=0.25)
+            lower = np.maximum(mean - half, 0)
+            ax.fill_between(support, lower, mean + half, alpha=0.25, color=line.get_color())
             top = max(top, float((mean + half).max()))
         top = max(top, float(mean.max()))
-        ax.plot(support, mean, marker=".", markersize=3, label=f"{label} (n={len(runs)})")
     ax.set_xlim(-1, max(true_pmf.size, LAMBDA_MAX + 1))
     ax.set_ylim(0, 1.1 * top)
-    ax.legend(fontsize=7)
+    plotting.outside_legend(ax)
     plotting._finish(fig, ax, path, title, "delay (steps)", "probability (pmf) or share of steps")
 
 
@@ -757,6 +760,10 @@ def setting_figures(
         }
         left_out = [a for a in same_curves if a in by_agent]
         suffix = f"\n({', '.join(left_out)}: the same curve as the thesis rule)" if left_out else ""
+        thesis = ""  # the thesis's Poisson statement, in words (Fig. 5.9 gives no value here)
+        if "Poisson" in setting:
+            above = ", above Q" if "Q" in by_agent else ""
+            thesis = f"\nthesis (Poisson, Fig. 5.9): MMQ near-optimal{above}"
         snaps = {
             a: [(r["snapshot_steps"], r["snapshot_optimal"]) for _, r in runs]
             for a, runs in by_agent.items()
@@ -764,7 +771,7 @@ def setting_figures(
         figures[f"learning_curves_{name}"] = plotting.figure(
             band_plot,
             curves,
-            f"{setting}: average reward during learning (95 % band){suffix}",
+            f"{setting}: average reward during learning{thesis}{suffix}",
             "time step",
             "average reward (undelayed)",
             None,
@@ -773,7 +780,7 @@ def setting_figures(
         figures[f"optimal_snapshots_{name}"] = plotting.figure(
             band_plot,
             snaps,
-            f"{setting}: share of seeds whose greedy policy is optimal",
+            f"{setting}: share of seeds whose greedy policy is optimal{thesis}",
             "time step",
             "share of seeds optimal",
             (-0.05, 1.05),
@@ -792,7 +799,7 @@ def setting_figures(
                 estimate_plot,
                 estimates,
                 true_pmf,
-                f"{setting}: delay estimates (mean over seeds, 95 % band)",
+                f"{setting}: delay estimates against the true pmf",
             )
     return figures
 

@@ -157,8 +157,13 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
         "fig5_19_controllers": plotting.figure(
             plotting.learning_curves,
             groups,
-            f"line following, λ = {LAM}: controllers' performance (Fig. 5.19)",
-            "average reward",
+            f"line following, Poisson delays of mean λ = {LAM}, λ̂max = {LAMBDA_MAX}: "
+            "the controllers' average reward (Fig. 5.19)",
+            "average reward (undelayed stream)",
+            thesis=[
+                (value, f"thesis {name} ≈ {value:+.1f} (Fig. 5.19)", name)
+                for name, value in THESIS.items()
+            ],
         )
     }
     extra = {

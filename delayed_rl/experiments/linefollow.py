@@ -51,6 +51,10 @@ AGENTS = ("MMQ", "Q")
 REWARD_TOLERANCE = 0.2
 #: The band of the accumulated-error ratio: 0.4 ± this.
 RATIO_TOLERANCE = 0.15
+#: The thesis's 5-run average rewards during learning (Fig. 5.22).
+THESIS_REWARD = {"MMQ": 0.55, "Q": 0.12}
+#: The thesis's MMQ accumulated error over Q's (Fig. 5.23: "only about 40 %").
+THESIS_ERROR_RATIO = 0.4
 
 
 def line_env(reward_delay: float | None = LAM, **kwargs: Any) -> gym.Env:
@@ -173,14 +177,14 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
             "MMQ average reward during learning",
             "≈ 0.55 (Fig. 5.22)",
             stat["MMQ"],
-            0.55,
+            THESIS_REWARD["MMQ"],
             REWARD_TOLERANCE,
         ),
         band_claim(
             "Q average reward during learning",
             "≈ 0.12 (Fig. 5.22)",
             stat["Q"],
-            0.12,
+            THESIS_REWARD["Q"],
             REWARD_TOLERANCE,
         ),
         band_claim(
@@ -200,7 +204,7 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
             "MMQ accumulated error / Q accumulated error",
             "≈ 0.4 (Fig. 5.23)",
             ratio,
-            0.4,
+            THESIS_ERROR_RATIO,
             RATIO_TOLERANCE,
             note=f"paired by seed; an unseen line counts |Δ| = {UNSEEN_ERROR}",
         ),
@@ -222,29 +226,56 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
 
 
 def _figures(runs: dict[str, list[dict]], seeds: int) -> dict:
-    """Figs. 5.20–5.23: reward and accumulated error, of the first seed and of every seed."""
+    """Figs. 5.20–5.23: reward and accumulated error, of the first seed and of every seed.
+
+    Every panel carries the thesis's 5-run values (Figs. 5.22–5.23): the average rewards as
+    dashed levels, the error ratio as a dashed curve, ``THESIS_ERROR_RATIO`` × Q's error.
+    """
     rewards = {a: [(r["steps"], r["curve"]) for r in rs] for a, rs in runs.items()}
     errors = {a: [(r["steps"], r["error"]) for r in rs] for a, rs in runs.items()}
     first_rewards = {a: rs[:1] for a, rs in rewards.items()}
     first_errors = {a: rs[:1] for a, rs in errors.items()}
-    title = f"line following, λ = {LAM}, λ̂max = {LAMBDA_MAX}"
-    every = f"{seeds} runs, 95 % band"
-    reward_label, error_label = "average reward", "accumulated error Σ|Δ| (pixels)"
+    title = f"line following, Poisson delays of mean λ = {LAM}, MMQ with λ̂max = {LAMBDA_MAX}"
+    every = f"{seeds} runs"
+    reward_label, error_label = (
+        "average reward (undelayed stream)",
+        "accumulated error Σ|Δ| (pixels)",
+    )
+    levels = thesis_reward_lines()
+    ratios = thesis_error_ratio_lines()
     curves = plotting.learning_curves
     return {
         "fig5_20_single_run_reward": plotting.figure(
-            curves, first_rewards, f"{title}: first seed (Fig. 5.20)", reward_label
+            curves, first_rewards, f"{title}: first seed (Fig. 5.20)", reward_label, levels
         ),
         "fig5_21_single_run_error": plotting.figure(
-            curves, first_errors, f"{title}: first seed (Fig. 5.21)", error_label
+            curves,
+            first_errors,
+            f"{title}: first seed (Fig. 5.21)",
+            error_label,
+            thesis_ratios=ratios,
         ),
         "fig5_22_average_reward": plotting.figure(
-            curves, rewards, f"{title}: {every} (Fig. 5.22)", reward_label
+            curves, rewards, f"{title}: {every} (Fig. 5.22)", reward_label, levels
         ),
         "fig5_23_accumulated_error": plotting.figure(
-            curves, errors, f"{title}: {every} (Fig. 5.23)", error_label
+            curves, errors, f"{title}: {every} (Fig. 5.23)", error_label, thesis_ratios=ratios
         ),
     }
+
+
+def thesis_reward_lines() -> list[tuple[float, str, str]]:
+    """The thesis's average rewards (Fig. 5.22) as :func:`.plotting.learning_curves` lines."""
+    return [
+        (value, f"thesis {agent} ≈ {value} (Fig. 5.22, 5-run mean)", agent)
+        for agent, value in THESIS_REWARD.items()
+    ]
+
+
+def thesis_error_ratio_lines() -> list[tuple[str, float, str, str]]:
+    """The thesis's error ratio (Fig. 5.23) as a :func:`.plotting.learning_curves` ratio curve."""
+    label = f"thesis MMQ = {THESIS_ERROR_RATIO} × Q's error (Fig. 5.23)"
+    return [("Q", THESIS_ERROR_RATIO, label, "MMQ")]
 
 
 EXPERIMENT = Experiment(

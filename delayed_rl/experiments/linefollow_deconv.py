@@ -151,10 +151,18 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
     lam = linefollow.LAM
     claims = [
         band_claim(
-            "MMQ average reward during learning", "≈ 0.55 (Fig. 5.22)", stat["MMQ"], 0.55, tolerance
+            "MMQ average reward during learning",
+            "≈ 0.55 (Fig. 5.22)",
+            stat["MMQ"],
+            linefollow.THESIS_REWARD["MMQ"],
+            tolerance,
         ),
         band_claim(
-            "Q average reward during learning", "≈ 0.12 (Fig. 5.22)", stat["Q"], 0.12, tolerance
+            "Q average reward during learning",
+            "≈ 0.12 (Fig. 5.22)",
+            stat["Q"],
+            linefollow.THESIS_REWARD["Q"],
+            tolerance,
         ),
         reference_row(
             "DeconvQ learned average reward during learning",
@@ -187,7 +195,7 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
             "MMQ accumulated error / Q accumulated error",
             "≈ 0.4 (Fig. 5.23)",
             thesis_ratio,
-            0.4,
+            linefollow.THESIS_ERROR_RATIO,
             linefollow.RATIO_TOLERANCE,
             note="paired by seed",
         ),
@@ -217,7 +225,10 @@ def _figures(runs: dict[str, list[dict]]) -> dict:
     """Reward and accumulated-error curves with 95 % bands; the delay estimates over Poisson(90)."""
     from delayed_rl.delays import Poisson
 
-    title = f"line following, λ = {linefollow.LAM}"
+    title = (
+        f"line following, Poisson delays of mean λ = {linefollow.LAM}, "
+        f"λ̂max = {linefollow.LAMBDA_MAX}"
+    )
     rewards = {a: [(r["steps"], r["curve"]) for r in rs] for a, rs in runs.items()}
     errors = {a: [(r["steps"], r["error"]) for r in rs] for a, rs in runs.items()}
     labels = {"MMQ": "MMQ acting share", "DeconvQ learned": "DeconvQ learned pmf"}
@@ -229,19 +240,24 @@ def _figures(runs: dict[str, list[dict]]) -> dict:
     true_pmf = np.asarray(Poisson(linefollow.LAM).pmf(np.arange(linefollow.LAMBDA_MAX + 1)))
     return {
         "average_reward": plotting.figure(
-            plotting.learning_curves, rewards, f"{title}: 95 % band", "average reward"
+            plotting.learning_curves,
+            rewards,
+            f"{title}: average reward (the thesis has no DeconvQ value)",
+            "average reward (undelayed stream)",
+            linefollow.thesis_reward_lines(),
         ),
         "accumulated_error": plotting.figure(
             plotting.learning_curves,
             errors,
-            f"{title}: 95 % band",
+            f"{title}: accumulated error (the thesis has no DeconvQ value)",
             "accumulated error Σ|Δ| (pixels)",
+            thesis_ratios=linefollow.thesis_error_ratio_lines(),
         ),
         "delay_estimate": plotting.figure(
             estimate_plot,
             estimates,
             true_pmf,
-            f"{title}: delay estimates (mean over seeds, 95 % band)",
+            f"{title}: delay estimates against the true Poisson({linefollow.LAM}) pmf",
         ),
     }
 

@@ -37,6 +37,7 @@ from delayed_rl.experiments.anonymous_delay import (
     LOOP_FRACTION,
     SNAPSHOTS,
     band_plot,
+    optimal_average,
     second_half_share,
     train_with_snapshots,
 )
@@ -64,6 +65,10 @@ SIZE, LAM, LAMBDA_MAX = 9, 13, 50
 GREEDY_TOLERANCE, NEAR_ZERO = 0.06, 0.1
 #: The true value of Q along the route (V* ≈ 2.2 on 9×9) and the spread Table 5.1 shows.
 TRUE_ROUTE_Q, SPREAD_LIMIT = 2.2, 0.1
+#: The thesis's greedy average rewards over 1000 steps (section 5.1.1: 0.59 and 0.00).
+THESIS_GREEDY = {"MMQ": 0.59, "Q": 0.0}
+#: The thesis's Table 5.1: the mean over λ̂ of Q along the greedy route, ≈ 21.4 in every row.
+THESIS_ROUTE_Q = 21.4
 
 
 def tasks(config: Config) -> list[dict]:
@@ -213,7 +218,7 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
             "MMQ greedy average reward (1000 steps)",
             "0.59 (near-optimal; optimum 0.588)",
             stat["MMQ"]["greedy"],
-            0.59,
+            THESIS_GREEDY["MMQ"],
             GREEDY_TOLERANCE,
         ),
         count_claim(
@@ -236,7 +241,7 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
             "Q greedy average reward (1000 steps)",
             "0.00 (loops in the centre)",
             stat["Q"]["greedy"],
-            0.0,
+            THESIS_GREEDY["Q"],
             NEAR_ZERO,
         ),
         count_claim(
@@ -283,7 +288,7 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
         reference_row(f"undelayed Q {late}", stat["Q undelayed"]["second_half_optimal"]),
         direction_claim(
             "Table 5.1: mean over λ̂ of Q along the greedy route",
-            f"≈ 21.4 (inflated above the true ≈ {TRUE_ROUTE_Q} by the max over models)",
+            f"≈ {THESIS_ROUTE_Q} (inflated above the true ≈ {TRUE_ROUTE_Q} by the max over models)",
             mean_ci_n(route_means),
             "above",
             2 * TRUE_ROUTE_Q,
@@ -292,7 +297,7 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
         ),
         direction_claim(
             "Table 5.1: spread across λ̂ (std / mean) along the route",
-            "≈ 0.04 (√0.75 / 21.4: the models agree, Eq. 5.5)",
+            f"≈ 0.04 (√0.75 / {THESIS_ROUTE_Q}: the models agree, Eq. 5.5)",
             mean_ci_n(route_spread),
             "below",
             SPREAD_LIMIT,
@@ -311,28 +316,68 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
         "snapshots": SNAPSHOTS,
         "loop_fraction": LOOP_FRACTION,
     }
-    return Summary(claims, curves, _figures(by_agent), extra)
+    return Summary(claims, curves, _figures(by_agent, stat), extra)
 
 
-def _figures(by_agent: dict[str, list[dict]]) -> dict:
-    """Figs. 5.9–5.15: learning curves, visits, greedy and ε-greedy policies of each agent."""
+def _figures(by_agent: dict[str, list[dict]], stat: dict[str, dict]) -> dict:
+    """Figs. 5.9–5.15 and Table 5.1: curves, greedy rewards, route Q, visits and policies.
+
+    Args:
+        by_agent: each agent's run results.
+        stat: each agent's ``(mean, ci, n)`` of ``"greedy"`` (and the other claim keys).
+    """
     groups = {a: [(r["steps"], r["curve"]) for r in runs] for a, runs in by_agent.items()}
     visits = {a: np.mean([r["visits"] for r in runs], axis=0) for a, runs in by_agent.items()}
     first = {a: runs[0] for a, runs in by_agent.items()}
+    setting = f"{SIZE}×{SIZE}, Poisson delays of mean λ = {LAM}, MMQ with Λ = {{0..{LAMBDA_MAX}}}"
+    optimum = optimal_average(SIZE)
+    n = len(by_agent["MMQ"])
+    route = first["MMQ"]["route_table"]
     figures = {
         "fig5_9_mmq_vs_q": plotting.figure(
             plotting.learning_curves,
             groups,
-            "9×9, λ = 13: MMQ vs Q-learning (Fig. 5.9)",
+            f"{setting}: average reward during learning (Fig. 5.9)\n"
+            "thesis: MMQ near-optimal (below the loop only by ε's exploration), Q ≈ 0",
             "average reward",
+            [
+                (optimum, f"thesis: MMQ near-optimal; optimal loop 10/17 = {optimum:.3f}", "MMQ"),
+                (THESIS_GREEDY["Q"], "thesis Q ≈ 0 (Fig. 5.9)", "Q"),
+            ],
+        ),
+        "greedy_average_reward": plotting.figure(
+            plotting.value_bars,
+            {a: stat[a]["greedy"] for a in by_agent},
+            f"{setting}: the final greedy policy's average reward over 1000 steps",
+            "greedy average reward",
+            {a: (v, f"thesis {a} {v:.2f} (section 5.1.1)") for a, v in THESIS_GREEDY.items()},
+        ),
+        "table5_1_route_q": plotting.figure(
+            plotting.errorbar_curve,
+            np.arange(len(route)),
+            [row[2] for row in route],
+            [np.sqrt(row[3]) for row in route],
+            f"{setting}: Q(s, a*, λ̂) along MMQ's greedy route, first seed (Table 5.1)",
+            "state along the greedy route (thesis numbering; a* its greedy action)",
+            "Q(s, a*, λ̂)",
+            thesis=[
+                (None, THESIS_ROUTE_Q, f"thesis ≈ {THESIS_ROUTE_Q} in every row (Table 5.1)"),
+                (None, TRUE_ROUTE_Q, f"true value ≈ {TRUE_ROUTE_Q} (V* of the route)"),
+            ],
+            label="measured: mean ± std over λ̂",
+            xticklabels=[str(row[0] + 1) for row in route],
         ),
         "fig5_10_visits": plotting.figure(
-            plotting.grid_heatmap, visits, "State visits during learning (Fig. 5.10)"
+            plotting.grid_heatmap,
+            visits,
+            f"{setting}: state visits during learning, mean over {n} seeds (Fig. 5.10)",
+            "visits per cell (mean over seeds)",
         ),
         "fig5_11_policies": plotting.figure(
             plotting.grid_heatmap,
             {a: r["visits"] for a, r in first.items()},
-            "Deterministic greedy policies, first seed (Fig. 5.11)",
+            f"{setting}: deterministic greedy policies (arrows), first seed (Fig. 5.11)",
+            "visits per cell during learning (first seed)",
             arrows={a: r["policy"] for a, r in first.items()},
         ),
         "greedy_optimal_snapshots": plotting.figure(
@@ -341,7 +386,8 @@ def _figures(by_agent: dict[str, list[dict]]) -> dict:
                 a: [(r["snapshot_steps"], r["snapshot_optimal"]) for r in runs]
                 for a, runs in by_agent.items()
             },
-            "9×9, λ = 13: share of seeds whose greedy policy is optimal (95 % band)",
+            f"{setting}: share of seeds whose greedy policy is optimal\n"
+            "thesis: MMQ's greedy policy near-optimal (most seeds), Q's ≈ 0 (loops in the centre)",
             "time step",
             "share of seeds optimal",
             (-0.05, 1.05),
@@ -350,11 +396,24 @@ def _figures(by_agent: dict[str, list[dict]]) -> dict:
     directions = ("P(up)", "P(right)", "P(down)", "P(left)")
     for agent, result in first.items():
         panels = dict(zip(directions, result["behaviour"], strict=True))
-        title = f"{agent}: probabilistic (ε-greedy) policy, first seed (Figs. 5.12, 5.15)"
+        title = f"{agent}: probabilistic (ε-greedy) policy, first seed (Figs. 5.12, 5.15)\n{_setting_of(agent)}"
         figures[f"fig5_12_15_probabilistic_policy_{agent.replace(' ', '_')}"] = plotting.figure(
-            plotting.grid_heatmap, panels, title
+            plotting.grid_heatmap,
+            panels,
+            title,
+            f"P(a | s) of the ε-greedy rule, ε = {EPSILON}",
+            vmin=0.0,
+            vmax=1.0,
+            columns=2,
         )
     return figures
+
+
+def _setting_of(agent: str) -> str:
+    """One agent's setting in a title: ``"9×9, Poisson delays of mean λ = 13, Λ = {0..50}"``."""
+    delay = "no reward delay" if agent == "Q undelayed" else f"Poisson delays of mean λ = {LAM}"
+    models = f", Λ = {{0..{LAMBDA_MAX}}}" if agent == "MMQ" else ""
+    return f"{SIZE}×{SIZE}, {delay}{models}"
 
 
 EXPERIMENT = Experiment(

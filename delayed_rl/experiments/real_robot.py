@@ -321,7 +321,7 @@ def _figures(runs: dict, seeds: list[int]) -> dict:
                 a: [(runs[a][seed]["real"]["steps"], runs[a][seed]["real"][key])] for a in AGENTS
             }
             lines = (
-                [(a, thesis[a], f"thesis {a} ({name})") for a in thesis]
+                [(a, thesis[a], f"thesis {a} ≈ {thesis[a]:+g} ({name})") for a in thesis]
                 if metric == "reward"
                 else [("Q", ratio, f"thesis Q = {ratio}× MMQ ({name})")]
             )
@@ -336,13 +336,18 @@ def _figures(runs: dict, seeds: list[int]) -> dict:
             if metric == "reward":
                 values = THESIS_REAL if condition == "real" else THESIS_SIM
                 source = "runs 1–2 mean" if condition == "real" else "Fig. 5.19, simulation"
-                lines = [(a, values[a], f"thesis {a} ({source})") for a in values]
+                lines = [(a, values[a], f"thesis {a} ≈ {values[a]:+g} ({source})") for a in values]
             else:
                 mean = float(np.mean(list(THESIS_ERROR_RATIOS.values())))
                 lines = [("Q", mean, f"thesis Q = {mean:g}× MMQ")] if condition == "real" else []
             label = "real robot" if condition == "real" else "control: clean simulation"
-            panels[metric].append((f"{n} seeds, {label}, 95 % band", groups, lines))
-    title = f"λ = {linefollow.LAM}: pretrained in simulation, then learning on the"
+            if not lines:
+                label += " (no thesis value)"
+            panels[metric].append((f"{n} seeds, {label}", groups, lines))
+    title = (
+        f"Poisson delays of mean λ = {linefollow.LAM}, MMQ with λ̂max = {linefollow.LAMBDA_MAX}: "
+        "pretrained in simulation, then learning on the"
+    )
     return {
         "fig5_24_26_average_reward": plotting.figure(
             thesis_panels,
@@ -376,7 +381,9 @@ def thesis_panels(path: Any, panels: list, title: str, ylabel: str, lines: str) 
     plt = plotting._pyplot()
     columns = 2
     rows = (len(panels) + columns - 1) // columns
-    fig, axes = plt.subplots(rows, columns, figsize=(12, 4.2 * rows), squeeze=False)
+    fig, axes = plt.subplots(
+        rows, columns, figsize=(12, 5.4 * rows), squeeze=False, layout="constrained"
+    )
     for ax, (panel_title, groups, thesis) in zip(axes.flat, panels, strict=False):
         means = {}
         for agent, agent_runs in groups.items():
@@ -389,7 +396,8 @@ def thesis_panels(path: Any, panels: list, title: str, ylabel: str, lines: str) 
                 ax.fill_between(
                     steps, means[agent][1] - half, means[agent][1] + half, color=colour, alpha=0.2
                 )
-            ax.plot(steps, means[agent][1], color=colour, label=agent)
+            label = plotting.band_label(agent, len(agent_runs))
+            ax.plot(steps, means[agent][1], color=colour, label=label)
         for agent, value, label in thesis:
             if lines == "level":
                 ax.axhline(value, color=_COLOURS[agent], linestyle="--", linewidth=1.2, label=label)
@@ -407,11 +415,12 @@ def thesis_panels(path: Any, panels: list, title: str, ylabel: str, lines: str) 
         ax.set_xlabel("time step on the robot")
         ax.set_ylabel(ylabel)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7)
+        ax.legend(  # below the panel: it never covers the curves
+            fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2, frameon=False
+        )
     for ax in list(axes.flat)[len(panels) :]:
         ax.set_visible(False)
     fig.suptitle(title)
-    fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
 

@@ -89,12 +89,16 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
         )
         for lam_hat, action, name in entries
     ]
-    panels = {f"after round {i + 1}": table for i, table in enumerate(measured)}
+    panels = {f"after round {i + 1} (Table 3.{i + 3})": table for i, table in enumerate(measured)}
     figures = {
         "tables_3_3_to_3_5": plotting.figure(
-            plotting.grid_heatmap,
+            plotting.value_tables,
             panels,
-            "Q(s, a, λ̂): rows λ̂ = 0, 1, 2; columns bet even, bet 13",
+            "Roulette walk-through: MMQ's Q(s, a, λ̂) after each round, measured and thesis",
+            "Q(s, a, λ̂)",
+            [f"λ̂ = {lam_hat}" for lam_hat in range(3)],
+            [f"bet {name}" for _, name in WAGERS],
+            thesis=dict(zip(panels, THESIS_TABLES, strict=True)),
         )
     }
     return Summary(claims, curves, figures, {"tables": measured})
