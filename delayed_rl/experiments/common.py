@@ -323,6 +323,18 @@ def reference_row(
     return Claim(quantity, thesis, mean, ci, n, REFERENCE, criterion, note, mean - ci, mean + ci)
 
 
+def seed_tasks(config: Config, agents: Sequence[str], **fields: object) -> list[dict]:
+    """One task per (seed, agent): ``{"agent", "seed", **fields}``, seed-major.
+
+    Seeds run from ``config.base_seed``, ``config.seeds`` of them.
+    """
+    return [
+        {"agent": agent, "seed": config.base_seed + i, **fields}
+        for i in range(config.seeds)
+        for agent in agents
+    ]
+
+
 def grid_tasks(config: Config, steps: int, runs: Sequence[dict]) -> list[dict]:
     """The tasks of a normalised grid-world experiment, for every seed of ``config``.
 

@@ -31,7 +31,7 @@ import numpy as np
 
 from delayed_rl._validation import check_choice
 from delayed_rl.experiments import plotting
-from delayed_rl.experiments.common import band_claim, direction_claim, mean_ci_n
+from delayed_rl.experiments.common import band_claim, direction_claim, mean_ci_n, seed_tasks
 from delayed_rl.experiments.runner import (
     Config,
     Curve,
@@ -121,11 +121,7 @@ def line_statistics(runs: dict[str, list[dict]]) -> dict[str, dict[str, tuple[fl
 def tasks(config: Config) -> list[dict]:
     """Per seed: one Q-learning and one MMQ run, 150k steps each (3k with ``config.quick``)."""
     steps = config.steps or (3_000 if config.quick else 150_000)
-    return [
-        {"agent": agent, "steps": steps, "seed": config.base_seed + i}
-        for i in range(config.seeds)
-        for agent in AGENTS
-    ]
+    return seed_tasks(config, AGENTS, steps=steps)
 
 
 def run_task(task: dict) -> dict:

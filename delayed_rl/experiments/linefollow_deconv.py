@@ -50,6 +50,7 @@ from delayed_rl.experiments.common import (
     mean_ci_n,
     paired,
     reference_row,
+    seed_tasks,
 )
 from delayed_rl.experiments.runner import Config, Curve, Experiment, Summary, running_average
 
@@ -86,11 +87,7 @@ def make_agent(kind: str, seed: int) -> Any:
 def tasks(config: Config) -> list[dict]:
     """Per seed, one run of each of :data:`AGENTS`: 150k steps (5k with ``config.quick``)."""
     steps = config.steps or (QUICK_STEPS if config.quick else STEPS)
-    return [
-        {"agent": agent, "steps": steps, "seed": config.base_seed + i}
-        for i in range(config.seeds)
-        for agent in AGENTS
-    ]
+    return seed_tasks(config, AGENTS, steps=steps)
 
 
 def run_task(task: dict) -> dict:

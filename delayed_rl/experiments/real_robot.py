@@ -73,6 +73,7 @@ from delayed_rl.experiments.common import (
     paired,
     range_claim,
     reference_row,
+    seed_tasks,
 )
 from delayed_rl.experiments.runner import Config, Curve, Experiment, Summary, running_average
 
@@ -111,11 +112,7 @@ def tasks(config: Config) -> list[dict]:
     """Per seed, one task per agent: pretraining, then the real and the control runs."""
     pretrain = config.steps or (QUICK_PRETRAIN_STEPS if config.quick else PRETRAIN_STEPS)
     run = QUICK_RUN_STEPS if config.quick else RUN_STEPS
-    return [
-        {"agent": agent, "seed": config.base_seed + i, "pretrain_steps": pretrain, "steps": run}
-        for i in range(config.seeds)
-        for agent in AGENTS
-    ]
+    return seed_tasks(config, AGENTS, pretrain_steps=pretrain, steps=run)
 
 
 def continuation(log: Any) -> dict:
