@@ -123,3 +123,28 @@ def fake_grid_run(
             "mean_delay": mean_delay,
         }
     return task, result
+
+
+def fake_line_run(average: float, total_error: float, mean_delay: float | None) -> dict:
+    """A result shaped like ``linefollow_deconv.run_task``'s: a 10-step run, for summaries.
+
+    ``average`` is its training reward, ``total_error`` its accumulated error (half of it by
+    step 5), with a flat delay estimate on 0..150 of mean ``mean_delay`` (``None``: none held).
+    """
+    result = {
+        "steps": np.array([5, 10]),
+        "curve": np.full(2, average),
+        "error": np.array([total_error / 2, total_error]),
+        "average": average,
+        "total_error": total_error,
+        "visible": 1.0,
+        "ns_per_step": 1e5,
+        "path": "python",
+    }
+    if mean_delay is not None:
+        result |= {
+            "estimate_support": np.arange(151),
+            "estimate": np.full(151, 1 / 151),
+            "mean_delay": mean_delay,
+        }
+    return result

@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 import pytest
-from support import fake_grid_run
+from support import fake_grid_run, fake_line_run
 
 from delayed_rl.cli import main
 from delayed_rl.experiments import NAMES, Config, get_experiment, run_experiment
@@ -268,23 +268,8 @@ def _lfd_verdicts(deconv_average: float, deconv_error: float, deconv_delay: floa
         for agent, (average, error, delay) in values.items():
             tasks.append({"agent": agent, "steps": 10, "seed": seed})
             jitter = 0.01 * seed
-            result = {
-                "steps": np.array([5, 10]),
-                "curve": np.full(2, average + jitter),
-                "error": np.array([error / 2, error * (1 + jitter)]),
-                "average": average + jitter,
-                "total_error": error * (1 + jitter),
-                "visible": 1.0,
-                "ns_per_step": 1e5,
-                "path": "python",
-            }
-            if delay is not None:
-                result |= {
-                    "estimate_support": np.arange(151),
-                    "estimate": np.full(151, 1 / 151),
-                    "mean_delay": delay + jitter,
-                }
-            results.append(result)
+            estimate_mean = None if delay is None else delay + jitter
+            results.append(fake_line_run(average + jitter, error * (1 + jitter), estimate_mean))
     summary = lfd.summarize(tasks, results, Config(seeds=3))
     return {claim.quantity: claim.verdict for claim in summary.claims}, summary
 

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 import pytest
-from support import fake_grid_run
+from support import fake_grid_run, fake_line_run
 
 from delayed_rl.experiments import (
     anonymous_delay,
@@ -404,23 +404,8 @@ def _deconv_summary(deconv_average: float, deconv_delay: float, seeds: int = 4):
     for seed in range(seeds):
         for agent, (average, error, delay) in values.items():
             tasks.append({"agent": agent, "steps": 10, "seed": seed})
-            result = {
-                "steps": np.array([5, 10]),
-                "curve": np.full(2, average + 0.01 * seed),
-                "error": np.array([error / 2, error]),
-                "average": average + 0.01 * seed,
-                "total_error": error,
-                "visible": 1.0,
-                "ns_per_step": 1e5,
-                "path": "python",
-            }
-            if delay is not None:
-                result |= {
-                    "estimate_support": np.arange(151),
-                    "estimate": np.full(151, 1 / 151),
-                    "mean_delay": delay + 0.1 * seed,
-                }
-            results.append(result)
+            estimate_mean = None if delay is None else delay + 0.1 * seed
+            results.append(fake_line_run(average + 0.01 * seed, error, estimate_mean))
     return _verdicts(linefollow_deconv.summarize(tasks, results, Config(seeds=seeds)))
 
 

@@ -96,7 +96,7 @@ from delayed_rl.experiments.runner import (
     Summary,
     running_average,
 )
-from delayed_rl.experiments.training import ALPHA, EPSILON, GAMMA, Q_INIT
+from delayed_rl.experiments.training import thesis_hyperparameters
 
 #: (side, mean delay λ, steps a run) of the two worlds.
 SETTINGS = ((9, 13, 1_000_000), (7, 8, 300_000))
@@ -213,14 +213,7 @@ def grid(size: int, delay: Delay | None = None, record_arrivals: bool = False) -
 
 def hyperparameters(seed: int) -> dict[str, Any]:
     """The thesis's grid-world hyper-parameters (:mod:`.training`), seeded."""
-    return {
-        "learning_rate": ALPHA,
-        "gamma": GAMMA,
-        "exploration_initial_eps": EPSILON,
-        "exploration_final_eps": EPSILON,
-        "q_init": Q_INIT,
-        "seed": seed,
-    }
+    return thesis_hyperparameters(seed)
 
 
 def make_agent(name: str, size: int, delay: Delay, seed: int) -> Any:

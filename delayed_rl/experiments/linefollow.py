@@ -40,11 +40,12 @@ from delayed_rl.experiments.runner import (
     mean_ci95,
     running_average,
 )
+from delayed_rl.experiments.training import ALPHA, EPSILON, GAMMA, thesis_hyperparameters
 
 ENV_ID = "delayed_rl/EPuckLineFollow-v0"
 TRACK = "racetrack"
 LAM, LAMBDA_MAX = 90, 150
-ALPHA, GAMMA, EPSILON, Q_INIT = 0.1, 0.9, 0.1, 10.0
+Q_INIT = 10.0  # 1 / (1 − γ): see the module docstring; α, γ and ε are :mod:`.training`'s
 CENTRE, UNSEEN_ERROR = 20, 20
 AGENTS = ("MMQ", "Q")
 #: The band of the average-reward claims (and of MMQ − Q): the thesis's value ± this.
@@ -80,14 +81,7 @@ def make_agent(kind: str, env: gym.Env, seed: int) -> Any:
     from delayed_rl.agents import MultipleModelQLearning, QLearning
 
     check_choice("kind", kind, AGENTS)
-    common = {
-        "learning_rate": ALPHA,
-        "gamma": GAMMA,
-        "exploration_initial_eps": EPSILON,
-        "exploration_final_eps": EPSILON,
-        "q_init": Q_INIT,
-        "seed": seed,
-    }
+    common = thesis_hyperparameters(seed, q_init=Q_INIT)
     if kind == "Q":
         return QLearning(env, **common)
     return MultipleModelQLearning(env, max_delay_estimate=LAMBDA_MAX, **common)
@@ -134,14 +128,25 @@ def run_task(task: dict) -> dict:
     """
     agent = make_agent(task["agent"], line_env(), task["seed"])
     agent.learn(task["steps"], log_interval=None, record=True)
-    log = agent.training_log
-    steps, curve = running_average(log["undelayed_reward"])
+    return run_metrics(agent.training_log)
+
+
+def run_metrics(log: Any) -> dict:
+    """A line-following run's metrics from its ``training_log``.
+
+    Returns:
+        ``steps`` and ``curve`` (the running average reward), ``error`` (the accumulated error
+        at those steps), and over the whole run the ``average`` reward, ``total_error`` and
+        the ``visible`` fraction of steps.
+    """
+    rewards = log["undelayed_reward"]
+    steps, curve = running_average(rewards)
     error = np.cumsum(line_error(log["obs"]))
     return {
         "steps": steps,
         "curve": curve,
         "error": error[steps - 1].astype(np.float64),
-        "average": float(log["undelayed_reward"].mean()),
+        "average": float(rewards.mean()),
         "total_error": float(error[-1]),
         "visible": float(np.mean(log["obs"] != 0)),
     }

@@ -52,7 +52,8 @@ from delayed_rl.experiments.common import (
     reference_row,
     seed_tasks,
 )
-from delayed_rl.experiments.runner import Config, Curve, Experiment, Summary, running_average
+from delayed_rl.experiments.runner import Config, Curve, Experiment, Summary
+from delayed_rl.experiments.training import thesis_hyperparameters
 
 AGENTS = ("MMQ", "DeconvQ learned", "Q")
 QUICK_STEPS, STEPS = 5_000, 150_000
@@ -75,12 +76,7 @@ def make_agent(kind: str, seed: int) -> Any:
         env,
         delay=None,
         max_delay=linefollow.LAMBDA_MAX,
-        learning_rate=linefollow.ALPHA,
-        gamma=linefollow.GAMMA,
-        exploration_initial_eps=linefollow.EPSILON,
-        exploration_final_eps=linefollow.EPSILON,
-        q_init=linefollow.Q_INIT,
-        seed=seed,
+        **thesis_hyperparameters(seed, q_init=linefollow.Q_INIT),
     )
 
 
@@ -102,16 +98,8 @@ def run_task(task: dict) -> dict:
     started = time.perf_counter()
     agent.learn(task["steps"], log_interval=None, record=True)
     seconds = time.perf_counter() - started
-    log = agent.training_log
-    steps, curve = running_average(log["undelayed_reward"])
-    error = np.cumsum(linefollow.line_error(log["obs"]))
     return {
-        "steps": steps,
-        "curve": curve,
-        "error": error[steps - 1].astype(np.float64),
-        "average": float(log["undelayed_reward"].mean()),
-        "total_error": float(error[-1]),
-        "visible": float(np.mean(log["obs"] != 0)),
+        **linefollow.run_metrics(agent.training_log),
         "ns_per_step": 1e9 * seconds / task["steps"],
         "path": agent.last_learn_path,
         **delay_estimate(agent),

@@ -52,12 +52,10 @@ from delayed_rl.experiments.common import (
 )
 from delayed_rl.experiments.runner import Config, Curve, Experiment, Summary, running_average
 from delayed_rl.experiments.training import (
-    ALPHA,
     EPSILON,
-    GAMMA,
-    Q_INIT,
     greedy_average_reward,
     grid_env,
+    thesis_hyperparameters,
 )
 
 SIZE, LAM, LAMBDA_MAX = 9, 13, 50
@@ -143,13 +141,8 @@ def run_task(task: dict) -> dict:
     """
     agent = MultipleModelQLearning(
         grid_env(SIZE, task["lam"]),
-        learning_rate=ALPHA,
-        gamma=GAMMA,
-        exploration_initial_eps=EPSILON,
-        exploration_final_eps=EPSILON,
-        q_init=Q_INIT,
         delay_estimates=list(task["lags"]),
-        seed=task["seed"],
+        **thesis_hyperparameters(task["seed"]),
     )
     run = train_with_snapshots(agent, task["steps"], SIZE, keep_obs=True)
     q = agent.q_table

@@ -75,7 +75,7 @@ from delayed_rl.experiments.common import (
     reference_row,
     seed_tasks,
 )
-from delayed_rl.experiments.runner import Config, Curve, Experiment, Summary, running_average
+from delayed_rl.experiments.runner import Config, Curve, Experiment, Summary
 
 REAL_ENV_ID = "delayed_rl/EPuckLineFollowReal-v0"
 AGENTS = ("MMQ", "Q", "DeconvQ learned")
@@ -115,32 +115,11 @@ def tasks(config: Config) -> list[dict]:
     return seed_tasks(config, AGENTS, pretrain_steps=pretrain, steps=run)
 
 
-def continuation(log: Any) -> dict:
-    """The metrics of one continuation from its ``training_log``.
-
-    Returns:
-        ``steps`` and ``curve`` (the running average reward), ``error`` (the accumulated error
-        at those steps), and over the whole run the ``average`` reward, ``total_error`` and
-        the ``visible`` fraction of steps.
-    """
-    rewards = log["undelayed_reward"]
-    steps, curve = running_average(rewards)
-    error = np.cumsum(linefollow.line_error(log["obs"]))
-    return {
-        "steps": steps,
-        "curve": curve,
-        "error": error[steps - 1].astype(np.float64),
-        "average": float(rewards.mean()),
-        "total_error": float(error[-1]),
-        "visible": float(np.mean(log["obs"] != 0)),
-    }
-
-
 def run_task(task: dict) -> dict:
     """Pretrain one agent in the clean simulation, then continue a copy on each condition.
 
     Returns:
-        ``{"real": ..., "control": ...}`` (:func:`continuation`'s metrics) and
+        ``{"real": ..., "control": ...}`` (:func:`.linefollow.run_metrics`'s metrics) and
         ``pretrain_seconds``, the wall time of the pretraining.
     """
     agent = linefollow_deconv.make_agent(task["agent"], task["seed"])
@@ -151,7 +130,7 @@ def run_task(task: dict) -> dict:
         learner = copy.deepcopy(agent)
         learner.set_env(real_env() if condition == "real" else linefollow.line_env())
         learner.learn(task["steps"], log_interval=None, reset_num_timesteps=False, record=True)
-        out[condition] = continuation(learner.training_log)
+        out[condition] = linefollow.run_metrics(learner.training_log)
     return out
 
 

@@ -28,21 +28,29 @@ def grid_env(size: int, lam: float) -> gym.Env:
     return gym.make("delayed_rl/GridWorld-v0", size=size, reward_delay=lam if lam > 0 else None)
 
 
+def thesis_hyperparameters(seed: int, q_init: float = Q_INIT) -> dict[str, float | int]:
+    """The thesis's Algorithm 1 hyper-parameters as agent keywords: α, γ, constant ε, seeded.
+
+    Args:
+        seed: the agent's seed.
+        q_init: the optimistic initial value (default :data:`Q_INIT`, the grid worlds').
+    """
+    return {
+        "learning_rate": ALPHA,
+        "gamma": GAMMA,
+        "exploration_initial_eps": EPSILON,
+        "exploration_final_eps": EPSILON,
+        "q_init": q_init,
+        "seed": seed,
+    }
+
+
 def train(env: gym.Env, lags: list[int], steps: int, seed: int) -> MultipleModelQLearning:
     """Train MMQ with delay estimates ``lags`` (``[0]``: Q-learning; ``[k]``: fixed delay k).
 
     The agent's ``training_log`` holds the per-step record (``undelayed_reward``, ``obs``, ...).
     """
-    agent = MultipleModelQLearning(
-        env,
-        learning_rate=ALPHA,
-        gamma=GAMMA,
-        exploration_initial_eps=EPSILON,
-        exploration_final_eps=EPSILON,
-        q_init=Q_INIT,
-        delay_estimates=list(lags),
-        seed=seed,
-    )
+    agent = MultipleModelQLearning(env, delay_estimates=list(lags), **thesis_hyperparameters(seed))
     return agent.learn(steps, log_interval=None, record=True)
 
 
