@@ -131,13 +131,21 @@ def test_delay_is_required_and_the_shared_hyperparameters_are_shown():
         ExpectedCreditQLearning(GRID3, 3, gammma=0.5)
 
 
-def test_it_runs_on_the_python_path_only():
+def test_it_runs_compiled_by_default_where_the_stack_compiles():
+    # the compiled rule is the Python one update for update: tests/test_fused_credit.py
     agent = ExpectedCreditQLearning(gym.make(GRID3, reward_delay=2), delay=2, seed=0)
-    assert agent.compiled_tables() is None
-    with pytest.raises(NotCompilable, match="ExpectedCreditQLearning has no compiled"):
-        agent.learn(100, fused=True)
+    tables = agent.compiled_tables()
+    np.testing.assert_array_equal(tables.delay_estimates, np.flatnonzero(agent.credit_weights))
+    np.testing.assert_array_equal(tables.lag_rates, 0.1 * agent.credit_weights)  # all > 0
     agent.learn(100)
+    assert agent.last_learn_path == "fused"
+    agent.learn(100, fused=False)
     assert agent.last_learn_path == "python"
+    agent = ExpectedCreditQLearning(
+        gym.make(GRID3, reward_delay=2), delay=2, learning_rate=lambda p: p
+    )
+    with pytest.raises(NotCompilable, match="the learning rate is a schedule"):
+        agent.learn(100, fused=True)
 
 
 # ---------------------------------------------------------------------- the rule, by hand
@@ -168,21 +176,23 @@ def test_update_shares_each_steps_td_update_by_the_weights():
 
 
 # ---------------------------------------------------------------------- reductions
+@pytest.mark.parametrize("fused", [False, True])
 @pytest.mark.parametrize("k", [0, 1, 3])
 @pytest.mark.parametrize("make", [{}, {"max_steps": 7}])
-def test_a_constant_delay_is_fixed_delay_q_learning_update_for_update(k, make):
+def test_a_constant_delay_is_fixed_delay_q_learning_update_for_update(k, make, fused):
     tables = []
     for cls, own in ((ExpectedCreditQLearning, {"delay": Constant(k)}),
                      (FixedDelayQLearning, {"delay_estimate": k})):  # fmt: skip
         env = gym.make(GRID5, reward_delay=Constant(k), **make)
-        tables.append(cls(env, **own, seed=5, **SETTINGS).learn(4_000, fused=False).q_table)
+        tables.append(cls(env, **own, seed=5, **SETTINGS).learn(4_000, fused=fused).q_table)
     np.testing.assert_array_equal(*tables)
 
 
-def test_no_delay_is_q_learning():
+@pytest.mark.parametrize("fused", [False, True])
+def test_no_delay_is_q_learning(fused):
     agent = ExpectedCreditQLearning(gym.make(GRID5), Poisson(0.0), seed=1, **SETTINGS)
-    q = QLearning(gym.make(GRID5), seed=1, **SETTINGS).learn(4_000, fused=False)
-    np.testing.assert_array_equal(agent.learn(4_000).q_table, q.q_table)
+    q = QLearning(gym.make(GRID5), seed=1, **SETTINGS).learn(4_000, fused=fused)
+    np.testing.assert_array_equal(agent.learn(4_000, fused=fused).q_table, q.q_table)
 
 
 # ---------------------------------------------------------------------- behaviour

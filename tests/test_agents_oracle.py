@@ -87,13 +87,16 @@ def test_the_wrapper_is_found_anywhere_in_the_stack_and_sets_the_history():
     assert agent.history_length == 4
 
 
-def test_it_runs_on_the_python_path_only():
+def test_it_runs_compiled_by_default_where_the_stack_compiles():
+    # the compiled rule is the Python one update for update: tests/test_fused_credit.py
     agent = OracleQLearning(oracle_env(), seed=0)
-    assert agent.compiled_tables() is None
-    with pytest.raises(NotCompilable, match="OracleQLearning has no compiled learning rule"):
-        agent.learn(100, fused=True)
+    assert agent.compiled_tables().held_transitions == agent.history_length > 0
     agent.learn(100)
+    assert agent.last_learn_path == "fused"
+    agent.learn(100, fused=False)
     assert agent.last_learn_path == "python"
+    with pytest.raises(NotCompilable, match="wrapper RecordInfos is not supported"):
+        OracleQLearning(RecordInfos(oracle_env()), seed=0).learn(100, fused=True)
 
 
 # ---------------------------------------------------------------------- the rule, by hand
@@ -207,18 +210,20 @@ def test_learning_reads_neither_the_undelayed_reward_nor_the_received_one():
 
 
 # ---------------------------------------------------------------------- reductions
-def test_without_delay_it_is_q_learning_update_for_update():
-    oracle = OracleQLearning(oracle_env(GRID5, Constant(0)), seed=3, **SETTINGS).learn(5_000)
-    q = QLearning(gym.make(GRID5), seed=3, **SETTINGS).learn(5_000, fused=False)
-    np.testing.assert_array_equal(oracle.q_table, q.q_table)
+@pytest.mark.parametrize("fused", [False, True])
+def test_without_delay_it_is_q_learning_update_for_update(fused):
+    oracle = OracleQLearning(oracle_env(GRID5, Constant(0)), seed=3, **SETTINGS)
+    q = QLearning(gym.make(GRID5), seed=3, **SETTINGS).learn(5_000, fused=fused)
+    np.testing.assert_array_equal(oracle.learn(5_000, fused=fused).q_table, q.q_table)
 
 
+@pytest.mark.parametrize("fused", [False, True])
 @pytest.mark.parametrize("k", [1, 3])
-def test_under_a_constant_delay_it_is_fixed_delay_q_learning(k):
-    oracle = OracleQLearning(oracle_env(GRID5, Constant(k)), seed=2, **SETTINGS).learn(5_000)
+def test_under_a_constant_delay_it_is_fixed_delay_q_learning(k, fused):
+    oracle = OracleQLearning(oracle_env(GRID5, Constant(k)), seed=2, **SETTINGS)
     env = gym.make(GRID5, reward_delay=Constant(k))
-    fixed = FixedDelayQLearning(env, delay_estimate=k, seed=2, **SETTINGS).learn(5_000, fused=False)
-    np.testing.assert_array_equal(oracle.q_table, fixed.q_table)
+    fixed = FixedDelayQLearning(env, delay_estimate=k, seed=2, **SETTINGS).learn(5_000, fused=fused)
+    np.testing.assert_array_equal(oracle.learn(5_000, fused=fused).q_table, fixed.q_table)
 
 
 # ---------------------------------------------------------------------- behaviour

@@ -45,6 +45,10 @@ class CompiledTables(NamedTuple):
         trace_decay: β of MMQ's delay trace; ``None``: off.
         trace: the delay trace (one float64 per model, the agent's own: updated in place);
             read only with ``trace_decay``.
+        lag_rates: the learning rate of each of Λ's lags when they all update one table
+            (expected credit); ``None``: one table per lag, each learning at α.
+        held_transitions: the oracle's history length: the run credits each transition with
+            its own reward (:mod:`delayed_rl.fast.arrivals`); ``None``: the delivered rewards.
     """
 
     q: np.ndarray
@@ -57,6 +61,8 @@ class CompiledTables(NamedTuple):
     credit_kernel: np.ndarray | None = None
     trace_decay: float | None = None
     trace: np.ndarray | None = None
+    lag_rates: np.ndarray | None = None
+    held_transitions: int | None = None
 
 
 def check_fused(fused: Any, callback: Any) -> bool | None:
@@ -96,7 +102,10 @@ def compiled_run(agent: Any, fused: bool | None, restart: bool) -> Any:
         cached = agent._fused
         if cached is None or cached[0] is not agent.env or restart:
             seed = int(agent._uniform.rng.integers(2**63))
-            agent._fused = (agent.env, FusedRun(agent.env, tables.delay_estimates, seed))
+            fused_run = FusedRun(
+                agent.env, tables.delay_estimates, seed, held_transitions=tables.held_transitions
+            )
+            agent._fused = (agent.env, fused_run)
         return agent._fused[1]
     except NotCompilable:
         agent._fused = None
@@ -133,6 +142,7 @@ def compiled_loop(agent: Any, fused_run: Any, run: LearnRun) -> None:
             credit_kernel=tables.credit_kernel,
             trace_decay=tables.trace_decay,
             trace=tables.trace,
+            lag_rates=tables.lag_rates,
         )
         agent.num_timesteps += length
         if tables.after_chunk is not None:

@@ -41,6 +41,7 @@ import numpy as np
 
 from delayed_rl._delay_line import ring_size
 from delayed_rl._validation import check_int, check_real
+from delayed_rl.agents._fused import CompiledTables
 from delayed_rl.agents.hyperparameters import shares_hyperparameters
 from delayed_rl.agents.qlearning import QLearning
 from delayed_rl.delays import Delay, Empirical, as_delay
@@ -136,7 +137,8 @@ class ExpectedCreditQLearning(QLearning):
     docstring for the exact rule and the weights). It is anonymous: it reads only the received
     reward, never the wrapper's ``info``. ``q_table`` has shape ``(|S|, 1, |A|)`` and acting is
     Q-learning's, so ``predict``, ``greedy_actions`` and ``save``/``load`` work as for
-    :class:`~delayed_rl.agents.QLearning`. ``learn()`` runs on the Python path only.
+    :class:`~delayed_rl.agents.QLearning`. ``learn()`` runs compiled when the env stack does
+    (:mod:`delayed_rl.fast`), with the same rule.
 
     Args:
         env: the training env (``Discrete`` observation and action spaces) or an env id.
@@ -223,9 +225,15 @@ class ExpectedCreditQLearning(QLearning):
         self._credit_s2 = np.zeros(size, dtype=np.int64)
         self._credit_cell = np.zeros(size, dtype=np.int64)  # s·|A| + a
 
-    def compiled_tables(self) -> None:
-        """``None``: this rule has no compiled twin; ``learn()`` runs the Python loop."""
-        return None
+    def compiled_tables(self) -> CompiledTables:
+        """The Q-table and its cache, the lags and each lag's rate ``α·w(k)``: the rule compiles.
+
+        The compiled loop credits the lags into the one table, TD errors first and increments
+        in lag order, as :meth:`_credit_many` does.
+        """
+        tables = super().compiled_tables()
+        rates = self._alpha * self._lag_weights
+        return tables._replace(delay_estimates=self._lags, lag_rates=rates)
 
     # ------------------------------------------------------------------ learning
     def _learn_transition(

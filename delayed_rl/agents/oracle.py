@@ -41,6 +41,7 @@ import numpy as np
 
 from delayed_rl._delay_line import delay_bound, ring_size
 from delayed_rl._validation import check_real
+from delayed_rl.agents._fused import CompiledTables
 from delayed_rl.agents.env_util import make_env
 from delayed_rl.agents.hyperparameters import shares_hyperparameters
 from delayed_rl.agents.qlearning import QLearning
@@ -60,7 +61,9 @@ class OracleQLearning(QLearning):
     itself is not used either (the arrivals carry the values). ``q_table`` has shape
     ``(|S|, 1, |A|)`` and acting is Q-learning's (ε-greedy, random tie-breaks), so
     ``predict``, ``greedy_actions`` and ``save``/``load`` work as for
-    :class:`~delayed_rl.agents.QLearning`. ``learn()`` runs on the Python path only.
+    :class:`~delayed_rl.agents.QLearning`. ``learn()`` runs compiled when the env stack does
+    (:mod:`delayed_rl.fast`): the compiled loop keeps the record of who emitted each reward
+    itself (:mod:`delayed_rl.fast.arrivals`) and makes the same updates in the same order.
 
     Args:
         env: the training env, wrapped in ``RewardDelay(env, delay, record_arrivals=True)``
@@ -118,9 +121,9 @@ class OracleQLearning(QLearning):
         self._episode_start = self._clock
         self._arrivals = None
 
-    def compiled_tables(self) -> None:
-        """``None``: the oracle has no compiled twin; ``learn()`` runs the Python loop."""
-        return None
+    def compiled_tables(self) -> CompiledTables:
+        """Q-learning's tables, and how many recent transitions the oracle credits."""
+        return super().compiled_tables()._replace(held_transitions=self.history_length)
 
     # ------------------------------------------------------------------ env
     def set_env(self, env: gym.Env | str) -> None:

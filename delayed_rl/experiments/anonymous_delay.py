@@ -12,7 +12,7 @@ learners on the grid world, each with the thesis's hyper-parameters (Î± = 0.1, Î
 - ``DeconvQ known``: :class:`~delayed_rl.agents.DeconvQ` given the true delay (``max_delay`` 50);
 - ``DeconvQ learned``: :class:`~delayed_rl.agents.DeconvQ` learning the delay on 0..50;
 - ``oracle``: :class:`~delayed_rl.agents.OracleQLearning`, which is told which transition each
-  reward came from (the non-anonymous upper bound; Python path, slower);
+  reward came from (the non-anonymous upper bound);
 - ``Q undelayed``: Q-learning without any delay (the reference; its runs are the same for the
   three delays of a world, since nothing in them depends on the delay).
 

@@ -1,8 +1,9 @@
 """The compiled (numba) training path for tabular envs; see :class:`FusedRun`.
 
 ``agent.learn()`` runs on it by itself when it can (``learn(fused=None)``, the default): the
-agent's rule has a compiled twin (``agent.compiled_tables()`` is not ``None``: MMQ, Q-learning and
-fixed-delay Q-learning), the env stack compiles (:mod:`delayed_rl.fast.tabular` states the
+agent's rule has a compiled twin (``agent.compiled_tables()`` is not ``None``: every agent of
+:mod:`delayed_rl.agents` — MMQ, Q-learning, fixed-delay Q-learning, deconvolution Q-learning,
+expected credit and the oracle), the env stack compiles (:mod:`delayed_rl.fast.tabular` states the
 protocol), the learning rate is constant and no callback is given (a progress bar is fine).
 ``learn(fused=False)`` never does and ``learn(fused=True)`` must (else
 :class:`NotCompilable` says why).

@@ -21,6 +21,8 @@ import numpy as np
 from delayed_rl._delay_line import ring_size
 from delayed_rl.fast._numba import HAVE_NUMBA  # noqa: F401  (re-exported: delayed_rl.fast)
 from delayed_rl.fast._numba import jit as _jit
+from delayed_rl.fast.arrivals import NO_ARRIVALS, end_pending, take_due
+from delayed_rl.fast.arrivals import record as record_arrival
 from delayed_rl.fast.statistics import EMPTY_STATISTICS, observe
 
 # Episode-end modes of the reward buffer, as integers for the compiled code.
@@ -142,6 +144,8 @@ NO_TRACE = np.zeros(0)
 """The empty delay trace (:attr:`QCache.trace`), for a rule without one."""
 TRACE_OFF = -1.0
 """The :attr:`Rule.trace_decay` of a rule without a delay trace."""
+NO_RATES = np.zeros(0)
+"""The empty :attr:`Rule.lag_rates`: every lag learns at α."""
 
 
 class QCache(NamedTuple):
@@ -183,6 +187,12 @@ class Rule(NamedTuple):
             0 to ``max Λ − min Λ``, from :func:`credit_kernel`); empty (:data:`NO_KERNEL`): off.
         trace_decay: β of the delay trace (each step ``e ← β e``, then ``e(m_t) ← 1``; the
             trace is :attr:`QCache.trace`); negative (:data:`TRACE_OFF`): off.
+        lag_rates: the learning rate of each lag (one per entry of ``delay_estimates``), for a
+            rule that credits several lags in *one* table (expected credit: ``α·w(k)``); empty
+            (:data:`NO_RATES`): α for every lag.
+
+    The Q-table has either one table per lag (MMQ: lag ``j`` updates table ``j``) or a single
+    table that every lag updates (expected credit); the loop tells them by the table's shape.
     """
 
     delay_estimates: np.ndarray
@@ -193,6 +203,7 @@ class Rule(NamedTuple):
     eps_steps: int
     credit_kernel: np.ndarray = NO_KERNEL
     trace_decay: float = TRACE_OFF
+    lag_rates: np.ndarray = NO_RATES
 
 
 def credit_kernel(delay_estimates: np.ndarray, width: float) -> np.ndarray:
@@ -322,7 +333,7 @@ NO_REWARD_MODEL = RewardModel(np.zeros(0), EMPTY_STATISTICS)
 
 
 @_jit
-def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, model):
+def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, model, arrivals):
     """Advance training by ``line.delays.shape[0]`` steps.
 
     One loop, written out: splitting its step into compiled helpers (choose, env step, delay,
@@ -331,7 +342,15 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, mod
     The MMQ update: at each step, for every model ``j`` whose step ``t − Λ[j]`` is in this
     episode's history, with (s, a, s′, terminated) that step's transition,
     ``target = r_t + γ (1 − terminated) max Q[s′]``, the max over every (λ̂, a′) of ``s′``; all
-    targets of a step are computed before its writes (a parallel update).
+    TD errors ``target − Q`` of a step are computed before its writes (a parallel update), then
+    each entry moves by ``rate · error``, lag after lag. With a Q-table of one model for several
+    lags (expected credit, :attr:`Rule.lag_rates`) the lags' increments to one entry add up.
+
+    The oracle (``arrivals`` not :data:`~delayed_rl.fast.arrivals.NO_ARRIVALS`): instead, the
+    loop records who emitted each reward (:mod:`delayed_rl.fast.arrivals`) and, for every
+    transition whose reward arrives at the step (oldest first; all pending ones at a flushing
+    episode end), makes the Q-learning update of that transition with its own reward, one after
+    the other, if it is among the ``arrivals.held`` most recent.
 
     The cache (:class:`QCache`) is kept exact: a state's row is rescanned only when the cached
     arg-max entry decreases; the acting model is read off ``v_cell`` unless the max is tied, so
@@ -357,6 +376,8 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, mod
         rng: the run's generator state (:func:`next_uniform`), advanced in place.
         model: a reward model (:class:`RewardModel`; Λ must then be {0}), or
             :data:`NO_REWARD_MODEL`.
+        arrivals: the oracle's record (:class:`~delayed_rl.fast.arrivals.Arrivals`, Λ = {0},
+            not with a script), or :data:`~delayed_rl.fast.arrivals.NO_ARRIVALS`.
 
     Indices into the Q-table and its cache are cast to unsigned integers, which spares the
     compiled code numba's negative-index handling in the innermost loops (about 5%).
@@ -365,32 +386,38 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, mod
     alpha, gamma = rule.learning_rate, rule.gamma
     eps_initial, eps_final, eps_steps = rule.eps_initial, rule.eps_final, rule.eps_steps
     q, qmax, qcell, qties, trace = cache.q, cache.v_max, cache.v_cell, cache.ties, cache.trace
-    kernel_weights, decay = rule.credit_kernel, rule.trace_decay
+    kernel_weights, decay, lag_rates = rule.credit_kernel, rule.trace_decay, rule.lag_rates
     has_kernel = kernel_weights.shape[0] > 0
     has_trace = decay >= 0.0
     weighted = has_kernel or has_trace
+    has_rates = lag_rates.shape[0] > 0
     out_cdf, out_next, out_reward = env.out_cdf, env.out_next, env.out_reward
     out_term = env.out_term
     init_cdf, max_steps = env.init_cdf, env.max_steps
     delays, buffer, episode_end_mode = line.delays, line.ring, line.episode_end_mode
     hist_s, hist_a, hist_s2, hist_term, state = history
     script_rows, script_term, script_reward, script_acting = script
-    n_models = estimates.shape[0]
+    n_lags = estimates.shape[0]
+    n_models = q.shape[1]  # one table per lag (MMQ), or one for every lag (expected credit)
+    per_lag = n_models == n_lags
     n_actions = q.shape[2]
     row_size = n_models * n_actions
     qf = q.reshape(q.size)  # the Q-table, flat: entry (s, j, a) is qf[(s·|Λ| + j)·|A| + a]
     _count_ties(qf, qmax, row_size, qties)
     hmask = hist_s.shape[0] - 1
     bmask = buffer.shape[0] - 1
-    targets = np.zeros(n_models)
-    states = np.zeros(n_models, dtype=np.uint64)
-    cells = np.zeros(n_models, dtype=np.uint64)
+    targets = np.zeros(n_lags)
+    states = np.zeros(n_lags, dtype=np.uint64)
+    cells = np.zeros(n_lags, dtype=np.uint64)
     s = state[0]
     hist_count = state[1]
     episode_steps = state[2]
     clock = state[3]
     scripted = script_rows.shape[0] > 0
     has_model = model.rewards.shape[0] > 0
+    oracle = arrivals.head.shape[0] > 0
+    pmask = arrivals.due.shape[0] - 1
+    n_arrived = 0
     for t in range(delays.shape[0]):
         if scripted:
             s = script_rows[t, 0]
@@ -440,10 +467,14 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, mod
             episode_steps += 1
             ended = terminated or (max_steps > 0 and episode_steps >= max_steps)
             # the reward delay
-            buffer[(clock + delays[t]) & bmask] += reward
+            due = clock + delays[t]
+            buffer[due & bmask] += reward
             delivered = buffer[clock & bmask]
             buffer[clock & bmask] = 0.0
-            clock += 1
+            if oracle:  # record who emitted the reward; collect this step's arrivals
+                record_arrival(arrivals, clock, due, s, action, s2, terminated, reward)
+                if not (ended and episode_end_mode == FLUSH):
+                    n_arrived = take_due(arrivals, clock)
             if ended and episode_end_mode != CARRY:
                 total = 0.0
                 for i in range(buffer.shape[0]):
@@ -451,6 +482,11 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, mod
                     buffer[i] = 0.0
                 if episode_end_mode == FLUSH:
                     delivered += total
+                if oracle:  # flushed: every pending transition arrives now; dropped: none
+                    flushed = end_pending(arrivals, clock, episode_end_mode == FLUSH)
+                    if episode_end_mode == FLUSH:
+                        n_arrived = flushed
+            clock += 1
         # record, remember
         log.undelayed_reward[t] = reward
         log.reward[t] = delivered
@@ -469,12 +505,14 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, mod
             for j in range(n_models):
                 trace[j] *= decay
             trace[acting] = 1.0
-        # learn: every target first (each reads the cached max of its next state) ...
-        count = 0  # the models whose step t − λ̂ is in this episode: a prefix (Λ is sorted)
-        for j in range(n_models):
+        # learn: every TD error first (each reads the cached max of its next state) ...
+        count = 0  # the lags whose step t − λ̂ is in this episode: a prefix (Λ is sorted)
+        while count < n_lags and estimates[count] < hist_count:
+            count += 1
+        if oracle:  # or: each arriving reward's own transition, oldest first, one by one
+            count = n_arrived
+        for j in range(0 if oracle else count):
             estimate = estimates[j]
-            if estimate >= hist_count:
-                break
             pos = np.uint64((hist_count - 1 - estimate) & hmask)
             bootstrap = 0.0 if hist_term[pos] else gamma * qmax[np.uint64(hist_s2[pos])]
             credited = delivered
@@ -487,15 +525,27 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, mod
                 if has_trace:
                     weight *= trace[j]
                 credited = delivered * weight
-            targets[j] = credited + bootstrap
             states[j] = hist_s[pos]
-            cells[j] = hist_s[pos] * row_size + j * n_actions + hist_a[pos]
-            count += 1
-        for j in range(count):  # ... then the writes, keeping the cache exact
-            sj = states[j]
-            cell = cells[j]
+            cells[j] = hist_s[pos] * row_size + (j if per_lag else 0) * n_actions + hist_a[pos]
+            targets[j] = credited + bootstrap - qf[cells[j]]  # the TD error
+        for j in range(count):  # ... then the writes (one lag's after another's on one entry)
+            if oracle:  # the arrival's TD error, after the writes before it
+                e = arrivals.order[j]
+                if clock - 1 - e >= arrivals.held:
+                    continue  # a transition the oracle does not hold
+                p = e & pmask
+                sj = np.uint64(arrivals.s[p])
+                cell = np.uint64(arrivals.s[p] * row_size + arrivals.a[p])
+                bootstrap = 0.0 if arrivals.terminated[p] else gamma * qmax[arrivals.s2[p]]
+                error = arrivals.value[p] + bootstrap - qf[cell]
+                rate = alpha
+            else:
+                sj = states[j]
+                cell = cells[j]
+                error = targets[j]
+                rate = lag_rates[j] if has_rates else alpha
             old = qf[cell]
-            new = old + alpha * (targets[j] - old)
+            new = old + rate * error
             qf[cell] = new
             if new > qmax[sj]:
                 qmax[sj] = new
@@ -605,5 +655,5 @@ def replay(
     no_draws = np.ones(4, np.uint64)  # a script draws nothing
     run_chunk(
         cache, rule, TabularModel.empty(), line, history, StepLog.empty(n), script, 0, no_draws,
-        model,
+        model, NO_ARRIVALS,
     )  # fmt: skip

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from delayed_rl._delay_line import delay_bound, draw_delays, regrow_ring, ring_size
-from delayed_rl.fast import kernel
+from delayed_rl.fast import arrivals, kernel
 from delayed_rl.fast.tabular import NotCompilable, inspect_stack
 
 _MODES = {"flush": kernel.FLUSH, "drop": kernel.DROP, "carry": kernel.CARRY}
@@ -34,6 +34,9 @@ class FusedRun:
         seed: seeds the run's own generators: one in the compiled code (actions, env
             outcomes: :func:`~delayed_rl.fast.kernel.next_uniform`) and, apart from it, the
             reward delays'. No other run, thread or copy draws from them.
+        held_transitions: for the oracle (who learns each transition from its own reward,
+            :mod:`delayed_rl.fast.arrivals`), how many recent transitions it credits; ``None``:
+            the run learns from the delivered rewards.
 
     Attributes:
         state: ``[s, history length, episode steps, clock]``, carried from one call to the next.
@@ -42,12 +45,21 @@ class FusedRun:
         tie_counts: after :meth:`run`, how many entries of each state's Q-row hold its max (the
             compiled code keeps them to read the acting model off the cached arg-max unless the
             max is tied).
+        arrivals: the oracle's record of who emitted each pending reward
+            (:class:`~delayed_rl.fast.arrivals.Arrivals`), or ``NO_ARRIVALS``.
 
     Raises:
         NotCompilable: if numba is missing or the stack is outside the protocol.
     """
 
-    def __init__(self, env, delay_estimates: np.ndarray, seed: int | None):
+    def __init__(
+        self,
+        env,
+        delay_estimates: np.ndarray,
+        seed: int | None,
+        *,
+        held_transitions: int | None = None,
+    ):
         if not kernel.HAVE_NUMBA:
             raise NotCompilable("numba is not installed (a core dependency: pip install numba)")
         self.model, wrapper = inspect_stack(env)
@@ -59,6 +71,11 @@ class FusedRun:
         self.history = kernel.History.empty(int(self.delay_estimates.max()))
         self.state = self.history.clocks
         self.ring = np.zeros(1)
+        self.arrivals = (
+            arrivals.NO_ARRIVALS
+            if held_transitions is None
+            else arrivals.Arrivals.empty(1, held_transitions)
+        )
         self.tie_counts = np.zeros(0, dtype=np.int64)
         kernel_seeds, delay_seeds = np.random.SeedSequence(seed).spawn(2)
         self.rng_state = kernel.generator_state(kernel_seeds)
@@ -112,6 +129,8 @@ class FusedRun:
         size = ring_size(longest + 1)
         if size > self.ring.shape[0]:
             self.ring = regrow_ring(self.ring, int(self.state[3]), size)
+            if self.arrivals.held:
+                self.arrivals = arrivals.regrow(self.arrivals, int(self.state[3]), size)
 
     def run(
         self,
@@ -130,6 +149,7 @@ class FusedRun:
         credit_kernel: np.ndarray | None = None,
         trace_decay: float | None = None,
         trace: np.ndarray | None = None,
+        lag_rates: np.ndarray | None = None,
     ) -> kernel.StepLog:
         """Advance ``steps`` steps, updating ``q`` and its cache in place; return the step log.
 
@@ -150,6 +170,8 @@ class FusedRun:
                 (:func:`~delayed_rl.fast.kernel.credit_kernel`); ``None``: off.
             trace_decay: β of the delay trace (``None``: off; then ``trace`` is not read).
             trace: the delay trace, one float64 per model, updated in place (the agent's).
+            lag_rates: the learning rate of each lag, for a rule crediting several lags in one
+                table (:attr:`~delayed_rl.fast.kernel.Rule.lag_rates`); ``None``: α for all.
 
         Returns:
             One entry per step (:class:`~delayed_rl.fast.kernel.StepLog`); :attr:`state`
@@ -158,7 +180,7 @@ class FusedRun:
         Raises:
             ValueError: ``credit_kernel`` is shorter than Λ's span, or ``trace_decay`` is given
                 without a ``trace`` of one float64 per model (the compiled code does not check
-                its indices).
+                its indices), or ``lag_rates`` is not one float64 per lag.
         """
         delays = self._draw_delays(steps)
         self._fit_ring(int(delays.max(initial=0)))
@@ -175,6 +197,10 @@ class FusedRun:
             trace_decay, trace = kernel.TRACE_OFF, kernel.NO_TRACE
         elif trace is None or trace.dtype != np.float64 or trace.shape != estimates.shape:
             raise ValueError(f"trace must be a float64 array of shape {estimates.shape}")
+        if lag_rates is None:
+            lag_rates = kernel.NO_RATES
+        elif lag_rates.dtype != np.float64 or lag_rates.shape != estimates.shape:
+            raise ValueError(f"lag_rates must be a float64 array of shape {estimates.shape}")
         cache = kernel.QCache(q, v_max, v_cell, self.tie_counts, trace)
         rule = kernel.Rule(
             delay_estimates=estimates,
@@ -185,6 +211,7 @@ class FusedRun:
             eps_steps=int(eps_steps),
             credit_kernel=credit_kernel,
             trace_decay=float(trace_decay),
+            lag_rates=lag_rates,
         )
         line = kernel.DelayLine(delays, self.ring, self.mode)
         log = kernel.StepLog.empty(steps)
@@ -197,6 +224,6 @@ class FusedRun:
             log,
             kernel.NO_SCRIPT,
             int(start_step),
-            self.rng_state, reward_model or kernel.NO_REWARD_MODEL,
+            self.rng_state, reward_model or kernel.NO_REWARD_MODEL, self.arrivals,
         )  # fmt: skip
         return log
