@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -79,8 +81,12 @@ def test_same_seed_same_run_and_tables_follow_the_env():
 
 
 def test_unsupported_stacks_are_refused_with_a_reason():
-    with pytest.raises(NotCompilable, match="TimeLimit"):
-        inspect_stack(gym.make("delayed_rl/GridWorld-3x3-v0", max_episode_steps=10))
+    with pytest.raises(NotCompilable, match="TransformReward is not supported"):
+        inspect_stack(gym.wrappers.TransformReward(gym.make("Taxi-v4"), lambda r: 2 * r))
+    limit = gym.make("delayed_rl/GridWorld-3x3-v0", max_episode_steps=10)
+    limit._max_episode_steps = 2.5  # what TimeLimit's own check would have refused
+    with pytest.raises(NotCompilable, match=r"TimeLimit with max_episode_steps=2.5"):
+        inspect_stack(limit)
     with pytest.raises(NotCompilable, match="P"):
         inspect_stack(gym.make("CartPole-v1").unwrapped)
     model, wrapper = inspect_stack(gym.make("FrozenLake-v1").unwrapped)
@@ -188,3 +194,70 @@ def test_compiled_delay_ring_matches_the_wrapper(mode, delay, max_delay):
         if terminated or truncated:
             wrapper.reset()
     np.testing.assert_allclose(log.reward, delivered, rtol=0, atol=1e-9)
+
+
+class _ReplayGrid(gym.Env):
+    """Emits a logged reward stream, never ending an episode itself (TimeLimits end them)."""
+
+    observation_space = gym.spaces.Discrete(16)
+    action_space = gym.spaces.Discrete(4)
+
+    def __init__(self, rewards):
+        self.rewards = iter(rewards.tolist())
+
+    def reset(self, *, seed=None, options=None):
+        return 0, {}
+
+    def step(self, action):
+        return 0, next(self.rewards), False, False, {}
+
+
+def _stack(env, delay, mode, inner, outer):
+    """``TimeLimit(outer)`` over ``RewardDelay`` over ``TimeLimit(inner)`` over ``env``."""
+    if inner:
+        env = gym.wrappers.TimeLimit(env, inner)
+    env = RewardDelay(env, delay, on_episode_end=mode)
+    return gym.wrappers.TimeLimit(env, outer) if outer else env
+
+
+@pytest.mark.filterwarnings("ignore:reset\\(\\) in the middle of an episode discarded")
+@pytest.mark.parametrize("mode", ["flush", "drop", "carry"])
+@pytest.mark.parametrize("inner, outer", [(30, None), (None, 30), (50, 30), (20, 30)])
+def test_time_limits_compile_and_deliver_what_the_python_stack_does(mode, inner, outer):
+    """A TimeLimit below the RewardDelay ends episodes the wrapper sees (its mode applies).
+
+    One above it cuts them unseen: the reset discards what is pending (kept under "carry").
+    """
+    draws = Uniform(0, 12).sample(np.random.default_rng(8), 3000).tolist()
+    grid = gym.make("delayed_rl/GridWorld-v0", size=4).unwrapped
+    env = _stack(grid, ScriptedDelay(draws), mode, inner, outer)
+    model, _ = inspect_stack(env)
+    cut = outer is not None and (inner is None or outer < inner)
+    length = min(x for x in (inner, outer) if x)
+    assert model.max_steps == (inner or 0 if cut else length)
+    assert model.cut_steps == (outer if cut else 0)
+    q = np.zeros((16, 1, 4))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        log = _run(
+            FusedRun(env, np.array([0]), seed=3), q, _cache(q), 3000, 0, 0.1, 0.9, 1.0, 1.0, 1
+        )
+    np.testing.assert_array_equal(
+        np.flatnonzero(log.episode_end) + 1, np.arange(length, 3001, length)
+    )
+    assert not log.terminated.any()
+    replayed = _stack(_ReplayGrid(log.undelayed_reward), ScriptedDelay(draws), mode, inner, outer)
+    replayed.reset(seed=0)
+    delivered, ends = [], []
+    for _ in range(3000):
+        _, reward, terminated, truncated, _ = replayed.step(0)
+        delivered.append(reward)
+        ends.append(terminated or truncated)
+        if ends[-1]:
+            replayed.reset()
+    np.testing.assert_array_equal(log.reward, delivered)
+    np.testing.assert_array_equal(log.episode_end, ends)
+    discarding = cut and mode != "carry"
+    assert any("cut episodes short" in str(w.message) for w in caught) == discarding
+    if mode == "flush" and not cut:  # every episode delivered all of its rewards
+        assert log.reward.sum() == log.undelayed_reward.sum() != 0

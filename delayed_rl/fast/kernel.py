@@ -230,11 +230,15 @@ class DelayLine(NamedTuple):
         delays: one delay per step of the chunk (its length is the chunk's length).
         ring: the pending rewards, a power-of-two ring longer than every delay in ``delays``.
         episode_end_mode: :data:`FLUSH`, :data:`DROP` or :data:`CARRY`.
+        discarded: one float, to which the loop adds the pending reward it discards when a
+            ``TimeLimit`` above the reward delay cuts an episode
+            (:attr:`~delayed_rl.fast.tabular.TabularModel.cut_steps`; not under "carry").
     """
 
     delays: np.ndarray
     ring: np.ndarray
     episode_end_mode: int
+    discarded: np.ndarray = np.zeros(1)
 
 
 class History(NamedTuple):
@@ -393,7 +397,7 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, mod
     has_rates = lag_rates.shape[0] > 0
     out_cdf, out_next, out_reward = env.out_cdf, env.out_next, env.out_reward
     out_term = env.out_term
-    init_cdf, max_steps = env.init_cdf, env.max_steps
+    init_cdf, max_steps, cut_steps = env.init_cdf, env.max_steps, env.cut_steps
     delays, buffer, episode_end_mode = line.delays, line.ring, line.episode_end_mode
     hist_s, hist_a, hist_s2, hist_term, state = history
     script_rows, script_term, script_reward, script_acting = script
@@ -433,6 +437,7 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, mod
                 first = _scan_max(qf, s * row_size, row_size)[1]
                 acting = (first - s * row_size) // n_actions
             ended = terminated
+            cut = False
         else:
             step = start_step + t
             if step >= eps_steps:
@@ -466,6 +471,7 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, mod
             terminated = out_term[s, action, k]
             episode_steps += 1
             ended = terminated or (max_steps > 0 and episode_steps >= max_steps)
+            cut = not ended and cut_steps > 0 and episode_steps >= cut_steps  # unseen by the delay
             # the reward delay
             due = clock + delays[t]
             buffer[due & bmask] += reward
@@ -475,17 +481,21 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, mod
                 record_arrival(arrivals, clock, due, s, action, s2, terminated, reward)
                 if not (ended and episode_end_mode == FLUSH):
                     n_arrived = take_due(arrivals, clock)
-            if ended and episode_end_mode != CARRY:
+            if (ended or cut) and episode_end_mode != CARRY:
+                flush = ended and episode_end_mode == FLUSH
                 total = 0.0
                 for i in range(buffer.shape[0]):
                     total += buffer[i]
                     buffer[i] = 0.0
-                if episode_end_mode == FLUSH:
+                if flush:
                     delivered += total
+                elif cut:  # the reset after a cut discards it, as RewardDelay.reset does
+                    line.discarded[0] += total
                 if oracle:  # flushed: every pending transition arrives now; dropped: none
-                    flushed = end_pending(arrivals, clock, episode_end_mode == FLUSH)
-                    if episode_end_mode == FLUSH:
+                    flushed = end_pending(arrivals, clock, flush)
+                    if flush:
                         n_arrived = flushed
+            ended = ended or cut
             clock += 1
         # record, remember
         log.undelayed_reward[t] = reward

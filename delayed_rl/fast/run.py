@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import math
+import warnings
+
 import numpy as np
 
 from delayed_rl._delay_line import delay_bound, draw_delays, regrow_ring, ring_size
@@ -65,7 +68,8 @@ class FusedRun:
         self.model, wrapper = inspect_stack(env)
         self.delay = None if wrapper is None else wrapper.delay
         self.max_delay = None if wrapper is None else wrapper.max_delay
-        self.mode = _MODES["flush" if wrapper is None else wrapper.on_episode_end]
+        self.on_episode_end = "flush" if wrapper is None else wrapper.on_episode_end
+        self.mode = _MODES[self.on_episode_end]
         self.delay_clip = self._delay_clip()
         self.delay_estimates = np.asarray(delay_estimates, dtype=np.int64)
         self.history = kernel.History.empty(int(self.delay_estimates.max()))
@@ -86,10 +90,11 @@ class FusedRun:
     def _delay_clip(self) -> int | None:
         """The longest delay the ring must hold, or ``None`` (no reward delay).
 
-        ``max_delay`` clips every delay. When the env ends its own episodes after ``max_steps``
-        and pending rewards do not outlive an episode (``"flush"``, ``"drop"``), a delay of
-        ``max_steps`` or more comes due after the episode's end either way, so delays are
-        clipped there too: that changes no delivery, only how far the ring must reach.
+        ``max_delay`` clips every delay. When episodes last at most ``n`` steps (the model's
+        ``max_steps`` or ``cut_steps``) and pending rewards do not outlive an episode
+        (``"flush"``, ``"drop"``), a delay of ``n`` or more comes due after the episode's end
+        either way, so delays are clipped there too: that changes no delivery, only how far the
+        ring must reach.
 
         Raises:
             NotCompilable: the delays can reach further than :data:`RING_LIMIT` slots.
@@ -97,8 +102,9 @@ class FusedRun:
         if self.delay is None:
             return None
         clip = self.max_delay
-        if self.model.max_steps > 0 and self.mode != kernel.CARRY:
-            clip = self.model.max_steps if clip is None else min(clip, self.model.max_steps)
+        longest = min(n for n in (self.model.max_steps, self.model.cut_steps, math.inf) if n)
+        if longest < math.inf and self.mode != kernel.CARRY:
+            clip = int(longest) if clip is None else min(clip, int(longest))
         reach = delay_bound(self.delay, clip)
         if reach >= RING_LIMIT:
             raise NotCompilable(
@@ -213,7 +219,7 @@ class FusedRun:
             trace_decay=float(trace_decay),
             lag_rates=lag_rates,
         )
-        line = kernel.DelayLine(delays, self.ring, self.mode)
+        line = kernel.DelayLine(delays, self.ring, self.mode, np.zeros(1))
         log = kernel.StepLog.empty(steps)
         kernel.run_chunk(
             cache,
@@ -226,4 +232,11 @@ class FusedRun:
             int(start_step),
             self.rng_state, reward_model or kernel.NO_REWARD_MODEL, self.arrivals,
         )  # fmt: skip
+        if line.discarded[0] != 0.0:
+            warnings.warn(
+                f"a TimeLimit above the RewardDelay cut episodes short: the resets discarded "
+                f"{line.discarded[0]} of pending reward (on_episode_end={self.on_episode_end!r}); "
+                "end episodes inside the RewardDelay wrapper to have them flushed",
+                stacklevel=4,
+            )
         return log

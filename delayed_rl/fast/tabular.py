@@ -8,14 +8,35 @@ The protocol an env follows to be compiled (Gymnasium's toy-text envs already do
 - ``env.max_steps`` (optional): the env truncates its own episodes after that many steps.
 
 The dynamics must be fully described by these tables (no hidden state). The stack above the env
-may hold Gymnasium's bookkeeping wrappers (``OrderEnforcing``, ``PassiveEnvChecker``) and at most
-one :class:`~delayed_rl.wrappers.RewardDelay`, with any delay distribution; anything else (a
-``TimeLimit``, a reward or observation wrapper) changes what the agent sees, and the stack runs
-on the Python path instead.
+may hold Gymnasium's bookkeeping wrappers (``OrderEnforcing``, ``PassiveEnvChecker``), its
+``TimeLimit`` (what ``gym.make`` adds, e.g. 200 steps for ``Taxi-v4``) and at most one
+:class:`~delayed_rl.wrappers.RewardDelay`, with any delay distribution; anything else (a reward
+or observation wrapper) changes what the agent sees, and the stack runs on the Python path.
+
+Where a ``TimeLimit`` sits decides what its truncation does to the pending rewards, on both
+paths alike: *below* the ``RewardDelay`` (``RewardDelay(gym.make(id), ...)``) the delay wrapper
+sees the episode end and applies its ``on_episode_end`` (``max_steps``); *above* it
+(``TimeLimit(RewardDelay(env), n)``, or ``gym.make(id, max_episode_steps=n, reward_delay=...)``)
+the delay wrapper does not, and the reset that follows discards what is pending, except under
+``"carry"`` (``cut_steps``; the compiled run warns, as the wrapper's ``reset`` does).
+
+A user's own tabular env compiles when it follows the same protocol: give it ``P``,
+``initial_state_distrib`` and, if it ends its own episodes, ``max_steps`` (or wrap it in a
+``TimeLimit``). For example::
+
+    class Chain(gym.Env):  # two states; action 1 in state 1 pays 1 and goes back to 0
+        observation_space, action_space = gym.spaces.Discrete(2), gym.spaces.Discrete(2)
+        P = {0: {0: [(1.0, 0, 0.0, False)], 1: [(0.9, 1, 0.0, False), (0.1, 0, 0.0, False)]},
+             1: {0: [(1.0, 0, 0.0, False)], 1: [(1.0, 0, 1.0, False)]}}
+        initial_state_distrib = np.array([1.0, 0.0])
+        # reset() and step() as usual: the Python path, and the checks, use them
+
+``examples/own_tabular_env.py`` is that env, trained on both paths.
 """
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import gymnasium as gym
@@ -39,7 +60,10 @@ class TabularModel(NamedTuple):
         out_reward: their rewards.
         out_term: whether they are terminal.
         init_cdf: the cumulative initial-state distribution.
-        max_steps: the env truncates its episodes after this many steps (0: never).
+        max_steps: the env truncates its episodes after this many steps, seen by the reward
+            delay (0: never): the env's own ``max_steps`` and the ``TimeLimit`` wrappers below it.
+        cut_steps: a ``TimeLimit`` above the reward delay truncates the episodes after this
+            many steps, unseen by it (0: never, or not before ``max_steps``).
     """
 
     out_cdf: np.ndarray
@@ -48,6 +72,7 @@ class TabularModel(NamedTuple):
     out_term: np.ndarray
     init_cdf: np.ndarray
     max_steps: int
+    cut_steps: int = 0
 
     @classmethod
     def empty(cls) -> TabularModel:
@@ -135,17 +160,43 @@ def _check_tables(
 def inspect_stack(env: gym.Env) -> tuple[TabularModel, RewardDelay | None]:
     """Split ``env`` into its compiled model and its reward-delay wrapper (or ``None``).
 
+    The model's ``max_steps`` and ``cut_steps`` include the stack's ``TimeLimit`` wrappers (see the
+    module docstring).
+
     Raises:
         NotCompilable: if a wrapper or the env itself is outside the protocol.
     """
     delay_wrapper = None
+    above, below = [], []  # the TimeLimits above the RewardDelay, and those below it
     layer = env
     while isinstance(layer, gym.Wrapper):
         if isinstance(layer, RewardDelay):
             if delay_wrapper is not None:
                 raise NotCompilable("more than one RewardDelay wrapper")
             delay_wrapper = layer
+        elif isinstance(layer, gym.wrappers.TimeLimit):
+            (below if delay_wrapper is not None else above).append(_time_limit(layer))
         elif not isinstance(layer, TRANSPARENT_WRAPPERS):
             raise NotCompilable(f"wrapper {type(layer).__name__} is not supported")
         layer = layer.env
-    return TabularModel.from_env(layer), delay_wrapper
+    model = TabularModel.from_env(layer)
+    if delay_wrapper is None:  # nothing is pending: every limit ends the episode alike
+        below, above = below + above, []
+    inner = min([model.max_steps or math.inf, *below])
+    outer = min(above, default=math.inf)
+    return model._replace(
+        max_steps=0 if inner == math.inf else int(inner),
+        cut_steps=int(outer) if outer < inner else 0,
+    ), delay_wrapper
+
+
+def _time_limit(layer: gym.wrappers.TimeLimit) -> int:
+    """The episode length ``layer`` truncates at.
+
+    Raises:
+        NotCompilable: it is not a positive integer (the compiled loop counts steps in int64).
+    """
+    limit = getattr(layer, "_max_episode_steps", None)
+    if isinstance(limit, (bool, np.bool_)) or not isinstance(limit, (int, np.integer)) or limit < 1:
+        raise NotCompilable(f"TimeLimit with max_episode_steps={limit!r} (not an integer >= 1)")
+    return int(limit)
