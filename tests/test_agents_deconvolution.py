@@ -104,12 +104,13 @@ def test_the_agent_finds_the_optimal_loop_where_q_learning_does_not(known):
         agent.learn(60_000, log_interval=None)
         assert agent.last_learn_path == "fused"
         assert greedy_average_reward(agent, 5) == pytest.approx(optimum, abs=0.002)
-        if not known:  # the learned pmf is near Poisson(4): measured over seeds 0-2 at 60k and
-            # 200k steps, total variation 0.10-0.17 and means 4.5-4.9 (thin spurious mass in
-            # the long tail pulls the mean up); the bounds leave room above the worst of those
+        if not known:  # the learned pmf is near Poisson(4). Measured over seeds 0-9 at 60k
+            # steps: total variation 0.13-0.20; means 4.02-5.10, average 4.73, sd 0.34 (thin
+            # spurious mass in the long tail biases the mean up: 4.64 at 200k). The mean's band
+            # is that average ± 2.3 sd, about 1 in 50 per seed outside it by chance
             true = Poisson(4.0).pmf(np.arange(21))
             assert 0.5 * np.abs(agent.delay_pmf - true / true.sum()).sum() < 0.25
-            assert abs(agent.mean_delay - 4.0) < 1.0
+            assert 3.95 < agent.mean_delay < 5.5
     q_results = [
         greedy_average_reward(QLearning(_grid(lam=4.0), q_init=25.0, seed=seed).learn(60_000), 5)
         for seed in range(3)
@@ -239,7 +240,9 @@ def test_the_layout_is_chosen_by_size_and_the_hashed_table_grows_with_what_is_se
     used = int(regression.stats.counters[6])
     assert 0 < used <= 3_000 * 51  # at most K + 1 new couples a step
     assert regression.stats.keys.size <= 4 * (used + 256 * 51)  # half full after a chunk's room
-    assert regression.nbytes < 2**30 / 16  # far below the direct layout's 498 MiB
+    row_bytes = 51 * 4 + 8  # a row's 51 int32 counts and its int64 key
+    assert regression.nbytes == regression.stats.keys.size * row_bytes  # rows for what was seen
+    assert regression.nbytes < 1600**2 * 51 * 4 / 3  # well below the direct layout's 498 MiB
     with pytest.raises(ValueError, match="direct layout, more than the limit"):
         RewardRegression(1600, 50, layout="direct")
 

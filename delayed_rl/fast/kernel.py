@@ -461,11 +461,12 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, mod
                 if ties > 1:
                     first = _nth_equal(qf, row, n_actions, best, _below(rng, ties))
                 action = first - row
-            # the env
-            u = next_uniform(rng)
+            # the env (no draw where the first outcome is certain: a deterministic move)
             k = 0
-            while k < out_cdf.shape[2] - 1 and out_cdf[s, action, k] <= u:
-                k += 1
+            if out_cdf[s, action, 0] < 1.0:
+                u = next_uniform(rng)
+                while k < out_cdf.shape[2] - 1 and out_cdf[s, action, k] <= u:
+                    k += 1
             s2 = out_next[s, action, k]
             reward = out_reward[s, action, k]
             terminated = out_term[s, action, k]
@@ -571,11 +572,12 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, mod
         if has_model:  # after the update, as the Python path: this step informs the next solve
             observe(model.stats, s * n_actions + action, delivered, ended)
         if ended:
-            if not scripted:
-                u = next_uniform(rng)
+            if not scripted:  # the next episode's start (no draw for a certain one)
                 s = 0
-                while s < init_cdf.shape[0] - 1 and init_cdf[s] <= u:
-                    s += 1
+                if init_cdf[0] < 1.0:
+                    u = next_uniform(rng)
+                    while s < init_cdf.shape[0] - 1 and init_cdf[s] <= u:
+                        s += 1
             hist_count = 0
             episode_steps = 0
         elif not scripted:
