@@ -1,12 +1,15 @@
-"""Wrappers that delay rewards (and observations) by random numbers of steps.
+"""Wrappers that delay rewards, observations and actions by random numbers of steps.
 
 - :class:`RewardDelay`, :class:`PoissonRewardDelay`: one env, the library's core;
 - :class:`ObservationDelay`: the same idea for observations (the thesis's delayed P-controller);
+- :class:`ActionDelay`: for actions (the env executes an action sent steps earlier), with its
+  ``gymnasium.vector`` twin :class:`VectorActionDelay`;
 - :class:`VectorRewardDelay`: the twin for ``gymnasium.vector`` envs;
 - :class:`delayed_rl.wrappers.sb3.VecRewardDelay`: the twin for stable-baselines3 ``VecEnv``s
   (imported from its own module so that stable-baselines3 and torch load only when used).
 """
 
+from delayed_rl.wrappers.action_delay import ActionDelay, VectorActionDelay
 from delayed_rl.wrappers.observation_delay import ObservationDelay
 from delayed_rl.wrappers.reward_delay import (
     EPISODE_END_MODES,
@@ -18,9 +21,11 @@ from delayed_rl.wrappers.vector import VectorRewardDelay
 
 __all__ = [
     "EPISODE_END_MODES",
+    "ActionDelay",
     "ObservationDelay",
     "PoissonRewardDelay",
     "RewardDelay",
+    "VectorActionDelay",
     "VectorRewardDelay",
     "wrap_reward_delay",
 ]

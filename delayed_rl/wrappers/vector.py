@@ -46,6 +46,21 @@ def sub_env_seeds(seed: Any, num_envs: int) -> list[int | None]:
     return [check_int(f"seed[{i}]", entry, 0, optional=True) for i, entry in enumerate(seed)]
 
 
+def autoreset_mode(env: VectorEnv) -> AutoresetMode:
+    """The autoreset mode of ``env`` (its ``metadata["autoreset_mode"]``, else ``NEXT_STEP``).
+
+    Raises:
+        ValueError: the metadata names no ``gymnasium.vector.AutoresetMode``.
+    """
+    mode = env.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP)
+    try:
+        return AutoresetMode(mode)
+    except ValueError:
+        raise ValueError(
+            f"unsupported autoreset_mode {mode!r}; supported: {list(AutoresetMode)}"
+        ) from None
+
+
 def _with_mask(info: dict[str, Any], key: str, values: np.ndarray, mask: np.ndarray) -> None:
     """Store ``values`` under ``key`` with Gymnasium's ``_key`` mask convention."""
     info[key] = values
@@ -112,14 +127,7 @@ class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
         self.delay = as_delay(delay)
         self.max_delay = check_max_delay(max_delay)
         self.on_episode_end = check_episode_end(on_episode_end)
-        mode = env.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP)
-        if isinstance(mode, str):
-            mode = AutoresetMode(mode)
-        if mode not in tuple(AutoresetMode):
-            raise ValueError(
-                f"unsupported autoreset_mode {mode!r}; supported: {list(AutoresetMode)}"
-            )
-        self.autoreset_mode = mode
+        self.autoreset_mode = autoreset_mode(env)
         self.buffers = RewardBuffers(self.num_envs, self.delay, self.max_delay)
         self._resetting = np.zeros(self.num_envs, dtype=bool)
         # per sub-env: from its episode's end (or construction) to its next reset
