@@ -1,4 +1,4 @@
-"""Registration: ids, ``gym.make(id, reward_delay=...)`` and ``gym.make(env.spec)``."""
+"""Registration: ids, ``gym.make(id, reward_delay=..., ...)`` and ``gym.make(env.spec)``."""
 
 from __future__ import annotations
 
@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-from delayed_rl.delays import Geometric, Uniform
+from delayed_rl.delays import Constant, Geometric, Poisson, Uniform
 from delayed_rl.envs import env_ids, register_envs
 from delayed_rl.envs.gridworld import GridWorldEnv
 from delayed_rl.envs.roulette import RouletteEnv
-from delayed_rl.wrappers import PoissonRewardDelay, RewardDelay
+from delayed_rl.wrappers import ActionDelay, ObservationDelay, PoissonRewardDelay, RewardDelay
 
 IDS = {
     "delayed_rl/GridWorld-3x3-v0": {},
@@ -124,3 +124,68 @@ def test_outer_wrapper_spec_round_trip() -> None:
 def test_make_rejects_bad_reward_delay(env_id: str, bad, exc, name) -> None:
     with pytest.raises(exc, match=name):
         gym.make(env_id, reward_delay=bad)
+
+
+# ---------------------------------------------------------------------- the three delays
+def layers(env: gym.Env) -> list[str]:
+    """The wrapper classes from the outside in, without Gymnasium's bookkeeping."""
+    names = []
+    while isinstance(env, gym.Wrapper):
+        if not isinstance(env, gym.wrappers.OrderEnforcing | gym.wrappers.PassiveEnvChecker):
+            names.append(type(env).__name__)
+        env = env.env
+    return names
+
+
+@pytest.mark.parametrize("env_id", [*IDS, "delayed_rl/EPuckLineFollow-v0"])
+def test_every_id_takes_the_three_delays_in_the_documented_order(env_id: str) -> None:
+    kwargs = IDS.get(env_id, {})
+    env = gym.make(env_id, action_delay=2, observation_delay=Constant(1), reward_delay=3, **kwargs)
+    assert layers(env) == ["PoissonRewardDelay", "ObservationDelay", "ActionDelay"]
+    assert find(env, ActionDelay).delay == Poisson(2) and find(
+        env, ObservationDelay
+    ).delay == Constant(1)
+    env.reset(seed=0)
+    *_, info = env.step(env.action_space.sample())
+    assert {"executed_action", "action_delay", "observation_delay", "reward_delay"} <= set(info)
+    only_actions = gym.make(env_id, action_delay=Geometric(0.5), **kwargs)
+    assert layers(only_actions) == ["ActionDelay"]
+
+
+def action_trajectory(env: gym.Env, seed: int, n: int = 200):
+    env.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(n):
+        obs, reward, terminated, truncated, info = env.step(int(rng.integers(env.action_space.n)))
+        out.append((obs, reward, info["executed_action"], info["observation_delay"], truncated))
+        if terminated or truncated:
+            env.reset()
+    return out
+
+
+@pytest.mark.parametrize("through_json", [False, True])
+def test_the_delays_round_trip_through_the_spec(through_json: bool) -> None:
+    env = gym.make(
+        "delayed_rl/GridWorld-5x5-v0", max_steps=30, reward_delay=Geometric(0.2),
+        observation_delay=Uniform(0, 3), action_delay=1.5,
+    )  # fmt: skip
+    spec = env.spec
+    assert spec.kwargs["observation_delay"] == {"type": "Uniform", "low": 0, "high": 3}
+    if through_json:
+        spec = gym.envs.registration.EnvSpec.from_json(spec.to_json())
+    rebuilt = gym.make(spec)
+    assert layers(rebuilt) == ["RewardDelay", "ObservationDelay", "ActionDelay"]
+    assert find(rebuilt, ObservationDelay).delay == Uniform(0, 3)
+    assert find(rebuilt, ActionDelay).delay == Poisson(1.5)
+    assert action_trajectory(env, 3) == action_trajectory(rebuilt, 3)
+
+
+@pytest.mark.parametrize("name", ["action_delay", "observation_delay"])
+@pytest.mark.parametrize(
+    ("bad", "exc"),
+    [("5", TypeError), (True, TypeError), (-1, ValueError), ({"type": "X"}, ValueError)],
+)
+def test_bad_delays_are_refused_naming_the_argument(name: str, bad, exc) -> None:
+    with pytest.raises(exc, match=name):
+        gym.make("delayed_rl/GridWorld-3x3-v0", **{name: bad})

@@ -1,14 +1,25 @@
-"""Entry points that let ``gym.make(id, reward_delay=...)`` return a reward-delayed env.
+"""Entry points that let ``gym.make(id, reward_delay=..., ...)`` return a delayed env.
 
 Every ``delayed_rl/...`` id is registered with a :class:`DelayableEntryPoint` instead of the bare
-env class. It builds the env from the remaining keyword arguments and, when ``reward_delay`` is
-given, wraps it in :class:`~delayed_rl.wrappers.PoissonRewardDelay` (a number, read as the Poisson
-mean λ) or :class:`~delayed_rl.wrappers.RewardDelay` (a :mod:`delayed_rl.delays` distribution).
-Because ``reward_delay`` is an ordinary keyword argument, it is recorded in ``env.spec.kwargs`` and
-``gym.make(env.spec)`` rebuilds the same stack. A distribution is recorded there (by the delay
-wrapper's ``spec``) as its JSON description, ``{"type": "Constant", "k": 2}``
-(:meth:`~delayed_rl.delays.Delay.to_dict`), which the entry points accept back, so the spec also
-survives ``EnvSpec.to_json`` / ``EnvSpec.from_json``.
+env class. It builds the env from the remaining keyword arguments and wraps it for the delays
+given (:func:`~delayed_rl.wrappers.wrap_delays`), innermost first:
+
+1. ``action_delay``: :class:`~delayed_rl.wrappers.ActionDelay` (the env executes actions sent
+   earlier);
+2. ``observation_delay``: :class:`~delayed_rl.wrappers.ObservationDelay` (the agent sees older
+   observations);
+3. ``reward_delay``: :class:`~delayed_rl.wrappers.PoissonRewardDelay` for a number (the Poisson
+   mean λ) or :class:`~delayed_rl.wrappers.RewardDelay` for a distribution — outermost, so its
+   ``info["undelayed_reward"]`` and episode-end handling see the whole step.
+
+Each is a number (a Poisson mean), a :mod:`delayed_rl.delays` distribution or its ``to_dict()``
+description. Because they are ordinary keyword arguments, they are recorded in
+``env.spec.kwargs`` and ``gym.make(env.spec)`` rebuilds the same stack. A distribution is
+recorded there (by the delay wrappers' ``spec``,
+:func:`~delayed_rl.wrappers.stack.describe_delays`) as its JSON
+description, ``{"type": "Constant", "k": 2}`` (:meth:`~delayed_rl.delays.Delay.to_dict`), which
+the entry points accept back, so the spec also survives ``EnvSpec.to_json`` /
+``EnvSpec.from_json``.
 
 Gymnasium applies its own wrappers (``PassiveEnvChecker``, ``OrderEnforcing`` and, when
 ``max_episode_steps`` is passed to ``gym.make``, ``TimeLimit``) *outside* the delay wrapper. The
@@ -45,7 +56,7 @@ class DelayableEntryPoint:
     """
 
     reads_delay_descriptions = True
-    """``reward_delay`` may be a ``Delay.to_dict()`` description: the delay wrapper records a
+    """Each delay may be a ``Delay.to_dict()`` description: the delay wrappers record a
     distribution in the env spec's kwargs that way (see the module docstring)."""
 
     def __init__(self, env_path: str, preset: str | None = None):
@@ -72,29 +83,40 @@ class DelayableEntryPoint:
         """The env class's metadata, so ``gym.make`` can check ``render_mode``."""
         return self.env_cls.metadata
 
-    def __call__(self, reward_delay: Any = None, **kwargs: Any) -> gym.Env:
-        """Build the env from ``kwargs``, wrapped for ``reward_delay`` when it is not None.
+    def __call__(
+        self,
+        reward_delay: Any = None,
+        observation_delay: Any = None,
+        action_delay: Any = None,
+        **kwargs: Any,
+    ) -> gym.Env:
+        """Build the env from ``kwargs``, wrapped for each delay that is not None.
 
         Args:
             reward_delay: ``None`` (no wrapper), a number λ (``PoissonRewardDelay``), a
                 :class:`~delayed_rl.delays.Delay` or its ``to_dict()`` description
                 (``RewardDelay``).
+            observation_delay: ``None``, or a delay as above (``ObservationDelay``).
+            action_delay: ``None``, or a delay as above (``ActionDelay``).
             **kwargs: the env class's own arguments.
 
         Raises:
-            TypeError: ``reward_delay`` is neither a number, a ``Delay`` nor a dict (or the env
-                refuses the type of one of its arguments).
-            ValueError: ``reward_delay`` is not a valid Poisson mean or describes no
-                distribution (or the env refuses the value of one of its arguments).
+            TypeError: a delay is neither a number, a ``Delay`` nor a dict (or the env refuses
+                the type of one of its arguments).
+            ValueError: a delay is not a valid Poisson mean or describes no distribution (or
+                the env refuses the value of one of its arguments).
         """
         if self.preset is not None:
             kwargs = {**_load(self.preset), **kwargs}
         env = self.env_cls(**kwargs)
-        if reward_delay is None:
-            return env
-        from delayed_rl.wrappers import wrap_reward_delay
+        from delayed_rl.wrappers import wrap_delays
 
-        return wrap_reward_delay(env, reward_delay)
+        return wrap_delays(
+            env,
+            action_delay=action_delay,
+            observation_delay=observation_delay,
+            reward_delay=reward_delay,
+        )
 
     def __repr__(self) -> str:
         preset = "" if self.preset is None else f", preset={self.preset!r}"

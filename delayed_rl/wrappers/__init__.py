@@ -4,6 +4,7 @@
 - :class:`ObservationDelay`: the same idea for observations (the thesis's delayed P-controller);
 - :class:`ActionDelay`: for actions (the env executes an action sent steps earlier), with its
   ``gymnasium.vector`` twin :class:`VectorActionDelay`;
+- :func:`wrap_delays`: all three on one env, in the order ``gym.make(id, ...)`` stacks them;
 - :class:`VectorRewardDelay`: the twin for ``gymnasium.vector`` envs;
 - :class:`delayed_rl.wrappers.sb3.VecRewardDelay`: the twin for stable-baselines3 ``VecEnv``s
   (imported from its own module so that stable-baselines3 and torch load only when used).
@@ -17,6 +18,7 @@ from delayed_rl.wrappers.reward_delay import (
     RewardDelay,
     wrap_reward_delay,
 )
+from delayed_rl.wrappers.stack import wrap_delays
 from delayed_rl.wrappers.vector import VectorRewardDelay
 
 __all__ = [
@@ -27,5 +29,6 @@ __all__ = [
     "RewardDelay",
     "VectorActionDelay",
     "VectorRewardDelay",
+    "wrap_delays",
     "wrap_reward_delay",
 ]

@@ -19,6 +19,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 
 from delayed_rl.delays import Delay, as_delay, delay_spec
 from delayed_rl.wrappers.reward_delay import DelaySampler, check_max_delay
+from delayed_rl.wrappers.stack import JsonSpecMixin
 from delayed_rl.wrappers.vector import autoreset_mode, sub_env_seeds
 
 __all__ = ["ActionDelay", "ActionLine", "VectorActionDelay", "neutral_action"]
@@ -111,7 +112,7 @@ class ActionLine:
         return self.executed
 
 
-class ActionDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
+class ActionDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Executes, at step ``t``, the action sent ``d_t`` steps earlier, ``d_t`` drawn from ``delay``.
 
     The rule (:class:`ActionLine`): the action sent at step ``t`` arrives at step ``t + d_t``; the

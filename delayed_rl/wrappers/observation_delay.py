@@ -11,6 +11,7 @@ import numpy as np
 from delayed_rl._delay_line import delay_bound
 from delayed_rl.delays import MAX_DELAY, Delay, as_delay, delay_spec
 from delayed_rl.wrappers.reward_delay import DelaySampler, check_max_delay
+from delayed_rl.wrappers.stack import JsonSpecMixin
 
 
 def _fresh(obs: Any) -> Any:
@@ -28,7 +29,7 @@ def _fresh(obs: Any) -> Any:
     return obs
 
 
-class ObservationDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
+class ObservationDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Shows, at step ``t``, the observation of step ``t − d_t`` with ``d_t`` drawn from ``delay``.
 
     Observations are numbered from the reset observation ``o_0``; the observation returned by

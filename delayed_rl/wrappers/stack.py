@@ -1,0 +1,107 @@
+"""One env wrapped for all three delays, in one documented order; JSON-able env specs.
+
+:func:`wrap_delays` is what ``gym.make(id, action_delay=..., observation_delay=...,
+reward_delay=...)`` does for every ``delayed_rl/`` id, and what you call for any other env.
+"""
+
+from __future__ import annotations
+
+import numbers
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+__all__ = ["DELAY_KWARGS", "JsonSpecMixin", "describe_delays", "wrap_delays"]
+
+DELAY_KWARGS = ("action_delay", "observation_delay", "reward_delay")
+"""The delay arguments, in the order their wrappers stack (innermost first)."""
+
+
+def wrap_delays(
+    env: gym.Env,
+    *,
+    action_delay: Any = None,
+    observation_delay: Any = None,
+    reward_delay: Any = None,
+) -> gym.Env:
+    """``env`` wrapped for each delay that is not ``None``, innermost first.
+
+    1. ``action_delay``: :class:`~delayed_rl.wrappers.ActionDelay`;
+    2. ``observation_delay``: :class:`~delayed_rl.wrappers.ObservationDelay`;
+    3. ``reward_delay``: :class:`~delayed_rl.wrappers.PoissonRewardDelay` for a number,
+       :class:`~delayed_rl.wrappers.RewardDelay` for a distribution — outermost, so that its
+       ``info["undelayed_reward"]`` and its episode-end handling see the whole step.
+
+    Each delay is a number (a Poisson mean), a :class:`~delayed_rl.delays.Delay` or its
+    ``to_dict()`` description. The wrappers' other arguments take their defaults; build the
+    stack by hand for others (``on_episode_end``, ``max_delay``, ``initial_action``).
+
+    Raises:
+        TypeError: a delay is neither a number, a ``Delay`` nor a dict.
+        ValueError: a delay is not a valid Poisson mean, or a dict describes no distribution.
+
+    Example:
+        >>> import gymnasium as gym
+        >>> env = wrap_delays(gym.make("CartPole-v1"), action_delay=1, reward_delay=3)
+        >>> type(env).__name__, type(env.env).__name__
+        ('PoissonRewardDelay', 'ActionDelay')
+    """
+    from delayed_rl.wrappers.action_delay import ActionDelay
+    from delayed_rl.wrappers.observation_delay import ObservationDelay
+    from delayed_rl.wrappers.reward_delay import wrap_reward_delay
+
+    if action_delay is not None:
+        env = ActionDelay(env, _checked(action_delay, "action_delay"))
+    if observation_delay is not None:
+        env = ObservationDelay(env, _checked(observation_delay, "observation_delay"))
+    if reward_delay is not None:
+        env = wrap_reward_delay(env, reward_delay)
+    return env
+
+
+def _checked(delay: Any, name: str) -> Any:
+    """``delay`` as a ``Delay``, the errors naming ``name`` (a number is a Poisson mean)."""
+    from delayed_rl._validation import check_real
+    from delayed_rl.delays import as_delay
+
+    if isinstance(delay, numbers.Real) and not isinstance(delay, (bool, np.bool_)):
+        check_real(name, delay, 0.0, note=" (a Poisson mean)")
+    return as_delay(delay, name)
+
+
+class JsonSpecMixin:
+    """Gives a delay wrapper a ``spec`` whose delay arguments are JSON (:func:`describe_delays`).
+
+    Listed before ``gym.Wrapper`` among a wrapper's bases, so its ``spec`` is the one used.
+    """
+
+    @property
+    def spec(self) -> Any:
+        """The env spec with this wrapper's ``WrapperSpec``, its delays described as JSON."""
+        spec = gym.Wrapper.spec.fget(self)
+        if spec is not None:
+            describe_delays(spec)
+        return spec
+
+
+def describe_delays(spec: Any) -> None:
+    """Record a registered env's delay arguments in ``spec.kwargs`` as JSON descriptions.
+
+    ``gym.make(id, reward_delay=Constant(2))`` keeps the object in the env spec's kwargs, which
+    ``EnvSpec.to_json`` cannot write; the library's entry points read the description back.
+    Every delay wrapper's ``spec`` calls this, so the outermost one's spec is JSON-able.
+    """
+    from delayed_rl.delays import Delay, delay_spec
+
+    kwargs = spec.kwargs if isinstance(spec.kwargs, dict) else {}
+    objects = {key: kwargs[key] for key in DELAY_KWARGS if isinstance(kwargs.get(key), Delay)}
+    if not objects:
+        return
+    entry = spec.entry_point
+    try:  # a "module:attribute" string names the entry point (its module is loaded already)
+        entry = gym.envs.registration.load_env_creator(entry) if isinstance(entry, str) else entry
+    except (ImportError, AttributeError, ValueError):
+        return
+    if getattr(entry, "reads_delay_descriptions", False):  # a DelayableEntryPoint
+        spec.kwargs = {**kwargs, **{key: delay_spec(value) for key, value in objects.items()}}
