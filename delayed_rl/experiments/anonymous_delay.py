@@ -101,10 +101,12 @@ from delayed_rl.experiments.training import thesis_hyperparameters
 #: (side, mean delay λ, steps a run) of the two worlds.
 SETTINGS = ((9, 13, 1_000_000), (7, 8, 300_000))
 QUICK_SIZE, QUICK_LAM, QUICK_STEPS = 7, 8, 30_000
+#: The three delay distributions of each world, all of mean λ (:func:`make_delay`).
 DELAYS = ("Poisson", "geometric", "bimodal")
 LAMBDA_MAX = 50
 """The longest delay any learner models: MMQ's λ̂max, DeconvQ's ``max_delay``, expected credit's
 last lag."""
+#: The seven learners, in the tables' order (:func:`make_agent`).
 AGENTS = (
     "Q",
     "MMQ",

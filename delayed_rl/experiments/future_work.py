@@ -89,7 +89,7 @@ def make_variant(variant: str, size: int, delay: Any, steps: int, seed: int) -> 
 
 
 def tasks(config: Config) -> list[dict]:
-    """Every (setting, variant, seed), as ``anonymous-delay``'s (:func:`.grid_tasks`)."""
+    """Every (setting, variant, seed), as ``anonymous-delay``'s (:func:`~delayed_rl.experiments.anonymous_delay.grid_tasks`)."""
     return shared.grid_tasks(config, tuple(VARIANTS))
 
 

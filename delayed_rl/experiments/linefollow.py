@@ -45,8 +45,11 @@ from delayed_rl.experiments.training import ALPHA, EPSILON, GAMMA, thesis_hyperp
 ENV_ID = "delayed_rl/EPuckLineFollow-v0"
 TRACK = "racetrack"
 LAM, LAMBDA_MAX = 90, 150
-Q_INIT = 10.0  # 1 / (1 − γ): see the module docstring; α, γ and ε are :mod:`.training`'s
+#: The optimistic initial value, 1 / (1 − γ) (see the module docstring; α, γ and ε are the
+#: thesis's, :mod:`delayed_rl.experiments.training`).
+Q_INIT = 10.0
 CENTRE, UNSEEN_ERROR = 20, 20
+#: The learners compared.
 AGENTS = ("MMQ", "Q")
 #: The band of the average-reward claims (and of MMQ − Q): the thesis's value ± this.
 REWARD_TOLERANCE = 0.2

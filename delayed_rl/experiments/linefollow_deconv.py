@@ -1,7 +1,7 @@
 """``linefollow-deconv`` (beyond the thesis): deconvolution Q-learning on the e-puck line follower.
 
 A module of its own (not a setting of ``anonymous-delay``): the e-puck runs share nothing with
-the grid worlds but the agents. The setting is ``linefollow``'s (:mod:`.linefollow`, whose env,
+the grid worlds but the agents. The setting is ``linefollow``'s (:mod:`delayed_rl.experiments.linefollow`, whose env,
 constants and metrics this module reuses): ``delayed_rl/EPuckLineFollow-v0`` on the racetrack,
 discrete Table 5.2 actions, centroid states, put back on the track after 50 line-less steps,
 Poisson(90) reward delays, 150k steps a run, 5 seeds; α = 0.1, γ = 0.9, constant ε = 0.1,
@@ -55,6 +55,7 @@ from delayed_rl.experiments.common import (
 from delayed_rl.experiments.runner import Config, Curve, Experiment, Summary
 from delayed_rl.experiments.training import thesis_hyperparameters
 
+#: The learners compared.
 AGENTS = ("MMQ", "DeconvQ learned", "Q")
 QUICK_STEPS, STEPS = 5_000, 150_000
 

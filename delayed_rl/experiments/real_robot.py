@@ -10,7 +10,7 @@ latency, wheel slip on paper, motor lag, camera noise and a grey printed line.
 
 Per seed and agent, one task:
 
-1. pretraining: ``linefollow``'s setting (:mod:`.linefollow`, whose env, agents, constants and
+1. pretraining: ``linefollow``'s setting (:mod:`delayed_rl.experiments.linefollow`, whose env, agents, constants and
    metrics this module reuses): the clean simulation on the racetrack, discrete Table 5.2
    actions, centroid states, put back on the track after 50 line-less steps, Poisson(90)
    reward delays, α = 0.1, γ = 0.9, constant ε = 0.1, ``q_init`` = 10; 500k steps;
@@ -78,6 +78,7 @@ from delayed_rl.experiments.common import (
 from delayed_rl.experiments.runner import Config, Curve, Experiment, Summary
 
 REAL_ENV_ID = "delayed_rl/EPuckLineFollowReal-v0"
+#: The learners compared.
 AGENTS = ("MMQ", "Q", "DeconvQ learned")
 CONDITIONS = ("real", "control")
 PRETRAIN_STEPS, QUICK_PRETRAIN_STEPS = 500_000, 5_000

@@ -25,7 +25,7 @@ from delayed_rl.fast.arrivals import NO_ARRIVALS, end_pending, take_due
 from delayed_rl.fast.arrivals import record as record_arrival
 from delayed_rl.fast.statistics import EMPTY_STATISTICS, observe
 
-# Episode-end modes of the reward buffer, as integers for the compiled code.
+#: Episode-end modes of the reward buffer, as integers for the compiled code.
 FLUSH, DROP, CARRY = 0, 1, 2
 
 

@@ -6,7 +6,7 @@
   ``gymnasium.vector`` twin :class:`VectorActionDelay`;
 - :func:`wrap_delays`: all three on one env, in the order ``gym.make(id, ...)`` stacks them;
 - :class:`VectorRewardDelay`: the twin for ``gymnasium.vector`` envs;
-- :class:`delayed_rl.wrappers.sb3.VecRewardDelay`: the twin for stable-baselines3 ``VecEnv``s
+- :class:`delayed_rl.wrappers.sb3.VecRewardDelay`: the twin for stable-baselines3 ``VecEnv`` objects
   (imported from its own module so that stable-baselines3 and torch load only when used).
 """
 

@@ -76,6 +76,10 @@ class ActionLine:
 
     Args:
         initial_action: what to execute until the episode's first action arrives.
+
+    Attributes:
+        executed: the action in force (executed at the last step sent).
+        executed_step: the episode step that sent it (``-1``: the initial action).
     """
 
     def __init__(self, initial_action: Any):
