@@ -292,8 +292,11 @@ _HELD: dict[str, list[str]] = {}
 
 
 def _hold_attribute_docstring(app, what, name, obj, options, lines):
-    """Keep an attribute's or property's docstring from napoleon, which would read its first
-    line's "X: Y" as "type: description"; :func:`_restore_attribute_docstring` puts it back."""
+    """Keep an attribute's or property's docstring from napoleon, put back after it.
+
+    Napoleon would read the first line's "X: Y" as "type: description";
+    :func:`_restore_attribute_docstring` puts the docstring back as written.
+    """
     if what in ("attribute", "data", "property") and lines:
         _HELD[name] = list(lines)
         lines[:] = []
