@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import runpy
+import subprocess
 import sys
 from pathlib import Path
 
@@ -27,3 +28,48 @@ def test_own_tabular_env_trains_on_the_compiled_path(capsys):
     lines = out.strip().splitlines()
     assert len(lines) == 2 and all("trained on the fused path" in line for line in lines)
     assert "DeconvolutionQLearning: trained on the fused path, greedy actions [1, 1]" in lines[1]
+
+
+@pytest.mark.slow
+def test_sb3_ppo_and_dqn_train_on_delayed_rewards(capsys):
+    out = run_example("sb3_delayed_rewards.py", "--steps", "300", capsys=capsys)
+    assert "PPO, CartPole-v1, Poisson(5.0) reward delays: return" in out
+    assert "DQN, Taxi-v4, Poisson(5.0) reward delays: return" in out
+
+
+def test_minigrid_shows_the_flush_trap_and_carry(capsys):
+    out = run_example("minigrid_carry.py", "--episodes", "30", capsys=capsys)
+    flush, carry = out.strip().splitlines()
+    assert flush == (
+        'on_episode_end="flush": 30 of 30 rewards arrived at an episode\'s final step; warned: True'
+    )
+    at_end, total = (int(word) for word in carry.split(": ")[1].split()[:3:2])
+    assert total >= 20 and at_end < total / 2 and carry.endswith("warned: False")
+
+
+def test_robot_loop_learns_online_through_update(capsys):
+    out = run_example("robot_loop.py", "--steps", "2000", capsys=capsys)
+    lines = out.strip().splitlines()
+    assert [line.split(":")[0] for line in lines] == [f"step {n}" for n in (500, 1000, 1500, 2000)]
+
+
+@pytest.mark.slow
+def test_the_rl_zoo3_file_wraps_the_env_and_trains(tmp_path):
+    import gymnasium as gym
+    import yaml
+    from rl_zoo3.utils import get_wrapper_class
+
+    from delayed_rl.wrappers import PoissonRewardDelay
+
+    config = EXAMPLES / "rl_zoo3" / "delayed_cartpole.yml"
+    hyperparams = yaml.safe_load(config.read_text())["CartPole-v1"]
+    wrapper = get_wrapper_class(hyperparams)
+    env = wrapper(gym.make("CartPole-v1"))
+    assert isinstance(env, PoissonRewardDelay) and env.lam == 5.0
+    command = [
+        sys.executable, "-m", "rl_zoo3.train", "--algo", "ppo", "--env", "CartPole-v1",
+        "--conf-file", str(config), "-n", "1000", "--log-folder", str(tmp_path),
+    ]  # fmt: skip
+    subprocess.run(command, check=True, capture_output=True, timeout=300)
+    saved = next(tmp_path.glob("ppo/CartPole-v1_*/CartPole-v1/config.yml")).read_text()
+    assert "delayed_rl.wrappers.PoissonRewardDelay" in saved
