@@ -100,14 +100,18 @@ def _move(old, new, clock):
         i, j = e & old_mask, e & new_mask
         new.value[j], new.s[j], new.a[j] = old.value[i], old.s[i], old.a[i]
         new.s2[j], new.terminated[j], new.due[j] = old.s2[i], old.terminated[i], old.due[i]
-        due = old.due[i]
-        if due >= clock:  # pending: append to its due slot's list (clocks ascending)
-            slot = due & ring_mask
-            if new.head[slot] < 0:
-                new.head[slot] = e
-            else:
-                new.link[new.tail[slot] & new_mask] = e
-            new.tail[slot] = e
+        if old.due[i] >= clock:  # pending: append to its due slot's list (clocks ascending)
+            _append(new, old.due[i] & ring_mask, e)
+
+
+@_jit
+def _append(arrivals, slot, e):
+    """Append clock ``e`` to the list of the transitions due at ring slot ``slot``."""
+    if arrivals.head[slot] < 0:
+        arrivals.head[slot] = e
+    else:
+        arrivals.link[arrivals.tail[slot] & (arrivals.due.shape[0] - 1)] = e
+    arrivals.tail[slot] = e
 
 
 @_jit
@@ -118,12 +122,7 @@ def record(arrivals, clock, due, s, a, s2, terminated, value):
     arrivals.s[p], arrivals.a[p], arrivals.s2[p] = s, a, s2
     arrivals.terminated[p], arrivals.value[p], arrivals.due[p] = terminated, value, due
     arrivals.link[p] = -1
-    slot = due & (arrivals.head.shape[0] - 1)
-    if arrivals.head[slot] < 0:
-        arrivals.head[slot] = clock
-    else:
-        arrivals.link[arrivals.tail[slot] & pool_mask] = clock
-    arrivals.tail[slot] = clock
+    _append(arrivals, due & (arrivals.head.shape[0] - 1), clock)
 
 
 @_jit

@@ -20,7 +20,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from delayed_rl.delays import Delay, as_delay, delay_spec
 from delayed_rl.wrappers.reward_delay import DelaySampler, check_max_delay
 from delayed_rl.wrappers.stack import JsonSpecMixin
-from delayed_rl.wrappers.vector import autoreset_mode, sub_env_seeds
+from delayed_rl.wrappers.vector import autoreset_mode, reset_mask, sub_env_seeds
 
 __all__ = ["ActionDelay", "ActionLine", "VectorActionDelay", "neutral_action"]
 
@@ -254,9 +254,7 @@ class VectorActionDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
                 ``num_envs`` of them (or ``None``).
         """
         seeds = sub_env_seeds(seed, self.num_envs)
-        envs = np.ones(self.num_envs, dtype=bool)
-        if options and "reset_mask" in options:  # read first: SyncVectorEnv.reset pops it
-            envs = np.array(options["reset_mask"], dtype=bool)
+        envs = reset_mask(options, self.num_envs)
         obs, info = self.env.reset(seed=seed, options=options)
         for i in np.flatnonzero(envs):
             if seeds[i] is not None:

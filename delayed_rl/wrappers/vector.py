@@ -61,6 +61,16 @@ def autoreset_mode(env: VectorEnv) -> AutoresetMode:
         ) from None
 
 
+def reset_mask(options: dict[str, Any] | None, num_envs: int) -> np.ndarray:
+    """Which sub-envs a ``reset(options=options)`` resets: ``options["reset_mask"]``, else all.
+
+    Read it before calling the vector env's ``reset``: ``SyncVectorEnv.reset`` pops it.
+    """
+    if options and "reset_mask" in options:
+        return np.array(options["reset_mask"], dtype=bool)
+    return np.ones(num_envs, dtype=bool)
+
+
 def _with_mask(info: dict[str, Any], key: str, values: np.ndarray, mask: np.ndarray) -> None:
     """Store ``values`` under ``key`` with Gymnasium's ``_key`` mask convention."""
     info[key] = values
@@ -146,9 +156,7 @@ class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
                 ``num_envs`` of them (or ``None``).
         """
         seeds = sub_env_seeds(seed, self.num_envs)
-        envs = np.ones(self.num_envs, dtype=bool)
-        if options and "reset_mask" in options:  # read first: SyncVectorEnv.reset pops it
-            envs = np.array(options["reset_mask"], dtype=bool)
+        envs = reset_mask(options, self.num_envs)
         obs, info = self.env.reset(seed=seed, options=options)
         self.buffers.seed([s if reset else None for s, reset in zip(seeds, envs, strict=True)])
         cut_short = envs & ~self._episode_ended
