@@ -4,11 +4,14 @@
 - ``delayed-rl train``: train a tabular agent on an env (optionally reward-delayed) and save it;
 - ``delayed-rl evaluate``: run a saved agent greedily and report its average reward;
 - ``delayed-rl bench NAME``: one thesis experiment over seeds, written to ``--out/NAME``;
-- ``delayed-rl reproduce``: every experiment.
+- ``delayed-rl reproduce``: every experiment;
+- ``delayed-rl sweep FILE``: your own agents × envs × delays × seeds, from a YAML or JSON file
+  (:mod:`delayed_rl.experiments.sweep` documents the file), written to ``--out``.
 
-Exit codes: 0 success, 2 bad usage (unknown names, bad values; argparse's usage and one
-``error:`` line), 1 a failure while running (a missing, corrupt or oversized model file, an env
-the agent cannot use, tables over ``delayed_rl.agents.mmq.MAX_TABLE_BYTES``, running out of
+Exit codes: 0 success, 2 bad usage (unknown names, bad values, in options or in a sweep file's
+fields or syntax; argparse's usage and one ``error:`` line), 1 a failure while running (a
+missing, corrupt or oversized model file, a missing sweep file, an env the agent cannot use,
+tables over ``delayed_rl.agents.mmq.MAX_TABLE_BYTES``, a sweep's run that fails, running out of
 memory, ...), reported as one ``error: ...`` line on stderr, without a traceback.
 
 Option values are checked by :mod:`delayed_rl._validation`, the library's own checks, so the
@@ -33,6 +36,7 @@ from delayed_rl._validation import check_fraction, check_int, check_probability,
 from delayed_rl.envs import env_ids
 from delayed_rl.experiments import NAMES
 from delayed_rl.experiments.runner import BACKENDS
+from delayed_rl.experiments.sweep import AGENTS as SWEEP_AGENTS
 
 #: The name :func:`_checked` gives the library's checks, cut from their messages again: argparse
 #: already names the option (``argument --steps: must be an integer >= 1, got 0``).
@@ -75,13 +79,9 @@ _learning_rate = _checked(float, check_fraction)
 _non_negative_int = _checked(int, check_int, 0)
 _positive_int = _checked(int, check_int, 1)
 
-#: ``--agent`` choices: the agent class for each.
-AGENTS = {
-    "q": "QLearning",
-    "fixed": "FixedDelayQLearning",
-    "mmq": "MultipleModelQLearning",
-    "deconv": "DeconvolutionQLearning",
-}
+#: ``--agent`` choices: the agent class for each (the sweep files' names of the agents whose
+#: options ``train`` has).
+AGENTS = {key: SWEEP_AGENTS[key] for key in ("q", "fixed", "mmq", "deconv")}
 #: The agents that take ``--max-delay-estimate``: MMQ's λ̂max, deconvolution's longest delay.
 _MAX_DELAY_AGENTS = ("mmq", "deconv")
 #: What ``--episodes`` waits for an episode to end before calling the env continuing.
@@ -295,6 +295,27 @@ def _bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _sweep(args: argparse.Namespace) -> int:
+    """``delayed-rl sweep FILE``: run the file's runs that ``--out`` lacks; print the summary."""
+    from delayed_rl.experiments.sweep import load_sweep, run_sweep
+
+    if args.address is not None and args.backend == "loky":
+        args.parser.error("--address is for --backend ray or dask")
+    try:
+        sweep = load_sweep(args.file)
+    except (TypeError, ValueError) as error:  # what the file says is wrong: bad usage
+        args.parser.error(_one_line(error))
+    out = Path("runs") / Path(args.file).stem if args.out is None else Path(args.out)
+    progress = sys.stderr.isatty() if args.progress is None else args.progress
+    outcome = run_sweep(sweep, out, args.workers, args.backend, args.address, progress)
+    print((out / "summary.md").read_text(encoding="utf-8"))
+    print(
+        f"[sweep] ran {outcome.ran} of {outcome.runs} runs ({outcome.skipped} already in "
+        f"{out / 'results.csv'}) in {outcome.wall_s} s; wrote {out}"
+    )
+    return 0
+
+
 def _add_bench_options(parser: argparse.ArgumentParser, default_out: str) -> None:
     """The options ``bench`` and ``reproduce`` share: seeds, steps, workers, output folder."""
     parser.add_argument(
@@ -477,6 +498,53 @@ def build_parser() -> argparse.ArgumentParser:
     reproduce = commands.add_parser("reproduce", help="run every thesis experiment")
     _add_bench_options(reproduce, "runs")
     reproduce.set_defaults(run=_bench, name="all")
+    sweep = commands.add_parser(
+        "sweep",
+        help="run your own agents × envs × delays × seeds, from a YAML or JSON file",
+        description="Train every agent of FILE on every env under every delay for every seed, "
+        "evaluate each greedily, and write results.csv (one row per run), summary.csv, "
+        "summary.md and one figure per env into --out. A rerun with the same --out runs only "
+        "what its results.csv lacks. The file's fields are documented in "
+        "delayed_rl.experiments.sweep; examples/sweep.yaml is a commented example.",
+    )
+    sweep.add_argument(
+        "file",
+        metavar="FILE",
+        help="the sweep file: .yaml or .yml (needs the sweep extra, PyYAML), or .json",
+    )
+    sweep.add_argument(
+        "--out",
+        metavar="DIR",
+        help="the output folder; a results.csv there is resumed (default: runs/NAME, NAME the "
+        "file's name without its suffix)",
+    )
+    sweep.add_argument(
+        "--workers",
+        type=_positive_int,
+        metavar="N",
+        help="runs at once (default: 1 with loky, in this process; every core of the cluster "
+        "with ray or dask)",
+    )
+    sweep.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        default="loky",
+        help="where the runs go: loky (default: joblib's processes on this machine), ray or dask",
+    )
+    sweep.add_argument(
+        "--address",
+        metavar="ADDR",
+        help="a running cluster to use: for ray, ray.init(address=ADDR), e.g. auto or "
+        "ray://HOST:10001; for dask, its scheduler, e.g. tcp://HOST:8786 (default: a local "
+        "one, started for the sweep)",
+    )
+    sweep.add_argument(
+        "--progress",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="show a progress bar on stderr (default: when stderr is a terminal)",
+    )
+    sweep.set_defaults(run=_sweep, parser=sweep)
     return parser
 
 

@@ -16,7 +16,7 @@ Each is a number (a Poisson mean), a :mod:`delayed_rl.delays` distribution or it
 description. Because they are ordinary keyword arguments, they are recorded in
 ``env.spec.kwargs`` and ``gym.make(env.spec)`` rebuilds the same stack. A distribution is
 recorded there (by the delay wrappers' ``spec``,
-:func:`~delayed_rl.wrappers.stack.describe_delays`) as its JSON
+:func:`~delayed_rl.wrappers._spec.describe_delays`) as its JSON
 description, ``{"type": "Constant", "k": 2}`` (:meth:`~delayed_rl.delays.Delay.to_dict`), which
 the entry points accept back, so the spec also survives ``EnvSpec.to_json`` /
 ``EnvSpec.from_json``.

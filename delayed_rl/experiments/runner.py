@@ -33,7 +33,7 @@ import csv
 import json
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -205,38 +205,141 @@ def running_average(rewards: np.ndarray, points: int = 200) -> tuple[np.ndarray,
 
 
 def run_tasks(
-    run_task: Callable[[dict], dict], tasks: list[dict], workers: int, backend: str
+    run_task: Callable[[dict], dict],
+    tasks: list[dict],
+    workers: int | None,
+    backend: str,
+    address: str | None = None,
 ) -> list[dict]:
-    """Run ``tasks`` through joblib with ``workers`` processes on ``backend``; keep their order.
+    """Run ``tasks`` with ``workers`` processes on ``backend``; return the results in their order.
+
+    See :func:`iter_tasks` for the arguments and errors.
+    """
+    results: list[Any] = [None] * len(tasks)
+    for index, result in iter_tasks(run_task, tasks, workers, backend, address):
+        results[index] = result
+    return results
+
+
+def iter_tasks(
+    run_task: Callable[[dict], dict],
+    tasks: list[dict],
+    workers: int | None,
+    backend: str,
+    address: str | None = None,
+) -> Iterator[tuple[int, dict]]:
+    """Run ``tasks`` in parallel: an iterator of ``(index, result)``, one as each task finishes.
+
+    Results come in the order the tasks finish, so a caller can keep each as soon as it is
+    done. ``loky`` and ``dask`` run through joblib; ``ray`` through Ray's own tasks (one CPU
+    each), as its joblib backend returns nothing before every task is done. The arguments are
+    checked at once; the backend starts (a local Ray or Dask cluster, the connection to one at
+    ``address``) when the first result is asked for.
+
+    Args:
+        run_task: a picklable function of one task (a module's top-level function).
+        tasks: the tasks.
+        workers: how many tasks run at once; ``None``: as many as the backend has cores. With
+            ``backend="loky"`` and 1 worker the tasks run in this process, one after another.
+        backend: ``"loky"`` (joblib's process pool on this machine), ``"ray"`` or ``"dask"``.
+        address: a running cluster of ``backend`` to send the tasks to. Ray:
+            ``ray.init(address=address)`` (e.g. ``"auto"``, ``"ray://host:10001"``), unless Ray
+            is initialized already in this process, which is then used as it is; without an
+            address, ``ray.init()`` starts a local Ray (or the one initialized is used).
+            Dask: a ``Client(address)`` of the scheduler (e.g. ``"tcp://host:8786"``), closed
+            afterwards (not the cluster); without one, a local cluster of ``workers``
+            processes that lives as long as the tasks.
 
     Raises:
-        TypeError: ``workers`` is not an integer, or ``backend`` not a string.
-        ValueError: ``workers`` < 1 or ``backend`` is not one of :data:`BACKENDS`.
+        TypeError: ``workers`` is not an integer (or ``None``), ``backend`` or ``address`` not a
+            string.
+        ValueError: ``workers`` < 1, ``backend`` is not one of :data:`BACKENDS`, or an
+            ``address`` is given for ``loky``.
         RuntimeError: the backend's package (Ray, Dask) is not installed.
     """
     check_choice("backend", backend, BACKENDS)
-    check_int("workers", workers, 1)
+    if workers is not None:
+        check_int("workers", workers, 1)
+    if address is not None:
+        if not isinstance(address, str):
+            raise TypeError(f"address must be a string, got {address!r} ({type(address).__name__})")
+        if backend == "loky":
+            raise ValueError(f"address is for the ray and dask backends, not {backend!r}")
     if workers == 1 and backend == "loky":
-        return [run_task(task) for task in tasks]
+        return _in_process_results(run_task, tasks)
+    if backend == "ray":
+        return _ray_results(run_task, tasks, workers, address)
+    return _joblib_results(run_task, tasks, workers, backend, address)
+
+
+def _in_process_results(
+    run_task: Callable[[dict], dict], tasks: list[dict]
+) -> Iterator[tuple[int, dict]]:
+    """:func:`iter_tasks` in this process, one task after another."""
+    for index, task in enumerate(tasks):
+        yield index, run_task(task)
+
+
+def _indexed(run_task: Callable[[dict], dict], index: int, task: dict) -> tuple[int, dict]:
+    """``(index, run_task(task))``: a result that says which task it is."""
+    return index, run_task(task)
+
+
+def _joblib_results(
+    run_task: Callable[[dict], dict],
+    tasks: list[dict],
+    workers: int | None,
+    backend: str,
+    address: str | None,
+) -> Iterator[tuple[int, dict]]:
+    """:func:`iter_tasks` on joblib's ``loky`` or ``dask`` backend."""
     import joblib
 
     with contextlib.ExitStack() as cleanup:
-        if backend == "ray":
+        if backend == "dask":
+            cleanup.enter_context(_dask_client(workers, address))  # closed after
+        with joblib.parallel_config(backend=backend, n_jobs=-1 if workers is None else workers):
+            parallel = joblib.Parallel(return_as="generator_unordered")
+            calls = (joblib.delayed(_indexed)(run_task, i, task) for i, task in enumerate(tasks))
+            yield from parallel(calls)
+
+
+def _dask_client(workers: int | None, address: str | None) -> Any:
+    """A Dask client of the scheduler at ``address``, else of a local cluster of ``workers``."""
+    try:
+        from dask.distributed import Client
+    except ImportError as error:
+        raise RuntimeError("backend 'dask' needs Dask: pip install 'dask[distributed]'") from error
+    if address is not None:
+        return Client(address)  # closing it leaves the cluster, which is not ours, running
+    return Client(processes=True, n_workers=workers)
+
+
+def _ray_results(
+    run_task: Callable[[dict], dict], tasks: list[dict], workers: int | None, address: str | None
+) -> Iterator[tuple[int, dict]]:
+    """:func:`iter_tasks` on Ray: at most ``workers`` tasks in flight (``None``: all of them)."""
+    try:
+        import ray
+    except ImportError as error:
+        raise RuntimeError("backend 'ray' needs Ray: pip install 'ray[default]'") from error
+    if not ray.is_initialized():
+        ray.init(address=address)
+    remote = ray.remote(num_cpus=1)(_indexed)
+    waiting = list(enumerate(tasks))[::-1]
+    running: list[Any] = []
+    try:
+        while waiting or running:
+            while waiting and (workers is None or len(running) < workers):
+                running.append(remote.remote(run_task, *waiting.pop()))
+            done, running = ray.wait(running, num_returns=1)
             try:
-                from ray.util.joblib import register_ray
-            except ImportError as error:
-                raise RuntimeError("backend 'ray' needs Ray: pip install 'ray[default]'") from error
-            register_ray()
-        elif backend == "dask":
-            try:
-                from dask.distributed import Client
-            except ImportError as error:
-                raise RuntimeError(
-                    "backend 'dask' needs Dask: pip install 'dask[distributed]'"
-                ) from error
-            cleanup.enter_context(Client(processes=True, n_workers=workers))  # closed after
-        with joblib.parallel_config(backend=backend, n_jobs=workers):
-            return list(joblib.Parallel()(joblib.delayed(run_task)(task) for task in tasks))
+                yield ray.get(done[0])
+            except ray.exceptions.RayTaskError as error:
+                raise error.cause from None  # the task's own exception, not Ray's wrapper
+    finally:
+        for ref in running:
+            ray.cancel(ref)
 
 
 def run_experiment(
@@ -336,6 +439,11 @@ def render_report(
     notes = [f"- {claim.quantity}: {claim.note}" for claim in summary.claims if claim.note]
     if notes:
         lines += ["", "Notes:", *notes]
-    if figures:
-        lines += ["", "Figures:", *[f"- {figure}" for figure in figures]]
+    drawn = [figure for figure in figures if figure.endswith(".png")]
+    missing = [figure for figure in figures if not figure.endswith(".png")]
+    if drawn:
+        lines += ["", "## Figures", ""]
+        lines += [f"![{Path(figure).stem}]({figure})\n" for figure in drawn]
+    if missing:
+        lines += ["", "Figures not drawn:", *[f"- {figure}" for figure in missing]]
     return "\n".join(lines) + "\n"

@@ -18,8 +18,8 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 
 from delayed_rl.delays import Delay, as_delay, delay_spec
+from delayed_rl.wrappers._spec import JsonSpecMixin
 from delayed_rl.wrappers.reward_delay import DelaySampler, check_max_delay
-from delayed_rl.wrappers.stack import JsonSpecMixin
 from delayed_rl.wrappers.vector import autoreset_mode, reset_mask, sub_env_seeds
 
 __all__ = ["ActionDelay", "ActionLine", "VectorActionDelay", "neutral_action"]

@@ -10,8 +10,8 @@ import numpy as np
 
 from delayed_rl._delay_line import delay_bound
 from delayed_rl.delays import MAX_DELAY, Delay, as_delay, delay_spec
+from delayed_rl.wrappers._spec import JsonSpecMixin
 from delayed_rl.wrappers.reward_delay import DelaySampler, check_max_delay
-from delayed_rl.wrappers.stack import JsonSpecMixin
 
 
 def _fresh(obs: Any) -> Any:

@@ -1,4 +1,4 @@
-"""One env wrapped for all three delays, in one documented order; JSON-able env specs.
+"""One env wrapped for all three delays, in one documented order.
 
 :func:`wrap_delays` is what ``gym.make(id, action_delay=..., observation_delay=...,
 reward_delay=...)`` does for every ``delayed_rl/`` id, and what you call for any other env.
@@ -12,10 +12,13 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-__all__ = ["DELAY_KWARGS", "JsonSpecMixin", "describe_delays", "wrap_delays"]
+from delayed_rl._validation import check_real
+from delayed_rl.delays import as_delay
+from delayed_rl.wrappers.action_delay import ActionDelay
+from delayed_rl.wrappers.observation_delay import ObservationDelay
+from delayed_rl.wrappers.reward_delay import wrap_reward_delay
 
-DELAY_KWARGS = ("action_delay", "observation_delay", "reward_delay")
-"""The delay arguments, in the order their wrappers stack (innermost first)."""
+__all__ = ["wrap_delays"]
 
 
 def wrap_delays(
@@ -47,10 +50,6 @@ def wrap_delays(
         >>> type(env).__name__, type(env.env).__name__
         ('PoissonRewardDelay', 'ActionDelay')
     """
-    from delayed_rl.wrappers.action_delay import ActionDelay
-    from delayed_rl.wrappers.observation_delay import ObservationDelay
-    from delayed_rl.wrappers.reward_delay import wrap_reward_delay
-
     if action_delay is not None:
         env = ActionDelay(env, _checked(action_delay, "action_delay"))
     if observation_delay is not None:
@@ -62,46 +61,6 @@ def wrap_delays(
 
 def _checked(delay: Any, name: str) -> Any:
     """``delay`` as a ``Delay``, the errors naming ``name`` (a number is a Poisson mean)."""
-    from delayed_rl._validation import check_real
-    from delayed_rl.delays import as_delay
-
     if isinstance(delay, numbers.Real) and not isinstance(delay, (bool, np.bool_)):
         check_real(name, delay, 0.0, note=" (a Poisson mean)")
     return as_delay(delay, name)
-
-
-class JsonSpecMixin:
-    """Gives a delay wrapper a ``spec`` whose delay arguments are JSON (:func:`describe_delays`).
-
-    Listed before ``gym.Wrapper`` among a wrapper's bases, so its ``spec`` is the one used.
-    """
-
-    @property
-    def spec(self) -> Any:
-        """The env spec with this wrapper's ``WrapperSpec``, its delays described as JSON."""
-        spec = gym.Wrapper.spec.fget(self)
-        if spec is not None:
-            describe_delays(spec)
-        return spec
-
-
-def describe_delays(spec: Any) -> None:
-    """Record a registered env's delay arguments in ``spec.kwargs`` as JSON descriptions.
-
-    ``gym.make(id, reward_delay=Constant(2))`` keeps the object in the env spec's kwargs, which
-    ``EnvSpec.to_json`` cannot write; the library's entry points read the description back.
-    Every delay wrapper's ``spec`` calls this, so the outermost one's spec is JSON-able.
-    """
-    from delayed_rl.delays import Delay, delay_spec
-
-    kwargs = spec.kwargs if isinstance(spec.kwargs, dict) else {}
-    objects = {key: kwargs[key] for key in DELAY_KWARGS if isinstance(kwargs.get(key), Delay)}
-    if not objects:
-        return
-    entry = spec.entry_point
-    try:  # a "module:attribute" string names the entry point (its module is loaded already)
-        entry = gym.envs.registration.load_env_creator(entry) if isinstance(entry, str) else entry
-    except (ImportError, AttributeError, ValueError):
-        return
-    if getattr(entry, "reads_delay_descriptions", False):  # a DelayableEntryPoint
-        spec.kwargs = {**kwargs, **{key: delay_spec(value) for key, value in objects.items()}}
