@@ -25,6 +25,9 @@ example (pixels 18–23 → 20) and makes the centred robot read exactly ``p_cen
 ``round`` and ``np.floor(x + 0.5)`` give 21.) The thesis's Eq. 5.6 prints the divisor as 40, which
 contradicts its own example; the divisor here is Σ f(i), the number of pixels that see the line.
 m = 0 when no pixel sees the line.
+
+:meth:`Camera.read` runs compiled where numba is installed
+(:mod:`~delayed_rl.envs.linefollow._kernels`), with the same pixels as its numpy code.
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from delayed_rl._validation import check_real
+from delayed_rl.envs.linefollow import _kernels
 from delayed_rl.envs.linefollow.track import CELL_SIZE, Track
 
 __all__ = [
@@ -107,6 +111,8 @@ class Camera:
         ValueError: an argument is not finite and positive, or the scanline reaches further
             sideways (``field_width / 2 + line_width / 2``) than the track index answers for
             (``CELL_SIZE``, 0.04 m).
+
+    A camera is immutable (its geometry is read-only; make a new camera for another one).
     """
 
     def __init__(
@@ -115,19 +121,38 @@ class Camera:
         field_width: float = FIELD_WIDTH,
         line_width: float = LINE_WIDTH,
     ):
-        self.look_ahead = check_real("look_ahead", look_ahead, 0.0, low_open=True, note=" (m)")
-        self.field_width = check_real("field_width", field_width, 0.0, low_open=True, note=" (m)")
-        self.line_width = check_real("line_width", line_width, 0.0, low_open=True, note=" (m)")
-        reach = self.field_width / 2 + self.line_width / 2
+        look_ahead = check_real("look_ahead", look_ahead, 0.0, low_open=True, note=" (m)")
+        field_width = check_real("field_width", field_width, 0.0, low_open=True, note=" (m)")
+        line_width = check_real("line_width", line_width, 0.0, low_open=True, note=" (m)")
+        reach = field_width / 2 + line_width / 2
         if reach > CELL_SIZE:
             raise ValueError(
                 f"field_width / 2 + line_width / 2 must be <= {CELL_SIZE} m (the track index's "
                 f"reach), got {reach}"
             )
+        self._look_ahead, self._field_width, self._line_width = look_ahead, field_width, line_width
         #: Width (m) of one pixel's footprint.
-        self.pixel_width = self.field_width / N_PIXELS
+        self.pixel_width = field_width / N_PIXELS
         #: Lateral offset (m, positive to the robot's left) of each pixel's sample point.
         self.offsets = ((N_PIXELS + 1) / 2 - _INDICES) * self.pixel_width
+        self.offsets.setflags(write=False)
+        # The geometry as the compiled reading (and the env) takes it.
+        self._packed = _kernels.pack_camera(look_ahead, 0.5 * line_width, self.offsets)
+
+    @property
+    def look_ahead(self) -> float:
+        """Distance (m) from the body centre to the scanline."""
+        return self._look_ahead
+
+    @property
+    def field_width(self) -> float:
+        """Width (m) of floor the scanline covers."""
+        return self._field_width
+
+    @property
+    def line_width(self) -> float:
+        """Width (m) of the line on the floor."""
+        return self._line_width
 
     def _scanline(
         self, x: float, y: float, heading: float
@@ -144,8 +169,19 @@ class Camera:
 
     def read(self, track: Track, x: float, y: float, heading: float) -> NDArray[np.bool_]:
         """Which of the 40 pixels see the line, for a robot at (x, y) facing ``heading`` (rad)."""
+        rounding = _kernels.numpy_rounding()
+        if rounding is None:
+            return self._read_numpy(track, x, y, heading)
+        out = np.empty(N_PIXELS, dtype=bool)
+        x, y = float(x), float(y)
+        cos, sin = math.cos(heading), math.sin(heading)
+        _kernels.read_camera(x, y, cos, sin, self._packed, *track._packed, *rounding, out)
+        return out
+
+    def _read_numpy(self, track: Track, x: float, y: float, heading: float) -> NDArray[np.bool_]:
+        """:meth:`read` in numpy: the reference the compiled version mirrors."""
         points, centre = self._scanline(x, y, heading)
-        return track.near_line(points, 0.5 * self.line_width, centre)
+        return track._near_line_numpy(points, 0.5 * self.line_width, centre)
 
     def __repr__(self) -> str:
         return (

@@ -19,6 +19,7 @@ from delayed_rl._validation import (
     check_probability,
     check_real,
 )
+from delayed_rl.envs.linefollow import _kernels
 from delayed_rl.envs.linefollow.camera import CENTRE_PIXEL, N_PIXELS, Camera, line_centroid
 from delayed_rl.envs.linefollow.robot import EPuckRobot
 from delayed_rl.envs.linefollow.track import TRACK_NAMES, Track, make_track
@@ -64,6 +65,12 @@ WHEEL_SPEED_ACTIONS: tuple[tuple[int, int], ...] = (
     (300, 0),
 )
 
+#: Wheel-slip factors when there is none.
+_NO_SLIP = (1.0, 1.0)
+#: WHEEL_SPEED_ACTIONS as floats, by action.
+_DISCRETE_SPEEDS = {
+    action: (float(left), float(right)) for action, (left, right) in enumerate(WHEEL_SPEED_ACTIONS)
+}
 _OBSERVATION_MODES = ("centroid", "pixels")
 _ACTION_MODES = ("discrete", "continuous")
 _LOST_LINE_MODES = ("terminate", "recover")
@@ -209,6 +216,11 @@ class EPuckLineFollowEnv(gym.Env):
     Noise (slip, contrast, camera flips) is drawn from the env's ``np_random``, so seeded
     resets reproduce it; with every one of them off the env draws nothing per step.
 
+    Speed: with numba (a core dependency) the camera reading, the track position and the
+    physics sub-steps run compiled (``benchmarks/epuck_speed.py`` times them); without it the
+    env runs the numpy and Python code they mirror, several times slower, with the same
+    trajectories to the last bit.
+
     An argument of the wrong type (``max_steps="5"``, ``motor_lag=True``, ``action_mode=1``)
     raises ``TypeError``; one of the right type but out of range (``max_steps=0``,
     ``wheel_slip=1.0``, ``lost_line="reset"``, ``control_period=0``) raises ``ValueError``.
@@ -299,11 +311,16 @@ class EPuckLineFollowEnv(gym.Env):
 
         self.camera = Camera()
         self.robot = EPuckRobot(physics_dt, self.motor_lag)
-        #: Commands on their way to the robot, one per physics sub-step still to come.
-        self._in_flight: deque[tuple[float, float]] = deque()
+        #: Commands on their way to the robot, oldest first: ((left, right), sub-steps) runs.
+        self._in_flight: deque[tuple[tuple[float, float], int]] = deque()
         self._renderer: Any = None
         self._trail: deque[tuple[float, float]] = deque(maxlen=4000)
         self._pixels = np.zeros(N_PIXELS, dtype=bool)
+        #: Each step's uniform draws per pixel: for line_contrast, then for camera_noise.
+        self._draws = np.zeros((2, N_PIXELS))
+        #: The track the compiled reading's arguments were made for, and those arguments.
+        self._compiled_track: Track | None = None
+        self._compiled: tuple | None = None
         self._s = 0.0
         self._segment = 0
         self._lateral = 0.0
@@ -373,24 +390,15 @@ class EPuckLineFollowEnv(gym.Env):
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         """Drive for one control period with the action's wheel speeds."""
         v_left, v_right = self._wheel_speeds(action)
-        substeps = self.physics_substeps
-        slip = (1.0, 1.0)
+        slip = _NO_SLIP
         if self.wheel_slip > 0:
             factors = self.np_random.uniform(1.0 - self.wheel_slip, 1.0, size=2)
             slip = (float(factors[0]), float(factors[1]))
         if self.latency_substeps == 0:
-            self.robot.step(v_left, v_right, substeps, slip)
+            x, y, heading = self.robot.step(v_left, v_right, self.physics_substeps, slip)
         else:
-            in_flight = self._in_flight
-            in_flight.extend([(v_left, v_right)] * substeps)
-            applied = [in_flight.popleft() for _ in range(substeps)]
-            start = 0
-            for i in range(1, substeps + 1):  # one robot.step per run of equal commands
-                if i == substeps or applied[i] != applied[start]:
-                    self.robot.step(*applied[start], i - start, slip)
-                    start = i
+            x, y, heading = self._drive_through_link(v_left, v_right, slip)
         self._steps += 1
-        x, y, heading = self.robot.pose
         m = self._read(x, y, heading)
         if m:
             self._lost = 0
@@ -419,13 +427,40 @@ class EPuckLineFollowEnv(gym.Env):
             self.render()
         return obs, float(reward), terminated, truncated, info
 
+    def _drive_through_link(
+        self, v_left: float, v_right: float, slip: tuple[float, float]
+    ) -> tuple[float, float, float]:
+        """Send a command down the latency link and drive one step; returns the robot's pose.
+
+        The step executes the commands that arrive during its sub-steps, one ``robot.step``
+        per run of sub-steps with the same command (a robot step split in two drives exactly
+        like one).
+        """
+        in_flight = self._in_flight
+        in_flight.append(((v_left, v_right), self.physics_substeps))
+        remaining = self.physics_substeps
+        while remaining:
+            (left, right), count = in_flight[0]
+            run = min(count, remaining)
+            pose = self.robot.step(left, right, run, slip)
+            remaining -= run
+            if run == count:
+                in_flight.popleft()
+            else:
+                in_flight[0] = ((left, right), count - run)
+        return pose
+
     def _stop_commands(self) -> None:
         """Fill the command link with "wheels stopped" (after a reset or a recovery)."""
         self._in_flight.clear()
-        self._in_flight.extend([(0.0, 0.0)] * self.latency_substeps)
+        if self.latency_substeps:
+            self._in_flight.append(((0.0, 0.0), self.latency_substeps))
 
     def _wheel_speeds(self, action: Any) -> tuple[float, float]:
+        """The commanded (left, right) wheel speeds (steps/s) of an action, which it validates."""
         if self.action_mode == "discrete":
+            if isinstance(action, (int, np.integer)) and action in _DISCRETE_SPEEDS:
+                return _DISCRETE_SPEEDS[action]
             try:
                 index = int(action)
             except (TypeError, ValueError):
@@ -450,21 +485,58 @@ class EPuckLineFollowEnv(gym.Env):
         raise ValueError(f"action must be 2 finite numbers in [-1, 1], got {action!r}")
 
     def _read(self, x: float, y: float, heading: float) -> int:
-        """Read the camera at a pose and update the track position; returns the centroid m."""
-        track = self.track
-        pixels = self.camera.read(track, x, y, heading)
+        """Read the camera at a pose and update the track position; returns the centroid m.
+
+        The noise is drawn first (locating the robot draws nothing, so this is the order of
+        the draws either way). With the compiled kernels
+        (:mod:`~delayed_rl.envs.linefollow._kernels`) one call reads the camera into
+        ``_pixels``, adds the noise, takes the centroid and locates the robot; without them
+        the camera, numpy, the track and :func:`line_centroid` do it. Both give the same bits.
+        """
+        track, draws = self.track, self._draws
         if self.line_contrast < 1:
-            pixels &= self.np_random.random(N_PIXELS) < self.line_contrast
+            self.np_random.random(out=draws[0])
         if self.camera_noise > 0:
-            pixels ^= self.np_random.random(N_PIXELS) < self.camera_noise
-        self._pixels = pixels
-        s, self._lateral, self._segment = track.locate(x, y, self._segment)
+            self.np_random.random(out=draws[1])
+        if self._compiled_track is not track:
+            self._compiled_track, self._compiled = track, self._compiled_arguments(track)
+        if self._compiled is None:
+            pixels = self.camera.read(track, x, y, heading)
+            if self.line_contrast < 1:
+                pixels &= draws[0] < self.line_contrast
+            if self.camera_noise > 0:
+                pixels ^= draws[1] < self.camera_noise
+            self._pixels = pixels
+            s, self._lateral, self._segment = track.locate(x, y, self._segment)
+            m = line_centroid(pixels)
+        else:
+            m, s, self._lateral, self._segment = _kernels.observe(
+                x,
+                y,
+                math.cos(heading),
+                math.sin(heading),
+                self._segment,
+                self.line_contrast,
+                self.camera_noise,
+                *self._compiled,
+            )
         half = 0.5 * track.length
         self._progress += ((s - self._s + half) % track.length - half) / track.length
         self._s = s
         if self.render_mode is not None:
             self._trail.append((x, y))
-        return line_centroid(pixels)
+        return m
+
+    def _compiled_arguments(self, track: Track) -> tuple | None:
+        """The arguments of :func:`_kernels.observe` after the pose, hint and noise, or None.
+
+        None when the kernels are not in use (numba missing, or numpy rounding in a way they do
+        not mirror): the env then reads with numpy.
+        """
+        rounding = _kernels.numpy_rounding()
+        if rounding is None:
+            return None
+        return (self.camera._packed, *track._packed, *rounding, self._draws, self._pixels)
 
     def _obs_info(
         self,
@@ -492,6 +564,16 @@ class EPuckLineFollowEnv(gym.Env):
             "pose": (x, y, math.remainder(heading, 2 * math.pi)),
         }
         return obs, info
+
+    def __getstate__(self) -> dict[str, Any]:
+        """The env's state without the compiled reading's arguments.
+
+        They hold this process's view of numpy's rounding; a copy or an unpickled env (perhaps
+        in another process or on another machine) makes its own at its first reading.
+        """
+        state = self.__dict__.copy()
+        state["_compiled_track"] = state["_compiled"] = None
+        return state
 
     # ------------------------------------------------------------------ rendering
     def render(self) -> NDArray[np.uint8] | None:

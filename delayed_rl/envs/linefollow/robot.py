@@ -19,6 +19,12 @@ Wheel speeds follow an optional first-order motor lag (time constant ``motor_lag
 factors (from the env's generator) scale each wheel's ground speed. The robot itself draws no
 random numbers, so it is deterministic given its inputs.
 
+Speed: a sub-step is four Chipmunk calls (read the angle, set the control body's velocity and
+angular velocity, step the space). They go to pymunk's Chipmunk functions directly, past its
+Python wrappers, and where numba can call them by address all the sub-steps of a step run in
+one compiled loop (:mod:`~delayed_rl.envs.linefollow._chipmunk`): the same C calls with the
+same arguments, so the same results to the last bit.
+
 Pickling: pymunk's solver caches each joint's last impulse for warm-starting, which a pickled
 space cannot restore. A :class:`EPuckRobot` therefore pickles its plain state (poses,
 velocities, wheel speeds) and rebuilds its space on unpickling; pickling also rebuilds the
@@ -33,6 +39,7 @@ from typing import Any
 import pymunk
 
 from delayed_rl._validation import check_real
+from delayed_rl.envs.linefollow import _chipmunk
 
 __all__ = [
     "AXLE_LENGTH",
@@ -105,6 +112,14 @@ class EPuckRobot:
         gear.max_force = FRICTION * MASS * _GRAVITY * AXLE_LENGTH / 2  # angular grip (N·m)
         space.add(body, control, pivot, gear)
         self.space, self.body, self.control = space, body, control
+        self._calls = _chipmunk.python_calls(body, control, space)
+        handles = _chipmunk.handles(body, control, space)
+        #: How :meth:`step` drives: the compiled loop where it is in use, else its reference.
+        self._driver = (
+            (_chipmunk.drive, handles)
+            if handles is not None and _chipmunk.enabled()
+            else (_chipmunk.drive_python, self._calls)
+        )
 
     def _state(self) -> dict[str, Any]:
         state: dict[str, Any] = {}
@@ -142,8 +157,9 @@ class EPuckRobot:
     @property
     def pose(self) -> tuple[float, float, float]:
         """``(x, y, heading)``: position (m) and heading (rad, unwrapped)."""
-        x, y = self.body.position
-        return x, y, self.body.angle
+        calls = self._calls
+        position = calls.get_position(calls.body)
+        return position.x, position.y, calls.get_angle(calls.body)
 
     def step(
         self,
@@ -151,7 +167,7 @@ class EPuckRobot:
         v_right: float,
         substeps: int,
         slip: tuple[float, float] = (1.0, 1.0),
-    ) -> None:
+    ) -> tuple[float, float, float]:
         """Drive for ``substeps`` physics sub-steps with commanded wheel speeds (steps/s).
 
         Args:
@@ -159,20 +175,27 @@ class EPuckRobot:
             v_right: the commanded right wheel speed (steps/s).
             substeps: number of physics sub-steps of ``physics_dt``.
             slip: factors scaling each wheel's ground speed during these sub-steps.
+
+        Returns:
+            The :attr:`pose` after them.
         """
+        drive, handles = self._driver
         lagged = self.motor_lag > 0
         wl, wr = self.wheel_speeds if lagged else (v_left, v_right)
-        gain = self._lag_gain
-        sl, sr = slip
-        body, control, space, dt = self.body, self.control, self.space, self.physics_dt
-        for _ in range(substeps):
-            if lagged:
-                wl += (v_left - wl) * gain
-                wr += (v_right - wr) * gain
-            gl, gr = wl * sl * METRES_PER_STEP, wr * sr * METRES_PER_STEP
-            v = 0.5 * (gl + gr)
-            angle = body.angle
-            control.velocity = (v * math.cos(angle), v * math.sin(angle))
-            control.angular_velocity = (gr - gl) / AXLE_LENGTH
-            space.step(dt)
+        wl, wr, x, y, heading = drive(
+            handles,
+            v_left,
+            v_right,
+            wl,
+            wr,
+            self._lag_gain,
+            lagged,
+            slip[0],
+            slip[1],
+            substeps,
+            self.physics_dt,
+            METRES_PER_STEP,
+            AXLE_LENGTH,
+        )
         self.wheel_speeds = (wl, wr)
+        return x, y, heading

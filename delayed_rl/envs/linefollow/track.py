@@ -9,6 +9,10 @@ two questions the env asks every step quickly:
 - where is the nearest centreline point to the robot (:meth:`Track.locate`), with an arc-length
   hint so a figure-eight's crossing does not make the robot jump to the other branch.
 
+Both queries run compiled (numba, :mod:`~delayed_rl.envs.linefollow._kernels`) where numba is
+installed: the same floating-point operations as their numpy code, which stays as the reference
+and the fallback, so the answers are the same to the last bit either way.
+
 Built-in tracks: :func:`make_track` with ``"oval"``, ``"racetrack"`` (long sweeping turns, like
 thesis Fig. 5.18), ``"figure8"`` and ``"random"`` (seeded, smooth, closed, simple). A user's own
 closed polyline goes through :meth:`Track.from_polyline`, which validates it.
@@ -31,12 +35,14 @@ is refused at construction, before anything is allocated.
 from __future__ import annotations
 
 import functools
+import numbers
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from delayed_rl._validation import check_bool, check_choice, check_int, check_real
+from delayed_rl.envs.linefollow import _kernels
 
 __all__ = [
     "BYTES_PER_VERTEX",
@@ -73,11 +79,11 @@ TRACK_NAMES = ("oval", "racetrack", "figure8", "random")
 #: The most vertices a track's dense centreline may have: 200 m of line at
 #: :data:`SAMPLE_SPACING`. A 2000-step episode drives at most 4.9 m (300 steps/s ≈ 3.9 cm/s for
 #: 128 s) and the thesis's track is 5.1 m long, so every realistic track is far below it; at the
-#: limit a track takes about 25 MB and builds and checks in a few seconds.
+#: limit a track takes about 30 MB and builds and checks in a few seconds.
 MAX_TRACK_VERTICES = 40_000
-#: About what one dense vertex costs (its geometry, its nine entries in the spatial grid and
-#: its window for hinted lookups).
-BYTES_PER_VERTEX = 640
+#: About what one dense vertex costs (its geometry, its nine entries in the spatial grid, its
+#: window for hinted lookups and the compiled queries' copy of its geometry and grid entries).
+BYTES_PER_VERTEX = 760
 #: Candidate pairs examined at once by :meth:`Track.clearance` (bounds its temporary arrays).
 _PAIR_CHUNK = 1 << 21
 
@@ -418,7 +424,9 @@ class Track:
         dict holding only the cells the line passes near (memory follows the track's length, not
         the area it spans). A window of
         :data:`LOCAL_WINDOW` segments either side of each segment, stored contiguously too
-        (wrapping round the track), serves hinted :meth:`locate` queries.
+        (wrapping round the track), serves hinted :meth:`locate` queries. The compiled queries
+        (:mod:`~delayed_rl.envs.linefollow._kernels`) read the same grid from ``_packed``: the
+        sorted cell keys, each cell's start in the CSR arrays, and the segments' geometry.
         """
         n = len(self._a)
         mid = self._a + 0.5 * self._d
@@ -448,6 +456,22 @@ class Track:
         self._pad_a = self._a[w]
         self._pad_d = self._d[w]
         self._pad_inv = self._inv_len2[w]
+        # The geometry and the grid as the compiled queries (and the env) take them.
+        self._packed = _kernels.pack_track(
+            self._a,
+            self._d,
+            self._inv_len2,
+            self._s0,
+            self._seg_len,
+            cell_keys=cells,  # the grid of _cells, searched by bisection
+            cell_starts=np.append(starts, len(keys)),
+            cell_segs=segs,
+            origin=(float(self._origin[0]), float(self._origin[1])),
+            shape=(self._nx, self._ny),
+            cell_size=CELL_SIZE,
+            length=self.length,
+            window=LOCAL_WINDOW,
+        )
 
     # ------------------------------------------------------------------ queries
     def _cell(self, x: float, y: float) -> slice:
@@ -470,6 +494,23 @@ class Track:
         Returns:
             ``(k,)`` booleans.
         """
+        rounding = _kernels.numpy_rounding()
+        if rounding is None:
+            return self._near_line_numpy(points, half_width, centre)
+        points = np.ascontiguousarray(points, dtype=np.complex128)
+        if points.ndim != 1:
+            raise ValueError(f"points must be a (k,) array of x + iy, got shape {points.shape}")
+        out = np.empty(len(points), dtype=bool)
+        centre = complex(centre)
+        _kernels.near_line(
+            points, float(half_width), centre.real, centre.imag, *self._packed, *rounding, out
+        )
+        return out
+
+    def _near_line_numpy(
+        self, points: NDArray[np.complex128], half_width: float, centre: complex
+    ) -> Any:
+        """:meth:`near_line` in numpy: the reference the compiled version mirrors."""
         cell = self._cell(centre.real, centre.imag)
         if cell.start == cell.stop:
             return np.zeros(len(points), dtype=bool)
@@ -507,7 +548,21 @@ class Track:
             ``(s, lateral, segment)``: the arc length (m, in ``[0, length)``) of the nearest
             point, the signed distance (m) of (x, y) from it (positive to the left of the
             direction of travel), and its segment (the next call's ``hint``).
+
+        Raises:
+            ValueError: ``hint`` is not a segment of the track (an int in ``[0, n)``).
         """
+        n = len(self._a)
+        if hint is not None and not (isinstance(hint, numbers.Integral) and 0 <= hint < n):
+            raise ValueError(f"hint must be None or a segment in 0..{n - 1}, got {hint!r}")
+        rounding = _kernels.numpy_rounding()
+        if rounding is None:
+            return self._locate_numpy(x, y, hint)
+        hint = -1 if hint is None else int(hint)
+        return _kernels.locate(float(x), float(y), hint, *self._packed, rounding.fused_products)
+
+    def _locate_numpy(self, x: float, y: float, hint: int | None) -> tuple[float, float, int]:
+        """:meth:`locate` in numpy: the reference the compiled version mirrors."""
         z = complex(x, y)
         n = len(self._a)
         seg = -1
