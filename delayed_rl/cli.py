@@ -21,7 +21,6 @@ command line and the Python API refuse the same values with the same words.
 from __future__ import annotations
 
 import argparse
-import difflib
 import sys
 import time
 import zlib
@@ -37,6 +36,8 @@ from delayed_rl.envs import env_ids
 from delayed_rl.experiments import NAMES
 from delayed_rl.experiments.runner import BACKENDS
 from delayed_rl.experiments.sweep import AGENTS as SWEEP_AGENTS
+from delayed_rl.experiments.sweep.runs import EpisodeTooLong, greedy_rollout
+from delayed_rl.experiments.sweep.schema import Evaluation, env_id_hint
 
 #: The name :func:`_checked` gives the library's checks, cut from their messages again: argparse
 #: already names the option (``argument --steps: must be an integer >= 1, got 0``).
@@ -161,10 +162,9 @@ def _list(args: argparse.Namespace) -> int:
 
 def _env_id(text: str) -> str:
     """An argparse ``type``: a registered Gymnasium id (or ``module:Id``, imported on make)."""
-    if text in gym.registry or ":" in text:
+    hint = env_id_hint(text)
+    if hint is None:
         return text
-    close = difflib.get_close_matches(text, list(gym.registry), n=3)
-    hint = f"; did you mean {', '.join(close)}?" if close else "; see delayed-rl list"
     raise argparse.ArgumentTypeError(f"unknown env id {text!r}{hint}")
 
 
@@ -238,29 +238,19 @@ def _evaluate(args: argparse.Namespace) -> int:
     env = _make_env(args.env, args.reward_delay)
     agent = load_agent(args.path, env)  # its errors name the file and the problem
     obs, _ = env.reset(seed=args.seed)
-    steps = episodes = episode_steps = 0
-    total = episode_return = 0.0
-    returns: list[float] = []
-    limit = args.steps
-    wanted = EPISODES if args.episodes is None else args.episodes
-    while (steps < limit) if limit is not None else (episodes < wanted):
-        action, _ = agent.predict(obs, deterministic=True)
-        obs, reward, terminated, truncated, info = env.step(action)
-        reward = float(info.get("undelayed_reward", reward))
-        steps, episode_steps = steps + 1, episode_steps + 1
-        total += reward
-        episode_return += reward
-        if terminated or truncated:
-            returns.append(episode_return)
-            episodes += 1
-            episode_steps, episode_return = 0, 0.0
-            obs, _ = env.reset()
-        elif limit is None and episode_steps >= args.max_episode_steps:
-            raise CommandError(
-                f"no episode of {args.env} ended within {args.max_episode_steps} steps: it looks "
-                "like a continuing task; evaluate it with --steps N"
-            )
+    if args.steps is not None:
+        length = Evaluation("step", args.steps)
+    else:
+        length = Evaluation("episode", EPISODES if args.episodes is None else args.episodes)
+    try:
+        run = greedy_rollout(agent, env, obs, length, args.max_episode_steps)
+    except EpisodeTooLong:
+        raise CommandError(
+            f"no episode of {args.env} ended within {args.max_episode_steps} steps: it looks "
+            "like a continuing task; evaluate it with --steps N"
+        ) from None
     env.close()
+    returns = run.returns
     per_episode = (
         f"{sum(returns) / len(returns):.4f} per episode over {len(returns)} episode(s)"
         if returns
@@ -268,8 +258,8 @@ def _evaluate(args: argparse.Namespace) -> int:
     )
     print(
         f"evaluated {type(agent).__name__} from {args.path} greedily on {args.env} "
-        f"({_delay_text(args.reward_delay)}) for {steps} steps: average undelayed reward "
-        f"{total / steps:.4f} per step; {per_episode}"
+        f"({_delay_text(args.reward_delay)}) for {run.steps} steps: average undelayed reward "
+        f"{run.total / run.steps:.4f} per step; {per_episode}"
     )
     return 0
 

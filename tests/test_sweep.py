@@ -19,7 +19,6 @@ import pytest
 
 from delayed_rl.cli import main
 from delayed_rl.delays import Constant, Poisson
-from delayed_rl.experiments import sweep as sweep_module
 from delayed_rl.experiments.sweep import (
     RESULT_COLUMNS,
     RunError,
@@ -30,6 +29,8 @@ from delayed_rl.experiments.sweep import (
     resolve_placeholders,
     run_sweep,
 )
+from delayed_rl.experiments.sweep import results as sweep_results
+from delayed_rl.experiments.sweep import runs as sweep_runs
 from delayed_rl.wrappers import ObservationDelay, RewardDelay
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "sweep.yaml"
@@ -375,7 +376,7 @@ def test_a_figure_without_matplotlib_is_a_note(tmp_path, monkeypatch):
     def no_matplotlib(*args):
         raise ImportError("No module named 'matplotlib'")
 
-    monkeypatch.setattr(sweep_module, "plot_env", no_matplotlib)
+    monkeypatch.setattr(sweep_results, "plot_env", no_matplotlib)
     run_sweep(parse_sweep(tiny(agents=["q"], seeds=1)), tmp_path)
     assert (
         "eval_reward_grid.png not drawn: install the plot extra"
@@ -439,7 +440,7 @@ def test_a_changed_configuration_runs_again_and_the_old_rows_stay(tmp_path):
 
 
 def test_a_failed_run_keeps_the_rows_of_those_that_finished(tmp_path, monkeypatch):
-    monkeypatch.setattr(sweep_module, "MAX_EVAL_EPISODE_STEPS", 30)
+    monkeypatch.setattr(sweep_runs, "MAX_EVAL_EPISODE_STEPS", 30)
     data = tiny(agents=["q"], seeds=1, delays=[1])
     data["envs"] = [{"id": GRID, "label": "grid", "eval_steps": 20}, GRID.replace("3x3", "5x5")]
     with pytest.raises(RunError) as info:
@@ -534,7 +535,7 @@ def test_a_missing_file_or_a_failing_run_exits_with_code_1(tmp_path, capsys, mon
     assert main(["sweep", str(tmp_path / "none.yaml")]) == 1
     err = capsys.readouterr().err
     assert err.startswith("error: [Errno 2] No such file") and err.count("\n") == 1
-    monkeypatch.setattr(sweep_module, "MAX_EVAL_EPISODE_STEPS", 10)
+    monkeypatch.setattr(sweep_runs, "MAX_EVAL_EPISODE_STEPS", 10)
     path = tmp_path / "continuing.json"
     data = tiny(agents=["q"], envs=[GRID], seeds=1, delays=[1], eval_episodes=1)
     path.write_text(json.dumps(data))

@@ -1,0 +1,284 @@
+"""A sweep's result files: ``results.csv`` (read, appended to, resumed), the summary, the figures.
+
+``results.csv`` holds one row per run, keyed by :func:`run_key`; :func:`summarize` turns the
+rows into ``summary.csv``, :func:`render_summary` into ``summary.md`` and :func:`draw_figures`
+into one figure per env.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+import re
+import textwrap
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from delayed_rl.experiments.runner import mean_ci95
+from delayed_rl.experiments.sweep.schema import Sweep
+
+#: The columns of ``results.csv`` that every sweep writes, in this order.
+RESULT_COLUMNS = ("agent", "env", "delay", "seed", "steps", "train_reward", "eval_reward", "wall_s")
+#: The columns after them: which ``eval_reward`` it is, and the run's configuration hash.
+EXTRA_COLUMNS = ("eval_unit", "run_id")
+SUMMARY_COLUMNS = (
+    "agent",
+    "env",
+    "delay",
+    "seeds",
+    "train_reward_mean",
+    "train_reward_ci95",
+    "eval_reward_mean",
+    "eval_reward_ci95",
+    "eval_unit",
+)
+
+
+# ---------------------------------------------------------------------------------- results
+RESULTS_FILE = "results.csv"
+_COLUMNS = (*RESULT_COLUMNS, *EXTRA_COLUMNS)
+
+
+def run_key(row: Mapping[str, Any]) -> tuple[str, ...]:
+    """What identifies a run in ``results.csv``: its labels, seed and ``run_id``, as text."""
+    return tuple(str(row[column]) for column in ("agent", "env", "delay", "seed", "run_id"))
+
+
+def read_results(path: Path) -> list[dict[str, str]]:
+    """The complete rows of ``path`` (none when there is no such file).
+
+    A row missing a value (a write cut short) is left out, so its run runs again.
+
+    Raises:
+        ValueError: the file's columns are not a sweep's (:data:`RESULT_COLUMNS` and the extras).
+    """
+    if not path.exists():
+        return []
+    with open(path, newline="", encoding="utf-8") as handle:
+        reader = csv.DictReader(handle)
+        if reader.fieldnames is None:
+            return []
+        if tuple(reader.fieldnames) != _COLUMNS:
+            raise ValueError(
+                f"{path} has the columns {reader.fieldnames}, not a sweep's {list(_COLUMNS)}: "
+                "give the sweep another output folder"
+            )
+        return [row for row in reader if all(row.get(c) not in (None, "") for c in _COLUMNS)]
+
+
+def write_results(path: Path, rows: Sequence[Mapping[str, Any]]) -> None:
+    """Write ``rows`` to ``path`` whole (through a temporary file, so it is never half written)."""
+    partial = path.with_name(path.name + ".partial")
+    with open(partial, "w", newline="", encoding="utf-8") as handle:
+        writer = csv.DictWriter(handle, fieldnames=_COLUMNS)
+        writer.writeheader()
+        writer.writerows(rows)
+    os.replace(partial, path)
+
+
+def append_result(path: Path, row: Mapping[str, Any]) -> None:
+    """Append one finished run's row to ``path`` (which has its header) and flush it."""
+    with open(path, "a", newline="", encoding="utf-8") as handle:
+        csv.DictWriter(handle, fieldnames=_COLUMNS).writerow(row)
+
+
+def _in_sweep_order(
+    rows: Sequence[Mapping[str, Any]], tasks: Sequence[Mapping[str, Any]]
+) -> tuple[list[Mapping[str, Any]], list[Mapping[str, Any]]]:
+    """The rows of ``tasks`` in their order, and the others (older runs) in theirs."""
+    by_key: dict[tuple[str, ...], Mapping[str, Any]] = {}
+    for row in rows:
+        by_key.setdefault(run_key(row), row)
+    keys = [run_key(task) for task in tasks]
+    wanted = set(keys)
+    ours = [by_key[key] for key in keys if key in by_key]
+    others = [row for key, row in by_key.items() if key not in wanted]
+    return ours, others
+
+
+# ---------------------------------------------------------------------------------- summary
+def summarize(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """Per (agent, env, delay), in the rows' order: the seeds and both rewards' mean and 95 % CI."""
+    groups: dict[tuple[str, str, str], list[Mapping[str, Any]]] = {}
+    for row in rows:
+        groups.setdefault((row["agent"], row["env"], row["delay"]), []).append(row)
+    summary = []
+    for (agent, env, delay), runs in groups.items():
+        train_mean, train_ci = mean_ci95([float(run["train_reward"]) for run in runs])
+        eval_mean, eval_ci = mean_ci95([float(run["eval_reward"]) for run in runs])
+        summary.append(
+            {
+                "agent": agent,
+                "env": env,
+                "delay": delay,
+                "seeds": len(runs),
+                "train_reward_mean": train_mean,
+                "train_reward_ci95": train_ci,
+                "eval_reward_mean": eval_mean,
+                "eval_reward_ci95": eval_ci,
+                "eval_unit": runs[0]["eval_unit"],
+            }
+        )
+    return summary
+
+
+def write_summary_csv(path: Path, summary: Sequence[Mapping[str, Any]]) -> None:
+    """``summary.csv``: the rows of :func:`summarize`."""
+    with open(path, "w", newline="", encoding="utf-8") as handle:
+        writer = csv.DictWriter(handle, fieldnames=SUMMARY_COLUMNS)
+        writer.writeheader()
+        writer.writerows(summary)
+
+
+def figure_name(env_label: str, taken: Sequence[str] = ()) -> str:
+    """The file name of an env's figure: ``eval_reward_<slug>.png``, unlike those ``taken``.
+
+    >>> figure_name("delayed_rl/GridWorld-5x5-v0")
+    'eval_reward_delayed-rl-gridworld-5x5-v0.png'
+    """
+    slug = re.sub(r"[^a-z0-9]+", "-", env_label.lower()).strip("-") or "env"
+    name, n = f"eval_reward_{slug}.png", 1
+    while name in taken:
+        n += 1
+        name = f"eval_reward_{slug}-{n}.png"
+    return name
+
+
+def _by_env(summary: Sequence[Mapping[str, Any]]) -> dict[str, list[Mapping[str, Any]]]:
+    groups: dict[str, list[Mapping[str, Any]]] = {}
+    for row in summary:
+        groups.setdefault(row["env"], []).append(row)
+    return groups
+
+
+def _cell(mean: float, ci: float) -> str:
+    return f"{mean:.3f} ± {ci:.3f}"
+
+
+def _markdown(text: str) -> str:
+    return str(text).replace("|", "\\|")
+
+
+def _best(rows: Sequence[Mapping[str, Any]], delay: str, column: str) -> float:
+    """The largest ``column`` among the rows of ``delay`` (NaN when none is a number)."""
+    values = [row[column] for row in rows if row["delay"] == delay]
+    return max((value for value in values if not math.isnan(value)), default=math.nan)
+
+
+def agent_delay_table(rows: Sequence[Mapping[str, Any]], reward: str) -> list[str]:
+    """One env's Markdown table: an agent per row, a delay per column, ``reward`` ± its CI.
+
+    Args:
+        rows: the env's rows of :func:`summarize`.
+        reward: ``"eval_reward"`` or ``"train_reward"``; each delay's best mean is in bold.
+    """
+    agents = list(dict.fromkeys(row["agent"] for row in rows))
+    delays = list(dict.fromkeys(row["delay"] for row in rows))
+    cells = {(row["agent"], row["delay"]): row for row in rows}
+    best = {delay: _best(rows, delay, f"{reward}_mean") for delay in delays}
+    lines = [
+        "| agent | " + " | ".join(_markdown(delay) for delay in delays) + " |",
+        "|---" * (len(delays) + 1) + "|",
+    ]
+    for agent in agents:
+        texts = []
+        for delay in delays:
+            row = cells.get((agent, delay))
+            if row is None:
+                texts.append("—")
+                continue
+            text = _cell(row[f"{reward}_mean"], row[f"{reward}_ci95"])
+            texts.append(f"**{text}**" if row[f"{reward}_mean"] == best[delay] else text)
+        lines.append(f"| {_markdown(agent)} | " + " | ".join(texts) + " |")
+    return lines
+
+
+def render_summary(
+    sweep: Sweep, summary: Sequence[Mapping[str, Any]], figures: Mapping[str, str]
+) -> str:
+    """``summary.md``: per env, the evaluation and training rewards by agent and delay.
+
+    Args:
+        sweep: the sweep (its name, source, and size).
+        summary: the rows of :func:`summarize`.
+        figures: per env label, its figure's file name or a note that it was not drawn.
+    """
+    seeds = len(sweep.seeds)
+    lines = [
+        f"# {sweep.name}",
+        "",
+        f"From `{sweep.source}`: {len(sweep.agents)} agent(s) × {len(sweep.envs)} env(s) × "
+        f"{len(sweep.delays)} delay(s) × {seeds} seed(s). Each cell is the mean ± the half-width "
+        "of its 95 % confidence interval over the seeds (Student t); `results.csv` has every "
+        "run, `summary.csv` these numbers.",
+    ]
+    for env, rows in _by_env(summary).items():
+        unit = rows[0]["eval_unit"]
+        lines += [
+            "",
+            f"## {env}",
+            "",
+            f"Greedy evaluation: undelayed reward per {unit} (the best agent per delay in bold):",
+            "",
+            *agent_delay_table(rows, "eval_reward"),
+            "",
+            "Training: mean undelayed reward per step:",
+            "",
+            *agent_delay_table(rows, "train_reward"),
+        ]
+        figure = figures.get(env)
+        if figure is not None:
+            drawn = figure.endswith(".png")
+            lines += ["", f"![{env}: evaluation reward by delay]({figure})" if drawn else figure]
+    return "\n".join(lines) + "\n"
+
+
+def plot_env(path: Path, env: str, rows: Sequence[Mapping[str, Any]]) -> None:
+    """One env's figure: per agent, the evaluation reward's mean and 95 % CI bar at each delay.
+
+    Args:
+        path: where to save the PNG.
+        env: the env's label (the title).
+        rows: the env's rows of :func:`summarize`.
+    """
+    from delayed_rl.experiments import plotting
+
+    plt = plotting._pyplot()
+    delays = list(dict.fromkeys(row["delay"] for row in rows))
+    agents = list(dict.fromkeys(row["agent"] for row in rows))
+    width = min(0.8 / len(agents), 0.2)
+    fig, ax = plt.subplots(figsize=(max(8.5, 1.8 * len(delays) + 5.5), 4.4))
+    for i, agent in enumerate(agents):
+        mine = [row for row in rows if row["agent"] == agent]
+        x = [delays.index(row["delay"]) + (i - (len(agents) - 1) / 2) * width for row in mine]
+        means = [row["eval_reward_mean"] for row in mine]
+        cis = [row["eval_reward_ci95"] for row in mine]
+        label = plotting.band_label(agent, min(row["seeds"] for row in mine))
+        ax.errorbar(x, means, yerr=cis, marker="o", linestyle="none", capsize=4, label=label)
+    ax.set_xticks(range(len(delays)), [textwrap.fill(delay, 18) for delay in delays])
+    ax.set_xlim(-0.6, len(delays) - 0.4)
+    ax.margins(y=0.15)
+    plotting.outside_legend(ax)
+    unit = rows[0]["eval_unit"]
+    title = f"{env}: greedy evaluation reward by delay"
+    plotting._finish(fig, ax, path, title, "delay", f"undelayed reward per {unit}")
+
+
+def draw_figures(out: Path, summary: Sequence[Mapping[str, Any]]) -> dict[str, str]:
+    """Draw :func:`plot_env` for every env into ``out``.
+
+    Returns:
+        Per env label, the figure's file name, or a note when matplotlib (the ``plot`` extra)
+        is not installed.
+    """
+    figures: dict[str, str] = {}
+    for env, rows in _by_env(summary).items():
+        name = figure_name(env, list(figures.values()))
+        try:
+            plot_env(out / name, env, rows)
+        except ImportError:
+            name = f"{name} not drawn: install the plot extra, matplotlib"
+        figures[env] = name
+    return figures
