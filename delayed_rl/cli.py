@@ -269,6 +269,7 @@ def _bench(args: argparse.Namespace) -> int:
     from delayed_rl.experiments import Config, get_experiment, run_experiment
 
     names = list(NAMES) if args.name == "all" else [args.name]
+    ran = []
     for name in names:
         config = Config(
             seeds=args.seeds,
@@ -282,6 +283,12 @@ def _bench(args: argparse.Namespace) -> int:
         summary = run_experiment(get_experiment(name), config, out)
         print((out / "report.md").read_text())
         print(f"[{name}] wrote {out} in {summary.extra['wall_time_s']} s")
+        ran.append((get_experiment(name), summary))
+    if args.name == "all":
+        from delayed_rl.experiments.runner import write_index
+
+        index = write_index(Path(args.out), ran)
+        print(f"[reproduce] wrote {index}")
     return 0
 
 

@@ -300,3 +300,20 @@ def test_mmq_gridworld_counts_the_optimal_loop_over_a_finite_walk():
 def _action(env, state: int, target: int) -> int:
     """The action leading from ``state`` to the neighbouring ``target``."""
     return next(a for a in env.P[state] if env.P[state][a][0][1] == target)
+
+
+def test_reproduce_writes_an_index_of_every_experiment(tmp_path):
+    from delayed_rl.experiments.runner import Claim, Summary, write_index
+
+    def claims(*verdicts):
+        return [Claim("q", "t", 0.0, 0.1, 5, verdict) for verdict in verdicts]
+
+    ran = [
+        (get_experiment("roulette"), Summary(claims("agrees", "agrees"), [], extra={"wall_time_s": 1.5})),
+        (get_experiment("delay-sweep"), Summary(claims("differs", "inconclusive", "reference"), [], extra={"wall_time_s": 60.0})),
+    ]  # fmt: skip
+    text = write_index(tmp_path, ran).read_text()
+    rows = [line for line in text.splitlines() if line.startswith("| `")]
+    assert rows[0].startswith("| `roulette` |") and "| 1.5 | 2 | 0 | 0 | 0 |" in rows[0]
+    assert "| 60.0 | 0 | 1 | 1 | 1 | [delay-sweep/report.md](delay-sweep/report.md) |" in rows[1]
+    assert "Total wall time: 61.5 s (1.0 min)." in text

@@ -401,6 +401,39 @@ def write_outputs(experiment: Experiment, config: Config, summary: Summary, out:
     (out / "report.md").write_text(render_report(experiment, config, summary, figures))
 
 
+def write_index(out: Path, ran: Sequence[tuple[Experiment, Summary]]) -> Path:
+    """Write ``out/index.md``: every experiment run, its wall time, verdicts and report.
+
+    ``delayed-rl reproduce`` writes it after the last experiment: one table of every
+    experiment's verdict counts and wall time (and their total), each linking to its
+    ``NAME/report.md``.
+
+    Returns:
+        The file written.
+    """
+    lines = [
+        "# Reproduction: every experiment",
+        "",
+        "| experiment | thesis | wall time (s) | " + " | ".join(VERDICTS) + " | report |",
+        "|---|---|---|" + "---|" * len(VERDICTS) + "---|",
+    ]
+    total = 0.0
+    for experiment, summary in ran:
+        wall = float(summary.extra.get("wall_time_s", 0.0))
+        total += wall
+        counts = [str(sum(c.verdict == v for c in summary.claims)) for v in VERDICTS]
+        link = f"[{experiment.name}/report.md]({experiment.name}/report.md)"
+        lines.append(
+            f"| `{experiment.name}` | {experiment.thesis} | {wall:.1f} | "
+            + " | ".join(counts)
+            + f" | {link} |"
+        )
+    lines += ["", f"Total wall time: {total:.1f} s ({total / 60:.1f} min)."]
+    path = out / "index.md"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
 def _json_default(value: Any) -> Any:
     if isinstance(value, np.ndarray):
         return value.tolist()
