@@ -151,45 +151,45 @@ def python_loop(agent: Any, run: LearnRun) -> None:
 
     Each step: ``agent._choose``, ``env.step``, ``agent._observe_info(info)`` if the agent has it
     (the oracle reads the arrivals there), ``agent._learn_transition``, the record, the callback;
-    an episode's end resets the env. Running sums live in locals (the hot spot), written back.
+    an episode's end resets the env. Running sums live in locals (the hot spot), written back;
+    the episode's length is counted from the step it started at, not step by step.
     """
     env, stats, callback, log = agent.env, agent._statistics, run.callback, run.log
     obs_start, action_start = agent._obs_index.start, agent._action_index.start
     eps_constant = agent.exploration_initial_eps == agent.exploration_final_eps
     schedules_constant = eps_constant and agent._lr_constant
-    eps, uniform = agent.exploration_rate, agent._uniform
+    eps, uniform = agent.exploration_rate, agent._uniform.next
     choose, learn_transition = agent._choose, agent._learn_transition
     observe_info = getattr(agent, "_observe_info", None)
     acting_counts = stats.acting_counts
     s = agent._obs
-    episode_reward, episode_length = stats.episode_reward, stats.episode_length
+    steps_done = 0
+    episode_reward, episode_start = stats.episode_reward, -stats.episode_length
     reward_total, undelayed_total, next_log = run.reward_total, run.undelayed_total, run.next_log
-    steps_done = run.steps_done
-    for step in range(run.n_steps):
+    for steps_done in range(1, run.n_steps + 1):
         if not schedules_constant:
-            eps = advance_schedules(agent, run.start_timesteps + step, run.total_timesteps)
+            timestep = run.start_timesteps + steps_done - 1
+            eps = advance_schedules(agent, timestep, run.total_timesteps)
         acting, a = choose(s, eps, uniform)
         acting_counts[acting] += 1
         obs, reward, terminated, truncated, info = env.step(a + action_start)
-        s2 = int(obs) - obs_start
+        s2 = (obs if type(obs) is int else int(obs)) - obs_start  # int() costs more than a test
         reward = float(reward)
         undelayed = info.get("undelayed_reward", reward)
         if observe_info is not None:
             observe_info(info)
         learn_transition(s, a, reward, s2, terminated, truncated)
-        episode_end = terminated or truncated
-        steps_done = step + 1
         reward_total += reward
         undelayed_total += undelayed
         episode_reward += undelayed
-        episode_length += 1
         if log:
+            step = steps_done - 1
             log["obs"][step] = s + obs_start
             log["action"][step] = a + action_start
             log["reward"][step] = reward
             log["undelayed_reward"][step] = undelayed
             log["acting_delay_index"][step] = acting
-            log["episode_end"][step] = episode_end
+            log["episode_end"][step] = terminated or truncated
         if callback is not None:
             run.locals_.update(
                 step_locals(
@@ -205,10 +205,10 @@ def python_loop(agent: Any, run: LearnRun) -> None:
                 )
             )
             callback.update_locals(run.locals_)
-        if episode_end:
-            stats.end_episode(episode_reward, episode_length)
+        if terminated or truncated:
+            stats.end_episode(episode_reward, steps_done - episode_start)
             s = agent._reset_env()
-            episode_reward, episode_length = 0.0, 0
+            episode_reward, episode_start = 0.0, steps_done
         else:
             s = s2
         if callback is not None:
@@ -220,7 +220,7 @@ def python_loop(agent: Any, run: LearnRun) -> None:
             log_metrics(agent, reward_total, undelayed_total)
             reward_total = undelayed_total = 0.0
     agent._obs = s
-    stats.episode_reward, stats.episode_length = episode_reward, episode_length
+    stats.episode_reward, stats.episode_length = episode_reward, steps_done - episode_start
     run.reward_total, run.undelayed_total, run.next_log = reward_total, undelayed_total, next_log
     run.steps_done = steps_done
 

@@ -6,7 +6,8 @@
 made and checked in :mod:`~delayed_rl.agents.env_util`. A subclass supplies the learning rule:
 
 - ``_setup_model()``: allocate the tables (hyper-parameters and spaces are set);
-- ``_choose(s, eps, uniform) -> (acting model index, action index)``: one behaviour choice;
+- ``_choose(s, eps, uniform) -> (acting model index, action index)``: one behaviour choice,
+  ``uniform()`` drawing its random numbers (a stream, or ``learn()``'s bound ``stream.next``);
 - ``_learn_transition(s, a, r, s2, terminated, truncated)``: one learning step, shared by
   ``learn()`` and ``update()``; it advances ``num_timesteps``;
 - ``_greedy_actions(states)``: the deterministic policy;
@@ -24,6 +25,7 @@ subclasses included.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -173,7 +175,7 @@ class TabularAgent(_persistence.CopyProtocol, ABC):
     @abstractmethod
     def _setup_model(self) -> None: ...
     @abstractmethod
-    def _choose(self, s: int, eps: float, uniform: UniformStream) -> tuple[int, int]: ...
+    def _choose(self, s: int, eps: float, uniform: Callable[[], float]) -> tuple[int, int]: ...
     @abstractmethod
     def _learn_transition(
         self, s: int, a: int, r: float, s2: int, terminated: bool, truncated: bool

@@ -18,13 +18,16 @@ The agent keeps one Q-table per delay hypothesis λ̂ ∈ Λ, stacked as ``q_tab
   ``greedy_window=W``, an exponential moving average of it over about ``W`` training steps.
 - **Cost** O(|Λ|) per step: each state's max over (λ̂, a) is cached with its position and
   recomputed only when the entry at that position decreases; the |Λ| updates of a step are one
-  batch of numpy gathers and scatters over a ring buffer of the episode's transitions.
+  compiled call (:func:`_update_batch`) over a ring buffer of the episode's transitions, a
+  single entry's update another (:func:`_write`). They run the operations of the numpy code
+  they replaced in its order, so the tables are the same to the last bit; without numba they run
+  as Python.
 """
 
 from __future__ import annotations
 
 import inspect
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -33,9 +36,9 @@ import numpy as np
 from delayed_rl._delay_line import ring_size
 from delayed_rl._validation import check_int, check_real
 from delayed_rl.agents._fused import CompiledTables
-from delayed_rl.agents._streams import UniformStream
 from delayed_rl.agents.base import TabularAgent
 from delayed_rl.agents.hyperparameters import shares_hyperparameters
+from delayed_rl.fast._numba import jit as _jit
 from delayed_rl.fast.kernel import credit_kernel
 
 __all__ = ["MAX_TABLE_BYTES", "MMQ", "MultipleModelQLearning", "greedy_actions", "table_bytes"]
@@ -53,6 +56,19 @@ allocated; a model file declaring such tables is refused the same way. Raise it 
 ``save_util.MAX_MODEL_BYTES``, so files load back) for larger tables.
 """
 _SMALL_ROW = 16  # rows up to this many entries are scanned in Python (cheaper than numpy calls)
+_FULL_CREDIT = np.zeros(0)  # the weights of :func:`_update_batch` without the options
+_NO_OPTION = np.zeros(0)  # the trace or the kernel of :func:`_credit_weights` when it is off
+_VIEWS = (
+    "_q_rows",
+    "_q_flat",
+    "_hist_s",
+    "_hist_s2",
+    "_hist_cell",
+    "_q_items",
+    "_v_max_items",
+    "_v_cell_items",
+)
+"""MMQ's views of its tables (:meth:`MultipleModelQLearning._rebuild_derived`)."""
 OPTION_NAMES = ("reward_kernel", "delay_trace", "greedy_window")
 """MMQ's own options beyond the thesis's rule (constructor arguments, saved with the agent)."""
 _GREEDY_UPDATES = 100  # the averaged table is updated about this many times per window
@@ -227,6 +243,152 @@ def greedy_actions(q_table: np.ndarray, states: np.ndarray | None = None) -> np.
     return rows.argmax(axis=1) % q_table.shape[2]
 
 
+@_jit
+def _first_max(values, start, stop):
+    """The max of ``values[start:stop]`` and the index of its first occurrence (as ``argmax``)."""
+    best, first = values[start], start
+    for i in range(start + 1, stop):
+        if values[i] > best:
+            best, first = values[i], i
+    return best, first
+
+
+@_jit
+def _count_equal(values, start, stop, value):
+    """How many entries of ``values[start:stop]`` equal ``value`` (a loop the compiler vectorises)."""
+    count = 0
+    for i in range(start, stop):
+        count += values[i] == value
+    return count
+
+
+@_jit
+def _models_holding(q_flat, start, n_models, n_actions, value):
+    """The models (ascending) whose table in the row at ``q_flat[start:]`` holds ``value``."""
+    models = np.empty(n_models, np.int64)
+    count = 0
+    for model in range(n_models):
+        first = start + model * n_actions
+        for i in range(first, first + n_actions):
+            if q_flat[i] == value:
+                models[count] = model
+                count += 1
+                break
+    return models[:count]
+
+
+@_jit
+def _write(q_flat, v_max, v_cell, s, cell, target, rate):
+    """:meth:`MultipleModelQLearning._write_entry`, compiled (cheaper than Python for one entry).
+
+    ``Q[cell] += rate · (target − Q[cell])``; the cache of state ``s`` is raised to the new
+    value when it passes the max, and its row rescanned when the cached cell fell.
+    """
+    old = q_flat[cell]
+    new = old + rate * (target - old)
+    q_flat[cell] = new
+    if new > v_max[s]:
+        v_max[s] = new
+        v_cell[s] = cell
+    elif new < old and v_cell[s] == cell:
+        size = q_flat.shape[0] // v_max.shape[0]
+        v_max[s], v_cell[s] = _first_max(q_flat, s * size, (s + 1) * size)
+
+
+@_jit
+def _textbook_update(q_flat, v_max, v_cell, s, a, r, s2, terminated, alpha, gamma):
+    """Q-learning's update of the transition ``(s, a, r, s2)``, compiled: one call a step.
+
+    ``Q(s, a) += α (r + γ (1 − terminated) max Q(s2) − Q(s, a))`` with the max read off the
+    cache (:func:`_write`), for an agent of one model whose λ̂ is 0.
+    """
+    size = q_flat.shape[0] // v_max.shape[0]
+    bootstrap = 0.0 if terminated else v_max[s2]
+    _write(q_flat, v_max, v_cell, s, s * size + a, r + gamma * bootstrap, alpha)
+
+
+@_jit
+def _credit_weights(trace, decay, kernel, estimates, acting):
+    """:meth:`MultipleModelQLearning._credit_weights`, compiled: each model's share of ``r``.
+
+    The delay trace (empty: off) decays by ``decay`` and the acting model's entry becomes 1;
+    model ``j``'s weight is ``kernel[|Λ[j] − Λ[acting]|]`` (empty: off) times its trace entry.
+    """
+    if trace.shape[0]:
+        for j in range(trace.shape[0]):
+            trace[j] *= decay
+        trace[acting] = 1.0
+        if not kernel.shape[0]:
+            return trace
+    weights = np.empty(estimates.shape[0])
+    for j in range(estimates.shape[0]):
+        weights[j] = kernel[abs(estimates[j] - estimates[acting])]
+        if trace.shape[0]:
+            weights[j] *= trace[j]
+    return weights
+
+
+@_jit
+def _update_batch(
+    q_flat, v_max, v_cell, history, back, n, t, mask, r, weights, alpha, gamma, terminal, n_actions
+):
+    """:meth:`MultipleModelQLearning._update_models`, compiled: one call a step, not two dozen.
+
+    Model ``j < n`` learns from the transition at ring position ``p = (t + back[j]) & mask``: it
+    moves the cell ``hist_cell[p] + j·|A|`` towards ``r·weights[j] + γ·v_max[hist_s2[p]]``
+    (``weights`` empty: ``r``; ``terminal``: model 0 does not bootstrap), every target read off
+    the cache as it was before the step. Then the cache: the states whose cached cell fell are
+    rescanned, and the entries that rose above their state's old max raise it, the last of equal
+    ones taking the cell. These are the operations, in their order, of the numpy version this
+    replaced, to the last bit.
+
+    Args:
+        q_flat: the Q-table, flat.
+        v_max: each state's max over its row.
+        v_cell: the flat index of an entry holding it.
+        history: the ring, rows ``s``, ``s2`` and model 0's cell.
+        back: per model, its transition's offset from ``t`` in the ring (``−λ̂``).
+        n: how many models learn (the first ``n``).
+        t: the episode step.
+        mask: the ring's length minus one (a power of two minus one).
+        r: the received reward.
+        weights: each model's share of ``r`` (the options), or empty.
+        alpha: the learning rate.
+        gamma: the discount.
+        terminal: model 0's transition is terminal.
+        n_actions: |A|.
+    """
+    size = q_flat.shape[0] // v_max.shape[0]
+    states = np.empty(n, np.int64)
+    cells = np.empty(n, np.int64)
+    values = np.empty(n)
+    fell = np.zeros(n, np.bool_)
+    rose = np.zeros(n, np.bool_)
+    for j in range(n):
+        p = (t + back[j]) & mask
+        s = history[0, p]
+        cell = history[2, p] + j * n_actions
+        bootstrap = 0.0 if j == 0 and terminal else v_max[history[1, p]]
+        credit = r * weights[j] if weights.shape[0] else r
+        target = credit + gamma * bootstrap
+        old = q_flat[cell]
+        new = old + alpha * (target - old)
+        q_flat[cell] = new
+        states[j], cells[j], values[j] = s, cell, new
+        fell[j] = v_cell[s] == cell and new < old
+        rose[j] = new > v_max[s]
+    for j in range(n):
+        if fell[j]:
+            s = states[j]
+            v_max[s], v_cell[s] = _first_max(q_flat, s * size, (s + 1) * size)
+    for j in range(n):
+        if rose[j] and values[j] > v_max[states[j]]:
+            v_max[states[j]] = values[j]
+    for j in range(n):
+        if rose[j] and values[j] == v_max[states[j]]:
+            v_cell[states[j]] = cells[j]
+
+
 class MultipleModelQLearning(TabularAgent):
     """Multiple Model Q-learning (MMQ): Q-learning over parallel delay hypotheses.
 
@@ -293,7 +455,7 @@ class MultipleModelQLearning(TabularAgent):
 
     _hyperparameter_names = (*TabularAgent._hyperparameter_names, "delay_estimates", *OPTION_NAMES)
     _optional_hyperparameter_names = OPTION_NAMES  # files written before the options lack them
-    _derived = (*TabularAgent._derived, "_q_rows", "_q_flat")  # views of _q: rebuilt on copies
+    _derived = (*TabularAgent._derived, *_VIEWS)  # views of the tables: rebuilt on copies
 
     @shares_hyperparameters
     def __init__(
@@ -412,18 +574,18 @@ class MultipleModelQLearning(TabularAgent):
             delay_trace=self.delay_trace is not None,
         )
         self.n_models = n_models
-        self._q = np.full((self.n_states, n_models, self.n_actions), self.q_init)
-        self._rebuild_derived()
         self._row_size = n_models * self.n_actions
-        self._model_offset = np.arange(n_models, dtype=np.int64) * self.n_actions
-        self._rebuild_cache()
+        self._q = np.full((self.n_states, n_models, self.n_actions), self.q_init)
+        self._v_max = np.zeros(self.n_states)
+        self._v_cell = np.zeros(self.n_states, dtype=np.int64)
         self._smallest_estimate = int(self._delay_estimates[0])
         self._largest_estimate = int(self._delay_estimates[-1])
         history = ring_size(self._largest_estimate + 1)
         self._history_mask = history - 1
-        self._hist_s = np.zeros(history, dtype=np.int64)
-        self._hist_s2 = np.zeros(history, dtype=np.int64)
-        self._hist_cell = np.zeros(history, dtype=np.int64)  # s·|Λ||A| + a: model 0's cell
+        self._history = np.zeros((3, history), dtype=np.int64)  # rows: s, s2, model 0's cell
+        self._back = -self._delay_estimates  # each model's transition is λ̂ steps back
+        self._rebuild_derived()
+        self._rebuild_cache()
         # how many models can learn at episode step t < max Λ: those with λ̂ <= t
         self._n_valid = np.searchsorted(
             self._delay_estimates, np.arange(self._largest_estimate + 1), side="right"
@@ -445,17 +607,28 @@ class MultipleModelQLearning(TabularAgent):
         self._greedy_q = None if window is None else np.zeros_like(self._q)
         self._greedy_clock = np.zeros(2, dtype=np.int64)  # [steps since an update, updates]
         self._weighted = self.reward_kernel is not None or self.delay_trace is not None
+        # one model, λ̂ = 0, no options: the update is the textbook one (thesis Eq. 3.2)
+        self._textbook = self.n_models == 1 and self._has_zero_estimate and not self._weighted
         self._acting: int | None = None  # the acting model _choose picked for the next step
 
     def _rebuild_derived(self) -> None:
+        """The views of the tables (:data:`_VIEWS`).
+
+        ``_q_rows`` (one row of |Λ|·|A| entries a state) and ``_q_flat`` are numpy views of the
+        Q-table. The memoryviews ``_q_items``, ``_v_max_items``, ``_v_cell_items`` and the rows
+        of the history ring, ``_hist_s``, ``_hist_s2`` and ``_hist_cell``, read and write single
+        entries as Python numbers, at half the cost of numpy's scalar indexing.
+        """
         super()._rebuild_derived()
-        self._q_rows = self._q.reshape(self.n_states, self.n_models * self.n_actions)  # views
+        self._q_rows = self._q.reshape(self.n_states, self._row_size)
         self._q_flat = self._q.reshape(-1)
+        self._hist_s, self._hist_s2, self._hist_cell = (memoryview(row) for row in self._history)
+        self._q_items = memoryview(self._q_flat)
+        self._v_max_items = memoryview(self._v_max)
+        self._v_cell_items = memoryview(self._v_cell)
 
     def _rebuild_cache(self) -> None:
         """Recompute every state's max over (λ̂, a) (``_v_max``) and its cell (``_v_cell``)."""
-        self._v_max = np.zeros(self.n_states)
-        self._v_cell = np.zeros(self.n_states, dtype=np.int64)
         self._repair(np.arange(self.n_states))
 
     def _end_episode(self) -> None:
@@ -494,41 +667,64 @@ class MultipleModelQLearning(TabularAgent):
         clock[1] += 1
 
     # ------------------------------------------------------------------ acting
-    def _choose(self, s: int, eps: float, uniform: UniformStream) -> tuple[int, int]:
-        n_actions, n_models = self.n_actions, self.n_models
-        actions: Any = None
-        if n_models > 1 and uniform() < eps:
-            acting = int(uniform() * n_models)
-        else:
-            ties = self._ties(s)
-            if len(ties) == 1:
-                acting, action = divmod(int(ties[0]), n_actions)
-                actions = (action,)
-            elif n_models == 1:
-                acting, actions = 0, ties
-            else:
-                ties = np.asarray(ties)
-                models = ties // n_actions
-                candidates = np.unique(models)
-                acting = int(candidates[0])
-                if candidates.size > 1:
-                    acting = int(candidates[int(uniform() * candidates.size)])
-                actions = ties[models == acting] - acting * n_actions
-        self._acting = acting  # the reward kernel and the delay trace centre on it
-        if uniform() < eps:
-            return acting, int(uniform() * n_actions)
-        if actions is None:  # the acting model was explored: act greedily within its table
-            row = self._q[s, acting]
-            actions = np.flatnonzero(row == row.max())
-        n = len(actions)
-        return acting, int(actions[0] if n == 1 else actions[int(uniform() * n)])
+    def _choose(self, s: int, eps: float, uniform: Callable[[], float]) -> tuple[int, int]:
+        """The behaviour policy at ``s``: the acting model, then its action (see the module)."""
+        if self.n_models == 1:
+            return self._choose_action(s, eps, uniform)
+        if uniform() < eps:  # explore the models
+            model = int(uniform() * self.n_models)
+            return self._choose_action(s, eps, uniform, model, explored=True)
+        return self._choose_action(s, eps, uniform, self._greedy_model(s, uniform))
 
-    def _ties(self, s: int) -> Any:
-        """The positions in state ``s``'s row (λ̂-major) that hold its max, ascending."""
-        best = self._v_max[s]
-        if self._row_size <= _SMALL_ROW:
-            return [i for i, value in enumerate(self._q_rows[s].tolist()) if value == best]
-        return np.flatnonzero(self._q_rows[s] == best)
+    def _greedy_model(self, s: int, uniform: Callable[[], float]) -> int:
+        """A model whose table holds state ``s``'s max, ties broken at random.
+
+        When the max is not tied (the common case) it is the cached cell's model, found by
+        counting the row's entries equal to the max, without listing them.
+        """
+        best, size = self._v_max_items[s], self._row_size
+        start = s * size
+        if size <= _SMALL_ROW:
+            ties = self._q_items[start : start + size].tolist().count(best)
+        else:
+            ties = _count_equal(self._q_flat, start, start + size, best)
+        if ties == 1:
+            return (self._v_cell_items[s] - start) // self.n_actions
+        models = _models_holding(self._q_flat, start, self.n_models, self.n_actions, best)
+        return int(models[0] if models.size == 1 else models[int(uniform() * models.size)])
+
+    def _choose_action(
+        self,
+        s: int,
+        eps: float,
+        uniform: Callable[[], float],
+        model: int = 0,
+        explored: bool = False,
+    ) -> tuple[int, int]:
+        """``(model, action)``: an ε-greedy action of ``model``'s table at ``s``, random ties.
+
+        ``model`` becomes the acting model (the options centre on it). Unless it was
+        ``explored``, its table holds the state's max, read off the cache. With one model this
+        is the whole behaviour policy: Q-learning and fixed-delay Q-learning use it as their
+        ``_choose``. Small rows are read as Python floats (cheaper than numpy calls); an
+        untied max, the common case, is found without building the list of ties.
+        """
+        self._acting = model
+        n_actions = self.n_actions
+        if uniform() < eps:
+            return model, int(uniform() * n_actions)
+        start = (s * self.n_models + model) * n_actions
+        if n_actions <= _SMALL_ROW:
+            row = self._q_items[start : start + n_actions].tolist()
+            best = max(row) if explored else self._v_max_items[s]
+            if row.count(best) == 1:
+                return model, row.index(best)
+            ties: Any = [i for i, value in enumerate(row) if value == best]
+        else:
+            row = self._q_flat[start : start + n_actions]
+            ties = np.flatnonzero(row == (row.max() if explored else self._v_max_items[s]))
+        n = len(ties)
+        return model, int(ties[0] if n == 1 else ties[int(uniform() * n)])
 
     def _greedy_actions(self, states: np.ndarray) -> np.ndarray:
         return greedy_actions(self._greedy_source(), states)
@@ -566,22 +762,40 @@ class MultipleModelQLearning(TabularAgent):
     def _learn_transition(
         self, s: int, a: int, r: float, s2: int, terminated: bool, truncated: bool
     ) -> None:
-        weights = self._step_weights(s) if self._weighted else None
-        t = self._t
-        mask = self._history_mask
-        j = t & mask
-        self._hist_s[j] = s
-        self._hist_s2[j] = s2
-        self._hist_cell[j] = s * self._row_size + a
-        n = self.n_models if t >= self._largest_estimate else self._n_valid[t]
-        if n == 1:
-            credited = r if weights is None else float(r * weights[0])
-            self._update_first_model((t - self._smallest_estimate) & mask, credited, terminated)
-        elif n:
-            credited_all = r if weights is None else r * weights[:n]
-            self._update_models(n, (t - self._delay_estimates[:n]) & mask, credited_all, terminated)
+        if self._textbook:  # Q-learning's own update of this transition
+            _textbook_update(
+                self._q_flat,
+                self._v_max,
+                self._v_cell,
+                s,
+                a,
+                r,
+                s2,
+                terminated,
+                self._alpha,
+                self.gamma,
+            )
+        else:  # the transition joins the history ring (only a λ̂ > 0 reads it back)
+            weights = self._step_weights(s) if self._weighted else None
+            t = self._t
+            cell = s * self._row_size + a
+            if self._largest_estimate:
+                j = t & self._history_mask
+                self._hist_s[j] = s
+                self._hist_s2[j] = s2
+                self._hist_cell[j] = cell
+            n = self.n_models if t >= self._largest_estimate else self._n_valid[t]
+            if n == 1:
+                credited = r if weights is None else float(r * weights[0])
+                if self._smallest_estimate:
+                    self._update_first_model(t, credited)
+                else:  # λ̂ = 0: this very transition
+                    bootstrap = 0.0 if terminated else self._v_max_items[s2]
+                    self._write_entry(s, cell, credited + self.gamma * bootstrap, self._alpha)
+            elif n:
+                self._update_models(n, self._back, r, terminated, weights, t)
         self.num_timesteps += 1
-        self._t = 0 if (terminated or truncated) else t + 1
+        self._t = 0 if (terminated or truncated) else self._t + 1
         if self._greedy_interval:
             self._greedy_clock[0] += 1
             if self._greedy_clock[0] >= self._greedy_interval:
@@ -602,78 +816,72 @@ class MultipleModelQLearning(TabularAgent):
     def _credit_weights(self, acting: int) -> np.ndarray:
         """Advance the delay trace to this step; each model's share of the reward, ``w_t``.
 
-        The products are the compiled loop's, in its order (kernel weight, then trace).
+        The products are the compiled loop's, in its order (kernel weight, then trace): one
+        compiled call (:func:`_credit_weights`).
         """
-        trace = self._trace
-        if trace is not None:
-            trace *= self.delay_trace
-            trace[acting] = 1.0
-        if self._credit_kernel is None:
-            return trace
-        estimates = self._delay_estimates
-        weights = self._credit_kernel[np.abs(estimates - estimates[acting])]
-        return weights if trace is None else weights * trace
+        trace, kernel = self._trace, self._credit_kernel
+        return _credit_weights(
+            _NO_OPTION if trace is None else trace,
+            0.0 if self.delay_trace is None else self.delay_trace,
+            _NO_OPTION if kernel is None else kernel,
+            self._delay_estimates,
+            acting,
+        )
 
     def _update_models(
-        self, n: int, positions: np.ndarray, r: float | np.ndarray, terminated: bool
+        self,
+        n: int,
+        back: np.ndarray,
+        r: float,
+        terminated: bool,
+        weights: np.ndarray | None = None,
+        t: int = 0,
     ) -> None:
         """Update Q(s_{t−λ̂}, a_{t−λ̂}, λ̂) for the first ``n`` models, all targets first.
 
-        ``r`` is the reward credited to every model, or one per model (the options).
+        Args:
+            n: how many models learn (the first ``n``).
+            back: per model, where its transition is in the history ring relative to ``t``:
+                ``−λ̂`` (or, with ``t = 0``, the ring positions themselves).
+            r: the received reward.
+            terminated: the current step (model 0's, when λ̂ = 0 is in Λ) is terminal.
+            weights: each model's share of ``r`` (the options; ``None``: all of it).
+            t: the episode step.
         """
-        v_max, v_cell = self._v_max, self._v_cell
-        states = self._hist_s[positions]
-        cells = self._hist_cell[positions] + self._model_offset[:n]
-        bootstrap = v_max[self._hist_s2[positions]]
-        if terminated and self._has_zero_estimate:
-            bootstrap[0] = 0.0  # only the current step (λ̂ = 0) can be terminal in an episode
-        target = r + self.gamma * bootstrap
-        q_flat = self._q_flat
-        old = q_flat[cells]
-        new = old + self._alpha * (target - old)
-        q_flat[cells] = new
-        # repair the cache: recompute the states whose cached arg-max entry fell ...
-        old_max = v_max[states]
-        fell = v_cell[states] == cells
-        if fell.any():
-            fell &= new < old
-            if fell.any():
-                self._repair(np.unique(states[fell]))
-        # ... and raise the max of the states where an entry rose above it
-        rose = new > old_max
-        if rose.any():
-            rose_states, rose_values, rose_cells = states[rose], new[rose], cells[rose]
-            np.maximum.at(v_max, rose_states, rose_values)
-            top = rose_values == v_max[rose_states]
-            v_cell[rose_states[top]] = rose_cells[top]
-
-    def _update_first_model(self, position: int, r: float, terminated: bool) -> None:
-        """:meth:`_update_models` for the one model that can learn (Python scalars, faster)."""
-        v_max = self._v_max
-        s = self._hist_s.item(position)
-        cell = self._hist_cell.item(position)
-        bootstrap = (
-            0.0
-            if terminated and self._has_zero_estimate
-            else v_max.item(self._hist_s2.item(position))
+        _update_batch(
+            self._q_flat,
+            self._v_max,
+            self._v_cell,
+            self._history,
+            back,
+            n,
+            t,
+            self._history_mask,
+            r,
+            _FULL_CREDIT if weights is None else weights,
+            self._alpha,
+            self.gamma,
+            terminated and self._has_zero_estimate,
+            self.n_actions,
         )
-        self._write_entry(s, cell, r + self.gamma * bootstrap, self._alpha)
+
+    def _update_first_model(self, t: int, r: float) -> None:
+        """The update of the one model that can learn at step ``t``, a λ̂ > 0 (Python scalars).
+
+        Its transition, ``λ̂`` steps back, is read off the history; it is not terminal (only the
+        current step can be, in an episode).
+        """
+        position = (t - self._smallest_estimate) & self._history_mask
+        target = r + self.gamma * self._v_max_items[self._hist_s2[position]]
+        self._write_entry(self._hist_s[position], self._hist_cell[position], target, self._alpha)
 
     def _write_entry(self, s: int, cell: int, target: float, rate: float) -> None:
         """``Q[cell] += rate · (target − Q[cell])`` for an entry of state ``s``, cache kept exact.
 
         The one-entry update every single-table rule shares (Q-learning, fixed delay, the oracle,
-        expected credit): Python scalars, cheaper than numpy calls for one entry.
+        expected credit): one compiled call (:func:`_write`).
         """
-        q_flat, v_max = self._q_flat, self._v_max
-        old = q_flat.item(cell)
-        new = old + rate * (target - old)
-        q_flat[cell] = new
-        if new > v_max.item(s):
-            v_max[s] = new
-            self._v_cell[s] = cell
-        elif new < old and self._v_cell.item(s) == cell:
-            self._repair(np.array([s]))
+        _write(self._q_flat, self._v_max, self._v_cell, s, cell, target, rate)
 
     def _repair(self, states: np.ndarray) -> None:
         """Recompute the cached max and its cell for ``states`` (distinct state indices)."""

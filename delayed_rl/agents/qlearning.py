@@ -46,6 +46,7 @@ class QLearning(MultipleModelQLearning):
     """
 
     _hyperparameter_names = _SINGLE_MODEL_NAMES
+    _choose = MultipleModelQLearning._choose_action  # one model: the choice is its action's
 
     @shares_hyperparameters
     def __init__(self, env: gym.Env | str, **hyperparameters: Any):
@@ -78,6 +79,7 @@ class FixedDelayQLearning(MultipleModelQLearning):
     """
 
     _hyperparameter_names = _SINGLE_MODEL_NAMES
+    _choose = MultipleModelQLearning._choose_action  # one model: the choice is its action's
 
     @shares_hyperparameters
     def __init__(

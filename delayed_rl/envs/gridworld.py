@@ -9,6 +9,7 @@ import numpy as np
 from gymnasium import spaces
 
 from delayed_rl._validation import check_choice, check_int
+from delayed_rl.envs._actions import ActionCheck
 
 UP, RIGHT, DOWN, LEFT = 0, 1, 2, 3
 _MOVES = {UP: (-1, 0), RIGHT: (0, 1), DOWN: (1, 0), LEFT: (0, -1)}
@@ -98,6 +99,9 @@ class GridWorldEnv(gym.Env):
         self.reward_state = 0
         self.observation_space = spaces.Discrete(self.n_states)
         self.action_space = spaces.Discrete(4)
+        self._check_action = ActionCheck(
+            self.action_space, "in Discrete(4) (0 up, 1 right, 2 down, 3 left)"
+        ).check
         self.next_state, self.reward_table = self._build_tables()
         self.P = {
             s: {a: [(1.0, nxt, reward, False)] for a, (nxt, reward) in enumerate(moves)}
@@ -148,11 +152,13 @@ class GridWorldEnv(gym.Env):
         return self.state, {}
 
     def step(self, action):
-        """Move (or collect the +10 and warp home); truncate after ``max_steps`` if set."""
-        if not self.action_space.contains(action):
-            raise ValueError(
-                f"action must be in Discrete(4) (0 up, 1 right, 2 down, 3 left), got {action!r}"
-            )
+        """Move (or collect the +10 and warp home); truncate after ``max_steps`` if set.
+
+        Raises:
+            ValueError: ``action`` is not in the action space (Gymnasium's
+                ``Discrete.contains``, answered fast for ``int`` and numpy integers).
+        """
+        self._check_action(action)
         reward = float(self.reward_table[self.state, action])
         self.state = int(self.next_state[self.state, action])
         self.steps += 1

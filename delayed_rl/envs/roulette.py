@@ -6,6 +6,7 @@ import gymnasium as gym
 from gymnasium import spaces
 
 from delayed_rl._validation import check_choice, check_int
+from delayed_rl.envs._actions import ActionCheck
 
 BET_EVEN, BET_13 = 0, 1
 POCKETS = 38  # an American wheel: 1-36, 0 and 00
@@ -64,6 +65,7 @@ class RouletteEnv(gym.Env):
         self.render_mode = check_choice("render_mode", render_mode, (None,))
         self.observation_space = spaces.Discrete(1)
         self.action_space = spaces.Discrete(2)
+        self._check_action = ActionCheck(self.action_space, "0 (bet even) or 1 (bet 13)").check
         self.P = {
             0: {
                 BET_EVEN: [
@@ -83,9 +85,13 @@ class RouletteEnv(gym.Env):
         return 0, {}
 
     def step(self, action):
-        """Spin the wheel for one $1 bet; ``info["pocket"]`` names the pocket (``"00"``...)."""
-        if not self.action_space.contains(action):
-            raise ValueError(f"action must be 0 (bet even) or 1 (bet 13), got {action!r}")
+        """Spin the wheel for one $1 bet; ``info["pocket"]`` names the pocket (``"00"``...).
+
+        Raises:
+            ValueError: ``action`` is not in the action space (Gymnasium's
+                ``Discrete.contains``, answered fast for ``int`` and numpy integers).
+        """
+        self._check_action(action)
         pocket = int(self.np_random.integers(POCKETS))  # 0..35 stand for 1..36; 36, 37 are 0, 00
         if action == BET_EVEN:
             reward = 1.0 if pocket < 36 and (pocket + 1) % 2 == 0 else -1.0

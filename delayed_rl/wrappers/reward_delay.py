@@ -256,7 +256,7 @@ class RewardDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
     def step(self, action):
         """Step the env; return the rewards due now (see the class docstring)."""
         obs, reward, terminated, truncated, info = self.env.step(action)
-        if type(reward) is not float or reward - reward:  # x - x is 0 for every finite float
+        if type(reward) is not float:
             reward = self._checked_reward(reward)
         try:
             delay = self._delays.pop()
@@ -264,8 +264,10 @@ class RewardDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
             delay = self._sampler.refill().pop()
         clock = self._clock
         self._clock = clock + 1
-        due = self._due
-        if reward:  # a zero reward changes no sum: nothing to schedule
+        if reward:  # a zero reward changes no sum (and is finite): nothing to schedule
+            if reward - reward:  # inf or NaN (x - x is 0 for every finite float)
+                self._refuse(reward, delay)
+            due = self._due
             when = clock + delay
             slot = due.get(when, 0.0) + reward
             pending = self._pending + reward
@@ -273,26 +275,15 @@ class RewardDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
                 pending = self._checked_pending(when, slot)
             due[when] = slot
             self._pending = pending
-        if clock in due:
+        if clock in self._due:
+            due = self._due
             delivered = due.pop(clock)
-            self._pending = self._pending - delivered if due else 0.0  # exact 0 once all is in
-            if self._pending - self._pending:
-                self._pending = exact_sum(due.values())
+            pending = self._pending - delivered if due else 0.0  # exact 0 once all is in
+            self._pending = exact_sum(due.values()) if pending - pending else pending
         else:
             delivered = 0.0
         if terminated or truncated:
-            self._episode_ended = True
-            if self.on_episode_end == "flush":
-                flushed = self._clear_pending()
-                info["flushed_reward"] = flushed
-                delivered += flushed
-                if delivered - delivered:
-                    raise ValueError(
-                        "the rewards delivered at the episode's last step (due then, plus the "
-                        "flushed rest) sum to more than float64 can hold; rescale the env's rewards"
-                    )
-            elif self.on_episode_end == "drop":
-                info["dropped_reward"] = self._clear_pending()
+            delivered = self._settle_episode_end(delivered, info)
         info["undelayed_reward"] = reward
         info["reward_delay"] = delay
         info["pending_reward"] = self._pending
@@ -301,6 +292,40 @@ class RewardDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
                 clock, delay, reward, terminated or truncated
             )
         return obs, delivered, terminated, truncated, info
+
+    def _settle_episode_end(self, delivered: float, info: dict[str, Any]) -> float:
+        """The episode ended at this step: settle what is pending (``on_episode_end``).
+
+        Returns:
+            What the step delivers: ``delivered`` plus, under ``"flush"``, the rest pending
+            (``info["flushed_reward"]``); ``"drop"`` reports it as ``info["dropped_reward"]``.
+
+        Raises:
+            ValueError: the flushed sum is beyond float64's range.
+        """
+        self._episode_ended = True
+        if self.on_episode_end == "flush":
+            flushed = self._clear_pending()
+            info["flushed_reward"] = flushed
+            delivered += flushed
+            if delivered - delivered:
+                raise ValueError(
+                    "the rewards delivered at the episode's last step (due then, plus the "
+                    "flushed rest) sum to more than float64 can hold; rescale the env's rewards"
+                )
+        elif self.on_episode_end == "drop":
+            info["dropped_reward"] = self._clear_pending()
+        return delivered
+
+    def _refuse(self, reward: float, delay: int) -> None:
+        """Undo the step begun for a non-finite ``reward`` (its delay, the clock), then refuse it.
+
+        Raises:
+            ValueError: always (see :meth:`_checked_reward`).
+        """
+        self._delays.append(delay)
+        self._clock -= 1
+        self._checked_reward(reward)
 
     def _checked_reward(self, reward: Any) -> float:
         """``reward`` as a Python float; a NaN or infinite reward raises ``ValueError``.
