@@ -733,3 +733,67 @@ def test_registered_reward_delay_survives_the_json_round_trip(delay) -> None:
         layer = layer.env
     assert type(layer) is RewardDelay and layer.delay == delay
     assert trajectory(env, 3, 200) == trajectory(rebuilt, 3, 200)
+
+
+# ---------------------------------------------------------------------- the flush trap
+class _TerminalReward(gym.Env):
+    """Episodes of ``length`` steps; reward ``final`` at the last step, ``along`` at the others."""
+
+    observation_space = gym.spaces.Discrete(1)
+    action_space = gym.spaces.Discrete(1)
+
+    def __init__(self, length=6, final=1.0, along=0.0):
+        self.length, self.final, self.along = length, final, along
+
+    def reset(self, *, seed=None, options=None):
+        self.t = 0
+        return 0, {}
+
+    def step(self, action):
+        self.t += 1
+        done = self.t >= self.length
+        return 0, self.final if done else self.along, done, False, {}
+
+
+def _trap_warnings(env, episodes):
+    """The flush-trap warnings raised over ``episodes`` episodes of ``env``."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        env.reset(seed=0)
+        for _ in range(episodes):
+            while not env.step(0)[2]:
+                pass
+            env.reset()
+    return [w for w in caught if "the delay had no effect" in str(w.message)]
+
+
+@pytest.mark.parametrize(
+    "inner, mode, delay, warned",
+    [
+        (_TerminalReward(), "flush", Poisson(5.0), True),  # the trap: the delay did nothing
+        (_TerminalReward(), "carry", Poisson(5.0), False),  # carry delays it: no trap
+        (_TerminalReward(), "drop", Poisson(5.0), False),
+        (_TerminalReward(), "flush", Constant(0), False),  # no delay asked for: nothing to say
+        (_TerminalReward(along=-1.0), "flush", Constant(1), False),  # rewards along the way
+        (_TerminalReward(final=0.0), "flush", Poisson(5.0), False),  # no reward at all
+        (_TerminalReward(along=1.0), "flush", Poisson(90.0), False),  # all flushed: delayed
+    ],
+)
+def test_the_flush_trap_warns_once_naming_carry(inner, mode, delay, warned):
+    env = RewardDelay(inner, delay, on_episode_end=mode)
+    caught = _trap_warnings(env, 25)
+    assert len(caught) == (1 if warned else 0)
+    if warned:
+        assert "on_episode_end='carry'" in str(caught[0].message)
+        assert "first 10 episodes" in str(caught[0].message)
+
+
+def test_the_watch_ends_and_costs_nothing_after():
+    env = RewardDelay(_TerminalReward(along=1.0), Poisson(3.0))
+    assert "step" in vars(env)  # watching
+    assert _trap_warnings(env, 2) == []
+    assert "step" not in vars(env)  # a reward before the end settled it: the class's step again
+    trapped = RewardDelay(_TerminalReward(), Poisson(3.0))
+    _trap_warnings(trapped, 10)
+    assert "step" not in vars(trapped)
+    assert _trap_warnings(trapped, 20) == []  # once

@@ -14,6 +14,7 @@ import numpy as np
 from delayed_rl._delay_line import draw_delays, exact_sum
 from delayed_rl._validation import check_bool, check_choice, check_int
 from delayed_rl.delays import MAX_DELAY, Delay, Poisson, as_delay, delay_spec
+from delayed_rl.wrappers._spec import JsonSpecMixin
 
 __all__ = [
     "EPISODE_END_MODES",
@@ -52,24 +53,6 @@ def check_max_delay(max_delay: Any) -> int | None:
     return check_int(
         "max_delay", max_delay, 0, MAX_DELAY, optional=True, note=" (delays must fit int64)"
     )
-
-
-def _json_reward_delay(spec: Any) -> None:
-    """Record a registered env's ``reward_delay`` Delay in ``spec.kwargs`` as its JSON dict.
-
-    ``gym.make(id, reward_delay=Constant(2))`` keeps the object in the env spec's kwargs, which
-    ``EnvSpec.to_json`` cannot write; the library's entry points read the dict back.
-    """
-    value = spec.kwargs.get("reward_delay") if isinstance(spec.kwargs, dict) else None
-    if not isinstance(value, Delay):
-        return
-    entry = spec.entry_point
-    try:  # a "module:attribute" string names the entry point (its module is loaded already)
-        entry = gym.envs.registration.load_env_creator(entry) if isinstance(entry, str) else entry
-    except (ImportError, AttributeError, ValueError):
-        return
-    if getattr(entry, "reads_delay_descriptions", False):  # a DelayableEntryPoint
-        spec.kwargs = {**spec.kwargs, "reward_delay": delay_spec(value)}
 
 
 def check_episode_end(on_episode_end: Any) -> str:
@@ -114,7 +97,37 @@ class DelaySampler:
         return (self.block or self.refill()).pop()
 
 
-class RewardDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
+FLUSH_WATCH_EPISODES = 10
+"""How many first episodes the flush-trap watch looks at (see :class:`RewardDelay`)."""
+
+
+class FlushWatch:
+    """Watches the first episodes under ``"flush"``: did the env reward only at final steps?
+
+    Attributes:
+        episodes: how many episodes ended so far.
+        rewarded: how many of them had a nonzero reward (at their final step).
+        trapped: after the watch, whether every reward was emitted at a final step (and some
+            were): then "flush" delivered each at once, and the delay had no effect.
+    """
+
+    def __init__(self):
+        self.episodes = self.rewarded = 0
+        self.trapped = False
+
+    def observe(self, emitted: float, ended: bool) -> bool:
+        """Take one step's reward, as the inner env emitted it; return ``True`` once it is over."""
+        if not ended:
+            return emitted != 0.0  # a reward before the end: no trap
+        self.episodes += 1
+        self.rewarded += emitted != 0.0
+        if self.episodes < FLUSH_WATCH_EPISODES:
+            return False
+        self.trapped = self.rewarded > 0
+        return True
+
+
+class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Delays every reward by its own random number of steps, drawn from ``delay``.
 
     At step ``t`` (counted from 0 in each episode) the inner env emits ``r_t``; the wrapper draws
@@ -130,6 +143,13 @@ class RewardDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
     - ``"drop"``: they are discarded and reported as ``info["dropped_reward"]``;
     - ``"carry"``: they are kept and delivered in the next episode at their scheduled offsets
       (continuing-task semantics: a robot put back on its track keeps receiving old feedback).
+
+    **The flush trap.** Under ``"flush"``, an env whose only reward comes at an episode's final step
+    (FrozenLake, Minigrid) is not delayed at all: the pending reward is flushed at that very step.
+    The wrapper watches the first :data:`FLUSH_WATCH_EPISODES` episodes and, if the inner env
+    emitted every reward of theirs at a final step (so every one was delivered as it came), warns
+    once, naming ``"carry"`` (which delays a terminal reward into the next episode). The watch
+    costs nothing once it is over.
 
     If ``reset()`` is called in the middle of an episode (for example by an outer ``TimeLimit``
     that this wrapper cannot see), the pending rewards are discarded under ``"flush"`` and
@@ -204,6 +224,9 @@ class RewardDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.delay = as_delay(delay)
         self.max_delay = check_max_delay(max_delay)
         self.on_episode_end = check_episode_end(on_episode_end)
+        if self.on_episode_end == "flush" and self.delay.support_max != 0:
+            self._watch = FlushWatch()
+            self.step = self._watched_step  # until the watch is over (then the class's step)
         self.record_arrivals = check_bool("record_arrivals", record_arrivals)
         self._sampler = DelaySampler(self.delay, self.max_delay)
         self._delays = self._sampler.block  # the sampler refills this very list
@@ -218,14 +241,6 @@ class RewardDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
     def pending_reward(self) -> float:
         """The sum of rewards emitted but not yet delivered."""
         return self._pending
-
-    @property
-    def spec(self):
-        """The env spec with this wrapper's ``WrapperSpec``, JSON-able (see the class docstring)."""
-        spec = gym.Wrapper.spec.fget(self)
-        if spec is not None:
-            _json_reward_delay(spec)
-        return spec
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Reset the env; ``seed`` also reseeds the delay generator.
@@ -292,6 +307,21 @@ class RewardDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
                 clock, delay, reward, terminated or truncated
             )
         return obs, delivered, terminated, truncated, info
+
+    def _watched_step(self, action):
+        """:meth:`step`, and the flush-trap watch (see the class docstring) on what it returns."""
+        step = type(self).step(self, action)
+        if self._watch.observe(step[4]["undelayed_reward"], step[2] or step[3]):
+            del self.step  # the watch is over: back to the class's step, at no cost
+            if self._watch.trapped:
+                warnings.warn(
+                    f"the env emitted every reward of the first {FLUSH_WATCH_EPISODES} episodes "
+                    "at an episode's final step, where on_episode_end='flush' delivers it at "
+                    "once: the delay had no effect. Use on_episode_end='carry' to delay such "
+                    "rewards into the next episode",
+                    stacklevel=2,
+                )
+        return step
 
     def _settle_episode_end(self, delivered: float, info: dict[str, Any]) -> float:
         """The episode ended at this step: settle what is pending (``on_episode_end``).
