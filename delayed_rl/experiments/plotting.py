@@ -80,34 +80,35 @@ def robust_ylim(
     curves: Sequence[tuple[np.ndarray, np.ndarray]],
     include: Sequence[float] = (),
     skip: float = 0.05,
-    fence: float = 5.0,
+    reach: float = 0.5,
     margin: float = 0.06,
 ) -> tuple[float, float] | None:
-    """y-limits that one early outlier does not stretch.
+    """y-limits that an early transient far off the curves' later range does not stretch.
 
-    The rule: pool every curve's finite values after the first ``skip`` of the step axis (the
-    span from the smallest to the largest step over all curves); their quartiles Q1, Q3 give
-    the fences ``[Q1 − fence·IQR, Q3 + fence·IQR]``. The limits are the extent of all finite
-    values (the early ones too) clipped to those fences, widened to take in ``include`` (e.g.
-    the thesis's values), plus ``margin`` of the range each side. A curve that settles keeps
-    all of it in view; an early spike far outside the settled spread (a normalised reward
-    divided by a reference that has barely earned anything yet) runs off the axes instead of
-    squashing every other curve flat.
+    The rule: the *settled range* is the extent of every curve's finite values after the first
+    ``skip`` of the step axis (the span from the smallest to the largest step over all
+    curves). Earlier values stay in view while they lie within ``reach`` of that range's
+    width beyond it (a learning curve rising from its start); further out they run off the
+    axes (a normalised reward divided by a reference that has barely earned anything yet), so
+    they do not squash every other curve flat. The limits then take in ``include`` (e.g. the
+    thesis's values) and ``margin`` of the range each side.
 
     Args:
         curves: ``(steps, values)`` pairs, e.g. the mean curves and their band edges.
         include: values that must be inside the limits.
-        skip: the leading fraction of the step axis the fences ignore, in [0, 1).
-        fence: how many IQRs beyond the quartiles a value may lie and still be in view.
+        skip: the leading fraction of the step axis that does not set the settled range, in
+            [0, 1).
+        reach: how far beyond the settled range an early value may lie and stay in view, as a
+            fraction of that range's width.
         margin: the padding, as a fraction of the range, on each side.
 
     Returns:
         ``(low, high)``, or ``None`` when there is no finite value (matplotlib's limits).
 
     >>> steps = np.arange(1, 101)
-    >>> spike = np.where(steps <= 3, -100.0, 0.5)
+    >>> spike = np.where(steps <= 3, -100.0, np.linspace(0.0, 0.5, 100))
     >>> low, high = robust_ylim([(steps, spike)], include=[0.6])
-    >>> -1 < low < 0.5 < 0.6 < high < 1
+    >>> -0.3 < low < 0.0 < 0.6 < high < 0.7
     True
     """
     finite = [
@@ -125,10 +126,10 @@ def robust_ylim(
     every = np.concatenate([y[np.isfinite(y)] for _, y in finite])
     low, high = float(every.min()), float(every.max())
     if late.size:
-        q1, q3 = np.percentile(late, [25, 75])
-        iqr = max(float(q3 - q1), 1e-9 * max(1.0, abs(float(q3))))
-        low = max(low, float(q1 - fence * iqr))
-        high = min(high, float(q3 + fence * iqr))
+        settled_low, settled_high = float(late.min()), float(late.max())
+        width = max(settled_high - settled_low, 1e-9 * max(1.0, abs(settled_high)))
+        low = max(low, settled_low - reach * width)
+        high = min(high, settled_high + reach * width)
     low, high = min([low, *extra]), max([high, *extra])
     pad = margin * (high - low) if high > low else max(0.05, 0.05 * abs(high))
     return low - pad, high + pad
@@ -151,6 +152,7 @@ def learning_curves(
     ylim: tuple[float, float] | str | None = "robust",
     xlabel: str = "time step",
     thesis_ratios: Sequence[tuple[str, float, str, str]] = (),
+    settle: float = 0.05,
 ) -> None:
     """Mean curve with a 95 % band per group, the thesis's values dashed.
 
@@ -166,6 +168,8 @@ def learning_curves(
         thesis_ratios: thesis values given as ratios, each ``(base, factor, label, group)``: a
             dashed curve ``factor`` × ``base``'s mean curve, in ``group``'s colour (e.g. MMQ's
             accumulated error as 0.4 × Q's).
+        settle: with ``ylim="robust"``, the leading fraction of the steps that does not set
+            the curves' settled range (:func:`robust_ylim`'s ``skip``).
     """
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(9.5, 4.4))
@@ -193,7 +197,7 @@ def learning_curves(
         ax.plot(steps, factor * mean, color=colour, linestyle="--", linewidth=1.3, label=label)
         drawn.append((steps, factor * mean))
     if ylim == "robust":
-        ylim = robust_ylim(drawn, include=[line[0] for line in thesis])
+        ylim = robust_ylim(drawn, include=[line[0] for line in thesis], skip=settle)
     if ylim is not None:
         ax.set_ylim(*ylim)
     outside_legend(ax)
