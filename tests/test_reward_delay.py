@@ -788,12 +788,11 @@ def test_the_flush_trap_warns_once_naming_carry(inner, mode, delay, warned):
         assert "first 10 episodes" in str(caught[0].message)
 
 
-def test_the_watch_ends_and_costs_nothing_after():
+def test_the_watch_ends_at_the_first_reward_before_an_end_or_after_ten_episodes():
     env = RewardDelay(_TerminalReward(along=1.0), Poisson(3.0))
-    assert "step" in vars(env)  # watching
+    assert env._watch is not None
     assert _trap_warnings(env, 2) == []
-    assert "step" not in vars(env)  # a reward before the end settled it: the class's step again
+    assert env._watch is None  # a reward before the end settled it
     trapped = RewardDelay(_TerminalReward(), Poisson(3.0))
-    _trap_warnings(trapped, 10)
-    assert "step" not in vars(trapped)
+    assert len(_trap_warnings(trapped, 10)) == 1 and trapped._watch is None
     assert _trap_warnings(trapped, 20) == []  # once

@@ -115,10 +115,11 @@ class FlushWatch:
         self.episodes = self.rewarded = 0
         self.trapped = False
 
-    def observe(self, emitted: float, ended: bool) -> bool:
-        """Take one step's reward, as the inner env emitted it; return ``True`` once it is over."""
-        if not ended:
-            return emitted != 0.0  # a reward before the end: no trap
+    def end_episode(self, emitted: float) -> bool:
+        """Count an episode whose last step emitted ``emitted``; ``True`` once the watch is over.
+
+        The wrapper stops the watch itself at a reward emitted before an episode's end.
+        """
         self.episodes += 1
         self.rewarded += emitted != 0.0
         if self.episodes < FLUSH_WATCH_EPISODES:
@@ -148,8 +149,7 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
     (FrozenLake, Minigrid) is not delayed at all: the pending reward is flushed at that very step.
     The wrapper watches the first :data:`FLUSH_WATCH_EPISODES` episodes and, if the inner env
     emitted every reward of theirs at a final step (so every one was delivered as it came), warns
-    once, naming ``"carry"`` (which delays a terminal reward into the next episode). The watch
-    costs nothing once it is over.
+    once, naming ``"carry"`` (which delays a terminal reward into the next episode).
 
     If ``reset()`` is called in the middle of an episode (for example by an outer ``TimeLimit``
     that this wrapper cannot see), the pending rewards are discarded under ``"flush"`` and
@@ -224,9 +224,8 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.delay = as_delay(delay)
         self.max_delay = check_max_delay(max_delay)
         self.on_episode_end = check_episode_end(on_episode_end)
-        if self.on_episode_end == "flush" and self.delay.support_max != 0:
-            self._watch = FlushWatch()
-            self.step = self._watched_step  # until the watch is over (then the class's step)
+        watching = self.on_episode_end == "flush" and self.delay.support_max != 0
+        self._watch = FlushWatch() if watching else None  # None once the watch is over
         self.record_arrivals = check_bool("record_arrivals", record_arrivals)
         self._sampler = DelaySampler(self.delay, self.max_delay)
         self._delays = self._sampler.block  # the sampler refills this very list
@@ -282,6 +281,8 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
         if reward:  # a zero reward changes no sum (and is finite): nothing to schedule
             if reward - reward:  # inf or NaN (x - x is 0 for every finite float)
                 self._refuse(reward, delay)
+            if self._watch is not None and not (terminated or truncated):
+                self._watch = None  # a reward before an episode's end: no flush trap
             due = self._due
             when = clock + delay
             slot = due.get(when, 0.0) + reward
@@ -299,6 +300,8 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
             delivered = 0.0
         if terminated or truncated:
             delivered = self._settle_episode_end(delivered, info)
+            if self._watch is not None:
+                self._watch_episode_end(reward)
         info["undelayed_reward"] = reward
         info["reward_delay"] = delay
         info["pending_reward"] = self._pending
@@ -308,20 +311,19 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
             )
         return obs, delivered, terminated, truncated, info
 
-    def _watched_step(self, action):
-        """:meth:`step`, and the flush-trap watch (see the class docstring) on what it returns."""
-        step = type(self).step(self, action)
-        if self._watch.observe(step[4]["undelayed_reward"], step[2] or step[3]):
-            del self.step  # the watch is over: back to the class's step, at no cost
-            if self._watch.trapped:
-                warnings.warn(
-                    f"the env emitted every reward of the first {FLUSH_WATCH_EPISODES} episodes "
-                    "at an episode's final step, where on_episode_end='flush' delivers it at "
-                    "once: the delay had no effect. Use on_episode_end='carry' to delay such "
-                    "rewards into the next episode",
-                    stacklevel=2,
-                )
-        return step
+    def _watch_episode_end(self, reward: float) -> None:
+        """The flush-trap watch at an episode's end (``reward``: its last step's, emitted)."""
+        if not self._watch.end_episode(reward):
+            return
+        trapped, self._watch = self._watch.trapped, None
+        if trapped:
+            warnings.warn(
+                f"the env emitted every reward of the first {FLUSH_WATCH_EPISODES} episodes at "
+                "an episode's final step, where on_episode_end='flush' delivers it at once: the "
+                "delay had no effect. Use on_episode_end='carry' to delay such rewards into the "
+                "next episode",
+                stacklevel=3,
+            )
 
     def _settle_episode_end(self, delivered: float, info: dict[str, Any]) -> float:
         """The episode ended at this step: settle what is pending (``on_episode_end``).
