@@ -67,14 +67,20 @@ def test_make_with_a_delay_distribution() -> None:
     assert type(wrapper) is RewardDelay and wrapper.delay == Geometric(0.25)
 
 
-def trajectory(env: gym.Env, seed: int, n: int = 300):
+def reward_row(obs, reward, terminated, truncated, info):
+    """What a reward-delayed step shows."""
+    return reward, info["reward_delay"], info["undelayed_reward"], terminated, truncated
+
+
+def trajectory(env: gym.Env, seed: int, n: int = 300, row=reward_row):
+    """``row(*step)`` of ``n`` seeded random steps of ``env`` (reset at episode ends)."""
     env.reset(seed=seed)
     rng = np.random.default_rng(seed)
     out = []
     for _ in range(n):
-        _, reward, terminated, truncated, info = env.step(int(rng.integers(env.action_space.n)))
-        out.append((reward, info["reward_delay"], info["undelayed_reward"], terminated, truncated))
-        if terminated or truncated:
+        step = env.step(int(rng.integers(env.action_space.n)))
+        out.append(row(*step))
+        if step[2] or step[3]:
             env.reset()
     return out
 
@@ -152,16 +158,9 @@ def test_every_id_takes_the_three_delays_in_the_documented_order(env_id: str) ->
     assert layers(only_actions) == ["ActionDelay"]
 
 
-def action_trajectory(env: gym.Env, seed: int, n: int = 200):
-    env.reset(seed=seed)
-    rng = np.random.default_rng(seed)
-    out = []
-    for _ in range(n):
-        obs, reward, terminated, truncated, info = env.step(int(rng.integers(env.action_space.n)))
-        out.append((obs, reward, info["executed_action"], info["observation_delay"], truncated))
-        if terminated or truncated:
-            env.reset()
-    return out
+def action_row(obs, reward, terminated, truncated, info):
+    """What a step under all three delays shows."""
+    return obs, reward, info["executed_action"], info["observation_delay"], truncated
 
 
 @pytest.mark.parametrize("through_json", [False, True])
@@ -178,7 +177,7 @@ def test_the_delays_round_trip_through_the_spec(through_json: bool) -> None:
     assert layers(rebuilt) == ["RewardDelay", "ObservationDelay", "ActionDelay"]
     assert find(rebuilt, ObservationDelay).delay == Uniform(0, 3)
     assert find(rebuilt, ActionDelay).delay == Poisson(1.5)
-    assert action_trajectory(env, 3) == action_trajectory(rebuilt, 3)
+    assert trajectory(env, 3, 200, action_row) == trajectory(rebuilt, 3, 200, action_row)
 
 
 @pytest.mark.parametrize("name", ["action_delay", "observation_delay"])
