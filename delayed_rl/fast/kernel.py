@@ -138,6 +138,27 @@ def _count_ties(qf, qmax, row_size, ties):
             ties[s] += qf[i] == qmax[s]
 
 
+@_jit
+def _write(qf, qmax, qcell, qties, s, cell, new, row_size):
+    """Set ``qf[cell]``, an entry of state ``s``'s row, to ``new``, keeping the cache exact.
+
+    A state's row is rescanned only when its cached arg-max entry decreases.
+    """
+    old = qf[cell]
+    qf[cell] = new
+    if new > qmax[s]:
+        qmax[s] = new
+        qcell[s] = cell
+        qties[s] = 1
+    elif new == qmax[s]:
+        qties[s] += old != new
+    elif old == qmax[s]:  # an entry holding the max fell
+        if qcell[s] != cell:
+            qties[s] -= 1
+        else:  # the cached arg-max itself: rescan the state's row
+            qmax[s], qcell[s], qties[s] = _scan_max(qf, s * row_size, row_size)
+
+
 NO_KERNEL = np.zeros(0)
 """The empty reward kernel (:attr:`Rule.credit_kernel`): every model is credited the reward."""
 NO_TRACE = np.zeros(0)
@@ -394,7 +415,7 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, mod
     has_kernel = kernel_weights.shape[0] > 0
     has_trace = decay >= 0.0
     weighted = has_kernel or has_trace
-    has_rates = lag_rates.shape[0] > 0
+    rates = lag_rates if lag_rates.shape[0] > 0 else np.full(estimates.shape[0], alpha)
     out_cdf, out_next, out_reward = env.out_cdf, env.out_next, env.out_reward
     out_term = env.out_term
     init_cdf, max_steps, cut_steps = env.init_cdf, env.max_steps, env.cut_steps
@@ -516,14 +537,27 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, mod
             for j in range(n_models):
                 trace[j] *= decay
             trace[acting] = 1.0
+        if oracle:  # each arriving reward's own transition, oldest first, one by one
+            for i in range(n_arrived):
+                e = arrivals.order[i]
+                if clock - 1 - e >= arrivals.held:
+                    continue  # a transition the oracle does not hold
+                p = e & pmask
+                cell = np.uint64(arrivals.s[p] * row_size + arrivals.a[p])
+                bootstrap = 0.0 if arrivals.terminated[p] else gamma * qmax[arrivals.s2[p]]
+                old = qf[cell]
+                new = old + alpha * (arrivals.value[p] + bootstrap - old)
+                _write(qf, qmax, qcell, qties, np.uint64(arrivals.s[p]), cell, new, row_size)
+            n_lags_now = 0  # (the lags below do not learn)
+        else:
+            n_lags_now = n_lags
         # learn: every TD error first (each reads the cached max of its next state) ...
-        count = 0  # the lags whose step t − λ̂ is in this episode: a prefix (Λ is sorted)
-        while count < n_lags and estimates[count] < hist_count:
-            count += 1
-        if oracle:  # or: each arriving reward's own transition, oldest first, one by one
-            count = n_arrived
-        for j in range(0 if oracle else count):
+        count = n_lags_now  # the lags whose step t − λ̂ is in this episode: a prefix (sorted Λ)
+        for j in range(n_lags_now):
             estimate = estimates[j]
+            if estimate >= hist_count:
+                count = j
+                break
             pos = np.uint64((hist_count - 1 - estimate) & hmask)
             bootstrap = 0.0 if hist_term[pos] else gamma * qmax[np.uint64(hist_s2[pos])]
             credited = delivered
@@ -538,25 +572,18 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, mod
                 credited = delivered * weight
             states[j] = hist_s[pos]
             cells[j] = hist_s[pos] * row_size + (j if per_lag else 0) * n_actions + hist_a[pos]
-            targets[j] = credited + bootstrap - qf[cells[j]]  # the TD error
-        for j in range(count):  # ... then the writes (one lag's after another's on one entry)
-            if oracle:  # the arrival's TD error, after the writes before it
-                e = arrivals.order[j]
-                if clock - 1 - e >= arrivals.held:
-                    continue  # a transition the oracle does not hold
-                p = e & pmask
-                sj = np.uint64(arrivals.s[p])
-                cell = np.uint64(arrivals.s[p] * row_size + arrivals.a[p])
-                bootstrap = 0.0 if arrivals.terminated[p] else gamma * qmax[arrivals.s2[p]]
-                error = arrivals.value[p] + bootstrap - qf[cell]
-                rate = alpha
-            else:
-                sj = states[j]
-                cell = cells[j]
-                error = targets[j]
-                rate = lag_rates[j] if has_rates else alpha
+            targets[j] = credited + bootstrap
+            if not per_lag:  # one table: the TD error now, before any write of the step
+                targets[j] -= qf[cells[j]]
+        # ... then the writes, lag after lag (several lags' increments to one entry add up).
+        # This is _write, inlined: the call measured 1.4-3x slower in this loop.
+        for j in range(count):
+            sj = states[j]
+            cell = cells[j]
             old = qf[cell]
-            new = old + rate * error
+            # one entry per lag: its TD error is the one it had before the step; one table:
+            # the error computed before the step's writes
+            new = old + alpha * (targets[j] - old) if per_lag else old + rates[j] * targets[j]
             qf[cell] = new
             if new > qmax[sj]:
                 qmax[sj] = new
