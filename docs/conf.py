@@ -83,6 +83,7 @@ def generate() -> None:
     (out / "experiments").mkdir(parents=True)
     (out / "api").mkdir()
     _experiment_pages(out / "experiments")
+    _report_page(out)
     _api_pages(out / "api")
     _grid_frames(out)
 
@@ -145,9 +146,17 @@ def _experiment_pages(out: Path) -> None:
         "Every thesis experiment (and those beyond it), as `delayed-rl bench NAME` runs it: what "
         "it measures, then the committed run's report — each claim beside the thesis's value, "
         "its 95 % interval over seeds, its verdict and the criterion that decides it — and "
-        "figures. {doc}`/reproduction` explains the differences.\n\n"
+        "figures. {doc}`/_generated/reproduction` explains the differences.\n\n"
         f"```{{toctree}}\n:maxdepth: 1\n\n{toctree}\n```\n"
     )
+
+
+def _report_page(out: Path) -> None:
+    """``benchmarks/REPORT.md`` as a page: its links to reports lead to the experiment pages."""
+    text = (ROOT / "benchmarks" / "REPORT.md").read_text()
+    text = re.sub(r"\]\(reproduction/([\w-]+)/report\.md\)", r"](experiments/\1.md)", text)
+    text = text.replace("](reproduction/", "](../../benchmarks/reproduction/")
+    (out / "reproduction.md").write_text(text)
 
 
 def _grid_frames(out: Path) -> None:

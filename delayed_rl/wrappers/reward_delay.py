@@ -27,6 +27,7 @@ __all__ = [
     "wrap_reward_delay",
 ]
 
+#: The values of ``on_episode_end``: what happens to pending rewards when an episode ends.
 EPISODE_END_MODES = ("flush", "drop", "carry")
 _BLOCK = 1024  # delays drawn per call to the generator
 _DELAY_STREAM = 0x5DE1A7  # spawn key separating the delay stream from the env's own stream
