@@ -47,6 +47,7 @@ __all__ = [
     "Poisson",
     "Uniform",
     "as_delay",
+    "checked_delay",
     "delay_spec",
 ]
 
@@ -479,6 +480,20 @@ def as_delay(delay: Delay | float | Mapping[str, Any], name: str = "delay") -> D
         f"Empirical), a number read as a Poisson mean or a Delay.to_dict() description, got "
         f"{delay!r} ({type(delay).__name__})"
     )
+
+
+def checked_delay(delay: Any, name: str) -> Delay:
+    """:func:`as_delay` for an argument called ``name``: a number's errors name it too.
+
+    A number must be a valid Poisson mean (finite, ``>= 0``); the message then names ``name``
+    (``"action_delay must be ... (a Poisson mean)"``) rather than Poisson's ``lam``.
+
+    Raises:
+        TypeError, ValueError: as :func:`as_delay`, naming ``name``.
+    """
+    if isinstance(delay, numbers.Real) and not isinstance(delay, (bool, np.bool_)):
+        check_real(name, delay, 0.0, note=" (a Poisson mean)")
+    return as_delay(delay, name)
 
 
 def delay_spec(delay: Any) -> Any:

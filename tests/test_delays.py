@@ -330,3 +330,14 @@ def test_constant_to_dict_is_the_plain_dict() -> None:
 def test_as_delay_refuses_bad_descriptions(description, exc, match) -> None:
     with pytest.raises(exc, match=match):
         as_delay(description)
+
+
+def test_checked_delay_names_the_argument():
+    from delayed_rl.delays import checked_delay
+
+    assert checked_delay(2.5, "action_delay") == Poisson(2.5)
+    assert checked_delay({"type": "Constant", "k": 2}, "x") == Constant(2)
+    with pytest.raises(ValueError, match=r"action_delay must be .*Poisson mean"):
+        checked_delay(-1, "action_delay")
+    with pytest.raises(TypeError, match="observation_delay"):
+        checked_delay("5", "observation_delay")

@@ -33,18 +33,17 @@ credit weights (normalised) and comes back as that.
 
 from __future__ import annotations
 
-import numbers
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
 from delayed_rl._delay_line import ring_size
-from delayed_rl._validation import check_int, check_real
+from delayed_rl._validation import check_int
 from delayed_rl.agents._fused import CompiledTables
 from delayed_rl.agents.hyperparameters import shares_hyperparameters
 from delayed_rl.agents.qlearning import QLearning
-from delayed_rl.delays import Delay, Empirical, as_delay
+from delayed_rl.delays import Delay, Empirical, checked_delay
 from delayed_rl.fast._numba import jit as _jit
 
 __all__ = ["ExpectedCreditQLearning", "credit_weights"]
@@ -121,13 +120,6 @@ def _describe(delay: Delay, weights: np.ndarray) -> dict[str, Any]:
         return Empirical(weights / weights.sum()).to_dict()
 
 
-def _check_delay(delay: Any) -> Delay:
-    """``delay`` as a :class:`Delay` (a number ``>= 0`` is a Poisson mean, a dict a description)."""
-    if isinstance(delay, numbers.Real) and not isinstance(delay, (bool, np.bool_)):
-        check_real("delay", delay, 0.0, note=" (a Poisson mean)")
-    return as_delay(delay, "delay")
-
-
 class ExpectedCreditQLearning(QLearning):
     """Q-learning that spreads every received reward over the past by the delay's pmf.
 
@@ -180,7 +172,7 @@ class ExpectedCreditQLearning(QLearning):
         max_delay: int | None = None,
         **hyperparameters: Any,
     ):
-        self._set_credit(_check_delay(delay), max_delay)
+        self._set_credit(checked_delay(delay, "delay"), max_delay)
         super().__init__(env, **hyperparameters)
 
     def _set_credit(self, delay: Delay, max_delay: Any) -> None:
@@ -203,7 +195,7 @@ class ExpectedCreditQLearning(QLearning):
         self, *, delay: Any = None, max_delay: Any = None, **kwargs: Any
     ) -> None:
         if delay is not None:  # loading: they come along
-            self._set_credit(_check_delay(delay), max_delay)
+            self._set_credit(checked_delay(delay, "delay"), max_delay)
         super()._set_hyperparameters(**kwargs)
 
     def _get_hyperparameters(self) -> dict[str, Any]:

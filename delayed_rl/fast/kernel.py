@@ -415,7 +415,7 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, mod
     has_kernel = kernel_weights.shape[0] > 0
     has_trace = decay >= 0.0
     weighted = has_kernel or has_trace
-    rates = lag_rates if lag_rates.shape[0] > 0 else np.full(estimates.shape[0], alpha)
+    has_rates = lag_rates.shape[0] > 0
     out_cdf, out_next, out_reward = env.out_cdf, env.out_next, env.out_reward
     out_term = env.out_term
     init_cdf, max_steps, cut_steps = env.init_cdf, env.max_steps, env.cut_steps
@@ -581,9 +581,10 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, mod
             sj = states[j]
             cell = cells[j]
             old = qf[cell]
+            rate = lag_rates[j] if has_rates else alpha
             # one entry per lag: its TD error is the one it had before the step; one table:
             # the error computed before the step's writes
-            new = old + alpha * (targets[j] - old) if per_lag else old + rates[j] * targets[j]
+            new = old + rate * (targets[j] - old if per_lag else targets[j])
             qf[cell] = new
             if new > qmax[sj]:
                 qmax[sj] = new

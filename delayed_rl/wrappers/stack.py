@@ -6,14 +6,11 @@ reward_delay=...)`` does for every ``delayed_rl/`` id, and what you call for any
 
 from __future__ import annotations
 
-import numbers
 from typing import Any
 
 import gymnasium as gym
-import numpy as np
 
-from delayed_rl._validation import check_real
-from delayed_rl.delays import as_delay
+from delayed_rl.delays import checked_delay
 from delayed_rl.wrappers.action_delay import ActionDelay
 from delayed_rl.wrappers.observation_delay import ObservationDelay
 from delayed_rl.wrappers.reward_delay import wrap_reward_delay
@@ -51,16 +48,9 @@ def wrap_delays(
         ('PoissonRewardDelay', 'ActionDelay')
     """
     if action_delay is not None:
-        env = ActionDelay(env, _checked(action_delay, "action_delay"))
+        env = ActionDelay(env, checked_delay(action_delay, "action_delay"))
     if observation_delay is not None:
-        env = ObservationDelay(env, _checked(observation_delay, "observation_delay"))
+        env = ObservationDelay(env, checked_delay(observation_delay, "observation_delay"))
     if reward_delay is not None:
         env = wrap_reward_delay(env, reward_delay)
     return env
-
-
-def _checked(delay: Any, name: str) -> Any:
-    """``delay`` as a ``Delay``, the errors naming ``name`` (a number is a Poisson mean)."""
-    if isinstance(delay, numbers.Real) and not isinstance(delay, (bool, np.bool_)):
-        check_real(name, delay, 0.0, note=" (a Poisson mean)")
-    return as_delay(delay, name)
