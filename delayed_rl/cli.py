@@ -265,29 +265,39 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 
 def _bench(args: argparse.Namespace) -> int:
-    """``delayed-rl bench NAME`` and ``reproduce``: run experiments, write and print reports."""
-    from delayed_rl.experiments import Config, get_experiment, run_experiment
+    """``delayed-rl bench NAME`` and ``reproduce``: run experiments, write and print reports.
+
+    ``reproduce`` runs every experiment together on one pool of workers
+    (:func:`~delayed_rl.experiments.run_experiments`): each prints its report as it finishes.
+    """
+    from delayed_rl.experiments import Config, get_experiment, run_experiments
 
     names = list(NAMES) if args.name == "all" else [args.name]
-    ran = []
-    for name in names:
-        config = Config(
-            seeds=args.seeds,
-            steps=args.steps,
-            quick=args.quick,
-            workers=args.workers,
-            backend=args.backend,
-            base_seed=args.seed,
+    config = Config(
+        seeds=args.seeds,
+        steps=args.steps,
+        quick=args.quick,
+        workers=args.workers,
+        backend=args.backend,
+        base_seed=args.seed,
+    )
+    out = Path(args.out)
+
+    def report(experiment: Any, summary: Any) -> None:
+        print((out / experiment.name / "report.md").read_text())
+        print(
+            f"[{experiment.name}] wrote {out / experiment.name} after "
+            f"{summary.extra['wall_time_s']} s ({summary.extra['run_seconds']} core-seconds)"
         )
-        out = Path(args.out) / name
-        summary = run_experiment(get_experiment(name), config, out)
-        print((out / "report.md").read_text())
-        print(f"[{name}] wrote {out} in {summary.extra['wall_time_s']} s")
-        ran.append((get_experiment(name), summary))
+
+    started = time.perf_counter()
+    experiments = [get_experiment(name) for name in names]
+    summaries = run_experiments(experiments, config, out, on_done=report)
     if args.name == "all":
         from delayed_rl.experiments.runner import write_index
 
-        index = write_index(Path(args.out), ran)
+        ran = list(zip(experiments, summaries, strict=True))
+        index = write_index(out, ran, time.perf_counter() - started)
         print(f"[reproduce] wrote {index}")
     return 0
 

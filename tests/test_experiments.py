@@ -308,12 +308,16 @@ def test_reproduce_writes_an_index_of_every_experiment(tmp_path):
     def claims(*verdicts):
         return [Claim("q", "t", 0.0, 0.1, 5, verdict) for verdict in verdicts]
 
+    def costs(runs, shared, seconds):
+        return {"runs": runs, "shared_runs": shared, "run_seconds": seconds}
+
     ran = [
-        (get_experiment("roulette"), Summary(claims("agrees", "agrees"), [], extra={"wall_time_s": 1.5})),
-        (get_experiment("delay-sweep"), Summary(claims("differs", "inconclusive", "reference"), [], extra={"wall_time_s": 60.0})),
+        (get_experiment("roulette"), Summary(claims("agrees", "agrees"), [], extra=costs(1, 0, 1.5))),
+        (get_experiment("delay-sweep"), Summary(claims("differs", "inconclusive", "reference"), [], extra=costs(70, 3, 60.0))),
     ]  # fmt: skip
-    text = write_index(tmp_path, ran).read_text()
+    text = write_index(tmp_path, ran, 61.5).read_text()
     rows = [line for line in text.splitlines() if line.startswith("| `")]
-    assert rows[0].startswith("| `roulette` |") and "| 1.5 | 2 | 0 | 0 | 0 |" in rows[0]
-    assert "| 60.0 | 0 | 1 | 1 | 1 | [delay-sweep/report.md](delay-sweep/report.md) |" in rows[1]
-    assert "Total wall time: 61.5 s (1.0 min)." in text
+    assert rows[0].startswith("| `roulette` |") and "| 1 | 0 | 1.5 | 2 | 0 | 0 | 0 |" in rows[0]
+    assert "| 70 | 3 | 60.0 | 0 | 1 | 1 | 1 | [delay-sweep/report.md](delay-sweep/report.md) |" in rows[1]
+    assert "Wall time: 61.5 s (1.0 min)." in text
+    assert "Wall time" not in write_index(tmp_path, ran).read_text()

@@ -5,7 +5,8 @@ from __future__ import annotations
 import importlib
 
 from delayed_rl._validation import check_choice
-from delayed_rl.experiments.runner import Config, Experiment, Summary, run_experiment
+from delayed_rl.experiments.runner import Config, Experiment, Summary
+from delayed_rl.experiments.schedule import run_experiment, run_experiments
 
 _MODULES = {
     "delay-sweep": "delay_sweep",
@@ -35,4 +36,12 @@ def get_experiment(name: str) -> Experiment:
     return importlib.import_module(f"delayed_rl.experiments.{_MODULES[name]}").EXPERIMENT
 
 
-__all__ = ["NAMES", "Config", "Experiment", "Summary", "get_experiment", "run_experiment"]
+__all__ = [
+    "NAMES",
+    "Config",
+    "Experiment",
+    "Summary",
+    "get_experiment",
+    "run_experiment",
+    "run_experiments",
+]

@@ -13,8 +13,8 @@ learners on the grid world, each with the thesis's hyper-parameters (α = 0.1, �
 - ``DeconvQ learned``: :class:`~delayed_rl.agents.DeconvQ` learning the delay on 0..50;
 - ``oracle``: :class:`~delayed_rl.agents.OracleQLearning`, which is told which transition each
   reward came from (the non-anonymous upper bound);
-- ``Q undelayed``: Q-learning without any delay (the reference; its runs are the same for the
-  three delays of a world, since nothing in them depends on the delay).
+- ``Q undelayed``: Q-learning without any delay (the reference; nothing in it depends on the
+  delay, so the three delays of a world share one run per seed, :func:`shared_run`).
 
 Settings: the 9×9 grid with mean delay λ = 13 (1M steps a run) and the 7×7 grid with λ = 8
 (300k steps), each under three delays of mean λ: Poisson(λ) (the thesis's), geometric
@@ -35,6 +35,10 @@ Per run, from the undelayed reward stream (``training_log["undelayed_reward"]``)
   flipping between routes;
 - the delay estimate: DeconvQ's ``delay_pmf`` and ``mean_delay``; MMQ's acting-delay share (how
   often each λ̂ acted) and its mean;
+- MMQ's runs also keep a greedy window (the averaged table of ``greedy_window`` =
+  ``steps // 10``), which changes nothing of how MMQ learns or acts; the snapshots read both
+  tables, this experiment reports the current one's, ``future-work``'s greedy-window variant
+  the averaged one's, from the same runs (:func:`shared_run`);
 - ns/step: the wall time of ``learn`` over the steps, the greedy evaluations excluded; a
   2000-step run of a twin agent before it loads the compiled kernels, untimed.
 
@@ -93,6 +97,7 @@ from delayed_rl.experiments.runner import (
     Config,
     Curve,
     Experiment,
+    SharedRun,
     Summary,
     running_average,
 )
@@ -122,6 +127,11 @@ LOOP_FRACTION = 0.95
 SNAPSHOTS = 50
 """Greedy snapshots a run takes: one every ``max(1, steps // SNAPSHOTS)`` steps."""
 WALK_STEPS = 1000
+WINDOW_DIVISOR = 10
+"""MMQ's runs keep a greedy window of ``steps // WINDOW_DIVISOR`` steps (100k of 1M): the
+averaged table ``future-work``'s greedy-window variant reads (:func:`make_agent`)."""
+AVERAGED = "window_"
+"""The prefix of :func:`measure`'s readouts of the averaged table (MMQ's ``greedy_window``)."""
 WARM_UP = 2000
 """Steps of the untimed warm-up run before each timed one (:func:`warm_up`): past DeconvQ's
 first solve, so every kernel of the run is loaded."""
@@ -218,8 +228,12 @@ def hyperparameters(seed: int) -> dict[str, Any]:
     return thesis_hyperparameters(seed)
 
 
-def make_agent(name: str, size: int, delay: Delay, seed: int) -> Any:
+def make_agent(name: str, size: int, delay: Delay, seed: int, steps: int | None = None) -> Any:
     """One of :data:`AGENTS` on its own ``size`` grid under ``delay`` (see the module docstring).
+
+    Given the run's ``steps``, MMQ also keeps the averaged table of a greedy window of
+    ``steps // WINDOW_DIVISOR`` steps (``greedy_window``), which changes nothing of how it learns
+    or acts: :func:`measure` reads both greedy policies off the one run.
 
     Raises:
         TypeError: ``name`` is not a string.
@@ -237,7 +251,8 @@ def make_agent(name: str, size: int, delay: Delay, seed: int) -> Any:
     if name == "Q":
         return agents.QLearning(env, **common)
     if name == "MMQ":
-        return agents.MMQ(env, max_delay_estimate=LAMBDA_MAX, **common)
+        window = None if steps is None else max(1, steps // WINDOW_DIVISOR)
+        return agents.MMQ(env, max_delay_estimate=LAMBDA_MAX, greedy_window=window, **common)
     if name == "expected credit":
         return agents.ExpectedCreditQLearning(env, delay=delay, max_delay=LAMBDA_MAX, **common)
     known = delay if name == "DeconvQ known" else None
@@ -283,15 +298,15 @@ def is_optimal(policy: Sequence[int] | np.ndarray, size: int) -> bool:
     return walk_average(policy, size) >= LOOP_FRACTION * optimal_average(size)
 
 
-def greedy_policy(agent: Any) -> np.ndarray:
+def greedy_policy(agent: Any, averaged: bool = False) -> np.ndarray:
     """The agent's deterministic greedy action in every state.
 
-    The table an agent's greedy policy reads (``greedy_table`` when it has one, as MMQ's
-    ``greedy_window`` option does), else ``predict(..., deterministic=True)``.
+    MMQ's is read off its current Q-table (the thesis's readout), or with ``averaged`` off the
+    averaged table of its ``greedy_window`` (``greedy_table``); any other agent's is
+    ``predict(..., deterministic=True)``.
     """
-    table = getattr(agent, "greedy_table", None)
-    if table is not None:
-        return greedy_actions(np.asarray(table))
+    if hasattr(agent, "greedy_table"):
+        return greedy_actions(np.asarray(agent.greedy_table if averaged else agent.q_table))
     states = np.arange(agent.observation_space.n)
     return np.asarray(agent.predict(states, deterministic=True)[0])
 
@@ -315,11 +330,17 @@ def train_with_snapshots(
         ``rewards`` (the undelayed reward of every step), ``learn_seconds`` (the wall time of
         the ``learn`` calls), ``snapshot_steps``, ``snapshot_optimal`` (bool) and
         ``snapshot_greedy`` (the walk's average) per snapshot, ``path`` (``learn``'s last), and
-        ``obs`` with ``keep_obs``.
+        ``obs`` with ``keep_obs``. An agent with a ``greedy_window`` has its averaged table's
+        snapshots too, as ``window_snapshot_optimal`` and ``window_snapshot_greedy``.
     """
     steps = check_int("steps", steps, 1)
     interval = max(1, steps // SNAPSHOTS)
-    rewards, observations, marks, optimal, greedy = [], [], [], [], []
+    readouts = {"": False}
+    if getattr(agent, "greedy_window", None) is not None:
+        readouts[AVERAGED] = True
+    rewards, observations, marks = [], [], []
+    optimal: dict[str, list[bool]] = {prefix: [] for prefix in readouts}
+    greedy: dict[str, list[float]] = {prefix: [] for prefix in readouts}
     seconds, done = 0.0, 0
     while done < steps:
         piece = min(interval, steps - done)
@@ -330,18 +351,20 @@ def train_with_snapshots(
         rewards.append(agent.training_log["undelayed_reward"])
         if keep_obs:
             observations.append(agent.training_log["obs"])
-        average = walk_average(greedy_policy(agent), size)
         marks.append(done)
-        greedy.append(average)
-        optimal.append(average >= LOOP_FRACTION * optimal_average(size))
-    out = {
+        for prefix, averaged in readouts.items():
+            average = walk_average(greedy_policy(agent, averaged), size)
+            greedy[prefix].append(average)
+            optimal[prefix].append(average >= LOOP_FRACTION * optimal_average(size))
+    out: dict[str, Any] = {
         "rewards": np.concatenate(rewards),
         "learn_seconds": seconds,
         "snapshot_steps": np.asarray(marks, dtype=np.int64),
-        "snapshot_optimal": np.asarray(optimal, dtype=bool),
-        "snapshot_greedy": np.asarray(greedy),
         "path": agent.last_learn_path,
     }
+    for prefix in readouts:
+        out[f"{prefix}snapshot_optimal"] = np.asarray(optimal[prefix], dtype=bool)
+        out[f"{prefix}snapshot_greedy"] = np.asarray(greedy[prefix])
     if keep_obs:
         out["obs"] = np.concatenate(observations)
     return out
@@ -391,23 +414,47 @@ def measure(agent: Any, task: dict) -> dict[str, Any]:
         reward), ``greedy`` (the final greedy 1000-step average) and ``optimal``, the snapshot
         arrays of :func:`train_with_snapshots`, ``second_half_optimal`` (the share of snapshots
         after half the steps that are optimal), ``ns_per_step``, ``path``, and the
-        :func:`delay_estimate`.
+        :func:`delay_estimate`. With a ``greedy_window``, the averaged table's readouts too:
+        ``greedy``, ``optimal``, ``second_half_optimal`` and the snapshot arrays prefixed
+        :data:`AVERAGED` (:func:`averaged_readout` puts them in place of the others).
     """
     run = train_with_snapshots(agent, task["steps"], task["size"])
     rewards = run.pop("rewards")
     steps, curve = running_average(rewards)
-    late = second_half_share(run["snapshot_steps"], run["snapshot_optimal"], task["steps"])
-    return {
+    out = {
         "steps": steps,
         "curve": curve,
         "average": float(rewards.mean()),
-        "greedy": float(run["snapshot_greedy"][-1]),
-        "optimal": bool(run["snapshot_optimal"][-1]),
-        "second_half_optimal": late,
         "ns_per_step": 1e9 * run.pop("learn_seconds") / task["steps"],
         **run,
         **delay_estimate(agent),
     }
+    for prefix in ("", AVERAGED):
+        if f"{prefix}snapshot_optimal" in run:
+            snapshots = run[f"{prefix}snapshot_optimal"]
+            out[f"{prefix}greedy"] = float(run[f"{prefix}snapshot_greedy"][-1])
+            out[f"{prefix}optimal"] = bool(snapshots[-1])
+            out[f"{prefix}second_half_optimal"] = second_half_share(
+                run["snapshot_steps"], snapshots, task["steps"]
+            )
+    return out
+
+
+def current_readout(result: dict[str, Any]) -> dict[str, Any]:
+    """A :func:`measure` result with the readouts of the current table only (as MMQ acts)."""
+    return {key: value for key, value in result.items() if not key.startswith(AVERAGED)}
+
+
+def averaged_readout(result: dict[str, Any]) -> dict[str, Any]:
+    """A :func:`measure` result whose greedy readouts are the averaged table's (greedy window).
+
+    Raises:
+        ValueError: the run kept no averaged table.
+    """
+    averaged = {k[len(AVERAGED) :]: v for k, v in result.items() if k.startswith(AVERAGED)}
+    if not averaged:
+        raise ValueError("the run kept no averaged table (an MMQ run without greedy_window)")
+    return {**current_readout(result), **averaged}
 
 
 def warm_up(make: Callable[[], Any], steps: int) -> None:
@@ -422,8 +469,33 @@ def warm_up(make: Callable[[], Any], steps: int) -> None:
 def run_task(task: dict) -> dict:
     """Train one agent of :data:`AGENTS` in its setting and :func:`measure` it."""
     delay = make_delay(task["delay"], task["lam"])
-    warm_up(lambda: make_agent(task["agent"], task["size"], delay, task["seed"] + 1), task["steps"])
-    return measure(make_agent(task["agent"], task["size"], delay, task["seed"]), task)
+    size, seed, steps = task["size"], task["seed"], task["steps"]
+    warm_up(lambda: make_agent(task["agent"], size, delay, seed + 1, steps), steps)
+    return measure(make_agent(task["agent"], size, delay, seed, steps), task)
+
+
+def shared_run(task: dict) -> SharedRun | None:
+    """The one run behind a world's undelayed Q-learning (the same under every delay kind).
+
+    MMQ's tasks read its current table (:func:`current_readout`); every other task is its own
+    run.
+    """
+    if task["agent"] == "MMQ":
+        return SharedRun(run_task, task, current_readout)
+    if task["agent"] != "Q undelayed":
+        return None
+    kind = DELAYS[0]
+    label = setting_label(task["size"], kind, task["lam"])
+    return SharedRun(run_task, {**task, "delay": kind, "setting": label})
+
+
+#: Compiled training cost per step (µs) of each learner on these grids, for scheduling only.
+STEP_MICROSECONDS = {"DeconvQ learned": 1.8, "DeconvQ known": 0.9, "MMQ": 0.8}
+
+
+def cost(task: dict) -> float:
+    """A task's estimated core-seconds (its steps at :data:`STEP_MICROSECONDS`, else 0.7 µs)."""
+    return 1e-6 * task["steps"] * STEP_MICROSECONDS.get(task["agent"], 0.7)
 
 
 # ---------------------------------------------------------------------- summaries
@@ -813,4 +885,6 @@ EXPERIMENT = Experiment(
     run_task=run_task,
     summarize=summarize,
     default_seeds=20,
+    shared_run=shared_run,
+    cost=cost,
 )

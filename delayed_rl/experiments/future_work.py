@@ -13,6 +13,11 @@ hyper-parameters (α = 0.1, γ = 0.9, constant ε = 0.1, ``q_init`` = 25):
   the Q-table over the last W steps (``greedy_table``), W = ``steps // 10``: 100k at 1M steps,
   30k at 300k, 3k in the quick run.
 
+The window changes only how the greedy policy is read, not how MMQ learns or acts, so the thesis
+rule and the greedy window are read off one run a seed: ``anonymous-delay``'s MMQ run, which
+keeps the averaged table beside the current one (:func:`shared_run`). Run together (``delayed-rl
+reproduce``), the two experiments share those runs; run alone, this one makes them itself.
+
 Settings, seeds, metrics, snapshots and figures are ``anonymous-delay``'s
 (:mod:`.anonymous_delay`, whose functions this module calls): the 9×9 grid with λ = 13 (1M
 steps) and the 7×7 grid with λ = 8 (300k steps), each under Poisson, geometric and bimodal
@@ -42,7 +47,7 @@ from typing import Any
 
 from delayed_rl._validation import check_choice
 from delayed_rl.experiments import anonymous_delay as shared
-from delayed_rl.experiments.runner import Claim, Config, Experiment, Summary
+from delayed_rl.experiments.runner import Claim, Config, Experiment, SharedRun, Summary
 
 THESIS = "MMQ (thesis)"
 VARIANTS: dict[str, dict[str, Any]] = {
@@ -51,15 +56,13 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "MMQ kernel σ=5": {"reward_kernel": 5.0},
     "MMQ trace β=0.9": {"delay_trace": 0.9},
     "MMQ Λ step 3": {"delay_step": 3},
-    "MMQ greedy window 100k": {"greedy_window": None},  # steps // WINDOW_DIVISOR
+    "MMQ greedy window 100k": {"greedy_window": None},  # steps // anonymous_delay.WINDOW_DIVISOR
 }
 """Each variant's keyword arguments to ``MMQ`` (the greedy window's is set from the steps)."""
 GREEDY_ONLY = ("MMQ greedy window 100k",)
 """Variants that act as the thesis's rule (only their greedy policy differs): no training-reward
 claim, and no curve of their own in the learning-curve and delay-estimate figures (they are the
 thesis rule's)."""
-WINDOW_DIVISOR = 10
-"""The greedy window is ``steps // WINDOW_DIVISOR`` steps (100k of 1M)."""
 
 
 def options(variant: str, steps: int) -> dict[str, Any]:
@@ -72,7 +75,7 @@ def options(variant: str, steps: int) -> dict[str, Any]:
     check_choice("variant", variant, tuple(VARIANTS))
     chosen = dict(VARIANTS[variant])
     if "greedy_window" in chosen:
-        chosen["greedy_window"] = max(1, steps // WINDOW_DIVISOR)
+        chosen["greedy_window"] = max(1, steps // shared.WINDOW_DIVISOR)
     return chosen
 
 
@@ -88,13 +91,40 @@ def make_variant(variant: str, size: int, delay: Any, steps: int, seed: int) -> 
     )
 
 
+def shared_run(task: dict) -> SharedRun | None:
+    """The thesis rule and the greedy window: ``anonymous-delay``'s MMQ run, read two ways.
+
+    Its current table for ``MMQ (thesis)``, its averaged table for the greedy-window variant;
+    every other variant is its own run.
+    """
+    if task["agent"] not in (THESIS, *GREEDY_ONLY):
+        return None
+    view = shared.current_readout if task["agent"] == THESIS else shared.averaged_readout
+    return SharedRun(shared.run_task, {**task, "agent": "MMQ"}, view)
+
+
+#: Compiled training cost per step (µs) of each variant on these grids, for scheduling only.
+STEP_MICROSECONDS = {"MMQ kernel σ=2": 1.2, "MMQ kernel σ=5": 1.1, "MMQ Λ step 3": 0.35}
+
+
+def cost(task: dict) -> float:
+    """A task's estimated core-seconds (its steps at :data:`STEP_MICROSECONDS`, else 0.85 µs)."""
+    return 1e-6 * task["steps"] * STEP_MICROSECONDS.get(task["agent"], 0.85)
+
+
 def tasks(config: Config) -> list[dict]:
     """Every (setting, variant, seed), as ``anonymous-delay``'s (:func:`~delayed_rl.experiments.anonymous_delay.grid_tasks`)."""
     return shared.grid_tasks(config, tuple(VARIANTS))
 
 
 def run_task(task: dict) -> dict:
-    """Train one variant in its setting and measure it as ``anonymous-delay`` does."""
+    """Train one variant in its setting and measure it as ``anonymous-delay`` does.
+
+    The thesis rule and the greedy window are its MMQ run, read as :func:`shared_run` says.
+    """
+    run = shared_run(task)
+    if run is not None:
+        return run.view(run.run(run.task))
     delay = shared.make_delay(task["delay"], task["lam"])
     size, steps, seed = task["size"], task["steps"], task["seed"]
     shared.warm_up(lambda: make_variant(task["agent"], size, delay, steps, seed + 1), steps)
@@ -167,4 +197,6 @@ EXPERIMENT = Experiment(
     run_task=run_task,
     summarize=summarize,
     default_seeds=20,
+    shared_run=shared_run,
+    cost=cost,
 )

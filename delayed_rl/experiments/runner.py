@@ -3,10 +3,12 @@
 An experiment module defines an :class:`Experiment`: its name, the thesis figure it reproduces,
 ``tasks(config)`` (one picklable task per (condition, seed)), ``run_task(task)`` (a dict of
 results, numbers or numpy arrays) and ``summarize(tasks, results, config)`` (the claims checked
-against the thesis, as :class:`Claim` rows, plus curves and figures). :func:`run_experiment`
-runs the tasks through joblib — on its default ``loky`` process pool, or handed to Ray or Dask —
-and writes ``curves.csv``, ``summary.json``, the figures and ``report.md`` into the output
-folder.
+against the thesis, as :class:`Claim` rows, plus curves and figures).
+:func:`~delayed_rl.experiments.schedule.run_experiment` runs the tasks through joblib — on its
+default ``loky`` process pool, or handed to Ray or Dask — and :func:`write_outputs` writes
+``curves.csv``, ``summary.json``, the figures and ``report.md`` into the output folder. Tasks
+that need the same computation (of one experiment or several) name it as one
+:class:`SharedRun`, run once.
 
 Every task carries its own seed, so results do not depend on the number of workers.
 
@@ -32,11 +34,10 @@ import contextlib
 import csv
 import json
 import math
-import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -59,7 +60,7 @@ class Config:
 
     Attributes:
         seeds: the number of seeds, independent runs per condition (``None``: the experiment's
-            default, see :func:`run_experiment`).
+            default, see :func:`~delayed_rl.experiments.schedule.run_experiment`).
         steps: training steps per run (``None``: the experiment's thesis-scale default).
         quick: a scaled-down version that runs in seconds (fewer steps, seeds and conditions).
         workers: parallel worker processes (1 runs in this process).
@@ -156,9 +157,47 @@ class Summary:
     extra: dict[str, Any] = field(default_factory=dict)
 
 
+class SharedRun(NamedTuple):
+    """The computation behind a task, where tasks (of one experiment or several) share one.
+
+    :func:`~delayed_rl.experiments.schedule.run_experiments` runs each distinct ``(run, task)``
+    once and hands every task behind it ``view(result)``.
+
+    Attributes:
+        run: a picklable top-level function of one task, returning the run's result.
+        task: what ``run`` is called with (JSON-like: its canonical form is the run's identity).
+        view: picks the task's result out of the run's (``None``: the whole result).
+    """
+
+    run: Callable[[dict], dict]
+    task: dict
+    view: Callable[[dict], dict] | None = None
+
+
+def default_cost(task: dict) -> float:
+    """A task's estimated cost for scheduling: its ``steps`` (1 without), at a microsecond each."""
+    return 1e-6 * float(task.get("steps", 1))
+
+
 @dataclass
 class Experiment:
-    """A thesis experiment (see the module docstring)."""
+    """A thesis experiment (see the module docstring).
+
+    Attributes:
+        name: the name ``delayed-rl bench NAME`` takes.
+        thesis: the thesis's figure or table it reproduces.
+        description: the report's first paragraph.
+        tasks: one task per (condition, seed), from the :class:`Config`.
+        run_task: a picklable top-level function of one task, returning its result.
+        summarize: the claims, curves and figures, from the tasks and their results.
+        default_seeds: the seeds of a full run.
+        quick_seeds: the seeds of a ``quick`` run.
+        shared_run: the :class:`SharedRun` behind a task whose run another task (of this
+            experiment or another) also needs, else ``None`` (``shared_run`` itself ``None``:
+            every task is its own run, ``run_task(task)``).
+        cost: a task's estimated core-seconds, which only orders the runs (longest first, so
+            that no long run starts last); :func:`default_cost` by default.
+    """
 
     name: str
     thesis: str
@@ -168,6 +207,13 @@ class Experiment:
     summarize: Callable[[list[dict], list[dict], Config], Summary]
     default_seeds: int
     quick_seeds: int = 2
+    shared_run: Callable[[dict], SharedRun | None] | None = None
+    cost: Callable[[dict], float] = default_cost
+
+    def run_of(self, task: dict) -> SharedRun:
+        """The run behind ``task``: its :attr:`shared_run`, else ``run_task`` on the task itself."""
+        shared = None if self.shared_run is None else self.shared_run(task)
+        return SharedRun(self.run_task, task) if shared is None else shared
 
 
 def mean_ci95(values: Sequence[float]) -> tuple[float, float]:
@@ -342,36 +388,6 @@ def _ray_results(
             ray.cancel(ref)
 
 
-def run_experiment(
-    experiment: Experiment, config: Config, out: Path | str | None = None, progress: bool = True
-) -> Summary:
-    """Run ``experiment`` and, if ``out`` is given, write its files there.
-
-    Args:
-        experiment: what to run.
-        config: how to run it; ``config.seeds`` is set to the experiment's default
-            (``quick_seeds`` with ``config.quick``, else ``default_seeds``) when ``None``.
-        out: the output folder (``None``: write nothing, return the summary only).
-        progress: print a line saying how many runs start on how many workers.
-
-    Returns:
-        The experiment's summary, with ``extra["wall_time_s"]`` the seconds it took.
-    """
-    check_bool("progress", progress)
-    if config.seeds is None:
-        config.seeds = experiment.quick_seeds if config.quick else experiment.default_seeds
-    tasks = experiment.tasks(config)
-    started = time.perf_counter()
-    if progress:
-        print(f"[{experiment.name}] {len(tasks)} runs on {config.workers} worker(s)...", flush=True)
-    results = run_tasks(experiment.run_task, tasks, config.workers, config.backend)
-    summary = experiment.summarize(tasks, results, config)
-    summary.extra["wall_time_s"] = round(time.perf_counter() - started, 2)
-    if out is not None:
-        write_outputs(experiment, config, summary, Path(out))
-    return summary
-
-
 def write_outputs(experiment: Experiment, config: Config, summary: Summary, out: Path) -> None:
     """Write ``curves.csv``, ``summary.json``, the figures and ``report.md`` into ``out``."""
     out.mkdir(parents=True, exist_ok=True)
@@ -401,12 +417,21 @@ def write_outputs(experiment: Experiment, config: Config, summary: Summary, out:
     (out / "report.md").write_text(render_report(experiment, config, summary, figures))
 
 
-def write_index(out: Path, ran: Sequence[tuple[Experiment, Summary]]) -> Path:
-    """Write ``out/index.md``: every experiment run, its wall time, verdicts and report.
+def write_index(
+    out: Path, ran: Sequence[tuple[Experiment, Summary]], wall_seconds: float | None = None
+) -> Path:
+    """Write ``out/index.md``: every experiment run, what it cost, its verdicts and its report.
 
     ``delayed-rl reproduce`` writes it after the last experiment: one table of every
-    experiment's verdict counts and wall time (and their total), each linking to its
-    ``NAME/report.md``.
+    experiment's verdict counts and cost, each linking to its ``NAME/report.md``. The cost is
+    the core-seconds of the experiment's runs (``extra["run_seconds"]``, a run shared between
+    experiments counted in each, marked in the ``shared runs`` column), as they ran together on
+    one pool (:mod:`.schedule`).
+
+    Args:
+        out: the folder of the experiments' folders.
+        ran: each experiment with its summary, in the table's order.
+        wall_seconds: the wall time of the whole run, for the last line (``None``: left out).
 
     Returns:
         The file written.
@@ -414,21 +439,23 @@ def write_index(out: Path, ran: Sequence[tuple[Experiment, Summary]]) -> Path:
     lines = [
         "# Reproduction: every experiment",
         "",
-        "| experiment | thesis | wall time (s) | " + " | ".join(VERDICTS) + " | report |",
-        "|---|---|---|" + "---|" * len(VERDICTS) + "---|",
+        "| experiment | thesis | runs | shared runs | core-seconds | "
+        + " | ".join(VERDICTS)
+        + " | report |",
+        "|---|---|---|---|---|" + "---|" * len(VERDICTS) + "---|",
     ]
-    total = 0.0
     for experiment, summary in ran:
-        wall = float(summary.extra.get("wall_time_s", 0.0))
-        total += wall
+        extra = summary.extra
         counts = [str(sum(c.verdict == v for c in summary.claims)) for v in VERDICTS]
         link = f"[{experiment.name}/report.md]({experiment.name}/report.md)"
         lines.append(
-            f"| `{experiment.name}` | {experiment.thesis} | {wall:.1f} | "
+            f"| `{experiment.name}` | {experiment.thesis} | {extra.get('runs', '?')} | "
+            f"{extra.get('shared_runs', 0)} | {float(extra.get('run_seconds', 0.0)):.1f} | "
             + " | ".join(counts)
             + f" | {link} |"
         )
-    lines += ["", f"Total wall time: {total:.1f} s ({total / 60:.1f} min)."]
+    if wall_seconds is not None:
+        lines += ["", f"Wall time: {wall_seconds:.1f} s ({wall_seconds / 60:.1f} min)."]
     path = out / "index.md"
     path.write_text("\n".join(lines) + "\n")
     return path

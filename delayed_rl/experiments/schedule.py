@@ -1,0 +1,211 @@
+"""Running experiments: each run once, on one pool of workers, the most costly first.
+
+:func:`run_experiments` (what ``delayed-rl reproduce`` calls) gathers the runs behind every task
+of the experiments it is given (:meth:`~.runner.Experiment.run_of`) and runs each *distinct* run
+once: a :class:`~.runner.SharedRun` that several tasks need, of one experiment or of several, is
+run once and its result handed to each of them (through its ``view``). Two runs are the same
+when they call the same function with the same task (compared in canonical JSON).
+
+All runs go to one pool, ordered by their estimated cost (:attr:`~.runner.Experiment.cost`),
+longest first, so the workers are never left idle behind one experiment's slowest run before the
+next experiment starts, and the last runs to start are short ones. Each experiment is
+summarized, and its files written, as soon as its last run is in, while the workers go on with
+the other experiments' runs. Results do not depend on the order or the number of workers: every
+task carries its own seed.
+
+Each summary's ``extra`` records what the experiment cost:
+
+- ``run_seconds``: the core-seconds of its runs, as timed in the workers (a run it shares with
+  another experiment counts in full in each);
+- ``runs``: how many distinct runs it needed, ``shared_runs`` how many of them another of the
+  experiments run together also needed;
+- ``wall_time_s``: seconds from the start until its summary was made (run alone: the
+  experiment's wall time).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+from delayed_rl._validation import check_bool
+from delayed_rl.experiments.runner import (
+    Config,
+    Experiment,
+    SharedRun,
+    Summary,
+    _json_default,
+    iter_tasks,
+    write_outputs,
+)
+
+
+def run_key(run: SharedRun) -> str:
+    """A run's identity: its function's qualified name and its task in canonical JSON."""
+    function = f"{run.run.__module__}.{run.run.__qualname__}"
+    return f"{function}:{json.dumps(run.task, sort_keys=True, default=_json_default)}"
+
+
+def _timed(run: SharedRun) -> tuple[dict, float]:
+    """``(run.run(run.task), seconds it took)``, timed where it runs (in the worker)."""
+    started = time.perf_counter()
+    result = run.run(run.task)
+    return result, time.perf_counter() - started
+
+
+@dataclasses.dataclass(eq=False)
+class _Plan:
+    """One experiment's part of a schedule: its tasks, the run behind each, what is missing."""
+
+    experiment: Experiment
+    config: Config
+    tasks: list[dict]
+    keys: list[str]
+    views: list[Callable[[dict], dict] | None]
+    out: Path | None
+    missing: int = 0
+
+
+def run_experiment(
+    experiment: Experiment, config: Config, out: Path | str | None = None, progress: bool = True
+) -> Summary:
+    """Run ``experiment`` and, if ``out`` is given, write its files there.
+
+    Args:
+        experiment: what to run.
+        config: how to run it; ``config.seeds`` is set to the experiment's default
+            (``quick_seeds`` with ``config.quick``, else ``default_seeds``) when ``None``.
+        out: the output folder (``None``: write nothing, return the summary only).
+        progress: print a line saying how many runs start on how many workers.
+
+    Returns:
+        The experiment's summary, with ``extra["wall_time_s"]`` the seconds it took (and the
+        other costs of the module docstring).
+    """
+    check_bool("progress", progress)
+    _default_seeds(experiment, config)
+    plan = _plan(experiment, config, None if out is None else Path(out))
+    return _run([plan], config, progress, None)[0]
+
+
+def run_experiments(
+    experiments: Sequence[Experiment],
+    config: Config,
+    out: Path | str | None = None,
+    progress: bool = True,
+    on_done: Callable[[Experiment, Summary], None] | None = None,
+) -> list[Summary]:
+    """Run ``experiments`` together (see the module docstring); write each into ``out/NAME``.
+
+    Args:
+        experiments: what to run.
+        config: how; each experiment runs with a copy whose ``seeds``, when ``None``, is its own
+            default (:func:`run_experiment`).
+        out: the parent of the output folders, one per experiment named after it (``None``:
+            write nothing).
+        progress: print a line saying how many runs start on how many workers.
+        on_done: called with each experiment and its summary, in the order they finish, after
+            its files are written.
+
+    Returns:
+        The summaries, in the order of ``experiments``.
+    """
+    check_bool("progress", progress)
+    plans = []
+    for experiment in experiments:
+        own = dataclasses.replace(config)
+        _default_seeds(experiment, own)
+        plans.append(_plan(experiment, own, None if out is None else Path(out) / experiment.name))
+    return _run(plans, config, progress, on_done)
+
+
+def _default_seeds(experiment: Experiment, config: Config) -> None:
+    if config.seeds is None:
+        config.seeds = experiment.quick_seeds if config.quick else experiment.default_seeds
+
+
+def _plan(experiment: Experiment, config: Config, out: Path | None) -> _Plan:
+    tasks = experiment.tasks(config)
+    runs = [experiment.run_of(task) for task in tasks]
+    keys = [run_key(run) for run in runs]
+    return _Plan(experiment, config, tasks, keys, [run.view for run in runs], out)
+
+
+def _run(
+    plans: list[_Plan],
+    config: Config,
+    progress: bool,
+    on_done: Callable[[Experiment, Summary], None] | None,
+) -> list[Summary]:
+    """Run every plan's distinct runs in one pool, longest first, summarizing each plan when done."""
+    started = time.perf_counter()
+    runs: dict[str, SharedRun] = {}
+    costs: dict[str, float] = {}
+    users: dict[str, list[_Plan]] = {}
+    for plan in plans:
+        for task, key in zip(plan.tasks, plan.keys, strict=True):
+            runs.setdefault(key, plan.experiment.run_of(task))
+            costs[key] = max(costs.get(key, 0.0), float(plan.experiment.cost(task)))
+        for key in dict.fromkeys(plan.keys):
+            users.setdefault(key, []).append(plan)
+        plan.missing = len(set(plan.keys))
+    order = sorted(runs, key=lambda key: -costs[key])  # stable: equal costs keep task order
+    if progress:
+        names = ", ".join(plan.experiment.name for plan in plans)
+        tasks = sum(len(plan.tasks) for plan in plans)
+        print(
+            f"[{names}] {len(order)} runs ({tasks} tasks) on {config.workers} worker(s)...",
+            flush=True,
+        )
+    results: dict[str, dict] = {}
+    seconds: dict[str, float] = {}
+    summaries: dict[int, Summary] = {}
+    unfinished = {key: len(plans_of) for key, plans_of in users.items()}
+
+    def finish(plan: _Plan) -> None:
+        summaries[id(plan)] = summary = _summarize(plan, results, seconds, users, started)
+        if plan.out is not None:
+            write_outputs(plan.experiment, plan.config, summary, plan.out)
+        if on_done is not None:
+            on_done(plan.experiment, summary)
+        for key in set(plan.keys):  # drop the results no other plan still needs
+            unfinished[key] -= 1
+            if not unfinished[key]:
+                results.pop(key)
+
+    for plan in plans:
+        if not plan.missing:
+            finish(plan)
+    pending = iter_tasks(_timed, [runs[key] for key in order], config.workers, config.backend)
+    for index, (result, spent) in pending:
+        key = order[index]
+        results[key], seconds[key] = result, spent
+        for plan in users[key]:
+            plan.missing -= 1
+            if not plan.missing:
+                finish(plan)
+    return [summaries[id(plan)] for plan in plans]
+
+
+def _summarize(
+    plan: _Plan,
+    results: dict[str, dict],
+    seconds: dict[str, float],
+    users: dict[str, list[_Plan]],
+    started: float,
+) -> Summary:
+    """The plan's summary from its runs' results (each through its task's view), with its costs."""
+    task_results = [
+        results[key] if view is None else view(results[key])
+        for key, view in zip(plan.keys, plan.views, strict=True)
+    ]
+    summary = plan.experiment.summarize(plan.tasks, task_results, plan.config)
+    distinct = set(plan.keys)
+    summary.extra["run_seconds"] = round(sum(seconds[key] for key in distinct), 2)
+    summary.extra["runs"] = len(distinct)
+    summary.extra["shared_runs"] = sum(len(users[key]) > 1 for key in distinct)
+    summary.extra["wall_time_s"] = round(time.perf_counter() - started, 2)
+    return summary

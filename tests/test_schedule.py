@@ -1,0 +1,140 @@
+"""Running experiments together: each distinct run once, longest first, each summary as it ends."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from delayed_rl.experiments import Config, get_experiment, run_experiment, run_experiments
+from delayed_rl.experiments import anonymous_delay as ad
+from delayed_rl.experiments import future_work as fw
+from delayed_rl.experiments.runner import Experiment, SharedRun, Summary
+from delayed_rl.experiments.schedule import run_key
+
+CALLS: list[dict] = []
+
+
+def square(task: dict) -> dict:
+    """A run that records that it ran."""
+    CALLS.append(task)
+    return {"value": task["x"] ** 2, "x": task["x"]}
+
+
+def negated(result: dict) -> dict:
+    return {**result, "value": -result["value"]}
+
+
+def _summarize(tasks, results, config):
+    return Summary([], [], extra={"values": [r["value"] for r in results], "tasks": tasks})
+
+
+def _experiment(name: str, xs: list[int], shared_run=None, cost=None) -> Experiment:
+    options = {} if cost is None else {"cost": cost}
+    return Experiment(
+        name=name,
+        thesis="-",
+        description="-",
+        tasks=lambda config: [{"name": name, "x": x} for x in xs],
+        run_task=square,
+        summarize=_summarize,
+        default_seeds=1,
+        shared_run=shared_run,
+        **options,
+    )
+
+
+def _by_x(task: dict) -> SharedRun:
+    """Every task with the same ``x`` is one run, whatever experiment it belongs to."""
+    return SharedRun(square, {"x": task["x"]})
+
+
+def _by_x_negated(task: dict) -> SharedRun:
+    return SharedRun(square, {"x": task["x"]}, negated)
+
+
+def test_a_run_shared_by_tasks_and_experiments_runs_once_and_each_task_gets_its_view():
+    CALLS.clear()
+    first = _experiment("first", [1, 2, 3, 2], _by_x)
+    second = _experiment("second", [3, 4], _by_x_negated)
+    one, two = run_experiments([first, second], Config(workers=1), progress=False)
+    assert sorted(task["x"] for task in CALLS) == [1, 2, 3, 4]
+    assert one.extra["values"] == [1, 4, 9, 4] and two.extra["values"] == [-9, -16]
+    assert (one.extra["runs"], one.extra["shared_runs"]) == (3, 1)
+    assert (two.extra["runs"], two.extra["shared_runs"]) == (2, 1)
+    assert one.extra["tasks"][3] == {"name": "first", "x": 2}  # each experiment keeps its tasks
+
+
+def test_runs_start_longest_first_and_experiments_are_summarized_as_they_finish():
+    CALLS.clear()
+    done = []
+    slow = _experiment("slow", [5, 6], cost=lambda task: 10.0 * task["x"])
+    fast = _experiment("fast", [1, 2, 3])
+    summaries = run_experiments(
+        [fast, slow], Config(workers=1), progress=False, on_done=lambda e, s: done.append(e.name)
+    )
+    assert [task["x"] for task in CALLS] == [6, 5, 1, 2, 3]  # by cost; ties in task order
+    assert done == ["slow", "fast"]
+    assert [s.extra["values"] for s in summaries] == [[1, 4, 9], [25, 36]]  # the given order
+    assert all(s.extra["run_seconds"] >= 0 for s in summaries)
+
+
+def test_without_shared_runs_every_distinct_task_is_its_own_run():
+    CALLS.clear()
+    summary = run_experiment(_experiment("plain", [2, 3, 2]), Config(workers=1), progress=False)
+    assert len(CALLS) == 2 and summary.extra["values"] == [4, 9, 4]  # identical tasks: one run
+    assert (summary.extra["runs"], summary.extra["shared_runs"]) == (2, 0)
+
+
+def test_run_key_is_the_function_and_the_task_in_canonical_form():
+    assert run_key(SharedRun(square, {"a": 1, "b": [1, 2]})) == run_key(
+        SharedRun(square, {"b": [1, 2], "a": 1}, negated)
+    )
+    assert run_key(SharedRun(square, {"a": 1})) != run_key(SharedRun(negated, {"a": 1}))
+    assert run_key(SharedRun(square, {"a": 1})) != run_key(SharedRun(square, {"a": 2}))
+
+
+def test_outputs_go_to_a_folder_per_experiment(tmp_path):
+    run_experiments([_experiment("first", [1])], Config(workers=1), tmp_path, progress=False)
+    assert (tmp_path / "first" / "report.md").exists()
+
+
+def _quick_task(agent: str) -> dict:
+    config = Config(quick=True, seeds=1, steps=6_000)
+    return next(t for t in ad.grid_tasks(config, (agent,)))
+
+
+def test_the_greedy_window_changes_nothing_of_how_mmq_learns():
+    """MMQ's shared run (with the averaged table) trains as the thesis rule alone does."""
+    task = _quick_task(fw.THESIS)
+    delay = ad.make_delay(task["delay"], task["lam"])
+    alone = ad.measure(fw.make_variant(fw.THESIS, task["size"], delay, task["steps"], 0), task)
+    shared = fw.run_task(task)
+    np.testing.assert_array_equal(shared["curve"], alone["curve"])
+    np.testing.assert_array_equal(shared["snapshot_optimal"], alone["snapshot_optimal"])
+    np.testing.assert_array_equal(shared["estimate"], alone["estimate"])
+    assert not any(key.startswith(ad.AVERAGED) for key in shared)
+
+
+def test_the_greedy_window_variant_reads_the_averaged_table_of_the_same_run():
+    task = {**_quick_task(fw.GREEDY_ONLY[0]), "agent": fw.GREEDY_ONLY[0]}
+    delay = ad.make_delay(task["delay"], task["lam"])
+    agent = fw.make_variant(task["agent"], task["size"], delay, task["steps"], task["seed"])
+    own = ad.train_with_snapshots(agent, task["steps"], task["size"])
+    window = fw.run_task(task)
+    np.testing.assert_array_equal(window["snapshot_greedy"], own["window_snapshot_greedy"])
+    assert window["greedy"] == ad.walk_average(ad.greedy_policy(agent, averaged=True), 7)
+    assert window["curve"].tolist() == fw.run_task({**task, "agent": fw.THESIS})["curve"].tolist()
+    with pytest.raises(ValueError, match="no averaged table"):
+        ad.averaged_readout(ad.current_readout(window))
+
+
+@pytest.mark.slow
+def test_future_work_run_with_anonymous_delay_shares_mmq_runs_and_claims_the_same(tmp_path):
+    config = Config(quick=True, steps=4_000)
+    alone = run_experiment(get_experiment("future-work"), Config(quick=True, steps=4_000))
+    both = run_experiments(
+        [get_experiment("anonymous-delay"), get_experiment("future-work")], config, progress=False
+    )
+    assert [c.mean for c in both[1].claims] == [c.mean for c in alone.claims]
+    assert both[1].extra["shared_runs"] == both[1].extra["runs"] - 4 * 2  # 4 variants of their own
+    assert alone.extra["runs"] == 5 * 2 and alone.extra["shared_runs"] == 0
