@@ -318,6 +318,9 @@ def test_reproduce_writes_an_index_of_every_experiment(tmp_path):
     text = write_index(tmp_path, ran, 61.5).read_text()
     rows = [line for line in text.splitlines() if line.startswith("| `")]
     assert rows[0].startswith("| `roulette` |") and "| 1 | 0 | 1.5 | 2 | 0 | 0 | 0 |" in rows[0]
-    assert "| 70 | 3 | 60.0 | 0 | 1 | 1 | 1 | [delay-sweep/report.md](delay-sweep/report.md) |" in rows[1]
+    assert (
+        "| 70 | 3 | 60.0 | 0 | 1 | 1 | 1 | [delay-sweep/report.md](delay-sweep/report.md) |"
+        in rows[1]
+    )
     assert "Wall time: 61.5 s (1.0 min)." in text
     assert "Wall time" not in write_index(tmp_path, ran).read_text()
