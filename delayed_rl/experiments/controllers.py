@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from delayed_rl.experiments import plotting
+from delayed_rl.experiments import linefollow, plotting
 from delayed_rl.experiments.common import band_claim, direction_claim, mean_ci_n, paired
 from delayed_rl.experiments.linefollow import (
     LAM,
@@ -119,6 +119,13 @@ def run_task(task: dict) -> dict:
     }
 
 
+def cost(task: dict) -> float:
+    """A task's estimated core-seconds, for scheduling: a learner's training and its run."""
+    learner = not task["controller"].startswith("P ")
+    steps = task["run_steps"] + (task["train_steps"] if learner else 0)
+    return linefollow.cost({"steps": steps})
+
+
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
     """Fig. 5.19's claims: each controller's final average reward, and their order."""
     runs: dict[str, list[dict]] = {name: [] for name in THESIS}
@@ -186,4 +193,5 @@ EXPERIMENT = Experiment(
     run_task=run_task,
     summarize=summarize,
     default_seeds=5,
+    cost=cost,
 )

@@ -24,6 +24,7 @@ Metrics come from the undelayed streams of ``training_log`` (``learn(..., record
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 import gymnasium as gym
@@ -31,6 +32,7 @@ import numpy as np
 
 from delayed_rl._validation import check_choice
 from delayed_rl.experiments import plotting
+from delayed_rl.experiments.anonymous_delay import delay_estimate
 from delayed_rl.experiments.common import band_claim, direction_claim, mean_ci_n, seed_tasks
 from delayed_rl.experiments.runner import (
     Config,
@@ -122,16 +124,37 @@ def tasks(config: Config) -> list[dict]:
 
 
 def run_task(task: dict) -> dict:
-    """Train one learner on the line follower and measure its reward and accumulated error.
+    """Train one learner on the line follower and :func:`measure` it."""
+    return measure(make_agent(task["agent"], line_env(), task["seed"]), task["steps"])
+
+
+def measure(agent: Any, steps: int) -> dict:
+    """Train ``agent`` for ``steps`` on its env and measure the run.
 
     Returns:
-        ``steps``, ``curve`` (the running average reward) and ``error`` (the accumulated error
-        at those steps); ``average`` reward, ``total_error`` and the ``visible`` fraction of
-        steps, over the whole run.
+        :func:`run_metrics`'s (``steps``, ``curve``, ``error``, ``average``, ``total_error``,
+        ``visible``), ``ns_per_step`` (``learn``'s wall time over the steps), ``path``
+        (``learn``'s) and the agent's delay estimate, if it holds one
+        (:func:`~delayed_rl.experiments.anonymous_delay.delay_estimate`).
     """
-    agent = make_agent(task["agent"], line_env(), task["seed"])
-    agent.learn(task["steps"], log_interval=None, record=True)
-    return run_metrics(agent.training_log)
+    started = time.perf_counter()
+    agent.learn(steps, log_interval=None, record=True)
+    seconds = time.perf_counter() - started
+    return {
+        **run_metrics(agent.training_log),
+        "ns_per_step": 1e9 * seconds / steps,
+        "path": agent.last_learn_path,
+        **delay_estimate(agent),
+    }
+
+
+#: Training cost per step on the line follower (env and learner, µs), for scheduling only.
+STEP_MICROSECONDS = 30.0
+
+
+def cost(task: dict) -> float:
+    """A task's estimated core-seconds: its steps at :data:`STEP_MICROSECONDS`."""
+    return 1e-6 * STEP_MICROSECONDS * task["steps"]
 
 
 def run_metrics(log: Any) -> dict:
@@ -294,4 +317,5 @@ EXPERIMENT = Experiment(
     run_task=run_task,
     summarize=summarize,
     default_seeds=5,
+    cost=cost,
 )

@@ -12,7 +12,8 @@ Poisson(90) reward delays, 150k steps a run, 5 seeds; α = 0.1, γ = 0.9, consta
   (``max_delay`` = 150, the same horizon), never told it is Poisson;
 - ``Q``: Q-learning on the delayed reward.
 
-``--quick``: 2 seeds, 5k steps. 15 tasks at full size.
+``--quick``: 2 seeds, 5k steps. 15 tasks at full size; MMQ's and Q's are ``linefollow``'s runs
+(the same env, settings and seeds), which ``delayed-rl reproduce`` runs once for both.
 
 Metrics, as ``linefollow``'s: the average reward during learning (the undelayed reward's
 running mean) and the accumulated error Σ|Δ| (an unseen line counted as |Δ| = 20), plus the
@@ -36,14 +37,13 @@ Whichever way they fall, the numbers are in the report and in ``summary.json``.
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
 import numpy as np
 
 from delayed_rl._validation import check_choice
 from delayed_rl.experiments import linefollow, plotting
-from delayed_rl.experiments.anonymous_delay import DELAY_TOLERANCE, delay_estimate, estimate_plot
+from delayed_rl.experiments.anonymous_delay import DELAY_TOLERANCE, estimate_plot
 from delayed_rl.experiments.common import (
     band_claim,
     direction_claim,
@@ -52,7 +52,7 @@ from delayed_rl.experiments.common import (
     reference_row,
     seed_tasks,
 )
-from delayed_rl.experiments.runner import Config, Curve, Experiment, Summary
+from delayed_rl.experiments.runner import Config, Curve, Experiment, SharedRun, Summary
 from delayed_rl.experiments.training import thesis_hyperparameters
 
 #: The learners compared.
@@ -91,20 +91,29 @@ def run_task(task: dict) -> dict:
     """Train one learner on the line follower; measure reward, error, delay estimate and cost.
 
     Returns:
-        ``linefollow``'s results (``steps``, ``curve``, ``error``, ``average``,
-        ``total_error``, ``visible``), ``ns_per_step`` and the delay estimate
-        (:func:`~delayed_rl.experiments.anonymous_delay.delay_estimate`).
+        :func:`.linefollow.measure`'s results: ``linefollow``'s metrics (``steps``,
+        ``curve``, ``error``, ``average``, ``total_error``, ``visible``), ``ns_per_step``,
+        ``path`` and the delay estimate.
     """
-    agent = make_agent(task["agent"], task["seed"])
-    started = time.perf_counter()
-    agent.learn(task["steps"], log_interval=None, record=True)
-    seconds = time.perf_counter() - started
-    return {
-        **linefollow.run_metrics(agent.training_log),
-        "ns_per_step": 1e9 * seconds / task["steps"],
-        "path": agent.last_learn_path,
-        **delay_estimate(agent),
-    }
+    return linefollow.measure(make_agent(task["agent"], task["seed"]), task["steps"])
+
+
+def shared_run(task: dict) -> SharedRun | None:
+    """MMQ and Q are ``linefollow``'s runs (the same env, settings and seeds), shared with it."""
+    if task["agent"] not in linefollow.AGENTS:
+        return None
+    return SharedRun(linefollow.run_task, task)
+
+
+#: DeconvQ's training cost per step on the line follower (µs; MMQ's and Q's are linefollow's).
+DECONV_STEP_MICROSECONDS = 40.0
+
+
+def cost(task: dict) -> float:
+    """A task's estimated core-seconds, for scheduling (:func:`.linefollow.cost` for MMQ and Q)."""
+    if task["agent"] in linefollow.AGENTS:
+        return linefollow.cost(task)
+    return 1e-6 * DECONV_STEP_MICROSECONDS * task["steps"]
 
 
 def _paired(runs: dict[str, list[dict]], ours: str, theirs: str, how: str) -> tuple:
@@ -260,4 +269,6 @@ EXPERIMENT = Experiment(
     run_task=run_task,
     summarize=summarize,
     default_seeds=5,
+    shared_run=shared_run,
+    cost=cost,
 )

@@ -135,6 +135,11 @@ def run_task(task: dict) -> dict:
     return out
 
 
+def cost(task: dict) -> float:
+    """A task's estimated core-seconds, for scheduling: its pretraining and two runs."""
+    return linefollow_deconv.cost({**task, "steps": task["pretrain_steps"] + 2 * task["steps"]})
+
+
 def _by_seed(runs: dict, agent: str, condition: str, key: str) -> dict[int, float]:
     """``{seed: result[condition][key]}`` of one agent's runs."""
     return {seed: result[condition][key] for seed, result in runs[agent].items()}
@@ -417,4 +422,5 @@ EXPERIMENT = Experiment(
     run_task=run_task,
     summarize=summarize,
     default_seeds=4,
+    cost=cost,
 )
