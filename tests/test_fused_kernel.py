@@ -12,7 +12,7 @@ from support import ScriptedDelay
 import delayed_rl  # noqa: F401
 from delayed_rl.delays import Constant, Empirical, Geometric, Poisson, Uniform
 from delayed_rl.fast import FusedRun, NotCompilable, inspect_stack
-from delayed_rl.fast.kernel import replay
+from delayed_rl.fast.kernel import _rescan, replay
 from delayed_rl.wrappers import RewardDelay
 
 
@@ -106,6 +106,19 @@ def test_cached_maxima_stay_exact(q_init):
     np.testing.assert_array_equal(run.tie_counts, (q.reshape(16, -1) == brute[:, None]).sum(1))
     np.testing.assert_array_equal(q.reshape(-1)[qcell], brute)
     assert np.all(qcell // 32 == np.arange(16))  # each cell lies in its own state's row
+
+
+@pytest.mark.parametrize("size", [1, 2, 3, 4, 5, 7, 8, 9, 204])
+def test_a_rescan_finds_the_max_its_first_holder_ties_and_the_others_max(size):
+    """The rescan of a state's row against numpy, on rows with many exact ties."""
+    rng = np.random.default_rng(size)
+    for _ in range(200):
+        row = rng.integers(-3, 3, size).astype(float) * rng.choice([1.0, 0.5])
+        values = np.concatenate([rng.normal(size=5), row, rng.normal(size=3)])  # an inner row
+        best, first, ties, second = _rescan(values, 5, size)
+        others = np.delete(row, row.argmax())
+        assert (best, first, ties) == (row.max(), 5 + row.argmax(), (row == row.max()).sum())
+        assert second == (others.max() if size > 1 else -np.inf)
 
 
 @pytest.mark.parametrize(

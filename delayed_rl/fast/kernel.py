@@ -130,33 +130,98 @@ def _pick_model(qf, base, n_models, n_actions, best, rng):
 
 
 @_jit
-def _count_ties(qf, qmax, row_size, ties):
-    """Set ``ties[s]`` to how many entries of state ``s``'s row equal its cached max."""
-    for s in range(qmax.shape[0]):
-        ties[s] = 0
-        for i in range(s * row_size, (s + 1) * row_size):
-            ties[s] += qf[i] == qmax[s]
+def _rescan(qf, base, size):
+    """``(max, first index of it, entries equal to it, max of the others)`` of a state's row.
+
+    "The others" are every entry but the first holding the max (so with ties, the max itself;
+    ``-inf`` for a row of one entry). Branch-free passes in four running maxima and counts (an
+    order-free result: a max and a count are exact in any order), cheaper than one branchy pass.
+    """
+    end = base + size
+    b0 = b1 = b2 = b3 = qf[base]
+    i = base
+    while i + 4 <= end:
+        b0 = max(b0, qf[i])
+        b1 = max(b1, qf[i + 1])
+        b2 = max(b2, qf[i + 2])
+        b3 = max(b3, qf[i + 3])
+        i += 4
+    while i < end:
+        b0 = max(b0, qf[i])
+        i += 1
+    best = max(max(b0, b1), max(b2, b3))
+    first = base
+    while qf[first] != best:
+        first += 1
+    t0 = t1 = t2 = t3 = 0
+    s0 = s1 = s2 = s3 = -np.inf
+    i = first + 1
+    while i + 4 <= end:
+        v0, v1, v2, v3 = qf[i], qf[i + 1], qf[i + 2], qf[i + 3]
+        t0 += v0 == best
+        t1 += v1 == best
+        t2 += v2 == best
+        t3 += v3 == best
+        s0 = max(s0, v0)
+        s1 = max(s1, v1)
+        s2 = max(s2, v2)
+        s3 = max(s3, v3)
+        i += 4
+    while i < end:
+        t0 += qf[i] == best
+        s0 = max(s0, qf[i])
+        i += 1
+    for i in range(base, first):  # the entries before the first holder, all below the max
+        s0 = max(s0, qf[i])
+    return best, first, 1 + (t0 + t1) + (t2 + t3), max(max(s0, s1), max(s2, s3))
 
 
 @_jit
-def _write(qf, qmax, qcell, qties, s, cell, new, row_size):
+def _prime_cache(qf, qmax, qcell, row_size, ties, second):
+    """Count each state's ties to its cached max and bound the rest (the start of a call).
+
+    ``ties[s]``: how many entries of state ``s``'s row equal ``qmax[s]``; ``second[s]``: the
+    max of the row's entries other than ``qcell[s]``.
+    """
+    for s in range(qmax.shape[0]):
+        ties[s] = 0
+        second[s] = -np.inf
+        for i in range(s * row_size, (s + 1) * row_size):
+            ties[s] += qf[i] == qmax[s]
+            if i != qcell[s] and qf[i] > second[s]:
+                second[s] = qf[i]
+
+
+@_jit
+def _write(qf, qmax, qcell, qties, qsecond, s, cell, new, row_size):
     """Set ``qf[cell]``, an entry of state ``s``'s row, to ``new``, keeping the cache exact.
 
-    A state's row is rescanned only when its cached arg-max entry decreases.
+    The cache of a state: its max ``qmax``, the flat index ``qcell`` of an entry holding it, how
+    many entries hold it (``qties``) and ``qsecond``, an upper bound of the other entries (every
+    one but ``qcell``'s; exact after a rescan, raised by each write to them). The row is
+    rescanned only when the cached arg-max entry decreases below that bound, or while tied.
     """
     old = qf[cell]
     qf[cell] = new
-    if new > qmax[s]:
+    best = qmax[s]
+    if new > best:  # a new unique max (a former holder elsewhere joins the others)
+        if qcell[s] != cell and best > qsecond[s]:
+            qsecond[s] = best
         qmax[s] = new
         qcell[s] = cell
         qties[s] = 1
-    elif new == qmax[s]:
-        qties[s] += old != new
-    elif old == qmax[s]:  # an entry holding the max fell
-        if qcell[s] != cell:
+    elif qcell[s] != cell:  # one of the others
+        if new == best:
+            qties[s] += old != new
+        elif old == best:  # an entry holding the max fell
             qties[s] -= 1
-        else:  # the cached arg-max itself: rescan the state's row
-            qmax[s], qcell[s], qties[s] = _scan_max(qf, s * row_size, row_size)
+        if new > qsecond[s]:
+            qsecond[s] = new
+    elif new < best:  # the cached arg-max fell: still above the others, else rescan
+        if qties[s] == 1 and new > qsecond[s]:
+            qmax[s] = new
+        else:
+            qmax[s], qcell[s], qties[s], qsecond[s] = _rescan(qf, s * row_size, row_size)
 
 
 NO_KERNEL = np.zeros(0)
@@ -378,8 +443,9 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, mod
     the other, if it is among the ``arrivals.held`` most recent.
 
     The cache (:class:`QCache`) is kept exact: a state's row is rescanned only when the cached
-    arg-max entry decreases; the acting model is read off ``v_cell`` unless the max is tied, so
-    ties cost a scan and nothing else does. Random draws happen exactly where the Python path
+    arg-max entry decreases below an upper bound of the row's other entries (kept for the call,
+    see :func:`_write`), or while it is tied; the acting model is read off ``v_cell`` unless the
+    max is tied, so ties cost a scan and nothing else does. Random draws happen exactly where the Python path
     draws: ε tests, uniform choices, and a tie-break only when there is a tie.
 
     With a non-empty ``script`` the steps replay its transitions and received rewards instead of
@@ -428,7 +494,8 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, mod
     n_actions = q.shape[2]
     row_size = n_models * n_actions
     qf = q.reshape(q.size)  # the Q-table, flat: entry (s, j, a) is qf[(s·|Λ| + j)·|A| + a]
-    _count_ties(qf, qmax, row_size, qties)
+    qsecond = np.empty(qmax.shape[0])  # the others' bound (see _write), made afresh each call
+    _prime_cache(qf, qmax, qcell, row_size, qties, qsecond)
     hmask = hist_s.shape[0] - 1
     bmask = buffer.shape[0] - 1
     targets = np.zeros(n_lags)
@@ -547,7 +614,8 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, mod
                 bootstrap = 0.0 if arrivals.terminated[p] else gamma * qmax[arrivals.s2[p]]
                 old = qf[cell]
                 new = old + alpha * (arrivals.value[p] + bootstrap - old)
-                _write(qf, qmax, qcell, qties, np.uint64(arrivals.s[p]), cell, new, row_size)
+                sp = np.uint64(arrivals.s[p])
+                _write(qf, qmax, qcell, qties, qsecond, sp, cell, new, row_size)
             n_lags_now = 0  # (the lags below do not learn)
         else:
             n_lags_now = n_lags
@@ -586,17 +654,27 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, mod
             # the error computed before the step's writes
             new = old + rate * (targets[j] - old if per_lag else targets[j])
             qf[cell] = new
-            if new > qmax[sj]:
+            best = qmax[sj]
+            if new > best:  # a new unique max (a former holder elsewhere joins the others)
+                if qcell[sj] != cell and best > qsecond[sj]:
+                    qsecond[sj] = best
                 qmax[sj] = new
                 qcell[sj] = cell
                 qties[sj] = 1
-            elif new == qmax[sj]:
-                qties[sj] += old != new
-            elif old == qmax[sj]:  # an entry holding the max fell
-                if qcell[sj] != cell:
+            elif qcell[sj] != cell:  # one of the others
+                if new == best:
+                    qties[sj] += old != new
+                elif old == best:  # an entry holding the max fell
                     qties[sj] -= 1
-                else:  # the cached arg-max itself: rescan the state's row
-                    qmax[sj], qcell[sj], qties[sj] = _scan_max(qf, sj * row_size, row_size)
+                if new > qsecond[sj]:
+                    qsecond[sj] = new
+            elif new < best:  # the cached arg-max fell: still above the others, else rescan
+                if qties[sj] == 1 and new > qsecond[sj]:
+                    qmax[sj] = new
+                else:
+                    qmax[sj], qcell[sj], qties[sj], qsecond[sj] = _rescan(
+                        qf, sj * row_size, row_size
+                    )
         if has_model:  # after the update, as the Python path: this step informs the next solve
             observe(model.stats, s * n_actions + action, delivered, ended)
         if ended:
