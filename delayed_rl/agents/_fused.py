@@ -49,6 +49,9 @@ class CompiledTables(NamedTuple):
             (expected credit); ``None``: one table per lag, each learning at α.
         held_transitions: the oracle's history length: the run credits each transition with
             its own reward (:mod:`delayed_rl.fast.arrivals`); ``None``: the delivered rewards.
+        average: a moving average of ``q`` the run keeps up to date, step by step
+            (:class:`~delayed_rl.fast.kernel.TableAverage`: MMQ's greedy window); ``None``:
+            none.
     """
 
     q: np.ndarray
@@ -63,6 +66,7 @@ class CompiledTables(NamedTuple):
     trace: np.ndarray | None = None
     lag_rates: np.ndarray | None = None
     held_transitions: int | None = None
+    average: Any = None
 
 
 def check_fused(fused: Any, callback: Any) -> bool | None:
@@ -143,6 +147,7 @@ def compiled_loop(agent: Any, fused_run: Any, run: LearnRun) -> None:
             trace_decay=tables.trace_decay,
             trace=tables.trace,
             lag_rates=tables.lag_rates,
+            average=tables.average,
         )
         agent.num_timesteps += length
         if tables.after_chunk is not None:

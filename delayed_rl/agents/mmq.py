@@ -39,7 +39,7 @@ from delayed_rl.agents._fused import CompiledTables
 from delayed_rl.agents.base import TabularAgent
 from delayed_rl.agents.hyperparameters import shares_hyperparameters
 from delayed_rl.fast._numba import jit as _jit
-from delayed_rl.fast.kernel import credit_kernel
+from delayed_rl.fast.kernel import TableAverage, credit_kernel
 
 __all__ = ["MAX_TABLE_BYTES", "MMQ", "MultipleModelQLearning", "greedy_actions", "table_bytes"]
 
@@ -637,8 +637,9 @@ class MultipleModelQLearning(TabularAgent):
     def compiled_tables(self) -> CompiledTables:
         """The Q-table, its cache and Λ: MMQ's rule runs compiled for every Λ, options included.
 
-        With ``greedy_window``, a chunk runs up to the next update of the averaged table, which
-        runs between chunks: both paths average at the same training steps.
+        With ``greedy_window``, the compiled loop keeps the averaged table itself, at the same
+        training steps and with the same arithmetic as :meth:`_average_greedy` on the Python
+        path.
         """
         tables = CompiledTables(self._q, self._v_max, self._v_cell, self._delay_estimates)
         if not (self._weighted or self._greedy_interval):
@@ -647,14 +648,10 @@ class MultipleModelQLearning(TabularAgent):
             credit_kernel=self._credit_kernel, trace_decay=self.delay_trace, trace=self._trace
         )
         if self._greedy_interval:
-            until = max(1, self._greedy_interval - int(self._greedy_clock[0]))
-            tables = tables._replace(chunk_limit=until, after_chunk=self._after_greedy_chunk)
+            rate = self._greedy_interval / self.greedy_window
+            average = TableAverage(self._greedy_q, self._greedy_clock, self._greedy_interval, rate)
+            tables = tables._replace(average=average)
         return tables
-
-    def _after_greedy_chunk(self, steps: int) -> None:
-        self._greedy_clock[0] += steps
-        if self._greedy_clock[0] >= self._greedy_interval:
-            self._average_greedy()
 
     def _average_greedy(self) -> None:
         """One update of the averaged table: ``G ← G + (interval / W)(Q − G)`` (first: ``Q``)."""

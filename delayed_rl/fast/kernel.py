@@ -422,8 +422,32 @@ NO_REWARD_MODEL = RewardModel(np.zeros(0), EMPTY_STATISTICS)
 """No reward model: targets use the delivered reward."""
 
 
+class TableAverage(NamedTuple):
+    """A moving average of the Q-table, updated every ``every`` steps (MMQ's greedy window).
+
+    Attributes:
+        table: the average, shaped as the Q-table, updated in place after every ``every``-th
+            step's update: ``table ← table + rate · (q − table)``, the first time ``table ← q``.
+        clock: ``[steps since the last update, updates so far]`` (``int64``), carried between
+            calls.
+        every: the steps between updates (0: no average, :data:`NO_AVERAGE`).
+        rate: the weight of an update.
+    """
+
+    table: np.ndarray
+    clock: np.ndarray
+    every: int
+    rate: float
+
+
+NO_AVERAGE = TableAverage(np.zeros((1, 1, 1)), np.zeros(2, np.int64), 0, 0.0)
+"""No moving average of the Q-table."""
+
+
 @_jit
-def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, model, arrivals):
+def run_chunk(
+    cache, rule, env, line, history, log, script, start_step, rng, model, arrivals, average
+):
     """Advance training by ``line.delays.shape[0]`` steps.
 
     One loop, written out: splitting its step into compiled helpers (choose, env step, delay,
@@ -469,6 +493,8 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, mod
             :data:`NO_REWARD_MODEL`.
         arrivals: the oracle's record (:class:`~delayed_rl.fast.arrivals.Arrivals`, Λ = {0},
             not with a script), or :data:`~delayed_rl.fast.arrivals.NO_ARRIVALS`.
+        average: a moving average of the Q-table to keep (:class:`TableAverage`), or
+            :data:`NO_AVERAGE`.
 
     Indices into the Q-table and its cache are cast to unsigned integers, which spares the
     compiled code numba's negative-index handling in the innermost loops (about 5%).
@@ -509,6 +535,8 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, mod
     has_model = model.rewards.shape[0] > 0
     oracle = arrivals.head.shape[0] > 0
     pmask = arrivals.due.shape[0] - 1
+    averaged, average_clock = average.table.reshape(average.table.size), average.clock
+    average_every, average_rate = average.every, average.rate
     n_arrived = 0
     for t in range(delays.shape[0]):
         if scripted:
@@ -677,6 +705,16 @@ def run_chunk(cache, rule, env, line, history, log, script, start_step, rng, mod
                     )
         if has_model:  # after the update, as the Python path: this step informs the next solve
             observe(model.stats, s * n_actions + action, delivered, ended)
+        if average_every > 0:  # the Q-table's moving average, after the step's update
+            average_clock[0] += 1
+            if average_clock[0] >= average_every:
+                if average_clock[1] > 0:  # the expression of the Python path's numpy update
+                    for i in range(qf.shape[0]):
+                        averaged[i] += average_rate * (qf[i] - averaged[i])
+                else:
+                    averaged[:] = qf
+                average_clock[0] = 0
+                average_clock[1] += 1
         if ended:
             if not scripted:  # the next episode's start (no draw for a certain one)
                 s = 0
@@ -773,5 +811,5 @@ def replay(
     no_draws = np.ones(4, np.uint64)  # a script draws nothing
     run_chunk(
         cache, rule, TabularModel.empty(), line, history, StepLog.empty(n), script, 0, no_draws,
-        model, NO_ARRIVALS,
+        model, NO_ARRIVALS, NO_AVERAGE,
     )  # fmt: skip

@@ -156,6 +156,7 @@ class FusedRun:
         trace_decay: float | None = None,
         trace: np.ndarray | None = None,
         lag_rates: np.ndarray | None = None,
+        average: kernel.TableAverage | None = None,
     ) -> kernel.StepLog:
         """Advance ``steps`` steps, updating ``q`` and its cache in place; return the step log.
 
@@ -178,6 +179,9 @@ class FusedRun:
             trace: the delay trace, one float64 per model, updated in place (the agent's).
             lag_rates: the learning rate of each lag, for a rule crediting several lags in one
                 table (:attr:`~delayed_rl.fast.kernel.Rule.lag_rates`); ``None``: α for all.
+            average: a moving average of ``q`` to keep up to date
+                (:class:`~delayed_rl.fast.kernel.TableAverage`, its table shaped as ``q``);
+                ``None``: none.
 
         Returns:
             One entry per step (:class:`~delayed_rl.fast.kernel.StepLog`); :attr:`state`
@@ -186,7 +190,8 @@ class FusedRun:
         Raises:
             ValueError: ``credit_kernel`` is shorter than Λ's span, or ``trace_decay`` is given
                 without a ``trace`` of one float64 per model (the compiled code does not check
-                its indices), or ``lag_rates`` is not one float64 per lag.
+                its indices), or ``lag_rates`` is not one float64 per lag, or ``average``'s table
+                is not a C-contiguous float64 array shaped as ``q``.
         """
         delays = self._draw_delays(steps)
         self._fit_ring(int(delays.max(initial=0)))
@@ -207,6 +212,14 @@ class FusedRun:
             lag_rates = kernel.NO_RATES
         elif lag_rates.dtype != np.float64 or lag_rates.shape != estimates.shape:
             raise ValueError(f"lag_rates must be a float64 array of shape {estimates.shape}")
+        if average is None:
+            average = kernel.NO_AVERAGE
+        elif (
+            average.table.dtype != np.float64
+            or average.table.shape != q.shape
+            or not average.table.flags.c_contiguous
+        ):
+            raise ValueError(f"average's table must be a C-contiguous float64 array of {q.shape}")
         cache = kernel.QCache(q, v_max, v_cell, self.tie_counts, trace)
         rule = kernel.Rule(
             delay_estimates=estimates,
@@ -230,7 +243,7 @@ class FusedRun:
             log,
             kernel.NO_SCRIPT,
             int(start_step),
-            self.rng_state, reward_model or kernel.NO_REWARD_MODEL, self.arrivals,
+            self.rng_state, reward_model or kernel.NO_REWARD_MODEL, self.arrivals, average,
         )  # fmt: skip
         if line.discarded[0] != 0.0:
             warnings.warn(
