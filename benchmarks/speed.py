@@ -10,7 +10,7 @@
   path and the bare env step, and every agent's compiled cost per step;
 - the e-puck: random-action steps/s beside pymunk's bare solver (the floor), and the
   line-following training loop (env + MMQ |Λ| = 151, Python path) beside the env alone;
-- with ``--reproduce``, the wall time of ``delayed-rl reproduce`` at full scale, per experiment.
+- with ``--reproduce``, the wall time of ``delayed-rl reproduce`` at full scale, and each experiment's cost.
 
     python benchmarks/speed.py [--quick] [--reproduce [--reproduce-out DIR]] [--markdown FILE]
 
@@ -90,7 +90,8 @@ def one_million_mmq_seconds() -> tuple[float, float]:
 def reproduce_seconds(out: Path) -> tuple[float, list[str]]:
     """Wall time of ``delayed-rl reproduce --workers 2`` at full scale, and its index's rows.
 
-    The results are written into ``out`` (``index.md`` lists each experiment's wall time).
+    The results are written into ``out`` (``index.md`` lists each experiment's runs and their
+    core-seconds).
     """
     command = ["reproduce", "--workers", "2", "--out", str(out)]
     start = time.perf_counter()
@@ -343,7 +344,10 @@ def main() -> None:
             f"## `delayed-rl reproduce --workers 2` at full scale: **{seconds:.0f} s** "
             f"({seconds / 60:.1f} min)",
             "",
-            "What each experiment cost (its `index.md`):",
+            "What each experiment cost (its `index.md`: the runs it needed, how many of them "
+            "another experiment shared, and their core-seconds; every experiment's runs go to "
+            "one pool of 2 workers, the longest first, so the wall time is about half the "
+            "distinct runs' core-seconds):",
             "",
             *rows,
             "",

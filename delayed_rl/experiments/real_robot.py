@@ -49,11 +49,11 @@ Claims, verdicts from the 95 % CIs over seeds (:mod:`.common`'s rules):
 - DeconvQ learned minus Q on the real configuration, above 0 (an extension), and DeconvQ's
   average reward there as a reference row.
 
-Cost: pretraining dominates (the e-puck env runs on the Python path, ~0.2–0.3 ms a step):
-500k steps took 131 s for MMQ on one core of a loaded 2-core machine, about as long for Q
-and DeconvQ learned, so a seed costs ~6 core-minutes and the default 4 seeds ~13 minutes on
-2 workers; the continuations take about a second each. ``summary.json`` records each
-pretraining's wall time (``pretrain_seconds``).
+Cost: pretraining dominates (the e-puck env runs on the Python path). In a full
+``delayed-rl reproduce`` on this 2-core machine (two workers busy), 500k pretraining steps took
+12 s for Q, 17 s for MMQ and 30 s for DeconvQ learned (23–59 µs a step), the continuations
+about a second each: the default 4 seeds cost about 240 core-seconds. ``summary.json`` records
+each pretraining's wall time (``pretrain_seconds``).
 """
 
 from __future__ import annotations

@@ -469,6 +469,18 @@ def _json_default(value: Any) -> Any:
     raise TypeError(f"cannot write {type(value).__name__} to JSON")
 
 
+def _cost_text(summary: Summary) -> str:
+    """What the experiment cost, for its report: runs, shared runs, core-seconds, wall time."""
+    extra = summary.extra
+    if "run_seconds" not in extra:
+        return f"wall time: {extra.get('wall_time_s', '?')} s."
+    return (
+        f"cost: {extra['runs']} runs ({extra['shared_runs']} shared with the other experiments "
+        f"run with it), {extra['run_seconds']} core-seconds; done {extra['wall_time_s']} s "
+        "after the start."
+    )
+
+
 def render_report(
     experiment: Experiment, config: Config, summary: Summary, figures: list[str]
 ) -> str:
@@ -483,8 +495,7 @@ def render_report(
         experiment.description,
         "",
         f"Seeds: {config.seeds} (from {config.base_seed}); steps: "
-        f"{config.steps or 'thesis default'}; quick: {config.quick}; "
-        f"wall time: {summary.extra.get('wall_time_s', '?')} s.",
+        f"{config.steps or 'thesis default'}; quick: {config.quick}; {_cost_text(summary)}",
         "",
         "| quantity | thesis value | measured mean ± 95 % CI | seeds | verdict | criterion |",
         "|---|---|---|---|---|---|",
