@@ -196,7 +196,7 @@ class Experiment:
             experiment or another) also needs, else ``None`` (``shared_run`` itself ``None``:
             every task is its own run, ``run_task(task)``).
         cost: a task's estimated core-seconds, which only orders the runs (longest first, so
-            that no long run starts last); :func:`default_cost` by default.
+            that no long run starts last); ``None``: :func:`default_cost`.
     """
 
     name: str
@@ -208,12 +208,16 @@ class Experiment:
     default_seeds: int
     quick_seeds: int = 2
     shared_run: Callable[[dict], SharedRun | None] | None = None
-    cost: Callable[[dict], float] = default_cost
+    cost: Callable[[dict], float] | None = None
 
     def run_of(self, task: dict) -> SharedRun:
         """The run behind ``task``: its :attr:`shared_run`, else ``run_task`` on the task itself."""
         shared = None if self.shared_run is None else self.shared_run(task)
         return SharedRun(self.run_task, task) if shared is None else shared
+
+    def task_cost(self, task: dict) -> float:
+        """``task``'s estimated core-seconds: its :attr:`cost`, else :func:`default_cost`."""
+        return float((self.cost or default_cost)(task))
 
 
 def mean_ci95(values: Sequence[float]) -> tuple[float, float]:

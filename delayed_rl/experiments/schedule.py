@@ -148,7 +148,7 @@ def _run(
     for plan in plans:
         for task, key in zip(plan.tasks, plan.keys, strict=True):
             runs.setdefault(key, plan.experiment.run_of(task))
-            costs[key] = max(costs.get(key, 0.0), float(plan.experiment.cost(task)))
+            costs[key] = max(costs.get(key, 0.0), plan.experiment.task_cost(task))
         for key in dict.fromkeys(plan.keys):
             users.setdefault(key, []).append(plan)
         plan.missing = len(set(plan.keys))
