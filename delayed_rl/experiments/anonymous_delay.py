@@ -283,8 +283,13 @@ def walk_average(policy: Sequence[int] | np.ndarray, size: int, steps: int = WAL
         steps: how many steps to walk.
     """
     check_int("steps", steps, 1)
+    return _walk_average(tuple(np.asarray(policy, dtype=np.int64).tolist()), size, steps)
+
+
+@functools.lru_cache(maxsize=4096)
+def _walk_average(actions: tuple[int, ...], size: int, steps: int) -> float:
+    """:func:`walk_average` of one policy (cached: a settled run snapshots the same policy)."""
     next_state, reward, state = _dynamics(size)
-    actions = np.asarray(policy, dtype=np.int64).tolist()
     total = 0.0
     for _ in range(steps):
         action = actions[state]
