@@ -27,9 +27,9 @@ after ``set_env`` uses the agent's seed), so their difference is paired. Agents:
 ``Q`` and, beyond the thesis, ``DeconvQ learned`` (:class:`~delayed_rl.agents.DeconvQ`
 learning the delay on 0..150, as in ``linefollow-deconv``). Default 4 seeds (the thesis's two
 runs are seeds ``base_seed`` and ``base_seed + 1``, drawn alone in the figures' first panels;
-all four give the 95 % CIs, with 3 degrees of freedom: the most that keeps the experiment near
-a quarter of an hour on two cores; ``--seeds`` takes more); ``--steps`` sets the pretraining steps. ``--quick``: 2 seeds,
-5k pretraining steps, 300 steps per continuation.
+all four give the 95 % CIs, with 3 degrees of freedom, a choice made when a seed cost minutes
+of pretraining; ``--seeds`` takes more); ``--steps`` sets the pretraining steps. ``--quick``: 2
+seeds, 5k pretraining steps, 300 steps per continuation.
 
 Metrics of each 1,500-step continuation, from its own ``training_log``: the average reward (the
 running mean of the undelayed reward, Figs. 5.24, 5.26) and the accumulated error Σ|Δ| (an
@@ -49,11 +49,12 @@ Claims, verdicts from the 95 % CIs over seeds (:mod:`.common`'s rules):
 - DeconvQ learned minus Q on the real configuration, above 0 (an extension), and DeconvQ's
   average reward there as a reference row.
 
-Cost: pretraining dominates (the e-puck env runs on the Python path). In a full
-``delayed-rl reproduce`` on this 2-core machine (two workers busy), 500k pretraining steps took
-12 s for Q, 17 s for MMQ and 30 s for DeconvQ learned (23–59 µs a step), the continuations
-about a second each: the default 4 seeds cost about 240 core-seconds. ``summary.json`` records
-each pretraining's wall time (``pretrain_seconds``).
+Cost: pretraining dominates (the e-puck env runs on the Python path). In full
+``delayed-rl reproduce`` runs on this 2-core machine (two workers busy), 500k pretraining steps
+took 8–12 s for Q, 11–17 s for MMQ and 13–30 s for DeconvQ learned (15–60 µs a step, as busy as
+the machine was), the continuations about a second each: the default 4 seeds cost 130–240
+core-seconds. ``summary.json`` records each pretraining's wall time (mean and CI,
+``pretrain_seconds``).
 """
 
 from __future__ import annotations
