@@ -27,8 +27,10 @@ __all__ = [
 _HINTS = {
     "observation_space": (
         "map observations to integers first, e.g. "
-        "gymnasium.wrappers.DiscretizeObservation(env, bins=10) for a Box space, or your own "
-        "gymnasium.ObservationWrapper whose observation_space is Discrete(n)"
+        "gymnasium.wrappers.DiscretizeObservation(env, bins=10) for a Box space, "
+        "delayed_rl.wrappers.DiscreteObservation(env) for a Tuple of Discrete spaces (as "
+        "Blackjack's) or a MultiDiscrete, or your own gymnasium.ObservationWrapper whose "
+        "observation_space is Discrete(n)"
     ),
     "action_space": (
         "use a discrete action set, e.g. gymnasium.wrappers.DiscretizeAction(env, bins=5) for "

@@ -5,12 +5,15 @@
 - :class:`ActionDelay`: for actions (the env executes an action sent steps earlier), with its
   ``gymnasium.vector`` twin :class:`VectorActionDelay`;
 - :func:`wrap_delays`: all three on one env, in the order ``gym.make(id, ...)`` stacks them;
+- :class:`DiscreteObservation`: observations of several discrete parts (``Blackjack-v1``'s
+  ``Tuple``) as one ``Discrete`` index, for the tabular agents;
 - :class:`VectorRewardDelay`: the twin for ``gymnasium.vector`` envs;
 - :class:`delayed_rl.wrappers.sb3.VecRewardDelay`: the twin for stable-baselines3 ``VecEnv`` objects
   (imported from its own module so that stable-baselines3 and torch load only when used).
 """
 
 from delayed_rl.wrappers.action_delay import ActionDelay, VectorActionDelay
+from delayed_rl.wrappers.discrete_observation import DiscreteObservation
 from delayed_rl.wrappers.observation_delay import ObservationDelay
 from delayed_rl.wrappers.reward_delay import (
     EPISODE_END_MODES,
@@ -24,6 +27,7 @@ from delayed_rl.wrappers.vector import VectorRewardDelay
 __all__ = [
     "EPISODE_END_MODES",
     "ActionDelay",
+    "DiscreteObservation",
     "ObservationDelay",
     "PoissonRewardDelay",
     "RewardDelay",
