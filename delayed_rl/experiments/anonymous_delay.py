@@ -40,7 +40,8 @@ Per run, from the undelayed reward stream (``training_log["undelayed_reward"]``)
   tables, this experiment reports the current one's, ``future-work``'s greedy-window variant
   the averaged one's, from the same runs (:func:`shared_run`);
 - ns/step: the wall time of ``learn`` over the steps, the greedy evaluations excluded; a
-  2000-step run of a twin agent before it loads the compiled kernels, untimed.
+  2000-step run of a twin agent, untimed, loads the compiled kernels first (once per kind of
+  agent in a worker process).
 
 ``summary.json`` holds the full table (``table``: one row per setting and agent, every metric
 with its 95 % CI). The claims, per setting, with verdicts computed from the runs by
@@ -462,20 +463,27 @@ def averaged_readout(result: dict[str, Any]) -> dict[str, Any]:
     return {**current_readout(result), **averaged}
 
 
-def warm_up(make: Callable[[], Any], steps: int) -> None:
-    """Train a throw-away agent ``make()`` for ``min(steps, WARM_UP)`` steps, untimed.
+_WARMED: set[str] = set()
+"""The kinds of agent already warmed up in this process (see :func:`warm_up`)."""
+
+
+def warm_up(make: Callable[[], Any], steps: int, kind: str) -> None:
+    """Train a throw-away agent ``make()`` for ``min(steps, WARM_UP)`` steps, untimed, once.
 
     The first ``learn`` of a compiled agent in a process loads its kernels (seconds); the
-    warm-up pays that, so ns/step measures training alone.
+    warm-up pays that, so ns/step measures training alone. It is done once per ``kind`` of
+    agent (its kernels) in a process: a worker's later runs of that kind find them loaded.
     """
-    make().learn(min(steps, WARM_UP), log_interval=None)
+    if kind not in _WARMED:
+        make().learn(min(steps, WARM_UP), log_interval=None)
+        _WARMED.add(kind)
 
 
 def run_task(task: dict) -> dict:
     """Train one agent of :data:`AGENTS` in its setting and :func:`measure` it."""
     delay = make_delay(task["delay"], task["lam"])
     size, seed, steps = task["size"], task["seed"], task["steps"]
-    warm_up(lambda: make_agent(task["agent"], size, delay, seed + 1, steps), steps)
+    warm_up(lambda: make_agent(task["agent"], size, delay, seed + 1, steps), steps, task["agent"])
     return measure(make_agent(task["agent"], size, delay, seed, steps), task)
 
 

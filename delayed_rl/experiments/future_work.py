@@ -127,7 +127,8 @@ def run_task(task: dict) -> dict:
         return run.view(run.run(run.task))
     delay = shared.make_delay(task["delay"], task["lam"])
     size, steps, seed = task["size"], task["steps"], task["seed"]
-    shared.warm_up(lambda: make_variant(task["agent"], size, delay, steps, seed + 1), steps)
+    variant = task["agent"]
+    shared.warm_up(lambda: make_variant(variant, size, delay, steps, seed + 1), steps, variant)
     return shared.measure(make_variant(task["agent"], size, delay, steps, seed), task)
 
 
