@@ -16,7 +16,7 @@ shared machine one repeat's bare env ran slow in all its rounds and such a ratio
 0.41, less than the wrapper's own work allows. Figures are min–median–max over the repeats,
 beside the floor (the bare env's cost) measured in the same run; a first round warms up.
 
-    python benchmarks/wrapper_overhead.py [--steps 10000] [--rounds 7] [--repeats 11]
+    python benchmarks/wrapper_overhead.py [--steps 10000] [--rounds 15] [--repeats 11]
 """
 
 from __future__ import annotations
@@ -144,7 +144,12 @@ def main() -> None:
     """Time the three stacks and print their costs, overheads and the overhead ratio."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=10_000, help="steps per timing")
-    parser.add_argument("--rounds", type=int, default=15, help="rounds per repeat (fastest kept)")
+    parser.add_argument(
+        "--rounds",
+        type=int,
+        default=15,
+        help="rounds per repeat (costs: the fastest; ratio: the median)",
+    )
     parser.add_argument("--repeats", type=int, default=11, help="repeats")
     args = parser.parse_args()
     repeats = measure(args.steps, args.repeats, args.rounds)

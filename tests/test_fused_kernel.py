@@ -12,7 +12,7 @@ from support import ScriptedDelay
 import delayed_rl  # noqa: F401
 from delayed_rl.delays import Constant, Empirical, Geometric, Poisson, Uniform
 from delayed_rl.fast import FusedRun, NotCompilable, inspect_stack
-from delayed_rl.fast.kernel import _rescan, replay
+from delayed_rl.fast.kernel import TableAverage, _rescan, replay
 from delayed_rl.wrappers import RewardDelay
 
 
@@ -119,6 +119,36 @@ def test_a_rescan_finds_the_max_its_first_holder_ties_and_the_others_max(size):
         others = np.delete(row, row.argmax())
         assert (best, first, ties) == (row.max(), 5 + row.argmax(), (row == row.max()).sum())
         assert second == (others.max() if size > 1 else -np.inf)
+
+
+def test_a_rescan_of_a_row_with_a_nan_stays_in_the_row():
+    values = np.array([7.0, np.nan, 1.0, 2.0, 3.0, 7.0])
+    assert _rescan(values, 1, 4)[1] in range(1, 5)
+
+
+def test_an_average_the_loop_cannot_keep_is_refused():
+    env = gym.make("delayed_rl/GridWorld-v0", size=4, reward_delay=3)
+    q = np.zeros((16, 2, 4))
+    run = FusedRun(env, np.arange(2), seed=0)
+    good = TableAverage(np.zeros_like(q), np.zeros(2, np.int64), 5, 0.1)
+    bad = {
+        "table": good._replace(table=np.zeros((16, 2, 3))),
+        "clock": good._replace(clock=np.zeros(3, np.int64)),
+        "every": good._replace(every=0),
+        "rate": good._replace(rate=float("nan")),
+    }
+    for name, average in bad.items():
+        with pytest.raises(ValueError, match=f"average's {name}"):
+            _run_averaged(run, q, average)
+    _run_averaged(run, q, good)  # 10 steps: two updates of the average
+    assert good.clock.tolist() == [0, 2] and good.table.shape == q.shape
+
+
+def _run_averaged(run, q, average):
+    return run.run(
+        q, *_cache(q), 10, start_step=0, learning_rate=0.1, gamma=0.9, eps_initial=0.1,
+        eps_final=0.1, eps_steps=1, average=average,
+    )  # fmt: skip
 
 
 @pytest.mark.parametrize(

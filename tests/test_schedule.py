@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 
@@ -91,6 +93,33 @@ def test_run_key_is_the_function_and_the_task_in_canonical_form():
     )
     assert run_key(SharedRun(square, {"a": 1})) != run_key(SharedRun(negated, {"a": 1}))
     assert run_key(SharedRun(square, {"a": 1})) != run_key(SharedRun(square, {"a": 2}))
+
+
+class _Runner:
+    def run(self, task: dict) -> dict:
+        return task
+
+
+@pytest.mark.parametrize(
+    "function",
+    [lambda task: task, functools.partial(square), _Runner().run, _Runner()],
+    ids=["lambda", "partial", "bound method", "callable"],
+)
+def test_a_run_must_be_a_module_level_function(function):
+    with pytest.raises(TypeError, match="module-level function"):
+        run_key(SharedRun(function, {"x": 1}))
+
+
+def test_a_task_must_be_json_like():
+    with pytest.raises(ValueError, match="not JSON-like"):
+        run_key(SharedRun(square, {"x": object()}))
+    with pytest.raises(ValueError, match="not JSON-like"):
+        run_key(SharedRun(square, {1: "a", "b": 2}))  # keys that cannot be sorted
+
+
+def test_experiments_run_together_must_have_distinct_names():
+    with pytest.raises(ValueError, match=r"distinct names, got \['twin'\]"):
+        run_experiments([_experiment("twin", [1]), _experiment("twin", [2])], Config(workers=1))
 
 
 def test_outputs_go_to_a_folder_per_experiment(tmp_path):

@@ -430,8 +430,9 @@ class MultipleModelQLearning(TabularAgent):
             ``update()`` alike), ``G ← G + (interval / W)·(Q − G)``, the first update setting
             ``G = Q``; before it the greedy policy reads ``Q``. Acting while training and the
             exploring ``predict`` still use the current table. The averaged table doubles the
-            Q-table's memory (counted against :data:`MAX_TABLE_BYTES`); on the compiled path,
-            chunks stop at each update, so a small ``W`` costs speed.
+            Q-table's memory (counted against :data:`MAX_TABLE_BYTES`); an update is a pass
+            over the whole table, every ``interval`` steps (inside the compiled loop on the
+            compiled path).
         **hyperparameters: the hyper-parameters every agent shares, by keyword
             (``learning_rate``, ``gamma``, ``exploration_initial_eps``,
             ``exploration_final_eps``, ``exploration_fraction``, ``q_init``, ``seed``,

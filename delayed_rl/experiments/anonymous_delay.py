@@ -39,7 +39,8 @@ Per run, from the undelayed reward stream (``training_log["undelayed_reward"]``)
   ``steps // 10``), which changes nothing of how MMQ learns or acts; the snapshots read both
   tables, this experiment reports the current one's, ``future-work``'s greedy-window variant
   the averaged one's, from the same runs (:func:`shared_run`);
-- ns/step: the wall time of ``learn`` over the steps, the greedy evaluations excluded; a
+- ns/step: the wall time of ``learn`` over the steps, the greedy evaluations excluded (MMQ's
+  includes keeping its greedy window's average, a pass over the table every hundredth of the window); a
   2000-step run of a twin agent, untimed, loads the compiled kernels first (once per kind of
   agent in a worker process).
 

@@ -21,12 +21,16 @@ Each summary's ``extra`` records what the experiment cost:
   experiments run together also needed;
 - ``wall_time_s``: seconds from the start until its summary was made (run alone: the
   experiment's wall time).
+
+Tasks that share a run receive the same result object (through their views): an experiment's
+``summarize`` reads its results and must not change them.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
+import sys
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -44,15 +48,37 @@ from delayed_rl.experiments.runner import (
 
 
 def run_key(run: SharedRun) -> str:
-    """A run's identity: its function's qualified name and its task in canonical JSON."""
-    function = f"{run.run.__module__}.{run.run.__qualname__}"
-    return f"{function}:{json.dumps(run.task, sort_keys=True, default=_json_default)}"
+    """A run's identity: its function's qualified name and its task in canonical JSON.
+
+    Tasks are compared as JSON: a tuple is the list of its items, an integer key the string of
+    it.
+
+    Raises:
+        TypeError: ``run.run`` is not a module-level function (a lambda, a closure, a bound
+            method or a ``functools.partial`` has no name that tells one computation from
+            another, nor one a worker process can import).
+        ValueError: ``run.task`` cannot be written as JSON.
+    """
+    function = run.run
+    module = sys.modules.get(getattr(function, "__module__", None) or "")
+    name = getattr(function, "__qualname__", "")
+    if module is None or "<" in name or getattr(module, name, None) is not function:
+        raise TypeError(
+            f"a run must be a module-level function (run_task, or a SharedRun's run), got "
+            f"{function!r}"
+        )
+    try:
+        task = json.dumps(run.task, sort_keys=True, default=_json_default)
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"the task {run.task!r} of {name} is not JSON-like: {error}") from None
+    return f"{function.__module__}.{name}:{task}"
 
 
-def _timed(run: SharedRun) -> tuple[dict, float]:
-    """``(run.run(run.task), seconds it took)``, timed where it runs (in the worker)."""
+def _timed(job: tuple[Callable[[dict], dict], dict]) -> tuple[dict, float]:
+    """``(run(task), seconds it took)`` of a ``(run, task)`` job, timed where it runs."""
+    run, task = job
     started = time.perf_counter()
-    result = run.run(run.task)
+    result = run(task)
     return result, time.perf_counter() - started
 
 
@@ -112,8 +138,15 @@ def run_experiments(
 
     Returns:
         The summaries, in the order of ``experiments``.
+
+    Raises:
+        ValueError: two experiments have the same name (their folders and runs would mix).
     """
     check_bool("progress", progress)
+    names = [experiment.name for experiment in experiments]
+    repeated = sorted({name for name in names if names.count(name) > 1})
+    if repeated:
+        raise ValueError(f"experiments must have distinct names, got {repeated} more than once")
     plans = []
     for experiment in experiments:
         own = dataclasses.replace(config)
@@ -179,7 +212,8 @@ def _run(
     for plan in plans:
         if not plan.missing:
             finish(plan)
-    pending = iter_tasks(_timed, [runs[key] for key in order], config.workers, config.backend)
+    jobs = [(runs[key].run, runs[key].task) for key in order]
+    pending = iter_tasks(_timed, jobs, config.workers, config.backend)
     for index, (result, spent) in pending:
         key = order[index]
         results[key], seconds[key] = result, spent

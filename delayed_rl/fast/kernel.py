@@ -151,7 +151,7 @@ def _rescan(qf, base, size):
         i += 1
     best = max(max(b0, b1), max(b2, b3))
     first = base
-    while qf[first] != best:
+    while first < end - 1 and qf[first] != best:  # (bounded: a NaN equals nothing)
         first += 1
     t0 = t1 = t2 = t3 = 0
     s0 = s1 = s2 = s3 = -np.inf
@@ -199,7 +199,8 @@ def _write(qf, qmax, qcell, qties, qsecond, s, cell, new, row_size):
     The cache of a state: its max ``qmax``, the flat index ``qcell`` of an entry holding it, how
     many entries hold it (``qties``) and ``qsecond``, an upper bound of the other entries (every
     one but ``qcell``'s; exact after a rescan, raised by each write to them). The row is
-    rescanned only when the cached arg-max entry decreases below that bound, or while tied.
+    rescanned only when the cached arg-max entry decreases to or below that bound, or while
+    tied.
     """
     old = qf[cell]
     qf[cell] = new
@@ -467,10 +468,10 @@ def run_chunk(
     the other, if it is among the ``arrivals.held`` most recent.
 
     The cache (:class:`QCache`) is kept exact: a state's row is rescanned only when the cached
-    arg-max entry decreases below an upper bound of the row's other entries (kept for the call,
-    see :func:`_write`), or while it is tied; the acting model is read off ``v_cell`` unless the
-    max is tied, so ties cost a scan and nothing else does. Random draws happen exactly where the Python path
-    draws: ε tests, uniform choices, and a tie-break only when there is a tie.
+    arg-max entry decreases to or below an upper bound of the row's other entries (kept for the
+    call, see :func:`_write`), or while it is tied; the acting model is read off ``v_cell``
+    unless the max is tied, where choosing costs a scan. Random draws happen exactly where the
+    Python path draws: ε tests, uniform choices, and a tie-break only when there is a tie.
 
     With a non-empty ``script`` the steps replay its transitions and received rewards instead of
     acting in the env: :func:`replay` uses it so that tests drive this very loop.

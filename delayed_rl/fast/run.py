@@ -190,8 +190,9 @@ class FusedRun:
         Raises:
             ValueError: ``credit_kernel`` is shorter than Λ's span, or ``trace_decay`` is given
                 without a ``trace`` of one float64 per model (the compiled code does not check
-                its indices), or ``lag_rates`` is not one float64 per lag, or ``average``'s table
-                is not a C-contiguous float64 array shaped as ``q``.
+                its indices), or ``lag_rates`` is not one float64 per lag, or ``average`` is not
+                one it can keep (its table a C-contiguous float64 array shaped as ``q``, its
+                clock two int64 counters, ``every`` ≥ 1, ``rate`` finite).
         """
         delays = self._draw_delays(steps)
         self._fit_ring(int(delays.max(initial=0)))
@@ -214,12 +215,8 @@ class FusedRun:
             raise ValueError(f"lag_rates must be a float64 array of shape {estimates.shape}")
         if average is None:
             average = kernel.NO_AVERAGE
-        elif (
-            average.table.dtype != np.float64
-            or average.table.shape != q.shape
-            or not average.table.flags.c_contiguous
-        ):
-            raise ValueError(f"average's table must be a C-contiguous float64 array of {q.shape}")
+        else:
+            _check_average(average, q.shape)
         cache = kernel.QCache(q, v_max, v_cell, self.tie_counts, trace)
         rule = kernel.Rule(
             delay_estimates=estimates,
@@ -253,3 +250,23 @@ class FusedRun:
                 stacklevel=4,
             )
         return log
+
+
+def _check_average(average: kernel.TableAverage, shape: tuple[int, ...]) -> None:
+    """Refuse a :class:`~delayed_rl.fast.kernel.TableAverage` the compiled loop cannot use.
+
+    Raises:
+        ValueError: the table is not a C-contiguous float64 array of ``shape``, the clock not
+            two int64 counters, ``every`` not a positive integer or ``rate`` not a finite float.
+    """
+    table, clock = average.table, average.clock
+    if table.dtype != np.float64 or table.shape != shape or not table.flags.c_contiguous:
+        raise ValueError(f"average's table must be a C-contiguous float64 array of {shape}")
+    if clock.dtype != np.int64 or clock.shape != (2,):
+        raise ValueError(
+            f"average's clock must be 2 int64 counters, got {clock.dtype} {clock.shape}"
+        )
+    if not isinstance(average.every, int) or average.every < 1:
+        raise ValueError(f"average's every must be an integer >= 1, got {average.every!r}")
+    if not isinstance(average.rate, float) or not np.isfinite(average.rate):
+        raise ValueError(f"average's rate must be a finite float, got {average.rate!r}")
