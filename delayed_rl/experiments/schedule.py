@@ -89,8 +89,8 @@ class _Plan:
     experiment: Experiment
     config: Config
     tasks: list[dict]
+    runs: list[SharedRun]
     keys: list[str]
-    views: list[Callable[[dict], dict] | None]
     out: Path | None
     missing: int = 0
 
@@ -163,8 +163,7 @@ def _default_seeds(experiment: Experiment, config: Config) -> None:
 def _plan(experiment: Experiment, config: Config, out: Path | None) -> _Plan:
     tasks = experiment.tasks(config)
     runs = [experiment.run_of(task) for task in tasks]
-    keys = [run_key(run) for run in runs]
-    return _Plan(experiment, config, tasks, keys, [run.view for run in runs], out)
+    return _Plan(experiment, config, tasks, runs, [run_key(run) for run in runs], out)
 
 
 def _run(
@@ -179,8 +178,8 @@ def _run(
     costs: dict[str, float] = {}
     users: dict[str, list[_Plan]] = {}
     for plan in plans:
-        for task, key in zip(plan.tasks, plan.keys, strict=True):
-            runs.setdefault(key, plan.experiment.run_of(task))
+        for task, run, key in zip(plan.tasks, plan.runs, plan.keys, strict=True):
+            runs.setdefault(key, run)
             costs[key] = max(costs.get(key, 0.0), plan.experiment.task_cost(task))
         for key in dict.fromkeys(plan.keys):
             users.setdefault(key, []).append(plan)
@@ -233,8 +232,8 @@ def _summarize(
 ) -> Summary:
     """The plan's summary from its runs' results (each through its task's view), with its costs."""
     task_results = [
-        results[key] if view is None else view(results[key])
-        for key, view in zip(plan.keys, plan.views, strict=True)
+        results[key] if run.view is None else run.view(results[key])
+        for run, key in zip(plan.runs, plan.keys, strict=True)
     ]
     summary = plan.experiment.summarize(plan.tasks, task_results, plan.config)
     distinct = set(plan.keys)
