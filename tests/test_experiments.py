@@ -324,3 +324,7 @@ def test_reproduce_writes_an_index_of_every_experiment(tmp_path):
     )
     assert "Wall time: 61.5 s (1.0 min)." in text
     assert "Wall time" not in write_index(tmp_path, ran).read_text()
+    with pytest.raises(ValueError, match="wall_seconds"):
+        write_index(tmp_path, ran, -1.0)
+    with pytest.raises(TypeError, match="wall_seconds"):
+        write_index(tmp_path, ran, "61.5")

@@ -139,6 +139,14 @@ def test_bad_arguments():
         ad.make_delay("uniform", 3)
     with pytest.raises(ValueError, match="agent must be one of"):
         ad.make_agent("SARSA", 5, ad.make_delay("Poisson", 2), 0)
+    with pytest.raises(ValueError, match="steps"):
+        ad.make_agent("MMQ", 5, ad.make_delay("Poisson", 2), 0, steps=0)
+    with pytest.raises(TypeError, match="steps"):
+        ad.make_agent("MMQ", 5, ad.make_delay("Poisson", 2), 0, steps="1000")
+    agent = ad.make_agent("MMQ", 5, ad.make_delay("Poisson", 2), 0, steps=1000)
+    assert agent.greedy_window == 100
+    with pytest.raises(TypeError, match="averaged"):
+        ad.greedy_policy(agent, averaged="yes")
     with pytest.raises(ValueError, match="kind must be one of"):
         lfd.make_agent("SARSA", 0)
 

@@ -82,7 +82,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from delayed_rl._validation import check_choice, check_int
+from delayed_rl._validation import check_bool, check_choice, check_int
 from delayed_rl.agents.mmq import greedy_actions
 from delayed_rl.delays import Delay, Empirical, Geometric, Poisson
 from delayed_rl.experiments import plotting
@@ -238,12 +238,13 @@ def make_agent(name: str, size: int, delay: Delay, seed: int, steps: int | None 
     or acts: :func:`measure` reads both greedy policies off the one run.
 
     Raises:
-        TypeError: ``name`` is not a string.
-        ValueError: ``name`` is not one of :data:`AGENTS`.
+        TypeError: ``name`` is not a string, or ``steps`` not an integer.
+        ValueError: ``name`` is not one of :data:`AGENTS`, or ``steps`` < 1.
     """
     from delayed_rl import agents
 
     check_choice("agent", name, AGENTS)
+    steps = check_int("steps", steps, 1, optional=True)
     common = hyperparameters(seed)
     if name == "Q undelayed":
         return agents.QLearning(grid(size), **common)
@@ -311,7 +312,11 @@ def greedy_policy(agent: Any, averaged: bool = False) -> np.ndarray:
     MMQ's is read off its current Q-table (the thesis's readout), or with ``averaged`` off the
     averaged table of its ``greedy_window`` (``greedy_table``); any other agent's is
     ``predict(..., deterministic=True)``.
+
+    Raises:
+        TypeError: ``averaged`` is not a bool.
     """
+    averaged = check_bool("averaged", averaged)
     if hasattr(agent, "greedy_table"):
         return greedy_actions(np.asarray(agent.greedy_table if averaged else agent.q_table))
     states = np.arange(agent.observation_space.n)

@@ -41,7 +41,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from delayed_rl._validation import check_bool, check_choice, check_int
+from delayed_rl._validation import check_bool, check_choice, check_int, check_real
 
 #: The joblib backends :func:`run_tasks` can hand the runs to.
 BACKENDS = ("loky", "ray", "dask")
@@ -439,7 +439,11 @@ def write_index(
 
     Returns:
         The file written.
+
+    Raises:
+        TypeError, ValueError: ``wall_seconds`` is not ``None`` or a real number ≥ 0.
     """
+    wall_seconds = check_real("wall_seconds", wall_seconds, 0.0, optional=True)
     lines = [
         "# Reproduction: every experiment",
         "",
