@@ -93,7 +93,7 @@ def compiled_run(agent: Any, fused: bool | None, restart: bool) -> Any:
         NotCompilable: ``fused=True`` and the run cannot be compiled (the message says why).
     """
     if fused is False:
-        agent._fused = None
+        _leave_compiled_episode(agent)
         return None
     from delayed_rl.fast import FusedRun, NotCompilable
 
@@ -112,10 +112,23 @@ def compiled_run(agent: Any, fused: bool | None, restart: bool) -> Any:
             agent._fused = (agent.env, fused_run)
         return agent._fused[1]
     except NotCompilable:
-        agent._fused = None
         if fused:
+            agent._fused = None
             raise
+        _leave_compiled_episode(agent)
         return None
+
+
+def _leave_compiled_episode(agent: Any) -> None:
+    """Go to the Python loop: an episode a compiled run left open on the env starts afresh.
+
+    A compiled run that steps its env (the e-puck) leaves the env mid-episode, but its pending
+    rewards are in the run, not in the env's delay wrapper: the Python loop resets the env, as
+    it does after a compiled run on a tabular env (whose env object was not stepped at all).
+    """
+    if agent._compiled_episode:
+        agent._obs = agent._reset_env()
+    agent._fused = None
 
 
 def compiled_loop(agent: Any, fused_run: Any, run: LearnRun) -> None:
@@ -164,7 +177,12 @@ def compiled_loop(agent: Any, fused_run: Any, run: LearnRun) -> None:
         ):
             break
         run.log_if_due(agent)
-    agent._episode_ended = True  # the env object was not stepped: reset it next time
+    if fused_run.robot is None:
+        agent._episode_ended = True  # the env object was not stepped: reset it next time
+    else:  # the run stepped the env: a compiled continuation goes on from where it is
+        agent._episode_ended = False
+        agent._compiled_episode = True
+        agent._obs = int(fused_run.state[0])
 
 
 def _replay_to_callback(agent: Any, run: LearnRun, out: Any, last_obs: int, start: int) -> bool:

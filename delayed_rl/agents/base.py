@@ -226,6 +226,8 @@ class TabularAgent(_persistence.CopyProtocol, ABC):
         self._vec_env = None
         self._env_seeded = False
         self._episode_ended = True
+        #: A compiled run left the env mid-episode (see ``_fused._leave_compiled_episode``).
+        self._compiled_episode = False
         self._end_episode()
 
     def _reset_env(self) -> int:
@@ -234,6 +236,7 @@ class TabularAgent(_persistence.CopyProtocol, ABC):
         obs, _ = self.env.reset(seed=seed)
         self._end_episode()
         self._episode_ended = False
+        self._compiled_episode = False
         self._statistics.start_episode()
         return self._obs_index.index(obs, "the env's reset() observation")
 

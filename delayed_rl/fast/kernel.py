@@ -23,6 +23,7 @@ from delayed_rl.fast._numba import HAVE_NUMBA  # noqa: F401  (re-exported: delay
 from delayed_rl.fast._numba import jit as _jit
 from delayed_rl.fast.arrivals import NO_ARRIVALS, end_pending, take_due
 from delayed_rl.fast.arrivals import record as record_arrival
+from delayed_rl.fast.robot import robot_reset, robot_step
 from delayed_rl.fast.statistics import EMPTY_STATISTICS, observe
 
 #: Episode-end modes of the reward buffer, as integers for the compiled code.
@@ -447,7 +448,7 @@ NO_AVERAGE = TableAverage(np.zeros((1, 1, 1)), np.zeros(2, np.int64), 0, 0.0)
 
 @_jit
 def run_chunk(
-    cache, rule, env, line, history, log, script, start_step, rng, model, arrivals, average
+    cache, rule, env, line, history, log, script, start_step, rng, model, arrivals, average, robot
 ):
     """Advance training by ``line.delays.shape[0]`` steps.
 
@@ -496,6 +497,9 @@ def run_chunk(
             not with a script), or :data:`~delayed_rl.fast.arrivals.NO_ARRIVALS`.
         average: a moving average of the Q-table to keep (:class:`TableAverage`), or
             :data:`NO_AVERAGE`.
+        robot: the e-puck env to step instead of ``env``'s tables
+            (:class:`~delayed_rl.fast.robot.Robot`, not with a script), or ``None``: numba
+            then compiles the loop without the robot's code.
 
     Indices into the Q-table and its cache are cast to unsigned integers, which spares the
     compiled code numba's negative-index handling in the innermost loops (about 5%).
@@ -578,17 +582,21 @@ def run_chunk(
                 if ties > 1:
                     first = _nth_equal(qf, row, n_actions, best, _below(rng, ties))
                 action = first - row
-            # the env (no draw where the first outcome is certain: a deterministic move)
-            k = 0
-            if out_cdf[s, action, 0] < 1.0:
-                u = next_uniform(rng)
-                while k < out_cdf.shape[2] - 1 and out_cdf[s, action, k] <= u:
-                    k += 1
-            s2 = out_next[s, action, k]
-            reward = out_reward[s, action, k]
-            terminated = out_term[s, action, k]
+            # the env: the robot, or the tables (no draw where the first outcome is certain)
+            if robot is not None:  # (pruned when compiling for None: tables only)
+                s2, reward, terminated, env_truncated = robot_step(robot, action)
+            else:
+                k = 0
+                if out_cdf[s, action, 0] < 1.0:
+                    u = next_uniform(rng)
+                    while k < out_cdf.shape[2] - 1 and out_cdf[s, action, k] <= u:
+                        k += 1
+                s2 = out_next[s, action, k]
+                reward = out_reward[s, action, k]
+                terminated = out_term[s, action, k]
+                env_truncated = False
             episode_steps += 1
-            ended = terminated or (max_steps > 0 and episode_steps >= max_steps)
+            ended = terminated or env_truncated or (max_steps > 0 and episode_steps >= max_steps)
             cut = not ended and cut_steps > 0 and episode_steps >= cut_steps  # unseen by the delay
             # the reward delay
             due = clock + delays[t]
@@ -717,7 +725,9 @@ def run_chunk(
                 average_clock[0] = 0
                 average_clock[1] += 1
         if ended:
-            if not scripted:  # the next episode's start (no draw for a certain one)
+            if robot is not None:  # the env's own reset
+                s = robot_reset(robot)
+            elif not scripted:  # the next episode's start (no draw for a certain one)
                 s = 0
                 if init_cdf[0] < 1.0:
                     u = next_uniform(rng)
@@ -812,5 +822,5 @@ def replay(
     no_draws = np.ones(4, np.uint64)  # a script draws nothing
     run_chunk(
         cache, rule, TabularModel.empty(), line, history, StepLog.empty(n), script, 0, no_draws,
-        model, NO_ARRIVALS, NO_AVERAGE,
+        model, NO_ARRIVALS, NO_AVERAGE, None,
     )  # fmt: skip

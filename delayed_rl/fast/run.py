@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 import warnings
 
@@ -9,6 +10,7 @@ import numpy as np
 
 from delayed_rl._delay_line import delay_bound, draw_delays, regrow_ring, ring_size
 from delayed_rl.fast import arrivals, kernel
+from delayed_rl.fast.robot import RobotLink, linked
 from delayed_rl.fast.tabular import NotCompilable, inspect_stack
 
 _MODES = {"flush": kernel.FLUSH, "drop": kernel.DROP, "carry": kernel.CARRY}
@@ -29,7 +31,11 @@ how ``learn()`` splits it (``log_interval``, callbacks)."""
 class FusedRun:
     """The state of a compiled training run on one env stack: history, delay ring, clocks.
 
-    The Q-table and its cached maxima belong to the agent and are updated in place.
+    The Q-table and its cached maxima belong to the agent and are updated in place. A tabular
+    env is simulated from its tables with the run's generator; its env object is not stepped.
+    The e-puck env (:mod:`delayed_rl.fast.robot`) is stepped itself, with its own generator
+    drawing its noise: the run starts where the env is (reset it first, as ``learn()`` does) and
+    leaves it where the run is.
 
     Args:
         env: the env stack (see :mod:`delayed_rl.fast.tabular` for what compiles).
@@ -50,6 +56,8 @@ class FusedRun:
             max is tied).
         arrivals: the oracle's record of who emitted each pending reward
             (:class:`~delayed_rl.fast.arrivals.Arrivals`), or ``NO_ARRIVALS``.
+        robot: the link to the e-puck env the run steps (:class:`~delayed_rl.fast.robot.RobotLink`),
+            or ``None`` for a tabular env.
 
     Raises:
         NotCompilable: if numba is missing or the stack is outside the protocol.
@@ -65,7 +73,8 @@ class FusedRun:
     ):
         if not kernel.HAVE_NUMBA:
             raise NotCompilable("numba is not installed (a core dependency: pip install numba)")
-        self.model, wrapper = inspect_stack(env)
+        self.robot = RobotLink(env.unwrapped) if linked(env.unwrapped) else None
+        self.model, wrapper = inspect_stack(env, tables=self.robot is None)
         self.delay = None if wrapper is None else wrapper.delay
         self.max_delay = None if wrapper is None else wrapper.max_delay
         self.on_episode_end = "flush" if wrapper is None else wrapper.on_episode_end
@@ -84,7 +93,11 @@ class FusedRun:
         kernel_seeds, delay_seeds = np.random.SeedSequence(seed).spawn(2)
         self.rng_state = kernel.generator_state(kernel_seeds)
         self.delay_rng = np.random.default_rng(delay_seeds)
-        self.state[0] = np.searchsorted(self.model.init_cdf, self.delay_rng.random(), side="right")
+        if self.robot is None:
+            first = np.searchsorted(self.model.init_cdf, self.delay_rng.random(), side="right")
+        else:
+            first = self.robot.observation()
+        self.state[0] = first
         self._delay_block = np.zeros(0, dtype=np.int64)
 
     def _delay_clip(self) -> int | None:
@@ -231,17 +244,20 @@ class FusedRun:
         )
         line = kernel.DelayLine(delays, self.ring, self.mode, np.zeros(1))
         log = kernel.StepLog.empty(steps)
-        kernel.run_chunk(
-            cache,
-            rule,
-            self.model,
-            line,
-            self.history,
-            log,
-            kernel.NO_SCRIPT,
-            int(start_step),
-            self.rng_state, reward_model or kernel.NO_REWARD_MODEL, self.arrivals, average,
-        )  # fmt: skip
+        with contextlib.ExitStack() as stack:
+            robot = None if self.robot is None else stack.enter_context(self.robot.arguments())
+            kernel.run_chunk(
+                cache,
+                rule,
+                self.model,
+                line,
+                self.history,
+                log,
+                kernel.NO_SCRIPT,
+                int(start_step),
+                self.rng_state, reward_model or kernel.NO_REWARD_MODEL, self.arrivals, average,
+                robot,
+            )  # fmt: skip
         if line.discarded[0] != 0.0:
             warnings.warn(
                 f"a TimeLimit above the RewardDelay cut episodes short: the resets discarded "

@@ -76,7 +76,7 @@ class TabularModel(NamedTuple):
 
     @classmethod
     def empty(cls) -> TabularModel:
-        """Tables of one state and action (for runs that replay a script instead of acting)."""
+        """Tables of one state and action, for runs that replay a script or step a robot."""
         none = np.zeros((1, 1, 1))
         return cls(none, none.astype(np.int64), none, none.astype(np.bool_), np.ones(1), 0)
 
@@ -157,11 +157,12 @@ def _check_tables(
         )
 
 
-def inspect_stack(env: gym.Env) -> tuple[TabularModel, RewardDelay | None]:
+def inspect_stack(env: gym.Env, tables: bool = True) -> tuple[TabularModel, RewardDelay | None]:
     """Split ``env`` into its compiled model and its reward-delay wrapper (or ``None``).
 
     The model's ``max_steps`` and ``cut_steps`` include the stack's ``TimeLimit`` wrappers (see the
-    module docstring).
+    module docstring). With ``tables=False`` the env's own tables are not read (an env the
+    compiled loop steps itself, :mod:`delayed_rl.fast.robot`): the model's are empty.
 
     Raises:
         NotCompilable: if a wrapper or the env itself is outside the protocol.
@@ -179,7 +180,7 @@ def inspect_stack(env: gym.Env) -> tuple[TabularModel, RewardDelay | None]:
         elif not isinstance(layer, TRANSPARENT_WRAPPERS):
             raise NotCompilable(f"wrapper {type(layer).__name__} is not supported")
         layer = layer.env
-    model = TabularModel.from_env(layer)
+    model = TabularModel.from_env(layer) if tables else TabularModel.empty()
     if delay_wrapper is None:  # nothing is pending: every limit ends the episode alike
         below, above = below + above, []
     inner = min([model.max_steps or math.inf, *below])

@@ -415,9 +415,7 @@ class EPuckLineFollowEnv(gym.Env):
             if self.lost_line == "terminate":
                 terminated = True
             else:
-                x, y, heading = self.track.point_at(self._s)
-                self.robot.reset(x, y, heading)
-                self._stop_commands()
+                x, y, heading = self._put_back()
                 m = self._read(x, y, heading)
                 self._lost = 0 if m else self._lost
                 recovered = True
@@ -449,6 +447,17 @@ class EPuckLineFollowEnv(gym.Env):
             else:
                 in_flight[0] = ((left, right), count - run)
         return pose
+
+    def _put_back(self) -> tuple[float, float, float]:
+        """Put the robot back on the track (``lost_line="recover"``); returns its pose.
+
+        It goes to the centreline point at its track position, facing along the track, with its
+        wheels and its command link stopped.
+        """
+        x, y, heading = self.track.point_at(self._s)
+        self.robot.reset(x, y, heading)
+        self._stop_commands()
+        return x, y, heading
 
     def _stop_commands(self) -> None:
         """Fill the command link with "wheels stopped" (after a reset or a recovery)."""
@@ -498,9 +507,7 @@ class EPuckLineFollowEnv(gym.Env):
             self.np_random.random(out=draws[0])
         if self.camera_noise > 0:
             self.np_random.random(out=draws[1])
-        if self._compiled_track is not track:
-            self._compiled_track, self._compiled = track, self._compiled_arguments(track)
-        if self._compiled is None:
+        if self._reading_arguments() is None:
             pixels = self.camera.read(track, x, y, heading)
             if self.line_contrast < 1:
                 pixels &= draws[0] < self.line_contrast
@@ -526,6 +533,13 @@ class EPuckLineFollowEnv(gym.Env):
         if self.render_mode is not None:
             self._trail.append((x, y))
         return m
+
+    def _reading_arguments(self) -> tuple | None:
+        """The current track's :meth:`_compiled_arguments`, made again when the track changes."""
+        if self._compiled_track is not self.track:
+            self._compiled_track = self.track
+            self._compiled = self._compiled_arguments(self.track)
+        return self._compiled
 
     def _compiled_arguments(self, track: Track) -> tuple | None:
         """The arguments of :func:`_kernels.observe` after the pose, hint and noise, or None.

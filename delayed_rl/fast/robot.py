@@ -1,0 +1,377 @@
+"""The e-puck line follower inside the compiled training loop.
+
+:class:`~delayed_rl.envs.linefollow.EPuckLineFollowEnv` with centroid observations and discrete
+actions is a tabular env to an agent (``Discrete(41)`` states, ``Discrete(7)`` actions) whose
+dynamics are a physics simulation rather than a table ``P``. Its step is already compiled piece
+by piece (the Chipmunk sub-steps, :func:`~delayed_rl.envs.linefollow._chipmunk.drive`; the
+camera and the track position, :func:`~delayed_rl.envs.linefollow._kernels.observe`); here the
+Python between the pieces is compiled too, so :func:`~delayed_rl.fast.kernel.run_chunk` steps
+the robot itself (:func:`robot_step`) and a whole training chunk runs without returning to
+Python.
+
+The compiled step is :meth:`EPuckLineFollowEnv.step` to the last bit: the same C calls on the
+env's own pymunk space, the same camera and reward arithmetic, and every random number drawn
+from the env's own ``np_random`` (numba draws from a numpy ``Generator`` in place, the same
+stream) at the same point of the step. A seeded env therefore walks the same trajectory for the
+same actions on either path. Two rare events go back to Python, to the env's own code, for the
+few microseconds they take: putting a lost robot back on the track (``lost_line="recover"``),
+which rebuilds its pymunk space, and the reset at an episode's end.
+
+What compiles (:class:`RobotLink` says why not, as
+:class:`~delayed_rl.fast.tabular.NotCompilable`): ``observation_mode="centroid"``,
+``action_mode="discrete"``, no ``command_latency``, a fixed track (not ``track="random"``
+without a ``track_seed``), no ``render_mode``, and a platform where the env's own compiled
+physics and camera are in use. Motor lag, wheel slip, camera noise, line contrast, both
+``lost_line`` modes, ``max_steps`` and any control period compile.
+
+Between chunks the env object holds the run's state (pose, track position, lap progress,
+line-less steps, step count), so it describes the robot where the compiled run left it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import math
+import warnings
+from collections.abc import Iterator
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from delayed_rl.envs.linefollow import _chipmunk, _kernels
+from delayed_rl.envs.linefollow.camera import CENTRE_PIXEL, line_centroid
+from delayed_rl.envs.linefollow.env import MAX_WHEEL_SPEED, WHEEL_SPEED_ACTIONS, EPuckLineFollowEnv
+from delayed_rl.envs.linefollow.robot import AXLE_LENGTH, METRES_PER_STEP
+from delayed_rl.fast._numba import HAVE_NUMBA
+from delayed_rl.fast._numba import jit as _jit
+from delayed_rl.fast.tabular import NotCompilable
+
+__all__ = ["NO_ROBOT", "Robot", "RobotLink", "robot_reset", "robot_step"]
+
+if HAVE_NUMBA:
+    from numba import objmode
+    from numba.core.errors import NumbaWarning
+
+    # numba notes that the object-mode blocks below take the GIL, which the library's ``nogil``
+    # compiled loop releases: true, and meant (they run at rare events only), so not shown
+    warnings.filterwarnings(
+        "ignore",
+        message="Code running in object mode won't allow parallel execution",
+        category=NumbaWarning,
+        module=r".*delayed_rl[/\\]fast[/\\]",
+    )
+else:  # pragma: no cover - without numba the functions below run as Python, for reading
+
+    def objmode(**types: str) -> contextlib.AbstractContextManager:
+        """Stand in for numba's object-mode block where numba is missing: plain Python."""
+        return contextlib.nullcontext()
+
+
+# the layout of Robot.reals, Robot.ints, Robot.live and Robot.counters
+_SLIP, _CONTRAST, _NOISE, _GAIN, _DT, _LENGTH = range(6)
+_SUBSTEPS, _LOST_STEPS, _TERMINATE, _MAX_STEPS, _LAGGED, _KEY = range(6)
+_ARC, _LATERAL, _PROGRESS, _LEFT, _RIGHT = range(5)
+_SEGMENT, _LOST, _STEPS = range(3)
+
+
+class Robot(NamedTuple):
+    """The e-puck env as :func:`~delayed_rl.fast.kernel.run_chunk` steps it (``NO_ROBOT``: none).
+
+    Attributes:
+        handles: the Chipmunk functions and objects of the env's robot
+            (:func:`~delayed_rl.envs.linefollow._chipmunk.handles`), rewritten when a recovery
+            or a reset rebuilds its space.
+        speeds: the (left, right) wheel speeds (steps/s) of each discrete action.
+        reals: wheel slip, line contrast, camera noise, the motor lag's gain, the physics
+            sub-step (s) and the track's length (m).
+        ints: physics sub-steps a step, line-less steps before the line counts as lost,
+            whether losing it terminates (else the robot is put back), ``max_steps`` (0: none),
+            whether the motor lags, and the env's key in the link's registry.
+        live: the arc position (m), lateral error (m), lap progress, and the (lagged) left and
+            right wheel speeds: the env's state, updated step by step.
+        counters: the track segment (the next position's search hint), the line-less steps so
+            far and the episode's steps.
+        camera: the camera's packed geometry.
+        track_floats: the track's packed geometry.
+        track_ints: the track's packed grid.
+        fused_products: numpy's rounding of complex products.
+        complex_abs: numpy's rounding of complex absolute values.
+        draws: the env's per-pixel uniform draws of a reading (contrast, then noise).
+        pixels: the env's last camera reading.
+        generator: the env's ``np_random``.
+    """
+
+    handles: np.ndarray
+    speeds: np.ndarray
+    reals: np.ndarray
+    ints: np.ndarray
+    live: np.ndarray
+    counters: np.ndarray
+    camera: np.ndarray
+    track_floats: np.ndarray
+    track_ints: np.ndarray
+    fused_products: bool
+    complex_abs: int
+    draws: np.ndarray
+    pixels: np.ndarray
+    generator: np.random.Generator
+
+
+NO_ROBOT = Robot(
+    np.zeros(0, np.int64),
+    np.zeros((1, 2)),
+    np.zeros(6),
+    np.zeros(6, np.int64),
+    np.zeros(5),
+    np.zeros(3, np.int64),
+    np.zeros(1),
+    np.zeros(1),
+    np.zeros(1, np.int64),
+    False,
+    0,
+    np.zeros((2, 1)),
+    np.zeros(1, np.bool_),
+    np.random.default_rng(0),
+)
+"""No robot: the run steps its env's tables (the generator is never drawn from)."""
+
+_LINKED: dict[int, EPuckLineFollowEnv] = {}
+"""The envs of the chunks running now, by key: the Python half of a recovery or reset finds its
+env here."""
+_KEYS = itertools.count(1)
+
+
+class RobotLink:
+    """Hands an :class:`EPuckLineFollowEnv` to compiled runs, and its state back after each.
+
+    Args:
+        env: the unwrapped env.
+
+    Raises:
+        NotCompilable: the env's configuration does not compile (the message says which
+            argument, and what would).
+    """
+
+    def __init__(self, env: EPuckLineFollowEnv):
+        reasons = [
+            ("observation_mode", env.observation_mode != "centroid", "'centroid'"),
+            ("action_mode", env.action_mode != "discrete", "'discrete'"),
+            ("command_latency", env.latency_substeps > 0, "0"),
+            ("track", env._random_tracks, "a fixed track or a track_seed"),
+            ("render_mode", env.render_mode is not None, "None"),
+        ]
+        for name, refused, allowed in reasons:
+            if refused:
+                raise NotCompilable(
+                    f"EPuckLineFollowEnv with {name}={getattr(env, name)!r} does not compile "
+                    f"(it does with {allowed})"
+                )
+        if env.robot._driver[0] is not _chipmunk.drive or not _kernels.enabled():
+            raise NotCompilable(
+                "the e-puck's compiled physics or camera is not in use on this platform"
+            )
+        self.env = env
+
+    def observation(self) -> int:
+        """The env's current state: the centroid of its last camera reading."""
+        return line_centroid(self.env._pixels)
+
+    @contextlib.contextmanager
+    def arguments(self) -> Iterator[Robot]:
+        """The :class:`Robot` of the env's current state, for one compiled call.
+
+        The env is reachable by its key during the call; on leaving, its state is the run's.
+        """
+        env = self.env
+        key = next(_KEYS)
+        camera, track_floats, track_ints, fused, complex_abs, draws, pixels = (
+            env._reading_arguments()
+        )
+        live, counters = np.zeros(5), np.zeros(3, np.int64)
+        _load(env, live, counters)
+        robot = Robot(
+            env.robot._driver[1].copy(),
+            np.array(WHEEL_SPEED_ACTIONS, dtype=np.float64),
+            np.array(
+                [
+                    env.wheel_slip,
+                    env.line_contrast,
+                    env.camera_noise,
+                    env.robot._lag_gain,
+                    env.robot.physics_dt,
+                    env.track.length,
+                ]
+            ),
+            np.array(
+                [
+                    env.physics_substeps,
+                    env.lost_line_steps,
+                    env.lost_line == "terminate",
+                    env.max_steps or 0,
+                    env.robot.motor_lag > 0,
+                    key,
+                ],
+                dtype=np.int64,
+            ),
+            live,
+            counters,
+            camera,
+            track_floats,
+            track_ints,
+            bool(fused),
+            int(complex_abs),
+            draws,
+            pixels,
+            env.np_random,
+        )
+        _LINKED[key] = env
+        try:
+            yield robot
+        finally:
+            del _LINKED[key]
+            _store(env, live, counters)
+
+
+def _load(env: EPuckLineFollowEnv, live: np.ndarray, counters: np.ndarray) -> None:
+    """Copy the env's state into a :class:`Robot`'s ``live`` and ``counters``."""
+    live[:] = (env._s, env._lateral, env._progress, *env.robot.wheel_speeds)
+    counters[:] = (env._segment, env._lost, env._steps)
+
+
+def _store(env: EPuckLineFollowEnv, live: np.ndarray, counters: np.ndarray) -> None:
+    """Copy a :class:`Robot`'s ``live`` and ``counters`` into the env's state."""
+    env._s, env._lateral, env._progress = float(live[0]), float(live[1]), float(live[2])
+    env.robot.wheel_speeds = (float(live[3]), float(live[4]))
+    env._segment, env._lost, env._steps = (int(c) for c in counters)
+
+
+def _python_put_back(
+    key: int, live: np.ndarray, counters: np.ndarray, handles: np.ndarray
+) -> tuple[float, float, float]:
+    """The env's own recovery (a rebuilt space: new handles); returns the robot's pose."""
+    env = _LINKED[int(key)]
+    _store(env, live, counters)
+    pose = env._put_back()
+    handles[:] = env.robot._driver[1]
+    _load(env, live, counters)
+    return pose
+
+
+def _python_reset(key: int, live: np.ndarray, counters: np.ndarray, handles: np.ndarray) -> int:
+    """The env's own ``reset()`` (unseeded: its generator goes on); returns the observation."""
+    env = _LINKED[int(key)]
+    obs, _ = env.reset()
+    handles[:] = env.robot._driver[1]
+    _load(env, live, counters)
+    return int(obs)
+
+
+@_jit
+def _read(robot, x, y, heading):
+    """``EPuckLineFollowEnv._read``: the noise drawn, the camera read, the track position moved."""
+    reals, live, counters, draws = robot.reals, robot.live, robot.counters, robot.draws
+    contrast, noise = reals[_CONTRAST], reals[_NOISE]
+    if contrast < 1:
+        for i in range(draws.shape[1]):
+            draws[0, i] = robot.generator.random()
+    if noise > 0:
+        for i in range(draws.shape[1]):
+            draws[1, i] = robot.generator.random()
+    m, s, lateral, segment = _kernels.observe(
+        x,
+        y,
+        math.cos(heading),
+        math.sin(heading),
+        counters[_SEGMENT],
+        contrast,
+        noise,
+        robot.camera,
+        robot.track_floats,
+        robot.track_ints,
+        robot.fused_products,
+        robot.complex_abs,
+        draws,
+        robot.pixels,
+    )
+    length = reals[_LENGTH]
+    half = 0.5 * length
+    live[_PROGRESS] += ((s - live[_ARC] + half) % length - half) / length
+    live[_ARC] = s
+    live[_LATERAL] = lateral
+    counters[_SEGMENT] = segment
+    return m
+
+
+@_jit
+def robot_step(robot, action):
+    """``EPuckLineFollowEnv.step(action)`` without command latency, compiled.
+
+    Returns:
+        ``(m, reward, terminated, truncated)``, with ``m`` the observed centroid.
+    """
+    reals, ints, live, counters = robot.reals, robot.ints, robot.live, robot.counters
+    v_left, v_right = robot.speeds[action, 0], robot.speeds[action, 1]
+    slip_left = slip_right = 1.0
+    if reals[_SLIP] > 0:  # numpy's uniform(1 − slip, 1, size=2): low + (high − low) · u
+        low = 1.0 - reals[_SLIP]
+        span = 1.0 - low
+        slip_left = low + span * robot.generator.random()
+        slip_right = low + span * robot.generator.random()
+    lagged = ints[_LAGGED] != 0
+    left, right = (live[_LEFT], live[_RIGHT]) if lagged else (v_left, v_right)
+    left, right, x, y, heading = _chipmunk.drive(
+        robot.handles,
+        v_left,
+        v_right,
+        left,
+        right,
+        reals[_GAIN],
+        lagged,
+        slip_left,
+        slip_right,
+        ints[_SUBSTEPS],
+        reals[_DT],
+        METRES_PER_STEP,
+        AXLE_LENGTH,
+    )
+    live[_LEFT], live[_RIGHT] = left, right
+    counters[_STEPS] += 1
+    m = _read(robot, x, y, heading)
+    if m:
+        counters[_LOST] = 0
+        reward = (
+            (v_left + v_right)
+            / (2 * MAX_WHEEL_SPEED)
+            * (1.0 - abs(m - CENTRE_PIXEL) / CENTRE_PIXEL)
+        )
+    else:
+        counters[_LOST] += 1
+        reward = -1.0
+    terminated = False
+    if counters[_LOST] >= ints[_LOST_STEPS]:
+        if ints[_TERMINATE]:
+            terminated = True
+        else:
+            key, handles = ints[_KEY], robot.handles
+            with objmode(x="float64", y="float64", heading="float64"):
+                x, y, heading = _python_put_back(key, live, counters, handles)
+            m = _read(robot, x, y, heading)
+            if m:
+                counters[_LOST] = 0
+    truncated = ints[_MAX_STEPS] > 0 and counters[_STEPS] >= ints[_MAX_STEPS]
+    return m, reward, terminated, truncated
+
+
+@_jit
+def robot_reset(robot):
+    """The env's ``reset()`` at an episode's end, in Python: the next episode's first state."""
+    key, live, counters, handles = robot.ints[_KEY], robot.live, robot.counters, robot.handles
+    with objmode(m="int64"):
+        m = _python_reset(key, live, counters, handles)
+    return m
+
+
+def linked(env: Any) -> bool:
+    """Whether ``env`` (unwrapped) is the e-puck env, which compiles through a :class:`RobotLink`."""
+    return isinstance(env, EPuckLineFollowEnv)
