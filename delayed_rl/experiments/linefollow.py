@@ -148,8 +148,9 @@ def measure(agent: Any, steps: int) -> dict:
     }
 
 
-#: Training cost per step on the line follower (env and learner, µs), for scheduling only.
-STEP_MICROSECONDS = 30.0
+#: Training cost per step on the line follower (env and learner on the compiled path, µs, with
+#: both cores busy), for scheduling only.
+STEP_MICROSECONDS = 7.0
 
 
 def cost(task: dict) -> float:

@@ -18,7 +18,7 @@ Poisson(90) reward delays, 150k steps a run, 5 seeds; α = 0.1, γ = 0.9, consta
 Metrics, as ``linefollow``'s: the average reward during learning (the undelayed reward's
 running mean) and the accumulated error Σ|Δ| (an unseen line counted as |Δ| = 20), plus the
 delay estimate (DeconvQ's ``delay_pmf`` and ``mean_delay``, MMQ's acting-delay share and its
-mean) and ns/step (``learn``'s wall time over the steps; this env runs on the Python path).
+mean) and ns/step (``learn``'s wall time over the steps, on the compiled path).
 
 The claims, with verdicts computed from the runs by :mod:`.common`'s rules (each row's
 ``criterion`` states its own):
@@ -106,7 +106,7 @@ def shared_run(task: dict) -> SharedRun | None:
 
 
 #: DeconvQ's training cost per step on the line follower (µs; MMQ's and Q's are linefollow's).
-DECONV_STEP_MICROSECONDS = 40.0
+DECONV_STEP_MICROSECONDS = 14.0
 
 
 def cost(task: dict) -> float:

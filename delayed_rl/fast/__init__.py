@@ -1,4 +1,4 @@
-"""The compiled (numba) training path for tabular envs; see :class:`FusedRun`.
+"""The compiled (numba) training path for tabular envs and the e-puck; see :class:`FusedRun`.
 
 ``agent.learn()`` runs on it by itself when it can (``learn(fused=None)``, the default): the
 agent's rule has a compiled twin (``agent.compiled_tables()`` is not ``None``: every agent of
@@ -10,8 +10,11 @@ protocol), the learning rate is constant and no callback is given (a progress ba
 
 - The update rule is the Python path's; the random streams differ, so seeded runs agree in
   distribution, not step by step. Each path is reproducible from the agent's seed.
-- The env object is not stepped: the compiled loop reads the env's tables. The next Python-path
-  ``learn()`` resets the env.
+- A tabular env object is not stepped: the compiled loop reads the env's tables. The e-puck
+  line follower is (:mod:`delayed_rl.fast.robot`): the compiled loop steps its robot, its own
+  generator drawing its noise, and leaves the env where the run is. Either way the next
+  Python-path ``learn()`` resets the env (the run's pending rewards are in the run, not in the
+  env's delay wrapper).
 - Callbacks (with ``fused=True``) still get one ``on_step()`` per step, with that step's
   ``locals`` (``info`` holds only ``undelayed_reward``), but they run after each compiled chunk
   of ``agent.fused_chunk`` steps: the model they see (an ``EvalCallback``'s evaluation, a

@@ -31,7 +31,8 @@ A user's own tabular env compiles when it follows the same protocol: give it ``P
         initial_state_distrib = np.array([1.0, 0.0])
         # reset() and step() as usual: the Python path, and the checks, use them
 
-``examples/own_tabular_env.py`` is that env, trained on both paths.
+``examples/own_tabular_env.py`` is that env, trained on both paths. (The e-puck line follower
+has no tables; the compiled loop steps it itself, :mod:`delayed_rl.fast.robot`.)
 """
 
 from __future__ import annotations

@@ -219,7 +219,9 @@ class EPuckLineFollowEnv(gym.Env):
     Speed: with numba (a core dependency) the camera reading, the track position and the
     physics sub-steps run compiled (``benchmarks/epuck_speed.py`` times them); without it the
     env runs the numpy and Python code they mirror, several times slower, with the same
-    trajectories to the last bit.
+    trajectories to the last bit. With centroid states, discrete actions and no
+    ``command_latency``, the agents' ``learn()`` steps the env inside their compiled training
+    loop (:mod:`delayed_rl.fast.robot`), again to the last bit.
 
     An argument of the wrong type (``max_steps="5"``, ``motor_lag=True``, ``action_mode=1``)
     raises ``TypeError``; one of the right type but out of range (``max_steps=0``,
