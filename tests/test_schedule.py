@@ -167,3 +167,51 @@ def test_future_work_run_with_anonymous_delay_shares_mmq_runs_and_claims_the_sam
     assert [c.mean for c in both[1].claims] == [c.mean for c in alone.claims]
     assert both[1].extra["shared_runs"] == both[1].extra["runs"] - 4 * 2  # 4 variants of their own
     assert alone.extra["runs"] == 5 * 2 and alone.extra["shared_runs"] == 0
+
+
+def _figured_summary(tasks, results, config):
+    """A summary with a figure drawn by a closure (as the experiments' are)."""
+    values = [r["value"] for r in results]
+
+    def draw(path):
+        path.write_text(f"figure of {values}")
+
+    return Summary([], [], figures={"plot": draw}, extra={"values": values})
+
+
+def test_files_are_written_in_background_processes_and_reported_once_written(tmp_path):
+    """With several experiments and workers, each one's files are on disk when on_done sees it."""
+    done = []
+
+    def seen(experiment, summary):
+        folder = tmp_path / experiment.name
+        done.append((experiment.name, (folder / "report.md").exists(), (folder / "plot.png")))
+
+    experiments = [
+        Experiment(
+            name=name,
+            thesis="-",
+            description="-",
+            tasks=lambda config, xs=xs: [{"x": x} for x in xs],
+            run_task=square,
+            summarize=_figured_summary,
+            default_seeds=1,
+        )
+        for name, xs in (("a", [1, 2]), ("b", [3]), ("c", [4, 5, 6]))
+    ]
+    summaries = run_experiments(experiments, Config(workers=2), tmp_path, False, seen)
+    assert sorted(name for name, _, _ in done) == ["a", "b", "c"]
+    assert all(report for _, report, _ in done)
+    assert [p.read_text() for _, _, p in sorted(done)] == [
+        "figure of [1, 4]",
+        "figure of [9]",
+        "figure of [16, 25, 36]",
+    ]
+    assert [s.extra["values"] for s in summaries] == [[1, 4], [9], [16, 25, 36]]
+
+
+def test_a_failed_background_write_is_raised(tmp_path):
+    (tmp_path / "a").write_text("a file where the folder should go")
+    experiments = [_experiment(name, [1]) for name in ("a", "b")]
+    with pytest.raises(FileExistsError):
+        run_experiments(experiments, Config(workers=2), tmp_path, progress=False)

@@ -243,22 +243,77 @@ def _prefix_dot(a, i, j, n):
 
 
 @_jit
+def _prefix_dots4(a, i, j, n):
+    """:func:`_prefix_dot` of rows ``i .. i + 3`` with row ``j``, each summed in the same order.
+
+    Four rows at once read row ``j`` once for all four and keep sixteen independent sums going:
+    the same bits as four calls, about twice as fast.
+    """
+    p0 = p1 = p2 = p3 = 0.0
+    q0 = q1 = q2 = q3 = 0.0
+    r0 = r1 = r2 = r3 = 0.0
+    t0 = t1 = t2 = t3 = 0.0
+    k = 0
+    while k + 4 <= n:
+        x0, x1, x2, x3 = a[j, k], a[j, k + 1], a[j, k + 2], a[j, k + 3]
+        p0 += a[i, k] * x0
+        p1 += a[i, k + 1] * x1
+        p2 += a[i, k + 2] * x2
+        p3 += a[i, k + 3] * x3
+        q0 += a[i + 1, k] * x0
+        q1 += a[i + 1, k + 1] * x1
+        q2 += a[i + 1, k + 2] * x2
+        q3 += a[i + 1, k + 3] * x3
+        r0 += a[i + 2, k] * x0
+        r1 += a[i + 2, k + 1] * x1
+        r2 += a[i + 2, k + 2] * x2
+        r3 += a[i + 2, k + 3] * x3
+        t0 += a[i + 3, k] * x0
+        t1 += a[i + 3, k + 1] * x1
+        t2 += a[i + 3, k + 2] * x2
+        t3 += a[i + 3, k + 3] * x3
+        k += 4
+    while k < n:
+        x = a[j, k]
+        p0 += a[i, k] * x
+        q0 += a[i + 1, k] * x
+        r0 += a[i + 2, k] * x
+        t0 += a[i + 3, k] * x
+        k += 1
+    return (
+        (p0 + p1) + (p2 + p3),
+        (q0 + q1) + (q2 + q3),
+        (r0 + r1) + (r2 + r3),
+        (t0 + t1) + (t2 + t3),
+    )
+
+
+@_jit
 def _cholesky_solve(a, b):
     """``x`` with ``a x = b`` for a symmetric positive definite ``a`` (overwritten), by Cholesky.
 
     Written out rather than LAPACK's: single-threaded, so a solve never waits on BLAS threads
     that compete with other work for the cores, and its result does not depend on their number.
+    Column ``j`` of ``L`` is its diagonal entry, then its rows below four at a time
+    (:func:`_prefix_dots4`); every entry is summed in the order of :func:`_prefix_dot`.
     """
     n = a.shape[0]
-    for j in range(n):  # a's lower triangle becomes L, row by row (contiguous inner products)
-        for i in range(j, n):
-            total = a[i, j] - _prefix_dot(a, i, j, j)
-            if i == j:
-                if total <= 0.0:
-                    raise ValueError("the normal equations are not positive definite")
-                a[j, j] = np.sqrt(total)
-            else:
-                a[i, j] = total / a[j, j]
+    for j in range(n):  # a's lower triangle becomes L, column by column (row-wise products)
+        total = a[j, j] - _prefix_dot(a, j, j, j)
+        if total <= 0.0:
+            raise ValueError("the normal equations are not positive definite")
+        a[j, j] = np.sqrt(total)
+        i = j + 1
+        while i + 4 <= n:
+            d0, d1, d2, d3 = _prefix_dots4(a, i, j, j)
+            a[i, j] = (a[i, j] - d0) / a[j, j]
+            a[i + 1, j] = (a[i + 1, j] - d1) / a[j, j]
+            a[i + 2, j] = (a[i + 2, j] - d2) / a[j, j]
+            a[i + 3, j] = (a[i + 3, j] - d3) / a[j, j]
+            i += 4
+        while i < n:
+            a[i, j] = (a[i, j] - _prefix_dot(a, i, j, j)) / a[j, j]
+            i += 1
     x = b.copy()
     for i in range(n):  # L y = b
         total = x[i]

@@ -9,9 +9,11 @@ when they call the same function with the same task (compared in canonical JSON)
 All runs go to one pool, ordered by their estimated cost (:attr:`~.runner.Experiment.cost`),
 longest first, so the workers are never left idle behind one experiment's slowest run before the
 next experiment starts, and the last runs to start are short ones. Each experiment is
-summarized, and its files written, as soon as its last run is in, while the workers go on with
-the other experiments' runs. Results do not depend on the order or the number of workers: every
-task carries its own seed.
+summarized as soon as its last run is in, while the workers go on with the other experiments'
+runs; with several experiments and workers its files (figures take seconds) are written by a
+pool of as many background processes, so the experiments that finish last are drawn side by
+side. Results do not depend on the order or the number of workers: every task carries its own
+seed.
 
 Each summary's ``extra`` records what the experiment cost:
 
@@ -33,7 +35,9 @@ import json
 import sys
 import time
 from collections.abc import Callable, Sequence
+from concurrent import futures
 from pathlib import Path
+from typing import Any
 
 from delayed_rl._validation import check_bool
 from delayed_rl.experiments.runner import (
@@ -199,28 +203,85 @@ def _run(
 
     def finish(plan: _Plan) -> None:
         summaries[id(plan)] = summary = _summarize(plan, results, seconds, users, started)
-        if plan.out is not None:
-            write_outputs(plan.experiment, plan.config, summary, plan.out)
-        if on_done is not None:
-            on_done(plan.experiment, summary)
+        writer.write(plan, summary)
         for key in set(plan.keys):  # drop the results no other plan still needs
             unfinished[key] -= 1
             if not unfinished[key]:
                 results.pop(key)
 
-    for plan in plans:
-        if not plan.missing:
-            finish(plan)
-    jobs = [(runs[key].run, runs[key].task) for key in order]
-    pending = iter_tasks(_timed, jobs, config.workers, config.backend)
-    for index, (result, spent) in pending:
-        key = order[index]
-        results[key], seconds[key] = result, spent
-        for plan in users[key]:
-            plan.missing -= 1
+    with _Writer(config.workers if len(plans) > 1 else 1, on_done) as writer:
+        for plan in plans:
             if not plan.missing:
                 finish(plan)
+        jobs = [(runs[key].run, runs[key].task) for key in order]
+        pending = iter_tasks(_timed, jobs, config.workers, config.backend)
+        for index, (result, spent) in pending:
+            key = order[index]
+            results[key], seconds[key] = result, spent
+            for plan in users[key]:
+                plan.missing -= 1
+                if not plan.missing:
+                    finish(plan)
+            writer.report(wait=False)
     return [summaries[id(plan)] for plan in plans]
+
+
+class _Writer:
+    """Writes each finished experiment's files, in background processes when several may be due.
+
+    An experiment's figures take seconds to draw, and the last experiments to finish finish
+    together: drawn one after another in this process, they would leave the workers idle at the
+    end. With ``processes`` > 1 the files are written by a pool of that many processes (loky's,
+    which carries the figures' closures), side by side and beside the runs; ``on_done`` is
+    called here, in the order the writes end, once the experiment's files are on disk.
+    """
+
+    def __init__(self, processes: int, on_done: Callable[[Experiment, Summary], None] | None):
+        self.on_done = on_done
+        self.pool: Any = None
+        if processes > 1:
+            from joblib.externals.loky import ProcessPoolExecutor
+
+            self.pool = ProcessPoolExecutor(max_workers=processes)
+        self.writing: list[tuple[Any, _Plan, Summary]] = []
+
+    def __enter__(self) -> _Writer:
+        return self
+
+    def __exit__(self, *error: object) -> None:
+        try:
+            if error[0] is None:
+                self.report(wait=True)
+        finally:
+            if self.pool is not None:
+                self.pool.shutdown(wait=True)
+
+    def write(self, plan: _Plan, summary: Summary) -> None:
+        """Write the plan's files (in the background with a pool), then report it."""
+        if plan.out is not None and self.pool is not None:
+            job = self.pool.submit(write_outputs, plan.experiment, plan.config, summary, plan.out)
+            self.writing.append((job, plan, summary))
+            return
+        if plan.out is not None:
+            write_outputs(plan.experiment, plan.config, summary, plan.out)
+        if self.on_done is not None:
+            self.on_done(plan.experiment, summary)
+
+    def report(self, wait: bool) -> None:
+        """Call ``on_done`` for the writes that ended (all of them with ``wait``); raise theirs."""
+        while self.writing:
+            ended = [entry for entry in self.writing if entry[0].done()]
+            if not ended and not wait:
+                return
+            if not ended:
+                futures.wait([job for job, _, _ in self.writing], return_when="FIRST_COMPLETED")
+                continue
+            for entry in ended:
+                self.writing.remove(entry)
+                job, plan, summary = entry
+                job.result()  # a write's error is raised here
+                if self.on_done is not None:
+                    self.on_done(plan.experiment, summary)
 
 
 def _summarize(
