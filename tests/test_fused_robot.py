@@ -10,6 +10,7 @@ from __future__ import annotations
 import copy
 import math
 import pickle
+import warnings
 
 import numpy as np
 import pytest
@@ -235,3 +236,41 @@ def test_progress_is_the_envs_arithmetic():
     walker.learn(2500, log_interval=None, record=True, fused=True)
     python = replay(kwargs, 9, walker.training_log["action"])
     assert env._progress == python["env"]._progress and math.isfinite(env._progress)
+
+
+def test_a_new_env_or_a_reset_starts_a_new_compiled_run():
+    """After ``set_env`` (even of the same env) the run starts on the reset env, not the old run."""
+    kwargs = CONFIGS["clean, recover"]
+    walker, env = random_walker(kwargs, seed=3)
+    walker.learn(700, log_interval=None, fused=True)
+    walker.set_env(walker.env)
+    walker.learn(400, log_interval=None, record=True, fused=True, reset_num_timesteps=False)
+    python = replay(kwargs, 3, walker.training_log["action"])  # a fresh env, reset with seed 3
+    np.testing.assert_array_equal(walker.training_log["obs"], python["obs"])
+    assert env_state(env) == env_state(python["env"])
+
+
+def test_an_interrupted_compiled_run_is_dropped_and_the_env_reset():
+    from delayed_rl.agents.callbacks import BaseCallback
+
+    class Interrupt(BaseCallback):
+        def _on_step(self) -> bool:
+            if self.num_timesteps >= 300:
+                raise KeyboardInterrupt
+            return True
+
+    walker, env = random_walker(CONFIGS["clean, recover"], seed=1)
+    with pytest.raises(KeyboardInterrupt):
+        walker.learn(1000, log_interval=None, fused=True, callback=Interrupt())
+    assert walker._fused is None
+    walker.learn(50, log_interval=None, fused=False, reset_num_timesteps=False)
+    assert env._steps == 50  # a fresh episode: the interrupted run's is not continued
+
+
+def test_python_then_compiled_starts_a_fresh_episode():
+    walker, env = random_walker(CONFIGS["clean, recover"], seed=1)
+    walker.learn(200, log_interval=None, fused=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the delay wrapper may say what its reset discards
+        walker.learn(100, log_interval=None, fused=True, reset_num_timesteps=False)
+    assert env._steps == 100

@@ -215,3 +215,33 @@ def test_a_failed_background_write_is_raised(tmp_path):
     experiments = [_experiment(name, [1]) for name in ("a", "b")]
     with pytest.raises(FileExistsError):
         run_experiments(experiments, Config(workers=2), tmp_path, progress=False)
+
+
+def test_a_summary_that_cannot_be_sent_is_written_here(tmp_path):
+    """A figure holding an object pickling refuses is drawn in this process, not lost."""
+    import threading
+
+    lock = threading.Lock()
+
+    def locked_summary(tasks, results, config):
+        def draw(path):
+            with lock:
+                path.write_text("drawn here")
+
+        return Summary([], [], figures={"plot": draw})
+
+    experiments = [
+        Experiment(
+            name=name,
+            thesis="-",
+            description="-",
+            tasks=lambda config: [{"x": 1}],
+            run_task=square,
+            summarize=locked_summary,
+            default_seeds=1,
+        )
+        for name in ("a", "b")
+    ]
+    run_experiments(experiments, Config(workers=2), tmp_path, progress=False)
+    assert (tmp_path / "a" / "plot.png").read_text() == "drawn here"
+    assert (tmp_path / "b" / "plot.png").read_text() == "drawn here"

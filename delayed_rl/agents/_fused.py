@@ -87,7 +87,10 @@ def compiled_run(agent: Any, fused: bool | None, restart: bool) -> Any:
 
     A run continues (same episode, history and pending rewards) across ``learn()`` calls
     with ``reset_num_timesteps=False`` on the same env; otherwise a new one starts, seeded
-    from the agent's own generator (so seeded agents are reproducible).
+    from the agent's own generator (so seeded agents are reproducible). A run that steps its
+    env (the e-puck) also starts anew when the env was reset since (``set_env``), and a new
+    one starts from a fresh episode: one the Python loop left open is reset first (its delay
+    wrapper then warns of the pending rewards it discards).
 
     Raises:
         NotCompilable: ``fused=True`` and the run cannot be compiled (the message says why).
@@ -96,6 +99,7 @@ def compiled_run(agent: Any, fused: bool | None, restart: bool) -> Any:
         _leave_compiled_episode(agent)
         return None
     from delayed_rl.fast import FusedRun, NotCompilable
+    from delayed_rl.fast.robot import linked
 
     try:
         if not agent._lr_constant:
@@ -104,7 +108,16 @@ def compiled_run(agent: Any, fused: bool | None, restart: bool) -> Any:
         if tables is None:
             raise NotCompilable(f"{type(agent).__name__} has no compiled learning rule")
         cached = agent._fused
-        if cached is None or cached[0] is not agent.env or restart:
+        if (
+            cached is None
+            or cached[0] is not agent.env
+            or restart
+            or (cached[1].robot is not None and not agent._compiled_episode)  # env reset since
+        ):
+            robot_env = agent.env.unwrapped
+            if linked(robot_env) and not agent._compiled_episode and robot_env._steps:
+                agent._obs = agent._reset_env()  # the Python loop left it mid-episode; the
+                # delay wrapper's reset says what it discards
             seed = int(agent._uniform.rng.integers(2**63))
             fused_run = FusedRun(
                 agent.env, tables.delay_estimates, seed, held_transitions=tables.held_transitions
@@ -132,7 +145,28 @@ def _leave_compiled_episode(agent: Any) -> None:
 
 
 def compiled_loop(agent: Any, fused_run: Any, run: LearnRun) -> None:
-    """Take ``run.n_steps`` steps on the compiled path, in chunks between callbacks and logs."""
+    """Take ``run.n_steps`` steps on the compiled path, in chunks between callbacks and logs.
+
+    Should a chunk or a callback raise (``KeyboardInterrupt`` included), the run is dropped and
+    the next ``learn()`` starts a new one on a reset env: a chunk cut short leaves the run's
+    state and the agent's tables out of step with each other.
+    """
+    try:
+        _compiled_chunks(agent, fused_run, run)
+    except BaseException:
+        agent._fused = None
+        agent._episode_ended = True
+        agent._compiled_episode = False
+        raise
+    if fused_run.robot is None:
+        agent._episode_ended = True  # the env object was not stepped: reset it next time
+    else:  # the run stepped the env: a compiled continuation goes on from where it is
+        agent._episode_ended = False
+        agent._compiled_episode = True
+        agent._obs = int(fused_run.state[0])
+
+
+def _compiled_chunks(agent: Any, fused_run: Any, run: LearnRun) -> None:
     eps_steps = max(1, round(agent.exploration_fraction * run.total_timesteps))
     if agent.exploration_initial_eps == agent.exploration_final_eps:
         eps_steps = 1
@@ -177,12 +211,6 @@ def compiled_loop(agent: Any, fused_run: Any, run: LearnRun) -> None:
         ):
             break
         run.log_if_due(agent)
-    if fused_run.robot is None:
-        agent._episode_ended = True  # the env object was not stepped: reset it next time
-    else:  # the run stepped the env: a compiled continuation goes on from where it is
-        agent._episode_ended = False
-        agent._compiled_episode = True
-        agent._obs = int(fused_run.state[0])
 
 
 def _replay_to_callback(agent: Any, run: LearnRun, out: Any, last_obs: int, start: int) -> bool:

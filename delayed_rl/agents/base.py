@@ -224,6 +224,7 @@ class TabularAgent(_persistence.CopyProtocol, ABC):
         """
         self.env = check_spaces_match(make_env(env), self.observation_space, self.action_space)
         self._vec_env = None
+        self._fused = None  # a compiled run belongs to the episode it was in
         self._env_seeded = False
         self._episode_ended = True
         #: A compiled run left the env mid-episode (see ``_fused._leave_compiled_episode``).

@@ -23,7 +23,9 @@ Per seed and agent, one task:
    against ``linefollow`` is what the delay costs.
 
 Both continuations start from the same agent state and the same env seed (the first reset
-after ``set_env`` uses the agent's seed), so their difference is paired. Agents: ``MMQ``,
+after ``set_env`` uses the agent's seed), so their difference is paired by seed. (The control
+runs on the compiled path; the stand-in's command latency keeps the real run on the Python
+path, so their agents' random draws differ.) Agents: ``MMQ``,
 ``Q`` and, beyond the thesis, ``DeconvQ learned`` (:class:`~delayed_rl.agents.DeconvQ`
 learning the delay on 0..150, as in ``linefollow-deconv``). Default 4 seeds (the thesis's two
 runs are seeds ``base_seed`` and ``base_seed + 1``, drawn alone in the figures' first panels;

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -209,7 +210,8 @@ def _run(
             if not unfinished[key]:
                 results.pop(key)
 
-    with _Writer(config.workers if len(plans) > 1 else 1, on_done) as writer:
+    local_cores = min(config.workers, len(plans), os.cpu_count() or 1)  # (a cluster's are not)
+    with _Writer(local_cores, on_done) as writer:
         for plan in plans:
             if not plan.missing:
                 finish(plan)
@@ -231,9 +233,11 @@ class _Writer:
 
     An experiment's figures take seconds to draw, and the last experiments to finish finish
     together: drawn one after another in this process, they would leave the workers idle at the
-    end. With ``processes`` > 1 the files are written by a pool of that many processes (loky's,
-    which carries the figures' closures), side by side and beside the runs; ``on_done`` is
-    called here, in the order the writes end, once the experiment's files are on disk.
+    end. With ``processes`` > 1 the files are written by a pool of that many processes on this
+    machine (loky's, which carries the figures' closures), side by side and beside the runs; a
+    summary that cannot be sent to another process is written here. ``on_done`` is called here,
+    in the order the writes end, once the experiment's files are on disk. On an error (an
+    interrupt included) the writes still running are abandoned.
     """
 
     def __init__(self, processes: int, on_done: Callable[[Experiment, Summary], None] | None):
@@ -254,11 +258,12 @@ class _Writer:
                 self.report(wait=True)
         finally:
             if self.pool is not None:
-                self.pool.shutdown(wait=True)
+                failed = error[0] is not None
+                self.pool.shutdown(wait=not failed, kill_workers=failed)
 
     def write(self, plan: _Plan, summary: Summary) -> None:
         """Write the plan's files (in the background with a pool), then report it."""
-        if plan.out is not None and self.pool is not None:
+        if plan.out is not None and self.pool is not None and _sendable(plan, summary):
             job = self.pool.submit(write_outputs, plan.experiment, plan.config, summary, plan.out)
             self.writing.append((job, plan, summary))
             return
@@ -282,6 +287,17 @@ class _Writer:
                 job.result()  # a write's error is raised here
                 if self.on_done is not None:
                     self.on_done(plan.experiment, summary)
+
+
+def _sendable(plan: _Plan, summary: Summary) -> bool:
+    """Whether a write of the plan's summary can go to another process (loky's pickler)."""
+    from joblib.externals.loky.backend.reduction import dumps
+
+    try:
+        dumps((plan.experiment, plan.config, summary))
+    except Exception:  # any object pickling refuses: a lock, a generator, an open file...
+        return False
+    return True
 
 
 def _summarize(

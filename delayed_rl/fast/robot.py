@@ -13,9 +13,9 @@ The compiled step is :meth:`EPuckLineFollowEnv.step` to the last bit: the same C
 env's own pymunk space, the same camera and reward arithmetic, and every random number drawn
 from the env's own ``np_random`` (numba draws from a numpy ``Generator`` in place, the same
 stream) at the same point of the step. A seeded env therefore walks the same trajectory for the
-same actions on either path. Two rare events go back to Python, to the env's own code, for the
-few microseconds they take: putting a lost robot back on the track (``lost_line="recover"``),
-which rebuilds its pymunk space, and the reset at an episode's end.
+same actions on either path. Two rare events go back to Python, to the env's own code (a
+fraction of a millisecond each): putting a lost robot back on the track
+(``lost_line="recover"``), which rebuilds its pymunk space, and the reset at an episode's end.
 
 What compiles (:class:`RobotLink` says why not, as
 :class:`~delayed_rl.fast.tabular.NotCompilable`): ``observation_mode="centroid"``,
@@ -47,7 +47,7 @@ from delayed_rl.fast._numba import HAVE_NUMBA
 from delayed_rl.fast._numba import jit as _jit
 from delayed_rl.fast.tabular import NotCompilable
 
-__all__ = ["NO_ROBOT", "Robot", "RobotLink", "robot_reset", "robot_step"]
+__all__ = ["Robot", "RobotLink", "linked", "robot_reset", "robot_step"]
 
 if HAVE_NUMBA:
     from numba import objmode
@@ -76,7 +76,7 @@ _SEGMENT, _LOST, _STEPS = range(3)
 
 
 class Robot(NamedTuple):
-    """The e-puck env as :func:`~delayed_rl.fast.kernel.run_chunk` steps it (``NO_ROBOT``: none).
+    """The e-puck env as :func:`~delayed_rl.fast.kernel.run_chunk` steps it.
 
     Attributes:
         handles: the Chipmunk functions and objects of the env's robot
@@ -118,24 +118,6 @@ class Robot(NamedTuple):
     generator: np.random.Generator
 
 
-NO_ROBOT = Robot(
-    np.zeros(0, np.int64),
-    np.zeros((1, 2)),
-    np.zeros(6),
-    np.zeros(6, np.int64),
-    np.zeros(5),
-    np.zeros(3, np.int64),
-    np.zeros(1),
-    np.zeros(1),
-    np.zeros(1, np.int64),
-    False,
-    0,
-    np.zeros((2, 1)),
-    np.zeros(1, np.bool_),
-    np.random.default_rng(0),
-)
-"""No robot: the run steps its env's tables (the generator is never drawn from)."""
-
 _LINKED: dict[int, EPuckLineFollowEnv] = {}
 """The envs of the chunks running now, by key: the Python half of a recovery or reset finds its
 env here."""
@@ -167,10 +149,7 @@ class RobotLink:
                     f"EPuckLineFollowEnv with {name}={getattr(env, name)!r} does not compile "
                     f"(it does with {allowed})"
                 )
-        if env.robot._driver[0] is not _chipmunk.drive or not _kernels.enabled():
-            raise NotCompilable(
-                "the e-puck's compiled physics or camera is not in use on this platform"
-            )
+        _check_platform(env)
         self.env = env
 
     def observation(self) -> int:
@@ -184,6 +163,7 @@ class RobotLink:
         The env is reachable by its key during the call; on leaving, its state is the run's.
         """
         env = self.env
+        _check_platform(env)  # (an env unpickled on another machine may not have them)
         key = next(_KEYS)
         camera, track_floats, track_ints, fused, complex_abs, draws, pixels = (
             env._reading_arguments()
@@ -231,6 +211,19 @@ class RobotLink:
         finally:
             del _LINKED[key]
             _store(env, live, counters)
+
+
+def _check_platform(env: EPuckLineFollowEnv) -> None:
+    """Refuse an env whose physics or camera does not run compiled here.
+
+    Raises:
+        NotCompilable: numba cannot call its Chipmunk functions, or its camera's kernels do not
+            mirror this numpy's rounding.
+    """
+    if env.robot._driver[0] is not _chipmunk.drive or env._reading_arguments() is None:
+        raise NotCompilable(
+            "the e-puck's compiled physics or camera is not in use on this platform"
+        )
 
 
 def _load(env: EPuckLineFollowEnv, live: np.ndarray, counters: np.ndarray) -> None:
