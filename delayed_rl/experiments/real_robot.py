@@ -51,12 +51,13 @@ Claims, verdicts from the 95 % CIs over seeds (:mod:`.common`'s rules):
 - DeconvQ learned minus Q on the real configuration, above 0 (an extension), and DeconvQ's
   average reward there as a reference row.
 
-Cost: pretraining dominates (the e-puck env runs on the Python path). In full
-``delayed-rl reproduce`` runs on this 2-core machine (two workers busy), 500k pretraining steps
-took 8–12 s for Q, 11–17 s for MMQ and 13–30 s for DeconvQ learned (15–60 µs a step, as busy as
-the machine was), the continuations about a second each: the default 4 seeds cost 130–240
-core-seconds. ``summary.json`` records each pretraining's wall time (mean and CI,
-``pretrain_seconds``).
+Cost: pretraining dominates; it runs on the compiled path (the e-puck stepped inside the
+compiled training loop), the continuations on the real configuration on the Python path (its
+command latency does not compile). In a full ``delayed-rl reproduce`` on this 2-core machine
+(two workers busy), 500k pretraining steps took about 2 s for Q, 3 s for MMQ and 4 s for
+DeconvQ learned (4–8 µs a step), the continuations well under a second each: the default 4
+seeds cost about 40 core-seconds. ``summary.json`` records each pretraining's wall time (mean
+and CI, ``pretrain_seconds``).
 """
 
 from __future__ import annotations
