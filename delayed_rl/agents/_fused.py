@@ -108,16 +108,11 @@ def compiled_run(agent: Any, fused: bool | None, restart: bool) -> Any:
         if tables is None:
             raise NotCompilable(f"{type(agent).__name__} has no compiled learning rule")
         cached = agent._fused
-        if (
-            cached is None
-            or cached[0] is not agent.env
-            or restart
-            or (cached[1].robot is not None and not agent._compiled_episode)  # env reset since
-        ):
-            robot_env = agent.env.unwrapped
-            if linked(robot_env) and not agent._compiled_episode and robot_env._steps:
-                agent._obs = agent._reset_env()  # the Python loop left it mid-episode; the
-                # delay wrapper's reset says what it discards
+        stepped = linked(agent.env.unwrapped)  # the run steps the env itself (the e-puck)
+        moved = stepped and not agent._compiled_episode  # the env is not where a run left it
+        if cached is None or cached[0] is not agent.env or restart or moved:
+            if moved and agent.env.unwrapped._steps:  # the Python loop left it mid-episode:
+                agent._obs = agent._reset_env()  # its delay wrapper says what the reset discards
             seed = int(agent._uniform.rng.integers(2**63))
             fused_run = FusedRun(
                 agent.env, tables.delay_estimates, seed, held_transitions=tables.held_transitions

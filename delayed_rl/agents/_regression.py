@@ -289,11 +289,9 @@ def _prefix_dots4(a, i, j, n):
 
 
 @_jit
-def _cholesky_solve(a, b):
-    """``x`` with ``a x = b`` for a symmetric positive definite ``a`` (overwritten), by Cholesky.
+def _cholesky_factor(a):
+    """Overwrite the lower triangle of a symmetric positive definite ``a`` with its Cholesky ``L``.
 
-    Written out rather than LAPACK's: single-threaded, so a solve never waits on BLAS threads
-    that compete with other work for the cores, and its result does not depend on their number.
     Column ``j`` of ``L`` is its diagonal entry, then its rows below four at a time
     (:func:`_prefix_dots4`); every entry is summed in the order of :func:`_prefix_dot`.
     """
@@ -314,6 +312,17 @@ def _cholesky_solve(a, b):
         while i < n:
             a[i, j] = (a[i, j] - _prefix_dot(a, i, j, j)) / a[j, j]
             i += 1
+
+
+@_jit
+def _cholesky_solve(a, b):
+    """``x`` with ``a x = b`` for a symmetric positive definite ``a`` (overwritten), by Cholesky.
+
+    Written out rather than LAPACK's: single-threaded, so a solve never waits on BLAS threads
+    that compete with other work for the cores, and its result does not depend on their number.
+    """
+    _cholesky_factor(a)
+    n = a.shape[0]
     x = b.copy()
     for i in range(n):  # L y = b
         total = x[i]

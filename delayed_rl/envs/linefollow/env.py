@@ -509,7 +509,8 @@ class EPuckLineFollowEnv(gym.Env):
             self.np_random.random(out=draws[0])
         if self.camera_noise > 0:
             self.np_random.random(out=draws[1])
-        if self._reading_arguments() is None:
+        compiled = self._compiled if self._compiled_track is track else self._reading_arguments()
+        if compiled is None:
             pixels = self.camera.read(track, x, y, heading)
             if self.line_contrast < 1:
                 pixels &= draws[0] < self.line_contrast
@@ -527,7 +528,7 @@ class EPuckLineFollowEnv(gym.Env):
                 self._segment,
                 self.line_contrast,
                 self.camera_noise,
-                *self._compiled,
+                *compiled,
             )
         half = 0.5 * track.length
         self._progress += ((s - self._s + half) % track.length - half) / track.length
