@@ -18,6 +18,7 @@ import pytest
 
 from delayed_rl.envs.linefollow import _chipmunk, _kernels
 from delayed_rl.envs.linefollow.camera import Camera, line_centroid
+from delayed_rl.envs.linefollow.env import EPuckLineFollowEnv
 from delayed_rl.envs.linefollow.robot import EPuckRobot
 from delayed_rl.envs.linefollow.track import Track, make_track, random_track
 
@@ -95,6 +96,24 @@ def test_near_line_equals_the_numpy_reference_for_any_points():
 
 
 @needs_kernels
+def test_the_env_reads_through_observe_without_its_dispatch():
+    env = EPuckLineFollowEnv(track="figure8", camera_noise=0.1, line_contrast=0.8)
+    env.reset(seed=3)
+    arguments = env._reading_arguments()
+    draws, out = arguments[-2], arguments[-1]
+    assert env._observe is not None and env._observe is not _kernels.observe
+    rng = np.random.default_rng(2)
+    for x, y, heading in poses(env.track, rng, 40):
+        draws[:] = rng.random(draws.shape)
+        hint = int(rng.integers(0, 5))
+        pose = (x, y, math.cos(heading), math.sin(heading), hint, 0.8, 0.1)
+        direct = env._observe(*pose, *arguments)
+        direct_pixels = out.copy()
+        assert same(direct, _kernels.observe(*pose, *arguments))
+        assert np.array_equal(direct_pixels, out)
+
+
+@needs_kernels
 def test_the_compiled_centroid_is_line_centroid():
     rng = np.random.default_rng(4)
     for row in rng.random((500, 40)) < rng.random((500, 1)):
@@ -145,7 +164,7 @@ def robots(motor_lag: float, physics_dt: float) -> tuple[EPuckRobot, EPuckRobot]
     compiled, python = EPuckRobot(physics_dt, motor_lag), EPuckRobot(physics_dt, motor_lag)
     for robot in (compiled, python):
         robot.reset(0.2, -0.1, 2.0)
-    assert compiled._driver[0] is _chipmunk.drive
+    assert compiled._driver[0] is _chipmunk.drive_entry()
     python._driver = (_chipmunk.drive_python, python._calls)
     return compiled, python
 

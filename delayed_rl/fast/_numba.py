@@ -1,7 +1,8 @@
 """numba, compiled with one set of options for the whole library (``cache=True``, ``nogil=True``).
 
 ``jit`` compiles a function; where numba is missing (it is a core dependency, so only in odd
-installs) it returns the function as it is, and ``HAVE_NUMBA`` says so.
+installs) it returns the function as it is, and ``HAVE_NUMBA`` says so. :func:`entry_point` gives
+Python a compiled function without numba's per-call dispatch, for calls made at every env step.
 
 For developers: numba's cache checks only the source file of the function it compiled, not
 those of the compiled functions it calls. After editing a callee in another module (e.g.
@@ -12,7 +13,10 @@ the old callee. An installed upgrade rewrites every file, so users are not affec
 
 from __future__ import annotations
 
-__all__ = ["HAVE_NUMBA", "jit"]
+from collections.abc import Callable
+from typing import Any
+
+__all__ = ["HAVE_NUMBA", "entry_point", "jit"]
 
 try:
     import numba
@@ -25,3 +29,19 @@ except ImportError:  # pragma: no cover - exercised where numba is absent
     def jit(function):
         """Return ``function`` uncompiled (numba is not installed)."""
         return function
+
+
+def entry_point(function: Callable, *example: Any) -> Callable:
+    """The compiled ``function`` for arguments of the types of ``example``, without dispatch.
+
+    Calling a compiled function from Python first finds the numba types of its arguments and
+    picks the compiled version for them: about 2 µs for the e-puck camera's 14 arguments, more
+    than the reading itself. The callable returned skips that step: it converts each argument
+    to the type of its ``example`` (a number to ``float``/``int``, an array as it is), so it may
+    only be given arrays of exactly the examples' dtypes, dimensions and layouts. It is not
+    picklable; make it again in a copy. Without numba, ``function`` itself.
+    """
+    if not HAVE_NUMBA:  # pragma: no cover - exercised where numba is absent
+        return function
+    signature = tuple(function.typeof_pyval(value) for value in example)
+    return function.compile(signature)

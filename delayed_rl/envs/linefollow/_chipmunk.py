@@ -33,7 +33,7 @@ import numpy as np
 import pymunk
 from numpy.typing import NDArray
 
-from delayed_rl.fast._numba import HAVE_NUMBA, jit
+from delayed_rl.fast._numba import HAVE_NUMBA, entry_point, jit
 
 __all__ = [
     "PythonCalls",
@@ -279,6 +279,16 @@ def handles(
     pointers = (body._body, control._body, space._space)
     objects = [int(_ffi.cast("uintptr_t", p)) for p in pointers]
     return np.array([*_function_addresses(), *objects], dtype=np.int64)
+
+
+@functools.cache
+def drive_entry() -> Any:
+    """:func:`drive` as the robot calls it at every step, without numba's per-call dispatch.
+
+    Its arguments' types are fixed (:func:`~delayed_rl.fast._numba.entry_point`): the
+    :func:`handles` array, five floats, a bool, two floats, the sub-step count and three floats.
+    """
+    return entry_point(drive, np.zeros(8, np.int64), *[0.0] * 5, False, 1.0, 1.0, 1, *[1.0] * 3)
 
 
 @functools.cache

@@ -23,6 +23,7 @@ from delayed_rl.envs.linefollow import _kernels
 from delayed_rl.envs.linefollow.camera import CENTRE_PIXEL, N_PIXELS, Camera, line_centroid
 from delayed_rl.envs.linefollow.robot import EPuckRobot
 from delayed_rl.envs.linefollow.track import TRACK_NAMES, Track, make_track
+from delayed_rl.fast._numba import entry_point
 
 __all__ = [
     "CONTROL_PERIOD",
@@ -323,6 +324,7 @@ class EPuckLineFollowEnv(gym.Env):
         #: The track the compiled reading's arguments were made for, and those arguments.
         self._compiled_track: Track | None = None
         self._compiled: tuple | None = None
+        self._observe: Any = None  # _kernels.observe for these arguments, without dispatch
         self._s = 0.0
         self._segment = 0
         self._lateral = 0.0
@@ -520,7 +522,7 @@ class EPuckLineFollowEnv(gym.Env):
             s, self._lateral, self._segment = track.locate(x, y, self._segment)
             m = line_centroid(pixels)
         else:
-            m, s, self._lateral, self._segment = _kernels.observe(
+            m, s, self._lateral, self._segment = self._observe(
                 x,
                 y,
                 math.cos(heading),
@@ -538,10 +540,20 @@ class EPuckLineFollowEnv(gym.Env):
         return m
 
     def _reading_arguments(self) -> tuple | None:
-        """The current track's :meth:`_compiled_arguments`, made again when the track changes."""
+        """The current track's :meth:`_compiled_arguments`, made again when the track changes.
+
+        With them, ``_observe`` is :func:`_kernels.observe` compiled for their types, called
+        without numba's dispatch (:func:`~delayed_rl.fast._numba.entry_point`): the pose, the
+        hint and the noise levels are converted to its float and int arguments.
+        """
         if self._compiled_track is not self.track:
             self._compiled_track = self.track
             self._compiled = self._compiled_arguments(self.track)
+            self._observe = (
+                None
+                if self._compiled is None
+                else entry_point(_kernels.observe, *[0.0] * 4, 0, 1.0, 0.0, *self._compiled)
+            )
         return self._compiled
 
     def _compiled_arguments(self, track: Track) -> tuple | None:
@@ -589,7 +601,7 @@ class EPuckLineFollowEnv(gym.Env):
         in another process or on another machine) makes its own at its first reading.
         """
         state = self.__dict__.copy()
-        state["_compiled_track"] = state["_compiled"] = None
+        state["_compiled_track"] = state["_compiled"] = state["_observe"] = None
         return state
 
     # ------------------------------------------------------------------ rendering

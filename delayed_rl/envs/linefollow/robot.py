@@ -116,7 +116,7 @@ class EPuckRobot:
         handles = _chipmunk.handles(body, control, space)
         #: How :meth:`step` drives: the compiled loop where it is in use, else its reference.
         self._driver = (
-            (_chipmunk.drive, handles)
+            (_chipmunk.drive_entry(), handles)
             if handles is not None and _chipmunk.enabled()
             else (_chipmunk.drive_python, self._calls)
         )
