@@ -271,7 +271,7 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
     def step(self, action):
         """Step the env; return the rewards due now (see the class docstring)."""
         obs, reward, terminated, truncated, info = self.env.step(action)
-        if type(reward) is not float:
+        if reward.__class__ is not float:  # (cheaper than type(reward): no call)
             reward = self._checked_reward(reward)
         try:
             delay = self._delays.pop()
@@ -279,12 +279,12 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
             delay = self._sampler.refill().pop()
         clock = self._clock
         self._clock = clock + 1
+        due = self._due
         if reward:  # a zero reward changes no sum (and is finite): nothing to schedule
             if reward - reward:  # inf or NaN (x - x is 0 for every finite float)
                 self._refuse(reward, delay)
             if self._watch is not None and not (terminated or truncated):
                 self._watch = None  # a reward before an episode's end: no flush trap
-            due = self._due
             when = clock + delay
             slot = due.get(when, 0.0) + reward
             pending = self._pending + reward
@@ -292,8 +292,7 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
                 pending = self._checked_pending(when, slot)
             due[when] = slot
             self._pending = pending
-        if clock in self._due:
-            due = self._due
+        if clock in due:
             delivered = due.pop(clock)
             pending = self._pending - delivered if due else 0.0  # exact 0 once all is in
             self._pending = exact_sum(due.values()) if pending - pending else pending
