@@ -12,7 +12,8 @@ Exit codes: 0 success, 2 bad usage (unknown names, bad values, in options or in 
 fields or syntax; argparse's usage and one ``error:`` line), 1 a failure while running (a
 missing, corrupt or oversized model file, a missing sweep file, an env the agent cannot use,
 tables over ``delayed_rl.agents.mmq.MAX_TABLE_BYTES``, a sweep's run that fails, running out of
-memory, ...), reported as one ``error: ...`` line on stderr, without a traceback.
+memory, ...), reported as one ``error: ...`` line on stderr, without a traceback; 130 after
+Ctrl-C (a second Ctrl-C quits at once, see :func:`console`).
 
 Option values are checked by :mod:`delayed_rl._validation`, the library's own checks, so the
 command line and the Python API refuse the same values with the same words.
@@ -21,6 +22,9 @@ command line and the Python API refuse the same values with the same words.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
+import signal
 import sys
 import time
 import zlib
@@ -580,3 +584,36 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 if __name__ == "__main__":
     sys.exit(main())
+
+
+def console() -> int:
+    """The ``delayed-rl`` command: :func:`main`, with Ctrl-C as a terminal user expects it.
+
+    The first Ctrl-C stops the run as Python does (``KeyboardInterrupt``: the worker pools are
+    stopped, the files already written stay) and the command exits with status 130; a second
+    one kills the worker processes and quits at once. Without that, a second Ctrl-C while
+    Python shuts the worker pools down could leave the process waiting forever for them.
+    """
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # (not if ignored)
+        signal.signal(signal.SIGINT, _interrupt)
+    try:
+        return main()
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+def _interrupt(signum: int, frame: Any) -> None:
+    """The first Ctrl-C: ``KeyboardInterrupt``, as Python's own handler; the next quits."""
+    signal.signal(signal.SIGINT, _quit_now)
+    raise KeyboardInterrupt
+
+
+def _quit_now(signum: int, frame: Any) -> None:
+    """A second Ctrl-C: stop this process's worker processes and exit at once, status 130."""
+    import multiprocessing
+
+    with contextlib.suppress(Exception):  # (a child gone meanwhile: nothing may stop the exit)
+        for child in multiprocessing.active_children():  # (loky's workers are among them)
+            os.kill(child.pid, getattr(signal, "SIGKILL", signal.SIGTERM))
+    os._exit(130)

@@ -6,6 +6,7 @@
 from __future__ import annotations
 
 import re
+import sys
 import tracemalloc
 import zipfile
 
@@ -284,3 +285,95 @@ def test_train_deconvolution_learns_the_delay_and_saves_an_agent_that_loads(tmp_
     assert "trained DeconvolutionQLearning" in capsys.readouterr().out
     agent = load_agent(save.with_suffix(".npz"))
     assert type(agent) is DeconvolutionQLearning and agent.delay_pmf.shape == (9,)
+
+
+# ---------------------------------------------------------------------- Ctrl-C
+def test_the_command_exits_130_on_ctrl_c_and_a_second_one_quits(monkeypatch, capsys):
+    import signal
+
+    from delayed_rl import cli
+
+    seen = []
+
+    def interrupted_main() -> int:
+        seen.append(signal.getsignal(signal.SIGINT))
+        signal.raise_signal(signal.SIGINT)  # Ctrl-C, delivered to this process's handler
+        return 0  # (not reached)
+
+    monkeypatch.setattr(cli, "main", interrupted_main)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        assert cli.console() == 130
+        assert seen == [cli._interrupt]  # the command's handler ran the command
+        assert signal.getsignal(signal.SIGINT) is cli._quit_now  # the next Ctrl-C quits
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert "interrupted" in capsys.readouterr().err
+
+
+def test_the_command_leaves_an_ignored_ctrl_c_ignored(monkeypatch):
+    import signal
+
+    from delayed_rl import cli
+
+    monkeypatch.setattr(cli, "main", lambda: 0)
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        assert cli.console() == 0
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _marked_processes(mark: str) -> list[int]:
+    """The pids of the processes whose environment holds ``mark`` (Linux's /proc)."""
+    from pathlib import Path
+
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                if mark.encode() in (entry / "environ").read_bytes():
+                    found.append(int(entry.name))
+            except OSError:  # gone, or not ours to read
+                continue
+    return found
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc (Linux)")
+@pytest.mark.parametrize("gap", [0.05, 0.5])
+def test_two_ctrl_c_during_a_parallel_run_exit_at_once_leaving_no_worker(tmp_path, gap):
+    import os
+    import signal
+    import subprocess
+    import time
+    import uuid
+
+    mark = f"DELAYED_RL_CTRL_C_TEST={uuid.uuid4().hex}"
+    command = (
+        "import sys; from delayed_rl.cli import console; "
+        f"sys.argv = ['delayed-rl', 'reproduce', '--quick', '--workers', '2', '--out', "
+        f"{str(tmp_path)!r}]; sys.exit(console())"
+    )
+    env = {**os.environ, mark.split("=")[0]: mark.split("=")[1]}
+    process = subprocess.Popen(
+        [sys.executable, "-c", command],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),  # as a terminal has it
+    )
+    deadline = time.monotonic() + 60
+    while not (tmp_path / "delay-sweep").exists() and time.monotonic() < deadline:
+        time.sleep(0.05)  # until the workers are busy (the first experiment written)
+    assert process.poll() is None, process.stderr.read().decode()
+    process.send_signal(signal.SIGINT)
+    time.sleep(gap)
+    if process.poll() is None:
+        process.send_signal(signal.SIGINT)
+    assert process.wait(timeout=30) in (130, -signal.SIGINT)
+    deadline = time.monotonic() + 10
+    while _marked_processes(mark.split("=")[1]) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert _marked_processes(mark.split("=")[1]) == []  # no worker left behind
