@@ -582,10 +582,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         gym.logger.min_level = level  # main() may be called from a program: leave it as it was
 
 
-if __name__ == "__main__":
-    sys.exit(main())
-
-
 def console() -> int:
     """The ``delayed-rl`` command: :func:`main`, with Ctrl-C as a terminal user expects it.
 
@@ -617,3 +613,7 @@ def _quit_now(signum: int, frame: Any) -> None:
         for child in multiprocessing.active_children():  # (loky's workers are among them)
             os.kill(child.pid, getattr(signal, "SIGKILL", signal.SIGTERM))
     os._exit(130)
+
+
+if __name__ == "__main__":
+    sys.exit(console())
