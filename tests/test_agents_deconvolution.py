@@ -197,6 +197,45 @@ def _fed(layout, steps, mode="flush", support=6, seed=3):
     return regression
 
 
+@pytest.mark.parametrize("layout", ["direct", "hashed"])
+@pytest.mark.parametrize("mode", ["flush", "drop", "carry"])
+def test_the_statistics_are_the_counts_and_sums_of_their_definitions(mode, layout):
+    """Counts per lag and reward sums by lag, recounted from the steps by their definitions.
+
+    The steps' rewards include zeros of both signs (``+0.0`` and ``-0.0``) and negative
+    values; a segment ends at each episode end (not under ``"carry"``), and under ``"flush"``
+    the reward of a segment's last step is kept apart from the sums.
+    """
+    n_pairs, k_max = 6, 4
+    rng = np.random.default_rng(11)
+    steps = []
+    for _ in range(400):
+        reward = float(rng.choice([0.0, -0.0, 1.5, -2.0, 0.25]))
+        steps.append((int(rng.integers(n_pairs)), reward, bool(rng.random() < 0.1)))
+    regression = RewardRegression(n_pairs, k_max, mode == "flush", mode == "carry", layout=layout)
+    regression.reserve(len(steps))
+    for pair, reward, ended in steps:
+        regression.observe(pair, reward, ended)
+    counts = np.zeros((k_max + 1, n_pairs, n_pairs), dtype=np.int64)
+    sums = np.zeros((k_max + 1, n_pairs))
+    segment: list[int] = []  # the open segment's pairs
+    for pair, reward, ended in steps:
+        segment.append(pair)
+        last_flushed = ended and mode == "flush"
+        for lag in range(min(k_max + 1, len(segment))):
+            earlier = segment[-1 - lag]
+            counts[lag, earlier, pair] += 1
+            if not last_flushed:
+                sums[lag, earlier] += reward
+        if ended and mode != "carry":
+            segment = []
+    for lag in range(k_max + 1):
+        np.testing.assert_array_equal(regression.counts(lag), counts[lag])
+    by_lag = regression.stats.by_lag
+    np.testing.assert_array_equal(by_lag, sums)
+    assert not np.signbit(by_lag[by_lag == 0.0]).any()  # no sum of rewards is a −0.0
+
+
 @pytest.mark.parametrize("mode", ["flush", "drop", "carry"])
 def test_the_hashed_layout_holds_the_same_counts_and_gives_the_same_solves(mode):
     """Both layouts, the same steps: equal counts per lag, normal equations, R̂ and pmf."""

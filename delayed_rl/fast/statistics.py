@@ -115,8 +115,10 @@ def observe(stats, pair, reward, episode_end):
                 keys[row] = key
                 counters[6] += 1
         cooc[row, m] += 1
-        if not flush_last:
-            stats.by_lag[m, window[m]] += reward
+    if reward != 0.0 and not flush_last:  # (adding ±0 changes no sum: all start at +0.0)
+        by_lag = stats.by_lag
+        for m in range(length):
+            by_lag[m, window[m]] += reward
     counters[1] += 1
     if ends:
         e = counters[2]
