@@ -589,14 +589,22 @@ def console() -> int:
     stopped, the files already written stay) and the command exits with status 130; a second
     one kills the worker processes and quits at once. Without that, a second Ctrl-C while
     Python shuts the worker pools down could leave the process waiting forever for them.
+
+    It is the command's entry point (programs call :func:`main`): after a Ctrl-C its handler
+    stays, for the exit that follows; otherwise the previous handler is put back. A Ctrl-C
+    that is ignored (a background job) stays ignored.
     """
-    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # (not if ignored)
+    previous = signal.getsignal(signal.SIGINT)
+    if previous is signal.default_int_handler:
         signal.signal(signal.SIGINT, _interrupt)
     try:
-        return main()
+        code = main()
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    if previous is signal.default_int_handler:
+        signal.signal(signal.SIGINT, previous)
+    return code
 
 
 def _interrupt(signum: int, frame: Any) -> None:

@@ -325,6 +325,22 @@ def test_the_command_leaves_an_ignored_ctrl_c_ignored(monkeypatch):
         signal.signal(signal.SIGINT, previous)
 
 
+def test_the_command_puts_the_handler_back_when_it_ends_without_ctrl_c(monkeypatch):
+    import signal
+
+    from delayed_rl import cli
+
+    during = []
+    monkeypatch.setattr(cli, "main", lambda: during.append(signal.getsignal(signal.SIGINT)) or 3)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        assert cli.console() == 3
+        assert during == [cli._interrupt]
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 def _marked_processes(mark: str) -> list[int]:
     """The pids of the processes whose environment holds ``mark`` (Linux's /proc)."""
     from pathlib import Path
@@ -344,6 +360,7 @@ def _marked_processes(mark: str) -> list[int]:
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc (Linux)")
 @pytest.mark.parametrize("gap", [0.05, 0.5])
 def test_two_ctrl_c_during_a_parallel_run_exit_at_once_leaving_no_worker(tmp_path, gap):
+    import contextlib
     import os
     import signal
     import subprocess
@@ -351,29 +368,34 @@ def test_two_ctrl_c_during_a_parallel_run_exit_at_once_leaving_no_worker(tmp_pat
     import uuid
 
     mark = f"DELAYED_RL_CTRL_C_TEST={uuid.uuid4().hex}"
-    command = (
-        "import sys; from delayed_rl.cli import console; "
+    command = (  # Ctrl-C as a terminal has it (a test runner may start us with it ignored)
+        "import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+        "from delayed_rl.cli import console; "
         f"sys.argv = ['delayed-rl', 'reproduce', '--quick', '--workers', '2', '--out', "
         f"{str(tmp_path)!r}]; sys.exit(console())"
     )
     env = {**os.environ, mark.split("=")[0]: mark.split("=")[1]}
     process = subprocess.Popen(
-        [sys.executable, "-c", command],
-        env=env,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),  # as a terminal has it
+        [sys.executable, "-c", command], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
     )
-    deadline = time.monotonic() + 60
-    while not (tmp_path / "delay-sweep").exists() and time.monotonic() < deadline:
-        time.sleep(0.05)  # until the workers are busy (the first experiment written)
-    assert process.poll() is None, process.stderr.read().decode()
-    process.send_signal(signal.SIGINT)
-    time.sleep(gap)
-    if process.poll() is None:
+    try:
+        deadline = time.monotonic() + 60
+        while not (tmp_path / "delay-sweep").exists() and time.monotonic() < deadline:
+            time.sleep(0.05)  # until the workers are busy (the first experiment written)
+        assert process.poll() is None, process.stderr.read().decode()
         process.send_signal(signal.SIGINT)
-    assert process.wait(timeout=30) in (130, -signal.SIGINT)
-    deadline = time.monotonic() + 10
-    while _marked_processes(mark.split("=")[1]) and time.monotonic() < deadline:
-        time.sleep(0.1)
-    assert _marked_processes(mark.split("=")[1]) == []  # no worker left behind
+        time.sleep(gap)
+        if process.poll() is None:
+            process.send_signal(signal.SIGINT)
+        assert process.wait(timeout=30) in (130, -signal.SIGINT)
+        deadline = time.monotonic() + 10
+        while _marked_processes(mark.split("=")[1]) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert _marked_processes(mark.split("=")[1]) == []  # no worker left behind
+    finally:  # (a hung run must not outlive the test)
+        if process.poll() is None:
+            process.kill()
+        for pid in _marked_processes(mark.split("=")[1]):
+            with contextlib.suppress(OSError):
+                os.kill(pid, signal.SIGKILL)
+        process.stderr.close()

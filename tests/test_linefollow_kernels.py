@@ -114,6 +114,27 @@ def test_the_env_reads_through_observe_without_its_dispatch():
 
 
 @needs_kernels
+def test_an_interrupted_first_reading_is_made_again_at_the_next(monkeypatch):
+    from delayed_rl.envs.linefollow import env as env_module
+
+    real, calls = env_module.entry_point, []
+
+    def interrupted_once(*args):
+        calls.append(1)
+        if len(calls) == 1:
+            raise KeyboardInterrupt  # e.g. Ctrl-C during a first compilation
+        return real(*args)
+
+    monkeypatch.setattr(env_module, "entry_point", interrupted_once)
+    env = EPuckLineFollowEnv(track="oval")
+    with pytest.raises(KeyboardInterrupt):
+        env.reset(seed=4)
+    obs, _ = env.reset(seed=4)
+    fresh = EPuckLineFollowEnv(track="oval")
+    assert (obs, env.step(2)[:4]) == (fresh.reset(seed=4)[0], fresh.step(2)[:4])
+
+
+@needs_kernels
 def test_the_compiled_centroid_is_line_centroid():
     rng = np.random.default_rng(4)
     for row in rng.random((500, 40)) < rng.random((500, 1)):

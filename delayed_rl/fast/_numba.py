@@ -36,12 +36,13 @@ def entry_point(function: Callable, *example: Any) -> Callable:
 
     Calling a compiled function from Python first finds the numba types of its arguments and
     picks the compiled version for them: about 2 µs for the e-puck camera's 14 arguments, more
-    than the reading itself. The callable returned skips that step: it converts each argument
-    to the type of its ``example`` (a number to ``float``/``int``; a non-number raises
-    ``TypeError``) and takes an array's memory as the example's dtype, dimensions and layout
-    *without checking them*. So it is for internal calls on arrays the caller made itself, of
-    fixed types (the e-puck's camera, track and physics handles), never for arrays a user
-    passes. It is not picklable; make it again in a copy. Without numba, ``function`` itself.
+    than the reading itself. The callable returned skips that step: it converts each scalar
+    argument to the type of its ``example`` as ``float()`` and ``int()`` do (a numeric string
+    too) and takes an array's memory as the example's dtype, dimensions and layout *without
+    checking them*. So it is for internal calls whose arguments the caller made itself, of
+    fixed types (the e-puck's camera, track and physics handles, its pose and speeds), never
+    for what a user passes. It is not picklable; make it again in a copy. Without numba,
+    ``function`` itself.
     """
     if not HAVE_NUMBA:  # pragma: no cover - exercised where numba is absent
         return function

@@ -271,7 +271,7 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
     def step(self, action):
         """Step the env; return the rewards due now (see the class docstring)."""
         obs, reward, terminated, truncated, info = self.env.step(action)
-        if reward.__class__ is not float:  # (cheaper than type(reward): no call)
+        if type(reward) is not float:
             reward = self._checked_reward(reward)
         try:
             delay = self._delays.pop()

@@ -546,14 +546,16 @@ class EPuckLineFollowEnv(gym.Env):
         without numba's dispatch (:func:`~delayed_rl.fast._numba.entry_point`): the pose, the
         hint and the noise levels are converted to its float and int arguments.
         """
-        if self._compiled_track is not self.track:
-            self._compiled_track = self.track
-            self._compiled = self._compiled_arguments(self.track)
-            self._observe = (
+        track = self.track
+        if self._compiled_track is not track:
+            compiled = self._compiled_arguments(track)
+            observe = (
                 None
-                if self._compiled is None
-                else entry_point(_kernels.observe, *[0.0] * 4, 0, 1.0, 0.0, *self._compiled)
+                if compiled is None
+                else entry_point(_kernels.observe, *[0.0] * 4, 0, 1.0, 0.0, *compiled)
             )
+            # the track last: an interruption above (a first compilation) leaves them unmade
+            self._compiled, self._observe, self._compiled_track = compiled, observe, track
         return self._compiled
 
     def _compiled_arguments(self, track: Track) -> tuple | None:
