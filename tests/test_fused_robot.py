@@ -217,6 +217,21 @@ def test_continuous_actions_do_not_compile():
         FusedRun(env, np.zeros(1, np.int64), 0)
 
 
+@pytest.mark.parametrize("missing", ["physics", "camera"])
+def test_an_env_without_its_compiled_physics_or_camera_does_not_compile(missing, monkeypatch):
+    from delayed_rl.envs.linefollow import _chipmunk
+
+    base = EPuckLineFollowEnv()
+    base.reset(seed=0)
+    if missing == "physics":  # as where numba cannot call Chipmunk: the Python sub-steps
+        base.robot._driver = (_chipmunk.drive_python, base.robot._calls)
+    else:  # as where the kernels do not mirror numpy's rounding: the numpy camera
+        monkeypatch.setattr(base, "_compiled_arguments", lambda track: None)
+        base._compiled_track = None
+    with pytest.raises(NotCompilable, match="compiled physics or camera"):
+        FusedRun(RewardDelay(base, Poisson(2.0)), np.zeros(1, np.int64), 0)
+
+
 def test_automatic_choice_falls_back_to_python():
     """``fused=None`` runs a latency env on the Python path, ``fused=True`` says why it cannot."""
     env = RewardDelay(

@@ -220,7 +220,7 @@ def _check_platform(env: EPuckLineFollowEnv) -> None:
         NotCompilable: numba cannot call its Chipmunk functions, or its camera's kernels do not
             mirror this numpy's rounding.
     """
-    if env.robot._driver[0] is not _chipmunk.drive_entry() or env._reading_arguments() is None:
+    if env.robot._driver[0] is _chipmunk.drive_python or env._reading_arguments() is None:
         raise NotCompilable(
             "the e-puck's compiled physics or camera is not in use on this platform"
         )
