@@ -149,7 +149,7 @@ class RobotLink:
                     f"EPuckLineFollowEnv with {name}={getattr(env, name)!r} does not compile "
                     f"(it does with {allowed})"
                 )
-        _check_platform(env)
+        _compiled_reading(env)
         self.env = env
 
     def observation(self) -> int:
@@ -163,11 +163,9 @@ class RobotLink:
         The env is reachable by its key during the call; on leaving, its state is the run's.
         """
         env = self.env
-        _check_platform(env)  # (an env unpickled on another machine may not have them)
+        # (checked each call: an env unpickled on another machine may not have them)
+        camera, track_floats, track_ints, fused, complex_abs, draws, pixels = _compiled_reading(env)
         key = next(_KEYS)
-        camera, track_floats, track_ints, fused, complex_abs, draws, pixels = (
-            env._reading_arguments()
-        )
         live, counters = np.zeros(5), np.zeros(3, np.int64)
         _load(env, live, counters)
         robot = Robot(
@@ -213,17 +211,19 @@ class RobotLink:
             _store(env, live, counters)
 
 
-def _check_platform(env: EPuckLineFollowEnv) -> None:
-    """Refuse an env whose physics or camera does not run compiled here.
+def _compiled_reading(env: EPuckLineFollowEnv) -> tuple:
+    """The env's compiled camera arguments; refuses an env whose physics or camera is not compiled.
 
     Raises:
         NotCompilable: numba cannot call its Chipmunk functions, or its camera's kernels do not
             mirror this numpy's rounding.
     """
-    if env.robot._driver[0] is _chipmunk.drive_python or env._reading_arguments() is None:
+    reading = env._reading_arguments()
+    if env.robot._driver[0] is _chipmunk.drive_python or reading is None:
         raise NotCompilable(
             "the e-puck's compiled physics or camera is not in use on this platform"
         )
+    return reading
 
 
 def _load(env: EPuckLineFollowEnv, live: np.ndarray, counters: np.ndarray) -> None:
