@@ -108,7 +108,7 @@ def test_cached_maxima_stay_exact(q_init):
     assert np.all(qcell // 32 == np.arange(16))  # each cell lies in its own state's row
 
 
-@pytest.mark.parametrize("size", [1, 2, 3, 4, 5, 7, 8, 9, 204])
+@pytest.mark.parametrize("size", [1, 2, 3, 4, 5, 6, 7, 8, 9, 13, 204, 206])
 def test_a_rescan_finds_the_max_its_first_holder_ties_and_the_others_max(size):
     """The rescan of a state's row against numpy, on rows with many exact ties."""
     rng = np.random.default_rng(size)
@@ -119,6 +119,15 @@ def test_a_rescan_finds_the_max_its_first_holder_ties_and_the_others_max(size):
         others = np.delete(row, row.argmax())
         assert (best, first, ties) == (row.max(), 5 + row.argmax(), (row == row.max()).sum())
         assert second == (others.max() if size > 1 else -np.inf)
+
+
+@pytest.mark.parametrize("size", [1, 3, 5, 8])
+def test_a_rescan_counts_minus_infinity_as_a_value(size):
+    """Rows of -inf (an agent's q_init may be -inf): the max, its first holder, ties, others."""
+    row = np.full(size, -np.inf)
+    assert _rescan(row, 0, size) == (-np.inf, 0, size, -np.inf)
+    row[-1] = 1.0  # the max in the last lane: the others are all -inf
+    assert _rescan(row, 0, size) == (1.0, size - 1, 1, -np.inf)
 
 
 def test_a_rescan_of_a_row_with_a_nan_stays_in_the_row():

@@ -135,46 +135,78 @@ def _rescan(qf, base, size):
     """``(max, first index of it, entries equal to it, max of the others)`` of a state's row.
 
     "The others" are every entry but the first holding the max (so with ties, the max itself;
-    ``-inf`` for a row of one entry). Branch-free passes in four running maxima and counts (an
-    order-free result: a max and a count are exact in any order), cheaper than one branchy pass.
+    ``-inf`` for a row of one entry). One branch-free pass in four lanes (entry ``i`` in lane
+    ``i mod 4``, the last ``size mod 4`` in lane 0), each keeping its max, the index of its first holder, how many of its entries
+    equal it and the max of its other entries; the lanes then combine. A max and a count are
+    exact in any order, so this is the row's max, count and others' max whatever the lanes.
+    The row is read through a view with ``range`` indices, which spares the compiled loop
+    numba's negative-index handling (half the cost of a pass); a row with NaNs still gets an
+    index inside it.
     """
-    end = base + size
-    b0 = b1 = b2 = b3 = qf[base]
-    i = base
-    while i + 4 <= end:
-        b0 = max(b0, qf[i])
-        b1 = max(b1, qf[i + 1])
-        b2 = max(b2, qf[i + 2])
-        b3 = max(b3, qf[i + 3])
-        i += 4
-    while i < end:
-        b0 = max(b0, qf[i])
-        i += 1
+    row = qf[base : base + size]
+    whole = size - size % 4
+    b0 = b1 = b2 = b3 = -np.inf  # each lane's max
+    o0 = o1 = o2 = o3 = -np.inf  # the max of the lane's entries but its first holder
+    i0 = i1 = i2 = i3 = 0  # the lane's first holder
+    t0 = t1 = t2 = t3 = 0  # the lane's entries equal to its max
+    for i in range(0, whole, 4):
+        v0, v1, v2, v3 = row[i], row[i + 1], row[i + 2], row[i + 3]
+        o0 = max(o0, min(v0, b0))  # a new max makes the old one an "other"; else v is one
+        o1 = max(o1, min(v1, b1))
+        o2 = max(o2, min(v2, b2))
+        o3 = max(o3, min(v3, b3))
+        g0, g1, g2, g3 = v0 > b0, v1 > b1, v2 > b2, v3 > b3
+        t0 = 1 if g0 else t0 + (v0 == b0)
+        t1 = 1 if g1 else t1 + (v1 == b1)
+        t2 = 1 if g2 else t2 + (v2 == b2)
+        t3 = 1 if g3 else t3 + (v3 == b3)
+        i0 = i if g0 else i0
+        i1 = i + 1 if g1 else i1
+        i2 = i + 2 if g2 else i2
+        i3 = i + 3 if g3 else i3
+        b0 = v0 if g0 else b0
+        b1 = v1 if g1 else b1
+        b2 = v2 if g2 else b2
+        b3 = v3 if g3 else b3
+    for i in range(whole, size):
+        v0 = row[i]
+        o0 = max(o0, min(v0, b0))
+        g0 = v0 > b0
+        t0 = 1 if g0 else t0 + (v0 == b0)
+        i0 = i if g0 else i0
+        b0 = v0 if g0 else b0
     best = max(max(b0, b1), max(b2, b3))
-    first = base
-    while first < end - 1 and qf[first] != best:  # (bounded: a NaN equals nothing)
-        first += 1
-    t0 = t1 = t2 = t3 = 0
-    s0 = s1 = s2 = s3 = -np.inf
-    i = first + 1
-    while i + 4 <= end:
-        v0, v1, v2, v3 = qf[i], qf[i + 1], qf[i + 2], qf[i + 3]
-        t0 += v0 == best
-        t1 += v1 == best
-        t2 += v2 == best
-        t3 += v3 == best
-        s0 = max(s0, v0)
-        s1 = max(s1, v1)
-        s2 = max(s2, v2)
-        s3 = max(s3, v3)
-        i += 4
-    while i < end:
-        t0 += qf[i] == best
-        s0 = max(s0, qf[i])
-        i += 1
-    for i in range(base, first):  # the entries before the first holder, all below the max
-        s0 = max(s0, qf[i])
-    return best, first, 1 + (t0 + t1) + (t2 + t3), max(max(s0, s1), max(s2, s3))
+    first = size  # the first holder: the lowest first index of the lanes holding the max
+    lane = 0  # its lane (the tail's entries are lane 0's)
+    ties = 0
+    if b0 == best:
+        first, ties = i0, t0
+    if b1 == best:
+        ties += t1
+        if i1 < first:
+            first, lane = i1, 1
+    if b2 == best:
+        ties += t2
+        if i2 < first:
+            first, lane = i2, 2
+    if b3 == best:
+        ties += t3
+        if i3 < first:
+            first, lane = i3, 3
+    if first == size:  # no lane holds it (NaNs): the row's first entry
+        first, ties = 0, 1
+    if ties > 1:
+        return best, base + first, ties, best
+    # the holder's lane contributes its others, every other lane its max
+    if lane == 0:
+        others = max(max(o0, b1), max(b2, b3))
+    elif lane == 1:
+        others = max(max(b0, o1), max(b2, b3))
+    elif lane == 2:
+        others = max(max(b0, b1), max(o2, b3))
+    else:
+        others = max(max(b0, b1), max(b2, o3))
+    return best, base + first, 1, others
 
 
 @_jit
