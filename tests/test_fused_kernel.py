@@ -12,7 +12,13 @@ from support import ScriptedDelay
 import delayed_rl  # noqa: F401
 from delayed_rl.delays import Constant, Empirical, Geometric, Poisson, Uniform
 from delayed_rl.fast import FusedRun, NotCompilable, inspect_stack
-from delayed_rl.fast.kernel import TableAverage, _rescan, replay
+from delayed_rl.fast.kernel import (
+    TableAverage,
+    _rescan,
+    _rescan_lanes,
+    _rescan_scalar,
+    replay,
+)
 from delayed_rl.wrappers import RewardDelay
 
 
@@ -108,31 +114,35 @@ def test_cached_maxima_stay_exact(q_init):
     assert np.all(qcell // 32 == np.arange(16))  # each cell lies in its own state's row
 
 
-@pytest.mark.parametrize("size", [1, 2, 3, 4, 5, 6, 7, 8, 9, 13, 204, 206])
-def test_a_rescan_finds_the_max_its_first_holder_ties_and_the_others_max(size):
-    """The rescan of a state's row against numpy, on rows with many exact ties."""
+@pytest.mark.parametrize("rescan", [_rescan, _rescan_scalar, _rescan_lanes])
+@pytest.mark.parametrize("size", [1, 2, 3, 4, 5, 6, 7, 8, 9, 13, 15, 16, 17, 19, 204, 206])
+def test_a_rescan_finds_the_max_its_first_holder_ties_and_the_others_max(rescan, size):
+    """Each pass of the rescan against numpy, on rows with many exact ties."""
     rng = np.random.default_rng(size)
     for _ in range(200):
         row = rng.integers(-3, 3, size).astype(float) * rng.choice([1.0, 0.5])
         values = np.concatenate([rng.normal(size=5), row, rng.normal(size=3)])  # an inner row
-        best, first, ties, second = _rescan(values, 5, size)
+        best, first, ties, second = rescan(values, 5, size)
         others = np.delete(row, row.argmax())
         assert (best, first, ties) == (row.max(), 5 + row.argmax(), (row == row.max()).sum())
         assert second == (others.max() if size > 1 else -np.inf)
 
 
-@pytest.mark.parametrize("size", [1, 3, 5, 8])
-def test_a_rescan_counts_minus_infinity_as_a_value(size):
+@pytest.mark.parametrize("rescan", [_rescan_scalar, _rescan_lanes])
+@pytest.mark.parametrize("size", [1, 3, 5, 8, 16, 19])
+def test_a_rescan_counts_minus_infinity_as_a_value(rescan, size):
     """Rows of -inf (an agent's q_init may be -inf): the max, its first holder, ties, others."""
     row = np.full(size, -np.inf)
-    assert _rescan(row, 0, size) == (-np.inf, 0, size, -np.inf)
-    row[-1] = 1.0  # the max in the last lane: the others are all -inf
-    assert _rescan(row, 0, size) == (1.0, size - 1, 1, -np.inf)
+    assert rescan(row, 0, size) == (-np.inf, 0, size, -np.inf)
+    row[-1] = 1.0  # the max in the last entry: the others are all -inf
+    assert rescan(row, 0, size) == (1.0, size - 1, 1, -np.inf)
 
 
-def test_a_rescan_of_a_row_with_a_nan_stays_in_the_row():
-    values = np.array([7.0, np.nan, 1.0, 2.0, 3.0, 7.0])
-    assert _rescan(values, 1, 4)[1] in range(1, 5)
+@pytest.mark.parametrize("rescan", [_rescan_scalar, _rescan_lanes])
+def test_a_rescan_of_a_row_with_a_nan_stays_in_the_row(rescan):
+    values = np.array([7.0, np.nan, 1.0, 2.0, 3.0, np.nan, 2.0, 7.0])
+    assert rescan(values, 1, 6)[1] in range(1, 7)
+    assert rescan(np.full(9, np.nan), 2, 5)[1] in range(2, 7)
 
 
 def test_an_average_the_loop_cannot_keep_is_refused():

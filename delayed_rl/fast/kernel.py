@@ -130,18 +130,54 @@ def _pick_model(qf, base, n_models, n_actions, best, rng):
     return 0
 
 
+LANES_FROM = 16
+"""Rows at least this long are rescanned in four lanes (:func:`_rescan_lanes`); shorter rows in
+one scalar pass (:func:`_rescan_scalar`), which costs less than setting the lanes up."""
+
+
 @_jit
 def _rescan(qf, base, size):
     """``(max, first index of it, entries equal to it, max of the others)`` of a state's row.
 
     "The others" are every entry but the first holding the max (so with ties, the max itself;
-    ``-inf`` for a row of one entry). One branch-free pass in four lanes (entry ``i`` in lane
-    ``i mod 4``, the last ``size mod 4`` in lane 0), each keeping its max, the index of its first holder, how many of its entries
-    equal it and the max of its other entries; the lanes then combine. A max and a count are
-    exact in any order, so this is the row's max, count and others' max whatever the lanes.
-    The row is read through a view with ``range`` indices, which spares the compiled loop
-    numba's negative-index handling (half the cost of a pass); a row with NaNs still gets an
-    index inside it.
+    ``-inf`` for a row of one entry). A max and a count are exact in any order, so both passes
+    give the same four numbers; a row with NaNs still gets an index inside it.
+    """
+    if size < LANES_FROM:
+        return _rescan_scalar(qf, base, size)
+    return _rescan_lanes(qf, base, size)
+
+
+@_jit
+def _rescan_scalar(qf, base, size):
+    """:func:`_rescan` in one pass that branches on each entry (for short rows)."""
+    best = qf[base]
+    first = base
+    ties = 1
+    others = -np.inf
+    for k in range(1, size):
+        i = base + k
+        value = qf[i]
+        if value > best:  # the old max becomes one of the others
+            others = max(others, best)
+            best, first, ties = value, i, 1
+        elif value == best:
+            ties += 1
+            others = value
+        else:
+            others = max(others, value)
+    return best, first, ties, others
+
+
+@_jit
+def _rescan_lanes(qf, base, size):
+    """:func:`_rescan` in one branch-free pass in four lanes (for long rows).
+
+    Entry ``i`` goes to lane ``i mod 4`` (the last ``size mod 4`` to lane 0); each lane keeps
+    its max, the index of its first holder, how many of its entries equal it and the max of its
+    other entries, and the lanes then combine. The row is read through a view with ``range``
+    indices, which spares the compiled loop numba's negative-index handling (half the cost of a
+    pass).
     """
     row = qf[base : base + size]
     whole = size - size % 4
