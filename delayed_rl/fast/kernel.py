@@ -141,7 +141,8 @@ def _rescan(qf, base, size):
 
     "The others" are every entry but the first holding the max (so with ties, the max itself;
     ``-inf`` for a row of one entry). A max and a count are exact in any order, so both passes
-    give the same four numbers; a row with NaNs still gets an index inside it.
+    give the same four numbers (up to the sign of a zero max); a row with NaNs still gets an
+    index inside it.
     """
     if size < LANES_FROM:
         return _rescan_scalar(qf, base, size)
