@@ -5,7 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from delayed_rl.agents._regression import _cholesky_factor, _cholesky_solve, _prefix_dot
+from delayed_rl.agents._regression import (
+    _cholesky_factor,
+    _cholesky_solve,
+    _dot,
+    _matrix_vector,
+    _prefix_dot,
+)
 
 
 def one_row_cholesky_factor(a: np.ndarray) -> np.ndarray:
@@ -35,3 +41,16 @@ def test_refuses_a_matrix_that_is_not_positive_definite():
     a = np.array([[1.0, 2.0], [2.0, 1.0]])
     with pytest.raises(ValueError, match="not positive definite"):
         _cholesky_solve(a, np.ones(2))
+
+
+@pytest.mark.parametrize("n", [0, 1, 3, 4, 5, 8, 51])
+def test_the_written_out_products_match_numpy(n):
+    """``_dot`` and ``_matrix_vector`` (numba's ``@`` needs SciPy) against numpy's products."""
+    rng = np.random.default_rng(n)
+    a, b = rng.normal(size=n), rng.normal(size=n)
+    g = rng.normal(size=(7, n))
+    scale = np.abs(a) @ np.abs(b) + 1.0  # the rounding error of a sum is relative to this
+    assert abs(_dot(a, b) - a @ b) <= 1e-13 * scale
+    np.testing.assert_allclose(_matrix_vector(g, b), g @ b, rtol=0, atol=1e-13 * (n + 1) * 10)
+    ints = rng.integers(-9, 9, size=n).astype(float)  # exact in any order
+    assert _dot(ints, ints) == float(ints @ ints)

@@ -131,6 +131,35 @@ def _window_corrections(vals, diag, b, stats, windows, lengths, finals, flushed,
 
 
 @_jit
+def _dot(a, b):
+    """``Σ_i a[i] · b[i]`` in four running sums (a fixed order).
+
+    Written out because numba compiles ``@`` and ``np.dot`` to BLAS calls that need SciPy,
+    which is not a dependency; the sum also does not depend on which BLAS is installed.
+    """
+    s0 = s1 = s2 = s3 = 0.0
+    n = a.shape[0]
+    whole = n - n % 4
+    for i in range(0, whole, 4):
+        s0 += a[i] * b[i]
+        s1 += a[i + 1] * b[i + 1]
+        s2 += a[i + 2] * b[i + 2]
+        s3 += a[i + 3] * b[i + 3]
+    for i in range(whole, n):
+        s0 += a[i] * b[i]
+    return (s0 + s1) + (s2 + s3)
+
+
+@_jit
+def _matrix_vector(g, v):
+    """``g @ v`` for a 2-d ``g``, each entry a :func:`_dot`."""
+    out = np.empty(g.shape[0])
+    for k in range(g.shape[0]):
+        out[k] = _dot(g[k], v)
+    return out
+
+
+@_jit
 def _coupled_product(later, earlier, vals, diag, v, out):
     """``out = A v`` for ``A = Σ_n vals[n] (e_later e_earlierᵀ + e_earlier e_laterᵀ) + diag(diag)``."""
     for i in range(v.shape[0]):
@@ -158,17 +187,17 @@ def _conjugate_gradient(later, earlier, vals, diag, b, start, tolerance, max_ite
     residual = b - product
     z = residual / precondition
     direction = z.copy()
-    rz = residual @ z
-    goal = tolerance * np.sqrt(b @ b)
+    rz = _dot(residual, z)
+    goal = tolerance * np.sqrt(_dot(b, b))
     for _ in range(max_iterations):
-        if np.sqrt(residual @ residual) <= goal:
+        if np.sqrt(_dot(residual, residual)) <= goal:
             break
         _coupled_product(later, earlier, vals, diag, direction, product)
-        step = rz / (direction @ product)
+        step = rz / _dot(direction, product)
         x += step * direction
         residual -= step * product
         z = residual / precondition
-        rz_next = residual @ z
+        rz_next = _dot(residual, z)
         direction = z + (rz_next / rz) * direction
         rz = rz_next
     return x
@@ -430,7 +459,7 @@ def _projected_gradient(g, z, start, scale, iterations):
     """Minimise ``½ pᵀGp − zᵀp`` over the simplex from ``start``, with steps ``1 / scale``."""
     p = start.copy()
     for _ in range(iterations):
-        p = project_to_simplex(p - (g @ p - z) / scale)
+        p = project_to_simplex(p - (_matrix_vector(g, p) - z) / scale)
     return p
 
 
