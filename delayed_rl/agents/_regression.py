@@ -256,19 +256,8 @@ def _dense_matrix(stats, vals, diag):
 
 @_jit
 def _prefix_dot(a, i, j, n):
-    """``Σ_{k < n} a[i, k] · a[j, k]`` in four running sums (a fixed order, four times the ILP)."""
-    s0 = s1 = s2 = s3 = 0.0
-    k = 0
-    while k + 4 <= n:
-        s0 += a[i, k] * a[j, k]
-        s1 += a[i, k + 1] * a[j, k + 1]
-        s2 += a[i, k + 2] * a[j, k + 2]
-        s3 += a[i, k + 3] * a[j, k + 3]
-        k += 4
-    while k < n:
-        s0 += a[i, k] * a[j, k]
-        k += 1
-    return (s0 + s1) + (s2 + s3)
+    """``Σ_{k < n} a[i, k] · a[j, k]``: :func:`_dot` of the two rows' first ``n`` entries."""
+    return _dot(a[i, :n], a[j, :n])
 
 
 @_jit
