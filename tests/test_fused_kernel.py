@@ -323,3 +323,55 @@ def test_time_limits_compile_and_deliver_what_the_python_stack_does(mode, inner,
     assert any("cut episodes short" in str(w.message) for w in caught) == discarding
     if mode == "flush" and not cut:  # every episode delivered all of its rewards
         assert log.reward.sum() == log.undelayed_reward.sum() != 0
+
+
+def _credit_table(steps, **options):
+    """The Q-table after ``steps`` compiled MMQ steps, Λ = {0, 1, 2}, on GridWorld-3x3, seed 0."""
+    run = FusedRun(
+        RewardDelay(gym.make("delayed_rl/GridWorld-3x3-v0"), Constant(1)), np.arange(3), 0
+    )
+    q = np.full((9, 3, 4), 1.0)
+    run.run(
+        q, *_cache(q), steps, start_step=0, learning_rate=0.1, gamma=0.9, eps_initial=0.2,
+        eps_final=0.2, eps_steps=1, **options,
+    )  # fmt: skip
+    return q
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"credit_kernel": np.ones(2)}, "credit_kernel must hold a float64 weight per distance"),
+        ({"credit_kernel": np.ones(3, np.float32)}, "credit_kernel must hold a float64"),
+        ({"trace_decay": 0.5}, r"trace must be a float64 array of shape \(3,\)"),
+        ({"trace_decay": 0.5, "trace": np.zeros(2)}, r"trace must be a float64 array"),
+        ({"lag_rates": np.ones(2)}, r"lag_rates must be a float64 array of shape \(3,\)"),
+        ({"lag_rates": np.ones(3, np.int64)}, r"lag_rates must be a float64 array"),
+    ],
+)
+def test_bad_credit_options_are_refused_by_name(options, message):
+    with pytest.raises(ValueError, match=message):
+        _credit_table(10, **options)
+
+
+@pytest.mark.parametrize(
+    ("options", "same_as"),
+    [
+        ({"credit_kernel": np.ones(3)}, {}),  # weight 1 at every distance: the thesis's rule
+        ({"lag_rates": np.full(3, 0.1)}, {}),  # α for every lag
+        (
+            {"credit_kernel": np.ones(3), "trace_decay": 0.5, "trace": np.zeros(3)},
+            {"trace_decay": 0.5, "trace": np.zeros(3)},
+        ),
+        (
+            {"lag_rates": np.full(3, 0.1), "trace_decay": 0.5, "trace": np.zeros(3)},
+            {"trace_decay": 0.5, "trace": np.zeros(3)},
+        ),
+    ],
+)
+def test_an_option_that_changes_nothing_gives_the_loop_without_it(options, same_as):
+    """Each combination of options is its own compiled loop: the loops agree to the bit."""
+    with_option = _credit_table(3000, **options)
+    without = _credit_table(3000, **same_as)
+    np.testing.assert_array_equal(with_option, without)
+    assert not np.array_equal(without, _credit_table(3000, credit_kernel=np.array([1, 0.5, 0.2])))

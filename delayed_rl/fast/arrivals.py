@@ -25,7 +25,7 @@ import numpy as np
 from delayed_rl._delay_line import ring_size
 from delayed_rl.fast._numba import jit as _jit
 
-__all__ = ["NO_ARRIVALS", "Arrivals", "regrow"]
+__all__ = ["Arrivals", "regrow"]
 
 
 class Arrivals(NamedTuple):
@@ -69,12 +69,6 @@ class Arrivals(NamedTuple):
             *lists, *slots, np.zeros(pool), *transition, np.zeros(pool, np.bool_),
             np.zeros(pool, np.int64), int(held),
         )  # fmt: skip
-
-
-NO_ARRIVALS = Arrivals(*(np.full(0, -1, np.int64) for _ in range(4)), np.zeros(0),
-                       *(np.zeros(0, np.int64) for _ in range(3)), np.zeros(0, np.bool_),
-                       np.zeros(0, np.int64), 0)  # fmt: skip
-"""No record: the rule learns from the delivered rewards (every agent but the oracle)."""
 
 
 def regrow(arrivals: Arrivals, clock: int, ring: int) -> Arrivals:

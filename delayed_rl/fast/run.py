@@ -55,7 +55,7 @@ class FusedRun:
             compiled code keeps them to read the acting model off the cached arg-max unless the
             max is tied).
         arrivals: the oracle's record of who emitted each pending reward
-            (:class:`~delayed_rl.fast.arrivals.Arrivals`), or ``NO_ARRIVALS``.
+            (:class:`~delayed_rl.fast.arrivals.Arrivals`), or ``None``.
         robot: the link to the e-puck env the run steps (:class:`~delayed_rl.fast.robot.RobotLink`),
             or ``None`` for a tabular env.
 
@@ -85,9 +85,7 @@ class FusedRun:
         self.state = self.history.clocks
         self.ring = np.zeros(1)
         self.arrivals = (
-            arrivals.NO_ARRIVALS
-            if held_transitions is None
-            else arrivals.Arrivals.empty(1, held_transitions)
+            None if held_transitions is None else arrivals.Arrivals.empty(1, held_transitions)
         )
         self.tie_counts = np.zeros(0, dtype=np.int64)
         kernel_seeds, delay_seeds = np.random.SeedSequence(seed).spawn(2)
@@ -148,7 +146,7 @@ class FusedRun:
         size = ring_size(longest + 1)
         if size > self.ring.shape[0]:
             self.ring = regrow_ring(self.ring, int(self.state[3]), size)
-            if self.arrivals.held:
+            if self.arrivals is not None:
                 self.arrivals = arrivals.regrow(self.arrivals, int(self.state[3]), size)
 
     def run(
@@ -212,23 +210,20 @@ class FusedRun:
         if self.tie_counts.shape != v_max.shape:
             self.tie_counts = np.zeros(v_max.shape, dtype=np.int64)
         estimates = self.delay_estimates
-        if credit_kernel is None:
-            credit_kernel = kernel.NO_KERNEL
-        elif credit_kernel.dtype != np.float64 or credit_kernel.shape[0] <= int(
-            estimates[-1] - estimates[0]
+        span = int(estimates[-1] - estimates[0])
+        if credit_kernel is not None and (
+            credit_kernel.dtype != np.float64 or credit_kernel.shape[0] <= span
         ):
             raise ValueError("credit_kernel must hold a float64 weight per distance in Λ's span")
         if trace_decay is None:
-            trace_decay, trace = kernel.TRACE_OFF, kernel.NO_TRACE
+            trace = None
         elif trace is None or trace.dtype != np.float64 or trace.shape != estimates.shape:
             raise ValueError(f"trace must be a float64 array of shape {estimates.shape}")
-        if lag_rates is None:
-            lag_rates = kernel.NO_RATES
-        elif lag_rates.dtype != np.float64 or lag_rates.shape != estimates.shape:
+        if lag_rates is not None and (
+            lag_rates.dtype != np.float64 or lag_rates.shape != estimates.shape
+        ):
             raise ValueError(f"lag_rates must be a float64 array of shape {estimates.shape}")
-        if average is None:
-            average = kernel.NO_AVERAGE
-        else:
+        if average is not None:
             _check_average(average, q.shape)
         cache = kernel.QCache(q, v_max, v_cell, self.tie_counts, trace)
         rule = kernel.Rule(
@@ -239,7 +234,7 @@ class FusedRun:
             eps_final=float(eps_final),
             eps_steps=int(eps_steps),
             credit_kernel=credit_kernel,
-            trace_decay=float(trace_decay),
+            trace_decay=None if trace_decay is None else float(trace_decay),
             lag_rates=lag_rates,
         )
         line = kernel.DelayLine(delays, self.ring, self.mode, np.zeros(1))
@@ -253,10 +248,9 @@ class FusedRun:
                 line,
                 self.history,
                 log,
-                kernel.NO_SCRIPT,
+                None,
                 int(start_step),
-                self.rng_state, reward_model or kernel.NO_REWARD_MODEL, self.arrivals, average,
-                robot,
+                self.rng_state, reward_model, self.arrivals, average, robot,
             )  # fmt: skip
         if line.discarded[0] != 0.0:
             warnings.warn(

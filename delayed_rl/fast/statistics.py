@@ -26,7 +26,7 @@ import numpy as np
 
 from delayed_rl.fast._numba import jit as _jit
 
-__all__ = ["EMPTY_STATISTICS", "Statistics", "find_row", "observe"]
+__all__ = ["Statistics", "find_row", "observe"]
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)  # Fibonacci hashing: 2**64 / the golden ratio
 _SHIFT = np.uint64(32)  # the hash's upper half indexes the table (up to 2**32 rows)
@@ -129,17 +129,3 @@ def observe(stats, pair, reward, episode_end):
         counters[2] = e + 1
         length = 0
     counters[0] = length
-
-
-EMPTY_STATISTICS = Statistics(
-    np.zeros((1, 1), dtype=np.int32),
-    np.zeros(0, dtype=np.int64),
-    np.zeros((1, 1)),
-    np.zeros(1, dtype=np.int64),
-    np.array([0, 0, 0, 0, 0, 1, 0], dtype=np.int64),
-    np.zeros((1, 1), dtype=np.int64),
-    np.zeros(1, dtype=np.int64),
-    np.zeros(1),
-    np.zeros(1, dtype=np.bool_),
-)
-"""Statistics of nothing, for compiled runs without a reward model (their types, no content)."""
