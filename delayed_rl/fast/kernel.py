@@ -492,7 +492,6 @@ class TableAverage(NamedTuple):
     rate: float
 
 
-@_jit
 def run_chunk(
     cache, rule, env, line, history, log, script, start_step, rng, model, arrivals, average, robot
 ):
@@ -571,7 +570,9 @@ def _loop(
     """:func:`run_chunk`'s loop, with the rule's optional parts as arguments of their own.
 
     numba leaves out the code of an absent part (``None``) only when it is an argument: its
-    dead-branch pruning does not see into tuples such as :class:`Rule`.
+    dead-branch pruning does not see into tuples such as :class:`Rule`. :func:`run_chunk` is
+    plain Python, called once a chunk: a compiled one would link a copy of each version of the
+    loop into its own, doubling what numba compiles and caches.
     """
     estimates = rule.delay_estimates
     alpha, gamma = rule.learning_rate, rule.gamma
