@@ -507,11 +507,11 @@ def run_chunk(
     each entry moves by ``rate · error``, lag after lag. With a Q-table of one model for several
     lags (expected credit, :attr:`Rule.lag_rates`) the lags' increments to one entry add up.
 
-    The oracle (``arrivals`` given): instead, the
-    loop records who emitted each reward (:mod:`delayed_rl.fast.arrivals`) and, for every
-    transition whose reward arrives at the step (oldest first; all pending ones at a flushing
-    episode end), makes the Q-learning update of that transition with its own reward, one after
-    the other, if it is among the ``arrivals.held`` most recent.
+    The oracle (``arrivals`` given): instead, the loop records who emitted each reward
+    (:mod:`delayed_rl.fast.arrivals`) and, for every transition whose reward arrives at the step
+    (oldest first; all pending ones at a flushing episode end), makes the Q-learning update of
+    that transition with its own reward, one after the other, if it is among the
+    ``arrivals.held`` most recent.
 
     The cache (:class:`QCache`) is kept exact: a state's row is rescanned only when the cached
     arg-max entry decreases to or below an upper bound of the row's other entries (kept for the
