@@ -28,11 +28,11 @@ def _cache(q):
     return flat.max(axis=1), np.arange(q.shape[0]) * flat.shape[1] + flat.argmax(axis=1)
 
 
-def _run(run, q, cache, steps, start, alpha, gamma, eps_initial, eps_final, eps_steps):
-    """``run.run`` with the rule's constants in the kernel's order."""
+def _run(run, q, cache, steps, start, alpha, gamma, eps_initial, eps_final, eps_steps, **options):
+    """``run.run`` with the rule's constants in the kernel's order (``options``: its keywords)."""
     rule = {"learning_rate": alpha, "gamma": gamma, "eps_steps": eps_steps}
     rule.update(eps_initial=eps_initial, eps_final=eps_final)
-    return run.run(q, *cache, steps, start_step=start, **rule)
+    return run.run(q, *cache, steps, start_step=start, **rule, **options)
 
 
 def test_roulette_walk_through_tables_3_2_to_3_5():
@@ -164,10 +164,7 @@ def test_an_average_the_loop_cannot_keep_is_refused():
 
 
 def _run_averaged(run, q, average):
-    return run.run(
-        q, *_cache(q), 10, start_step=0, learning_rate=0.1, gamma=0.9, eps_initial=0.1,
-        eps_final=0.1, eps_steps=1, average=average,
-    )  # fmt: skip
+    return _run(run, q, _cache(q), 10, 0, 0.1, 0.9, 0.1, 0.1, 1, average=average)
 
 
 @pytest.mark.parametrize(
@@ -331,10 +328,7 @@ def _credit_table(steps, **options):
         RewardDelay(gym.make("delayed_rl/GridWorld-3x3-v0"), Constant(1)), np.arange(3), 0
     )
     q = np.full((9, 3, 4), 1.0)
-    run.run(
-        q, *_cache(q), steps, start_step=0, learning_rate=0.1, gamma=0.9, eps_initial=0.2,
-        eps_final=0.2, eps_steps=1, **options,
-    )  # fmt: skip
+    _run(run, q, _cache(q), steps, 0, 0.1, 0.9, 0.2, 0.2, 1, **options)
     return q
 
 
