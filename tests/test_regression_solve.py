@@ -10,17 +10,17 @@ from delayed_rl.agents._regression import (
     _cholesky_solve,
     _dot,
     _matrix_vector,
-    _prefix_dot,
 )
 
 
 def one_row_cholesky_factor(a: np.ndarray) -> np.ndarray:
-    """The factorization as written before the four-row products: one inner product per entry."""
+    """The right-looking factorization one row at a time, in numpy: ``a``'s upper triangle is ``U``."""
     n = a.shape[0]
     for j in range(n):
-        for i in range(j, n):
-            total = a[i, j] - _prefix_dot(a, i, j, j)
-            a[i, j] = np.sqrt(total) if i == j else total / a[j, j]
+        a[j, j] = np.sqrt(a[j, j])
+        a[j, j + 1 :] /= a[j, j]
+        for i in range(j + 1, n):
+            a[i, i:] -= a[j, i] * a[j, i:]
     return a
 
 
@@ -29,10 +29,11 @@ def test_four_rows_at_once_change_no_bit(n):
     rng = np.random.default_rng(n)
     m = rng.normal(size=(n, n + 3))
     a = m @ m.T + 0.1 * np.eye(n)
-    expected = np.tril(one_row_cholesky_factor(a.copy()))
+    expected = np.triu(one_row_cholesky_factor(a.copy()))
     got = a.copy()
     _cholesky_factor(got)
-    assert np.tril(got).tobytes() == expected.tobytes()
+    assert np.triu(got).tobytes() == expected.tobytes()
+    np.testing.assert_allclose(expected.T @ expected, a, rtol=1e-12, atol=1e-12)
     b = rng.normal(size=n)
     np.testing.assert_allclose(a @ _cholesky_solve(a.copy(), b), b, rtol=1e-8, atol=1e-8)
 

@@ -27,7 +27,7 @@ ridge that pulls pairs of little evidence towards a prior value.
 4-byte integers in the direct layout, used while that is at most :data:`DIRECT_LIMIT`; above it
 (envs with many pairs, e.g. Taxi's 3000) a hashed layout keeps a row only for the couples that
 occurred, so memory follows what the agent has seen, up to :data:`STATISTICS_LIMIT`. ``R`` is
-solved by dense LU up to :data:`DENSE_SOLVE_PAIRS` pairs, and above by conjugate gradients on
+solved by a dense Cholesky factorization up to :data:`DENSE_SOLVE_PAIRS` pairs, and above by conjugate gradients on
 the sparse couplings, warm-started from the last estimate.
 """
 
@@ -58,7 +58,7 @@ names ``max_delay``.
 DIRECT_LIMIT = 64 * 2**20
 """The direct layout (``(K + 1)·P²`` counts, no lookups) is used up to this many bytes: 64 MiB."""
 DENSE_SOLVE_PAIRS = 512
-"""Up to this many (state, action) pairs ``R̂`` is solved by dense LU; above, by sparse CG."""
+"""Up to this many (state, action) pairs ``R̂`` is solved by dense Cholesky; above, by sparse CG."""
 _CG_TOLERANCE = 1e-10  # relative residual at which conjugate gradients stop
 _CG_MAX_ITERATIONS = 2_000
 _FIRST_ROWS = 1024  # the hashed table's first size
@@ -255,81 +255,55 @@ def _dense_matrix(stats, vals, diag):
 
 
 @_jit
-def _prefix_dot(a, i, j, n):
-    """``Σ_{k < n} a[i, k] · a[j, k]``: :func:`_dot` of the two rows' first ``n`` entries."""
-    return _dot(a[i, :n], a[j, :n])
+def _factor_rows(u, first, count, n):
+    """Finish rows ``first .. first + count - 1`` of :func:`_cholesky_factor`'s ``U``.
 
+    Each row has had every row above ``first`` subtracted; the rows of the block above it are
+    subtracted now, in order, then the row is divided by its diagonal's square root.
 
-@_jit
-def _prefix_dots4(a, i, j, n):
-    """:func:`_prefix_dot` of rows ``i .. i + 3`` with row ``j``, each summed in the same order.
-
-    Four rows at once read row ``j`` once for all four and keep sixteen independent sums going:
-    the same bits as four calls, about twice as fast.
+    Raises:
+        ValueError: a diagonal is not positive (``a`` is not positive definite).
     """
-    p0 = p1 = p2 = p3 = 0.0
-    q0 = q1 = q2 = q3 = 0.0
-    r0 = r1 = r2 = r3 = 0.0
-    t0 = t1 = t2 = t3 = 0.0
-    k = 0
-    while k + 4 <= n:
-        x0, x1, x2, x3 = a[j, k], a[j, k + 1], a[j, k + 2], a[j, k + 3]
-        p0 += a[i, k] * x0
-        p1 += a[i, k + 1] * x1
-        p2 += a[i, k + 2] * x2
-        p3 += a[i, k + 3] * x3
-        q0 += a[i + 1, k] * x0
-        q1 += a[i + 1, k + 1] * x1
-        q2 += a[i + 1, k + 2] * x2
-        q3 += a[i + 1, k + 3] * x3
-        r0 += a[i + 2, k] * x0
-        r1 += a[i + 2, k + 1] * x1
-        r2 += a[i + 2, k + 2] * x2
-        r3 += a[i + 2, k + 3] * x3
-        t0 += a[i + 3, k] * x0
-        t1 += a[i + 3, k + 1] * x1
-        t2 += a[i + 3, k + 2] * x2
-        t3 += a[i + 3, k + 3] * x3
-        k += 4
-    while k < n:
-        x = a[j, k]
-        p0 += a[i, k] * x
-        q0 += a[i + 1, k] * x
-        r0 += a[i + 2, k] * x
-        t0 += a[i + 3, k] * x
-        k += 1
-    return (
-        (p0 + p1) + (p2 + p3),
-        (q0 + q1) + (q2 + q3),
-        (r0 + r1) + (r2 + r3),
-        (t0 + t1) + (t2 + t3),
-    )
+    for r in range(first, first + count):
+        row = u[r]
+        for q in range(first, r):
+            factor = u[q, r]
+            above = u[q]
+            for k in range(np.uint64(r), np.uint64(n)):  # unsigned: no negative-index wrap,
+                row[k] -= factor * above[k]  # so the row's update compiles to vector code
+        pivot = row[r]
+        if not pivot > 0.0:
+            raise ValueError("the normal equations are not positive definite")
+        pivot = np.sqrt(pivot)
+        row[r] = pivot
+        for k in range(np.uint64(r + 1), np.uint64(n)):
+            row[k] /= pivot
 
 
 @_jit
 def _cholesky_factor(a):
-    """Overwrite the lower triangle of a symmetric positive definite ``a`` with its Cholesky ``L``.
+    """Overwrite the upper triangle of a symmetric positive definite ``a`` with ``U``, ``a = UᵀU``.
 
-    Column ``j`` of ``L`` is its diagonal entry, then its rows below four at a time
-    (:func:`_prefix_dots4`); every entry is summed in the order of :func:`_prefix_dot`.
+    Right-looking, by rows: row ``j`` of ``U`` is row ``j`` of what is left of ``a``, divided by
+    the square root of its diagonal, and is then subtracted (times ``U[j, i]``) from every row
+    ``i`` below it. Rows are finished four at a time, and each entry below them takes the four
+    subtractions in a row (one pass over the rows below instead of four); every entry still
+    takes its subtractions one by one, in the order of ``j``, so the result has the bits of the
+    one-row order whatever the blocking, and no entry's sum is reordered to vectorize (each
+    row update is an element-wise ``row -= factor · above``, compiled to vector code).
     """
     n = a.shape[0]
-    for j in range(n):  # a's lower triangle becomes L, column by column (row-wise products)
-        total = a[j, j] - _prefix_dot(a, j, j, j)
-        if total <= 0.0:
-            raise ValueError("the normal equations are not positive definite")
-        a[j, j] = np.sqrt(total)
-        i = j + 1
-        while i + 4 <= n:
-            d0, d1, d2, d3 = _prefix_dots4(a, i, j, j)
-            a[i, j] = (a[i, j] - d0) / a[j, j]
-            a[i + 1, j] = (a[i + 1, j] - d1) / a[j, j]
-            a[i + 2, j] = (a[i + 2, j] - d2) / a[j, j]
-            a[i + 3, j] = (a[i + 3, j] - d3) / a[j, j]
-            i += 4
-        while i < n:
-            a[i, j] = (a[i, j] - _prefix_dot(a, i, j, j)) / a[j, j]
-            i += 1
+    j = 0
+    while j + 4 <= n:
+        _factor_rows(a, j, 4, n)
+        u0, u1, u2, u3 = a[j], a[j + 1], a[j + 2], a[j + 3]
+        for i in range(j + 4, n):
+            f0, f1, f2, f3 = u0[i], u1[i], u2[i], u3[i]
+            row = a[i]
+            for k in range(np.uint64(i), np.uint64(n)):
+                row[k] = (((row[k] - f0 * u0[k]) - f1 * u1[k]) - f2 * u2[k]) - f3 * u3[k]
+        j += 4
+    _factor_rows(a, j, n - j, n)
 
 
 @_jit
@@ -337,20 +311,22 @@ def _cholesky_solve(a, b):
     """``x`` with ``a x = b`` for a symmetric positive definite ``a`` (overwritten), by Cholesky.
 
     Written out rather than LAPACK's: single-threaded, so a solve never waits on BLAS threads
-    that compete with other work for the cores, and its result does not depend on their number.
+    that compete with other work for the cores, and its result does not depend on their number
+    or on which BLAS is installed.
     """
     _cholesky_factor(a)
     n = a.shape[0]
     x = b.copy()
-    for i in range(n):  # L y = b
-        total = x[i]
-        for k in range(i):
-            total -= a[i, k] * x[k]
-        x[i] = total / a[i, i]
-    for i in range(n - 1, -1, -1):  # Lᵀ x = y
+    for i in range(n):  # Uᵀ y = b: y_i, then its share taken from the entries after it
+        x[i] /= a[i, i]
+        share = x[i]
+        row = a[i]
+        for k in range(np.uint64(i + 1), np.uint64(n)):
+            x[k] -= share * row[k]
+    for i in range(n - 1, -1, -1):  # U x = y
         total = x[i]
         for k in range(i + 1, n):
-            total -= a[k, i] * x[k]
+            total -= a[i, k] * x[k]
         x[i] = total / a[i, i]
     return x
 
