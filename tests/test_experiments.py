@@ -123,7 +123,9 @@ def test_bad_experiment_arguments():
     from delayed_rl.experiments.linefollow import make_agent
     from delayed_rl.experiments.mmq_gridworld import behaviour_policy
 
-    with pytest.raises(ValueError, match=r"kind must be one of \('MMQ', 'Q'\), got 'SARSA'"):
+    with pytest.raises(
+        ValueError, match=r"kind must be one of \('MMQ', 'Q', 'DeconvQ learned'\), got 'SARSA'"
+    ):
         make_agent("SARSA", None, 0)
     with pytest.raises(ValueError, match=r"epsilon must be a number in \[0, 1\], got 1.5"):
         behaviour_policy(np.zeros((2, 1, 4)), epsilon=1.5)

@@ -11,7 +11,7 @@ from delayed_rl.experiments import Config, get_experiment, run_experiment, run_e
 from delayed_rl.experiments import anonymous_delay as ad
 from delayed_rl.experiments import future_work as fw
 from delayed_rl.experiments.runner import Experiment, SharedRun, Summary
-from delayed_rl.experiments.schedule import run_key
+from delayed_rl.experiments.schedule import pool_key, run_key
 
 CALLS: list[dict] = []
 
@@ -93,6 +93,70 @@ def test_run_key_is_the_function_and_the_task_in_canonical_form():
     )
     assert run_key(SharedRun(square, {"a": 1})) != run_key(SharedRun(negated, {"a": 1}))
     assert run_key(SharedRun(square, {"a": 1})) != run_key(SharedRun(square, {"a": 2}))
+
+
+def powers(task: dict) -> dict:
+    """A pooled run: ``x`` to each power in ``task["powers"]``, one result per item."""
+    CALLS.append(task)
+    return {"powers": [task["x"] ** power for power in task["powers"]], "x": task["x"]}
+
+
+def _pooling(task: dict) -> SharedRun:
+    return SharedRun(powers, {"x": task["x"], "powers": task["powers"]}, None, "powers")
+
+
+def _powers_experiment(name: str, tasks: list[dict]) -> Experiment:
+    return Experiment(
+        name=name,
+        thesis="-",
+        description="-",
+        tasks=lambda config: tasks,
+        run_task=powers,
+        summarize=lambda tasks, results, config: Summary([], [], extra={"results": results}),
+        default_seeds=1,
+        shared_run=_pooling,
+    )
+
+
+def test_pooled_runs_run_once_on_the_union_and_each_task_gets_its_own_part():
+    CALLS.clear()
+    first = _powers_experiment("first", [{"x": 2, "powers": [3, 1]}, {"x": 3, "powers": [2]}])
+    second = _powers_experiment("second", [{"x": 2, "powers": [2, 3]}])
+    one, two = run_experiments([first, second], Config(workers=1), progress=False)
+    assert sorted((task["x"], task["powers"]) for task in CALLS) == [(2, [1, 2, 3]), (3, [2])]
+    assert one.extra["results"] == [{"powers": [8, 2], "x": 2}, {"powers": [9], "x": 3}]
+    assert two.extra["results"] == [{"powers": [4, 8], "x": 2}]  # in each task's own order
+    assert (one.extra["runs"], one.extra["shared_runs"]) == (2, 1)
+    CALLS.clear()
+    alone = run_experiment(second, Config(workers=1), progress=False)
+    assert CALLS == [{"x": 2, "powers": [2, 3]}] and alone.extra["results"] == two.extra["results"]
+
+
+def test_pool_key_ignores_only_the_pooled_items():
+    def key(task: dict, pooled: str | None = "powers") -> str:
+        return pool_key(SharedRun(powers, task, None, pooled))
+
+    assert key({"x": 1, "powers": [1]}) == key({"x": 1, "powers": [2, 3]})
+    assert key({"x": 1, "powers": [1]}) != key({"x": 2, "powers": [1]})
+    assert key({"x": 1, "powers": [1]}, None) == run_key(SharedRun(powers, {"x": 1, "powers": [1]}))
+    with pytest.raises(ValueError, match="has no entry 'powers' to pool"):
+        key({"x": 1})
+    with pytest.raises(TypeError, match="pooled entry 'powers' must be a list, got 3"):
+        key({"x": 1, "powers": 3})
+    with pytest.raises(TypeError, match="pooled must be None or a task entry's name, got 1"):
+        key({"x": 1, "powers": [1]}, 1)
+
+
+def broken_powers(task: dict) -> dict:
+    """A pooled run that returns one result too few."""
+    return {"powers": [task["x"]] * (len(task["powers"]) - 1)}
+
+
+def test_a_pooled_run_must_return_one_result_per_item():
+    experiment = _powers_experiment("broken", [{"x": 2, "powers": [1, 2]}])
+    experiment.shared_run = lambda task: SharedRun(broken_powers, task, None, "powers")
+    with pytest.raises(ValueError, match=r"one result per item \(2\), got list of 1"):
+        run_experiment(experiment, Config(workers=1), progress=False)
 
 
 class _Runner:

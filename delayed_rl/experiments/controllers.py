@@ -14,7 +14,9 @@ same pose for a given seed:
 - **Q** and **MMQ** (λ̂max = 150, as in Figs. 5.20–5.23): first "thoroughly trained" under the
   Poisson(90) reward delay for ``steps`` steps (default 300k, twice the 150k of Figs. 5.20–5.23;
   the learning curves are flat by then), then their Q-tables start the 1700-step run on a fresh
-  env, where they keep learning with ε = 0.1 as the thesis's did.
+  env, where they keep learning with ε = 0.1 as the thesis's did. The training is
+  :func:`.linefollow.training_run`'s: its first 150k steps are ``linefollow``'s run of the same
+  learner and seed, and ``real-robot`` continues it to 500k, so run together they train once.
 
 Metric: the running average of the undelayed reward over the 1700 steps (Fig. 5.19); the claim
 is its final value. Verdicts (:mod:`.common`'s rules): a controller's row is the band rule on the
@@ -35,9 +37,15 @@ from delayed_rl.experiments.linefollow import (
     line_env,
     line_error,
     line_statistics,
-    make_agent,
 )
-from delayed_rl.experiments.runner import Config, Curve, Experiment, Summary, running_average
+from delayed_rl.experiments.runner import (
+    Config,
+    Curve,
+    Experiment,
+    SharedRun,
+    Summary,
+    running_average,
+)
 
 RUN_STEPS = 1700
 #: Thesis Fig. 5.19's final average rewards, in the thesis's order of performance.
@@ -87,15 +95,6 @@ def _run_proportional(delayed: bool, steps: int, seed: int) -> tuple[np.ndarray,
     return rewards, centroids
 
 
-def _run_learner(kind: str, train_steps: int, steps: int, seed: int) -> tuple[np.ndarray, ...]:
-    """Train ``kind`` for ``train_steps``, then keep learning for ``steps`` on a fresh env."""
-    agent = make_agent(kind, line_env(), seed)
-    agent.learn(train_steps, log_interval=None)
-    agent.set_env(line_env())  # its first reset uses the agent's seed: the P runs' start pose
-    agent.learn(steps, log_interval=None, reset_num_timesteps=False, record=True)
-    return agent.training_log["undelayed_reward"], agent.training_log["obs"]
-
-
 def run_task(task: dict) -> dict:
     """One controller's run: its running average reward, accumulated error and line visibility.
 
@@ -105,10 +104,10 @@ def run_task(task: dict) -> dict:
         steps whose camera saw the line).
     """
     name, seed, steps = task["controller"], task["seed"], task["run_steps"]
-    if name.startswith("P "):
-        rewards, centroids = _run_proportional(name != "P undelayed", steps, seed)
-    else:
-        rewards, centroids = _run_learner(name, task["train_steps"], steps, seed)
+    if not name.startswith("P "):
+        run = shared_run(task)
+        return run.view(run.run(run.task))
+    rewards, centroids = _run_proportional(name != "P undelayed", steps, seed)
     points, curve = running_average(rewards)
     return {
         "steps": points,
@@ -116,6 +115,29 @@ def run_task(task: dict) -> dict:
         "average": float(rewards.mean()),
         "total_error": float(line_error(centroids).sum()),
         "visible": float(np.mean(centroids != 0)),
+    }
+
+
+def shared_run(task: dict) -> SharedRun | None:
+    """A learner's run: its training, pooled with the other line-following experiments'.
+
+    Trained for ``train_steps``, a copy of it goes on for ``run_steps`` on a fresh env
+    (:func:`.linefollow.training_run`, whose first steps are ``linefollow``'s run of the same
+    learner and seed and whose training ``real-robot`` continues); the P controllers' runs are
+    their own (``None``).
+    """
+    if task["controller"].startswith("P "):
+        return None
+    continuation = ["continue", task["train_steps"], "clean", task["run_steps"]]
+    run = linefollow.training_task(task["controller"], task["seed"], continuation)
+    return SharedRun(linefollow.training_run, run, _run_metrics, "readouts")
+
+
+def _run_metrics(result: dict) -> dict:
+    """A learner's run's metrics, as :func:`run_task` returns them, from its training run."""
+    continuation = linefollow.only_readout(result)
+    return {
+        key: continuation[key] for key in ("steps", "curve", "average", "total_error", "visible")
     }
 
 
@@ -193,5 +215,6 @@ EXPERIMENT = Experiment(
     run_task=run_task,
     summarize=summarize,
     default_seeds=5,
+    shared_run=shared_run,
     cost=cost,
 )

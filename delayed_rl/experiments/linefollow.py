@@ -24,6 +24,7 @@ Metrics come from the undelayed streams of ``training_log`` (``learn(..., record
 
 from __future__ import annotations
 
+import copy
 import time
 from typing import Any
 
@@ -38,6 +39,7 @@ from delayed_rl.experiments.runner import (
     Config,
     Curve,
     Experiment,
+    SharedRun,
     Summary,
     mean_ci95,
     running_average,
@@ -45,6 +47,10 @@ from delayed_rl.experiments.runner import (
 from delayed_rl.experiments.training import ALPHA, EPSILON, GAMMA, thesis_hyperparameters
 
 ENV_ID = "delayed_rl/EPuckLineFollow-v0"
+#: The stand-in robot of ``real-robot`` (:mod:`delayed_rl.experiments.real_robot`).
+REAL_ENV_ID = "delayed_rl/EPuckLineFollowReal-v0"
+#: What a trained agent can continue on (:func:`training_run`): the clean simulation, the robot.
+SETTINGS = {"clean": ENV_ID, "real": REAL_ENV_ID}
 TRACK = "racetrack"
 LAM, LAMBDA_MAX = 90, 150
 #: The optimistic initial value, 1 / (1 − γ) (see the module docstring; α, γ and ε are the
@@ -53,6 +59,8 @@ Q_INIT = 10.0
 CENTRE, UNSEEN_ERROR = 20, 20
 #: The learners compared.
 AGENTS = ("MMQ", "Q")
+#: The learners :func:`make_agent` makes: these and ``linefollow-deconv``'s DeconvQ.
+LEARNERS = (*AGENTS, "DeconvQ learned")
 #: The band of the average-reward claims (and of MMQ − Q): the thesis's value ± this.
 REWARD_TOLERANCE = 0.2
 #: The band of the accumulated-error ratio: 0.4 ± this.
@@ -63,33 +71,40 @@ THESIS_REWARD = {"MMQ": 0.55, "Q": 0.12}
 THESIS_ERROR_RATIO = 0.4
 
 
-def line_env(reward_delay: float | None = LAM, **kwargs: Any) -> gym.Env:
+def line_env(reward_delay: float | None = LAM, env_id: str = ENV_ID, **kwargs: Any) -> gym.Env:
     """The thesis's line-following env: racetrack, manual resets, continuing, reward delay λ.
 
     Args:
         reward_delay: the Poisson mean λ of the reward delay (``None``: undelayed).
+        env_id: the e-puck's id: the simulation (default) or :data:`REAL_ENV_ID`.
         **kwargs: other ``EPuckLineFollow`` arguments (e.g. ``action_mode="continuous"``).
     """
     import delayed_rl  # noqa: F401  (registers the ids)
 
     options = {"track": TRACK, "lost_line": "recover", "max_steps": None, **kwargs}
-    return gym.make(ENV_ID, reward_delay=reward_delay, **options)
+    return gym.make(env_id, reward_delay=reward_delay, **options)
 
 
 def make_agent(kind: str, env: gym.Env, seed: int) -> Any:
-    """A thesis-setting learner: ``"Q"`` (Q-learning) or ``"MMQ"`` (Λ = {0, ..., 150}).
+    """A thesis-setting learner on ``env``, one of :data:`LEARNERS`.
+
+    ``"Q"`` (Q-learning), ``"MMQ"`` (Λ = {0, ..., 150}) or ``"DeconvQ learned"``
+    (:class:`~delayed_rl.agents.DeconvQ` learning the delay on 0..150), with the thesis's
+    hyper-parameters and ``q_init`` = :data:`Q_INIT`.
 
     Raises:
         TypeError: ``kind`` is not a string.
-        ValueError: ``kind`` is not one of :data:`AGENTS`.
+        ValueError: ``kind`` is not one of :data:`LEARNERS`.
     """
-    from delayed_rl.agents import MultipleModelQLearning, QLearning
+    from delayed_rl.agents import DeconvQ, MultipleModelQLearning, QLearning
 
-    check_choice("kind", kind, AGENTS)
+    check_choice("kind", kind, LEARNERS)
     common = thesis_hyperparameters(seed, q_init=Q_INIT)
     if kind == "Q":
         return QLearning(env, **common)
-    return MultipleModelQLearning(env, max_delay_estimate=LAMBDA_MAX, **common)
+    if kind == "MMQ":
+        return MultipleModelQLearning(env, max_delay_estimate=LAMBDA_MAX, **common)
+    return DeconvQ(env, delay=None, max_delay=LAMBDA_MAX, **common)
 
 
 def line_error(centroids: np.ndarray) -> np.ndarray:
@@ -124,12 +139,7 @@ def tasks(config: Config) -> list[dict]:
 
 
 def run_task(task: dict) -> dict:
-    """Train one learner on the line follower and :func:`measure` it."""
-    return measure(make_agent(task["agent"], line_env(), task["seed"]), task["steps"])
-
-
-def measure(agent: Any, steps: int) -> dict:
-    """Train ``agent`` for ``steps`` on its env and measure the run.
+    """Train one learner on the line follower and measure the run (:func:`training_run`).
 
     Returns:
         :func:`run_metrics`'s (``steps``, ``curve``, ``error``, ``average``, ``total_error``,
@@ -137,15 +147,113 @@ def measure(agent: Any, steps: int) -> dict:
         (``learn``'s) and the agent's delay estimate, if it holds one
         (:func:`~delayed_rl.experiments.anonymous_delay.delay_estimate`).
     """
-    started = time.perf_counter()
-    agent.learn(steps, log_interval=None, record=True)
-    seconds = time.perf_counter() - started
-    return {
-        **run_metrics(agent.training_log),
-        "ns_per_step": 1e9 * seconds / steps,
-        "path": agent.last_learn_path,
-        **delay_estimate(agent),
-    }
+    return only_readout(training_run(training_task(task["agent"], task["seed"], log(task))))
+
+
+def shared_run(task: dict) -> SharedRun:
+    """The task's training run, pooled with the other line-following experiments' (see below)."""
+    run = training_task(task["agent"], task["seed"], log(task))
+    return SharedRun(training_run, run, only_readout, "readouts")
+
+
+def log(task: dict) -> list:
+    """The readout of a task's own training: its first ``task["steps"]`` steps."""
+    return ["log", task["steps"]]
+
+
+def only_readout(result: dict) -> dict:
+    """The result of a :func:`training_run` read once."""
+    return result["readouts"][0]
+
+
+def training_task(agent: str, seed: int, *readouts: list) -> dict:
+    """The task of :func:`training_run` for ``agent`` and ``seed`` with ``readouts``."""
+    return {"agent": agent, "seed": seed, "readouts": list(readouts)}
+
+
+def training_run(task: dict) -> dict:
+    """One learner trained in the thesis's setting, read at the steps its readouts name.
+
+    ``linefollow`` and ``linefollow-deconv`` (150k steps), ``controllers`` (300k) and
+    ``real-robot`` (500k) train the same learners — :func:`make_agent` on :func:`line_env`, one
+    seed each — so their tasks pool their readouts (:class:`~.runner.SharedRun`'s ``pooled``):
+    run together, each (learner, seed) trains once, to the last readout's steps, instead of
+    once per experiment. The training runs in pieces that end at each readout's steps
+    (``learn(..., reset_num_timesteps=False)``, which trains exactly as one call does), so every
+    readout is what a run of its own would give.
+
+    Args:
+        task: ``agent`` (one of :data:`LEARNERS`), ``seed`` and ``readouts``, a list of
+
+            - ``["log", n]``: the first ``n`` steps of the training itself: :func:`run_metrics`
+              of its log, ``ns_per_step`` (``learn``'s wall time over them), ``path``
+              (``learn``'s) and the delay estimate at step ``n``;
+            - ``["continue", n, setting, steps]``: a copy of the agent at step ``n`` goes on
+              for ``steps`` steps on a fresh env of ``setting`` (a key of :data:`SETTINGS`),
+              learning on (its first reset uses the agent's seed): the continuation's
+              :func:`run_metrics`, and ``pretrain_seconds``, ``learn``'s wall time over the
+              first ``n`` steps.
+
+    Returns:
+        ``{"readouts": [...]}``, one result per readout, in the task's order.
+
+    Raises:
+        ValueError: a readout is none of these.
+    """
+    readouts = task["readouts"]
+    for readout in readouts:
+        _check_readout(readout)
+    logged = max((readout[1] for readout in readouts if readout[0] == "log"), default=0)
+    agent = make_agent(task["agent"], line_env(), task["seed"])
+    results: list[dict | None] = [None] * len(readouts)
+    pieces: list[dict[str, np.ndarray]] = []
+    seconds, done = 0.0, 0
+    for mark in sorted({readout[1] for readout in readouts}):
+        started = time.perf_counter()
+        agent.learn(
+            mark - done, log_interval=None, reset_num_timesteps=not done, record=mark <= logged
+        )
+        seconds += time.perf_counter() - started
+        done = mark
+        if mark <= logged:
+            pieces.append({key: agent.training_log[key] for key in ("undelayed_reward", "obs")})
+        for index, readout in enumerate(readouts):
+            if readout[1] != mark:
+                continue
+            if readout[0] == "log":
+                training = {key: np.concatenate([p[key] for p in pieces]) for key in pieces[0]}
+                results[index] = {
+                    **run_metrics(training),
+                    "ns_per_step": 1e9 * seconds / mark,
+                    "path": agent.last_learn_path,
+                    **delay_estimate(agent),
+                }
+            else:
+                learner = copy.deepcopy(agent)
+                learner.set_env(line_env(env_id=SETTINGS[readout[2]]))
+                learner.learn(readout[3], log_interval=None, reset_num_timesteps=False, record=True)
+                results[index] = {**run_metrics(learner.training_log), "pretrain_seconds": seconds}
+    return {"readouts": results}
+
+
+def _check_readout(readout: Any) -> None:
+    """Raise a ValueError naming ``readout`` unless it is one :func:`training_run` reads."""
+    ok = isinstance(readout, list) and len(readout) >= 2 and _whole(readout[1])
+    if ok and readout[0] == "log":
+        ok = len(readout) == 2
+    elif ok and readout[0] == "continue":
+        ok = len(readout) == 4 and readout[2] in SETTINGS and _whole(readout[3])
+    else:
+        ok = False
+    if not ok:
+        raise ValueError(
+            f"a readout must be ['log', n] or ['continue', n, setting, steps] with n, steps "
+            f"integers >= 1 and setting one of {sorted(SETTINGS)}, got {readout!r}"
+        )
+
+
+def _whole(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 1
 
 
 #: Training cost per step on the line follower (env and learner on the compiled path, µs, with
@@ -318,5 +426,6 @@ EXPERIMENT = Experiment(
     run_task=run_task,
     summarize=summarize,
     default_seeds=5,
+    shared_run=shared_run,
     cost=cost,
 )

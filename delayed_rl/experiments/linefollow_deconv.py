@@ -13,7 +13,9 @@ Poisson(90) reward delays, 150k steps a run, 5 seeds; α = 0.1, γ = 0.9, consta
 - ``Q``: Q-learning on the delayed reward.
 
 ``--quick``: 2 seeds, 5k steps. 15 tasks at full size; MMQ's and Q's are ``linefollow``'s runs
-(the same env, settings and seeds), which ``delayed-rl reproduce`` runs once for both.
+(the same env, settings and seeds), which ``delayed-rl reproduce`` runs once for both, and every
+learner's run is also the start of ``controllers``' and ``real-robot``'s longer training
+(:func:`.linefollow.training_run`: run together, each learner and seed trains once).
 
 Metrics, as ``linefollow``'s: the average reward during learning (the undelayed reward's
 running mean) and the accumulated error Σ|Δ| (an unseen line counted as |Δ| = 20), plus the
@@ -53,7 +55,6 @@ from delayed_rl.experiments.common import (
     seed_tasks,
 )
 from delayed_rl.experiments.runner import Config, Curve, Experiment, SharedRun, Summary
-from delayed_rl.experiments.training import thesis_hyperparameters
 
 #: The learners compared.
 AGENTS = ("MMQ", "DeconvQ learned", "Q")
@@ -61,24 +62,14 @@ QUICK_STEPS, STEPS = 5_000, 150_000
 
 
 def make_agent(kind: str, seed: int) -> Any:
-    """One of :data:`AGENTS` on a fresh ``linefollow`` env (Poisson(90) reward delays).
+    """One of :data:`AGENTS` on a fresh ``linefollow`` env (:func:`.linefollow.make_agent`).
 
     Raises:
         TypeError: ``kind`` is not a string.
         ValueError: ``kind`` is not one of :data:`AGENTS`.
     """
     check_choice("kind", kind, AGENTS)
-    env = linefollow.line_env()
-    if kind != "DeconvQ learned":
-        return linefollow.make_agent(kind, env, seed)
-    from delayed_rl.agents import DeconvQ
-
-    return DeconvQ(
-        env,
-        delay=None,
-        max_delay=linefollow.LAMBDA_MAX,
-        **thesis_hyperparameters(seed, q_init=linefollow.Q_INIT),
-    )
+    return linefollow.make_agent(kind, linefollow.line_env(), seed)
 
 
 def tasks(config: Config) -> list[dict]:
@@ -91,18 +82,22 @@ def run_task(task: dict) -> dict:
     """Train one learner on the line follower; measure reward, error, delay estimate and cost.
 
     Returns:
-        :func:`.linefollow.measure`'s results: ``linefollow``'s metrics (``steps``,
+        :func:`.linefollow.run_task`'s results: ``linefollow``'s metrics (``steps``,
         ``curve``, ``error``, ``average``, ``total_error``, ``visible``), ``ns_per_step``,
         ``path`` and the delay estimate.
     """
-    return linefollow.measure(make_agent(task["agent"], task["seed"]), task["steps"])
+    check_choice("agent", task["agent"], AGENTS)
+    return linefollow.run_task(task)
 
 
-def shared_run(task: dict) -> SharedRun | None:
-    """MMQ and Q are ``linefollow``'s runs (the same env, settings and seeds), shared with it."""
-    if task["agent"] not in linefollow.AGENTS:
-        return None
-    return SharedRun(linefollow.run_task, task)
+def shared_run(task: dict) -> SharedRun:
+    """Every task's training run, pooled with the other line-following experiments'.
+
+    MMQ's and Q's are ``linefollow``'s runs (the same env, settings and seeds); each learner's
+    is also the start of ``controllers``' and ``real-robot``'s (:func:`.linefollow.training_run`).
+    """
+    check_choice("agent", task["agent"], AGENTS)
+    return linefollow.shared_run(task)
 
 
 #: DeconvQ's training cost per step on the line follower (µs; MMQ's and Q's are linefollow's).

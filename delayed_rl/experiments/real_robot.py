@@ -57,18 +57,19 @@ command latency does not compile). In a full ``delayed-rl reproduce`` on this 2-
 (two workers busy), 500k pretraining steps took about 2 s for Q, 3 s for MMQ and 4 s for
 DeconvQ learned (4–8 µs a step), the continuations well under a second each: the default 4
 seeds cost about 40 core-seconds. ``summary.json`` records each pretraining's wall time (mean
-and CI, ``pretrain_seconds``).
+and CI, ``pretrain_seconds``). The pretraining is :func:`.linefollow.training_run`'s, whose
+first steps are ``linefollow``'s, ``linefollow-deconv``'s and ``controllers``' training of the
+same learner and seed: run together (``delayed-rl reproduce``), each trains once.
 """
 
 from __future__ import annotations
 
-import copy
-import time
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
+from delayed_rl._validation import check_choice
 from delayed_rl.experiments import linefollow, linefollow_deconv, plotting
 from delayed_rl.experiments.common import (
     band_claim,
@@ -79,12 +80,14 @@ from delayed_rl.experiments.common import (
     reference_row,
     seed_tasks,
 )
-from delayed_rl.experiments.runner import Config, Curve, Experiment, Summary
+from delayed_rl.experiments.runner import Config, Curve, Experiment, SharedRun, Summary
 
-REAL_ENV_ID = "delayed_rl/EPuckLineFollowReal-v0"
+REAL_ENV_ID = linefollow.REAL_ENV_ID
 #: The learners compared.
 AGENTS = ("MMQ", "Q", "DeconvQ learned")
 CONDITIONS = ("real", "control")
+#: The env each condition continues on (a key of :data:`.linefollow.SETTINGS`).
+SETTING = {"real": "real", "control": "clean"}
 PRETRAIN_STEPS, QUICK_PRETRAIN_STEPS = 500_000, 5_000
 RUN_STEPS, QUICK_RUN_STEPS = 1_500, 300
 #: Thesis section 5.3: average reward of each agent in each of the two robot runs.
@@ -107,10 +110,7 @@ def real_env(reward_delay: float | None = linefollow.LAM, **kwargs: Any) -> gym.
         reward_delay: the Poisson mean λ of the reward delay (``None``: undelayed).
         **kwargs: other ``EPuckLineFollow`` arguments, overriding the real configuration's.
     """
-    import delayed_rl  # noqa: F401  (registers the ids)
-
-    options = {"track": linefollow.TRACK, "lost_line": "recover", "max_steps": None, **kwargs}
-    return gym.make(REAL_ENV_ID, reward_delay=reward_delay, **options)
+    return linefollow.line_env(reward_delay, env_id=REAL_ENV_ID, **kwargs)
 
 
 def tasks(config: Config) -> list[dict]:
@@ -127,15 +127,32 @@ def run_task(task: dict) -> dict:
         ``{"real": ..., "control": ...}`` (:func:`.linefollow.run_metrics`'s metrics) and
         ``pretrain_seconds``, the wall time of the pretraining.
     """
-    agent = linefollow_deconv.make_agent(task["agent"], task["seed"])
-    started = time.perf_counter()
-    agent.learn(task["pretrain_steps"], log_interval=None)
-    out: dict[str, Any] = {"pretrain_seconds": time.perf_counter() - started}
-    for condition in CONDITIONS:
-        learner = copy.deepcopy(agent)
-        learner.set_env(real_env() if condition == "real" else linefollow.line_env())
-        learner.learn(task["steps"], log_interval=None, reset_num_timesteps=False, record=True)
-        out[condition] = linefollow.run_metrics(learner.training_log)
+    run = shared_run(task)
+    return run.view(run.run(run.task))
+
+
+def shared_run(task: dict) -> SharedRun:
+    """The task's training run, pooled with the other line-following experiments'.
+
+    Its first steps are ``linefollow``'s (or ``linefollow-deconv``'s) and ``controllers``' runs
+    of the same learner and seed (:func:`.linefollow.training_run`): run together, each learner
+    and seed trains once.
+    """
+    check_choice("agent", task["agent"], AGENTS)
+    continuations = [
+        ["continue", task["pretrain_steps"], SETTING[condition], task["steps"]]
+        for condition in CONDITIONS
+    ]
+    run = linefollow.training_task(task["agent"], task["seed"], *continuations)
+    return SharedRun(linefollow.training_run, run, _by_condition, "readouts")
+
+
+def _by_condition(result: dict) -> dict:
+    """:func:`run_task`'s result from the training run's readouts (one per condition)."""
+    readouts = result["readouts"]
+    out: dict[str, Any] = {"pretrain_seconds": readouts[0]["pretrain_seconds"]}
+    for condition, readout in zip(CONDITIONS, readouts, strict=True):
+        out[condition] = {key: value for key, value in readout.items() if key != "pretrain_seconds"}
     return out
 
 
@@ -426,5 +443,6 @@ EXPERIMENT = Experiment(
     run_task=run_task,
     summarize=summarize,
     default_seeds=4,
+    shared_run=shared_run,
     cost=cost,
 )

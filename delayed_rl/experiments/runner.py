@@ -163,15 +163,26 @@ class SharedRun(NamedTuple):
     :func:`~delayed_rl.experiments.schedule.run_experiments` runs each distinct ``(run, task)``
     once and hands every task behind it ``view(result)``.
 
+    **Pooled runs.** With ``pooled`` the name of a list in ``task`` (its *items*: say, the
+    steps at which a training run is read), runs of the same function whose tasks differ only
+    in that list are one run, on the union of their items (each once, in the order of their
+    canonical JSON). ``run`` then returns a dict whose entry ``pooled`` holds one result per
+    item of the task it was given, in that task's order; each task sees the result it would
+    have had alone: that list cut down to its own items, in its own order (then its ``view``).
+    So one experiment's run can extend another's, e.g. a 500k-step training run that a second
+    experiment reads at 150k steps, instead of both training from scratch.
+
     Attributes:
         run: a picklable top-level function of one task, returning the run's result.
         task: what ``run`` is called with (JSON-like: its canonical form is the run's identity).
         view: picks the task's result out of the run's (``None``: the whole result).
+        pooled: the name of the list in ``task`` whose items runs pool (``None``: none).
     """
 
     run: Callable[[dict], dict]
     task: dict
     view: Callable[[dict], dict] | None = None
+    pooled: str | None = None
 
 
 def default_cost(task: dict) -> float:

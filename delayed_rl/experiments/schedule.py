@@ -4,7 +4,9 @@
 of the experiments it is given (:meth:`~.runner.Experiment.run_of`) and runs each *distinct* run
 once: a :class:`~.runner.SharedRun` that several tasks need, of one experiment or of several, is
 run once and its result handed to each of them (through its ``view``). Two runs are the same
-when they call the same function with the same task (compared in canonical JSON).
+when they call the same function with the same task (compared in canonical JSON); runs that
+*pool* a list of their task (``SharedRun.pooled``, e.g. the steps at which a training run is
+read) are one run when their tasks differ only in that list, run on the union of its items.
 
 All runs go to one pool, ordered by their estimated cost (:attr:`~.runner.Experiment.cost`),
 longest first, so the workers are never left idle behind one experiment's slowest run before the
@@ -77,6 +79,70 @@ def run_key(run: SharedRun) -> str:
     except (TypeError, ValueError) as error:
         raise ValueError(f"the task {run.task!r} of {name} is not JSON-like: {error}") from None
     return f"{function.__module__}.{name}:{task}"
+
+
+def pool_key(run: SharedRun) -> str:
+    """The identity of the run that ``run`` pools into: :func:`run_key` less its pooled items.
+
+    Without ``run.pooled`` it is :func:`run_key`.
+
+    Raises:
+        TypeError: as :func:`run_key`; or ``run.pooled`` is not a string, or the task's entry
+            of that name is not a list.
+        ValueError: as :func:`run_key`; or the task has no entry named ``run.pooled``.
+    """
+    if run.pooled is None:
+        return run_key(run)
+    _items(run)
+    rest = {name: value for name, value in run.task.items() if name != run.pooled}
+    return f"{run_key(run._replace(task=rest))} pooling {run.pooled}"
+
+
+def _items(run: SharedRun) -> list:
+    """``run.task[run.pooled]``, checked (see :func:`pool_key`)."""
+    if not isinstance(run.pooled, str):
+        raise TypeError(f"pooled must be None or a task entry's name, got {run.pooled!r}")
+    if run.pooled not in run.task:
+        raise ValueError(f"the task {run.task!r} has no entry {run.pooled!r} to pool")
+    items = run.task[run.pooled]
+    if not isinstance(items, list):
+        raise TypeError(f"the pooled entry {run.pooled!r} must be a list, got {items!r}")
+    return items
+
+
+def _canonical(item: Any) -> str:
+    return json.dumps(item, sort_keys=True, default=_json_default)
+
+
+def _pooled(runs: Sequence[SharedRun]) -> SharedRun:
+    """The one run that ``runs`` (of one :func:`pool_key`) pool into: the union of their items."""
+    first = runs[0]
+    if first.pooled is None:
+        return first
+    union = {_canonical(item): item for run in runs for item in _items(run)}
+    items = [union[key] for key in sorted(union)]
+    return first._replace(task={**first.task, first.pooled: items}, view=None)
+
+
+def _own_result(run: SharedRun, pooled: SharedRun, result: dict) -> dict:
+    """The result ``run`` would have had alone, out of the result of the run it pooled into.
+
+    Raises:
+        ValueError: the pooled run's result does not hold one entry per item.
+    """
+    if run.pooled is None:
+        return result
+    items = pooled.task[run.pooled]
+    parts = result.get(run.pooled) if isinstance(result, dict) else None
+    if not isinstance(parts, list) or len(parts) != len(items):
+        raise ValueError(
+            f"a pooled run must return a dict whose {run.pooled!r} holds one result per item "
+            f"({len(items)}), got {type(parts).__name__}"
+            + ("" if not isinstance(parts, list) else f" of {len(parts)}")
+        )
+    where = {_canonical(item): index for index, item in enumerate(items)}
+    own = [parts[where[_canonical(item)]] for item in run.task[run.pooled]]
+    return {**result, run.pooled: own}
 
 
 def _timed(job: tuple[Callable[[dict], dict], dict]) -> tuple[dict, float]:
@@ -168,7 +234,7 @@ def _default_seeds(experiment: Experiment, config: Config) -> None:
 def _plan(experiment: Experiment, config: Config, out: Path | None) -> _Plan:
     tasks = experiment.tasks(config)
     runs = [experiment.run_of(task) for task in tasks]
-    return _Plan(experiment, config, tasks, runs, [run_key(run) for run in runs], out)
+    return _Plan(experiment, config, tasks, runs, [pool_key(run) for run in runs], out)
 
 
 def _run(
@@ -179,16 +245,17 @@ def _run(
 ) -> list[Summary]:
     """Run every plan's distinct runs in one pool, longest first, summarizing each plan when done."""
     started = time.perf_counter()
-    runs: dict[str, SharedRun] = {}
+    pooling: dict[str, list[SharedRun]] = {}
     costs: dict[str, float] = {}
     users: dict[str, list[_Plan]] = {}
     for plan in plans:
         for task, run, key in zip(plan.tasks, plan.runs, plan.keys, strict=True):
-            runs.setdefault(key, run)
+            pooling.setdefault(key, []).append(run)
             costs[key] = max(costs.get(key, 0.0), plan.experiment.task_cost(task))
         for key in dict.fromkeys(plan.keys):
             users.setdefault(key, []).append(plan)
         plan.missing = len(set(plan.keys))
+    runs = {key: _pooled(pooled) for key, pooled in pooling.items()}
     order = sorted(runs, key=lambda key: -costs[key])  # stable: equal costs keep task order
     if progress:
         names = ", ".join(plan.experiment.name for plan in plans)
@@ -203,7 +270,7 @@ def _run(
     unfinished = {key: len(plans_of) for key, plans_of in users.items()}
 
     def finish(plan: _Plan) -> None:
-        summaries[id(plan)] = summary = _summarize(plan, results, seconds, users, started)
+        summaries[id(plan)] = summary = _summarize(plan, runs, results, seconds, users, started)
         writer.write(plan, summary)
         for key in set(plan.keys):  # drop the results no other plan still needs
             unfinished[key] -= 1
@@ -302,16 +369,20 @@ def _sendable(plan: _Plan, summary: Summary) -> bool:
 
 def _summarize(
     plan: _Plan,
+    runs: dict[str, SharedRun],
     results: dict[str, dict],
     seconds: dict[str, float],
     users: dict[str, list[_Plan]],
     started: float,
 ) -> Summary:
-    """The plan's summary from its runs' results (each through its task's view), with its costs."""
-    task_results = [
-        results[key] if run.view is None else run.view(results[key])
-        for run, key in zip(plan.runs, plan.keys, strict=True)
-    ]
+    """The plan's summary from its runs' results (each its own part, through its task's view).
+
+    ``runs`` are the runs as run (pooled), by key; the summary's extra records the costs.
+    """
+    task_results = []
+    for run, key in zip(plan.runs, plan.keys, strict=True):
+        result = _own_result(run, runs[key], results[key])
+        task_results.append(result if run.view is None else run.view(result))
     summary = plan.experiment.summarize(plan.tasks, task_results, plan.config)
     distinct = set(plan.keys)
     summary.extra["run_seconds"] = round(sum(seconds[key] for key in distinct), 2)
