@@ -21,7 +21,8 @@ while that fits 64 MiB (the grid worlds); above (Taxi's 3000 pairs), a hashed ta
 the couples of pairs that occurred within ``K`` steps of each other, so memory follows what the
 agent has seen (:mod:`delayed_rl.agents._regression`). Both paths run either layout; a
 compiled step costs about 1.4 MMQ(|Λ| = 51) steps and the solves bring a 1M-step run on
-GridWorld-9x9 to about 2.7 times MMQ's time (``benchmarks/deconvolution_cost.py``).
+GridWorld-9x9 to about 2.6 times MMQ's time, a known delay's to about MMQ's
+(``benchmarks/deconvolution_cost.py``).
 
 **When it helps.** Deconvolution removes the delay's bias at the price of variance: the
 estimate of a pair's mean reward improves as ``1/√visits``, and the noise of the delivered
