@@ -257,7 +257,7 @@ def test_the_hashed_layout_holds_the_same_counts_and_gives_the_same_solves(mode)
 
 
 def test_conjugate_gradients_agree_with_the_dense_solve(monkeypatch):
-    """Above DENSE_SOLVE_PAIRS pairs R̂ comes from CG: the same solution as LU, to 1e-7."""
+    """Above DENSE_SOLVE_PAIRS pairs R̂ comes from CG: the same solution as the dense Cholesky solve, to 1e-7."""
     from delayed_rl.agents import _regression
 
     regression = _fed("hashed", 4000, "flush")

@@ -147,8 +147,8 @@ def test_bad_arguments():
     assert agent.greedy_window == 100
     with pytest.raises(TypeError, match="averaged"):
         ad.greedy_policy(agent, averaged="yes")
-    with pytest.raises(ValueError, match="kind must be one of"):
-        lfd.make_agent("SARSA", 0)
+    with pytest.raises(ValueError, match=r"agent must be one of \('MMQ', 'DeconvQ learned', 'Q'\)"):
+        lfd.run_task({"agent": "SARSA", "seed": 0, "steps": 10})
 
 
 def test_the_new_experiments_are_listed(capsys):

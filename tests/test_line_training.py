@@ -46,6 +46,9 @@ def test_each_readout_of_one_run_is_what_a_run_of_its_own_gives(agent):
         (alone,) = training_run(training_task(agent, 3, readout))["readouts"]
         assert_same(result, alone)
     assert pooled[1]["steps"][-1] == 400 and pooled[3]["steps"][-1] == 250
+    twice = training_run(training_task(agent, 3, ["log", 250], ["log", 250]))["readouts"]
+    assert_same(twice[0], twice[1])
+    assert_same(twice[0], pooled[3])
     assert pooled[0]["pretrain_seconds"] >= pooled[2]["pretrain_seconds"] > 0
     other_seed = training_run(training_task(agent, 4, ["log", 400]))["readouts"][0]
     assert other_seed["curve"].tobytes() != pooled[1]["curve"].tobytes()  # the check can fail
@@ -54,7 +57,8 @@ def test_each_readout_of_one_run_is_what_a_run_of_its_own_gives(agent):
 @pytest.mark.parametrize(
     "readout",
     [["log"], ["log", 0], ["log", 10, 5], ["continue", 10, "moon", 5], ["continue", 10, "real"],
-     ["fit", 10], ("log", 10), ["log", 2.5], ["continue", 10, "clean", True]],
+     ["fit", 10], ("log", 10), ["log", 2.5], ["continue", 10, "clean", True],
+     ["continue", 10, ["clean"], 5]],
 )  # fmt: skip
 def test_a_bad_readout_is_refused_by_name(readout):
     with pytest.raises(ValueError, match=r"a readout must be \['log', n\] or") as error:

@@ -14,7 +14,7 @@ from delayed_rl.agents._regression import (
 
 
 def one_row_cholesky_factor(a: np.ndarray) -> np.ndarray:
-    """The right-looking factorization one row at a time, in numpy: ``a``'s upper triangle is ``U``."""
+    """The right-looking factorization one row at a time, in numpy (``U`` in the upper triangle)."""
     n = a.shape[0]
     for j in range(n):
         a[j, j] = np.sqrt(a[j, j])
@@ -42,6 +42,20 @@ def test_refuses_a_matrix_that_is_not_positive_definite():
     a = np.array([[1.0, 2.0], [2.0, 1.0]])
     with pytest.raises(ValueError, match="not positive definite"):
         _cholesky_solve(a, np.ones(2))
+
+
+@pytest.mark.parametrize("row", [2, 6, 8])  # inside the first block of four, after it, the rest
+def test_refuses_a_matrix_whose_pivot_fails_in_any_part_of_the_factorization(row):
+    n = 9
+    a = np.eye(n) * 4.0
+    a[row, row - 1] = a[row - 1, row] = 4.0  # rows row - 1 and row equal: a zero pivot at row
+    with pytest.raises(ValueError, match="not positive definite"):
+        _cholesky_solve(a.copy(), np.ones(n))
+    a[row, row - 1] = a[row - 1, row] = 3.9  # a little less: positive definite
+    np.testing.assert_allclose(a @ _cholesky_solve(a.copy(), np.ones(n)), np.ones(n), rtol=1e-9)
+    a[row, row] = np.nan
+    with pytest.raises(ValueError, match="not positive definite"):
+        _cholesky_solve(a, np.ones(n))
 
 
 @pytest.mark.parametrize("n", [0, 1, 3, 4, 5, 8, 51])

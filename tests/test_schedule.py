@@ -145,6 +145,29 @@ def test_pool_key_ignores_only_the_pooled_items():
         key({"x": 1, "powers": 3})
     with pytest.raises(TypeError, match="pooled must be None or a task entry's name, got 1"):
         key({"x": 1, "powers": [1]}, 1)
+    with pytest.raises(ValueError, match="not JSON-like"):  # the items too
+        key({"x": 1, "powers": [object()]})
+
+
+def test_a_task_may_name_an_item_twice():
+    CALLS.clear()
+    experiment = _powers_experiment("twice", [{"x": 2, "powers": [3, 1, 3]}])
+    (result,) = run_experiment(experiment, Config(workers=1), progress=False).extra["results"]
+    assert CALLS == [{"x": 2, "powers": [1, 3]}] and result == {"powers": [8, 2, 8], "x": 2}
+
+
+def not_a_dict(task: dict) -> list:
+    """A pooled run that returns its items' results bare."""
+    return [task["x"]] * len(task["powers"])
+
+
+def test_a_pooled_run_must_return_a_dict():
+    experiment = _powers_experiment("bare", [{"x": 2, "powers": [1, 2]}])
+    experiment.shared_run = lambda task: SharedRun(not_a_dict, task, None, "powers")
+    with pytest.raises(
+        ValueError, match=r"test_schedule\.not_a_dict.* returned a list, not a dict"
+    ):
+        run_experiment(experiment, Config(workers=1), progress=False)
 
 
 def broken_powers(task: dict) -> dict:
@@ -155,7 +178,9 @@ def broken_powers(task: dict) -> dict:
 def test_a_pooled_run_must_return_one_result_per_item():
     experiment = _powers_experiment("broken", [{"x": 2, "powers": [1, 2]}])
     experiment.shared_run = lambda task: SharedRun(broken_powers, task, None, "powers")
-    with pytest.raises(ValueError, match=r"one result per item \(2\), got list of 1"):
+    with pytest.raises(
+        ValueError, match=r"one result per item \(2\); .*broken_powers.* returned list of 1"
+    ):
         run_experiment(experiment, Config(workers=1), progress=False)
 
 

@@ -27,8 +27,8 @@ ridge that pulls pairs of little evidence towards a prior value.
 4-byte integers in the direct layout, used while that is at most :data:`DIRECT_LIMIT`; above it
 (envs with many pairs, e.g. Taxi's 3000) a hashed layout keeps a row only for the couples that
 occurred, so memory follows what the agent has seen, up to :data:`STATISTICS_LIMIT`. ``R`` is
-solved by a dense Cholesky factorization up to :data:`DENSE_SOLVE_PAIRS` pairs, and above by conjugate gradients on
-the sparse couplings, warm-started from the last estimate.
+solved by a dense Cholesky factorization up to :data:`DENSE_SOLVE_PAIRS` pairs, and above by
+conjugate gradients on the sparse couplings, warm-started from the last estimate.
 """
 
 from __future__ import annotations

@@ -105,8 +105,7 @@ def run_task(task: dict) -> dict:
     """
     name, seed, steps = task["controller"], task["seed"], task["run_steps"]
     if not name.startswith("P "):
-        run = shared_run(task)
-        return run.view(run.run(run.task))
+        return shared_run(task).alone()
     rewards, centroids = _run_proportional(name != "P undelayed", steps, seed)
     points, curve = running_average(rewards)
     return {
@@ -130,10 +129,10 @@ def shared_run(task: dict) -> SharedRun | None:
         return None
     continuation = ["continue", task["train_steps"], "clean", task["run_steps"]]
     run = linefollow.training_task(task["controller"], task["seed"], continuation)
-    return SharedRun(linefollow.training_run, run, _run_metrics, "readouts")
+    return SharedRun(linefollow.training_run, run, _continuation_metrics, "readouts")
 
 
-def _run_metrics(result: dict) -> dict:
+def _continuation_metrics(result: dict) -> dict:
     """A learner's run's metrics, as :func:`run_task` returns them, from its training run."""
     continuation = linefollow.only_readout(result)
     return {

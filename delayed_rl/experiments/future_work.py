@@ -124,7 +124,7 @@ def run_task(task: dict) -> dict:
     """
     run = shared_run(task)
     if run is not None:
-        return run.view(run.run(run.task))
+        return run.alone()
     delay = shared.make_delay(task["delay"], task["lam"])
     size, steps, seed = task["size"], task["steps"], task["seed"]
     variant = task["agent"]

@@ -147,18 +147,13 @@ def run_task(task: dict) -> dict:
         (``learn``'s) and the agent's delay estimate, if it holds one
         (:func:`~delayed_rl.experiments.anonymous_delay.delay_estimate`).
     """
-    return only_readout(training_run(training_task(task["agent"], task["seed"], log(task))))
+    return shared_run(task).alone()
 
 
 def shared_run(task: dict) -> SharedRun:
-    """The task's training run, pooled with the other line-following experiments' (see below)."""
-    run = training_task(task["agent"], task["seed"], log(task))
+    """The task's :func:`training_run`, pooled with the other line-following experiments'."""
+    run = training_task(task["agent"], task["seed"], ["log", task["steps"]])
     return SharedRun(training_run, run, only_readout, "readouts")
-
-
-def log(task: dict) -> list:
-    """The readout of a task's own training: its first ``task["steps"]`` steps."""
-    return ["log", task["steps"]]
 
 
 def only_readout(result: dict) -> dict:
@@ -180,7 +175,9 @@ def training_run(task: dict) -> dict:
     run together, each (learner, seed) trains once, to the last readout's steps, instead of
     once per experiment. The training runs in pieces that end at each readout's steps
     (``learn(..., reset_num_timesteps=False)``, which trains exactly as one call does), so every
-    readout is what a run of its own would give.
+    readout is what a run of its own would give (the thesis's α and ε are constant: a schedule
+    would restart with each piece). Its wall times (``ns_per_step``, ``pretrain_seconds``) are
+    those of the pieces up to the readout, recording the log where a log readout asks for it.
 
     Args:
         task: ``agent`` (one of :data:`LEARNERS`), ``seed`` and ``readouts``, a list of
@@ -198,7 +195,8 @@ def training_run(task: dict) -> dict:
         ``{"readouts": [...]}``, one result per readout, in the task's order.
 
     Raises:
-        ValueError: a readout is none of these.
+        TypeError: ``agent`` is not a string.
+        ValueError: a readout is none of these, or ``agent`` is not one of :data:`LEARNERS`.
     """
     readouts = task["readouts"]
     for readout in readouts:
@@ -242,7 +240,8 @@ def _check_readout(readout: Any) -> None:
     if ok and readout[0] == "log":
         ok = len(readout) == 2
     elif ok and readout[0] == "continue":
-        ok = len(readout) == 4 and readout[2] in SETTINGS and _whole(readout[3])
+        ok = len(readout) == 4 and isinstance(readout[2], str) and readout[2] in SETTINGS
+        ok = ok and _whole(readout[3])
     else:
         ok = False
     if not ok:
@@ -253,6 +252,7 @@ def _check_readout(readout: Any) -> None:
 
 
 def _whole(value: Any) -> bool:
+    """Whether ``value`` is an integer (not a bool) of at least 1."""
     return isinstance(value, int) and not isinstance(value, bool) and value >= 1
 
 

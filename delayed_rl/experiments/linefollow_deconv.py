@@ -39,8 +39,6 @@ Whichever way they fall, the numbers are in the report and in ``summary.json``.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
 from delayed_rl._validation import check_choice
@@ -59,17 +57,6 @@ from delayed_rl.experiments.runner import Config, Curve, Experiment, SharedRun, 
 #: The learners compared.
 AGENTS = ("MMQ", "DeconvQ learned", "Q")
 QUICK_STEPS, STEPS = 5_000, 150_000
-
-
-def make_agent(kind: str, seed: int) -> Any:
-    """One of :data:`AGENTS` on a fresh ``linefollow`` env (:func:`.linefollow.make_agent`).
-
-    Raises:
-        TypeError: ``kind`` is not a string.
-        ValueError: ``kind`` is not one of :data:`AGENTS`.
-    """
-    check_choice("kind", kind, AGENTS)
-    return linefollow.make_agent(kind, linefollow.line_env(), seed)
 
 
 def tasks(config: Config) -> list[dict]:

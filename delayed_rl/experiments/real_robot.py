@@ -66,7 +66,6 @@ from __future__ import annotations
 
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 
 from delayed_rl._validation import check_choice
@@ -103,16 +102,6 @@ ERROR_RATIO_TOLERANCE = 0.25
 _COLOURS = {"MMQ": "C0", "Q": "C1", "DeconvQ learned": "C2"}
 
 
-def real_env(reward_delay: float | None = linefollow.LAM, **kwargs: Any) -> gym.Env:
-    """The stand-in robot: ``EPuckLineFollowReal-v0`` in ``linefollow``'s setting, delay λ.
-
-    Args:
-        reward_delay: the Poisson mean λ of the reward delay (``None``: undelayed).
-        **kwargs: other ``EPuckLineFollow`` arguments, overriding the real configuration's.
-    """
-    return linefollow.line_env(reward_delay, env_id=REAL_ENV_ID, **kwargs)
-
-
 def tasks(config: Config) -> list[dict]:
     """Per seed, one task per agent: pretraining, then the real and the control runs."""
     pretrain = config.steps or (QUICK_PRETRAIN_STEPS if config.quick else PRETRAIN_STEPS)
@@ -127,8 +116,7 @@ def run_task(task: dict) -> dict:
         ``{"real": ..., "control": ...}`` (:func:`.linefollow.run_metrics`'s metrics) and
         ``pretrain_seconds``, the wall time of the pretraining.
     """
-    run = shared_run(task)
-    return run.view(run.run(run.task))
+    return shared_run(task).alone()
 
 
 def shared_run(task: dict) -> SharedRun:

@@ -165,17 +165,20 @@ class SharedRun(NamedTuple):
 
     **Pooled runs.** With ``pooled`` the name of a list in ``task`` (its *items*: say, the
     steps at which a training run is read), runs of the same function whose tasks differ only
-    in that list are one run, on the union of their items (each once, in the order of their
-    canonical JSON). ``run`` then returns a dict whose entry ``pooled`` holds one result per
-    item of the task it was given, in that task's order; each task sees the result it would
-    have had alone: that list cut down to its own items, in its own order (then its ``view``).
-    So one experiment's run can extend another's, e.g. a 500k-step training run that a second
-    experiment reads at 150k steps, instead of both training from scratch.
+    in that list are one run, on the union of their items (each once, sorted by their canonical
+    JSON). ``run`` then returns a dict whose entry ``pooled`` holds one result per item of the
+    task it was given, in that task's order; each task sees the result it would have had alone:
+    that list cut down to its own items, in its own order (then its ``view``). So one
+    experiment's run can extend another's, e.g. a 500k-step training run that a second
+    experiment reads at 150k steps, instead of both training from scratch. For that to hold,
+    an item's result must not depend on which other items the run has, nor on their order, and
+    the result's other entries must not depend on the items at all.
 
     Attributes:
         run: a picklable top-level function of one task, returning the run's result.
         task: what ``run`` is called with (JSON-like: its canonical form is the run's identity).
-        view: picks the task's result out of the run's (``None``: the whole result).
+        view: picks the task's result out of the run's (``None``: the whole result); with
+            ``pooled``, out of the task's own part of it.
         pooled: the name of the list in ``task`` whose items runs pool (``None``: none).
     """
 
@@ -183,6 +186,11 @@ class SharedRun(NamedTuple):
     task: dict
     view: Callable[[dict], dict] | None = None
     pooled: str | None = None
+
+    def alone(self) -> dict:
+        """The task's result from a run of its own, in this process: ``view(run(task))``."""
+        result = self.run(self.task)
+        return result if self.view is None else self.view(result)
 
 
 def default_cost(task: dict) -> float:

@@ -20,7 +20,8 @@ seed.
 Each summary's ``extra`` records what the experiment cost:
 
 - ``run_seconds``: the core-seconds of its runs, as timed in the workers (a run it shares with
-  another experiment counts in full in each);
+  another experiment counts in full in each, a pooled run too: an experiment whose run another
+  extends counts the longer run);
 - ``runs``: how many distinct runs it needed, ``shared_runs`` how many of them another of the
   experiments run together also needed;
 - ``wall_time_s``: seconds from the start until its summary was made (run alone: the
@@ -75,7 +76,7 @@ def run_key(run: SharedRun) -> str:
             f"{function!r}"
         )
     try:
-        task = json.dumps(run.task, sort_keys=True, default=_json_default)
+        task = _canonical(run.task)
     except (TypeError, ValueError) as error:
         raise ValueError(f"the task {run.task!r} of {name} is not JSON-like: {error}") from None
     return f"{function.__module__}.{name}:{task}"
@@ -91,8 +92,9 @@ def pool_key(run: SharedRun) -> str:
             of that name is not a list.
         ValueError: as :func:`run_key`; or the task has no entry named ``run.pooled``.
     """
+    whole = run_key(run)  # the items too must be JSON-like
     if run.pooled is None:
-        return run_key(run)
+        return whole
     _items(run)
     rest = {name: value for name, value in run.task.items() if name != run.pooled}
     return f"{run_key(run._replace(task=rest))} pooling {run.pooled}"
@@ -110,8 +112,9 @@ def _items(run: SharedRun) -> list:
     return items
 
 
-def _canonical(item: Any) -> str:
-    return json.dumps(item, sort_keys=True, default=_json_default)
+def _canonical(value: Any) -> str:
+    """``value`` in canonical JSON (keys sorted): what tells tasks and pooled items apart."""
+    return json.dumps(value, sort_keys=True, default=_json_default)
 
 
 def _pooled(runs: Sequence[SharedRun]) -> SharedRun:
@@ -133,12 +136,13 @@ def _own_result(run: SharedRun, pooled: SharedRun, result: dict) -> dict:
     if run.pooled is None:
         return result
     items = pooled.task[run.pooled]
-    parts = result.get(run.pooled) if isinstance(result, dict) else None
-    if not isinstance(parts, list) or len(parts) != len(items):
+    parts = result.get(run.pooled) if isinstance(result, dict) else result
+    if not isinstance(result, dict) or not isinstance(parts, list) or len(parts) != len(items):
+        got = f"{type(parts).__name__}" + (f" of {len(parts)}" if isinstance(parts, list) else "")
         raise ValueError(
             f"a pooled run must return a dict whose {run.pooled!r} holds one result per item "
-            f"({len(items)}), got {type(parts).__name__}"
-            + ("" if not isinstance(parts, list) else f" of {len(parts)}")
+            f"({len(items)}); {run_key(pooled)} returned "
+            + (got if isinstance(result, dict) else f"a {type(result).__name__}, not a dict")
         )
     where = {_canonical(item): index for index, item in enumerate(items)}
     own = [parts[where[_canonical(item)]] for item in run.task[run.pooled]]
