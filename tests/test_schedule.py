@@ -161,26 +161,22 @@ def not_a_dict(task: dict) -> list:
     return [task["x"]] * len(task["powers"])
 
 
-def test_a_pooled_run_must_return_a_dict():
-    experiment = _powers_experiment("bare", [{"x": 2, "powers": [1, 2]}])
-    experiment.shared_run = lambda task: SharedRun(not_a_dict, task, None, "powers")
-    with pytest.raises(
-        ValueError, match=r"test_schedule\.not_a_dict.* returned a list, not a dict"
-    ):
-        run_experiment(experiment, Config(workers=1), progress=False)
-
-
 def broken_powers(task: dict) -> dict:
     """A pooled run that returns one result too few."""
     return {"powers": [task["x"]] * (len(task["powers"]) - 1)}
 
 
-def test_a_pooled_run_must_return_one_result_per_item():
+@pytest.mark.parametrize(
+    ("run", "message"),
+    [
+        (not_a_dict, r"test_schedule\.not_a_dict.* returned a list, not a dict"),
+        (broken_powers, r"one result per item \(2\); .*broken_powers.* returned list of 1"),
+    ],
+)
+def test_a_pooled_run_must_return_a_dict_with_one_result_per_item(run, message):
     experiment = _powers_experiment("broken", [{"x": 2, "powers": [1, 2]}])
-    experiment.shared_run = lambda task: SharedRun(broken_powers, task, None, "powers")
-    with pytest.raises(
-        ValueError, match=r"one result per item \(2\); .*broken_powers.* returned list of 1"
-    ):
+    experiment.shared_run = lambda task: SharedRun(run, task, None, "powers")
+    with pytest.raises(ValueError, match=message):
         run_experiment(experiment, Config(workers=1), progress=False)
 
 

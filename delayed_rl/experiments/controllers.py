@@ -35,7 +35,6 @@ from delayed_rl.experiments.linefollow import (
     LAM,
     LAMBDA_MAX,
     line_env,
-    line_error,
     line_statistics,
 )
 from delayed_rl.experiments.runner import (
@@ -44,7 +43,6 @@ from delayed_rl.experiments.runner import (
     Experiment,
     SharedRun,
     Summary,
-    running_average,
 )
 
 RUN_STEPS = 1700
@@ -107,14 +105,7 @@ def run_task(task: dict) -> dict:
     if not name.startswith("P "):
         return shared_run(task).alone()
     rewards, centroids = _run_proportional(name != "P undelayed", steps, seed)
-    points, curve = running_average(rewards)
-    return {
-        "steps": points,
-        "curve": curve,
-        "average": float(rewards.mean()),
-        "total_error": float(line_error(centroids).sum()),
-        "visible": float(np.mean(centroids != 0)),
-    }
+    return _metrics({"undelayed_reward": rewards, "obs": centroids})
 
 
 def shared_run(task: dict) -> SharedRun | None:
@@ -134,10 +125,17 @@ def shared_run(task: dict) -> SharedRun | None:
 
 def _continuation_metrics(result: dict) -> dict:
     """A learner's run's metrics, as :func:`run_task` returns them, from its training run."""
-    continuation = linefollow.only_readout(result)
-    return {
-        key: continuation[key] for key in ("steps", "curve", "average", "total_error", "visible")
-    }
+    return _pick(linefollow.only_readout(result))
+
+
+def _metrics(log: dict) -> dict:
+    """A run's metrics, as :func:`run_task` returns them, from its undelayed rewards and states."""
+    return _pick(linefollow.run_metrics(log))
+
+
+def _pick(metrics: dict) -> dict:
+    """The entries of :func:`.linefollow.run_metrics`' result that a controller's run reports."""
+    return {key: metrics[key] for key in ("steps", "curve", "average", "total_error", "visible")}
 
 
 def cost(task: dict) -> float:
