@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from delayed_rl import _portable_math as portable_math
 from delayed_rl._validation import check_int, check_real
 
 __all__ = [
@@ -229,14 +230,22 @@ class Poisson(Delay):
         return AliasTable(self.pmf(np.arange(end))) if end <= self.MAX_TABLE else None
 
     def pmf(self, k):
-        """``λ^k e^{-λ} / k!`` (computed in log space), 0 for negative ``k``; vectorised."""
+        """``λ^k e^{-λ} / k!`` (computed in log space), 0 for negative ``k``; vectorised.
+
+        The logarithms and exponentials are :mod:`delayed_rl._portable_math`'s, so the values
+        (and every alias table and credit weight made from them) have the same bits on every CPU.
+        """
         k = np.asarray(k)
         if self.lam == 0.0:
             out = (k == 0).astype(float)
         else:
             safe_k = np.where(k >= 0, k, 0).astype(float)
-            log_p = safe_k * math.log(self.lam) - self.lam - _log_factorial(safe_k)
-            out = np.where(k >= 0, np.exp(log_p), 0.0)
+            log_p = (
+                safe_k * portable_math.log(self.lam)
+                - self.lam
+                - portable_math.log_factorial(safe_k)
+            )
+            out = np.where(k >= 0, portable_math.exp_array(log_p), 0.0)
         return float(out) if out.ndim == 0 else out
 
     @property
@@ -296,7 +305,7 @@ class Geometric(Delay):
         ValueError: ``p`` is outside ``[MIN_P, 1]`` or NaN.
     """
 
-    MIN_P = -math.log(_TAIL) / MAX_DELAY
+    MIN_P = -portable_math.log(_TAIL) / MAX_DELAY
     """The smallest ``p`` (about 5e-18): below it a delay passes ``MAX_DELAY`` with probability
     above 1e-20 (numpy would clip it there, distorting the distribution)."""
 
@@ -310,9 +319,10 @@ class Geometric(Delay):
         return self._finish(rng.geometric(self.p, size) - 1, size)
 
     def pmf(self, k):
-        """``p (1 − p)^k`` for ``k >= 0``, else 0; vectorised."""
+        """``p (1 − p)^k`` for ``k >= 0``, else 0; vectorised (the power by repeated squaring)."""
         k = np.asarray(k)
-        out = np.where(k >= 0, self.p * (1.0 - self.p) ** np.where(k >= 0, k, 0), 0.0)
+        power = portable_math.integer_power(1.0 - self.p, np.where(k >= 0, k, 0))
+        out = np.where(k >= 0, self.p * power, 0.0)
         return float(out) if out.ndim == 0 else out
 
     @property
@@ -422,11 +432,6 @@ class Empirical(Delay):
 
     def __repr__(self) -> str:
         return f"Empirical(pmf={self.probs.tolist()!r})"
-
-
-def _log_factorial(k: np.ndarray) -> np.ndarray:
-    """``log(k!)`` elementwise, as ``lgamma(k + 1)``."""
-    return np.vectorize(lambda x: math.lgamma(x + 1.0), otypes=[float])(k)
 
 
 _DELAY_TYPES: dict[str, type[Delay]] = {

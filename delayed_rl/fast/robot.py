@@ -32,13 +32,13 @@ from __future__ import annotations
 
 import contextlib
 import itertools
-import math
 import warnings
 from collections.abc import Iterator
 from typing import Any, NamedTuple
 
 import numpy as np
 
+from delayed_rl import _portable_math as portable_math
 from delayed_rl.envs.linefollow import _chipmunk, _kernels
 from delayed_rl.envs.linefollow.camera import CENTRE_PIXEL, line_centroid
 from delayed_rl.envs.linefollow.env import MAX_WHEEL_SPEED, WHEEL_SPEED_ACTIONS, EPuckLineFollowEnv
@@ -95,8 +95,6 @@ class Robot(NamedTuple):
         camera: the camera's packed geometry.
         track_floats: the track's packed geometry.
         track_ints: the track's packed grid.
-        fused_products: numpy's rounding of complex products.
-        complex_abs: numpy's rounding of complex absolute values.
         draws: the env's per-pixel uniform draws of a reading (contrast, then noise).
         pixels: the env's last camera reading.
         generator: the env's ``np_random``.
@@ -111,8 +109,6 @@ class Robot(NamedTuple):
     camera: np.ndarray
     track_floats: np.ndarray
     track_ints: np.ndarray
-    fused_products: bool
-    complex_abs: int
     draws: np.ndarray
     pixels: np.ndarray
     generator: np.random.Generator
@@ -164,7 +160,7 @@ class RobotLink:
         """
         env = self.env
         # (checked each call: an env unpickled on another machine may not have them)
-        camera, track_floats, track_ints, fused, complex_abs, draws, pixels = _compiled_reading(env)
+        camera, track_floats, track_ints, draws, pixels = _compiled_reading(env)
         key = next(_KEYS)
         live, counters = np.zeros(5), np.zeros(3, np.int64)
         _load(env, live, counters)
@@ -197,8 +193,6 @@ class RobotLink:
             camera,
             track_floats,
             track_ints,
-            bool(fused),
-            int(complex_abs),
             draws,
             pixels,
             env.np_random,
@@ -215,8 +209,7 @@ def _compiled_reading(env: EPuckLineFollowEnv) -> tuple:
     """The env's compiled camera arguments; refuses an env whose physics or camera is not compiled.
 
     Raises:
-        NotCompilable: numba cannot call its Chipmunk functions, or its camera's kernels do not
-            mirror this numpy's rounding.
+        NotCompilable: numba cannot call its Chipmunk functions here, or is missing.
     """
     reading = env._reading_arguments()
     if env.robot._driver[0] is _chipmunk.drive_python or reading is None:
@@ -271,19 +264,18 @@ def _read(robot, x, y, heading):
     if noise > 0:
         for i in range(draws.shape[1]):
             draws[1, i] = robot.generator.random()
+    sin, cos = portable_math.sincos(heading)
     m, s, lateral, segment = _kernels.observe(
         x,
         y,
-        math.cos(heading),
-        math.sin(heading),
+        cos,
+        sin,
         counters[_SEGMENT],
         contrast,
         noise,
         robot.camera,
         robot.track_floats,
         robot.track_ints,
-        robot.fused_products,
-        robot.complex_abs,
         draws,
         robot.pixels,
     )

@@ -14,8 +14,9 @@ bit:
 - :func:`drive` on :func:`handles`: all the sub-steps of a robot step, and the pose read after
   them, in one compiled (numba) loop that calls the C functions by address. The
   differential-drive arithmetic between the calls is the same expressions, compiled without
-  reassociation or fused operations, and compiled ``math.cos``/``math.sin`` are libm's, like
-  Python's. Only on platforms where a ``cpVect`` argument or result (a struct of two doubles)
+  reassociation or fused operations, and the heading's sine and cosine are
+  :func:`delayed_rl._portable_math.sincos`'s on both routes (the same bits compiled or not, on
+  every CPU; the C library's ``sin`` and ``cos`` pick a variant by CPU). Only on platforms where a ``cpVect`` argument or result (a struct of two doubles)
   is passed exactly like two doubles (the System V x86-64 and AArch64 conventions of Linux and
   macOS), and only once :func:`enabled` has checked, on a space like the robot's, that it ends
   in exactly the state :func:`drive_python` does.
@@ -24,7 +25,6 @@ bit:
 from __future__ import annotations
 
 import functools
-import math
 import platform
 import sys
 from typing import Any, NamedTuple
@@ -33,6 +33,7 @@ import numpy as np
 import pymunk
 from numpy.typing import NDArray
 
+from delayed_rl import _portable_math as portable_math
 from delayed_rl.fast._numba import HAVE_NUMBA, entry_point, jit
 
 __all__ = [
@@ -150,15 +151,15 @@ def drive_python(
         ``(wl, wr, x, y, heading)``: the final (lagged) wheel speeds and the body's pose.
     """
     body, control, space, get_position, get_angle, set_velocity, set_angular_velocity, step = calls
-    cos, sin = math.cos, math.sin
+    sincos = portable_math.sincos
     v, w = body_velocity(wl, wr, sl, sr, metres_per_step, axle)  # without lag: throughout
     for _ in range(substeps):
         if lagged:
             wl += (v_left - wl) * gain
             wr += (v_right - wr) * gain
             v, w = body_velocity(wl, wr, sl, sr, metres_per_step, axle)
-        angle = get_angle(body)
-        set_velocity(control, (v * cos(angle), v * sin(angle)))
+        sin, cos = sincos(get_angle(body))
+        set_velocity(control, (v * cos, v * sin))
         set_angular_velocity(control, w)
         step(space, dt)
     position = get_position(body)
@@ -245,8 +246,8 @@ def drive(
             wl += (v_left - wl) * gain
             wr += (v_right - wr) * gain
             v, w = _compiled_body_velocity(wl, wr, sl, sr, metres_per_step, axle)
-        angle = _get_angle(get_angle, body)
-        _set_velocity(set_velocity, control, v * math.cos(angle), v * math.sin(angle))
+        sin, cos = portable_math.sincos(_get_angle(get_angle, body))
+        _set_velocity(set_velocity, control, v * cos, v * sin)
         _set_scalar(set_angular_velocity, control, w)
         _set_scalar(step_space, space, dt)
     x, y = _get_position(get_position, body)
@@ -316,7 +317,7 @@ def enabled() -> bool:
             end = run(calls, left, right, wl, wr, 0.3, True, 0.93, 0.98, 5, 0.016, 2e-4, 0.05)
             wl, wr = end[:2]
         ends.append(repr((end, body.velocity, body.angular_velocity)))
-    return ends[0] == ends[1] and _same_trigonometry()
+    return ends[0] == ends[1]
 
 
 def _trial_space() -> tuple[pymunk.Space, pymunk.Body, pymunk.Body]:
@@ -331,19 +332,3 @@ def _trial_space() -> tuple[pymunk.Space, pymunk.Body, pymunk.Body]:
         joint.max_bias, joint.max_force = 0.0, force
     space.add(body, control, pivot, gear)
     return space, body, control
-
-
-def _same_trigonometry() -> bool:
-    """Whether compiled ``math.cos``/``math.sin`` give Python's bits on sample angles."""
-    angles = np.random.default_rng(5).normal(0.0, 4.0, 256)
-    expected = np.array([[math.cos(a), math.sin(a)] for a in angles.tolist()])
-    return _trigonometry(angles).tobytes() == expected.tobytes()
-
-
-@jit
-def _trigonometry(angles):
-    """``(n, 2)``: the cosine and sine of each angle, compiled."""
-    out = np.empty((len(angles), 2))
-    for i in range(len(angles)):
-        out[i, 0], out[i, 1] = math.cos(angles[i]), math.sin(angles[i])
-    return out

@@ -32,12 +32,12 @@ m = 0 when no pixel sees the line.
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from delayed_rl import _portable_math as portable_math
 from delayed_rl._validation import check_real
 from delayed_rl.envs.linefollow import _kernels
 from delayed_rl.envs.linefollow.track import CELL_SIZE, Track
@@ -156,32 +156,35 @@ class Camera:
 
     def _scanline(
         self, x: float, y: float, heading: float
-    ) -> tuple[NDArray[np.complex128], complex]:
-        """The sample points (complex x + iy) and the scanline's centre."""
-        forward = complex(math.cos(heading), math.sin(heading))
-        centre = complex(x, y) + self.look_ahead * forward
-        return centre + self.offsets * (1j * forward), centre  # 1j·forward points left
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], float, float]:
+        """``(xs, ys, cx, cy)``: the sample points' coordinates and the scanline's centre.
+
+        The centre is ``look_ahead`` ahead, ``(x + look_ahead·cos, y + look_ahead·sin)``, and
+        pixel i is ``offsets[i]`` to its left, along ``(−sin, cos)``; the heading's sine and
+        cosine are :func:`delayed_rl._portable_math.sincos`'s (the same bits on every CPU).
+        """
+        sin, cos = portable_math.sincos(float(heading))
+        cx, cy = float(x) + self.look_ahead * cos, float(y) + self.look_ahead * sin
+        return cx + self.offsets * -sin, cy + self.offsets * cos, cx, cy
 
     def sample_points(self, x: float, y: float, heading: float) -> NDArray[np.float64]:
         """World coordinates ``(40, 2)`` of the pixels' sample points for a robot pose."""
-        points = self._scanline(x, y, heading)[0]
-        return np.column_stack([points.real, points.imag])
+        xs, ys, _, _ = self._scanline(x, y, heading)
+        return np.column_stack([xs, ys])
 
     def read(self, track: Track, x: float, y: float, heading: float) -> NDArray[np.bool_]:
         """Which of the 40 pixels see the line, for a robot at (x, y) facing ``heading`` (rad)."""
-        rounding = _kernels.numpy_rounding()
-        if rounding is None:
+        if not _kernels.enabled():
             return self._read_numpy(track, x, y, heading)
         out = np.empty(N_PIXELS, dtype=bool)
-        x, y = float(x), float(y)
-        cos, sin = math.cos(heading), math.sin(heading)
-        _kernels.read_camera(x, y, cos, sin, self._packed, *track._packed, *rounding, out)
+        sin, cos = portable_math.sincos(float(heading))
+        _kernels.read_camera(float(x), float(y), cos, sin, self._packed, *track._packed, out)
         return out
 
     def _read_numpy(self, track: Track, x: float, y: float, heading: float) -> NDArray[np.bool_]:
         """:meth:`read` in numpy: the reference the compiled version mirrors."""
-        points, centre = self._scanline(x, y, heading)
-        return track._near_line_numpy(points, 0.5 * self.line_width, centre)
+        xs, ys, cx, cy = self._scanline(x, y, heading)
+        return track._near_line_numpy(xs, ys, 0.5 * self.line_width, cx, cy)
 
     def __repr__(self) -> str:
         return (

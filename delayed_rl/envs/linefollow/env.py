@@ -12,6 +12,7 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import ArrayLike, NDArray
 
+from delayed_rl import _portable_math as portable_math
 from delayed_rl._validation import (
     check_choice,
     check_fraction,
@@ -522,11 +523,12 @@ class EPuckLineFollowEnv(gym.Env):
             s, self._lateral, self._segment = track.locate(x, y, self._segment)
             m = line_centroid(pixels)
         else:
+            sin, cos = portable_math.sincos(heading)
             m, s, self._lateral, self._segment = self._observe(
                 x,
                 y,
-                math.cos(heading),
-                math.sin(heading),
+                cos,
+                sin,
                 self._segment,
                 self.line_contrast,
                 self.camera_noise,
@@ -561,13 +563,11 @@ class EPuckLineFollowEnv(gym.Env):
     def _compiled_arguments(self, track: Track) -> tuple | None:
         """The arguments of :func:`_kernels.observe` after the pose, hint and noise, or None.
 
-        None when the kernels are not in use (numba missing, or numpy rounding in a way they do
-        not mirror): the env then reads with numpy.
+        None when the kernels are not in use (numba is missing): the env then reads with numpy.
         """
-        rounding = _kernels.numpy_rounding()
-        if rounding is None:
+        if not _kernels.enabled():
             return None
-        return (self.camera._packed, *track._packed, *rounding, self._draws, self._pixels)
+        return (self.camera._packed, *track._packed, self._draws, self._pixels)
 
     def _obs_info(
         self,
@@ -599,8 +599,8 @@ class EPuckLineFollowEnv(gym.Env):
     def __getstate__(self) -> dict[str, Any]:
         """The env's state without the compiled reading's arguments.
 
-        They hold this process's view of numpy's rounding; a copy or an unpickled env (perhaps
-        in another process or on another machine) makes its own at its first reading.
+        They hold a compiled function of this process; a copy or an unpickled env (perhaps in
+        another process) makes its own at its first reading.
         """
         state = self.__dict__.copy()
         state["_compiled_track"] = state["_compiled"] = state["_observe"] = None

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from delayed_rl import _portable_math as portable_math
 from delayed_rl._validation import check_int
 from delayed_rl.envs.linefollow.camera import Camera
 from delayed_rl.envs.linefollow.robot import BODY_RADIUS
@@ -109,7 +110,8 @@ class Renderer:
         self._stamp(frame, body, BODY_RADIUS * self.scale, ROBOT_EDGE)
         self._stamp(frame, body, BODY_RADIUS * self.scale - 1.5, ROBOT)
         nose = np.linspace(0.0, 0.8 * BODY_RADIUS, 8)
-        direction = np.array([np.cos(heading), np.sin(heading)])
+        sin, cos = portable_math.sincos(float(heading))
+        direction = np.array([cos, sin])
         self._stamp(frame, body + nose[:, None] * direction, 1.2, ROBOT_EDGE)
         samples = self.camera.sample_points(x, y, heading)
         seen = np.asarray(pixels, dtype=bool)

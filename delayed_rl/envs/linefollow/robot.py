@@ -38,6 +38,7 @@ from typing import Any
 
 import pymunk
 
+from delayed_rl import _portable_math as portable_math
 from delayed_rl._validation import check_real
 from delayed_rl.envs.linefollow import _chipmunk
 
@@ -87,7 +88,9 @@ class EPuckRobot:
         self.motor_lag = check_real("motor_lag", motor_lag, 0.0, note=" (s)")
         #: Fraction of the gap to the commanded speed closed per sub-step.
         self._lag_gain = (
-            1.0 if self.motor_lag == 0 else 1.0 - math.exp(-self.physics_dt / self.motor_lag)
+            1.0
+            if self.motor_lag == 0
+            else 1.0 - portable_math.exp(-self.physics_dt / self.motor_lag)
         )
         #: Current (lagged) wheel speeds (steps/s).
         self.wheel_speeds = (0.0, 0.0)

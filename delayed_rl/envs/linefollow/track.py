@@ -35,12 +35,14 @@ is refused at construction, before anything is allocated.
 from __future__ import annotations
 
 import functools
+import math
 import numbers
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from delayed_rl import _portable_math as portable_math
 from delayed_rl._validation import check_bool, check_choice, check_int, check_real
 from delayed_rl.envs.linefollow import _kernels
 
@@ -147,9 +149,11 @@ def corner_angles(points: ArrayLike) -> FloatArray:
         points: ``(n, 2)`` vertices of a closed polyline (the closing segment is implied).
     """
     p = _as_points(points)
-    z = p[:, 0] + 1j * p[:, 1]
-    d = np.roll(z, -1) - z
-    return np.degrees(np.abs(np.angle(d / np.roll(d, 1))))
+    d = np.roll(p, -1, axis=0) - p
+    before = np.roll(d, 1, axis=0)
+    cross = before[:, 0] * d[:, 1] - before[:, 1] * d[:, 0]
+    dot = before[:, 0] * d[:, 0] + before[:, 1] * d[:, 1]
+    return np.degrees(np.abs(portable_math.atan2_array(cross, dot)))
 
 
 def _segment_crossings(a0: FloatArray, a1: FloatArray, b0: FloatArray, b1: FloatArray) -> Any:
@@ -258,6 +262,22 @@ def _uniform_resample(points: FloatArray, spacing: float) -> FloatArray:
     )
 
 
+def _offsets(x: Any, y: Any, a: NDArray, d: NDArray, inv: FloatArray) -> tuple[Any, Any, Any]:
+    """``(t, er, ei)``: the projections of (x, y) on segments ``a → a + d`` and the offsets from them.
+
+    ``t = clip((wr·dr + wi·di) · inv, 0, 1)`` with ``w = (x, y) − a`` (0 for −0.0 too, NaN
+    stays), ``e = w − t·d``: real operations only, in the order of ``_kernels._offset_from_segment``,
+    so the numpy reference and the compiled queries agree to the bit on every CPU. ``x`` and
+    ``y`` broadcast against the segments.
+    """
+    dr, di = d.real, d.imag
+    wr, wi = x - a.real, y - a.imag
+    t = (wr * dr + wi * di) * inv
+    t = np.where(t <= 0.0, 0.0, t)
+    t = np.where(t > 1.0, 1.0, t)
+    return t, wr - t * dr, wi - t * di
+
+
 class Track:
     """A closed line on the floor: a dense centreline polyline plus a spatial index.
 
@@ -300,13 +320,13 @@ class Track:
         self.name = name
         self.allow_crossings = allow_crossings
         self.points = p
-        z = p[:, 0] + 1j * p[:, 1]  # complex coordinates keep the per-step queries short
+        z = p[:, 0] + 1j * p[:, 1]  # complex storage; the queries compute on its real parts
         d = np.roll(z, -1) - z
-        seg_len = np.abs(d)
+        seg_len = np.sqrt(d.real * d.real + d.imag * d.imag)
         self._a = z  # segment i runs from _a[i] to _a[i] + _d[i]
         self._d = d
         self._seg_len = seg_len
-        self._inv_len2 = 1.0 / np.maximum(seg_len**2, 1e-300)
+        self._inv_len2 = 1.0 / np.maximum(seg_len * seg_len, 1e-300)
         self._s0 = np.concatenate([[0.0], np.cumsum(seg_len)[:-1]])
         self.length = float(seg_len.sum())
         self.min_turn_radius = (
@@ -494,44 +514,36 @@ class Track:
         Returns:
             ``(k,)`` booleans.
         """
-        rounding = _kernels.numpy_rounding()
-        if rounding is None:
-            return self._near_line_numpy(points, half_width, centre)
-        points = np.ascontiguousarray(points, dtype=np.complex128)
+        points = np.asarray(points, dtype=np.complex128)
         if points.ndim != 1:
             raise ValueError(f"points must be a (k,) array of x + iy, got shape {points.shape}")
-        out = np.empty(len(points), dtype=bool)
         centre = complex(centre)
-        _kernels.near_line(
-            points, float(half_width), centre.real, centre.imag, *self._packed, *rounding, out
-        )
+        xs, ys = np.ascontiguousarray(points.real), np.ascontiguousarray(points.imag)
+        if not _kernels.enabled():
+            return self._near_line_numpy(xs, ys, half_width, centre.real, centre.imag)
+        out = np.empty(len(points), dtype=bool)
+        _kernels.near_line(xs, ys, float(half_width), centre.real, centre.imag, *self._packed, out)
         return out
 
     def _near_line_numpy(
-        self, points: NDArray[np.complex128], half_width: float, centre: complex
+        self, xs: FloatArray, ys: FloatArray, half_width: float, cx: float, cy: float
     ) -> Any:
-        """:meth:`near_line` in numpy: the reference the compiled version mirrors."""
-        cell = self._cell(centre.real, centre.imag)
+        """:meth:`near_line` in numpy, on the points' coordinates and the centre's: the reference."""
+        cell = self._cell(cx, cy)
         if cell.start == cell.stop:
-            return np.zeros(len(points), dtype=bool)
-        w = points[:, None] - self._cell_a[cell]
-        d = self._cell_d[cell]
-        t = (w * d.conjugate()).real * self._cell_inv[cell]
-        np.maximum(t, 0.0, out=t)
-        np.minimum(t, 1.0, out=t)
-        w -= t * d
-        return (np.abs(w) <= half_width).any(axis=1)
+            return np.zeros(len(xs), dtype=bool)
+        _, er, ei = _offsets(
+            xs[:, None], ys[:, None], self._cell_a[cell], self._cell_d[cell], self._cell_inv[cell]
+        )
+        return (np.sqrt(er * er + ei * ei) <= half_width).any(axis=1)
 
     def _nearest(
-        self, z: complex, a: NDArray, d: NDArray, inv: NDArray
-    ) -> tuple[int, float, complex]:
-        w = z - a
-        t = (w * d.conjugate()).real * inv
-        np.maximum(t, 0.0, out=t)
-        np.minimum(t, 1.0, out=t)
-        w -= t * d
-        k = int(np.argmin(w.real * w.real + w.imag * w.imag))
-        return k, float(t[k]), complex(w[k])
+        self, x: float, y: float, a: NDArray, d: NDArray, inv: NDArray
+    ) -> tuple[int, float, float, float]:
+        """``(k, t, er, ei)``: the first nearest of the segments, as ``_kernels._nearest``."""
+        t, er, ei = _offsets(x, y, a, d, inv)
+        k = int(np.argmin(er * er + ei * ei))
+        return k, float(t[k]), float(er[k]), float(ei[k])
 
     def locate(self, x: float, y: float, hint: int | None = None) -> tuple[float, float, int]:
         """The nearest centreline point to (x, y).
@@ -555,37 +567,36 @@ class Track:
         n = len(self._a)
         if hint is not None and not (isinstance(hint, numbers.Integral) and 0 <= hint < n):
             raise ValueError(f"hint must be None or a segment in 0..{n - 1}, got {hint!r}")
-        rounding = _kernels.numpy_rounding()
-        if rounding is None:
-            return self._locate_numpy(x, y, hint)
+        if not _kernels.enabled():
+            return self._locate_numpy(float(x), float(y), hint)
         hint = -1 if hint is None else int(hint)
-        return _kernels.locate(float(x), float(y), hint, *self._packed, rounding.fused_products)
+        return _kernels.locate(float(x), float(y), hint, *self._packed)
 
     def _locate_numpy(self, x: float, y: float, hint: int | None) -> tuple[float, float, int]:
         """:meth:`locate` in numpy: the reference the compiled version mirrors."""
-        z = complex(x, y)
         n = len(self._a)
         seg = -1
         if hint is not None:
             window = slice(hint, hint + 2 * LOCAL_WINDOW + 1)
-            k, t, e = self._nearest(
-                z, self._pad_a[window], self._pad_d[window], self._pad_inv[window]
+            k, t, er, ei = self._nearest(
+                x, y, self._pad_a[window], self._pad_d[window], self._pad_inv[window]
             )
-            if 0 < k < 2 * LOCAL_WINDOW and abs(e) <= CELL_SIZE:
+            if 0 < k < 2 * LOCAL_WINDOW and math.sqrt(er * er + ei * ei) <= CELL_SIZE:
                 seg = (hint + k - LOCAL_WINDOW) % n
         if seg < 0:
             cell = self._cell(x, y)
             if cell.start == cell.stop:
-                k, t, e = self._nearest(z, self._a, self._d, self._inv_len2)
+                k, t, er, ei = self._nearest(x, y, self._a, self._d, self._inv_len2)
                 seg = k
             else:
-                k, t, e = self._nearest(
-                    z, self._cell_a[cell], self._cell_d[cell], self._cell_inv[cell]
+                k, t, er, ei = self._nearest(
+                    x, y, self._cell_a[cell], self._cell_d[cell], self._cell_inv[cell]
                 )
                 seg = int(self._cell_segs[cell][k])
         d = self._d[seg]
-        cross = d.real * e.imag - d.imag * e.real
-        lateral = abs(e) if cross > 0 else -abs(e) if cross < 0 else 0.0
+        cross = d.real * ei - d.imag * er
+        length = math.sqrt(er * er + ei * ei)
+        lateral = length if cross > 0 else -length if cross < 0 else 0.0
         s = (float(self._s0[seg]) + t * float(self._seg_len[seg])) % self.length
         return s, lateral, seg
 
@@ -593,9 +604,9 @@ class Track:
         """The centreline point at arc length ``s`` (mod length): ``(x, y, heading)``."""
         s = float(s) % self.length
         seg = int(np.searchsorted(self._s0, s, side="right") - 1)
-        z = self._a[seg] + (s - self._s0[seg]) / self._seg_len[seg] * self._d[seg]
-        d = self._d[seg]
-        return float(z.real), float(z.imag), float(np.arctan2(d.imag, d.real))
+        a, d = complex(self._a[seg]), complex(self._d[seg])
+        f = (s - float(self._s0[seg])) / float(self._seg_len[seg])
+        return a.real + f * d.real, a.imag + f * d.imag, portable_math.atan2(d.imag, d.real)
 
     def clearance(self, exclude_arc: float) -> float:
         """Smallest distance between two vertices more than ``exclude_arc`` apart along the track.
@@ -674,10 +685,12 @@ def _bspline_closed(control: ArrayLike, samples_per_span: int = 2000) -> FloatAr
     """A closed uniform cubic B-spline (C² smooth) through-ish the control polygon."""
     c = np.asarray(control, dtype=np.float64)
     u = np.arange(samples_per_span) / samples_per_span
-    b0 = (1 - u) ** 3 / 6
-    b1 = (3 * u**3 - 6 * u**2 + 4) / 6
-    b2 = (-3 * u**3 + 3 * u**2 + 3 * u + 1) / 6
-    b3 = u**3 / 6
+    u2, v = u * u, 1 - u
+    u3 = u2 * u  # products, not np.power (a CPU-dependent SIMD loop)
+    b0 = v * v * v / 6
+    b1 = (3 * u3 - 6 * u2 + 4) / 6
+    b2 = (-3 * u3 + 3 * u2 + 3 * u + 1) / 6
+    b3 = u3 / 6
     spans = [
         b0[:, None] * c[j - 1]
         + b1[:, None] * c[j]
@@ -697,7 +710,8 @@ def _smooth_track(curve: FloatArray, name: str, allow_crossings: bool = False) -
 def oval_track() -> Track:
     """An ellipse with semi-axes 0.75 m × 0.45 m (length 3.8 m, tightest radius 0.27 m)."""
     t = np.linspace(0.0, 2 * np.pi, 16384, endpoint=False)
-    return _smooth_track(np.column_stack([0.75 * np.cos(t), 0.45 * np.sin(t)]), "oval")
+    curve = np.column_stack([0.75 * portable_math.cos_array(t), 0.45 * portable_math.sin_array(t)])
+    return _smooth_track(curve, "oval")
 
 
 #: Control polygon (m) of the racetrack's B-spline: long straights joined by long sweeping turns,
@@ -728,7 +742,7 @@ def racetrack_track() -> Track:
 def figure8_track() -> Track:
     """A figure-eight x = sin t, y = 0.4 sin 2t (m): 2 m wide, crossing itself at the origin."""
     t = np.linspace(0.0, 2 * np.pi, 16384, endpoint=False)
-    curve = np.column_stack([np.sin(t), 0.4 * np.sin(2 * t)])
+    curve = np.column_stack([portable_math.sin_array(t), 0.4 * portable_math.sin_array(2 * t)])
     return _smooth_track(curve, "figure8", allow_crossings=True)
 
 
@@ -791,16 +805,18 @@ def random_track(
     name = "random" if seed is None or isinstance(seed, np.random.Generator) else f"random-{seed}"
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     theta = np.linspace(0.0, 2 * np.pi, 16384, endpoint=False)
+    cos_theta, sin_theta = portable_math.cos_array(theta), portable_math.sin_array(theta)
     k = np.arange(2, harmonics + 1)
     for _ in range(max_tries):
         amp = rng.uniform(0.0, 0.35, size=k.size) / (k - 1)
         phase = rng.uniform(0.0, 2 * np.pi, size=k.size)
         r = mean_radius * (
-            1.0 + (amp[:, None] * np.cos(k[:, None] * theta + phase[:, None])).sum(0)
+            1.0
+            + (amp[:, None] * portable_math.cos_array(k[:, None] * theta + phase[:, None])).sum(0)
         )
         if r.min() <= 0.2 * mean_radius:
             continue
-        curve = np.column_stack([r * np.cos(theta), r * np.sin(theta)])
+        curve = np.column_stack([r * cos_theta, r * sin_theta])
         if turn_radii(curve).min() < min_turn_radius:
             continue
         if _dense_vertices(curve)[1] / SAMPLE_SPACING > MAX_TRACK_VERTICES:

@@ -1,0 +1,178 @@
+"""Short seeded runs whose bits must not depend on the CPU: run as a script, prints their hashes.
+
+``python tests/cpu_probe.py [NAME ...]`` prints one JSON object mapping each run's name to the
+SHA-256 of everything it produced (observations, rewards, ``info``, velocities, Q-tables, delay
+estimates). ``tests/test_cpu_independence.py`` runs it in a subprocess with numpy's SIMD loops
+and numba's host-CPU code turned off and compares the hashes with the same runs in its own
+process.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import sys
+from collections.abc import Callable, Iterable
+
+import gymnasium as gym
+import numpy as np
+
+import delayed_rl  # noqa: F401  (registers the envs)
+from delayed_rl.agents import (
+    DeconvQ,
+    ExpectedCreditQLearning,
+    FixedDelayQLearning,
+    MultipleModelQLearning,
+    OracleQLearning,
+    QLearning,
+)
+from delayed_rl.delays import Poisson
+from delayed_rl.wrappers import PoissonRewardDelay
+
+
+class Digest:
+    """A SHA-256 over values fed to it: arrays by dtype, shape and bytes, the rest as repr."""
+
+    def __init__(self) -> None:
+        self._hash = hashlib.sha256()
+
+    def add(self, value) -> None:
+        """Feed one value (recursing into dicts, lists and tuples)."""
+        if isinstance(value, dict):
+            for key in sorted(value, key=str):
+                self.add(key)
+                self.add(value[key])
+        elif isinstance(value, (list, tuple)):
+            self._hash.update(f"seq{len(value)}".encode())
+            for item in value:
+                self.add(item)
+        elif isinstance(value, (np.ndarray, np.generic, float, int)) and not isinstance(
+            value, bool
+        ):
+            array = np.ascontiguousarray(value)
+            self._hash.update(f"{array.dtype.str}{array.shape}".encode())
+            self._hash.update(array.tobytes())
+        else:
+            self._hash.update(repr(value).encode())
+
+    def hexdigest(self) -> str:
+        """The hash so far."""
+        return self._hash.hexdigest()
+
+
+# ---------------------------------------------------------------------- the e-puck
+EPUCK_CONFIGS: dict[str, dict] = {
+    "epuck-centroid-discrete": {},
+    "epuck-pixels-continuous": {"observation_mode": "pixels", "action_mode": "continuous"},
+    "epuck-centroid-continuous": {"action_mode": "continuous"},
+    "epuck-pixels-discrete-noisy": {
+        "observation_mode": "pixels",
+        "wheel_slip": 0.1,
+        "motor_lag": 0.3,
+        "camera_noise": 0.05,
+        "lost_line": "recover",
+    },
+    "epuck-figure-eight": {"track": "figure8"},
+    "epuck-random-track": {"track": "random", "track_seed": 5, "lost_line": "recover"},
+    "epuck-latency-contrast": {"command_latency": 0.05, "line_contrast": 0.8, "track": "oval"},
+}
+
+
+def epuck_run(kwargs: dict, steps: int = 80, seed: int = 3) -> str:
+    """Random actions on the e-puck: every output of every step, and the body's velocities."""
+    env = gym.make("delayed_rl/EPuckLineFollow-v0", **kwargs)
+    env.action_space.seed(seed)
+    digest = Digest()
+    obs, info = env.reset(seed=seed)
+    digest.add((obs, info))
+    robot = env.unwrapped
+    for _ in range(steps):
+        obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+        digest.add((obs, reward, terminated, truncated, info))
+        digest.add(_velocities(robot))
+        if terminated or truncated:
+            obs, info = env.reset()
+            digest.add((obs, info))
+    env.close()
+    return digest.hexdigest()
+
+
+def _velocities(env) -> tuple:
+    body = env.robot.body
+    return (tuple(body.velocity), body.angular_velocity, tuple(body.position), body.angle)
+
+
+# ---------------------------------------------------------------------- the agents
+def _grid(seed_lam: float = 3.0, record: bool = False) -> gym.Env:
+    return PoissonRewardDelay(
+        gym.make("delayed_rl/GridWorld-5x5-v0"), lam=seed_lam, max_delay=20, record_arrivals=record
+    )
+
+
+AGENTS: dict[str, Callable[[gym.Env], object]] = {
+    "q": lambda env: QLearning(env, q_init=5.0, seed=1),
+    "fixed": lambda env: FixedDelayQLearning(env, delay_estimate=3, q_init=5.0, seed=1),
+    "mmq": lambda env: MultipleModelQLearning(env, max_delay_estimate=8, q_init=5.0, seed=1),
+    "expected-credit": lambda env: ExpectedCreditQLearning(
+        env, delay=Poisson(3.0), max_delay=20, q_init=5.0, seed=1
+    ),
+    "oracle": lambda env: OracleQLearning(env, q_init=5.0, seed=1),
+    "deconv-known": lambda env: DeconvQ(
+        env, delay=Poisson(3.0), max_delay=20, solve_interval=1500, q_init=5.0, seed=1
+    ),
+    "deconv-learned": lambda env: DeconvQ(
+        env, max_delay=20, solve_interval=1500, q_init=5.0, seed=1
+    ),
+}
+
+
+def agent_run(name: str, fused: bool, steps: int = 6000) -> str:
+    """Train one agent briefly on a delayed 5×5 grid world; hash its learned arrays."""
+    env = _grid(record=name == "oracle")
+    agent = AGENTS[name](env)
+    agent.learn(steps, fused=fused)
+    digest = Digest()
+    digest.add(agent.q_table)
+    for attribute in ("delay_pmf", "reward_model", "mean_delay"):
+        value = getattr(agent, attribute, None)
+        if value is not None:
+            digest.add(value)
+    digest.add(agent.predict(np.arange(25), deterministic=True)[0])
+    return digest.hexdigest()
+
+
+def epuck_agent_run(fused: bool, steps: int = 1500) -> str:
+    """MMQ on the delayed e-puck line follower, on either training path."""
+    env = gym.make("delayed_rl/EPuckLineFollow-v0", reward_delay=20)
+    agent = MultipleModelQLearning(env, max_delay_estimate=30, q_init=1.0, seed=2)
+    agent.learn(steps, fused=fused)
+    digest = Digest()
+    digest.add(agent.q_table)
+    digest.add(_velocities(env.unwrapped))
+    return digest.hexdigest()
+
+
+def runs() -> dict[str, Callable[[], str]]:
+    """Every probe run by name."""
+    table: dict[str, Callable[[], str]] = {
+        name: (lambda kwargs=kwargs: epuck_run(kwargs)) for name, kwargs in EPUCK_CONFIGS.items()
+    }
+    for name in AGENTS:
+        for fused in (False, True):
+            path = "compiled" if fused else "python"
+            table[f"{name}-{path}"] = lambda name=name, fused=fused: agent_run(name, fused)
+    for fused in (False, True):
+        path = "compiled" if fused else "python"
+        table[f"epuck-mmq-{path}"] = lambda fused=fused: epuck_agent_run(fused)
+    return table
+
+
+def hashes(names: Iterable[str] | None = None) -> dict[str, str]:
+    """The hash of each named run (all of them by default)."""
+    table = runs()
+    return {name: table[name]() for name in (names or table)}
+
+
+if __name__ == "__main__":
+    json.dump(hashes(sys.argv[1:] or None), sys.stdout, indent=1)
+    print()
