@@ -97,7 +97,7 @@ def summary(values: list[float]) -> str:
 def disable_compiled() -> None:
     """Make the env take its numpy and Python reference paths (as it does without numba)."""
     if _kernels is not None:
-        _kernels.numpy_rounding = lambda: None  # type: ignore[assignment]
+        _kernels.enabled = lambda: False  # type: ignore[assignment]
         _chipmunk.enabled = lambda: False  # type: ignore[assignment]
 
 

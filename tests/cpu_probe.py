@@ -141,6 +141,17 @@ def agent_run(name: str, fused: bool, steps: int = 6000) -> str:
     return digest.hexdigest()
 
 
+def taxi_deconv_run(steps: int = 4000) -> str:
+    """DeconvQ with the delay learned on Taxi: 3000 pairs, the hashed statistics and CG solves."""
+    env = PoissonRewardDelay(gym.make("Taxi-v4"), lam=2.0, max_delay=10)
+    agent = DeconvQ(env, max_delay=10, solve_interval=2000, seed=4)
+    agent.learn(steps, fused=False)
+    digest = Digest()
+    for value in (agent.q_table, agent.delay_pmf, agent.reward_model):
+        digest.add(value)
+    return digest.hexdigest()
+
+
 def epuck_agent_run(fused: bool, steps: int = 1500) -> str:
     """MMQ on the delayed e-puck line follower, on either training path."""
     env = gym.make("delayed_rl/EPuckLineFollow-v0", reward_delay=20)
@@ -161,6 +172,7 @@ def runs() -> dict[str, Callable[[], str]]:
         for fused in (False, True):
             path = "compiled" if fused else "python"
             table[f"{name}-{path}"] = lambda name=name, fused=fused: agent_run(name, fused)
+    table["taxi-deconv-learned-python"] = taxi_deconv_run
     for fused in (False, True):
         path = "compiled" if fused else "python"
         table[f"epuck-mmq-{path}"] = lambda fused=fused: epuck_agent_run(fused)

@@ -16,6 +16,7 @@ import sys
 import numpy as np
 import pytest
 
+from delayed_rl import _portable_math as portable_math
 from delayed_rl.envs.linefollow import _chipmunk, _kernels
 from delayed_rl.envs.linefollow.camera import Camera, line_centroid
 from delayed_rl.envs.linefollow.env import EPuckLineFollowEnv
@@ -89,10 +90,9 @@ def test_camera_read_equals_the_numpy_reference(track):
 def test_near_line_equals_the_numpy_reference_for_any_points():
     track, rng = make_track("racetrack"), np.random.default_rng(3)
     for x, y, _ in poses(track, rng, 200):
-        centre = complex(x, y)
-        points = centre + (rng.normal(0.0, 0.01, 30) + 1j * rng.normal(0.0, 0.01, 30))
-        compiled = track.near_line(points, 0.005, centre)
-        assert np.array_equal(compiled, track._near_line_numpy(points, 0.005, centre))
+        xs, ys = x + rng.normal(0.0, 0.01, 30), y + rng.normal(0.0, 0.01, 30)
+        compiled = track.near_line(xs + 1j * ys, 0.005, complex(x, y))
+        assert np.array_equal(compiled, track._near_line_numpy(xs, ys, 0.005, x, y))
 
 
 @needs_kernels
@@ -106,7 +106,8 @@ def test_the_env_reads_through_observe_without_its_dispatch():
     for x, y, heading in poses(env.track, rng, 40):
         draws[:] = rng.random(draws.shape)
         hint = int(rng.integers(0, 5))
-        pose = (x, y, math.cos(heading), math.sin(heading), hint, 0.8, 0.1)
+        sin, cos = portable_math.sincos(heading)
+        pose = (x, y, cos, sin, hint, 0.8, 0.1)
         direct = env._observe(*pose, *arguments)
         direct_pixels = out.copy()
         assert same(direct, _kernels.observe(*pose, *arguments))
@@ -160,15 +161,6 @@ def test_a_camera_is_immutable():
         camera.look_ahead = 0.06
     with pytest.raises(ValueError):
         camera.offsets[0] = 0.0
-
-
-@needs_kernels
-def test_the_probe_tells_the_candidate_roundings_apart():
-    rounding = _kernels.numpy_rounding()
-    assert _kernels._products_as_numpy(rounding.fused_products)
-    assert not _kernels._products_as_numpy(not rounding.fused_products)
-    for mode in (_kernels.ABS_HYPOT, _kernels.ABS_SCALED, _kernels.ABS_SCALED_FUSED):
-        assert _kernels._absolutes_as_numpy(mode) == (mode == rounding.complex_abs)
 
 
 @pytest.mark.skipif(

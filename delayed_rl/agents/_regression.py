@@ -62,6 +62,8 @@ DENSE_SOLVE_PAIRS = 512
 _CG_TOLERANCE = 1e-10  # relative residual at which conjugate gradients stop
 _CG_MAX_ITERATIONS = 2_000
 _FIRST_ROWS = 1024  # the hashed table's first size
+_EIGENVALUE_TOLERANCE = 1e-12  # relative change at which the power iteration stops
+_EIGENVALUE_ITERATIONS = 1_000
 
 
 @_jit
@@ -157,6 +159,50 @@ def _matrix_vector(g, v):
     for k in range(g.shape[0]):
         out[k] = _dot(g[k], v)
     return out
+
+
+@_jit
+def _vector_matrix(v, g):
+    """``v @ g`` for a 2-d ``g``: entry j sums ``v[k] · g[k, j]`` in the order of ``k``."""
+    out = np.zeros(g.shape[1])
+    for k in range(g.shape[0]):
+        for j in range(g.shape[1]):
+            out[j] += v[k] * g[k, j]
+    return out
+
+
+@_jit
+def _lag_products(p):
+    """``c(m) = Σ_k p(k) · p(k + m)`` for ``m = 0..K``, each a :func:`_dot`."""
+    k1 = p.shape[0]
+    out = np.empty(k1)
+    for m in range(k1):
+        out[m] = _dot(p[: k1 - m], p[m:])
+    return out
+
+
+@_jit
+def _largest_eigenvalue(g, tolerance, max_iterations):
+    """The largest eigenvalue of the symmetric positive semi-definite ``g``, by power iteration.
+
+    From the unit vector of equal entries, the Rayleigh quotient ``vᵀ g v`` of the iterates,
+    until it changes by at most ``tolerance`` of itself (or ``max_iterations``). It approaches
+    the eigenvalue from below; a projected gradient with steps ``1 / λ`` still descends while
+    ``λ`` is above half the true value. 0 for a zero matrix.
+    """
+    n = g.shape[0]
+    v = np.full(n, 1.0 / np.sqrt(n))
+    value = 0.0
+    for _ in range(max_iterations):
+        w = _matrix_vector(g, v)
+        previous, value = value, _dot(v, w)
+        norm = np.sqrt(_dot(w, w))
+        if norm == 0.0:
+            return 0.0
+        v = w / norm
+        if abs(value - previous) <= tolerance * abs(value):
+            break
+    return value
 
 
 @_jit
@@ -623,10 +669,9 @@ class RewardRegression:
         ``A = Σ_rows vals[row] (e_later e_earlierᵀ + e_earlier e_laterᵀ) + diag(diag)``, one
         coupling per row of the statistics.
         """
-        k = self.max_delay
-        c = np.array([pmf[: k + 1 - m] @ pmf[m:] for m in range(k + 1)])
+        c = _lag_products(pmf)
         vals, diag = _row_couplings(self.stats, c)
-        b = pmf @ self.stats.by_lag
+        b = _vector_matrix(pmf, self.stats.by_lag)
         _window_corrections(vals, diag, b, self.stats, *self._windows(), pmf)
         return vals, diag, b
 
@@ -683,7 +728,7 @@ class RewardRegression:
         q = _lag_quadratic_forms(self.stats, reward)
         lags = np.abs(np.subtract.outer(np.arange(k + 1), np.arange(k + 1)))
         g = q[lags]
-        z = self.stats.by_lag @ reward
+        z = _matrix_vector(self.stats.by_lag, reward)
         _delay_gram_corrections(g, z, *self._windows(), reward)
         return g, z
 
@@ -693,10 +738,11 @@ class RewardRegression:
         """The pmf on ``0..K`` that best explains the received rewards given ``reward``.
 
         Projected gradient on the simplex, from ``start``, with the step set by ``G``'s largest
-        eigenvalue (so each step decreases the squared error).
+        eigenvalue (so each step decreases the squared error), found by power iteration in a
+        fixed order (no LAPACK or BLAS, whose kernels differ between CPUs).
         """
         g, z = self.delay_gram(reward)
-        scale = np.linalg.eigvalsh(g)[-1]
+        scale = _largest_eigenvalue(g, _EIGENVALUE_TOLERANCE, _EIGENVALUE_ITERATIONS)
         if not scale > 0:
             return start
         return _projected_gradient(g, z, start, scale, iterations)

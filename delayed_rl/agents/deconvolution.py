@@ -304,7 +304,7 @@ class DeconvolutionQLearning(QLearning):
     @property
     def mean_delay(self) -> float:
         """The mean of :attr:`delay_pmf`."""
-        return float(self._pmf @ np.arange(self._pmf.size))
+        return float(np.sum(self._pmf * np.arange(self._pmf.size)))
 
     @property
     def reward_model(self) -> np.ndarray:

@@ -413,7 +413,7 @@ def delay_estimate(agent: Any) -> dict[str, Any]:
         return {
             "estimate_support": support,
             "estimate": share,
-            "mean_delay": float(share @ support),
+            "mean_delay": float(np.sum(share * support)),
         }
     return {}
 

@@ -256,7 +256,7 @@ def per_seed_slopes(x: Sequence[float], ys: Sequence[Sequence[float]]) -> list[f
     slopes = []
     for y in ys:
         y = np.asarray(y, dtype=float)
-        slopes.append(float(centred @ (y - y.mean()) / (centred @ centred)))
+        slopes.append(float(np.sum(centred * (y - y.mean())) / np.sum(centred * centred)))
     return slopes
 
 

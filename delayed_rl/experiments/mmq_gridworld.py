@@ -120,7 +120,7 @@ def behaviour_policy(q: np.ndarray, epsilon: float = EPSILON) -> np.ndarray:
     p_model = p_model + epsilon / n_models if n_models > 1 else np.ones((n_states, 1))
     greedy = q == model_best[..., None]  # (S, Λ, A)
     p_action = (1 - epsilon) * greedy / greedy.sum(axis=2, keepdims=True) + epsilon / n_actions
-    return np.einsum("sm,sma->sa", p_model, p_action)
+    return (p_model[:, :, None] * p_action).sum(axis=1)  # Σ over models, in a fixed order
 
 
 def run_task(task: dict) -> dict:

@@ -18,6 +18,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from delayed_rl import _portable_math as portable_math
 from delayed_rl._delay_line import ring_size
 from delayed_rl.fast._numba import HAVE_NUMBA  # noqa: F401  (re-exported: delayed_rl.fast)
 from delayed_rl.fast._numba import jit as _jit
@@ -357,7 +358,8 @@ def credit_kernel(delay_estimates: np.ndarray, width: float) -> np.ndarray:
     """The reward kernel's weights ``exp(−d² / (2σ²))`` for ``d = 0 .. max Λ − min Λ`` steps.
 
     Both training paths read a model's weight off this one array (so they agree to the bit):
-    the weight of model λ̂ when λ̂* acts is ``weights[|λ̂ − λ̂*|]``.
+    the weight of model λ̂ when λ̂* acts is ``weights[|λ̂ − λ̂*|]``. The exponential is
+    :func:`delayed_rl._portable_math.exp`, the same bits on every CPU.
 
     Args:
         delay_estimates: Λ, sorted ascending.
@@ -365,7 +367,7 @@ def credit_kernel(delay_estimates: np.ndarray, width: float) -> np.ndarray:
     """
     distance = np.arange(int(delay_estimates[-1] - delay_estimates[0]) + 1, dtype=np.float64)
     with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
-        weights = np.exp(-(distance * distance) / (2.0 * width * width))
+        weights = portable_math.exp_array(-(distance * distance) / (2.0 * width * width))
     weights[0] = 1.0  # d = 0 is full credit, even where σ² underflows to 0
     return weights
 

@@ -7,8 +7,10 @@ observation, reward, terminated, truncated, the ``info`` entries and the robot b
 The test replays the stored actions and asserts that every row is bit-for-bit the same, so any
 change to the env's numerics (an optimisation that reorders float operations, say) shows up.
 
-The file was produced by the env *before* it was optimised; regenerate it only on purpose,
-when the env's dynamics are meant to change::
+The file was last produced when the env's arithmetic was made independent of the CPU (real
+operations and ``delayed_rl._portable_math`` instead of numpy's complex loops and the C
+library's trigonometry), so it holds on every x86-64 CPU; regenerate it only on purpose, when
+the env's dynamics are meant to change::
 
     python tests/data/make_epuck_trajectories.py  # writes tests/data/epuck_trajectories.npz
 """
