@@ -159,8 +159,10 @@ def log_factorial(k) -> np.ndarray:
 def integer_power(base: float, exponent) -> np.ndarray:
     """``base ** k`` for each integer ``k >= 0`` of ``exponent``, by repeated squaring.
 
-    A fixed sequence of multiplications (about log₂ k of them), reproducible to the bit, where
-    ``np.power`` runs a CPU-dependent SIMD loop; within about log₂ k units in the last place.
+    A fixed sequence of multiplications (about 2·log₂ k of them), reproducible to the bit, where
+    ``np.power`` runs a CPU-dependent SIMD loop. Each squaring doubles the relative error of
+    the square, so the result is within about ``k`` units in the last place (1e-13 relative at
+    ``k = 1000``).
     """
     remaining = np.asarray(exponent, dtype=np.int64).copy()
     result = np.ones(remaining.shape)

@@ -419,7 +419,7 @@ class Empirical(Delay):
     @property
     def mean(self) -> float:
         """``Σ k · probs[k]``."""
-        return float(np.dot(np.arange(self.probs.size), self.probs))
+        return float(np.sum(np.arange(self.probs.size) * self.probs))
 
     @property
     def support_max(self) -> int:

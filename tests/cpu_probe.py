@@ -2,17 +2,22 @@
 
 ``python tests/cpu_probe.py [NAME ...]`` prints one JSON object mapping each run's name to the
 SHA-256 of everything it produced (observations, rewards, ``info``, velocities, Q-tables, delay
-estimates). ``tests/test_cpu_independence.py`` runs it in a subprocess with numpy's SIMD loops
+estimates, every experiment's quick results). ``tests/test_cpu_independence.py`` runs it in a subprocess with numpy's SIMD loops
 and numba's host-CPU code turned off and compares the hashes with the same runs in its own
 process.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import io
 import json
+import re
 import sys
+import tempfile
 from collections.abc import Callable, Iterable
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -163,6 +168,34 @@ def epuck_agent_run(fused: bool, steps: int = 1500) -> str:
     return digest.hexdigest()
 
 
+#: Keys of an experiment's ``summary.json`` that hold timings, not results.
+TIMINGS = re.compile(r"ns_per_step|seconds|wall_time")
+
+
+def _without_timings(value):
+    if isinstance(value, dict):
+        return {k: _without_timings(v) for k, v in value.items() if not TIMINGS.search(k)}
+    if isinstance(value, list):
+        return [_without_timings(v) for v in value]
+    return value
+
+
+def experiments_run() -> str:
+    """``delayed-rl reproduce --quick``: every experiment's curves and summary, less timings."""
+    from delayed_rl.cli import main
+
+    digest = Digest()
+    with tempfile.TemporaryDirectory() as out, contextlib.redirect_stdout(io.StringIO()):
+        assert main(["reproduce", "--quick", "--workers", "1", "--out", out]) == 0
+        for path in sorted(Path(out).glob("*/curves.csv")) + sorted(Path(out).glob("*/*.json")):
+            digest.add(path.relative_to(out).as_posix())
+            if path.suffix == ".json":
+                digest.add(_without_timings(json.loads(path.read_text())))
+            else:
+                digest.add(path.read_text())
+    return digest.hexdigest()
+
+
 def runs() -> dict[str, Callable[[], str]]:
     """Every probe run by name."""
     table: dict[str, Callable[[], str]] = {
@@ -173,6 +206,7 @@ def runs() -> dict[str, Callable[[], str]]:
             path = "compiled" if fused else "python"
             table[f"{name}-{path}"] = lambda name=name, fused=fused: agent_run(name, fused)
     table["taxi-deconv-learned-python"] = taxi_deconv_run
+    table["experiments-quick"] = experiments_run
     for fused in (False, True):
         path = "compiled" if fused else "python"
         table[f"epuck-mmq-{path}"] = lambda fused=fused: epuck_agent_run(fused)

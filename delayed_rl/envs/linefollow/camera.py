@@ -84,7 +84,7 @@ def line_centroid(pixels: ArrayLike) -> int | NDArray[np.int64]:
         raise ValueError(f"pixels must have {N_PIXELS} values on the last axis, got {seen.shape}")
     if seen.ndim == 1:  # the env's per-step path: Python integers
         count = int(np.count_nonzero(seen))
-        return _round_half_down(int(_INDICES @ seen), count) if count else 0
+        return _round_half_down(int(_INDICES[seen].sum()), count) if count else 0
     count = seen.sum(axis=-1)
     m = _round_half_down((seen * _INDICES).sum(axis=-1), np.maximum(count, 1))
     return np.where(count > 0, m, 0).astype(np.int64)

@@ -93,6 +93,11 @@ FloatArray = NDArray[np.float64]
 _EMPTY = slice(0, 0)
 
 
+def _norms(v: FloatArray) -> FloatArray:
+    """The length of each row ``(x, y)`` of ``v``, ``sqrt(x·x + y·y)`` (no BLAS, no ``hypot``)."""
+    return np.sqrt(v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1])
+
+
 def _as_points(points: ArrayLike, name: str = "points") -> FloatArray:
     """``points`` as an ``(n, 2)`` float array.
 
@@ -136,7 +141,7 @@ def turn_radii(points: ArrayLike) -> FloatArray:
     b = np.roll(p, -1, axis=0) - p
     c = np.roll(p, -1, axis=0) - np.roll(p, 1, axis=0)
     cross = np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])
-    lengths = np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1) * np.linalg.norm(c, axis=1)
+    lengths = _norms(a) * _norms(b) * _norms(c)
     with np.errstate(divide="ignore", invalid="ignore"):
         radii = lengths / (2.0 * cross)
     return np.where(cross > 0.0, radii, np.inf)
@@ -215,7 +220,7 @@ def self_intersections(points: ArrayLike) -> list[tuple[int, int]]:
 
 def _dense_vertices(points: FloatArray) -> tuple[int, float]:
     """``(vertices, length)`` of the closed polyline ``points`` once densified for a track."""
-    lengths = np.linalg.norm(np.roll(points, -1, axis=0) - points, axis=1)
+    lengths = _norms(np.roll(points, -1, axis=0) - points)
     length = float(lengths.sum())
     if lengths.max(initial=0.0) <= SAMPLE_SPACING * (1 + 1e-9):
         return len(points), length
@@ -242,7 +247,7 @@ def _check_size(points: FloatArray, name: str = "points") -> None:
 def _resample(points: FloatArray, spacing: float) -> FloatArray:
     """A closed polyline through every vertex of ``points`` with segments at most ``spacing``."""
     q = np.roll(points, -1, axis=0)
-    lengths = np.linalg.norm(q - points, axis=1)
+    lengths = _norms(q - points)
     pieces = np.maximum(1, np.ceil(lengths / spacing - 1e-9).astype(np.int64))
     seg = np.repeat(np.arange(len(points)), pieces)
     frac = (np.arange(pieces.sum()) - np.repeat(np.cumsum(pieces) - pieces, pieces)) / np.repeat(
@@ -254,7 +259,7 @@ def _resample(points: FloatArray, spacing: float) -> FloatArray:
 def _uniform_resample(points: FloatArray, spacing: float) -> FloatArray:
     """Resample a densely evaluated smooth closed curve at (nearly) uniform arc length."""
     closed = np.vstack([points, points[:1]])
-    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(closed, axis=0), axis=1))])
+    s = np.concatenate([[0.0], np.cumsum(_norms(np.diff(closed, axis=0)))])
     n = max(3, int(np.ceil(s[-1] / spacing)))
     targets = np.arange(n) * (s[-1] / n)
     return np.column_stack(
@@ -315,12 +320,13 @@ class Track:
         if len(p) == 0 or not np.all(np.isfinite(p)):
             raise ValueError(f"points must be a non-empty array of finite (x, y) points, got {p}")
         _check_size(p)
-        if np.linalg.norm(np.roll(p, -1, axis=0) - p, axis=1).max() > SAMPLE_SPACING * (1 + 1e-9):
+        if _norms(np.roll(p, -1, axis=0) - p).max() > SAMPLE_SPACING * (1 + 1e-9):
             p = _resample(p, SAMPLE_SPACING)  # the spatial index relies on short segments
         self.name = name
         self.allow_crossings = allow_crossings
         self.points = p
-        z = p[:, 0] + 1j * p[:, 1]  # complex storage; the queries compute on its real parts
+        z = np.empty(len(p), dtype=np.complex128)  # complex storage; the queries use its parts
+        z.real, z.imag = p[:, 0], p[:, 1]
         d = np.roll(z, -1) - z
         seg_len = np.sqrt(d.real * d.real + d.imag * d.imag)
         self._a = z  # segment i runs from _a[i] to _a[i] + _d[i]
@@ -389,14 +395,14 @@ class Track:
                 f"track polyline needs at least 3 distinct points plus the closing point "
                 f"(last == first), got {len(p)} points"
             )
-        if np.linalg.norm(p[-1] - p[0]) > 1e-6:
+        if _norms(p[-1:] - p[:1])[0] > 1e-6:
             raise ValueError(
                 f"track polyline must be closed: its last point {p[-1].tolist()} must equal its "
                 f"first point {p[0].tolist()} (repeat the first point at the end)"
             )
         p = p[:-1]
         _check_size(p)
-        seg = np.linalg.norm(np.roll(p, -1, axis=0) - p, axis=1)
+        seg = _norms(np.roll(p, -1, axis=0) - p)
         if np.any(seg <= 1e-9):
             bad = int(np.argmax(seg <= 1e-9))
             raise ValueError(
