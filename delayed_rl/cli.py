@@ -296,7 +296,7 @@ def _bench(args: argparse.Namespace) -> int:
 
     started = time.perf_counter()
     experiments = [get_experiment(name) for name in names]
-    summaries = run_experiments(experiments, config, out, on_done=report)
+    summaries = run_experiments(experiments, config, out, _bench_progress(args), report)
     if args.name == "all":
         from delayed_rl.experiments.runner import write_index
 
@@ -304,6 +304,20 @@ def _bench(args: argparse.Namespace) -> int:
         index = write_index(out, ran, time.perf_counter() - started)
         print(f"[reproduce] wrote {index}")
     return 0
+
+
+def _bench_progress(args: argparse.Namespace) -> bool:
+    """Whether ``bench`` and ``reproduce`` show their progress (``--progress``/``--no-progress``).
+
+    By default, when stderr is a terminal and tqdm (optional: the ``dev`` extra) can draw the
+    bar; an explicit ``--progress`` without tqdm shows a plain count instead (as ``train``
+    shows a plain bar).
+    """
+    if args.progress is not None:
+        return args.progress
+    from delayed_rl.experiments.runner import tqdm_installed
+
+    return sys.stderr.isatty() and tqdm_installed()
 
 
 def _sweep(args: argparse.Namespace) -> int:
@@ -328,7 +342,7 @@ def _sweep(args: argparse.Namespace) -> int:
 
 
 def _add_bench_options(parser: argparse.ArgumentParser, default_out: str) -> None:
-    """The options ``bench`` and ``reproduce`` share: seeds, steps, workers, output folder."""
+    """The options ``bench`` and ``reproduce`` share: seeds, steps, workers, output, progress."""
     parser.add_argument(
         "--seeds",
         type=_positive_int,
@@ -353,6 +367,14 @@ def _add_bench_options(parser: argparse.ArgumentParser, default_out: str) -> Non
     )
     parser.add_argument("--out", default=default_out, help=f"output folder (default {default_out})")
     parser.add_argument("--quick", action="store_true", help="a scaled-down run, in seconds")
+    parser.add_argument(
+        "--progress",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="show a progress bar on stderr: the runs done out of the total, the time elapsed "
+        "and the time left (default: when stderr is a terminal and tqdm is installed; without "
+        "tqdm, --progress prints a line per finished run)",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,6 +1,7 @@
 """The ``delayed-rl`` commands: the train/evaluate round trip, exit codes and messages.
 
-``bench`` and ``reproduce`` runs are tested with the experiments (``test_experiments.py``).
+``bench`` and ``reproduce`` runs are tested with the experiments (``test_experiments.py``), their
+progress bar here.
 """
 
 from __future__ import annotations
@@ -399,3 +400,68 @@ def test_two_ctrl_c_during_a_parallel_run_exit_at_once_leaving_no_worker(tmp_pat
             with contextlib.suppress(OSError):
                 os.kill(pid, signal.SIGKILL)
         process.stderr.close()
+
+
+# ---------------------------------------------------------------------- bench's progress
+#: The quickest ``bench``: the delay sweep scaled down to one seed of 2000 steps.
+BENCH = "bench delay-sweep --quick --seeds 1 --steps 2000"
+
+
+def _scheduled_runs() -> int:
+    """How many distinct runs :data:`BENCH` schedules (as the scheduler counts them)."""
+    from delayed_rl.experiments import Config, get_experiment
+    from delayed_rl.experiments.schedule import pool_key
+
+    experiment = get_experiment("delay-sweep")
+    tasks = experiment.tasks(Config(quick=True, seeds=1, steps=2000))
+    return len({pool_key(experiment.run_of(task)) for task in tasks})
+
+
+def _bench(tmp_path, capsys, *options: str) -> tuple[str, str]:
+    """Run :data:`BENCH` with ``options`` into ``tmp_path``; return its stdout and stderr."""
+    assert main([*BENCH.split(), "--out", str(tmp_path), *options]) == 0
+    captured = capsys.readouterr()
+    assert "verdict" in captured.out  # the report, whatever the progress
+    return captured.out, captured.err
+
+
+@pytest.mark.parametrize("default", [False, True], ids=["--progress", "default-on-a-terminal"])
+def test_bench_progress_bar_counts_the_scheduled_runs(tmp_path, capsys, monkeypatch, default):
+    runs = _scheduled_runs()
+    assert runs > 1
+    if default:
+        monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
+    out, err = _bench(tmp_path, capsys, *([] if default else ["--progress"]))
+    assert "delay-sweep: 100%" in err and f"| {runs}/{runs} [" in err  # tqdm's bar
+    assert re.search(r"\[\d\d:\d\d<\d\d:\d\d", err)  # the time elapsed < the time left
+    assert f"[delay-sweep] {runs} runs ({runs} tasks) on 1 worker(s)..." in out
+
+
+@pytest.mark.parametrize("option", ["--no-progress", None], ids=["--no-progress", "not-a-tty"])
+def test_bench_shows_no_progress_when_off_or_stderr_is_not_a_terminal(tmp_path, capsys, option):
+    assert not sys.stderr.isatty()  # (capsys's)
+    runs = _scheduled_runs()
+    out, err = _bench(tmp_path, capsys, *([option] if option else []))
+    assert f"/{runs}" not in err and "run/s" not in err
+    assert "worker(s)..." not in out
+
+
+def test_bench_without_tqdm_counts_in_lines_when_asked_and_stays_silent_by_default(
+    tmp_path, capsys, monkeypatch
+):
+    monkeypatch.setitem(sys.modules, "tqdm.auto", None)  # as if tqdm were not installed
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
+    runs = _scheduled_runs()
+    _, err = _bench(tmp_path / "asked", capsys, "--progress")
+    assert err.splitlines() == [
+        f"[delay-sweep] {done}/{runs} runs done" for done in range(1, runs + 1)
+    ]
+    _, err = _bench(tmp_path / "default", capsys)
+    assert err == ""
+
+
+@pytest.mark.parametrize("command", ["bench", "reproduce"])
+def test_bench_and_reproduce_take_progress_flags(command, capsys):
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    assert "--progress, --no-progress" in capsys.readouterr().out

@@ -20,8 +20,10 @@ from delayed_rl.wrappers import (
     EPISODE_END_MODES,
     PoissonRewardDelay,
     RewardDelay,
+    reward_delay,
     wrap_reward_delay,
 )
+from delayed_rl.wrappers.reward_delay import FLUSH_WATCH_EPISODES, FLUSH_WATCH_STEPS
 
 TOL = 1e-9
 
@@ -737,13 +739,18 @@ def test_registered_reward_delay_survives_the_json_round_trip(delay) -> None:
 
 # ---------------------------------------------------------------------- the flush trap
 class _TerminalReward(gym.Env):
-    """Episodes of ``length`` steps; reward ``final`` at the last step, ``along`` at the others."""
+    """Episodes of ``length`` steps; reward ``final`` at the last step, ``along`` at the others.
+
+    With ``every`` > 1 only every ``every``-th episode to end has its ``final`` reward; the
+    others end with 0.
+    """
 
     observation_space = gym.spaces.Discrete(1)
     action_space = gym.spaces.Discrete(1)
 
-    def __init__(self, length=6, final=1.0, along=0.0):
-        self.length, self.final, self.along = length, final, along
+    def __init__(self, length=6, final=1.0, along=0.0, every=1):
+        self.length, self.final, self.along, self.every = length, final, along, every
+        self.ended = 0
 
     def reset(self, *, seed=None, options=None):
         self.t = 0
@@ -751,8 +758,10 @@ class _TerminalReward(gym.Env):
 
     def step(self, action):
         self.t += 1
-        done = self.t >= self.length
-        return 0, self.final if done else self.along, done, False, {}
+        if self.t < self.length:
+            return 0, self.along, False, False, {}
+        self.ended += 1
+        return 0, self.final if self.ended % self.every == 0 else 0.0, True, False, {}
 
 
 def _trap_warnings(env, episodes):
@@ -788,11 +797,108 @@ def test_the_flush_trap_warns_once_naming_carry(inner, mode, delay, warned):
         assert "first 10 episodes" in str(caught[0].message)
 
 
-def test_the_watch_ends_at_the_first_reward_before_an_end_or_after_ten_episodes():
+def test_the_watch_ends_at_the_first_reward_before_an_end_or_after_ten_rewarded_episodes():
     env = RewardDelay(_TerminalReward(along=1.0), Poisson(3.0))
     assert env._watch is not None
     assert _trap_warnings(env, 2) == []
     assert env._watch is None  # a reward before the end settled it
     trapped = RewardDelay(_TerminalReward(), Poisson(3.0))
-    assert len(_trap_warnings(trapped, 10)) == 1 and trapped._watch is None
+    assert len(_trap_warnings(trapped, FLUSH_WATCH_EPISODES)) == 1 and trapped._watch is None
     assert _trap_warnings(trapped, 20) == []  # once
+
+
+def test_episodes_without_a_reward_do_not_count_towards_the_watch():
+    every = 3  # one episode in three has its terminal reward
+    env = RewardDelay(_TerminalReward(every=every), Poisson(3.0))
+    before = every * FLUSH_WATCH_EPISODES - 1  # one rewarded episode short
+    assert _trap_warnings(env, before) == [] and env._watch is not None
+    assert env._watch.episodes == before and env._watch.rewarded == FLUSH_WATCH_EPISODES - 1
+    (caught,) = _trap_warnings(env, 1)
+    expected = f"first {before + 1} episodes ({FLUSH_WATCH_EPISODES} of them with a reward)"
+    assert expected in str(caught.message)
+    assert env._watch is None
+
+
+def _random_walk(env, seed, steps):
+    """Step ``env`` with a seeded random policy, resetting at episode ends, until its watch is off.
+
+    Returns how many steps it took (``None`` if the watch was still on after ``steps``).
+    """
+    env.action_space.seed(seed)
+    env.reset(seed=seed)
+    for step in range(1, steps + 1):
+        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+        if env._watch is None:
+            return step
+        if terminated or truncated:
+            env.reset()
+    return None
+
+
+def test_frozen_lake_under_a_random_policy_warns_of_the_flush_trap():
+    env = PoissonRewardDelay(gym.make("FrozenLake-v1"), lam=5)
+    with pytest.warns(UserWarning, match="the delay had no effect") as caught:
+        steps = _random_walk(env, 0, FLUSH_WATCH_STEPS)
+    assert steps is not None and steps < FLUSH_WATCH_STEPS  # its rewarded episodes ended it
+    (warning,) = [w for w in caught if "the delay had no effect" in str(w.message)]
+    assert "on_episode_end='carry'" in str(warning.message)
+    assert warning.filename == __file__  # it names the line that called step()
+
+
+def test_a_reward_before_the_final_step_ends_the_watch_silently_however_late():
+    # 30 episodes of nothing, then a reward in the middle of an episode: the watch waits for it
+    quiet = [0.0] * (30 * 5)
+    env = RewardDelay(ScriptedEnv([*quiet, 0.0, 2.0], lengths=[5] * 31), Poisson(4.0))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        env.reset(seed=0)
+        for _ in range(30):
+            for _ in range(5):
+                env.step(0)
+            env.reset()
+        assert env._watch is not None and env._watch.episodes == 30
+        env.step(0)
+        env.step(0)  # the reward, at the episode's second step of five
+        assert env._watch is None
+        for _ in range(3):
+            env.step(0)
+    assert [w for w in caught if "the delay had no effect" in str(w.message)] == []
+
+
+def test_taxi_rewards_along_the_way_end_the_watch_at_the_first_step():
+    env = PoissonRewardDelay(gym.make("Taxi-v4"), lam=5)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert _random_walk(env, 0, 10) == 1  # Taxi's -1 per step, before any end
+    assert [w for w in caught if "the delay had no effect" in str(w.message)] == []
+
+
+def test_the_step_cap_ends_the_watch_of_an_env_that_never_rewards(monkeypatch):
+    monkeypatch.setattr(reward_delay, "FLUSH_WATCH_STEPS", 50)
+    env = RewardDelay(_TerminalReward(length=6, final=0.0), Poisson(3.0))
+    assert _trap_warnings(env, 8) == [] and env._watch is not None  # 48 steps: still on
+    assert _trap_warnings(env, 1) == [] and env._watch is None  # 54 steps: off, silently
+
+
+def test_at_the_step_cap_rare_terminal_rewards_still_warn(monkeypatch):
+    monkeypatch.setattr(reward_delay, "FLUSH_WATCH_STEPS", 60)
+    env = RewardDelay(_TerminalReward(length=6, every=4), Poisson(3.0))
+    assert _trap_warnings(env, 9) == [] and env._watch.rewarded == 2  # 54 steps
+    (caught,) = _trap_warnings(env, 1)
+    assert "first 10 episodes (2 of them with a reward)" in str(caught.message)
+    assert env._watch is None
+
+
+@pytest.mark.parametrize("mode", ["carry", "drop"])
+def test_carry_and_drop_never_watch(mode):
+    env = PoissonRewardDelay(gym.make("FrozenLake-v1"), lam=5, on_episode_end=mode)
+    assert env._watch is None
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        _random_walk(env, 0, 3_000)
+    assert [w for w in caught if "the delay had no effect" in str(w.message)] == []
+
+
+def test_a_delay_clipped_to_zero_is_not_watched():
+    assert RewardDelay(_TerminalReward(), Poisson(5.0), max_delay=0)._watch is None
+    assert RewardDelay(_TerminalReward(), Poisson(5.0), max_delay=1)._watch is not None

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import subprocess
 import sys
+import warnings
 from collections import defaultdict
 
 import gymnasium as gym
@@ -15,7 +16,8 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
 
 from delayed_rl.delays import Constant, Poisson, Uniform
-from delayed_rl.wrappers import EPISODE_END_MODES, PoissonRewardDelay
+from delayed_rl.wrappers import EPISODE_END_MODES, PoissonRewardDelay, reward_delay
+from delayed_rl.wrappers.reward_delay import FLUSH_WATCH_STEPS
 from delayed_rl.wrappers.sb3 import VecRewardDelay
 
 
@@ -292,3 +294,68 @@ def test_sb3_pending_sum_beyond_float64_is_a_clear_error_not_inf() -> None:
     env.step(np.zeros(1, dtype=int))
     with pytest.raises(ValueError, match="float64"):
         env.step(np.zeros(1, dtype=int))
+
+
+# --- the flush trap ---------------------------------------------------------------------------
+
+
+def _sb3_walk(env: VecRewardDelay, steps: int, seed: int = 0) -> int | None:
+    """Seeded random steps until the flush-trap watch is off: how many (``None``: over ``steps``)."""
+    rng = np.random.default_rng(seed)
+    env.reset()
+    for step in range(1, steps + 1):
+        env.step(rng.integers(env.action_space.n, size=env.num_envs))
+        if env._watch is None:
+            return step
+    return None
+
+
+def _trap_warnings(caught) -> list:
+    return [w for w in caught if "the delay had no effect" in str(w.message)]
+
+
+def test_frozen_lake_sub_envs_warn_of_the_flush_trap_once() -> None:
+    n_envs = 3
+    venv = DummyVecEnv([lambda: gym.make("FrozenLake-v1") for _ in range(n_envs)])
+    env = VecRewardDelay(venv, Poisson(5), seed=0)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert _sb3_walk(env, FLUSH_WATCH_STEPS // n_envs) is not None
+        for _ in range(50):  # and never again
+            env.step(np.zeros(n_envs, dtype=int))
+    (warning,) = _trap_warnings(caught)
+    assert "on_episode_end='carry'" in str(warning.message)
+    assert warning.filename == __file__  # it names the line that called step()
+
+
+def test_rewards_along_the_way_end_the_sb3_watch_at_once() -> None:
+    env = VecRewardDelay(DummyVecEnv([lambda: RandomEndEnv(0.1)] * 3), Poisson(5), seed=0)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert _sb3_walk(env, 10) == 1
+    assert _trap_warnings(caught) == []
+
+
+def test_the_sb3_step_cap_counts_every_sub_envs_steps(monkeypatch) -> None:
+    n_envs, cap = 3, 30
+    monkeypatch.setattr(reward_delay, "FLUSH_WATCH_STEPS", cap)
+    venv = DummyVecEnv([lambda: RandomEndEnv(0.2, reward=0.0) for _ in range(n_envs)])
+    env = VecRewardDelay(venv, Poisson(3), seed=0)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert _sb3_walk(env, 100) == cap // n_envs
+    assert _trap_warnings(caught) == []
+
+
+@pytest.mark.parametrize("on_episode_end", ["carry", "drop"])
+def test_carry_and_drop_never_watch_sb3_sub_envs(on_episode_end) -> None:
+    venv = DummyVecEnv([lambda: gym.make("FrozenLake-v1") for _ in range(3)])
+    env = VecRewardDelay(venv, Poisson(5), on_episode_end=on_episode_end, seed=0)
+    assert env._watch is None
+    rng = np.random.default_rng(0)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        env.reset()
+        for _ in range(300):
+            env.step(rng.integers(4, size=3))
+    assert _trap_warnings(caught) == []

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from collections import defaultdict
 
 import gymnasium as gym
@@ -11,7 +12,8 @@ import pytest
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 from delayed_rl.delays import Constant, Empirical, Poisson
-from delayed_rl.wrappers import EPISODE_END_MODES, VectorRewardDelay
+from delayed_rl.wrappers import EPISODE_END_MODES, VectorRewardDelay, reward_delay
+from delayed_rl.wrappers.reward_delay import FLUSH_WATCH_EPISODES, FLUSH_WATCH_STEPS
 
 TOL = 1e-9
 MODES = [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP, AutoresetMode.DISABLED]
@@ -351,3 +353,117 @@ def test_huge_rewards_whose_sum_fits_are_exact_in_the_vector_buffers() -> None:
         delivered, _ = buffers.push(np.array([reward]), np.array([True]))
         assert delivered[0] == 0.0 and np.isfinite(buffers.pending).all()
     np.testing.assert_array_equal(buffers.clear(np.array([True])), [1e308])
+
+
+# ---------------------------------------------------------------------- the flush trap
+class TerminalReward(gym.Env):
+    """Episodes of ``length`` steps whose only reward, ``final``, comes at the last step."""
+
+    observation_space = gym.spaces.Discrete(1)
+    action_space = gym.spaces.Discrete(2)
+
+    def __init__(self, length: int = 6, final: float = 1.0):
+        self.length, self.final = length, final
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.t = 0
+        return 0, {}
+
+    def step(self, action):
+        self.t += 1
+        done = self.t >= self.length
+        return 0, self.final if done else 0.0, done, False, {}
+
+
+def _trap_warnings(caught) -> list:
+    return [w for w in caught if "the delay had no effect" in str(w.message)]
+
+
+def _random_step(env: VectorRewardDelay) -> None:
+    """One step of random actions; under DISABLED, reset the sub-envs whose episode ended."""
+    _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+    ended = np.asarray(terminated) | np.asarray(truncated)
+    if env.autoreset_mode == AutoresetMode.DISABLED and ended.any():
+        env.reset(options={"reset_mask": ended})
+
+
+def _walk(env: VectorRewardDelay, steps: int, seed: int = 0) -> int | None:
+    """Seeded random steps until the watch is off: how many it took (``None``: over ``steps``)."""
+    env.action_space.seed(seed)
+    env.reset(seed=seed)
+    for step in range(1, steps + 1):
+        _random_step(env)
+        if env._watch is None:
+            return step
+    return None
+
+
+@pytest.mark.parametrize("autoreset", MODES, ids=[m.name for m in MODES])
+def test_frozen_lake_sub_envs_warn_of_the_flush_trap_once(autoreset) -> None:
+    n_envs = 4
+    inner = SyncVectorEnv(
+        [lambda: gym.make("FrozenLake-v1") for _ in range(n_envs)], autoreset_mode=autoreset
+    )
+    env = VectorRewardDelay(inner, Poisson(5))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert _walk(env, FLUSH_WATCH_STEPS // n_envs) is not None
+        for _ in range(50):  # and never again
+            _random_step(env)
+    (warning,) = _trap_warnings(caught)
+    assert "on_episode_end='carry'" in str(warning.message)
+    assert warning.filename == __file__  # it names the line that called step()
+
+
+def test_the_sub_envs_rewarded_episodes_count_together() -> None:
+    n_envs, length = 4, 6
+    inner = SyncVectorEnv(
+        [lambda: TerminalReward(length) for _ in range(n_envs)],
+        autoreset_mode=AutoresetMode.SAME_STEP,
+    )
+    env = VectorRewardDelay(inner, Poisson(3))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        steps = _walk(env, 1_000)
+    # every sub-env ends an episode every `length` steps: the watch has its rewarded episodes
+    # once the rounds of n_envs episodes reach FLUSH_WATCH_EPISODES, not FLUSH_WATCH_EPISODES each
+    assert steps == length * math.ceil(FLUSH_WATCH_EPISODES / n_envs)
+    assert len(_trap_warnings(caught)) == 1
+
+
+def test_rewards_along_the_way_end_the_vector_watch_at_once() -> None:
+    env = VectorRewardDelay(make_vec(3, AutoresetMode.NEXT_STEP), Poisson(5))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert _walk(env, 10) == 1
+        for _ in range(100):
+            env.step(env.action_space.sample())
+    assert _trap_warnings(caught) == []
+
+
+def test_the_step_cap_counts_every_sub_envs_steps(monkeypatch) -> None:
+    n_envs, cap = 4, 40
+    monkeypatch.setattr(reward_delay, "FLUSH_WATCH_STEPS", cap)
+    inner = SyncVectorEnv(
+        [lambda: TerminalReward(final=0.0) for _ in range(n_envs)],
+        autoreset_mode=AutoresetMode.SAME_STEP,
+    )
+    env = VectorRewardDelay(inner, Poisson(3))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert _walk(env, 100) == cap // n_envs
+    assert _trap_warnings(caught) == []
+
+
+@pytest.mark.parametrize("on_episode_end", ["carry", "drop"])
+def test_carry_and_drop_never_watch_sub_envs(on_episode_end) -> None:
+    inner = SyncVectorEnv([lambda: TerminalReward() for _ in range(3)])
+    env = VectorRewardDelay(inner, Poisson(3), on_episode_end=on_episode_end)
+    assert env._watch is None
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        env.reset(seed=0)
+        for _ in range(200):
+            env.step(env.action_space.sample())
+    assert _trap_warnings(caught) == []

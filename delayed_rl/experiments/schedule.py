@@ -15,7 +15,8 @@ summarized as soon as its last run is in, while the workers go on with the other
 runs; with several experiments and workers its files (figures take seconds) are written by a
 pool of as many background processes, so the experiments that finish last are drawn side by
 side. Results do not depend on the order or the number of workers: every task carries its own
-seed.
+seed. With ``progress``, a bar on stderr counts the distinct runs as they finish, in whatever
+order the workers finish them.
 
 Each summary's ``extra`` records what the experiment cost:
 
@@ -47,6 +48,7 @@ from delayed_rl._validation import check_bool
 from delayed_rl.experiments.runner import (
     Config,
     Experiment,
+    RunProgress,
     SharedRun,
     Summary,
     _json_default,
@@ -180,7 +182,10 @@ def run_experiment(
         config: how to run it; ``config.seeds`` is set to the experiment's default
             (``quick_seeds`` with ``config.quick``, else ``default_seeds``) when ``None``.
         out: the output folder (``None``: write nothing, return the summary only).
-        progress: print a line saying how many runs start on how many workers.
+        progress: report the progress: print a line saying how many runs start on how many
+            workers, then count the runs on stderr as they finish
+            (:class:`~delayed_rl.experiments.runner.RunProgress`: tqdm's bar, else a line per
+            run).
 
     Returns:
         The experiment's summary, with ``extra["wall_time_s"]`` the seconds it took (and the
@@ -207,7 +212,8 @@ def run_experiments(
             default (:func:`run_experiment`).
         out: the parent of the output folders, one per experiment named after it (``None``:
             write nothing).
-        progress: print a line saying how many runs start on how many workers.
+        progress: report the progress, as :func:`run_experiment` does; the bar counts the
+            distinct runs of all the experiments together.
         on_done: called with each experiment and its summary, in the order they finish, after
             its files are written.
 
@@ -282,20 +288,28 @@ def _run(
                 results.pop(key)
 
     local_cores = min(config.workers, len(plans), os.cpu_count() or 1)  # (a cluster's are not)
-    with _Writer(local_cores, on_done) as writer:
-        for plan in plans:
-            if not plan.missing:
-                finish(plan)
-        jobs = [(runs[key].run, runs[key].task) for key in order]
-        pending = iter_tasks(_timed, jobs, config.workers, config.backend)
-        for index, (result, spent) in pending:
-            key = order[index]
-            results[key], seconds[key] = result, spent
-            for plan in users[key]:
-                plan.missing -= 1
+    label = plans[0].experiment.name if len(plans) == 1 else f"{len(plans)} experiments"
+    with RunProgress(len(order), label, progress and bool(order)) as counter:
+
+        def done(experiment: Experiment, summary: Summary) -> None:
+            with counter.paused():  # what on_done prints does not run into the bar
+                on_done(experiment, summary)
+
+        with _Writer(local_cores, None if on_done is None else done) as writer:
+            for plan in plans:
                 if not plan.missing:
                     finish(plan)
-            writer.report(wait=False)
+            jobs = [(runs[key].run, runs[key].task) for key in order]
+            pending = iter_tasks(_timed, jobs, config.workers, config.backend)
+            for index, (result, spent) in pending:  # in the order the runs finish
+                counter.tick()
+                key = order[index]
+                results[key], seconds[key] = result, spent
+                for plan in users[key]:
+                    plan.missing -= 1
+                    if not plan.missing:
+                        finish(plan)
+                writer.report(wait=False)
     return [summaries[id(plan)] for plan in plans]
 
 

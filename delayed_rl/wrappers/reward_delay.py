@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 import numbers
 import warnings
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 import gymnasium as gym
@@ -18,7 +18,11 @@ from delayed_rl.wrappers._spec import JsonSpecMixin
 
 __all__ = [
     "EPISODE_END_MODES",
+    "FLUSH_WATCH_EPISODES",
+    "FLUSH_WATCH_STEPS",
+    "FlushWatch",
     "find_reward_delay",
+    "flush_watch",
     "PoissonRewardDelay",
     "RewardDelay",
     "check_episode_end",
@@ -99,34 +103,107 @@ class DelaySampler:
 
 
 FLUSH_WATCH_EPISODES = 10
-"""How many first episodes the flush-trap watch looks at (see :class:`RewardDelay`)."""
+"""How many episodes with a nonzero reward the flush-trap watch waits for (:class:`FlushWatch`).
+
+Episodes without any reward do not count: under a random policy most FrozenLake episodes end in
+a hole with no reward, and ten of those say nothing about where the env puts its rewards."""
+
+FLUSH_WATCH_STEPS = 100_000
+"""The most steps the flush-trap watch lasts, all sub-envs' together (:class:`FlushWatch`).
+
+It bounds what the watch costs when rewarded episodes are rare or never come (an env that never
+rewards, a policy that never reaches the goal): from then on the wrapper does nothing for it."""
 
 
 class FlushWatch:
-    """Watches the first episodes under ``"flush"``: did the env reward only at final steps?
+    """The flush-trap watch of one wrapper: does the env reward only at episodes' final steps?
+
+    One watch serves a whole wrapper (:class:`RewardDelay`, or a vector twin and all its sub-envs
+    together, so it warns once, not once per sub-env). The rule:
+
+    - a nonzero reward emitted at a step that ends no episode ends the watch, without a warning
+      (the env rewards along the way, which the delay does delay);
+    - otherwise the watch counts the episodes that end, and those of them with a nonzero reward
+      (necessarily at their final step). Once :data:`FLUSH_WATCH_EPISODES` episodes with a reward
+      have ended, or once :data:`FLUSH_WATCH_STEPS` steps have been taken, the watch ends, and it
+      warns if any episode had a reward: every reward came at a final step, where ``"flush"``
+      delivers it at once.
+
+    The step cap is checked whenever :meth:`see` is called: :class:`RewardDelay` calls it only at
+    an episode's end or a reward before it (other steps cost the watch nothing), the vector twins
+    at every step (through :meth:`see_envs`).
+
+    Args:
+        stacklevel: how many calls lead from the line that calls the wrapper's ``step`` down to
+            :meth:`see` (2 for a ``step`` that calls :meth:`see` itself), so that the warning
+            names that line.
 
     Attributes:
         episodes: how many episodes ended so far.
-        rewarded: how many of them had a nonzero reward (at their final step).
-        trapped: after the watch, whether every reward was emitted at a final step (and some
-            were): then "flush" delivered each at once, and the delay had no effect.
+        rewarded: how many of them had a nonzero reward.
     """
 
-    def __init__(self):
+    def __init__(self, stacklevel: int):
+        self.stacklevel = stacklevel
         self.episodes = self.rewarded = 0
-        self.trapped = False
 
-    def end_episode(self, emitted: float) -> bool:
-        """Count an episode whose last step emitted ``emitted``; ``True`` once the watch is over.
+    def see(self, steps: int, early: bool, finals: Iterable[float]) -> bool:
+        """Take in what happened since the last call; ``True`` once the watch is over.
 
-        The wrapper stops the watch itself at a reward emitted before an episode's end.
+        The call that ends the watch warns (a ``UserWarning``) if the env was caught in the trap.
+
+        Args:
+            steps: the steps taken so far (since the wrapper's construction, all sub-envs').
+            early: whether a nonzero reward was emitted at a step that ended no episode.
+            finals: the reward emitted at the final step of each episode that ended.
         """
-        self.episodes += 1
-        self.rewarded += emitted != 0.0
-        if self.episodes < FLUSH_WATCH_EPISODES:
+        if early:
+            return True
+        for reward in finals:
+            self.episodes += 1
+            self.rewarded += reward != 0.0
+        if self.rewarded < FLUSH_WATCH_EPISODES and steps < FLUSH_WATCH_STEPS:
             return False
-        self.trapped = self.rewarded > 0
+        if self.rewarded:
+            warnings.warn(
+                f"the env emitted every reward of its first {self.episodes} episodes "
+                f"({self.rewarded} of them with a reward) at an episode's final step, where "
+                "on_episode_end='flush' delivers it at once: the delay had no effect. Use "
+                "on_episode_end='carry' to delay such rewards into the next episode",
+                stacklevel=self.stacklevel + 1,
+            )
         return True
+
+    def see_envs(self, steps: int, rewards: np.ndarray, ended: np.ndarray) -> bool:
+        """:meth:`see` for one step of several sub-envs; ``True`` once the watch is over.
+
+        Args:
+            steps: the steps taken so far, all sub-envs' together.
+            rewards: each sub-env's reward emitted at this step (0 for a sub-env that did not
+                step).
+            ended: whether each sub-env's episode ended at this step.
+        """
+        ended = np.asarray(ended, dtype=bool)
+        early = bool(np.any((rewards != 0.0) & ~ended))
+        return self.see(steps, early, rewards[ended].tolist())
+
+
+def flush_watch(
+    on_episode_end: str, delay: Delay, max_delay: int | None, stacklevel: int
+) -> FlushWatch | None:
+    """The flush-trap watch of a wrapper with these arguments, or ``None`` if it needs none.
+
+    Only ``"flush"`` has the trap, and only a delay that can be nonzero can be lost to it.
+
+    Args:
+        on_episode_end: the wrapper's ``on_episode_end``.
+        delay: its delay distribution.
+        max_delay: its clip (``None``: none).
+        stacklevel: the :class:`FlushWatch`'s.
+    """
+    if on_episode_end != "flush" or delay.support_max == 0 or max_delay == 0:
+        return None
+    return FlushWatch(stacklevel)
 
 
 class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
@@ -148,9 +225,14 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     **The flush trap.** Under ``"flush"``, an env whose only reward comes at an episode's final step
     (FrozenLake, Minigrid) is not delayed at all: the pending reward is flushed at that very step.
-    The wrapper watches the first :data:`FLUSH_WATCH_EPISODES` episodes and, if the inner env
-    emitted every reward of theirs at a final step (so every one was delivered as it came), warns
-    once, naming ``"carry"`` (which delays a terminal reward into the next episode).
+    The wrapper watches its first episodes (:class:`FlushWatch`) until
+    :data:`FLUSH_WATCH_EPISODES` episodes *with a nonzero reward* have ended (episodes without
+    any do not count: FrozenLake's random walks rarely reach the goal), and for at most
+    :data:`FLUSH_WATCH_STEPS` steps. If the inner env emitted every reward of those episodes at
+    a final step (so every one was delivered as it came), it warns once, naming ``"carry"``
+    (which delays a terminal reward into the next episode). A nonzero reward emitted before an
+    episode's final step ends the watch without a warning; ``"carry"`` and ``"drop"``, and a
+    delay that is always 0, are not watched.
 
     If ``reset()`` is called in the middle of an episode (for example by an outer ``TimeLimit``
     that this wrapper cannot see), the pending rewards are discarded under ``"flush"`` and
@@ -225,8 +307,8 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.delay = as_delay(delay)
         self.max_delay = check_max_delay(max_delay)
         self.on_episode_end = check_episode_end(on_episode_end)
-        watching = self.on_episode_end == "flush" and self.delay.support_max != 0
-        self._watch = FlushWatch() if watching else None  # None once the watch is over
+        # None once the watch is over (called as step -> _watch_see -> FlushWatch.see)
+        self._watch = flush_watch(self.on_episode_end, self.delay, self.max_delay, stacklevel=3)
         self.record_arrivals = check_bool("record_arrivals", record_arrivals)
         self._sampler = DelaySampler(self.delay, self.max_delay)
         self._delays = self._sampler.block  # the sampler refills this very list
@@ -284,7 +366,7 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
             if reward - reward:  # inf or NaN (x - x is 0 for every finite float)
                 self._refuse(reward, delay)
             if self._watch is not None and not (terminated or truncated):
-                self._watch = None  # a reward before an episode's end: no flush trap
+                self._watch_see(True, ())  # a reward before an episode's end: no flush trap
             when = clock + delay
             slot = due.get(when, 0.0) + reward
             pending = self._pending + reward
@@ -301,7 +383,7 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
         if terminated or truncated:
             delivered = self._settle_episode_end(delivered, info)
             if self._watch is not None:
-                self._watch_episode_end(reward)
+                self._watch_see(False, (reward,))
         info["undelayed_reward"] = reward
         info["reward_delay"] = delay
         info["pending_reward"] = self._pending
@@ -311,19 +393,10 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
             )
         return obs, delivered, terminated, truncated, info
 
-    def _watch_episode_end(self, reward: float) -> None:
-        """The flush-trap watch at an episode's end (``reward``: its last step's, emitted)."""
-        if not self._watch.end_episode(reward):
-            return
-        trapped, self._watch = self._watch.trapped, None
-        if trapped:
-            warnings.warn(
-                f"the env emitted every reward of the first {FLUSH_WATCH_EPISODES} episodes at "
-                "an episode's final step, where on_episode_end='flush' delivers it at once: the "
-                "delay had no effect. Use on_episode_end='carry' to delay such rewards into the "
-                "next episode",
-                stacklevel=3,
-            )
+    def _watch_see(self, early: bool, finals: tuple[float, ...]) -> None:
+        """Show this step to the flush-trap watch (:meth:`FlushWatch.see`); end it once over."""
+        if self._watch.see(self._clock, early, finals):
+            self._watch = None
 
     def _settle_episode_end(self, delivered: float, info: dict[str, Any]) -> float:
         """The episode ended at this step: settle what is pending (``on_episode_end``).

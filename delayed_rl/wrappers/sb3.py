@@ -14,7 +14,7 @@ from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 from delayed_rl._validation import check_int
 from delayed_rl.delays import Delay, as_delay
 from delayed_rl.wrappers.buffers import RewardBuffers
-from delayed_rl.wrappers.reward_delay import check_episode_end, check_max_delay
+from delayed_rl.wrappers.reward_delay import check_episode_end, check_max_delay, flush_watch
 
 
 class VecRewardDelay(VecEnvWrapper):
@@ -32,6 +32,10 @@ class VecRewardDelay(VecEnvWrapper):
     discarded under ``"flush"``/``"drop"`` as ``dropped_reward``, with a warning when they are not
     zero (``"carry"`` keeps them). An autoreset at an episode's end updates ``reset_infos[i]``
     too.
+
+    Under ``"flush"`` the wrapper watches for the flush trap as :class:`RewardDelay` does
+    (:class:`~delayed_rl.wrappers.reward_delay.FlushWatch`), over all its sub-envs together, and
+    warns at most once.
 
     Delays come from the wrapper's own generators, one per sub-env: ``seed=s`` here, or
     ``venv.seed(s)`` followed by ``reset()``, seeds sub-env ``i``'s delays with ``s + i``, as
@@ -73,6 +77,8 @@ class VecRewardDelay(VecEnvWrapper):
         self.max_delay = check_max_delay(max_delay)
         self.on_episode_end = check_episode_end(on_episode_end)
         self.buffers = RewardBuffers(self.num_envs, self.delay, self.max_delay)
+        # (called as VecEnv.step -> step_wait -> FlushWatch.see_envs -> see)
+        self._watch = flush_watch(self.on_episode_end, self.delay, self.max_delay, stacklevel=4)
         seed = check_int("seed", seed, 0, optional=True)
         if seed is not None:
             self.buffers.seed(self._seeds_from(seed))
@@ -145,6 +151,10 @@ class VecRewardDelay(VecEnvWrapper):
                         f"{np.flatnonzero(~np.isfinite(delivered)).tolist()} (due then, plus the "
                         "flushed rest) sum to more than float64 can hold; rescale the rewards"
                     )
+        if self._watch is not None and self._watch.see_envs(
+            int(self.buffers.clock.sum()), rewards, ended
+        ):
+            self._watch = None
         pending = self.buffers.pending
         key = "flushed_reward" if self.on_episode_end == "flush" else "dropped_reward"
         for i, info in enumerate(infos):

@@ -13,7 +13,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from delayed_rl._validation import check_int
 from delayed_rl.delays import Delay, as_delay, delay_spec
 from delayed_rl.wrappers.buffers import RewardBuffers
-from delayed_rl.wrappers.reward_delay import check_episode_end, check_max_delay
+from delayed_rl.wrappers.reward_delay import check_episode_end, check_max_delay, flush_watch
 
 
 def sub_env_seeds(seed: Any, num_envs: int) -> list[int | None]:
@@ -92,6 +92,11 @@ class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
       whose episode had not ended loses its pending rewards under ``"flush"``/``"drop"`` (reported
       as ``info["dropped_reward"]``), as in :class:`RewardDelay`.
 
+    Under ``"flush"`` the wrapper watches for the flush trap as :class:`RewardDelay` does
+    (:class:`~delayed_rl.wrappers.reward_delay.FlushWatch`), over all its sub-envs together: their
+    episodes with a reward count towards one total, their steps towards one step cap, and it
+    warns at most once.
+
     ``info`` holds arrays (with Gymnasium's ``_key`` masks): ``undelayed_reward``, ``reward_delay``,
     ``pending_reward`` on every step; ``flushed_reward`` or ``dropped_reward`` for the sub-envs
     whose episode ended at this step.
@@ -139,6 +144,8 @@ class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
         self.on_episode_end = check_episode_end(on_episode_end)
         self.autoreset_mode = autoreset_mode(env)
         self.buffers = RewardBuffers(self.num_envs, self.delay, self.max_delay)
+        # (called as step -> FlushWatch.see_envs -> see)
+        self._watch = flush_watch(self.on_episode_end, self.delay, self.max_delay, stacklevel=3)
         self._resetting = np.zeros(self.num_envs, dtype=bool)
         # per sub-env: from its episode's end (or construction) to its next reset
         self._episode_ended = np.ones(self.num_envs, dtype=bool)
@@ -185,6 +192,11 @@ class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
                 _with_mask(info, "flushed_reward", flushed, ended)
             elif self.on_episode_end == "drop":
                 _with_mask(info, "dropped_reward", self.buffers.clear(ended), ended)
+        emitted = np.where(active, rewards, 0.0)
+        if self._watch is not None and self._watch.see_envs(
+            int(self.buffers.clock.sum()), emitted, ended
+        ):
+            self._watch = None
         if self.autoreset_mode == AutoresetMode.NEXT_STEP:
             self._episode_ended = ended.copy()  # until the reset step starts a new episode
             self._resetting = ended.copy()
@@ -192,7 +204,7 @@ class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
             self._episode_ended[:] = False
         else:
             self._episode_ended |= ended
-        _with_mask(info, "undelayed_reward", np.where(active, rewards, 0.0), active)
+        _with_mask(info, "undelayed_reward", emitted, active)
         _with_mask(info, "reward_delay", delays, active)
         _with_mask(info, "pending_reward", self.buffers.pending, np.ones(self.num_envs, bool))
         return obs, delivered, terminated, truncated, info

@@ -146,15 +146,12 @@ floating-point sums do not depend on the machine's thread count either.
 
 from __future__ import annotations
 
-import contextlib
-import sys
 import time
-from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from delayed_rl.experiments.runner import iter_tasks
+from delayed_rl.experiments.runner import RunProgress, iter_tasks
 from delayed_rl.experiments.sweep.results import (
     EXTRA_COLUMNS,
     RESULT_COLUMNS,
@@ -241,7 +238,6 @@ __all__ = [
     "make_model",
     "parse_sweep",
     "plot_env",
-    "progress_counter",
     "read_results",
     "read_sweep_file",
     "render_summary",
@@ -307,33 +303,6 @@ class SweepOutcome:
     figures: dict[str, str] = field(default_factory=dict)
 
 
-@contextlib.contextmanager
-def progress_counter(total: int, enabled: bool) -> Iterator[Callable[[], None]]:
-    """Yield ``tick()``, to call once per finished run: tqdm's bar on stderr, else a count line.
-
-    Args:
-        total: how many runs there are.
-        enabled: show the progress at all.
-    """
-    if not enabled:
-        yield lambda: None
-        return
-    try:
-        from tqdm.auto import tqdm
-    except ImportError:
-        done = 0
-
-        def tick() -> None:
-            nonlocal done
-            done += 1
-            print(f"[sweep] {done}/{total} runs done", file=sys.stderr, flush=True)
-
-        yield tick
-        return
-    with tqdm(total=total, desc="sweep", unit="run", file=sys.stderr) as bar:
-        yield bar.update
-
-
 def run_sweep(
     sweep: Sweep,
     out: str | Path,
@@ -352,7 +321,8 @@ def run_sweep(
         backend: ``"loky"`` (joblib's process pool), ``"ray"`` or ``"dask"``.
         address: an existing Ray or Dask cluster to run on (``None``: a local one); see
             :func:`~delayed_rl.experiments.runner.iter_tasks`.
-        progress: show a progress bar on stderr (tqdm's, else a count line).
+        progress: show the progress on stderr (:class:`~delayed_rl.experiments.runner.RunProgress`:
+            tqdm's bar, else a count line per run).
 
     Returns:
         What was run and written.
@@ -375,10 +345,10 @@ def run_sweep(
     write_results(results, existing)  # a clean file to append to, without a row cut short
     started = time.perf_counter()
     if pending:  # (no backend starts for nothing)
-        with progress_counter(len(pending), progress) as tick:
+        with RunProgress(len(pending), "sweep", progress) as counter:
             for _, row in finished:
                 append_result(results, row)
-                tick()
+                counter.tick()
     ours, others = _in_sweep_order(read_results(results), tasks)
     write_results(results, [*ours, *others])
     summary = summarize(ours)
