@@ -7,7 +7,7 @@ these functions do:
   absolute values) run SIMD loops chosen for the CPU at import (AVX2, AVX-512), each rounding
   its own way;
 - the C library's ``exp``, ``log``, ``sin``, ``cos``, ``atan``, ``atan2`` (behind Python's
-  :mod:`math`, numba's compiled ``math`` and numpy's scalar loops) pick, on x86-64 glibc, a
+  ``math``, numba's compiled ``math`` and numpy's scalar loops) pick, on x86-64 glibc, a
   variant compiled for fused multiply-adds where the CPU has them, whose last bit differs from
   the plain one on some arguments.
 
@@ -18,13 +18,13 @@ order. numba compiles them without reassociation or fused operations (it never a
 contract ``a * b + c``), and without numba they run as plain Python on the same doubles, so a
 compiled call, a Python call and a call on another CPU return the same bits. Their error is
 below one unit in the last place on the arguments the library uses (tested against
-:mod:`math`); they are not correctly rounded, only reproducible.
+``math``); they are not correctly rounded, only reproducible.
 
-Domains: :func:`sin`, :func:`cos` and :func:`sincos` reduce exactly for ``|x| < 2**19 · π/2``
+Domains: ``sin``, ``cos`` and ``sincos`` reduce exactly for ``|x| < 2**19 · π/2``
 (about 823,550 rad, a robot turning for days); beyond it they reduce modulo 2π in one exact
 ``%`` by the double nearest 2π, still reproducible but less accurate. Infinite or NaN
-arguments give NaN. :func:`exp` overflows to ``inf`` above 709.78 and underflows to 0 below
-−745.13; :func:`log` gives ``-inf`` at 0 and NaN below.
+arguments give NaN. ``exp`` overflows to ``inf`` above 709.78 and underflows to 0 below
+−745.13; ``log`` gives ``-inf`` at 0 and NaN below.
 """
 
 from __future__ import annotations
@@ -124,7 +124,7 @@ _HALF_LOG_TWO_PI = 9.18938533204672741780e-01
 
 @jit
 def _log_factorials(k):
-    """``log(k!)`` for each integer-valued ``k >= 0`` of a float array (see :func:`log_factorial`)."""
+    """``log(k!)`` for each integer-valued ``k >= 0`` of a float array (see ``log_factorial``)."""
     exact = np.empty(_EXACT_FACTORIALS)
     factorial = 1.0  # exact up to 22! (its odd part fits 53 bits), then rounded once a step
     for i in range(_EXACT_FACTORIALS):
@@ -363,17 +363,17 @@ def _apply(function_id: int, values) -> np.ndarray:
 
 
 def sin_array(values) -> np.ndarray:
-    """:func:`sin` of every element (a float64 array of the same shape)."""
+    """``sin`` of every element (a float64 array of the same shape)."""
     return _apply(0, values)
 
 
 def cos_array(values) -> np.ndarray:
-    """:func:`cos` of every element (a float64 array of the same shape)."""
+    """``cos`` of every element (a float64 array of the same shape)."""
     return _apply(1, values)
 
 
 def exp_array(values) -> np.ndarray:
-    """:func:`exp` of every element (a float64 array of the same shape)."""
+    """``exp`` of every element (a float64 array of the same shape)."""
     return _apply(2, values)
 
 
@@ -386,7 +386,7 @@ def _atan2_map(y, x):
 
 
 def atan2_array(y, x) -> np.ndarray:
-    """:func:`atan2` of every pair of elements of ``y`` and ``x`` (broadcast together)."""
+    """``atan2`` of every pair of elements of ``y`` and ``x`` (broadcast together)."""
     y_array, x_array = np.broadcast_arrays(np.asarray(y, np.float64), np.asarray(x, np.float64))
     flat = _atan2_map(np.ascontiguousarray(y_array.ravel()), np.ascontiguousarray(x_array.ravel()))
     return flat.reshape(y_array.shape)

@@ -232,7 +232,7 @@ class Poisson(Delay):
     def pmf(self, k):
         """``λ^k e^{-λ} / k!`` (computed in log space), 0 for negative ``k``; vectorised.
 
-        The logarithms and exponentials are :mod:`delayed_rl._portable_math`'s, so the values
+        The logarithms and exponentials are ``delayed_rl._portable_math``'s, so the values
         (and every alias table and credit weight made from them) have the same bits on every CPU.
         """
         k = np.asarray(k)

@@ -905,7 +905,9 @@ class MultipleModelQLearning(TabularAgent):
         counts = self._statistics.acting_counts_since_log()
         total = counts.sum()
         if total:
-            logger.record("mmq/acting_delay_mean", float(np.sum(counts * self._delay_estimates) / total))
+            logger.record(
+                "mmq/acting_delay_mean", float(np.sum(counts * self._delay_estimates) / total)
+            )
             logger.record(
                 "mmq/acting_delay_mode", int(self._delay_estimates[int(np.argmax(counts))])
             )

@@ -359,7 +359,7 @@ def credit_kernel(delay_estimates: np.ndarray, width: float) -> np.ndarray:
 
     Both training paths read a model's weight off this one array (so they agree to the bit):
     the weight of model λ̂ when λ̂* acts is ``weights[|λ̂ − λ̂*|]``. The exponential is
-    :func:`delayed_rl._portable_math.exp`, the same bits on every CPU.
+    ``delayed_rl._portable_math.exp``, the same bits on every CPU.
 
     Args:
         delay_estimates: Λ, sorted ascending.

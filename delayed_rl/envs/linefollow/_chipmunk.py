@@ -15,7 +15,7 @@ bit:
   them, in one compiled (numba) loop that calls the C functions by address. The
   differential-drive arithmetic between the calls is the same expressions, compiled without
   reassociation or fused operations, and the heading's sine and cosine are
-  :func:`delayed_rl._portable_math.sincos`'s on both routes (the same bits compiled or not, on
+  ``delayed_rl._portable_math.sincos``'s on both routes (the same bits compiled or not, on
   every CPU; the C library's ``sin`` and ``cos`` pick a variant by CPU). Only on platforms where a ``cpVect`` argument or result (a struct of two doubles)
   is passed exactly like two doubles (the System V x86-64 and AArch64 conventions of Linux and
   macOS), and only once :func:`enabled` has checked, on a space like the robot's, that it ends

@@ -161,7 +161,7 @@ class Camera:
 
         The centre is ``look_ahead`` ahead, ``(x + look_ahead·cos, y + look_ahead·sin)``, and
         pixel i is ``offsets[i]`` to its left, along ``(−sin, cos)``; the heading's sine and
-        cosine are :func:`delayed_rl._portable_math.sincos`'s (the same bits on every CPU).
+        cosine are ``delayed_rl._portable_math.sincos``'s (the same bits on every CPU).
         """
         sin, cos = portable_math.sincos(float(heading))
         cx, cy = float(x) + self.look_ahead * cos, float(y) + self.look_ahead * sin
