@@ -8,6 +8,8 @@ fed the same transitions through ``update()`` (to the last bit).
 
 from __future__ import annotations
 
+import warnings
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -93,3 +95,14 @@ def test_slippery_frozen_lake_compiles_with_the_tables_probabilities():
     assert n > 1000
     # a 1/3 share's standard error is sqrt(2/9 / n): within 4 of them
     assert np.all(np.abs(counts / n - 1 / 3) < 4 * np.sqrt(2 / 9 / n))
+
+
+@pytest.mark.parametrize("fused", [True, False], ids=["compiled", "python"])
+def test_an_agent_is_warned_of_the_flush_trap_on_either_path(fused):
+    env = PoissonRewardDelay(gym.make("FrozenLake-v1"), lam=5)
+    with pytest.warns(UserWarning, match="at an episode's final step"):
+        QLearning(env, seed=0).learn(20_000, fused=fused)
+    env = PoissonRewardDelay(gym.make("Taxi-v4"), lam=5)  # rewards along the way
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        QLearning(env, seed=0).learn(5_000, fused=fused)

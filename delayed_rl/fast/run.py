@@ -56,6 +56,8 @@ class FusedRun:
             max is tied).
         arrivals: the oracle's record of who emitted each pending reward
             (:class:`~delayed_rl.fast.arrivals.Arrivals`), or ``None``.
+        wrapper: the stack's reward-delay wrapper, or ``None``; its flush-trap watch sees the
+            run's steps (:meth:`~delayed_rl.wrappers.RewardDelay.watch_steps_taken_elsewhere`).
         robot: the link to the e-puck env the run steps (:class:`~delayed_rl.fast.robot.RobotLink`),
             or ``None`` for a tabular env.
 
@@ -75,6 +77,7 @@ class FusedRun:
             raise NotCompilable("numba is not installed (a core dependency: pip install numba)")
         self.robot = RobotLink(env.unwrapped) if linked(env.unwrapped) else None
         self.model, wrapper = inspect_stack(env, tables=self.robot is None)
+        self.wrapper = wrapper
         self.delay = None if wrapper is None else wrapper.delay
         self.max_delay = None if wrapper is None else wrapper.max_delay
         self.on_episode_end = "flush" if wrapper is None else wrapper.on_episode_end
@@ -259,6 +262,9 @@ class FusedRun:
                 "end episodes inside the RewardDelay wrapper to have them flushed",
                 stacklevel=4,
             )
+        if self.wrapper is not None:
+            ends = log.episode_end.astype(bool)
+            self.wrapper.watch_steps_taken_elsewhere(log.undelayed_reward, ends, stacklevel=6)
         return log
 
 

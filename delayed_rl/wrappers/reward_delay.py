@@ -309,6 +309,7 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.on_episode_end = check_episode_end(on_episode_end)
         # None once the watch is over (called as step -> _watch_see -> FlushWatch.see)
         self._watch = flush_watch(self.on_episode_end, self.delay, self.max_delay, stacklevel=3)
+        self._watched_elsewhere = 0  # steps the compiled path showed the watch
         self.record_arrivals = check_bool("record_arrivals", record_arrivals)
         self._sampler = DelaySampler(self.delay, self.max_delay)
         self._delays = self._sampler.block  # the sampler refills this very list
@@ -395,8 +396,41 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     def _watch_see(self, early: bool, finals: tuple[float, ...]) -> None:
         """Show this step to the flush-trap watch (:meth:`FlushWatch.see`); end it once over."""
-        if self._watch.see(self._clock, early, finals):
+        if self._watch.see(self._clock + self._watched_elsewhere, early, finals):
             self._watch = None
+
+    def watch_steps_taken_elsewhere(
+        self, rewards: np.ndarray, episode_ends: np.ndarray, stacklevel: int
+    ) -> None:
+        """Show the flush-trap watch steps of this stack that did not go through :meth:`step`.
+
+        The compiled training path (:mod:`delayed_rl.fast`) steps the env's tables or robot
+        itself, not this wrapper; it passes each chunk's emitted rewards and episode ends here,
+        so an agent trained either way is warned alike. The steps count towards
+        :data:`FLUSH_WATCH_STEPS` after those taken through :meth:`step`.
+
+        Args:
+            rewards: the reward emitted at each step, in order.
+            episode_ends: whether each step ended an episode.
+            stacklevel: how many calls lead from the line to name in a warning to this one.
+        """
+        if self._watch is None:
+            return
+        base = self._clock + self._watched_elsewhere
+        self._watched_elsewhere += len(rewards)
+        watch, level = self._watch, self._watch.stacklevel
+        watch.stacklevel = stacklevel
+        try:
+            for i in np.flatnonzero((rewards != 0.0) | episode_ends).tolist():
+                ended = bool(episode_ends[i])
+                finals = (float(rewards[i]),) if ended else ()
+                if watch.see(base + i + 1, not ended, finals):
+                    self._watch = None
+                    return
+            if watch.see(self._clock + self._watched_elsewhere, False, ()):  # the step cap
+                self._watch = None
+        finally:
+            watch.stacklevel = level
 
     def _settle_episode_end(self, delivered: float, info: dict[str, Any]) -> float:
         """The episode ended at this step: settle what is pending (``on_episode_end``).
