@@ -4,9 +4,21 @@ from __future__ import annotations
 
 import gymnasium as gym
 import numpy as np
-from scipy import stats
 
 from delayed_rl.delays import Delay
+
+
+def examples(ci_count: int) -> int:
+    """A test's own ``max_examples``: ``ci_count`` under the ``ci`` profile, scaled to the active one.
+
+    A test's ``@settings(max_examples=...)`` overrides the profile (``tests/conftest.py``), so a
+    test that needs more (or fewer) examples than the default states its ``ci`` count through
+    this: the ``dev`` profile's 10 examples in place of 100 give a tenth of it (at least one).
+    """
+    from hypothesis import settings
+
+    scale = settings().max_examples / settings.get_profile("ci").max_examples
+    return max(1, round(ci_count * scale))
 
 
 class ScriptedDelay(Delay):
@@ -60,6 +72,8 @@ def binned_chisquare(draws: np.ndarray, pmf) -> float:
     assert len(obs_bins) >= 2, "too few bins for a chi-square test"
     exp_arr = np.asarray(exp_bins)
     exp_arr *= n / exp_arr.sum()
+    from scipy import stats  # (imported here: scipy.stats takes half a second to import)
+
     return float(stats.chisquare(np.asarray(obs_bins), exp_arr).pvalue)
 
 

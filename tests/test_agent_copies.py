@@ -137,6 +137,7 @@ def test_what_cannot_be_copied_is_dropped_and_said():
         assert twin.num_timesteps == 300
 
 
+@pytest.mark.sb3
 def test_a_logger_that_cannot_be_copied_is_replaced(tmp_path):
     from stable_baselines3.common.logger import configure
 

@@ -58,6 +58,7 @@ def test_public_exports():
     assert ProportionalController is Controller
 
 
+@pytest.mark.sb3
 def test_env_id_string_and_get_env():
     agent = QLearning(GRID5, seed=0)
     assert isinstance(agent.env, gym.Env)
@@ -76,6 +77,7 @@ def test_set_env_checks_spaces():
         agent.set_env(42)
 
 
+@pytest.mark.sb3
 def test_vec_env_is_refused_with_a_hint():
     from stable_baselines3.common.vec_env import DummyVecEnv
 
@@ -287,6 +289,7 @@ def test_learning_rate_schedule_gets_progress_remaining():
         fading.learn(10)
 
 
+@pytest.mark.sb3
 def test_exploration_schedule_matches_sb3_linear_schedule():
     from stable_baselines3.common.utils import LinearSchedule as SB3Linear
 
@@ -351,6 +354,7 @@ def test_default_logger_prints_when_verbose(capsys):
     assert capsys.readouterr().out == ""
 
 
+@pytest.mark.cold_cache
 def test_works_without_stable_baselines3_or_tqdm():
     """A fresh interpreter where stable_baselines3 and tqdm cannot be imported."""
     code = textwrap.dedent(
@@ -406,9 +410,10 @@ class HugeEnv(gym.Env):
             lambda: MMQ(GRID5, delay_estimates=[0, 10**30]),
             r"delay_estimates must keep the tables .*got \[0, 10+\]",
         ),
-        (
+        pytest.param(  # 100,000 delays checked one by one under tracemalloc
             lambda: MMQ(GRID5, delay_estimates=range(0, 10**8, 10**3)),
             r"delay_estimates must keep the tables .*got \[0, \.\.\., 99999000\] \(100000 values\)",
+            marks=pytest.mark.large,
         ),
         (
             lambda: MMQ(HugeEnv()),

@@ -196,6 +196,7 @@ def test_no_delay_is_q_learning(fused):
 
 
 # ---------------------------------------------------------------------- behaviour
+@pytest.mark.statistical
 def test_under_poisson_delays_it_beats_q_learning_on_the_same_rewards():
     for seed in range(5):
         rewards = []

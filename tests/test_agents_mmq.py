@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from support import examples
 
 import delayed_rl  # noqa: F401  (registers the env ids)
 from delayed_rl.agents import MMQ, FixedDelayQLearning, MultipleModelQLearning, QLearning
@@ -135,7 +136,7 @@ transitions = st.lists(
 )
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=examples(60), deadline=None)
 @given(
     delays=st.lists(st.integers(0, 6), min_size=1, max_size=5, unique=True),
     q_init=st.sampled_from([0.0, 5.0, 20.0]),
@@ -157,7 +158,7 @@ def test_matches_reference_and_cache_is_exact(delays, q_init, steps):
         np.testing.assert_array_equal(rows[np.arange(9), cells], agent._v_max)
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=examples(40), deadline=None)
 @given(
     values=st.lists(st.sampled_from([-1.0, 0.0, 0.5, 1.0]), min_size=12, max_size=12),
     s=st.integers(0, 2),

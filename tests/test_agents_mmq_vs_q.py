@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import gymnasium as gym
 import numpy as np
-import pytest
 
 import delayed_rl  # noqa: F401  (registers the env ids)
 from delayed_rl.agents import MMQ, QLearning
@@ -30,7 +29,6 @@ def average_undelayed_reward(agent):
     return float(agent.training_log["undelayed_reward"].mean())
 
 
-@pytest.mark.slow
 def test_mmq_beats_q_learning_on_9x9_with_poisson_13_delays():
     mmq, q = [], []
     for seed in SEEDS:

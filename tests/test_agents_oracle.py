@@ -227,6 +227,7 @@ def test_under_a_constant_delay_it_is_fixed_delay_q_learning(k, fused):
 
 
 # ---------------------------------------------------------------------- behaviour
+@pytest.mark.statistical
 def test_under_poisson_delays_it_learns_what_undelayed_q_learning_learns():
     optimum = 111 * 10 / 1000  # 9-step round trips in a 1000-step greedy walk
     for seed in range(5):

@@ -7,19 +7,13 @@ import warnings
 
 import numpy as np
 import pytest
-from stable_baselines3.common.callbacks import (
-    CallbackList,
-    CheckpointCallback,
-    EvalCallback,
-    ProgressBarCallback,
-    StopTrainingOnMaxEpisodes,
-)
-from stable_baselines3.common.evaluation import evaluate_policy
-from stable_baselines3.common.logger import configure
-from stable_baselines3.common.monitor import Monitor
 
 from delayed_rl.agents import MMQ, QLearning
 from delayed_rl.envs.gridworld import GridWorldEnv
+
+# Every test imports stable-baselines3 (and so torch, over a second), each in its body: not at
+# collection.
+pytestmark = pytest.mark.sb3
 
 
 def grid(size=5, max_steps=50):
@@ -39,6 +33,9 @@ def greedy_return(agent, env, steps):
 
 
 def test_eval_callback(tmp_path):
+    from stable_baselines3.common.callbacks import EvalCallback
+    from stable_baselines3.common.monitor import Monitor
+
     agent = QLearning(grid(max_steps=200), q_init=20.0, seed=0)
     callback = EvalCallback(
         Monitor(grid(max_steps=30)),
@@ -64,6 +61,8 @@ def test_eval_callback(tmp_path):
 
 
 def test_checkpoint_callback(tmp_path):
+    from stable_baselines3.common.callbacks import CheckpointCallback
+
     agent = MMQ(grid(), max_delay_estimate=3, seed=0)
     agent.learn(2_000, callback=CheckpointCallback(save_freq=500, save_path=str(tmp_path)))
     names = sorted(p.name for p in tmp_path.iterdir())
@@ -75,6 +74,8 @@ def test_checkpoint_callback(tmp_path):
 
 
 def test_stop_on_max_episodes():
+    from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
+
     agent = QLearning(grid(max_steps=100), seed=0)
     agent.learn(10_000, callback=StopTrainingOnMaxEpisodes(max_episodes=3))
     assert agent.num_timesteps == 300
@@ -82,6 +83,13 @@ def test_stop_on_max_episodes():
 
 @pytest.mark.filterwarnings("ignore::tqdm.TqdmExperimentalWarning")
 def test_callback_list_and_progress_bar(tmp_path):
+    from stable_baselines3.common.callbacks import (
+        CallbackList,
+        CheckpointCallback,
+        ProgressBarCallback,
+        StopTrainingOnMaxEpisodes,
+    )
+
     progress = ProgressBarCallback()
     stop = StopTrainingOnMaxEpisodes(max_episodes=5)
     checkpoint = CheckpointCallback(save_freq=100, save_path=str(tmp_path))
@@ -97,6 +105,9 @@ def test_callback_list_and_progress_bar(tmp_path):
 
 
 def test_evaluate_policy_matches_a_hand_rollout():
+    from stable_baselines3.common.evaluation import evaluate_policy
+    from stable_baselines3.common.monitor import Monitor
+
     agent = MMQ(grid(size=3, max_steps=500), max_delay_estimate=2, q_init=15.0, seed=1)
     agent.learn(5_000)
     mean, std = evaluate_policy(agent, Monitor(grid(size=3, max_steps=60)), n_eval_episodes=3)
@@ -110,6 +121,8 @@ def test_evaluate_policy_matches_a_hand_rollout():
 
 
 def test_configure_logger_records_metrics(tmp_path):
+    from stable_baselines3.common.logger import configure
+
     agent = MMQ(grid(max_steps=100), max_delay_estimate=5, seed=0)
     agent.set_logger(configure(str(tmp_path), ["csv"]))
     agent.learn(3_000, log_interval=1_000)

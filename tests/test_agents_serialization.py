@@ -225,6 +225,7 @@ def test_pickled_arrays_are_never_loaded(tmp_path):
         MMQ.load(target)
 
 
+@pytest.mark.sb3
 def test_sb3_eval_callback_best_model_loads_by_its_sb3_name(tmp_path):
     """EvalCallback saves ``best_model`` (written ``best_model.npz``); ``.zip`` finds it.
 

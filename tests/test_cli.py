@@ -357,7 +357,7 @@ def _marked_processes(mark: str) -> list[int]:
     return found
 
 
-@pytest.mark.slow
+@pytest.mark.experiment
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc (Linux)")
 @pytest.mark.parametrize("gap", [0.05, 0.5])
 def test_two_ctrl_c_during_a_parallel_run_exit_at_once_leaving_no_worker(tmp_path, gap):

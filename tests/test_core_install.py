@@ -61,7 +61,7 @@ _TRAIN = textwrap.dedent(
 )
 
 
-@pytest.mark.slow
+@pytest.mark.cold_cache
 def test_deconvolution_solves_compile_and_run_without_scipy(tmp_path: Path):
     (tmp_path / "sitecustomize.py").write_text(_BLOCK_SCIPY)
     root = Path(__file__).resolve().parents[1]

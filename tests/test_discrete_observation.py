@@ -99,6 +99,7 @@ def test_decode_refuses_what_is_not_an_index():
             env.decode(bad)
 
 
+@pytest.mark.statistical
 def test_blackjack_learns_under_delayed_rewards_on_the_python_path():
     """Blackjack's Tuple observation, numbered, under Poisson(2) delays: every reward arrives."""
     env = DiscreteObservation(wrap_delays(gym.make("Blackjack-v1"), reward_delay=2))

@@ -1,16 +1,20 @@
 """Every ``>>>`` example in the package's docstrings runs and prints what it claims.
 
-The modules are found, not listed: every module under ``delayed_rl/`` is imported and searched
-with ``doctest.DocTestFinder``; each one with at least one example is a test case of its own.
-Modules that need an optional extra (stable-baselines3, matplotlib) are imported too: CI
-installs the extras, so a missing one fails here instead of silently skipping examples.
+The modules are found, not listed: every module under ``delayed_rl/`` whose source holds a
+``>>>`` line is a test case of its own, imported and searched with ``doctest.DocTestFinder`` by
+its test (not at collection: ``delayed_rl.wrappers.sb3`` imports stable-baselines3, so torch).
+``test_every_module_imports_and_the_search_misses_no_example`` imports every module, those that
+need an optional extra (stable-baselines3, matplotlib) too: CI installs the extras, so a missing
+one fails there instead of silently skipping examples.
 """
 
 from __future__ import annotations
 
 import doctest
 import importlib
+import importlib.util
 import pkgutil
+from pathlib import Path
 
 import pytest
 
@@ -25,9 +29,15 @@ def _reraise(name: str) -> None:
 
 
 def _module_names() -> list[str]:
-    """The package and every module below it, by dotted name."""
+    """The package and every module below it, by dotted name (subpackages are imported, modules not)."""
     found = pkgutil.walk_packages(delayed_rl.__path__, prefix="delayed_rl.", onerror=_reraise)
     return ["delayed_rl", *sorted(info.name for info in found)]
+
+
+def _has_examples(name: str) -> bool:
+    """Whether module ``name``'s source has a ``>>>`` line: read, not imported."""
+    source = Path(importlib.util.find_spec(name).origin).read_text(encoding="utf-8")
+    return any(line.lstrip().startswith(">>>") for line in source.splitlines())
 
 
 def _examples(name: str) -> list[doctest.DocTest]:
@@ -37,12 +47,17 @@ def _examples(name: str) -> list[doctest.DocTest]:
     return [test for test in tests if test.examples]
 
 
-MODULES = [name for name in _module_names() if _examples(name)]
+MODULES = [name for name in _module_names() if _has_examples(name)]
 
 
 def test_the_search_finds_the_examples():
     # a search that found nothing would leave test_doctests with no case, and pass
     assert {"delayed_rl.delays", "delayed_rl.wrappers.reward_delay"} <= set(MODULES)
+
+
+@pytest.mark.sb3  # delayed_rl.wrappers.sb3 imports stable-baselines3, so torch
+def test_every_module_imports_and_the_search_misses_no_example():
+    assert [name for name in _module_names() if _examples(name)] == MODULES
 
 
 @pytest.mark.parametrize("name", MODULES)
@@ -51,4 +66,5 @@ def test_doctests(name: str) -> None:
     for test in _examples(name):
         runner.run(test)
     result = runner.summarize(verbose=False)
+    assert result.attempted > 0, f"{name}'s >>> lines are no doctest example"
     assert result.failed == 0, f"{result.failed} of {result.attempted} examples of {name} failed"

@@ -30,7 +30,7 @@ def test_own_tabular_env_trains_on_the_compiled_path(capsys):
     assert "DeconvolutionQLearning: trained on the fused path, greedy actions [1, 1]" in lines[1]
 
 
-@pytest.mark.slow
+@pytest.mark.sb3
 def test_sb3_ppo_and_dqn_train_on_delayed_rewards(capsys):
     out = run_example("sb3_delayed_rewards.py", "--steps", "300", capsys=capsys)
     assert "PPO, CartPole-v1, Poisson(5.0) reward delays: return" in out
@@ -53,7 +53,7 @@ def test_robot_loop_learns_online_through_update(capsys):
     assert [line.split(":")[0] for line in lines] == [f"step {n}" for n in (500, 1000, 1500, 2000)]
 
 
-@pytest.mark.slow
+@pytest.mark.sb3
 def test_the_rl_zoo3_file_wraps_the_env_and_trains(tmp_path):
     import gymnasium as gym
     import yaml

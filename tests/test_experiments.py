@@ -14,7 +14,7 @@ from delayed_rl.experiments.runner import VERDICTS, mean_ci95, run_tasks, runnin
 from delayed_rl.experiments.training import greedy_average_reward, grid_env, train
 
 
-@pytest.mark.slow
+@pytest.mark.experiment
 @pytest.mark.parametrize("name", NAMES)
 def test_quick_run_writes_every_file(name, tmp_path):
     experiment, config = get_experiment(name), Config(quick=True, seeds=2)
@@ -72,6 +72,7 @@ def test_mmq_gridworld_learns_in_pieces_as_in_one_run():
     assert pieces["optimal"] == bool(pieces["snapshot_optimal"][-1])
 
 
+@pytest.mark.cold_cache
 def test_results_do_not_depend_on_the_number_of_workers():
     experiment = get_experiment("delay-sweep")
     tasks = experiment.tasks(Config(quick=True, seeds=2, steps=3000))

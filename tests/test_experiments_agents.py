@@ -201,7 +201,7 @@ def test_linefollow_deconv_run_measures_reward_error_and_the_delay_estimate():
     assert result["ns_per_step"] > 0
 
 
-@pytest.mark.slow
+@pytest.mark.experiment
 def test_anonymous_delay_quick_run(tmp_path):
     summary = run_experiment(get_experiment("anonymous-delay"), Config(quick=True), tmp_path, False)
     assert len(summary.claims) == 6 and summary.extra["table"][0]["seeds"] == 2
@@ -297,7 +297,7 @@ def test_linefollow_deconv_verdicts_flip_with_the_data(tmp_path):
     assert len(list(tmp_path.glob("*.png"))) == 3
 
 
-@pytest.mark.slow
+@pytest.mark.experiment
 def test_linefollow_deconv_quick_run(tmp_path):
     summary = run_experiment(
         get_experiment("linefollow-deconv"), Config(quick=True), tmp_path, False

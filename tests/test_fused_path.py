@@ -52,7 +52,7 @@ def _assert_paths_agree(make_agent, n_seeds: int) -> tuple[np.ndarray, np.ndarra
     return fused, python
 
 
-@pytest.mark.slow
+@pytest.mark.statistical
 def test_seeded_runs_agree_in_distribution():
     """MMQ on GridWorld-5x5 under Poisson(5) delays, 6 seeds a path."""
 
@@ -64,7 +64,7 @@ def test_seeded_runs_agree_in_distribution():
     assert fused.mean() > 0.3  # both learn the 9-step route (optimum 10/9 ≈ 1.11)
 
 
-@pytest.mark.slow
+@pytest.mark.statistical
 def test_seeded_runs_agree_on_a_gymnasium_env_with_other_delays():
     """Q-learning on FrozenLake (its own ``P`` tables, slippery) under Geometric delays."""
 

@@ -9,7 +9,6 @@ import gymnasium as gym
 import numba
 import numpy as np
 import pytest
-from scipy import stats
 
 import delayed_rl  # noqa: F401  (registers the ids)
 from delayed_rl.agents import MMQ, QLearning
@@ -59,6 +58,8 @@ def test_draws_are_uniform():
     draws = _draws(generator_state(np.random.SeedSequence(7)), 200_000)
     assert draws.min() >= 0.0 and draws.max() < 1.0
     counts = np.bincount((draws * 100).astype(np.int64), minlength=100)
+    from scipy import stats
+
     assert stats.chisquare(counts).pvalue > 1e-4
     assert abs(np.corrcoef(draws[:-1], draws[1:])[0, 1]) < 5 / np.sqrt(draws.size)
 

@@ -26,12 +26,13 @@ from gymnasium.vector import AutoresetMode, SyncVectorEnv
 from gymnasium.wrappers import TimeLimit
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from support import examples
 
 from delayed_rl.delays import Constant, Empirical, Geometric, Poisson, Uniform
 from delayed_rl.wrappers import EPISODE_END_MODES, RewardDelay, VectorRewardDelay
 
 FUZZ = settings(
-    max_examples=100,
+    max_examples=examples(100),
     deadline=None,
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
 )
@@ -197,6 +198,7 @@ def test_vector_env_conserves_every_sub_envs_rewards(
 # --- the stable-baselines3 vector env ----------------------------------------------------------
 
 
+@pytest.mark.sb3
 @FUZZ
 @given(
     data=st.data(),
@@ -314,6 +316,9 @@ def _delay_rng(seed):
     return delay_rng(seed)
 
 
+#: The stable-baselines3 rows' mark: importing stable-baselines3 imports torch (over a second).
+SB3 = pytest.mark.sb3
+
 # (what to call with the bad value, argument name, a wrong-type value, a bad value or None)
 BAD_INPUTS = [
     # delays
@@ -337,9 +342,9 @@ BAD_INPUTS = [
     (_reset_vector, "seed", "3", -3),
     (lambda v: _reset_vector([0, v]), "seed", 1.5, -1),
     (lambda v: _reset_vector(v), "seed", {0: 1}, [0, 1, 2]),
-    (lambda v: _sb3(max_delay=v), "max_delay", "3", 2**63),
-    (lambda v: _sb3(delay=v), "delay", None, {"type": "Uniform", "low": 3}),
-    (_seed_sb3, "seed", "3", -1),
+    pytest.param(lambda v: _sb3(max_delay=v), "max_delay", "3", 2**63, marks=SB3),
+    pytest.param(lambda v: _sb3(delay=v), "delay", None, {"type": "Uniform", "low": 3}, marks=SB3),
+    pytest.param(_seed_sb3, "seed", "3", -1, marks=SB3),
     (_delay_rng, "seed", "x", -1),
     # envs
     (lambda v: _gridworld(size=v), "size", 9.0, 1000),
@@ -357,7 +362,7 @@ BAD_INPUTS = [
 @pytest.mark.parametrize(
     ("call", "name", "wrong_type", "bad_value"),
     BAD_INPUTS,
-    ids=[f"{row[1]}-{i}" for i, row in enumerate(BAD_INPUTS)],
+    ids=[f"{getattr(row, 'values', row)[1]}-{i}" for i, row in enumerate(BAD_INPUTS)],
 )
 def test_bad_inputs_raise_naming_the_argument(call, name, wrong_type, bad_value) -> None:
     with pytest.raises(TypeError, match=name):

@@ -66,6 +66,7 @@ def test_a_bad_readout_is_refused_by_name(readout):
     assert repr(readout) in str(error.value)
 
 
+@pytest.mark.experiment
 def test_the_line_experiments_run_together_train_each_learner_and_seed_once():
     config = Config(quick=True, seeds=1, workers=1)
     experiments = [

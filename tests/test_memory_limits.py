@@ -64,6 +64,7 @@ def circle(radius: float, n: int = 2000) -> np.ndarray:
 # --- delay rings -----------------------------------------------------------------------------
 
 
+@pytest.mark.large
 @pytest.mark.parametrize("delay", [Poisson(1e9), Constant(2**63 - 1), Geometric(1e-9)], ids=repr)
 def test_vector_rings_start_small_and_hold_only_what_is_pending(delay) -> None:
     def run():
@@ -92,6 +93,7 @@ def test_vector_ring_grows_with_the_delays_drawn_and_stops_at_its_limit() -> Non
     np.testing.assert_array_equal(env.buffers.pending, [50.0] * 4)
 
 
+@pytest.mark.sb3
 def test_sb3_rings_start_small() -> None:
     from stable_baselines3.common.vec_env import DummyVecEnv
 
@@ -150,7 +152,7 @@ def test_realistic_gridworlds_are_small(size: int) -> None:
     assert peak < 2 * MB + 1200 * size * size
 
 
-@pytest.mark.slow
+@pytest.mark.large
 def test_the_largest_gridworld_allowed_builds() -> None:
     side = int(MAX_STATES**0.5)
     start = time.perf_counter()
@@ -193,7 +195,7 @@ def test_tracks_of_a_few_metres_are_small() -> None:
     assert peak < 16 * MB
 
 
-@pytest.mark.slow
+@pytest.mark.large
 def test_the_longest_tracks_allowed_build_in_seconds() -> None:
     radius = 0.95 * MAX_TRACK_VERTICES * SAMPLE_SPACING / (2 * np.pi)
     start = time.perf_counter()

@@ -515,6 +515,7 @@ def test_truncated_files_are_refused(base, tmp_path, compress):
 
 
 @pytest.mark.parametrize("compress", [True, False], ids=["deflated", "stored"])
+@pytest.mark.statistical
 def test_bit_flips_are_refused_or_harmless(base, tmp_path, compress):
     """A flipped bit gives a ``ValueError`` or, in a field nothing reads, the same agent.
 
@@ -545,7 +546,14 @@ def test_bit_flips_are_refused_or_harmless(base, tmp_path, compress):
     assert refusals > 150  # most bits matter
 
 
-@pytest.mark.parametrize("delays", [[10**9], [0, 10**30], list(range(0, 10**8, 1_000))])
+@pytest.mark.parametrize(
+    "delays",
+    [
+        [10**9],
+        [0, 10**30],
+        pytest.param(list(range(0, 10**8, 1_000)), marks=pytest.mark.large),  # 100,000 delays
+    ],
+)
 def test_a_refused_table_names_its_size_before_allocating(tmp_path, delays):
     """The tables a file declares are checked against MAX_TABLE_BYTES before allocation."""
     good = MMQ(GRID3, max_delay_estimate=2, seed=0).save(tmp_path / "mmq")

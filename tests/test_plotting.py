@@ -5,15 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-pytest.importorskip("matplotlib")
-
-from delayed_rl.experiments import get_experiment, plotting  # noqa: E402
-from delayed_rl.experiments.runner import Config  # noqa: E402
+from delayed_rl.experiments import get_experiment, plotting
+from delayed_rl.experiments.runner import Config
 
 
 @pytest.fixture
 def kept(monkeypatch):
     """The figures the drawing functions close, kept open and returned in order."""
+    pytest.importorskip("matplotlib")  # (the plot extra; imported here, not at collection)
     import matplotlib.pyplot as plt
 
     figures = []
@@ -74,6 +73,7 @@ def test_learning_curves_limits_leave_the_spike_out_and_the_thesis_in(tmp_path, 
     assert "9×9: mean, 95 % CI over 2 seeds" in _labels(kept[-1])
 
 
+@pytest.mark.experiment
 def test_heatmaps_have_one_labelled_colourbar(tmp_path, kept):
     summary = _summary("mmq-gridworld", seeds=1, steps=3000)
     names = [n for n in summary.figures if n.startswith(("fig5_10", "fig5_11", "fig5_12"))]

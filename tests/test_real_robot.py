@@ -243,7 +243,7 @@ def test_a_task_continues_one_pretrained_agent_on_both_conditions():
     assert result["pretrain_seconds"] > 0
 
 
-@pytest.mark.slow
+@pytest.mark.experiment
 def test_quick_run_writes_claims_and_figures(tmp_path):
     experiment = get_experiment("real-robot")
     summary = run_experiment(experiment, Config(quick=True, steps=2_000), tmp_path, False)

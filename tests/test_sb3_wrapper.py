@@ -7,18 +7,22 @@ import subprocess
 import sys
 import warnings
 from collections import defaultdict
+from typing import TYPE_CHECKING
 
 import gymnasium as gym
 import numpy as np
 import pytest
-from stable_baselines3 import DQN, PPO
-from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
 
 from delayed_rl.delays import Constant, Poisson, Uniform
 from delayed_rl.wrappers import EPISODE_END_MODES, PoissonRewardDelay, reward_delay
 from delayed_rl.wrappers.reward_delay import FLUSH_WATCH_STEPS
-from delayed_rl.wrappers.sb3 import VecRewardDelay
+
+if TYPE_CHECKING:
+    from delayed_rl.wrappers.sb3 import VecRewardDelay
+
+# Every test here imports stable-baselines3 (so torch, over a second), in its body: not at
+# collection.
+pytestmark = pytest.mark.sb3
 
 
 class RandomEndEnv(gym.Env):
@@ -57,6 +61,10 @@ def test_importing_delayed_rl_does_not_import_torch_or_sb3() -> None:
 @pytest.mark.parametrize("on_episode_end", EPISODE_END_MODES)
 @pytest.mark.parametrize("delay", [Poisson(0), Poisson(3.5), Constant(2), Uniform(0, 8)], ids=repr)
 def test_vec_reward_delay_conservation_and_info(on_episode_end, delay) -> None:
+    from stable_baselines3.common.env_util import make_vec_env
+
+    from delayed_rl.wrappers.sb3 import VecRewardDelay
+
     n_envs = 3
     venv = make_vec_env(RandomEndEnv, n_envs=n_envs, seed=4)
     twin = make_vec_env(RandomEndEnv, n_envs=n_envs, seed=4)
@@ -113,6 +121,10 @@ def test_vec_reward_delay_conservation_and_info(on_episode_end, delay) -> None:
 
 
 def test_vec_reward_delay_seeding() -> None:
+    from stable_baselines3.common.env_util import make_vec_env
+
+    from delayed_rl.wrappers.sb3 import VecRewardDelay
+
     def delays(seed=None, via_seed_method=False):
         env = VecRewardDelay(
             make_vec_env(RandomEndEnv, n_envs=2, seed=0), 5, seed=None if via_seed_method else seed
@@ -133,6 +145,10 @@ def test_vec_reward_delay_seeding() -> None:
 
 @pytest.mark.parametrize("bad", [float("nan"), float("inf")])
 def test_vec_reward_delay_non_finite_reward_raises(bad) -> None:
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from delayed_rl.wrappers.sb3 import VecRewardDelay
+
     env = VecRewardDelay(DummyVecEnv([lambda: RandomEndEnv(reward=bad)]), 2, seed=0)
     env.reset()
     with pytest.raises(ValueError, match="non-finite"):
@@ -155,12 +171,17 @@ def test_vec_reward_delay_non_finite_reward_raises(bad) -> None:
     ],
 )
 def test_vec_reward_delay_invalid_arguments(kwargs, exc, name) -> None:
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from delayed_rl.wrappers.sb3 import VecRewardDelay
+
     with pytest.raises(exc, match=name):
         VecRewardDelay(DummyVecEnv([RandomEndEnv]), **kwargs)
 
 
-@pytest.mark.slow
 def test_dqn_trains_through_the_gymnasium_wrapper() -> None:
+    from stable_baselines3 import DQN
+
     env = PoissonRewardDelay(gym.make("CartPole-v1"), 5)
     model = DQN("MlpPolicy", env, learning_starts=500, train_freq=16, seed=0, device="cpu")
     model.learn(2000)
@@ -171,8 +192,9 @@ def test_dqn_trains_through_the_gymnasium_wrapper() -> None:
     assert all(r == pytest.approx(length) for r, length in returns)  # CartPole pays 1 per step
 
 
-@pytest.mark.slow
 def test_dqn_trains_on_a_registered_env_with_reward_delay() -> None:
+    from stable_baselines3 import DQN
+
     env = gym.make("delayed_rl/GridWorld-3x3-v0", reward_delay=2, max_steps=50)
     model = DQN("MlpPolicy", env, learning_starts=100, train_freq=16, seed=0, device="cpu")
     model.learn(1000)
@@ -180,8 +202,12 @@ def test_dqn_trains_on_a_registered_env_with_reward_delay() -> None:
     assert all(ep["l"] == 50 for ep in model.ep_info_buffer)  # max_steps truncation, seen by SB3
 
 
-@pytest.mark.slow
 def test_ppo_trains_through_vec_reward_delay() -> None:
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
+
+    from delayed_rl.wrappers.sb3 import VecRewardDelay
+
     venv = DummyVecEnv([lambda: gym.make("CartPole-v1") for _ in range(2)])
     env = VecMonitor(VecRewardDelay(venv, 5, seed=0))
     model = PPO("MlpPolicy", env, n_steps=512, batch_size=256, n_epochs=1, seed=0, device="cpu")
@@ -196,6 +222,10 @@ def test_ppo_trains_through_vec_reward_delay() -> None:
 
 
 def test_mid_episode_reset_reports_dropped_reward_in_reset_infos() -> None:
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from delayed_rl.wrappers.sb3 import VecRewardDelay
+
     env = VecRewardDelay(DummyVecEnv([lambda: RandomEndEnv(0.0, 1.0)] * 2), Constant(5), seed=0)
     env.reset()
     assert all("dropped_reward" not in info for info in env.reset_infos)  # no episode yet
@@ -212,6 +242,10 @@ def test_mid_episode_reset_reports_dropped_reward_in_reset_infos() -> None:
 def test_mid_episode_reset_with_nothing_pending_reports_zero_without_warning() -> None:
     import warnings
 
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from delayed_rl.wrappers.sb3 import VecRewardDelay
+
     env = VecRewardDelay(DummyVecEnv([lambda: RandomEndEnv(0.0, 0.0)]), Constant(5), seed=0)
     env.reset()
     env.step(np.zeros(1, dtype=int))
@@ -222,6 +256,10 @@ def test_mid_episode_reset_with_nothing_pending_reports_zero_without_warning() -
 
 
 def test_mid_episode_reset_under_carry_keeps_pending() -> None:
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from delayed_rl.wrappers.sb3 import VecRewardDelay
+
     env = VecRewardDelay(
         DummyVecEnv([lambda: RandomEndEnv(0.0, 1.0)]), Constant(5), on_episode_end="carry", seed=0
     )
@@ -234,6 +272,10 @@ def test_mid_episode_reset_under_carry_keeps_pending() -> None:
 
 
 def sb3_delays(seed=None, n_envs=2, via_seed_method=False, steps=60):
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from delayed_rl.wrappers.sb3 import VecRewardDelay
+
     venv = DummyVecEnv([lambda: RandomEndEnv(0.0, 1.0) for _ in range(n_envs)])
     env = VecRewardDelay(venv, 5, seed=None if via_seed_method else seed)
     if via_seed_method:
@@ -260,15 +302,26 @@ def test_sub_env_i_gets_seed_plus_i_like_sb3_vec_env_seed() -> None:
     assert not np.array_equal(sb3_delays(20)[:, 0], sb3_delays(20)[:, 1])
 
 
-class Float64VecEnv(DummyVecEnv):
-    """A VecEnv whose rewards are float64 (DummyVecEnv's own buffer is float32)."""
+def Float64VecEnv(env_fns):
+    """A VecEnv whose rewards are float64 (DummyVecEnv's own buffer is float32).
 
-    def step_wait(self):
-        obs, _, dones, infos = super().step_wait()
-        return obs, np.full(self.num_envs, 0.1, dtype=np.float64), dones, infos
+    (Its class is made here, so that stable-baselines3 is imported by the tests, not at collection.)
+    """
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    class _Float64VecEnv(DummyVecEnv):
+        def step_wait(self):
+            obs, _, dones, infos = super().step_wait()
+            return obs, np.full(self.num_envs, 0.1, dtype=np.float64), dones, infos
+
+    return _Float64VecEnv(env_fns)
 
 
 def test_delivered_sums_keep_float64_until_sb3_casts() -> None:
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from delayed_rl.wrappers.sb3 import VecRewardDelay
+
     env = VecRewardDelay(Float64VecEnv([lambda: RandomEndEnv(0.0, 0.0)]), Constant(0), seed=0)
     env.reset()
     _, rewards, _, _ = env.step(np.zeros(1, dtype=int))
@@ -281,6 +334,8 @@ def test_delivered_sums_keep_float64_until_sb3_casts() -> None:
 
 
 def test_sb3_pending_sum_beyond_float64_is_a_clear_error_not_inf() -> None:
+    from delayed_rl.wrappers.sb3 import VecRewardDelay
+
     env = VecRewardDelay(
         Float64VecEnv([lambda: RandomEndEnv(0.0, 0.0)]), Constant(5), seed=0
     )  # float64 rewards of 0.1 ...
@@ -315,6 +370,10 @@ def _trap_warnings(caught) -> list:
 
 
 def test_frozen_lake_sub_envs_warn_of_the_flush_trap_once() -> None:
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from delayed_rl.wrappers.sb3 import VecRewardDelay
+
     n_envs = 3
     venv = DummyVecEnv([lambda: gym.make("FrozenLake-v1") for _ in range(n_envs)])
     env = VecRewardDelay(venv, Poisson(5), seed=0)
@@ -329,6 +388,10 @@ def test_frozen_lake_sub_envs_warn_of_the_flush_trap_once() -> None:
 
 
 def test_rewards_along_the_way_end_the_sb3_watch_at_once() -> None:
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from delayed_rl.wrappers.sb3 import VecRewardDelay
+
     env = VecRewardDelay(DummyVecEnv([lambda: RandomEndEnv(0.1)] * 3), Poisson(5), seed=0)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -337,6 +400,10 @@ def test_rewards_along_the_way_end_the_sb3_watch_at_once() -> None:
 
 
 def test_the_sb3_step_cap_counts_every_sub_envs_steps(monkeypatch) -> None:
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from delayed_rl.wrappers.sb3 import VecRewardDelay
+
     n_envs, cap = 3, 30
     monkeypatch.setattr(reward_delay, "FLUSH_WATCH_STEPS", cap)
     venv = DummyVecEnv([lambda: RandomEndEnv(0.2, reward=0.0) for _ in range(n_envs)])
@@ -349,6 +416,10 @@ def test_the_sb3_step_cap_counts_every_sub_envs_steps(monkeypatch) -> None:
 
 @pytest.mark.parametrize("on_episode_end", ["carry", "drop"])
 def test_carry_and_drop_never_watch_sb3_sub_envs(on_episode_end) -> None:
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from delayed_rl.wrappers.sb3 import VecRewardDelay
+
     venv = DummyVecEnv([lambda: gym.make("FrozenLake-v1") for _ in range(3)])
     env = VecRewardDelay(venv, Poisson(5), on_episode_end=on_episode_end, seed=0)
     assert env._watch is None

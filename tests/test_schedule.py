@@ -242,7 +242,7 @@ def test_the_greedy_window_variant_reads_the_averaged_table_of_the_same_run():
         ad.averaged_readout(ad.current_readout(window))
 
 
-@pytest.mark.slow
+@pytest.mark.experiment
 def test_future_work_run_with_anonymous_delay_shares_mmq_runs_and_claims_the_same(tmp_path):
     config = Config(quick=True, steps=4_000)
     alone = run_experiment(get_experiment("future-work"), Config(quick=True, steps=4_000))
@@ -264,6 +264,7 @@ def _figured_summary(tasks, results, config):
     return Summary([], [], figures={"plot": draw}, extra={"values": values})
 
 
+@pytest.mark.cold_cache
 def test_files_are_written_in_background_processes_and_reported_once_written(tmp_path):
     """With several experiments and workers, each one's files are on disk when on_done sees it."""
     done = []
@@ -295,6 +296,7 @@ def test_files_are_written_in_background_processes_and_reported_once_written(tmp
     assert [s.extra["values"] for s in summaries] == [[1, 4], [9], [16, 25, 36]]
 
 
+@pytest.mark.cold_cache
 def test_a_failed_background_write_is_raised(tmp_path):
     (tmp_path / "a").write_text("a file where the folder should go")
     experiments = [_experiment(name, [1]) for name in ("a", "b")]
@@ -302,6 +304,7 @@ def test_a_failed_background_write_is_raised(tmp_path):
         run_experiments(experiments, Config(workers=2), tmp_path, progress=False)
 
 
+@pytest.mark.cold_cache
 def test_a_summary_that_cannot_be_sent_is_written_here(tmp_path):
     """A figure holding an object pickling refuses is drawn in this process, not lost."""
     import threading

@@ -345,6 +345,7 @@ def test_the_example_sweep_is_what_its_comments_say_and_every_run_works(tmp_path
 
 
 # ---------------------------------------------------------------------------------- running
+@pytest.mark.experiment
 def test_a_sweep_writes_one_row_per_run_a_summary_and_a_figure_per_env(tmp_path, joblib_table):
     outcome = run_sweep(parse_sweep(tiny(seeds=[0])), tmp_path)
     rows = read_rows(tmp_path)
@@ -399,11 +400,13 @@ def test_bad_run_options_fail_before_anything_is_written(tmp_path, options, erro
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.cold_cache
 def test_the_same_file_gives_the_same_numbers_in_a_process_pool(tmp_path, joblib_table):
     run_sweep(parse_sweep(tiny()), tmp_path, workers=2)
     assert numbers(tmp_path) == joblib_table
 
 
+@pytest.mark.experiment
 def test_a_rerun_runs_only_what_results_csv_lacks(tmp_path, joblib_table):
     sweep = parse_sweep(tiny())
     assert run_sweep(sweep, tmp_path).ran == 32
@@ -460,6 +463,7 @@ def test_progress_without_tqdm_is_a_count_on_stderr(tmp_path, monkeypatch, capsy
     ]
 
 
+@pytest.mark.sb3
 def test_sb3_algorithms_run_by_name(tmp_path):
     data = {
         "agents": [
@@ -488,6 +492,7 @@ def test_sb3_algorithms_run_by_name(tmp_path):
 
 
 # ---------------------------------------------------------------------------------- the CLI
+@pytest.mark.experiment
 def test_the_cli_runs_a_sweep_file_and_resumes_it(tmp_path, capsys, joblib_table):
     path = tmp_path / "tiny.json"
     path.write_text(json.dumps(TINY))
@@ -556,7 +561,7 @@ def test_sweep_help_documents_every_option(capsys):
 
 
 # ---------------------------------------------------------------------------------- Ray, Dask
-@pytest.mark.slow
+@pytest.mark.distributed
 def test_ray_gives_the_same_table(tmp_path, joblib_table):
     import ray
 
@@ -574,7 +579,7 @@ def test_ray_gives_the_same_table(tmp_path, joblib_table):
     assert time.perf_counter() - started < 90
 
 
-@pytest.mark.slow
+@pytest.mark.distributed
 def test_dask_at_an_address_gives_the_same_table(tmp_path, capsys, joblib_table):
     from dask.distributed import LocalCluster
 
