@@ -8,7 +8,6 @@ before anything large is allocated, with an error naming the argument and the si
 from __future__ import annotations
 
 import re
-import time
 import tracemalloc
 import warnings
 
@@ -155,10 +154,9 @@ def test_realistic_gridworlds_are_small(size: int) -> None:
 @pytest.mark.large
 def test_the_largest_gridworld_allowed_builds() -> None:
     side = int(MAX_STATES**0.5)
-    start = time.perf_counter()
     env, peak = peak_of(lambda: GridWorldEnv(size=side))
     assert env.n_states == MAX_STATES
-    assert peak < 200 * MB and time.perf_counter() - start < 30
+    assert peak < 200 * MB
 
 
 # --- tracks -----------------------------------------------------------------------------------
@@ -180,10 +178,16 @@ def test_the_track_error_names_the_size_and_the_limit() -> None:
     assert re.search(r"6,283 m long and would need 1,25\d,\d{3} vertices", str(e.value))
 
 
-def test_random_track_with_a_huge_mean_radius_fails_at_once() -> None:
-    start = time.perf_counter()
+def test_random_track_with_a_huge_mean_radius_fails_at_once(monkeypatch) -> None:
+    from delayed_rl.envs.linefollow import track as track_module
+
+    def never(*args, **kwargs):
+        raise AssertionError("a track was drawn before the size was checked")
+
+    monkeypatch.setattr(track_module, "_smooth_track", never)
+    monkeypatch.setattr(track_module.np.random, "default_rng", never)
     peak = peak_of_error(lambda: random_track(0, mean_radius=50), ValueError, r"mean_radius=50")
-    assert time.perf_counter() - start < 2.0 and peak < 8 * MB
+    assert peak < 8 * MB
 
 
 def test_tracks_of_a_few_metres_are_small() -> None:
@@ -198,13 +202,11 @@ def test_tracks_of_a_few_metres_are_small() -> None:
 @pytest.mark.large
 def test_the_longest_tracks_allowed_build_in_seconds() -> None:
     radius = 0.95 * MAX_TRACK_VERTICES * SAMPLE_SPACING / (2 * np.pi)
-    start = time.perf_counter()
     track, peak = peak_of(lambda: Track.from_polyline(circle(radius, 8000)))
     assert len(track.points) <= MAX_TRACK_VERTICES
     assert track.clearance(0.5) < 0.6
-    assert peak < 100 * MB and time.perf_counter() - start < 30
-    start = time.perf_counter()
+    assert peak < 100 * MB
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         track = random_track(1, mean_radius=10.0)
-    assert time.perf_counter() - start < 30 and track.length > 50
+    assert track.length > 50

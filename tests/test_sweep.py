@@ -12,7 +12,6 @@ import json
 import math
 import re
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -565,7 +564,6 @@ def test_sweep_help_documents_every_option(capsys):
 def test_ray_gives_the_same_table(tmp_path, joblib_table):
     import ray
 
-    started = time.perf_counter()
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     try:
         address = ray.get_runtime_context().gcs_address
@@ -576,14 +574,12 @@ def test_ray_gives_the_same_table(tmp_path, joblib_table):
     finally:
         ray.shutdown()
     assert numbers(tmp_path) == joblib_table
-    assert time.perf_counter() - started < 90
 
 
 @pytest.mark.distributed
 def test_dask_at_an_address_gives_the_same_table(tmp_path, capsys, joblib_table):
     from dask.distributed import LocalCluster
 
-    started = time.perf_counter()
     path = tmp_path / "tiny.json"
     path.write_text(json.dumps(TINY))
     with LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None) as cluster:
@@ -591,4 +587,3 @@ def test_dask_at_an_address_gives_the_same_table(tmp_path, capsys, joblib_table)
         assert main([*argv, "--address", cluster.scheduler_address, "--no-progress"]) == 0
     assert "ran 32 of 32 runs" in capsys.readouterr().out
     assert numbers(tmp_path / "out") == joblib_table
-    assert time.perf_counter() - started < 90
