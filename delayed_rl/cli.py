@@ -581,6 +581,24 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _check_train_arguments(args: argparse.Namespace) -> None:
+    """Refuse bad ``train`` values as bad usage (exit 2), before training rather than after.
+
+    A ``--save`` with no file name (``""``, ``"."``), and ``--steps`` above ``MAX_TIMESTEPS``.
+    """
+    from delayed_rl.agents._loop import MAX_TIMESTEPS, MAX_TIMESTEPS_TEXT
+    from delayed_rl.agents.save_util import check_model_path
+
+    try:
+        check_model_path(args.save)
+    except (TypeError, ValueError) as error:
+        args.parser.error(f"argument --save: {str(error).removeprefix('path ')}")
+    if args.steps > MAX_TIMESTEPS:
+        args.parser.error(
+            f"argument --steps: must be at most {MAX_TIMESTEPS_TEXT}, got {args.steps}"
+        )
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``delayed-rl`` with ``argv`` (default: the process's arguments); return the exit code."""
     parser = build_parser()
@@ -594,6 +612,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             args.parser.error(
                 f"--max-delay-estimate is for --agent mmq or deconv, not --agent {args.agent}"
             )
+        _check_train_arguments(args)
     level, gym.logger.min_level = gym.logger.min_level, 40  # Gymnasium's warnings stay out
     try:
         return args.run(args)

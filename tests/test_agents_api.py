@@ -444,3 +444,84 @@ def test_the_table_limit_fits_the_thesis_and_far_larger():
     agent = MMQ("delayed_rl/GridWorld-9x9-v0", max_delay_estimate=50)
     assert agent.q_table.nbytes == 81 * 51 * 4 * 8
     QLearning(DiscretizeObservation(gym.make("MountainCar-v0"), bins=300))  # 90 000 states
+
+
+# ---------------------------------------------------------------------- clear errors, bounded work
+@pytest.mark.parametrize(
+    ("args", "error", "match"),
+    [
+        ((0, np.array([1, 2]), 1.0, 1), TypeError, r"action must be an integer in Discrete\(4\) "
+         r"\(one int, or a 0-d integer array\), got array\(\[1, 2\]\): an array of shape \(2,\)"),
+        ((np.array([3]), 0, 1.0, 1), TypeError, r"obs must be an integer .* of shape \(1,\)"),
+        ((0, 0, 1.0, np.zeros((2, 2), np.int64)), TypeError, r"next_obs must be an integer .* "
+         r"of shape \(2, 2\)"),
+        ((0, np.array(1.5), 1.0, 1), TypeError, r"action must be an integer .* dtype float64"),
+        ((0, np.array(True), 1.0, 1), TypeError, r"action must be an integer .* dtype bool"),
+        ((0, 0, 1e300, 1), ValueError, r"reward must be within ±MAX_ABS_VALUE = 2\*\*200"),
+    ],
+)  # fmt: skip
+def test_update_names_the_argument_and_what_is_allowed(args, error, match):
+    agent = QLearning(GRID5)
+    with pytest.raises(error, match=match):
+        agent.update(*args)
+    assert agent.num_timesteps == 0 and np.all(agent.q_table == 0.0)
+    agent.update(np.int64(0), np.array(1), 1.0, np.array(5.0))  # 0-d integral arrays still do
+    assert agent.num_timesteps == 1
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"q_init": 1e300}, r"q_init must be within ±MAX_ABS_VALUE = 2\*\*200 \(delayed_rl"),
+        (
+            {"seed": 2**64},
+            r"seed must be at most MAX_SEED = 2\*\*63 - 1 .*got 18446744073709551616",
+        ),
+        ({"greedy_window": 2**41}, r"greedy_window must be at most MAX_TIMESTEPS = 2\*\*40"),
+    ],
+)
+def test_hyperparameters_above_their_stated_limits_are_refused(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        MMQ(GRID5, max_delay_estimate=2, **kwargs)
+
+
+def test_learn_refuses_work_above_its_limits_before_starting():
+    import tracemalloc
+
+    from delayed_rl.agents._loop import MAX_RECORD_BYTES, MAX_TIMESTEPS
+
+    agent = QLearning(GRID5, seed=0).learn(10)
+    with pytest.raises(
+        ValueError, match=r"total_timesteps must be at most MAX_TIMESTEPS = 2\*\*40"
+    ):
+        agent.learn(MAX_TIMESTEPS + 1)
+    agent.num_timesteps = MAX_TIMESTEPS - 5
+    with pytest.raises(ValueError, match="keep the agent's step count within MAX_TIMESTEPS"):
+        agent.learn(10, reset_num_timesteps=False)
+    tracemalloc.start()
+    try:
+        with pytest.raises(ValueError, match="record within MAX_RECORD_BYTES = 1 GiB"):
+            agent.learn(MAX_RECORD_BYTES // 41 + 1, record=True)  # 41 bytes a step
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 4 * 2**20
+    assert agent.num_timesteps == MAX_TIMESTEPS - 5  # nothing started
+
+
+@pytest.mark.parametrize(
+    ("path", "error", "match"),
+    [
+        ("", ValueError, r"path must name a model file .*got '', which has no file name"),
+        (".", ValueError, r"path must name a model file .*got '\.', which has no file name"),
+        ("runs/..", ValueError, r"got 'runs/\.\.', which has no file name"),
+        (None, TypeError, r"path must be a str or os\.PathLike naming a model file, got None"),
+        (3, TypeError, r"path must be a str or os\.PathLike .*got 3 \(int\)"),
+    ],
+)
+def test_save_and_load_name_a_path_without_a_file_name(path, error, match):
+    agent = QLearning(GRID5)
+    with pytest.raises(error, match=match):
+        agent.save(path)
+    with pytest.raises(error, match=match):
+        QLearning.load(path)

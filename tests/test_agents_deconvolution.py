@@ -180,6 +180,24 @@ def test_the_episode_end_mode_is_read_from_the_wrapper_and_conflicts_are_refused
         ({"delay_iterations": 0}, ValueError, "delay_iterations must be an integer >= 1"),
         ({"on_episode_end": "keep"}, ValueError, "on_episode_end must be one of"),
         ({"on_episode_end": 1}, TypeError, "on_episode_end must be one of"),
+        ({"max_delay": 1025}, ValueError, "max_delay must be at most MAX_MODELLED_DELAY = 1024"),
+        (
+            {"solve_interval": 2**40 + 1},
+            ValueError,
+            r"solve_interval must be at most MAX_SOLVE_INTERVAL = 2\*\*40",
+        ),
+        ({"ridge": 1e300}, ValueError, r"ridge must be at most MAX_ABS_VALUE = 2\*\*200"),
+        (
+            {"delay_iterations": 101},
+            ValueError,
+            "delay_iterations must be at most MAX_DELAY_ITERATIONS = 100",
+        ),
+        (
+            {"delay": Poisson(2000.0)},
+            ValueError,
+            "delay must be modelled on at most 1025 lags .* give a max_delay",
+        ),
+        ({"delay": [0.5, 0.6]}, ValueError, r"delay \(a saved pmf\): pmf must sum to 1"),
     ],
 )
 def test_bad_arguments(kwargs, error, match):
@@ -374,3 +392,25 @@ def test_the_python_path_runs_gymnasiums_tabular_envs_with_the_defaults(env_id, 
     pmf = agent.delay_pmf
     error = log["reward"].std() / np.sqrt(np.bincount(pairs)[top] * (pmf @ pmf))
     assert abs(agent.reward_model.ravel()[top] - true) < 4 * error
+
+
+def test_a_solve_whose_mean_rewards_pass_max_abs_value_is_refused(monkeypatch):
+    agent = DeconvQ(GridWorldEnv(size=3), max_delay=4, seed=0)
+    agent.update(0, 0, 1.0, 1)
+    monkeypatch.setattr(RewardRegression, "solve_rewards", lambda *args: np.full(36, np.inf))
+    with pytest.raises(ValueError, match=r"mean reward of inf, beyond MAX_ABS_VALUE = 2\*\*200"):
+        agent.solve()
+    assert np.all(agent.reward_model == 0.0)  # the Q-learning step never sees it
+
+
+def test_a_shorter_solve_interval_given_to_load_shortens_the_pending_gap(tmp_path):
+    """Saved 500 steps into a 1000-step gap; loaded with ``solve_interval=200``: it solves next."""
+    agent = DeconvQ(GridWorldEnv(size=3), max_delay=4, q_init=5.0, seed=0).learn(1_500)
+    path = agent.save(tmp_path / "deconv")
+    kept = load_agent(path, GridWorldEnv(size=3))
+    shortened = load_agent(path, GridWorldEnv(size=3), custom_objects={"solve_interval": 200})
+    for loaded in (kept, shortened):
+        np.testing.assert_array_equal(loaded.reward_model, agent.reward_model)
+        loaded.update(0, 0, 1.0, 1)
+    np.testing.assert_array_equal(kept.reward_model, agent.reward_model)
+    assert not np.array_equal(shortened.reward_model, agent.reward_model)

@@ -15,7 +15,13 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from delayed_rl.agents import MultipleModelQLearning, QLearning, load_agent
+from delayed_rl.agents import (
+    DeconvQ,
+    ExpectedCreditQLearning,
+    MultipleModelQLearning,
+    QLearning,
+    load_agent,
+)
 from delayed_rl.cli import main
 
 GRID = "delayed_rl/GridWorld-3x3-v0"
@@ -465,3 +471,73 @@ def test_bench_and_reproduce_take_progress_flags(command, capsys):
     with pytest.raises(SystemExit):
         main([command, "--help"])
     assert "--progress, --no-progress" in capsys.readouterr().out
+
+
+def _edited_copy(path, target, arrays=None, **hyperparameters):
+    """``path``'s model file with arrays replaced and hyper-parameters set, written to ``target``."""
+    import json
+
+    with np.load(path) as data:
+        contents = {key: data[key] for key in data.files}
+    metadata = json.loads(str(contents.pop("metadata")))
+    metadata["hyperparameters"].update(hyperparameters)
+    contents.update(arrays or {})
+    np.savez(target, **contents, metadata=np.array(json.dumps(metadata)))
+    return target
+
+
+@pytest.mark.parametrize("path", [".", ""])
+def test_evaluate_of_a_path_without_a_file_name_exits_1_naming_it(path, capsys):
+    assert main(["evaluate", path, "--env", GRID, "--steps", "5"]) == 1
+    assert "path must name a model file" in _one_error_line(capsys)
+
+
+@pytest.mark.parametrize(
+    ("make", "edit", "fragment"),
+    [
+        (
+            lambda env: ExpectedCreditQLearning(env, 2.0),
+            {"delay": None},
+            "delay must be",
+        ),
+        (
+            lambda env: DeconvQ(env, max_delay=4),
+            {"max_delay": 10**9},
+            "max_delay must be at most MAX_MODELLED_DELAY",
+        ),
+        (
+            lambda env: DeconvQ(env, max_delay=4),
+            {"arrays": {"delay_pmf": np.array([2.0, -1.0, 0.0, 0.0, 0.0])}},
+            "delay_pmf must hold numbers in [0, 1]",
+        ),
+    ],
+    ids=["expected credit with delay null", "DeconvQ max_delay 1e9", "DeconvQ pmf off simplex"],
+)
+def test_evaluate_on_a_bad_agent_file_exits_1_with_one_line(tmp_path, capsys, make, edit, fragment):
+    good = make(gym.make(GRID)).learn(20).save(tmp_path / "good")
+    bad = _edited_copy(good, tmp_path / "bad.npz", **edit)
+    assert main(["evaluate", str(bad), "--env", GRID, "--steps", "5"]) == 1
+    err = _one_error_line(capsys)
+    assert str(bad) in err and fragment in err, err
+
+
+def test_train_refuses_a_save_path_without_a_file_name_or_too_many_steps(
+    tmp_path, capsys, monkeypatch
+):
+    """Bad usage, exit 2, before training (the step limit lowered to keep the test short)."""
+    from delayed_rl.agents import _loop
+
+    argv = _train(tmp_path, "--agent", "q")
+    argv[argv.index("--save") + 1] = ""
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv)
+    assert exit_info.value.code == 2
+    assert "argument --save: must name a model file" in capsys.readouterr().err
+    monkeypatch.setattr(_loop, "MAX_TIMESTEPS", 100)
+    argv = _train(tmp_path, "--agent", "q")
+    argv[argv.index("--steps") + 1] = "101"
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv)
+    assert exit_info.value.code == 2
+    assert "argument --steps: must be at most MAX_TIMESTEPS" in capsys.readouterr().err
+    assert not (tmp_path / "agent.npz").exists()

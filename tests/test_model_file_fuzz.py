@@ -22,11 +22,27 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from numpy.lib import format as npy
+from support import examples
 
 import delayed_rl  # noqa: F401  (registers the env ids)
-from delayed_rl.agents import MMQ, QLearning, load_agent, save_util
+from delayed_rl.agents import (
+    MMQ,
+    DeconvQ,
+    ExpectedCreditQLearning,
+    FixedDelayQLearning,
+    OracleQLearning,
+    QLearning,
+    load_agent,
+    save_util,
+)
+from delayed_rl.agents import _regression as regression_module
 from delayed_rl.agents.mmq import MAX_TABLE_BYTES
+from delayed_rl.delays import Poisson
+from delayed_rl.envs.gridworld import GridWorldEnv
+from delayed_rl.wrappers import RewardDelay
 
 GRID3 = "delayed_rl/GridWorld-3x3-v0"
 MEMORY_BOUND = 32 * 2**20
@@ -602,3 +618,391 @@ def test_sb3_callback_names_find_the_file(tmp_path):
     assert agent.save(tmp_path / "rl_model_10_steps.zip").name == "rl_model_10_steps.zip"
     for name in ("rl_model_10_steps", "rl_model_10_steps.zip", "rl_model_10_steps.npz"):
         assert QLearning.load(tmp_path / name).num_timesteps == 10
+
+
+# ---------------------------------------------------------------------- every agent class
+# Files of every agent class, each of their state arrays and metadata fields mutated in turn:
+# each must be refused with one ValueError/TypeError that names the file and the field, or load
+# to an agent that learns 300 steps with finite tables (and, for DeconvQ, a pmf on the simplex).
+def _grid_env() -> gym.Env:
+    return gym.make(GRID3, reward_delay=2)
+
+
+def _oracle_env() -> gym.Env:
+    return RewardDelay(gym.make(GRID3), Poisson(2.0), record_arrivals=True)
+
+
+def _episodic_env(mode: str = "flush") -> gym.Env:
+    """Episodes of 15 steps: DeconvQ's statistics then hold ended windows (and flushed rewards)."""
+    return RewardDelay(GridWorldEnv(size=3, max_steps=15), Poisson(2.0), on_episode_end=mode)
+
+
+@dataclass(frozen=True)
+class Kind:
+    """An agent class as the corpus builds it: its constructor, its env, its layout."""
+
+    make: Callable[[gym.Env], Any]
+    env: Callable[[], gym.Env]
+    hashed: bool = False  # DeconvQ's statistics in the hashed layout
+
+
+KINDS = {
+    "QLearning": Kind(lambda e: QLearning(e, q_init=5.0, seed=0), _grid_env),
+    "FixedDelayQLearning": Kind(
+        lambda e: FixedDelayQLearning(e, delay_estimate=2, q_init=5.0, seed=0), _grid_env
+    ),
+    "MMQ with options": Kind(
+        lambda e: MMQ(
+            e,
+            max_delay_estimate=3,
+            reward_kernel=1.0,
+            delay_trace=0.5,
+            greedy_window=200,
+            q_init=5.0,
+            seed=0,
+        ),
+        _grid_env,
+    ),
+    "ExpectedCreditQLearning": Kind(
+        lambda e: ExpectedCreditQLearning(e, delay=2, q_init=5.0, seed=0), _grid_env
+    ),
+    "OracleQLearning": Kind(lambda e: OracleQLearning(e, q_init=5.0, seed=0), _oracle_env),
+    "DeconvQ known delay": Kind(
+        lambda e: DeconvQ(e, delay=Poisson(2.0), max_delay=6, q_init=5.0, seed=0), _episodic_env
+    ),
+    "DeconvQ learned delay": Kind(
+        lambda e: DeconvQ(e, max_delay=5, q_init=5.0, seed=0), lambda: _episodic_env("drop")
+    ),
+    "DeconvQ hashed statistics": Kind(
+        lambda e: DeconvQ(e, max_delay=5, q_init=5.0, seed=0), _episodic_env, hashed=True
+    ),
+}
+TRAINED = 900
+"""Steps before saving: DeconvQ's first solve (at 1000) comes 100 steps into the 300 after."""
+FIELD_VALUES: list[Any] = [None, "x", [1], {"a": 1}, True, -1, 0, 10**12, 10**30, 1.5, 1e308]
+FIELD_VALUES += [float("nan"), DROP]
+"""What each metadata field is set to in turn (JSON's NaN included; DROP: removed)."""
+
+
+@pytest.fixture(scope="module")
+def bases(tmp_path_factory) -> dict[str, Base]:
+    """One good file of each :data:`KINDS`, trained :data:`TRAINED` steps."""
+    folder = tmp_path_factory.mktemp("agents")
+    out = {}
+    for name, kind in KINDS.items():
+        with pytest.MonkeyPatch.context() as patch:
+            if kind.hashed:
+                patch.setattr(regression_module, "DIRECT_LIMIT", 0)
+            agent = kind.make(kind.env()).learn(TRAINED)
+        if kind.hashed:
+            assert agent._regression.layout == "hashed"
+        path = agent.save(folder / name.replace(" ", "_"))
+        with np.load(path) as data:
+            arrays = {key: data[key] for key in data.files}
+        out[name] = Base(path.read_bytes(), json.loads(str(arrays.pop("metadata"))), arrays)
+    return out
+
+
+def array_mutations(value: np.ndarray) -> list[tuple[str, Any]]:
+    """``(label, replacement)`` for one state array: dtypes, shapes, values; ``DROP``: missing."""
+    kind = value.dtype.kind
+    out: list[tuple[str, Any]] = [
+        ("float32", value.astype(np.float32)),
+        ("int64" if kind == "f" else "float64", value.astype(np.int64 if kind == "f" else float)),
+        ("int32", value.astype(np.int32)),
+        ("bool", value.astype(bool)),
+        ("text", np.array("x")),
+        ("0-d", np.array(value.flat[0]) if value.size else np.zeros((), value.dtype)),
+        ("extra axis", value[..., None]),
+        ("missing", DROP),
+    ]
+    if value.ndim:
+        longer = (
+            np.concatenate([value, value[:1]]) if len(value) else np.zeros((1, *value.shape[1:]))
+        )
+        out.append(("longer", longer.astype(value.dtype)))
+        if len(value):
+            out.append(("shorter", value[:-1]))
+    if not value.size:
+        return out
+    if kind == "f":
+        specials: list[Any] = [np.nan, np.inf, -np.inf, 1e308, -1e308, 1e200, -1.0, 2.0, 0.5]
+    elif kind in "iu":
+        specials = [-1, 7, 2**31 - 1, 2**62, -(2**62)]
+    else:
+        specials = [True, False]
+    for special in specials:
+        if kind in "iu" and not np.iinfo(value.dtype).min <= special <= np.iinfo(value.dtype).max:
+            continue
+        for where in ("first", "all"):
+            mutated = value.copy()
+            if where == "first":
+                mutated.flat[0] = special
+            else:
+                mutated[...] = special
+            out.append((f"{where}={special!r}", mutated))
+    return out
+
+
+AgentCase = tuple[str, Callable[[Base], bytes], tuple[str, ...]]
+"""(id, build the file from the kind's base, fragments one of which the message must contain)."""
+
+
+def agent_corpus(base: Base) -> list[AgentCase]:
+    """Every mutation of ``base``: each state array's, each metadata field's, extra ones."""
+    cases: list[AgentCase] = []
+    state = tuple(name for name in base.arrays)
+    for name, value in base.arrays.items():
+        for label, replacement in array_mutations(value):
+            drop = (name,) if replacement is DROP else ()
+            extra = {} if replacement is DROP else {name: replacement}
+            fragments = (name, "regression_") if name.startswith("regression_") else (name,)
+            cases.append(
+                (f"{name} {label}", lambda b, d=drop, e=extra: changed(b, drop=d, **e), fragments)
+            )
+    cases.append(("extra array", lambda b: changed(b, extra=np.zeros(2)), ("extra",)))
+    fields = [f for f in base.metadata if f not in ("format", "format_version", "class")]
+    fields += [f"hyperparameters.{name}" for name in base.metadata["hyperparameters"]]
+    for field in fields:
+        for value in FIELD_VALUES:
+            # a valid value that no longer fits the arrays is refused naming the array
+            names = (field.rpartition(".")[2], "hyper-parameters", *state)
+            cases.append(
+                (f"{field}={value!r}"[:60], lambda b, f=field, v=value: changed(b, {f: v}), names)
+            )
+    cases.append(
+        ("extra hyper-parameter", lambda b: changed(b, {"hyperparameters.extra": 1}), ("extra",))
+    )
+    return cases
+
+
+def _sound_tables(agent: Any) -> list[np.ndarray]:
+    tables = [agent.q_table]
+    if isinstance(agent, MMQ):
+        tables.append(agent.greedy_table)
+    if isinstance(agent, DeconvQ):
+        tables += [agent.reward_model, agent.delay_pmf]
+        pmf = agent.delay_pmf
+        assert pmf.min() >= 0.0 and abs(pmf.sum() - 1.0) < 1e-6, pmf
+    return tables
+
+
+def refused_or_sound(kind: str, path: Path, fragments: tuple[str, ...]) -> str:
+    """``"refused"`` (one clear error, little memory) or ``"loaded"`` (it then learns soundly)."""
+    tracemalloc.start()
+    try:
+        agent = load_agent(path, KINDS[kind].env())
+    except (ValueError, TypeError) as error:
+        message = str(error)
+        assert str(path) in message and "\n" not in message, message
+        assert any(fragment in message for fragment in fragments), (fragments, message)
+        return "refused"
+    finally:
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        assert peak < MEMORY_BOUND, f"{peak / 2**20:.1f} MiB"
+    agent.learn(300)
+    assert all(np.all(np.isfinite(table)) for table in _sound_tables(agent))
+    return "loaded"
+
+
+def _modified(base: Base, arrays: dict[str, Any] | None = None, **fields: Any) -> bytes:
+    """The base with arrays replaced and metadata fields (``hyperparameters__x``: nested) set."""
+    metadata = {key.replace("__", "."): value for key, value in fields.items()}
+    return changed(base, metadata, **(arrays or {}))
+
+
+def _free_row_counted(base: Base) -> np.ndarray:
+    """The hashed counts with a lag-1 count in a row no couple holds (the lag-0 sums still right)."""
+    cooc = base.arrays["regression_cooc"].copy()
+    cooc[int(np.flatnonzero(base.arrays["regression_keys"] == -1)[0]), 1] = 1
+    return cooc
+
+
+_DECONV = ("DeconvQ known delay", "DeconvQ learned delay", "DeconvQ hashed statistics")
+#: (kind, id, build, fragment): files the loader used to accept (or crash on) that it refuses.
+REFUSED: list[tuple[str, str, Callable[[Base], bytes], str]] = [
+    # the issue's files
+    *[
+        (
+            "DeconvQ learned delay",
+            f"delay_pmf {pmf}",
+            lambda b, p=pmf: _modified(b, {"delay_pmf": np.array(p, dtype=float)}),
+            "delay_pmf",
+        )
+        for pmf in ([2, -1, 0, 0, 0, 0], [0] * 6, [7] * 6, [0.5, 0.5, 0.5, 0, 0, 0])
+    ],
+    (
+        "DeconvQ learned delay",
+        "reward_model 1e308",
+        lambda b: _modified(b, {"reward_model": np.full(36, 1e308)}),
+        "reward_model",
+    ),
+    (
+        "DeconvQ learned delay",
+        "solve_clock 2**62",
+        lambda b: _modified(b, {"solve_clock": np.array([2**62, 2**62])}),
+        "solve_clock",
+    ),
+    (
+        "DeconvQ learned delay",
+        "delay_iterations 10**12",
+        lambda b: _modified(b, hyperparameters__delay_iterations=10**12),
+        "MAX_DELAY_ITERATIONS",
+    ),
+    (
+        "DeconvQ learned delay",
+        "max_delay 10**9",
+        lambda b: _modified(b, hyperparameters__max_delay=10**9),
+        "MAX_MODELLED_DELAY",
+    ),
+    (
+        "ExpectedCreditQLearning",
+        "delay null",
+        lambda b: _modified(b, hyperparameters__delay=None),
+        "delay must be",
+    ),
+    # clocks and counters out of their ranges
+    (
+        "DeconvQ known delay",
+        "solve_clock since >= gap",
+        lambda b: _modified(b, {"solve_clock": np.array([5, 5])}),
+        "solve_clock",
+    ),
+    (
+        "DeconvQ known delay",
+        "delay_pmf not the known delay's",
+        lambda b: _modified(b, {"delay_pmf": np.full(7, 1 / 7)}),
+        "known delay's pmf",
+    ),
+    (
+        "DeconvQ known delay",
+        "solve_interval 10**30",
+        lambda b: _modified(b, hyperparameters__solve_interval=10**30),
+        "MAX_SOLVE_INTERVAL",
+    ),
+    (
+        "DeconvQ known delay",
+        "ridge 1e300",
+        lambda b: _modified(b, hyperparameters__ridge=1e300),
+        "ridge must be at most",
+    ),
+    (
+        "DeconvQ hashed statistics",
+        "a free row holding counts",
+        lambda b: _modified(b, {"regression_cooc": _free_row_counted(b)}),
+        "a free row of the hashed table holds counts",
+    ),
+    (
+        "DeconvQ learned delay",
+        "by_lag 1e308",
+        lambda b: _modified(
+            b, {"regression_by_lag": np.full_like(b.arrays["regression_by_lag"], 1e308)}
+        ),
+        "regression_by_lag",
+    ),
+    (
+        "MMQ with options",
+        "greedy_clock past its interval",
+        lambda b: _modified(b, {"greedy_clock": np.array([10**6, 1])}),
+        "greedy_clock[0]",
+    ),
+    (
+        "MMQ with options",
+        "greedy_window 10**30",
+        lambda b: _modified(b, hyperparameters__greedy_window=10**30),
+        "MAX_TIMESTEPS",
+    ),
+    (
+        "MMQ with options",
+        "greedy_table 1e300",
+        lambda b: _modified(b, {"greedy_table": np.full((9, 4, 4), 1e300)}),
+        "greedy_table",
+    ),
+    *[
+        (
+            kind,
+            "q_table 1e300",
+            lambda b: _modified(b, {"q_table": np.full_like(b.arrays["q_table"], 1e300)}),
+            "q_table",
+        )
+        for kind in KINDS
+    ],
+    *[
+        (kind, f"{field}={value}", lambda b, f=field, v=value: _modified(b, **{f: v}), fragment)
+        for kind in ("QLearning", "OracleQLearning", "DeconvQ learned delay")
+        for field, value, fragment in (
+            ("num_timesteps", 2**62, "MAX_TIMESTEPS"),
+            ("hyperparameters__seed", 2**64, "MAX_SEED"),
+            ("hyperparameters__q_init", 1e300, "MAX_ABS_VALUE"),
+        )
+    ],
+    *[
+        (
+            kind,
+            "acting_counts 2**62",
+            lambda b: _modified(
+                b, {"acting_counts": np.full_like(b.arrays["acting_counts"], 2**62)}
+            ),
+            "acting_counts",
+        )
+        for kind in ("FixedDelayQLearning", "ExpectedCreditQLearning", _DECONV[0])
+    ],
+]
+
+
+@pytest.mark.parametrize(
+    ("kind", "build", "fragment"),
+    [(c[0], *c[2:]) for c in REFUSED],
+    ids=[f"{c[0]}: {c[1]}" for c in REFUSED],
+)
+def test_every_agent_class_refuses_out_of_range_state(bases, tmp_path, kind, build, fragment):
+    path = tmp_path / "bad.npz"
+    path.write_bytes(build(bases[kind]))
+    tracemalloc.start()
+    try:
+        with pytest.raises(ValueError) as error:  # (not learning: some used to hang it)
+            load_agent(path, KINDS[kind].env())
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    message = str(error.value)
+    assert str(path) in message and fragment in message and "\n" not in message, message
+    assert peak < MEMORY_BOUND, f"{peak / 2**20:.1f} MiB"
+
+
+@given(data=st.data())
+@settings(
+    max_examples=examples(200),
+    deadline=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture],
+)
+def test_a_mutated_file_of_any_class_is_refused_or_learns_soundly(bases, tmp_path, data):
+    kind = data.draw(st.sampled_from(sorted(KINDS)), label="kind")
+    name, build, fragments = data.draw(st.sampled_from(agent_corpus(bases[kind])), label="case")
+    path = tmp_path / "case.npz"
+    path.write_bytes(build(bases[kind]))
+    refused_or_sound(kind, path, fragments)
+
+
+@pytest.mark.statistical
+@pytest.mark.parametrize("kind", sorted(KINDS))
+def test_every_mutation_of_every_class_is_refused_or_learns_soundly(bases, tmp_path, kind, capsys):
+    """The whole corpus of a class (about 300 to 650 files), each one in turn.
+
+    The good file itself loads and learns on: the checks accept what ``save`` writes.
+    """
+    good = tmp_path / "good.npz"
+    good.write_bytes(bases[kind].data)
+    assert refused_or_sound(kind, good, ()) == "loaded"
+    outcomes = []
+    for name, build, fragments in agent_corpus(bases[kind]):
+        path = tmp_path / "case.npz"
+        path.write_bytes(build(bases[kind]))
+        try:
+            outcomes.append(refused_or_sound(kind, path, fragments))
+        except AssertionError as error:
+            raise AssertionError(f"{kind}, {name}: {error}") from None
+        capsys.readouterr()  # a file with verbose=10**12 logs as it learns
+    assert outcomes.count("refused") > 0.8 * len(outcomes)
+    assert outcomes.count("loaded") > 0

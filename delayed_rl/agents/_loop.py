@@ -17,8 +17,11 @@ import numpy as np
 from delayed_rl._validation import check_bool, check_int
 from delayed_rl.agents._statistics import TrainingStatistics
 from delayed_rl.agents.callbacks import as_callback
+from delayed_rl.agents.hyperparameters import check_limit
 
 __all__ = [
+    "MAX_RECORD_BYTES",
+    "MAX_TIMESTEPS",
     "RECORD_DTYPES",
     "LearnRun",
     "TrainingLog",
@@ -39,6 +42,25 @@ RECORD_DTYPES = {
     "episode_end": np.bool_,
 }
 """The arrays of ``agent.training_log`` after ``learn(..., record=True)``, and their types."""
+_RECORD_STEP_BYTES = sum(np.dtype(dtype).itemsize for dtype in RECORD_DTYPES.values())
+
+MAX_TIMESTEPS = 2**40
+"""The most training steps an agent counts (about 1.1e12): ``learn()``'s bound, and a file's.
+
+``learn(total_timesteps)`` refuses more, and with ``reset_num_timesteps=False`` refuses to take
+the agent's step count (``num_timesteps``) past it, before anything starts; a model file whose
+``num_timesteps`` (or acting count) passes it is refused. Days of training at the compiled
+path's millions of steps a second; the bound keeps every step count, schedule clock and
+``learn()``'s progress arithmetic far inside int64 and float64's exact integers (``2**53``).
+"""
+MAX_TIMESTEPS_TEXT = "MAX_TIMESTEPS = 2**40 (delayed_rl.agents._loop.MAX_TIMESTEPS)"
+"""How messages name :data:`MAX_TIMESTEPS`."""
+MAX_RECORD_BYTES = 2**30
+"""The most memory ``learn(..., record=True)`` may allocate for its record (1 GiB).
+
+The record takes 41 bytes a step (:data:`RECORD_DTYPES`), allocated when ``learn()`` starts: up
+to about 26 million steps. A longer recorded call is refused before anything is allocated.
+"""
 
 
 class TrainingLog(dict):
@@ -239,13 +261,31 @@ def setup_learn(
 
     Raises:
         TypeError: an argument has the wrong type.
-        ValueError: a bad value, or the agent has no env.
+        ValueError: a bad value (``total_timesteps`` above :data:`MAX_TIMESTEPS`, or a record
+            above :data:`MAX_RECORD_BYTES`), or the agent has no env.
     """
-    n_steps = check_int("total_timesteps", total_timesteps, 0)
+    n_steps = check_limit(
+        "total_timesteps",
+        check_int("total_timesteps", total_timesteps, 0),
+        MAX_TIMESTEPS,
+        MAX_TIMESTEPS_TEXT,
+    )
     log_interval = check_int("log_interval", log_interval, 1, optional=True)
     check_bool("reset_num_timesteps", reset_num_timesteps)
     check_bool("progress_bar", progress_bar)
     check_bool("record", record)
+    if not reset_num_timesteps and agent.num_timesteps + n_steps > MAX_TIMESTEPS:
+        raise ValueError(
+            f"total_timesteps must keep the agent's step count within {MAX_TIMESTEPS_TEXT} "
+            f"with reset_num_timesteps=False, got "
+            f"{n_steps} after {agent.num_timesteps} steps"
+        )
+    if record and n_steps * _RECORD_STEP_BYTES > MAX_RECORD_BYTES:
+        raise ValueError(
+            f"total_timesteps with record=True must keep the record within MAX_RECORD_BYTES = "
+            f"1 GiB (delayed_rl.agents._loop.MAX_RECORD_BYTES; {_RECORD_STEP_BYTES} bytes a "
+            f"step: at most {MAX_RECORD_BYTES // _RECORD_STEP_BYTES} steps), got {n_steps}"
+        )
     if agent.env is None:
         raise ValueError(
             "the agent has no env to learn from: pass env= to load() or call set_env(env)"

@@ -25,11 +25,13 @@ import numpy as np
 from delayed_rl._validation import check_int, check_probability, check_real
 from delayed_rl._version import __version__
 from delayed_rl.agents import save_util
+from delayed_rl.agents._loop import MAX_TIMESTEPS, MAX_TIMESTEPS_TEXT
 from delayed_rl.agents._statistics import TrainingStatistics
 from delayed_rl.agents._streams import UniformStream
+from delayed_rl.agents.hyperparameters import check_limit
 from delayed_rl.agents.schedules import schedule_from_json
 
-__all__ = ["AGENT_CLASSES", "CopyProtocol", "class_key", "load_as", "save"]
+__all__ = ["AGENT_CLASSES", "CopyProtocol", "check_state_array", "class_key", "load_as", "save"]
 
 AGENT_CLASSES: dict[str, type] = {}
 """Every agent class defined in this process, by :func:`class_key`."""
@@ -53,8 +55,91 @@ _METADATA_KEYS = frozenset(
 _STREAMS = (("rng_state", "rng_block"), ("predict_rng_state", "predict_rng_block"))
 _SCHEDULE_FIELDS = {"linear": ("start", "end", "end_fraction"), "constant": ("value",)}
 _SCHEDULE_FIELDS["callable"] = _SCHEDULE_FIELDS["constant"]  # and its "repr", a string
+_STEPS_NOTE = " (MAX_TIMESTEPS = 2**40, delayed_rl.agents._loop.MAX_TIMESTEPS)"  # array checks
 _OPTIONAL = ("env", "_fused", "_logger")
 """What a copy keeps when it can be copied, and drops (``None``) otherwise."""
+
+
+def check_state_array(
+    name: str,
+    array: Any,
+    shape: tuple[int, ...],
+    dtype: Any,
+    low: float | None = None,
+    high: float | None = None,
+    *,
+    note: str = "",
+) -> np.ndarray:
+    """``array`` (native byte order) after checking its shape, dtype and values.
+
+    What a model file's state array must be, as the constructed agent has it: exactly ``shape``
+    and ``dtype`` (any byte order); for floats, no NaN or infinity; every value in
+    ``[low, high]`` (``None``: no bound). The first offending value is shown, with its index.
+
+    Args:
+        name: the array's name in the file, for the message.
+        array: the array read (``None``: missing).
+        shape: the shape the agent expects.
+        dtype: the dtype it expects.
+        low: the smallest value allowed.
+        high: the largest value allowed.
+        note: appended to the description of what is allowed (e.g. the limit's name).
+
+    Raises:
+        ValueError: ``array`` is missing, of another shape or dtype, or holds a value that is
+            not allowed (the message names it).
+    """
+    dtype, shape = np.dtype(dtype), tuple(shape)
+    if (
+        not isinstance(array, np.ndarray)
+        or array.shape != shape
+        or (array.dtype.newbyteorder("=") != dtype)
+    ):
+        got = (
+            "missing"
+            if array is None
+            else f"{array.dtype} array of shape {array.shape}"
+            if isinstance(array, np.ndarray)
+            else repr(array)
+        )
+        raise ValueError(f"{name} must be a {dtype} array of shape {shape}, got {got}")
+    array = array.astype(dtype, copy=False)
+    allowed = f"{'numbers' if dtype.kind == 'f' else 'values'}{_interval_text(low, high)}{note}"
+    if dtype.kind == "f":
+        finite = np.isfinite(array)
+        if not finite.all():
+            raise ValueError(
+                f"{name} holds non-finite values ({_first(array, ~finite)}): it must hold "
+                f"finite {allowed}"
+            )
+    outside = np.zeros(array.shape, dtype=bool)
+    if low is not None:
+        outside |= array < low
+    if high is not None:
+        outside |= array > high
+    if outside.any():
+        raise ValueError(f"{name} must hold {allowed}, got {_first(array, outside)}")
+    return array
+
+
+def _interval_text(low: float | None, high: float | None) -> str:
+    """``" in [0, 1]"``, ``" >= 0"``, ``" <= 5"`` or ``""`` (integers shown exactly)."""
+
+    def shown(bound: float) -> str:
+        return str(bound) if isinstance(bound, (int, np.integer)) else f"{bound:g}"
+
+    if low is not None and high is not None:
+        return f" in [{shown(low)}, {shown(high)}]"
+    if low is not None:
+        return f" >= {shown(low)}"
+    return "" if high is None else f" <= {shown(high)}"
+
+
+def _first(array: np.ndarray, mask: np.ndarray) -> str:
+    """The first entry of ``array`` where ``mask`` holds, and its index, for a message."""
+    at = np.unravel_index(int(np.argmax(mask)), array.shape)
+    index = tuple(int(i) for i in at)
+    return f"{array[at].item()!r} at index {index[0] if len(index) == 1 else index}"
 
 
 def class_key(cls: type) -> str:
@@ -124,6 +209,10 @@ def load_as(cls: type, path: str | Path, custom_objects: dict[str, Any] | None, 
             save_util.space_from_json(metadata.get("action_space"), "action_space", where),
         )
         _check_headers(model, agent._state_array_specs())
+        try:
+            agent._check_state_headers(model.headers)
+        except ValueError as error:
+            raise ValueError(f"{where}: {error}") from None
         try:
             agent._setup_model()
         except ValueError as error:
@@ -226,7 +315,9 @@ def _hyperparameters(
         if "learning_rate" in saved:
             saved["learning_rate"] = _schedule(saved["learning_rate"])
     except (KeyError, TypeError, ValueError, OverflowError) as error:
-        raise ValueError(f"{where}: malformed hyper-parameters in the metadata: {error}") from None
+        raise ValueError(
+            f"{where}: malformed hyper-parameters (the metadata's hyperparameters field): {error}"
+        ) from None
     unknown = set(custom_objects) - set(names)
     if unknown:
         raise ValueError(f"custom_objects may override {list(names)}, got {sorted(unknown)}")
@@ -250,11 +341,20 @@ def _restore_clock(
 ) -> None:
     """Restore the step count, the schedules' clock, the random streams and the acting counts.
 
+    ``num_timesteps`` and every acting count must lie in ``[0, MAX_TIMESTEPS]``
+    (:data:`~delayed_rl.agents._loop.MAX_TIMESTEPS`), ``progress_remaining`` and
+    ``exploration_rate`` in [0, 1], the random blocks in [0, 1).
+
     Raises:
         ValueError: a field is missing or out of range (the message names the file and it).
     """
     try:
-        agent.num_timesteps = check_int("num_timesteps", metadata["num_timesteps"], 0, 2**63 - 1)
+        agent.num_timesteps = check_limit(
+            "num_timesteps",
+            check_int("num_timesteps", metadata["num_timesteps"], 0),
+            MAX_TIMESTEPS,
+            MAX_TIMESTEPS_TEXT,
+        )
         agent._progress_remaining = check_probability(
             "progress_remaining", metadata["progress_remaining"]
         )
@@ -272,10 +372,14 @@ def _restore_clock(
                 raise ValueError(f"{block} must hold numbers in [0, 1), got {values.max()!r}")
             stream.set_state(_generator_state(state, metadata[state]), values)
         counts = arrays["acting_counts"]
-        if counts.shape != (agent.n_models,) or np.any(counts < 0):
+        if counts.shape != (agent.n_models,):
             raise ValueError(
-                f"acting_counts must be {agent.n_models} counts >= 0, got {counts.tolist()!r}"
+                f"acting_counts must be {agent.n_models} counts (one per delay model), got "
+                f"{counts.shape[0]}"
             )
+        check_state_array(
+            "acting_counts", counts, (agent.n_models,), np.int64, 0, MAX_TIMESTEPS, note=_STEPS_NOTE
+        )
         agent._statistics = TrainingStatistics(agent.n_models, agent.num_timesteps)
         agent._statistics.acting_counts = counts.tolist()
         agent._statistics.logged_counts = counts.tolist()
@@ -362,6 +466,18 @@ class CopyProtocol:
         against them before ``_setup_model`` allocates anything. Default: none.
         """
         return {}
+
+    def _check_state_headers(self, headers: dict[str, save_util.ArrayHeader]) -> None:
+        """Check the headers of the state arrays whose shape ``_state_array_specs`` cannot fix.
+
+        Called when loading, after ``_state_array_specs``' arrays are checked and before
+        anything is allocated or read: an agent whose arrays' lengths depend on what it has seen
+        (DeconvQ's statistics) checks their sizes here. Default: nothing to check.
+
+        Raises:
+            ValueError: a header declares an array the agent cannot hold (naming it).
+        """
+        return None
 
     def __getstate__(self) -> dict[str, Any]:
         state = _own_state(self)

@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from delayed_rl.agents.hyperparameters import MAX_ABS_VALUE
 from delayed_rl.fast._numba import jit as _jit
 from delayed_rl.fast.statistics import Statistics, _slot, find_row, observe
 
@@ -46,6 +47,7 @@ __all__ = [
     "STATISTICS_LIMIT",
     "RewardRegression",
     "project_to_simplex",
+    "statistics_bytes",
 ]
 
 STATISTICS_LIMIT = 256 * 2**20
@@ -474,6 +476,27 @@ def _projected_gradient(g, z, start, scale, iterations):
     return p
 
 
+def statistics_bytes(n_pairs: int, max_delay: int) -> int:
+    """The bytes :class:`RewardRegression` starts with, and its solves' workspace, before any.
+
+    The counts (the direct layout's ``(K + 1)·P²`` int32 while they fit :data:`DIRECT_LIMIT`,
+    else the hashed table's first rows), the reward sums ``by_lag`` (``(K + 1)·P`` float64),
+    the windows and the warm start; a solve's dense matrices (three ``P × P`` float64 up to
+    :data:`DENSE_SOLVE_PAIRS` pairs, else a few vectors of ``P``) and the delay's Gram matrix
+    (three ``(K + 1)²`` float64). A hashed table then grows with the couples seen, up to
+    :data:`STATISTICS_LIMIT`.
+
+    Args:
+        n_pairs: ``P``, the (state, action) pairs.
+        max_delay: ``K``.
+    """
+    k1 = max_delay + 1
+    direct = k1 * n_pairs * n_pairs * 4
+    counts = direct if direct <= DIRECT_LIMIT else _FIRST_ROWS * (k1 * 4 + 8)
+    solve = 24 * n_pairs * (n_pairs if n_pairs <= DENSE_SOLVE_PAIRS else 4) + 24 * k1 * k1
+    return counts + 8 * k1 * n_pairs + 8 * n_pairs + 16 * k1 + solve
+
+
 class RewardRegression:
     """Sufficient statistics of the reward-on-past regression, and its least-squares solves.
 
@@ -591,24 +614,57 @@ class RewardRegression:
             for index, (name, value) in enumerate(zip(Statistics._fields, self.stats, strict=True))
         }
 
-    def restore(self, arrays: dict[str, np.ndarray]) -> None:
-        """Restore what :meth:`state` returned, checking every array's shape and type.
+    def restore(self, arrays: dict[str, np.ndarray], prefix: str = "") -> None:
+        """Restore what :meth:`state` returned, checking every array's shape, type and values.
 
         Either layout loads, whichever the agent would choose; so do the statistics of earlier
-        versions (counts as ``cooc[m, i, j]``, five counters, no keys).
+        versions (counts as ``cooc[m, i, j]``, five counters, no keys). The checks: each array
+        has the shape and dtype the statistics of ``K`` and ``P`` have; the counts and keys take
+        at most :data:`STATISTICS_LIMIT` bytes; the counters are in range (the window's length
+        within ``K + 1``, as many segment ends as arrays of them, the episode-end mode this
+        one, the hashed table's rows in use counted and at most half of it); the lag-0 counts
+        add up to the step count (one a step); counts are ``>= 0`` and a free hashed row holds
+        none; every window holds pairs of the env, an ended window's length is in
+        ``1..K + 1``, every end is flushed exactly under ``"flush"`` (none under ``"carry"``,
+        whose stream never ends) and only a flushed one holds a reward; the reward sums are
+        finite and within the step count times
+        :data:`~delayed_rl.agents.hyperparameters.MAX_ABS_VALUE` (each sums at most one reward
+        a step). Nothing is restored unless every check passes.
+
+        Args:
+            arrays: the arrays, by the names of :class:`~delayed_rl.fast.statistics.Statistics`.
+            prefix: what the messages put before those names (a model file's
+                ``"regression_"``).
 
         Raises:
-            ValueError: an array is missing, of the wrong shape or type, or out of range.
+            ValueError: an array is missing, of the wrong shape or type, or out of range (the
+                message names it).
         """
+        missing = [name for name in Statistics._fields if name not in arrays and name != "keys"]
+        if missing or ("keys" not in arrays and np.ndim(arrays.get("cooc")) != 3):
+            raise ValueError(
+                f"missing statistics: {[prefix + name for name in missing or ['keys']]}"
+            )
         arrays = _upgraded(dict(arrays), self.n_pairs)
         k1, n_pairs = self.max_delay + 1, self.n_pairs
         keys = arrays["keys"]
-        if keys.dtype != np.int64 or keys.ndim != 1:
-            raise ValueError("keys must be a 1-d int64 array")
+        if not isinstance(keys, np.ndarray) or keys.dtype != np.int64 or keys.ndim != 1:
+            raise ValueError(f"{prefix}keys must be a 1-d int64 array")
         hashed = keys.size > 0
         if hashed and keys.size & (keys.size - 1):
-            raise ValueError(f"keys must have a power-of-two length, got {keys.size}")
-        ends = arrays["end_lengths"].shape[0]
+            raise ValueError(f"{prefix}keys must have a power-of-two length, got {keys.size}")
+        end_lengths, cooc = arrays["end_lengths"], arrays["cooc"]
+        if not isinstance(end_lengths, np.ndarray) or end_lengths.ndim != 1:
+            raise ValueError(
+                f"{prefix}end_lengths must be a 1-d int64 array (one length per segment end)"
+            )
+        rows = keys.size if hashed else n_pairs * n_pairs
+        if isinstance(cooc, np.ndarray) and cooc.ndim == 2 and cooc.shape[0] != rows:
+            raise ValueError(
+                f"{prefix}cooc has {cooc.shape[0]} rows but {prefix}keys says {rows} ("
+                + (f"a hashed table of {rows} rows)" if hashed else f"the direct layout's {rows})")
+            )
+        ends = end_lengths.shape[0]
         shapes = {
             "cooc": (keys.size if hashed else n_pairs * n_pairs, k1),
             "keys": keys.shape,
@@ -622,28 +678,100 @@ class RewardRegression:
         }
         for name, ours in zip(Statistics._fields, self.stats, strict=True):
             value = arrays[name]
-            if value.dtype != ours.dtype or value.shape != shapes[name]:
-                raise ValueError(f"{name} must be a {ours.dtype} array of shape {shapes[name]}")
-        length, steps, n_ends, flush, carry, pairs, used = (int(v) for v in arrays["counters"])
+            if (
+                not isinstance(value, np.ndarray)
+                or value.dtype.newbyteorder("=") != ours.dtype
+                or value.shape != shapes[name]
+            ):
+                got = (
+                    f"{value.dtype} array of shape {value.shape}"
+                    if isinstance(value, np.ndarray)
+                    else repr(value)
+                )
+                per_end = f" (one row per {prefix}end_lengths entry)" if "end_" in name else ""
+                raise ValueError(
+                    f"{prefix}{name} must be a {ours.dtype} array of shape {shapes[name]}"
+                    f"{per_end}, got {got}"
+                )
+        arrays = {
+            name: arrays[name].astype(ours.dtype, copy=False) for name, ours in self._fields()
+        }
+        nbytes = arrays["cooc"].nbytes + keys.nbytes
+        if nbytes > STATISTICS_LIMIT:
+            raise ValueError(
+                f"{prefix}cooc and {prefix}keys take {nbytes / 2**20:,.0f} MiB, more than the "
+                f"limit of STATISTICS_LIMIT = {STATISTICS_LIMIT / 2**20:.0f} MiB "
+                "(delayed_rl.agents._regression.STATISTICS_LIMIT)"
+            )
+        counters = arrays["counters"]
+        length, steps, n_ends, flush, carry, pairs, used = (int(v) for v in counters)
         if not 0 <= length <= k1 or steps < 0 or n_ends != ends or pairs != n_pairs:
-            raise ValueError(f"counters out of range: {arrays['counters'].tolist()}")
+            raise ValueError(
+                f"{prefix}counters must be [window length in 0..{k1}, steps >= 0, segment ends "
+                f"= {ends} (the end arrays' length), flush, carry, pairs = {n_pairs}, rows in "
+                f"use], got {counters.tolist()}"
+            )
         if (flush, carry) != (int(self.flush), int(self.carry)):
-            raise ValueError("counters disagree with the episode-end mode")
+            raise ValueError(
+                f"{prefix}counters' flush and carry ({flush}, {carry}) disagree with the "
+                f"episode-end mode ({int(self.flush)}, {int(self.carry)})"
+            )
+        cooc = arrays["cooc"]
+        if np.any(cooc < 0):
+            raise ValueError(f"{prefix}cooc must hold counts >= 0")
+        if int(cooc[:, 0].sum(dtype=np.int64)) != steps:
+            raise ValueError(
+                f"{prefix}cooc's lag-0 counts must add up to the step count {steps} (one a "
+                f"step, {prefix}counters[1]), got {int(cooc[:, 0].sum(dtype=np.int64))}"
+            )
         if hashed:
             in_use = keys != -1
             if used != int(in_use.sum()) or 2 * used > keys.size:
-                raise ValueError("the hashed table's count of rows in use is wrong")
+                raise ValueError(
+                    f"{prefix}counters[6] (the hashed table's rows in use) must be the number "
+                    f"of {prefix}keys in use ({int(in_use.sum())}, at most half of "
+                    f"{keys.size}), got {used}"
+                )
             if np.any(keys[in_use] < 0) or np.any(keys[in_use] >= n_pairs * n_pairs):
-                raise ValueError("a key names a couple outside the env's pairs")
+                raise ValueError(f"{prefix}keys: a key names a couple outside the env's pairs")
             if not _all_found(keys):
-                raise ValueError("the hashed table's keys are not where lookups find them")
+                raise ValueError(
+                    f"{prefix}keys: the hashed table's keys are not where lookups find them"
+                )
+            if np.any(cooc[~in_use]):
+                raise ValueError(f"{prefix}cooc: a free row of the hashed table holds counts")
+        elif used:
+            raise ValueError(f"{prefix}counters[6] must be 0 in the direct layout, got {used}")
         indices = np.concatenate([arrays["window"], arrays["end_windows"].ravel()])
         if indices.size and (indices.min() < 0 or indices.max() >= n_pairs):
-            raise ValueError("a window holds a pair outside the env's pairs")
-        if np.any(arrays["cooc"] < 0) or not np.all(np.isfinite(arrays["by_lag"])):
-            raise ValueError("negative counts or non-finite reward sums")
+            raise ValueError(
+                f"{prefix}window and {prefix}end_windows must hold pairs in 0..{n_pairs - 1}"
+            )
+        lengths, flushed = arrays["end_lengths"], arrays["end_flushed"]
+        if ends and (lengths.min() < 1 or lengths.max() > k1):
+            raise ValueError(f"{prefix}end_lengths must hold lengths in 1..{k1}")
+        if self.carry and ends:
+            raise ValueError(f"{prefix}end_lengths: a carried-over stream has no segment ends")
+        if np.any(flushed != self.flush):
+            raise ValueError(
+                f"{prefix}end_flushed must be {self.flush} for every end (the episode-end mode)"
+            )
+        bound = max(steps, 1) * MAX_ABS_VALUE
+        for name in ("by_lag", "end_rewards"):
+            sums = arrays[name]
+            if not np.all(np.isfinite(sums)) or np.any(np.abs(sums) > bound):
+                raise ValueError(
+                    f"{prefix}{name} must hold finite reward sums within the step count times "
+                    f"MAX_ABS_VALUE = 2**200 (delayed_rl.agents.hyperparameters.MAX_ABS_VALUE)"
+                )
+        if np.any(arrays["end_rewards"][~flushed]):
+            raise ValueError(f"{prefix}end_rewards: only a flushed end holds a reward")
         self.stats = Statistics(*(arrays[name].copy() for name in Statistics._fields))
         self.reserve(1)
+
+    def _fields(self) -> list[tuple[str, Any]]:
+        """``(name, array)`` of each statistic, in :class:`Statistics`' order."""
+        return list(zip(Statistics._fields, self.stats, strict=True))
 
     # ------------------------------------------------------------------ observing
     def observe(self, pair: int, reward: float, episode_end: bool) -> None:

@@ -32,7 +32,7 @@ from typing import Any, ClassVar
 import gymnasium as gym
 import numpy as np
 
-from delayed_rl._validation import check_bool, check_real
+from delayed_rl._validation import check_bool
 from delayed_rl.agents import _persistence
 from delayed_rl.agents._fused import CompiledTables, check_fused, compiled_loop, compiled_run
 from delayed_rl.agents._loop import (
@@ -51,7 +51,12 @@ from delayed_rl.agents.env_util import (
     make_env,
     vec_env_view,
 )
-from delayed_rl.agents.hyperparameters import DEFAULTS, HYPERPARAMETER_NAMES, check_hyperparameters
+from delayed_rl.agents.hyperparameters import (
+    DEFAULTS,
+    HYPERPARAMETER_NAMES,
+    check_hyperparameters,
+    check_value,
+)
 from delayed_rl.agents.logger import Logger
 from delayed_rl.agents.schedules import (
     ConstantSchedule,
@@ -81,8 +86,10 @@ class TabularAgent(_persistence.CopyProtocol, ABC):
         exploration_final_eps: ε after a fraction ``exploration_fraction`` of ``learn()``.
             Equal to ``exploration_initial_eps`` (the default, 0.1) gives a constant ε.
         exploration_fraction: the fraction of training over which ε moves, in (0, 1].
-        q_init: the initial value of every Q-table entry (optimistic when above the values).
-        seed: seeds the agent's random choices and the env's first reset after it is set.
+        q_init: the initial value of every Q-table entry (optimistic when above the values),
+            within ±:data:`~delayed_rl.agents.hyperparameters.MAX_ABS_VALUE` (2**200).
+        seed: seeds the agent's random choices and the env's first reset after it is set
+            (``None``, or an integer in ``[0, MAX_SEED]``, ``MAX_SEED = 2**63 - 1``).
         verbose: 0 silent, 1 prints the logged metrics at every dump.
 
     Attributes:
@@ -340,13 +347,15 @@ class TabularAgent(_persistence.CopyProtocol, ABC):
             truncated: the episode was cut short (e.g. a time limit).
 
         Raises:
-            TypeError: an argument has the wrong type.
-            ValueError: an argument is outside its space, or the reward is not finite.
+            TypeError: an argument has the wrong type (``obs``, ``action`` and ``next_obs``
+                must each be one integer, or a 0-d integer array: a batch is refused).
+            ValueError: an argument is outside its space, or the reward is not finite or above
+                :data:`~delayed_rl.agents.hyperparameters.MAX_ABS_VALUE` in magnitude.
         """
         s = self._obs_index.index(obs, "obs")
         s2 = self._obs_index.index(next_obs, "next_obs")
         a = self._action_index.index(action, "action")
-        r = check_real("reward", reward)
+        r = check_value("reward", reward)
         ended = check_bool("terminated", terminated), check_bool("truncated", truncated)
         self._learn_transition(s, a, r, s2, *ended)
 
@@ -369,7 +378,11 @@ class TabularAgent(_persistence.CopyProtocol, ABC):
         (after ``load`` or ``set_env``, the env is reset).
 
         Args:
-            total_timesteps: how many env steps to take (``reset_num_timesteps=False``: more).
+            total_timesteps: how many env steps to take (``reset_num_timesteps=False``: more);
+                at most :data:`~delayed_rl.agents._loop.MAX_TIMESTEPS` (2**40), and with
+                ``reset_num_timesteps=False`` the step count may not pass it either; with
+                ``record=True``, at most what
+                :data:`~delayed_rl.agents._loop.MAX_RECORD_BYTES` holds (41 bytes a step).
             callback: ``None``, a stable-baselines3 callback (``EvalCallback``,
                 ``CheckpointCallback``, ``StopTrainingOnMaxEpisodes``, ``CallbackList``, ...), a
                 :mod:`delayed_rl.agents.callbacks` callback, a callable
@@ -427,7 +440,12 @@ class TabularAgent(_persistence.CopyProtocol, ABC):
         ``.zip`` names: the file is still an ``.npz`` archive); otherwise ``.npz`` is appended
         (``load`` finds it by either name). The file holds the learned arrays, the acting counts,
         both random streams and the training clock, so a loaded agent resumes exactly. Returns
-        the path written; raises ``ValueError`` above ``save_util.MAX_MODEL_BYTES``.
+        the path written.
+
+        Raises:
+            TypeError: ``path`` is not a ``str`` or ``os.PathLike``.
+            ValueError: ``path`` has no file name (``""``, ``"."``), or the file would pass
+                ``save_util.MAX_MODEL_BYTES``.
         """
         return _persistence.save(self, path)
 
@@ -449,10 +467,17 @@ class TabularAgent(_persistence.CopyProtocol, ABC):
             custom_objects: constructor arguments to override, e.g. a ``learning_rate``
                 schedule (a saved callable schedule comes back as a constant at its saved value).
 
+        Every field is checked as the constructor checks it (the hyper-parameters are given
+        to the class's own checks, limits included), the arrays' headers against the shapes
+        and dtypes the agent's tables have before anything is allocated or read, and each
+        array's values against their ranges (tables within ±``MAX_ABS_VALUE``, clocks and
+        counters within theirs, pmfs on the simplex): see each class's ``_set_state_arrays``.
+
         Raises:
+            TypeError: ``path`` is not a ``str`` or ``os.PathLike``.
             FileNotFoundError: there is no such file.
-            ValueError: the file is corrupt (every field is checked, sizes before allocating;
-                one message names the file and the field), too large (``save_util``'s
+            ValueError: ``path`` has no file name (``""``, ``"."``), or the file is corrupt
+                (one message names the file and the field), too large (``save_util``'s
                 ``MAX_MODEL_BYTES``), holds a class that is not ``cls`` or a subclass of it (or
                 is not defined in this process: import its module first), or ``env``'s spaces
                 do not match (the message says which).

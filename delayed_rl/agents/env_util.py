@@ -105,14 +105,31 @@ class SpaceIndex:
     def index(self, value: Any, name: str) -> int:
         """The index of one value of the space (an integer, or a 0-d integer array).
 
+        A 0-d float array holding an integral value (``np.array(3.0)``) is accepted, as
+        :meth:`indices` accepts integral floats; any other array (a batch, ``np.array(1.5)``,
+        a bool array) is refused.
+
         Raises:
-            TypeError: ``value`` is not an integer.
+            TypeError: ``value`` is not one integer (a bool, a float, a string, an array of
+                another shape than ``()``).
             ValueError: it is not in the space.
         """
-        if isinstance(value, (bool, np.bool_)) or not isinstance(
-            value, (numbers.Integral, np.ndarray)
-        ):
-            raise TypeError(f"{name} must be an integer in {self.space}, got {value!r}")
+        allowed = f"{name} must be an integer in {self.space}"
+        if isinstance(value, np.ndarray):
+            integral = value.dtype.kind in "iu" or (
+                value.dtype.kind == "f"
+                and value.ndim == 0
+                and bool(np.isfinite(value))
+                and float(value) == round(float(value))
+            )
+            if value.ndim != 0 or not integral:
+                shown = value.tolist() if value.size <= 8 else f"{value.ravel()[:8].tolist()}..."
+                raise TypeError(
+                    f"{allowed} (one int, or a 0-d integer array), got array({shown}): an array "
+                    f"of shape {value.shape} and dtype {value.dtype}"
+                )
+        elif isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
+            raise TypeError(f"{allowed}, got {value!r}")
         index = int(value) - self.start
         if not 0 <= index < self.n:
             raise ValueError(f"{name} must be an integer in {self.space}, got {value!r}")

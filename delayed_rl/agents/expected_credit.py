@@ -55,6 +55,9 @@ MAX_LAGS = 1 << 16
 """The most lags credited (a delay that reaches further needs ``max_delay``)."""
 
 
+_UNSET: Any = object()  # ``_set_hyperparameters`` without a delay (the constructor's call)
+
+
 def credit_weights(delay: Delay, max_delay: int | None = None) -> np.ndarray:
     """The pmf of ``min(d, K)`` on ``0..K`` for ``d ~ delay`` (``K`` as the module says).
 
@@ -192,9 +195,14 @@ class ExpectedCreditQLearning(QLearning):
         ).tolist()
 
     def _set_hyperparameters(
-        self, *, delay: Any = None, max_delay: Any = None, **kwargs: Any
+        self, *, delay: Any = _UNSET, max_delay: Any = None, **kwargs: Any
     ) -> None:
-        if delay is not None:  # loading: they come along
+        """Also the delay and ``max_delay`` when loading (the constructor sets them itself).
+
+        A file's ``delay`` is checked as the constructor checks it: ``null`` (or any other
+        value that is not a delay) is refused.
+        """
+        if delay is not _UNSET:  # loading: they come along
             self._set_credit(checked_delay(delay, "delay"), max_delay)
         super()._set_hyperparameters(**kwargs)
 

@@ -13,7 +13,12 @@ from delayed_rl.agents.schedules import Schedule, as_learning_rate_schedule
 __all__ = [
     "DEFAULTS",
     "HYPERPARAMETER_NAMES",
+    "MAX_ABS_VALUE",
+    "MAX_SEED",
     "AgentDefaults",
+    "check_limit",
+    "check_seed",
+    "check_value",
     "check_hyperparameters",
     "shares_hyperparameters",
 ]
@@ -42,6 +47,84 @@ class AgentDefaults:
 
 DEFAULTS = AgentDefaults()
 """The defaults the agents' constructors use."""
+
+MAX_ABS_VALUE = 2.0**200
+"""The largest magnitude of a value the agents are given to learn from (about 1.6e60).
+
+It bounds ``q_init``, every entry of a Q-table, averaged table or reward model a model file
+holds, the reward of :meth:`~delayed_rl.agents.base.TabularAgent.update` (and an oracle's
+arrivals), and DeconvQ's ``ridge``; a value above is refused (``ValueError`` naming it).
+
+Why this bound: no update can then overflow float64 (largest value about ``2**1024``).
+
+- A Q-learning update ``Q ← Q + α (r + γ max Q′ − Q)`` with ``α, γ`` in [0, 1] is a convex
+  combination of ``Q`` and ``r + γ max Q′``, so each step raises ``max |Q|`` by at most ``|r|``:
+  after ``T`` steps ``|Q| <= (T + 1) · 2**200``, below ``2**1021`` for every ``T < 2**821`` —
+  any step count an int64 can hold (``2**63``) — and the TD error, at most three such values,
+  stays below ``2**1023``. (With ``γ < 1`` the table even stays within ``2**200 / (1 − γ)``.)
+  The reward kernel's and the delay trace's weights, expected credit's lag weights and the
+  averaged table's rate are in [0, 1]: the same bound holds.
+- DeconvQ's least squares multiply rewards by rewards and by counts: with rewards and mean
+  rewards within ``2**200``, a sum over ``2**63`` steps is within ``2**263``, and a product of
+  two such values with a count (int32, below ``2**31``), summed over ``2**27`` pairs and
+  ``2**11`` lags, within ``2**(263 + 200 + 31 + 27 + 11) = 2**532``.
+
+An env whose own rewards pass it is outside this guarantee (``learn()`` does not check each
+reward it receives).
+"""
+MAX_SEED = 2**63 - 1
+"""The largest ``seed`` (the int64 range, which numpy arrays and the sweeps' tables hold)."""
+
+
+def check_limit(name: str, value: Any, limit: int | float, limit_name: str) -> Any:
+    """Return ``value`` after checking that it is at most ``limit`` (a checked number, or None).
+
+    The bounds the library states as module constants are checked after the argument's own
+    check (its type and lower bound), so that the message names the constant.
+
+    Args:
+        name: the argument's name, for the message.
+        value: its value (``None`` passes).
+        limit: the largest value allowed.
+        limit_name: the constant, with where it lives, e.g.
+            ``"MAX_SEED = 2**63 - 1 (delayed_rl.agents.hyperparameters.MAX_SEED)"``.
+
+    Raises:
+        ValueError: ``value`` is above ``limit``.
+    """
+    if value is not None and value > limit:
+        raise ValueError(f"{name} must be at most {limit_name}, got {value!r}")
+    return value
+
+
+_MAX_ABS_VALUE = "MAX_ABS_VALUE = 2**200 (delayed_rl.agents.hyperparameters.MAX_ABS_VALUE)"
+
+
+def check_value(name: str, value: Any) -> float:
+    """Return ``value`` as a float after checking that it is a number within ±MAX_ABS_VALUE.
+
+    Raises:
+        TypeError: ``value`` is not a real number.
+        ValueError: it is NaN, infinite or of magnitude above :data:`MAX_ABS_VALUE`.
+    """
+    number = check_real(name, value)
+    if abs(number) > MAX_ABS_VALUE:
+        raise ValueError(f"{name} must be within ±{_MAX_ABS_VALUE}, got {value!r}")
+    return number
+
+
+def check_seed(name: str, value: Any) -> int | None:
+    """Return ``value`` (``None`` or an int in ``[0, MAX_SEED]``) after checking it.
+
+    Raises:
+        TypeError: ``value`` is neither ``None`` nor an integer.
+        ValueError: it is negative or above :data:`MAX_SEED`.
+    """
+    seed = check_int(name, value, 0, optional=True)
+    return check_limit(
+        name, seed, MAX_SEED, "MAX_SEED = 2**63 - 1 (delayed_rl.agents.hyperparameters.MAX_SEED)"
+    )
+
 
 _SHARED = {**asdict(DEFAULTS), "seed": None, "verbose": 0}
 HYPERPARAMETER_NAMES = tuple(_SHARED)
@@ -78,6 +161,8 @@ def check_hyperparameters(
 ) -> dict[str, Any]:
     """The shared hyper-parameters, checked, plus the learning rate as a schedule.
 
+    ``q_init`` must lie within ±:data:`MAX_ABS_VALUE` and ``seed`` in ``[0, MAX_SEED]``.
+
     Returns:
         One entry per argument (``learning_rate`` as given), and ``lr_schedule``.
 
@@ -94,7 +179,7 @@ def check_hyperparameters(
         ),
         "exploration_final_eps": check_probability("exploration_final_eps", exploration_final_eps),
         "exploration_fraction": check_fraction("exploration_fraction", exploration_fraction),
-        "q_init": check_real("q_init", q_init),
-        "seed": check_int("seed", seed, 0, optional=True),
+        "q_init": check_value("q_init", q_init),
+        "seed": check_seed("seed", seed),
         "verbose": check_int("verbose", verbose, 0, note=" (0 silent, 1 info)"),
     }

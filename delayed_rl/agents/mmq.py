@@ -36,8 +36,10 @@ import numpy as np
 from delayed_rl._delay_line import ring_size
 from delayed_rl._validation import check_int, check_real
 from delayed_rl.agents._fused import CompiledTables
+from delayed_rl.agents._loop import MAX_TIMESTEPS, MAX_TIMESTEPS_TEXT
+from delayed_rl.agents._persistence import check_state_array
 from delayed_rl.agents.base import TabularAgent
-from delayed_rl.agents.hyperparameters import shares_hyperparameters
+from delayed_rl.agents.hyperparameters import MAX_ABS_VALUE, check_limit, shares_hyperparameters
 from delayed_rl.fast._numba import jit as _jit
 from delayed_rl.fast.kernel import TableAverage, credit_kernel
 
@@ -72,6 +74,8 @@ _VIEWS = (
 OPTION_NAMES = ("reward_kernel", "delay_trace", "greedy_window")
 """MMQ's own options beyond the thesis's rule (constructor arguments, saved with the agent)."""
 _GREEDY_UPDATES = 100  # the averaged table is updated about this many times per window
+_VALUE_RANGE = (-MAX_ABS_VALUE, MAX_ABS_VALUE)  # a model file's tables (see MAX_ABS_VALUE)
+_VALUE_NOTE = " (|value| <= MAX_ABS_VALUE = 2**200, delayed_rl.agents.hyperparameters)"
 
 
 def table_bytes(
@@ -504,7 +508,12 @@ class MultipleModelQLearning(TabularAgent):
             "reward_kernel", reward_kernel, 0.0, low_open=True, optional=True
         )
         self.delay_trace = check_real("delay_trace", delay_trace, 0.0, 1.0, optional=True)
-        self.greedy_window = check_int("greedy_window", greedy_window, 1, optional=True)
+        self.greedy_window = check_limit(
+            "greedy_window",
+            check_int("greedy_window", greedy_window, 1, optional=True),
+            MAX_TIMESTEPS,
+            MAX_TIMESTEPS_TEXT,
+        )
 
     # ------------------------------------------------------------------ model
     @property
@@ -924,20 +933,32 @@ class MultipleModelQLearning(TabularAgent):
         return arrays
 
     def _set_state_arrays(self, arrays: dict[str, np.ndarray], where: str) -> None:
-        q = arrays.get("q_table")
+        """Check every state array against this agent's tables, then set them.
+
+        ``q_table`` (and ``greedy_table``) must be float64 of the agent's shape with every entry
+        within ±:data:`~delayed_rl.agents.hyperparameters.MAX_ABS_VALUE`; ``delay_estimates``
+        must be Λ as the metadata gives it; ``delay_trace`` in [0, 1]; ``greedy_clock`` the
+        steps since the average's last update (below its interval) and the updates made (at
+        most ``MAX_TIMESTEPS``). Nothing is set unless every array passes.
+
+        Raises:
+            ValueError: an array is missing or wrong (the message names the file and it).
+        """
         expected = (self.n_states, self.n_models, self.n_actions)
-        if q is None or q.dtype != np.float64 or q.shape != expected:
-            got = "missing" if q is None else f"{q.dtype} array of shape {q.shape}"
-            raise ValueError(
-                f"{where}: q_table must be a float64 array of shape {expected}, got {got}"
-            )
-        if not np.all(np.isfinite(q)):
-            raise ValueError(f"{where}: q_table holds non-finite values")
+        q = check_state_array(
+            f"{where}: q_table",
+            arrays.get("q_table"),
+            expected,
+            np.float64,
+            *_VALUE_RANGE,
+            note=_VALUE_NOTE,
+        )
         delays = arrays.get("delay_estimates")
         if delays is None or not np.array_equal(delays, self._delay_estimates):
+            shown = "missing" if delays is None else _shown(np.ravel(delays).tolist())
             raise ValueError(
-                f"{where}: the delay_estimates array ({delays!r}) does not match the "
-                f"metadata ({self.delay_estimates})"
+                f"{where}: the delay_estimates array ({shown}) does not match the "
+                f"metadata ({_shown(self.delay_estimates)})"
             )
         self._set_option_arrays(arrays, where)
         self._q[...] = q
@@ -945,17 +966,43 @@ class MultipleModelQLearning(TabularAgent):
 
     def _set_option_arrays(self, arrays: dict[str, np.ndarray], where: str) -> None:
         """Check and set the options' state (the trace, the averaged table and its clock)."""
+        trace = greedy = clock = None
         if self._trace is not None:
-            trace = arrays["delay_trace"]
-            if not np.all((trace >= 0.0) & (trace <= 1.0)):
-                raise ValueError(f"{where}: delay_trace must hold numbers in [0, 1]")
-            self._trace[...] = trace
+            trace = check_state_array(
+                f"{where}: delay_trace",
+                arrays.get("delay_trace"),
+                self._trace.shape,
+                np.float64,
+                0.0,
+                1.0,
+            )
         if self._greedy_q is not None:
-            greedy, clock = arrays["greedy_table"], arrays["greedy_clock"]
-            if not np.all(np.isfinite(greedy)):
-                raise ValueError(f"{where}: greedy_table holds non-finite values")
-            if np.any(clock < 0):
-                raise ValueError(f"{where}: greedy_clock must hold counts >= 0, got {clock!r}")
+            greedy = check_state_array(
+                f"{where}: greedy_table",
+                arrays.get("greedy_table"),
+                self._greedy_q.shape,
+                np.float64,
+                *_VALUE_RANGE,
+                note=_VALUE_NOTE,
+            )
+            clock = check_state_array(
+                f"{where}: greedy_clock",
+                arrays.get("greedy_clock"),
+                (2,),
+                np.int64,
+                0,
+                MAX_TIMESTEPS,
+                note=f" ({MAX_TIMESTEPS_TEXT})",
+            )
+            if clock[0] >= self._greedy_interval:
+                raise ValueError(
+                    f"{where}: greedy_clock[0] (the steps since the averaged table's last "
+                    f"update) must be below its interval {self._greedy_interval} (greedy_window="
+                    f"{self.greedy_window}), got {int(clock[0])}"
+                )
+        if trace is not None:
+            self._trace[...] = trace
+        if greedy is not None:
             self._greedy_q[...] = greedy
             self._greedy_clock[...] = clock
 

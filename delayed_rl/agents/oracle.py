@@ -40,10 +40,9 @@ import gymnasium as gym
 import numpy as np
 
 from delayed_rl._delay_line import delay_bound, ring_size
-from delayed_rl._validation import check_real
 from delayed_rl.agents._fused import CompiledTables
 from delayed_rl.agents.env_util import make_env
-from delayed_rl.agents.hyperparameters import shares_hyperparameters
+from delayed_rl.agents.hyperparameters import check_value, shares_hyperparameters
 from delayed_rl.agents.qlearning import QLearning
 from delayed_rl.wrappers.reward_delay import find_reward_delay
 
@@ -195,7 +194,9 @@ class OracleQLearning(QLearning):
         Raises:
             TypeError: an argument has the wrong type, or ``arrivals`` is missing.
             ValueError: an argument is outside its space, an arrival comes from a later step or
-                has a non-finite value, or the agent has no env.
+                has a non-finite value (or one above
+                :data:`~delayed_rl.agents.hyperparameters.MAX_ABS_VALUE` in magnitude), or the
+                agent has no env.
         """
         if self.env is None:
             raise ValueError(
@@ -234,7 +235,7 @@ class OracleQLearning(QLearning):
                     f"arrivals[{i}][0] must be an emission step <= {step} (this step's), "
                     f"got {emitted!r}"
                 )
-            checked.append((int(emitted), check_real(f"arrivals[{i}][1]", value)))
+            checked.append((int(emitted), check_value(f"arrivals[{i}][1]", value)))
         return checked
 
     def _learn_transition(

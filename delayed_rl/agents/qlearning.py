@@ -16,13 +16,18 @@ import gymnasium as gym
 
 from delayed_rl._validation import check_int
 from delayed_rl.agents.hyperparameters import shares_hyperparameters
-from delayed_rl.agents.mmq import OPTION_NAMES, MultipleModelQLearning
+from delayed_rl.agents.mmq import OPTION_NAMES, MultipleModelQLearning, check_delay_estimates
 
 __all__ = ["FixedDelayQLearning", "QLearning"]
 
 _SINGLE_MODEL_NAMES = tuple(
     name for name in MultipleModelQLearning._hyperparameter_names if name not in OPTION_NAMES
 )  # MMQ's options are not exposed: with one model, the kernel and the trace are moot
+
+
+def _estimates(delay_estimates: Any) -> list[int]:
+    """Λ as a file gives it, checked as MMQ checks it (a sequence of distinct integers >= 0)."""
+    return check_delay_estimates(None, None, delay_estimates).tolist()
 
 
 class QLearning(MultipleModelQLearning):
@@ -53,7 +58,7 @@ class QLearning(MultipleModelQLearning):
         super().__init__(env, delay_estimates=[0], **hyperparameters)
 
     def _set_hyperparameters(self, *, delay_estimates: Any = None, **kwargs: Any) -> None:
-        if delay_estimates is not None and list(delay_estimates) != [0]:
+        if delay_estimates is not None and _estimates(delay_estimates) != [0]:
             raise ValueError(f"QLearning has delay_estimates [0], got {delay_estimates!r}")
         super()._set_hyperparameters(delay_estimates=delay_estimates, **kwargs)
 
@@ -120,7 +125,7 @@ class FixedDelayQLearning(MultipleModelQLearning):
         return self.delay_estimate
 
     def _set_hyperparameters(self, *, delay_estimates: Any = None, **kwargs: Any) -> None:
-        if delay_estimates is not None and len(delay_estimates) != 1:
+        if delay_estimates is not None and len(_estimates(delay_estimates)) != 1:
             raise ValueError(
                 f"FixedDelayQLearning has one delay estimate, got delay_estimates="
                 f"{delay_estimates!r}"

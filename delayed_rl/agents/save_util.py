@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import struct
 import zipfile
 import zlib
@@ -36,6 +37,7 @@ __all__ = [
     "MAX_MODEL_BYTES",
     "ArrayHeader",
     "ModelFile",
+    "check_model_path",
     "read_model_file",
     "resolve_model_path",
     "space_from_json",
@@ -109,9 +111,11 @@ def write_model_file(path: str | Path, metadata: dict[str, Any], arrays: dict[st
         The path written.
 
     Raises:
-        ValueError: the arrays hold more than :data:`MAX_MODEL_BYTES` (the file would not load).
+        TypeError: ``path`` is not a ``str`` or ``os.PathLike``.
+        ValueError: ``path`` has no file name (:func:`check_model_path`), or the arrays hold more
+            than :data:`MAX_MODEL_BYTES` (the file would not load).
     """
-    path = Path(path)
+    path = check_model_path(path)
     if not path.suffix:
         path = path.with_suffix(".npz")
     header = json.dumps({"format": FORMAT, "format_version": FORMAT_VERSION, **metadata})
@@ -132,6 +136,27 @@ def write_model_file(path: str | Path, metadata: dict[str, Any], arrays: dict[st
     return path
 
 
+def check_model_path(path: Any) -> Path:
+    """``path`` as a ``Path`` after checking that it can name a model file.
+
+    Raises:
+        TypeError: ``path`` is not a ``str`` or ``os.PathLike`` (e.g. ``None``, bytes, a number).
+        ValueError: it has no file name (``""``, ``"."``, ``".."``, a path ending in ``/..``).
+    """
+    if not isinstance(path, (str, os.PathLike)):
+        raise TypeError(
+            f"path must be a str or os.PathLike naming a model file, got {path!r} "
+            f"({type(path).__name__})"
+        )
+    checked = Path(path)
+    if checked.name in ("", ".", ".."):
+        raise ValueError(
+            f"path must name a model file (e.g. 'model' or 'runs/model.npz'), got {str(path)!r}, "
+            "which has no file name"
+        )
+    return checked
+
+
 def resolve_model_path(path: str | Path) -> Path:
     """The model file ``path`` names, as ``load`` looks for it.
 
@@ -142,9 +167,11 @@ def resolve_model_path(path: str | Path) -> Path:
     ``CheckpointCallback`` file ``rl_model_10_steps.zip`` loads with or without its suffix.
 
     Raises:
+        TypeError: ``path`` is not a ``str`` or ``os.PathLike``.
+        ValueError: ``path`` has no file name (``""``, ``"."``: see :func:`check_model_path`).
         FileNotFoundError: none of them exists.
     """
-    path = Path(path)
+    path = check_model_path(path)
     appended = [path.with_name(path.name + end) for end in _SUFFIXES if end != path.suffix]
     candidates = [path, *appended]
     if path.suffix in _SUFFIXES:

@@ -130,7 +130,7 @@ class FusedRun:
 
     def _draw_delays(self, n: int) -> np.ndarray:
         """The next ``n`` delays of the run's stream, drawn in blocks of :data:`DELAY_BLOCK`."""
-        if self.delay is None:
+        if self.delay is None or n == 0:
             return np.zeros(n, dtype=np.int64)
         parts, needed = [], n
         while needed > 0:
@@ -202,12 +202,18 @@ class FusedRun:
             ``[0]`` is the state after the last.
 
         Raises:
-            ValueError: ``credit_kernel`` is shorter than Λ's span, or ``trace_decay`` is given
+            TypeError: ``steps`` is not an integer.
+            ValueError: ``steps`` is negative (0 steps is a run that takes none), or
+                ``credit_kernel`` is shorter than Λ's span, or ``trace_decay`` is given
                 without a ``trace`` of one float64 per model (the compiled code does not check
                 its indices), or ``lag_rates`` is not one float64 per lag, or ``average`` is not
                 one it can keep (its table a C-contiguous float64 array shaped as ``q``, its
                 clock two int64 counters, ``every`` ≥ 1, ``rate`` finite).
         """
+        if isinstance(steps, (bool, np.bool_)) or not isinstance(steps, (int, np.integer)):
+            raise TypeError(f"steps must be an integer >= 0, got {steps!r}")
+        if steps < 0:
+            raise ValueError(f"steps must be an integer >= 0, got {steps!r}")
         delays = self._draw_delays(steps)
         self._fit_ring(int(delays.max(initial=0)))
         if self.tie_counts.shape != v_max.shape:
