@@ -36,7 +36,12 @@ __all__ = [
     "check_int",
     "check_probability",
     "check_real",
+    "check_real_vector",
+    "check_reward",
+    "check_rewards",
 ]
+
+_SHOWN = 200  # characters of a value's repr that a message shows
 
 
 def _interval(low: float | None, high: float | None, low_open: bool, high_open: bool) -> str:
@@ -50,9 +55,18 @@ def _interval(low: float | None, high: float | None, low_open: bool, high_open: 
     return ""
 
 
+def _shown(value: Any) -> str:
+    """``repr(value)``, cut to :data:`_SHOWN` characters (an int too long to print: its size)."""
+    try:
+        text = repr(value)
+    except ValueError:  # an int beyond Python's digit limit for str()
+        return f"<an int of {value.bit_length()} bits>"
+    return text if len(text) <= _SHOWN else f"{text[: _SHOWN - 5]}...{text[-2:]}"
+
+
 def _got(value: Any, wrong_type: bool) -> str:
     """``"got <repr>"``, with the type's name when the type is what is wrong."""
-    return f"got {value!r} ({type(value).__name__})" if wrong_type else f"got {value!r}"
+    return f"got {_shown(value)} ({type(value).__name__})" if wrong_type else f"got {_shown(value)}"
 
 
 def check_int(
@@ -166,3 +180,116 @@ def check_choice(name: str, value: Any, choices: Collection[Any]) -> Any:
     if value not in choices:
         raise ValueError(f"{name} must be one of {tuple(choices)}, got {value!r}")
     return value
+
+
+def check_real_vector(name: str, value: Any, length: int, *, note: str = "") -> tuple[float, ...]:
+    """Return ``value``, a sequence of ``length`` finite real numbers, as a tuple of floats.
+
+    A list, a tuple or a 1-D numpy array is accepted; each entry is checked as
+    :func:`check_real` checks a number (named ``name[i]``).
+
+    Args:
+        name: the argument's name, for the message.
+        value: what was passed.
+        length: how many numbers it must hold.
+        note: appended to the description of what is allowed, e.g. ``" (x, y, heading)"``.
+
+    Raises:
+        TypeError: ``value`` is not a sequence (a string is not), or an entry is not a number.
+        ValueError: ``value`` does not hold ``length`` numbers (or is a multi-dimensional
+            array), or an entry is NaN or infinite.
+    """
+    allowed = f"a sequence of {length} finite numbers{note}"
+    if isinstance(value, np.ndarray):
+        if value.ndim != 1:
+            raise ValueError(f"{name} must be {allowed}, got an array of shape {value.shape}")
+    elif isinstance(value, (str, bytes)) or not isinstance(value, (list, tuple)):
+        raise TypeError(f"{name} must be {allowed}, {_got(value, True)}")
+    if len(value) != length:
+        raise ValueError(f"{name} must be {allowed}, got {len(value)} of them: {_shown(value)}")
+    return tuple(check_real(f"{name}[{i}]", entry) for i, entry in enumerate(value))
+
+
+_REWARD = (
+    "a real scalar (a Python or numpy int or float, or a 0-d numpy array of one; not a bool, "
+    "a complex number or a sequence)"
+)
+_SCALAR_TYPES = frozenset(
+    {int, float}
+    | {kind for kind in np.sctypeDict.values() if issubclass(kind, np.integer | np.floating)}
+)
+
+
+def check_reward(name: str, value: Any) -> float:
+    """Return a reward as a Python ``float`` after checking that it is a real scalar.
+
+    Accepted: ``int``, ``float``, numpy integer and floating scalars, any other
+    ``numbers.Real`` (``fractions.Fraction``), and 0-d numpy arrays of an integer or floating
+    dtype (what numpy itself treats as a scalar). Refused: ``bool`` and ``np.bool_`` (as
+    everywhere in this library, and by Gymnasium's env checker), complex numbers, ``None``,
+    strings, and sequences or arrays of one or more dimensions (a 1-element array included:
+    numpy deprecates reading it as a scalar, and it is more likely one objective of a vector
+    reward than a scalar). Infinite and NaN values are returned: the caller refuses them with
+    its own message.
+
+    The common case (an ``int``, a ``float`` or a numpy number) costs one set look-up and the
+    conversion; the careful checks run only for the other types.
+
+    Args:
+        name: what the value is, for the message (``"reward"``, ``"rewards[2]"``).
+        value: the reward.
+
+    Raises:
+        TypeError: ``value`` is not a real scalar.
+        ValueError: ``value`` is an integer beyond float64's range (``10**400``).
+    """
+    if type(value) in _SCALAR_TYPES:
+        try:
+            return float(value)
+        except OverflowError:
+            pass  # an int beyond float64: said below
+    if isinstance(value, np.ndarray) and value.ndim == 0 and value.dtype.kind in "iuf":
+        return float(value)
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        kind = type(value).__name__
+        if isinstance(value, np.ndarray):
+            kind += f" of shape {value.shape}"
+        raise TypeError(f"{name} must be {_REWARD}, got {_shown(value)} ({kind})")
+    try:
+        return float(value)
+    except OverflowError:
+        raise ValueError(
+            f"{name} must be a real number within float64's range (of magnitude below about "
+            f"1.8e308), {_got(value, False)}"
+        ) from None
+
+
+def check_rewards(name: str, values: Any, count: int) -> np.ndarray:
+    """Return a batch of ``count`` rewards as a float64 array after checking it.
+
+    The common case, a 1-D numpy array of ``count`` integers or floats, is converted at once
+    (no copy for float64); anything else is checked entry by entry as :func:`check_reward`
+    checks one reward (the message names ``name[i]``). Infinite and NaN entries are returned:
+    the caller refuses them with its own message.
+
+    Args:
+        name: what the batch is, for the message (``"rewards"``).
+        values: the batch (an array, a list or a tuple).
+        count: how many rewards it must hold (one per sub-env).
+
+    Raises:
+        TypeError: ``values`` is not a sequence, or an entry is not a real scalar.
+        ValueError: ``values`` does not hold ``count`` rewards (or has more than one
+            dimension), or an entry is beyond float64's range.
+    """
+    if type(values) is np.ndarray and values.dtype.kind in "iuf" and values.shape == (count,):
+        return np.asarray(values, dtype=np.float64)
+    allowed = f"a 1-D array of {count} real numbers (one reward per sub-env)"
+    if isinstance(values, np.ndarray):
+        if values.ndim != 1 or len(values) != count:
+            raise ValueError(f"{name} must be {allowed}, got an array of shape {values.shape}")
+    elif isinstance(values, (str, bytes)) or not isinstance(values, (list, tuple)):
+        raise TypeError(f"{name} must be {allowed}, {_got(values, True)}")
+    elif len(values) != count:
+        raise ValueError(f"{name} must be {allowed}, got {len(values)}: {_shown(values)}")
+    return np.array([check_reward(f"{name}[{i}]", v) for i, v in enumerate(values)])

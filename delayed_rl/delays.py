@@ -48,7 +48,6 @@ __all__ = [
     "Poisson",
     "Uniform",
     "as_delay",
-    "checked_delay",
     "delay_spec",
 ]
 
@@ -470,14 +469,18 @@ def as_delay(delay: Delay | float | Mapping[str, Any], name: str = "delay") -> D
     Raises:
         TypeError: if ``delay`` is neither a :class:`Delay`, a real number (a bool is not) nor a
             dict, or a description's parameter has the wrong type.
-        ValueError: if ``delay`` is a number that is not a valid λ (negative, NaN, infinite), or a
-            dict that describes no distribution (no or an unknown ``"type"``, missing or extra
-            parameters, a parameter's bad value).
+        ValueError: if ``delay`` is a number that is not a valid λ (negative, NaN, infinite,
+            above :attr:`Poisson.MAX_LAM`: that message names ``lam``), or a dict that describes no distribution (no or an
+            unknown ``"type"``, missing or extra parameters, a parameter's bad value).
+
+    A number's message names ``name`` (``"reward_delay must be a number >= 0 (a Poisson mean),
+    got -1"``), not Poisson's own ``lam``; a description's bad parameter is named as the
+    description names it (``lam``, ``k``...), after ``name``.
     """
     if isinstance(delay, Delay):
         return delay
-    if isinstance(delay, numbers.Real) and not isinstance(delay, bool):
-        return Poisson(delay)
+    if isinstance(delay, numbers.Real) and not isinstance(delay, (bool, np.bool_)):
+        return Poisson(check_real(name, delay, 0.0, note=" (a Poisson mean)"))
     if isinstance(delay, Mapping):
         return _from_dict(delay, name)
     raise TypeError(
@@ -485,20 +488,6 @@ def as_delay(delay: Delay | float | Mapping[str, Any], name: str = "delay") -> D
         f"Empirical), a number read as a Poisson mean or a Delay.to_dict() description, got "
         f"{delay!r} ({type(delay).__name__})"
     )
-
-
-def checked_delay(delay: Any, name: str) -> Delay:
-    """:func:`as_delay` for an argument called ``name``: a number's errors name it too.
-
-    A number must be a valid Poisson mean (finite, ``>= 0``); the message then names ``name``
-    (``"action_delay must be ... (a Poisson mean)"``) rather than Poisson's ``lam``.
-
-    Raises:
-        TypeError, ValueError: as :func:`as_delay`, naming ``name``.
-    """
-    if isinstance(delay, numbers.Real) and not isinstance(delay, (bool, np.bool_)):
-        check_real(name, delay, 0.0, note=" (a Poisson mean)")
-    return as_delay(delay, name)
 
 
 def delay_spec(delay: Any) -> Any:

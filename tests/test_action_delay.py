@@ -118,12 +118,14 @@ def test_defaults_and_bad_input():
         env.step(50)
     with pytest.raises(ValueError, match=r"initial_action must be an action of Discrete\(50\)"):
         ActionDelay(Echo(), 2.0, initial_action=-1)
-    tuple_env = gym.make("Blackjack-v1")
-    tuple_env.action_space = gym.spaces.Tuple((gym.spaces.Discrete(2),))
+    nested = gym.spaces.Dict({"a": gym.spaces.Tuple((gym.spaces.Discrete(2, start=1),))})
+    assert neutral_action(nested) == {"a": (1,)}
+    text_env = gym.make("Blackjack-v1")
+    text_env.action_space = gym.spaces.Tuple((gym.spaces.Text(3),))
     with pytest.raises(
-        ValueError, match="initial_action must be given for an action space of type"
+        ValueError, match="initial_action must be given for an action space of type Text"
     ):
-        ActionDelay(tuple_env, 2.0)
+        ActionDelay(text_env, 2.0)
     with pytest.raises(TypeError, match="max_delay"):
         ActionDelay(Echo(), 2.0, max_delay=2.5)
     with pytest.raises(ValueError, match="delay"):

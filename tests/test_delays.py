@@ -349,12 +349,10 @@ def test_as_delay_refuses_bad_descriptions(description, exc, match) -> None:
         as_delay(description)
 
 
-def test_checked_delay_names_the_argument():
-    from delayed_rl.delays import checked_delay
-
-    assert checked_delay(2.5, "action_delay") == Poisson(2.5)
-    assert checked_delay({"type": "Constant", "k": 2}, "x") == Constant(2)
+def test_as_delay_names_the_argument_in_a_numbers_error():
+    assert as_delay(2.5, "action_delay") == Poisson(2.5)
+    assert as_delay({"type": "Constant", "k": 2}, "x") == Constant(2)
     with pytest.raises(ValueError, match=r"action_delay must be .*Poisson mean"):
-        checked_delay(-1, "action_delay")
+        as_delay(-1, "action_delay")
     with pytest.raises(TypeError, match="observation_delay"):
-        checked_delay("5", "observation_delay")
+        as_delay("5", "observation_delay")

@@ -113,3 +113,18 @@ def test_copies_check_their_own_space() -> None:
         twin.reset()
         with pytest.raises(ValueError, match="got 4"):
             twin.step(4)
+
+
+@pytest.mark.parametrize("make", [lambda: GridWorldEnv(size=3), RouletteEnv])
+@pytest.mark.parametrize("action", [True, False])
+def test_envs_refuse_a_bool_for_an_action_with_a_type_error(make, action) -> None:
+    env = make()
+    env.reset(seed=0)
+    with pytest.raises(TypeError, match=rf"^action must be an integer .*not a bool, got {action}"):
+        env.step(action)
+
+
+def test_the_bool_refusal_is_the_envs_choice_not_the_checks_default() -> None:
+    ActionCheck(spaces.Discrete(2), "0 or 1").check(True)  # Discrete.contains(True) holds
+    with pytest.raises(TypeError, match="not a bool"):
+        ActionCheck(spaces.Discrete(2), "0 or 1", refuse_bool=True).check(True)

@@ -592,13 +592,40 @@ def test_valid_argument_types_are_normalised():
     [
         ({"start": 0.5}, r"unknown reset options \['start'\]"),
         ({"start_progress": 1.0}, r"start_progress'\] must be a number in \[0, 1\), got 1.0"),
-        ({"pose": (1.0, 2.0)}, r"options\['pose'\] must be a finite \(x, y, heading\)"),
+        ({"pose": (1.0, 2.0)}, r"options\['pose'\] must be a sequence of 3 finite numbers"),
+        ({"pose": np.zeros((1, 3))}, r"options\['pose'\] must be .*got an array of shape \(1, 3\)"),
+        ({"pose": (0.0, float("nan"), 0.0)}, r"options\['pose'\]\[1\] must be"),
+        ({"pose": [0.0, 0.0, float("inf")]}, r"options\['pose'\]\[2\] must be"),
         ({"pose": (0, 0, 0), "start_progress": 0.1}, r"may hold one of"),
     ],
 )
 def test_bad_reset_options_raise(options, match):
     with pytest.raises(ValueError, match=match):
         EPuckLineFollowEnv().reset(seed=0, options=options)
+
+
+@pytest.mark.parametrize(
+    ("pose", "match"),
+    [
+        ("abc", r"options\['pose'\] must be a sequence of 3 finite numbers .*\(str\)"),
+        (None, r"options\['pose'\] must be a sequence of 3 finite numbers .*\(NoneType\)"),
+        (1.0, r"options\['pose'\] must be a sequence .*\(float\)"),
+        ((0.0, "1", 0.0), r"options\['pose'\]\[1\] must be"),
+        ((0.0, 0.0, True), r"options\['pose'\]\[2\] must be"),
+        ((0.0, 0.0, 1j), r"options\['pose'\]\[2\] must be"),
+    ],
+)
+def test_a_pose_that_is_not_three_numbers_is_a_type_error(pose, match):
+    with pytest.raises(TypeError, match=match):
+        EPuckLineFollowEnv().reset(seed=0, options={"pose": pose})
+
+
+def test_a_pose_in_any_sequence_form_gives_the_same_start():
+    env = EPuckLineFollowEnv()
+    poses = [(0.7, 0.01, 1.5), [0.7, 0.01, 1.5], np.array([0.7, 0.01, 1.5], dtype=np.float32)]
+    starts = [env.reset(seed=0, options={"pose": pose})[1]["pose"] for pose in poses[:2]]
+    assert starts[0] == starts[1]
+    assert env.reset(seed=0, options={"pose": poses[2]})[1]["pose"] == pytest.approx(starts[0])
 
 
 def test_start_progress_of_the_wrong_type_is_a_type_error():

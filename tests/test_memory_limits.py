@@ -138,6 +138,12 @@ def test_gridworld_too_large_fails_before_allocating() -> None:
     assert peak < 4 * MB
 
 
+@pytest.mark.parametrize("size", [10**12, 10**400, 10**5000], ids=["1e12", "1e400", "1e5000"])
+def test_gridworld_sizes_far_too_large_get_a_readable_message(size: int) -> None:
+    with pytest.raises(ValueError, match=r"size=.* would build tables of .* states .*the limit"):
+        GridWorldEnv(size=size)
+
+
 def test_gridworld_error_states_the_limit() -> None:
     side = int(MAX_STATES**0.5)
     with pytest.raises(ValueError, match=rf"the limit is {MAX_STATES:,} states \(size <= {side}\)"):
@@ -210,3 +216,43 @@ def test_the_longest_tracks_allowed_build_in_seconds() -> None:
         warnings.simplefilter("error")
         track = random_track(1, mean_radius=10.0)
     assert track.length > 50
+
+
+# --- the agents' tables ------------------------------------------------------------------------
+
+
+def test_deconvq_tables_too_large_fail_before_allocating() -> None:
+    from delayed_rl.agents import DeconvQ
+
+    env = GridWorldEnv(size=200)  # 160,000 pairs: 1025 reward sums each would take 1.2 GiB
+    peak = peak_of_error(
+        lambda: DeconvQ(env, max_delay=1024),
+        ValueError,
+        r"DeconvolutionQLearning\(max_delay=1024\) on an env of 40000 states and 4 actions needs "
+        r"1.\d+ GiB of tables .*over MAX_TABLE_BYTES = 1 GiB",
+    )
+    assert peak < MB
+    peak = peak_of_error(
+        lambda: DeconvQ(env, max_delay=10**9),
+        ValueError,
+        "max_delay must be at most MAX_MODELLED_DELAY = 1024",
+    )
+    assert peak < MB
+
+
+def test_deconvq_statistics_a_file_declares_are_checked_before_they_are_read(
+    tmp_path, monkeypatch
+) -> None:
+    from delayed_rl.agents import DeconvQ, deconvolution, save_util
+
+    path = DeconvQ(GridWorldEnv(size=3), max_delay=5, seed=0).learn(50).save(tmp_path / "d")
+    monkeypatch.setattr(deconvolution, "STATISTICS_LIMIT", 2**10)  # its counts take 7.8 KiB
+
+    def never(*args, **kwargs):
+        raise AssertionError("an array was read before the sizes were checked")
+
+    monkeypatch.setattr(save_util.ModelFile, "read", never)
+    with pytest.raises(
+        ValueError, match=r"regression_cooc and regression_keys declare 0 MiB, more"
+    ):
+        DeconvQ.load(path)

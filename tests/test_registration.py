@@ -11,7 +11,13 @@ from delayed_rl.delays import Constant, Geometric, Poisson, Uniform
 from delayed_rl.envs import env_ids, register_envs
 from delayed_rl.envs.gridworld import GridWorldEnv
 from delayed_rl.envs.roulette import RouletteEnv
-from delayed_rl.wrappers import ActionDelay, ObservationDelay, PoissonRewardDelay, RewardDelay
+from delayed_rl.wrappers import (
+    ActionDelay,
+    ObservationDelay,
+    PoissonRewardDelay,
+    RewardDelay,
+    wrap_delays,
+)
 
 IDS = {
     "delayed_rl/GridWorld-3x3-v0": {},
@@ -116,20 +122,25 @@ def test_outer_wrapper_spec_round_trip() -> None:
 
 
 @pytest.mark.parametrize(
-    ("bad", "exc", "name"),
+    ("bad", "exc"),
     [
-        ("5", TypeError, "reward_delay"),
-        (True, TypeError, "reward_delay"),
-        ([1, 2], TypeError, "reward_delay"),
-        (-1, ValueError, "lam"),
-        (float("nan"), ValueError, "lam"),
-        (float("inf"), ValueError, "lam"),
+        ("5", TypeError),
+        (True, TypeError),
+        (np.bool_(True), TypeError),
+        ([1, 2], TypeError),
+        (-1, ValueError),
+        (float("nan"), ValueError),
+        (float("inf"), ValueError),
+        (np.float32(-2.0), ValueError),
     ],
 )
+@pytest.mark.parametrize("kwarg", ["reward_delay", "observation_delay", "action_delay"])
 @pytest.mark.parametrize("env_id", ["delayed_rl/GridWorld-3x3-v0", "delayed_rl/Roulette-v0"])
-def test_make_rejects_bad_reward_delay(env_id: str, bad, exc, name) -> None:
-    with pytest.raises(exc, match=name):
-        gym.make(env_id, reward_delay=bad)
+def test_make_rejects_a_bad_delay_naming_its_argument(env_id: str, kwarg: str, bad, exc) -> None:
+    with pytest.raises(exc, match=f"^{kwarg} must be"):
+        gym.make(env_id, **{kwarg: bad})
+    with pytest.raises(exc, match=f"^{kwarg} must be"):
+        wrap_delays(gym.make(env_id), **{kwarg: bad})
 
 
 # ---------------------------------------------------------------------- the three delays

@@ -587,8 +587,8 @@ def _env():
         (lambda: PoissonRewardDelay(_env(), float("inf")), ValueError, "lam"),
         (lambda: PoissonRewardDelay(_env(), True), TypeError, "lam"),
         (lambda: PoissonRewardDelay(_env(), "5"), TypeError, "lam"),
-        (lambda: RewardDelay(_env(), -0.5), ValueError, "lam"),
-        (lambda: RewardDelay(_env(), float("nan")), ValueError, "lam"),
+        (lambda: RewardDelay(_env(), -0.5), ValueError, "^delay must be"),
+        (lambda: RewardDelay(_env(), float("nan")), ValueError, "^delay must be"),
         (lambda: RewardDelay(_env(), "5"), TypeError, "delay"),
         (lambda: RewardDelay(_env(), True), TypeError, "delay"),
         (lambda: RewardDelay(_env(), None), TypeError, "delay"),
@@ -614,7 +614,7 @@ def _env():
             "record_arrivals",
         ),
         (lambda: wrap_reward_delay(_env(), "5"), TypeError, "reward_delay"),
-        (lambda: wrap_reward_delay(_env(), -2), ValueError, "lam"),
+        (lambda: wrap_reward_delay(_env(), -2), ValueError, "^reward_delay must be"),
     ],
 )
 def test_invalid_arguments(make, exc, name) -> None:
@@ -652,7 +652,7 @@ def test_each_argument_refuses_a_wrong_type_and_a_bad_value(
 def test_the_delay_argument_refuses_a_wrong_type_and_a_bad_value(wrong_type, bad_value) -> None:
     with pytest.raises(TypeError, match="delay"):
         RewardDelay(_env(), wrong_type)
-    with pytest.raises(ValueError, match="lam"):
+    with pytest.raises(ValueError, match="^delay must be"):
         RewardDelay(_env(), bad_value)
     with pytest.raises(TypeError, match="lam"):
         PoissonRewardDelay(_env(), wrong_type)
@@ -660,7 +660,7 @@ def test_the_delay_argument_refuses_a_wrong_type_and_a_bad_value(wrong_type, bad
         PoissonRewardDelay(_env(), bad_value)
     with pytest.raises(TypeError, match="reward_delay"):
         wrap_reward_delay(_env(), wrong_type)
-    with pytest.raises(ValueError, match="lam"):
+    with pytest.raises(ValueError, match="^reward_delay must be"):
         wrap_reward_delay(_env(), bad_value)
 
 

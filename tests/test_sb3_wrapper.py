@@ -158,7 +158,7 @@ def test_vec_reward_delay_non_finite_reward_raises(bad) -> None:
 @pytest.mark.parametrize(
     ("kwargs", "exc", "name"),
     [
-        ({"delay": -1}, ValueError, "lam"),
+        ({"delay": -1}, ValueError, "^delay must be a number >= 0"),
         ({"delay": "x"}, TypeError, "delay"),
         ({"delay": 1, "max_delay": -1}, ValueError, "max_delay"),
         ({"delay": 1, "on_episode_end": "nope"}, ValueError, "on_episode_end"),
@@ -315,6 +315,50 @@ def Float64VecEnv(env_fns):
             return obs, np.full(self.num_envs, 0.1, dtype=np.float64), dones, infos
 
     return _Float64VecEnv(env_fns)
+
+
+def ScriptedRewardVecEnv(env_fns, rewards):
+    """A VecEnv whose ``step_wait`` returns ``rewards`` as they are (of any type)."""
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    class _Scripted(DummyVecEnv):
+        def step_wait(self):
+            obs, _, dones, infos = super().step_wait()
+            return obs, rewards, dones, infos
+
+    return _Scripted(env_fns)
+
+
+@pytest.mark.parametrize(
+    ("rewards", "exc", "match"),
+    [
+        (None, TypeError, r"^rewards must be a 1-D array of 2 real numbers"),
+        ([None, 1.0], TypeError, r"^rewards\[0\] must be a real scalar"),
+        (np.array([1 + 0j, 1]), TypeError, r"^rewards\[0\] must be a real scalar"),
+        (np.array([True, False]), TypeError, r"^rewards\[0\] must be a real scalar"),
+        (np.ones((2, 1)), ValueError, r"^rewards must be .*shape \(2, 1\)"),
+        ([1.0, 10**400], ValueError, r"^rewards\[1\] must be a real number within float64"),
+    ],
+    ids=repr,
+)
+def test_vec_reward_delay_refuses_rewards_of_the_wrong_form(rewards, exc, match) -> None:
+    from delayed_rl.wrappers.sb3 import VecRewardDelay
+
+    inner = ScriptedRewardVecEnv([lambda: RandomEndEnv(0.0, 0.0)] * 2, rewards)
+    env = VecRewardDelay(inner, Constant(0), seed=0)
+    env.reset()
+    with pytest.raises(exc, match=match):
+        env.step(np.zeros(2, dtype=int))
+
+
+def test_vec_reward_delay_takes_a_list_of_rewards() -> None:
+    from delayed_rl.wrappers.sb3 import VecRewardDelay
+
+    inner = ScriptedRewardVecEnv([lambda: RandomEndEnv(0.0, 0.0)] * 2, [1, 0.5])
+    env = VecRewardDelay(inner, Constant(0), seed=0)
+    env.reset()
+    _, rewards, _, _ = env.step(np.zeros(2, dtype=int))
+    assert rewards.dtype == np.float32 and rewards.tolist() == [1.0, 0.5]
 
 
 def test_delivered_sums_keep_float64_until_sb3_casts() -> None:

@@ -43,7 +43,7 @@ from delayed_rl._validation import check_int
 from delayed_rl.agents._fused import CompiledTables
 from delayed_rl.agents.hyperparameters import shares_hyperparameters
 from delayed_rl.agents.qlearning import QLearning
-from delayed_rl.delays import Delay, Empirical, checked_delay
+from delayed_rl.delays import Delay, Empirical, as_delay
 from delayed_rl.fast._numba import jit as _jit
 
 __all__ = ["ExpectedCreditQLearning", "credit_weights"]
@@ -175,7 +175,7 @@ class ExpectedCreditQLearning(QLearning):
         max_delay: int | None = None,
         **hyperparameters: Any,
     ):
-        self._set_credit(checked_delay(delay, "delay"), max_delay)
+        self._set_credit(as_delay(delay, "delay"), max_delay)
         super().__init__(env, **hyperparameters)
 
     def _set_credit(self, delay: Delay, max_delay: Any) -> None:
@@ -203,7 +203,7 @@ class ExpectedCreditQLearning(QLearning):
         value that is not a delay) is refused.
         """
         if delay is not _UNSET:  # loading: they come along
-            self._set_credit(checked_delay(delay, "delay"), max_delay)
+            self._set_credit(as_delay(delay, "delay"), max_delay)
         super()._set_hyperparameters(**kwargs)
 
     def _get_hyperparameters(self) -> dict[str, Any]:

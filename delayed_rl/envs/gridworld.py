@@ -25,6 +25,19 @@ construction, before anything is allocated."""
 BYTES_PER_STATE = 1_300
 """About what one cell's tables take (measured: the ``P`` dict's lists and tuples dominate)."""
 
+MAX_SIDE = math.isqrt(MAX_STATES)
+"""The largest ``size``: 256 (``size² <= MAX_STATES``)."""
+
+
+def _count(n: int) -> str:
+    """``n`` with thousands separators, or as a power of ten when it is too long to read."""
+    return f"{n:,}" if n < 10**30 else f"about 10^{int(n.bit_length() * math.log10(2))}"
+
+
+def _gigabytes(n_bytes: int) -> str:
+    """``n_bytes`` in GB, two significant digits (a power of ten beyond float64's range)."""
+    return f"{n_bytes / 1e9:.2g}" if n_bytes < 10**300 else _count(n_bytes // 10**9)
+
 
 class GridWorldEnv(gym.Env):
     """An ``size × size`` grid whose top-left cell pays +10 and warps the agent home.
@@ -37,7 +50,9 @@ class GridWorldEnv(gym.Env):
     ``2(size − 1) + 1`` steps, ``10 / (2(size − 1) + 1)`` (0.588 for 9×9).
 
     ## Action Space
-    ``Discrete(4)``: 0 up, 1 right, 2 down, 3 left (the thesis's actions 1–4).
+    ``Discrete(4)``: 0 up, 1 right, 2 down, 3 left (the thesis's actions 1–4). An action is an
+    ``int``, a numpy integer or a 0-d integer array; ``True`` and ``False`` raise ``TypeError``
+    (Gymnasium's ``Discrete.contains`` would read them as 1 and 0).
 
     ## Observation Space
     ``Discrete(size²)``: the cell index, row-major from the top-left corner, so the thesis's state
@@ -63,7 +78,9 @@ class GridWorldEnv(gym.Env):
 
     ## Arguments
     - ``size``: the side length, an integer ≥ 2 (default 9) with ``size² <= MAX_STATES``
-      (``size <= 256``).
+      (``size <= MAX_SIDE``, 256: tables of some 85 MB). A larger size, here or through
+      ``gym.make("delayed_rl/GridWorld-v0", size=...)``, raises ``ValueError`` naming the limit
+      before anything is allocated.
     - ``max_steps``: truncate after this many steps (``None``, the default, never truncates).
     - ``render_mode``: ``None`` or ``"ansi"`` (a text picture of the grid).
 
@@ -83,12 +100,13 @@ class GridWorldEnv(gym.Env):
 
     def __init__(self, size: int = 9, max_steps: int | None = None, render_mode: str | None = None):
         self.size = check_int("size", size, 2)
-        if self.size * self.size > MAX_STATES:
+        if self.size > MAX_SIDE:  # before anything is allocated, whatever the size
             states = self.size * self.size
+            size = self.size if self.size < 10**30 else _count(self.size)
             raise ValueError(
-                f"size={self.size} would build tables of {states:,} states (about "
-                f"{states * BYTES_PER_STATE / 1e9:.2g} GB); the limit is {MAX_STATES:,} states "
-                f"(size <= {math.isqrt(MAX_STATES)}): see delayed_rl.envs.gridworld.MAX_STATES"
+                f"size={size} would build tables of {_count(states)} states (about "
+                f"{_gigabytes(states * BYTES_PER_STATE)} GB); the limit is {MAX_STATES:,} states "
+                f"(size <= {MAX_SIDE}): see delayed_rl.envs.gridworld.MAX_STATES"
             )
         self.max_steps = check_int("max_steps", max_steps, 1, optional=True)
         self.render_mode = check_choice(
@@ -100,7 +118,7 @@ class GridWorldEnv(gym.Env):
         self.observation_space = spaces.Discrete(self.n_states)
         self.action_space = spaces.Discrete(4)
         self._check_action = ActionCheck(
-            self.action_space, "in Discrete(4) (0 up, 1 right, 2 down, 3 left)"
+            self.action_space, "in Discrete(4) (0 up, 1 right, 2 down, 3 left)", refuse_bool=True
         ).check
         self.next_state, self.reward_table = self._build_tables()
         self.P = {
@@ -155,6 +173,8 @@ class GridWorldEnv(gym.Env):
         """Move (or collect the +10 and warp home); truncate after ``max_steps`` if set.
 
         Raises:
+            TypeError: ``action`` is a ``bool``: ``Discrete.contains`` would take ``True`` for
+                1, but a bool is not an action here (nor a number anywhere in this library).
             ValueError: ``action`` is not in the action space (Gymnasium's
                 ``Discrete.contains``, answered fast for ``int`` and numpy integers).
         """

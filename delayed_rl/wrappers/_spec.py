@@ -1,16 +1,20 @@
 """Env specs whose delay arguments are JSON: ``gym.make(id, reward_delay=Constant(2))`` writable.
 
 Every delay wrapper lists :class:`JsonSpecMixin` among its bases, so whichever is outermost
-gives an ``env.spec`` that ``EnvSpec.to_json`` can write and ``gym.make`` can read back.
+gives an ``env.spec`` that ``EnvSpec.to_json`` can write and ``gym.make`` can read back. The
+wrappers record their own arguments through :func:`json_safe` (numpy numbers as Python numbers,
+arrays as lists), and a registered env's delay arguments are recorded the same way.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 
-__all__ = ["DELAY_KWARGS", "JsonSpecMixin", "describe_delays"]
+__all__ = ["DELAY_KWARGS", "JsonSpecMixin", "describe_delays", "json_safe"]
 
 DELAY_KWARGS = ("action_delay", "observation_delay", "reward_delay")
 """The delay arguments of every ``delayed_rl/`` id, in the order their wrappers stack
@@ -32,17 +36,45 @@ class JsonSpecMixin:
         return spec
 
 
+def json_safe(value: Any) -> Any:
+    """``value`` in a form ``json.dumps`` writes and ``json.loads`` gives back equal.
+
+    Numpy scalars become Python numbers (``np.float32(2.5)`` → ``2.5``, ``np.int64(3)`` → ``3``,
+    ``np.bool_`` → ``bool``), arrays nested lists of them; dicts are rebuilt around their
+    converted values, tuples and lists become lists (JSON has no tuples), recursively. Anything
+    else is returned as it is (``EnvSpec.to_json`` then says what it cannot write).
+
+    Example:
+        >>> json_safe({"k": np.int64(2), "pose": (np.float32(0.5), np.zeros(2))})
+        {'k': 2, 'pose': [0.5, [0.0, 0.0]]}
+    """
+    if isinstance(value, np.ndarray | np.generic):
+        return value.tolist()
+    if isinstance(value, Mapping):
+        return {key: json_safe(entry) for key, entry in value.items()}
+    if isinstance(value, tuple | list):
+        return [json_safe(entry) for entry in value]
+    return value
+
+
 def describe_delays(spec: Any) -> None:
-    """Record a registered env's delay arguments in ``spec.kwargs`` as JSON descriptions.
+    """Record a registered env's delay arguments in ``spec.kwargs`` in JSON form.
 
     ``gym.make(id, reward_delay=Constant(2))`` keeps the object in the env spec's kwargs, which
-    ``EnvSpec.to_json`` cannot write; the library's entry points read the description back.
-    Every delay wrapper's ``spec`` calls this, so the outermost one's spec is JSON-able.
+    ``EnvSpec.to_json`` cannot write; it is recorded as its ``to_dict()`` description, which the
+    library's entry points read back. A number is recorded as a Python ``int`` or ``float``
+    (``reward_delay=np.float32(2.0)`` as ``2.0``) and a description's numpy numbers likewise
+    (:func:`json_safe`): the same delay, in a form JSON keeps. Every delay wrapper's ``spec``
+    calls this, so the outermost one's spec is JSON-able.
     """
     from delayed_rl.delays import Delay, delay_spec
 
     kwargs = spec.kwargs if isinstance(spec.kwargs, dict) else {}
-    objects = {key: kwargs[key] for key in DELAY_KWARGS if isinstance(kwargs.get(key), Delay)}
+    objects = {
+        key: kwargs[key]
+        for key in DELAY_KWARGS
+        if isinstance(kwargs.get(key), Delay | np.generic | Mapping)
+    }
     if not objects:
         return
     entry = spec.entry_point
@@ -51,4 +83,5 @@ def describe_delays(spec: Any) -> None:
     except (ImportError, AttributeError, ValueError):
         return
     if getattr(entry, "reads_delay_descriptions", False):  # a DelayableEntryPoint
-        spec.kwargs = {**kwargs, **{key: delay_spec(value) for key, value in objects.items()}}
+        described = {key: json_safe(delay_spec(value)) for key, value in objects.items()}
+        spec.kwargs = {**kwargs, **described}

@@ -16,9 +16,11 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import concatenate, create_empty_array, iterate
 
 from delayed_rl.delays import Delay, as_delay, delay_spec
-from delayed_rl.wrappers._spec import JsonSpecMixin
+from delayed_rl.wrappers._samples import as_action, copy_sample
+from delayed_rl.wrappers._spec import JsonSpecMixin, json_safe
 from delayed_rl.wrappers.reward_delay import DelaySampler, check_max_delay
 from delayed_rl.wrappers.vector import autoreset_mode, reset_mask, sub_env_seeds
 
@@ -29,10 +31,13 @@ def neutral_action(space: gym.Space) -> Any:
     """The action executed before any sent action has arrived, when none is given.
 
     ``Discrete``: its first action (``start``, usually 0); ``Box``: zeros, clipped into the box;
-    ``MultiDiscrete``: each entry's first value (``start``); ``MultiBinary``: zeros.
+    ``MultiDiscrete``: each entry's first value (``start``); ``MultiBinary``: zeros; ``Dict``
+    and ``Tuple``: the neutral action of each of their spaces (a dict in the space's key order,
+    a tuple), recursively.
 
     Raises:
-        ValueError: any other space (give ``initial_action``).
+        ValueError: any other space, or a ``Dict`` or ``Tuple`` holding one (give
+            ``initial_action``).
     """
     if isinstance(space, spaces.Discrete):
         return space.dtype.type(space.start)
@@ -42,6 +47,10 @@ def neutral_action(space: gym.Space) -> Any:
         return np.array(space.start, dtype=space.dtype)
     if isinstance(space, spaces.MultiBinary):
         return np.zeros(space.shape, dtype=space.dtype)
+    if isinstance(space, spaces.Dict):
+        return {key: neutral_action(sub) for key, sub in space.spaces.items()}
+    if isinstance(space, spaces.Tuple):
+        return tuple(neutral_action(sub) for sub in space.spaces)
     raise ValueError(
         f"initial_action must be given for an action space of type {type(space).__name__} "
         f"({space}): there is no neutral action to default to"
@@ -49,13 +58,14 @@ def neutral_action(space: gym.Space) -> Any:
 
 
 def _check_action(space: gym.Space, action: Any, name: str) -> Any:
-    """``action``, checked to be in ``space`` (an array is copied: it may be reused by the caller).
+    """A copy of ``action`` (:func:`copy_sample`), checked to be in ``space``.
+
+    The copy is what the line keeps: the caller may reuse or modify its own object.
 
     Raises:
         ValueError: ``action`` is not in ``space``.
     """
-    if isinstance(action, np.ndarray):
-        action = action.copy()
+    action = copy_sample(action)
     if not space.contains(action):
         raise ValueError(f"{name} must be an action of {space}, got {action!r}")
     return action
@@ -72,7 +82,9 @@ class ActionLine:
     line executes ``initial_action``.
 
     Only the actions still in transit are kept (a heap by arrival step), so memory follows what
-    is in flight, not the delay's bound.
+    is in flight, not the delay's bound. The line keeps the very objects it is given and
+    returns them: :class:`ActionDelay` and :class:`VectorActionDelay` give it copies and hand
+    out copies of what it returns, so that nobody else holds its objects.
 
     Args:
         initial_action: what to execute until the episode's first action arrives.
@@ -127,7 +139,14 @@ class ActionDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
     Actions still in transit when an episode ends are discarded by the next ``reset()``.
 
     Every action sent is checked against the action space (an action that would never be
-    executed is still refused if it is invalid). ``info`` is the inner env's plus
+    executed is still refused if it is invalid), for any space (``Discrete``, ``Box``,
+    ``MultiDiscrete``, ``MultiBinary``, ``Dict`` and ``Tuple``, nested). Actions are copied
+    (:func:`~delayed_rl.wrappers._samples.copy_sample`: arrays copied, dicts and tuples rebuilt)
+    where they enter and where they leave: the wrapper keeps a copy of each action sent, steps
+    the inner env with a copy of the action executed and reports another copy in ``info``. So
+    reusing or modifying an action after ``step()``, writing into ``info["executed_action"]``,
+    or an inner env that edits its action in place, changes neither the actions in transit nor
+    ``initial_action``. ``info`` is the inner env's plus
     ``info["executed_action"]`` (the action the env executed), ``info["executed_action_step"]``
     (the episode step that sent it, ``-1`` for ``initial_action``) and ``info["action_delay"]``
     (``d_t``, the transit time drawn for this step's action). Seeded by ``reset(seed=...)`` from
@@ -139,7 +158,10 @@ class ActionDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
             read as a Poisson mean.
         initial_action: executed until the episode's first action arrives; ``None``: the
             space's neutral action (:func:`neutral_action`: 0 for ``Discrete``, zeros for
-            ``Box``).
+            ``Box``). Anything the space's ``contains`` accepts, kept as a copy in the form of
+            the space's samples (a list for a ``Box`` becomes an array of its dtype, a list for
+            a ``Tuple`` a tuple), and recorded in the env spec in JSON form (arrays as lists),
+            which reads back to the same action.
         max_delay: clip delays to at most this many steps (``None``: unbounded).
 
     Raises:
@@ -166,16 +188,19 @@ class ActionDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
         max_delay: int | None = None,
     ):
         gym.utils.RecordConstructorArgs.__init__(
-            self, delay=delay_spec(delay), initial_action=initial_action, max_delay=max_delay
+            self,
+            delay=delay_spec(delay),
+            initial_action=json_safe(initial_action),
+            max_delay=json_safe(max_delay),
         )
         gym.Wrapper.__init__(self, env)
         self.delay = as_delay(delay)
         self.max_delay = check_max_delay(max_delay)
         if initial_action is None:
             initial_action = neutral_action(env.action_space)
-        self.initial_action = _check_action(env.action_space, initial_action, "initial_action")
+        self.initial_action = as_action(env.action_space, initial_action, "initial_action")
         self._sampler = DelaySampler(self.delay, self.max_delay)
-        self.line = ActionLine(self.initial_action)
+        self.line = ActionLine(copy_sample(self.initial_action))
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Reset the env and the line (actions in transit are discarded); ``seed`` reseeds it."""
@@ -190,8 +215,8 @@ class ActionDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
         action = _check_action(self.action_space, action, "action")
         delay = self._sampler()
         executed = self.line.send(action, delay)
-        obs, reward, terminated, truncated, info = self.env.step(executed)
-        info["executed_action"] = executed
+        obs, reward, terminated, truncated, info = self.env.step(copy_sample(executed))
+        info["executed_action"] = copy_sample(executed)
         info["executed_action_step"] = self.line.executed_step
         info["action_delay"] = delay
         return obs, reward, terminated, truncated, info
@@ -211,6 +236,12 @@ class VectorActionDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
     ``info`` holds, with Gymnasium's ``_key`` masks, ``executed_action`` (the batch of actions
     executed), ``executed_action_step`` and ``action_delay`` (for the sub-envs that sent an
     action at this step).
+
+    Actions are batched as in ``gymnasium.vector``: an array with one row per sub-env, and for
+    a ``Dict`` (``Tuple``) action space a dict (tuple) of such batches, nested as the space is;
+    ``info["executed_action"]`` is a batch of the same form. They are copied as
+    :class:`ActionDelay` copies them: the batch given to the inner env and the one reported are
+    new objects built from copies of what the lines keep.
 
     Args:
         env: a Gymnasium ``VectorEnv``.
@@ -232,7 +263,10 @@ class VectorActionDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
         max_delay: int | None = None,
     ):
         gym.utils.RecordConstructorArgs.__init__(
-            self, delay=delay_spec(delay), initial_action=initial_action, max_delay=max_delay
+            self,
+            delay=delay_spec(delay),
+            initial_action=json_safe(initial_action),
+            max_delay=json_safe(max_delay),
         )
         gym.vector.VectorWrapper.__init__(self, env)
         self.delay = as_delay(delay)
@@ -240,9 +274,9 @@ class VectorActionDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
         space = env.single_action_space
         if initial_action is None:
             initial_action = neutral_action(space)
-        self.initial_action = _check_action(space, initial_action, "initial_action")
+        self.initial_action = as_action(space, initial_action, "initial_action")
         self.autoreset_mode = autoreset_mode(env)
-        self.lines = [ActionLine(self.initial_action) for _ in range(self.num_envs)]
+        self.lines = [ActionLine(copy_sample(self.initial_action)) for _ in range(self.num_envs)]
         self._samplers = [DelaySampler(self.delay, self.max_delay) for _ in range(self.num_envs)]
         self._resetting = np.zeros(self.num_envs, dtype=bool)
 
@@ -264,18 +298,28 @@ class VectorActionDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
         return obs, info
 
     def step(self, actions):
-        """Send each sub-env's action; step them with the actions executed now."""
+        """Send each sub-env's action; step them with the actions executed now.
+
+        Raises:
+            TypeError: ``actions`` is not a batch of the action space's form (see the class
+                docstring).
+            ValueError: it does not hold one action per sub-env, or a sub-env's action is not
+                in the single action space (the message names ``actions[i]``).
+        """
         space = self.single_action_space
-        executed = np.array(actions, copy=True)
+        given = self._unbatch(actions)
+        executed = list(given)  # the reset step's sub-envs ignore the action given
         sent_steps = np.full(self.num_envs, -1, dtype=np.int64)
         delays = np.zeros(self.num_envs, dtype=np.int64)
         sending = ~self._resetting
-        for i in np.flatnonzero(sending):
-            action = _check_action(space, actions[i], f"actions[{i}]")
+        for i in np.flatnonzero(sending).tolist():
+            action = _check_action(space, given[i], f"actions[{i}]")
             delays[i] = self._samplers[i]()
             executed[i] = self.lines[i].send(action, int(delays[i]))
             sent_steps[i] = self.lines[i].executed_step
-        obs, rewards, terminated, truncated, info = self.env.step(executed)
+        batch = self._batch(executed)  # new arrays: the lines' actions are not handed out
+        report = copy_sample(batch)  # another: the inner env may edit its batch in place
+        obs, rewards, terminated, truncated, info = self.env.step(batch)
         ended = np.asarray(terminated) | np.asarray(truncated)
         if self.autoreset_mode == AutoresetMode.NEXT_STEP:
             self._resetting = ended & sending
@@ -285,9 +329,48 @@ class VectorActionDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
             for i in np.flatnonzero(ended):
                 self.lines[i].reset()
         for key, values in (
-            ("executed_action", executed),
+            ("executed_action", report),
             ("executed_action_step", sent_steps),
             ("action_delay", delays),
         ):
             info[key], info["_" + key] = values, sending.copy()
         return obs, rewards, terminated, truncated, info
+
+    def _unbatch(self, actions: Any) -> list[Any]:
+        """The sub-envs' actions in the batch ``actions`` (``gymnasium.vector.utils.iterate``).
+
+        Raises:
+            TypeError: ``actions`` is not a batch of the action space's form.
+            ValueError: it does not hold one action per sub-env.
+        """
+        allowed = (
+            f"a batch of {self.num_envs} actions of {self.single_action_space} (one per sub-env; "
+            "a dict or tuple of batches for a Dict or Tuple space)"
+        )
+        try:
+            given = list(iterate(self.action_space, actions))
+        except (TypeError, KeyError, IndexError, ValueError) as error:
+            kind = TypeError if isinstance(error, TypeError) else ValueError
+            raise kind(
+                f"actions must be {allowed}, got {actions!r} ({type(actions).__name__}): {error}"
+            ) from None
+        if len(given) != self.num_envs:
+            raise ValueError(f"actions must be {allowed}, got {len(given)}: {actions!r}")
+        return given
+
+    def _batch(self, actions: list[Any]) -> Any:
+        """One batch (new arrays) of the sub-envs' ``actions`` (``gymnasium.vector.utils``).
+
+        Raises:
+            ValueError: the actions do not stack into a batch of the action space (an action
+                given for a sub-env at its reset step, which is not checked, of the wrong
+                shape).
+        """
+        space = self.single_action_space
+        try:
+            return concatenate(space, actions, create_empty_array(space, self.num_envs))
+        except (TypeError, ValueError) as error:
+            raise ValueError(
+                f"actions must be a batch of {self.num_envs} actions of {space}, got actions "
+                f"that do not stack into one ({error}): {actions!r}"
+            ) from None

@@ -6,27 +6,12 @@ from collections import deque
 from typing import Any
 
 import gymnasium as gym
-import numpy as np
 
 from delayed_rl._delay_line import delay_bound
 from delayed_rl.delays import MAX_DELAY, Delay, as_delay, delay_spec
-from delayed_rl.wrappers._spec import JsonSpecMixin
+from delayed_rl.wrappers._samples import copy_sample
+from delayed_rl.wrappers._spec import JsonSpecMixin, json_safe
 from delayed_rl.wrappers.reward_delay import DelaySampler, check_max_delay
-
-
-def _fresh(obs: Any) -> Any:
-    """``obs`` itself, or a copy where it is (or holds) a numpy array, which callers may modify.
-
-    Numbers and strings are immutable and returned as they are; dicts and tuples (Gymnasium's
-    ``Dict`` and ``Tuple`` spaces) are rebuilt around copies of their arrays.
-    """
-    if isinstance(obs, np.ndarray):
-        return obs.copy()
-    if isinstance(obs, dict):
-        return type(obs)((key, _fresh(value)) for key, value in obs.items())
-    if isinstance(obs, tuple):
-        return tuple(_fresh(value) for value in obs)
-    return obs
 
 
 class ObservationDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
@@ -68,7 +53,9 @@ class ObservationDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorAr
     """
 
     def __init__(self, env: gym.Env, delay: Delay | float, max_delay: int | None = None):
-        gym.utils.RecordConstructorArgs.__init__(self, delay=delay_spec(delay), max_delay=max_delay)
+        gym.utils.RecordConstructorArgs.__init__(
+            self, delay=delay_spec(delay), max_delay=json_safe(max_delay)
+        )
         gym.Wrapper.__init__(self, env)
         self.delay = as_delay(delay)
         self.max_delay = check_max_delay(max_delay)
@@ -88,7 +75,7 @@ class ObservationDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorAr
         self._observations.clear()
         self._observations.append(obs)
         info["observation_delay"] = 0
-        return _fresh(obs), info
+        return copy_sample(obs), info
 
     def step(self, action):
         """Step the env; return an older observation (see the class docstring) with its reward."""
@@ -96,4 +83,4 @@ class ObservationDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorAr
         self._observations.append(obs)
         applied = min(self._sampler(), len(self._observations) - 1)
         info["observation_delay"] = applied
-        return _fresh(self._observations[-1 - applied]), reward, terminated, truncated, info
+        return copy_sample(self._observations[-1 - applied]), reward, terminated, truncated, info

@@ -12,9 +12,9 @@ import gymnasium as gym
 import numpy as np
 
 from delayed_rl._delay_line import draw_delays, exact_sum
-from delayed_rl._validation import check_bool, check_choice, check_int
+from delayed_rl._validation import check_bool, check_choice, check_int, check_reward
 from delayed_rl.delays import MAX_DELAY, Delay, Poisson, as_delay, delay_spec
-from delayed_rl.wrappers._spec import JsonSpecMixin
+from delayed_rl.wrappers._spec import JsonSpecMixin, json_safe
 
 __all__ = [
     "EPISODE_END_MODES",
@@ -261,12 +261,16 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
     flushed and dropped amounts are exact sums rounded once.
 
     The wrapper records its arguments (``gym.utils.RecordConstructorArgs``) with the delay as its
-    JSON description (:meth:`~delayed_rl.delays.Delay.to_dict`), so ``env.spec.to_json()`` works
-    and ``gym.make`` of the spec read back rebuilds the same stack; a registered env's
-    ``reward_delay`` kwarg is recorded in that form too.
+    JSON description (:meth:`~delayed_rl.delays.Delay.to_dict`) and numpy numbers as Python
+    ones, so ``env.spec.to_json()`` works and ``gym.make`` of the spec read back rebuilds the
+    same stack; a registered env's ``reward_delay`` kwarg is recorded in that form too
+    (``reward_delay=np.float32(2.0)`` as ``2.0``).
 
     Args:
-        env: the env whose rewards to delay (any reward type convertible to ``float``).
+        env: the env whose rewards to delay. Its rewards must be real scalars: ``int``,
+            ``float``, numpy integer and floating scalars or 0-d arrays of them (summed as
+            float64); a bool, a complex number, ``None``, a list or an array of one or more
+            dimensions (a 1-element one included) raises ``TypeError`` at that step.
         delay: a :class:`~delayed_rl.delays.Delay`, its ``to_dict()`` description, or a number
             read as a Poisson mean.
         max_delay: clip delays to at most this many steps (``None``: unbounded).
@@ -275,8 +279,11 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     Raises:
         TypeError, ValueError: at construction, for an invalid argument (the message names it).
-        ValueError: at a step where the inner env returns a NaN or infinite reward, or where the
-            rewards due at one step or all those pending sum beyond float64's range.
+        TypeError: at a step where the inner env returns a reward that is not a real scalar
+            (the message names the reward, its value and the episode step).
+        ValueError: at a step where the inner env returns a NaN or infinite reward (or an int
+            beyond float64's range), or where the rewards due at one step or all those pending
+            sum beyond float64's range.
 
     Example:
         >>> import gymnasium as gym
@@ -299,9 +306,9 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
         gym.utils.RecordConstructorArgs.__init__(
             self,
             delay=delay_spec(delay),
-            max_delay=max_delay,
+            max_delay=json_safe(max_delay),
             on_episode_end=on_episode_end,
-            record_arrivals=record_arrivals,
+            record_arrivals=json_safe(record_arrivals),
         )
         gym.Wrapper.__init__(self, env)
         self.delay = as_delay(delay)
@@ -467,11 +474,22 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
         self._checked_reward(reward)
 
     def _checked_reward(self, reward: Any) -> float:
-        """``reward`` as a Python float; a NaN or infinite reward raises ``ValueError``.
+        """``reward`` as a Python float, checked (:func:`~delayed_rl._validation.check_reward`).
 
         Numpy-typed rewards (e.g. float32) are thereby summed in double precision.
+
+        Raises:
+            TypeError: ``reward`` is not a real scalar (``None``, a bool, a complex number, a
+                list, an array of one or more dimensions...).
+            ValueError: ``reward`` is NaN, infinite or an integer beyond float64's range.
         """
-        reward = float(reward)
+        try:
+            reward = check_reward("reward", reward)
+        except (TypeError, ValueError) as error:
+            raise type(error)(
+                f"{error}; the inner env returned it at episode step "
+                f"{self._clock - self._episode_start}, and RewardDelay refuses to buffer it"
+            ) from None
         if not math.isfinite(reward):
             raise ValueError(
                 f"the inner env returned a non-finite reward ({reward!r}) at episode step "
@@ -547,10 +565,10 @@ class PoissonRewardDelay(RewardDelay):
     ):
         gym.utils.RecordConstructorArgs.__init__(
             self,
-            lam=lam,
-            max_delay=max_delay,
+            lam=json_safe(lam),
+            max_delay=json_safe(max_delay),
             on_episode_end=on_episode_end,
-            record_arrivals=record_arrivals,
+            record_arrivals=json_safe(record_arrivals),
         )
         super().__init__(env, Poisson(lam), max_delay, on_episode_end, record_arrivals)
         self.lam = self.delay.lam
@@ -563,23 +581,18 @@ def wrap_reward_delay(env: gym.Env, reward_delay: Delay | float | Mapping[str, A
         env: the env to wrap.
         reward_delay: a :class:`~delayed_rl.delays.Delay` or its
             :meth:`~delayed_rl.delays.Delay.to_dict` description (gives a :class:`RewardDelay`),
-            or a number λ (gives a :class:`PoissonRewardDelay`, whose ``lam`` is recorded).
+            or a number λ (gives a :class:`PoissonRewardDelay`, whose ``lam`` is recorded as a
+            Python number).
 
     Raises:
         TypeError: ``reward_delay`` is neither a number, a ``Delay`` nor a dict.
         ValueError: ``reward_delay`` is a number that is not a valid λ (negative, NaN, infinite),
-            or a dict that describes no distribution.
+            or a dict that describes no distribution. The messages name ``reward_delay``.
     """
-    if isinstance(reward_delay, Delay):
-        return RewardDelay(env, reward_delay)
-    if isinstance(reward_delay, Mapping):
-        return RewardDelay(env, as_delay(reward_delay, "reward_delay"))
-    if isinstance(reward_delay, numbers.Real) and not isinstance(reward_delay, bool):
+    delay = as_delay(reward_delay, "reward_delay")
+    if isinstance(reward_delay, numbers.Real):
         return PoissonRewardDelay(env, lam=reward_delay)
-    raise TypeError(
-        "reward_delay must be a number (the Poisson mean λ), a delayed_rl.delays.Delay or its "
-        f"to_dict() description, got {reward_delay!r} ({type(reward_delay).__name__})"
-    )
+    return RewardDelay(env, delay)
 
 
 def find_reward_delay(env: gym.Env) -> Any:

@@ -15,6 +15,7 @@ from delayed_rl._validation import check_int
 from delayed_rl.delays import Delay, as_delay
 from delayed_rl.wrappers.buffers import RewardBuffers
 from delayed_rl.wrappers.reward_delay import check_episode_end, check_max_delay, flush_watch
+from delayed_rl.wrappers.vector import checked_rewards
 
 
 class VecRewardDelay(VecEnvWrapper):
@@ -42,6 +43,10 @@ class VecRewardDelay(VecEnvWrapper):
     ``VecEnv.seed`` seeds the envs; sub-env ``i`` then draws the delays of a
     :class:`~delayed_rl.wrappers.RewardDelay` reset with ``seed=s + i``. (Since 0.2; before,
     all sub-envs drew from one stream, so seeded runs changed.)
+
+    The inner ``VecEnv``'s rewards must be one real scalar per sub-env, as for
+    :class:`~delayed_rl.wrappers.VectorRewardDelay`: anything else raises ``TypeError``
+    (``ValueError`` for the wrong count), naming ``rewards[i]`` and its value.
 
     Pending rewards are summed in float64; the rewards returned have the inner ``VecEnv``'s
     floating dtype (float32 for SB3's ``DummyVecEnv`` and ``SubprocVecEnv``, whose reward buffers
@@ -136,8 +141,8 @@ class VecRewardDelay(VecEnvWrapper):
 
     def step_wait(self):
         """Finish the step; return the rewards due now (see the class docstring)."""
-        obs, rewards, dones, infos = self.venv.step_wait()
-        rewards = np.asarray(rewards)
+        obs, raw, dones, infos = self.venv.step_wait()
+        rewards = checked_rewards(raw, self.num_envs, type(self).__name__)
         delivered, delays = self.buffers.push(rewards, self._all)
         ended = np.asarray(dones, dtype=bool)
         amounts = None
@@ -165,5 +170,5 @@ class VecRewardDelay(VecEnvWrapper):
                 info[key] = float(amounts[i])
         for i in np.flatnonzero(ended).tolist():  # the autoreset's info, as the inner VecEnv's
             self.reset_infos[i] = {**self.venv.reset_infos[i], "pending_reward": float(pending[i])}
-        kind = rewards.dtype if rewards.dtype.kind == "f" else np.float32
+        kind = raw.dtype if isinstance(raw, np.ndarray) and raw.dtype.kind == "f" else np.float32
         return obs, delivered.astype(np.promote_types(kind, np.float32)), dones, infos

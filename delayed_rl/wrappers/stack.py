@@ -10,7 +10,7 @@ from typing import Any
 
 import gymnasium as gym
 
-from delayed_rl.delays import checked_delay
+from delayed_rl.delays import as_delay
 from delayed_rl.wrappers.action_delay import ActionDelay
 from delayed_rl.wrappers.observation_delay import ObservationDelay
 from delayed_rl.wrappers.reward_delay import wrap_reward_delay
@@ -41,6 +41,8 @@ def wrap_delays(
         TypeError: a delay is neither a number, a ``Delay`` nor a dict.
         ValueError: a delay is not a valid Poisson mean, or a dict describes no distribution.
 
+    The messages name the argument (``reward_delay``, ``observation_delay``, ``action_delay``).
+
     Example:
         >>> import gymnasium as gym
         >>> env = wrap_delays(gym.make("CartPole-v1"), action_delay=1, reward_delay=3)
@@ -48,9 +50,9 @@ def wrap_delays(
         ('PoissonRewardDelay', 'ActionDelay')
     """
     if action_delay is not None:
-        env = ActionDelay(env, checked_delay(action_delay, "action_delay"))
+        env = ActionDelay(env, as_delay(action_delay, "action_delay"))
     if observation_delay is not None:
-        env = ObservationDelay(env, checked_delay(observation_delay, "observation_delay"))
+        env = ObservationDelay(env, as_delay(observation_delay, "observation_delay"))
     if reward_delay is not None:
         env = wrap_reward_delay(env, reward_delay)
     return env

@@ -10,7 +10,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 
-from delayed_rl._validation import check_int
+from delayed_rl._validation import check_int, check_rewards
 from delayed_rl.delays import Delay, as_delay, delay_spec
 from delayed_rl.wrappers.buffers import RewardBuffers
 from delayed_rl.wrappers.reward_delay import check_episode_end, check_max_delay, flush_watch
@@ -71,6 +71,25 @@ def reset_mask(options: dict[str, Any] | None, num_envs: int) -> np.ndarray:
     return np.ones(num_envs, dtype=bool)
 
 
+def checked_rewards(rewards: Any, num_envs: int, wrapper: str) -> np.ndarray:
+    """A vector env's ``rewards`` as float64, checked (:func:`~delayed_rl._validation.check_rewards`).
+
+    Infinite and NaN rewards pass (the buffers refuse them with their own message).
+
+    Raises:
+        TypeError: ``rewards`` is not a batch of real scalars (the message names ``rewards[i]``,
+            its value and what is allowed).
+        ValueError: it does not hold ``num_envs`` rewards, or an entry is an integer beyond
+            float64's range.
+    """
+    try:
+        return check_rewards("rewards", rewards, num_envs)
+    except (TypeError, ValueError) as error:
+        raise type(error)(
+            f"{error}; the inner vector env returned them, and {wrapper} refuses to buffer them"
+        ) from None
+
+
 def _with_mask(info: dict[str, Any], key: str, values: np.ndarray, mask: np.ndarray) -> None:
     """Store ``values`` under ``key`` with Gymnasium's ``_key`` mask convention."""
     info[key] = values
@@ -96,6 +115,10 @@ class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
     (:class:`~delayed_rl.wrappers.reward_delay.FlushWatch`), over all its sub-envs together: their
     episodes with a reward count towards one total, their steps towards one step cap, and it
     warns at most once.
+
+    The inner env's rewards must be one real scalar per sub-env (an array, list or tuple of
+    ``num_envs`` ints or floats, as :class:`RewardDelay` accepts them one by one): anything else
+    raises ``TypeError`` (``ValueError`` for the wrong count), naming ``rewards[i]`` and its value.
 
     ``info`` holds arrays (with Gymnasium's ``_key`` masks): ``undelayed_reward``, ``reward_delay``,
     ``pending_reward`` on every step; ``flushed_reward`` or ``dropped_reward`` for the sub-envs
@@ -176,6 +199,7 @@ class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
     def step(self, actions):
         """Step every sub-env; return the rewards due now (see the class docstring)."""
         obs, rewards, terminated, truncated, info = self.env.step(actions)
+        rewards = checked_rewards(rewards, self.num_envs, type(self).__name__)
         active = ~self._resetting
         delivered, delays = self.buffers.push(rewards, active)
         ended = (np.asarray(terminated) | np.asarray(truncated)) & active

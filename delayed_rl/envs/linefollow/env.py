@@ -19,6 +19,7 @@ from delayed_rl._validation import (
     check_int,
     check_probability,
     check_real,
+    check_real_vector,
 )
 from delayed_rl.envs.linefollow import _kernels
 from delayed_rl.envs.linefollow.camera import CENTRE_PIXEL, N_PIXELS, Camera, line_centroid
@@ -351,7 +352,23 @@ class EPuckLineFollowEnv(gym.Env):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[Any, dict[str, Any]]:
-        """Start an episode (see the class docstring's "Starting State")."""
+        """Start an episode (see the class docstring's "Starting State").
+
+        Args:
+            seed: seeds the env's generator (the start point, a random track, sensor noise).
+            options: ``None``, or a dict with one of ``"start_progress"`` (a number in
+                ``[0, 1)``: the fraction of the way round the track to start at) and
+                ``"pose"`` (``(x, y, heading)``: a list, tuple or 1-D array of three finite
+                real numbers, metres and radians; bools and strings are not numbers).
+
+        Raises:
+            TypeError: ``options['pose']`` is not a sequence of numbers (a string, ``None``,
+                an entry that is not a real number), or ``options['start_progress']`` is not
+                a number.
+            ValueError: ``options`` holds an unknown key or both keys, ``options['pose']``
+                does not hold three numbers or holds a NaN or infinite one, or
+                ``options['start_progress']`` is outside ``[0, 1)``.
+        """
         super().reset(seed=seed)
         options = {} if options is None else options
         unknown = set(options) - set(_RESET_OPTIONS)
@@ -365,12 +382,9 @@ class EPuckLineFollowEnv(gym.Env):
             self.track = make_track("random", self.np_random)
         track = self.track
         if "pose" in options:
-            pose = np.asarray(options["pose"], dtype=np.float64)
-            if pose.shape != (3,) or not np.all(np.isfinite(pose)):
-                raise ValueError(
-                    f"options['pose'] must be a finite (x, y, heading), got {options['pose']!r}"
-                )
-            x, y, heading = (float(v) for v in pose)
+            x, y, heading = check_real_vector(
+                "options['pose']", options["pose"], 3, note=" (x, y in metres, heading in radians)"
+            )
         else:
             fraction = options.get("start_progress")
             if fraction is None:

@@ -401,9 +401,9 @@ def _parse_evaluation(prefix: str, entry: Mapping[str, Any]) -> Evaluation | Non
 
 def _distribution(where: str, value: Any) -> dict[str, Any]:
     """A delay as its ``to_dict()`` description: a number is a Poisson mean."""
-    if isinstance(value, numbers.Real) and not isinstance(value, bool):
-        check_real(where, value, 0.0, note=" (a Poisson mean)")
-    elif not isinstance(value, Mapping):
+    if not isinstance(value, Mapping) and (
+        not isinstance(value, numbers.Real) or isinstance(value, bool)
+    ):
         raise TypeError(
             f"{where} must be a number (a Poisson mean) or a distribution's description such as "
             f"{{type: Geometric, p: 0.25}}, got {value!r} ({type(value).__name__})"
