@@ -422,7 +422,8 @@ def test_a_rerun_runs_only_what_results_csv_lacks(tmp_path, joblib_table):
         writer.writerows(rows)
     with open(tmp_path / "results.csv", "a") as handle:
         handle.write("q,grid,Poisson(lam=1.5),1,15")  # a row cut short by an interruption
-    again = run_sweep(sweep, tmp_path)
+    with pytest.warns(UserWarning, match=r"results.csv, line 33: a row cut short"):
+        again = run_sweep(sweep, tmp_path)
     assert (again.ran, again.skipped) == (1, 31)
     after = read_rows(tmp_path)
     assert [r["run_id"] for r in after] == [r["run_id"] for r in before]  # the sweep's order

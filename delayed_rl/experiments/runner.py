@@ -325,7 +325,9 @@ def iter_tasks(
             string.
         ValueError: ``workers`` < 1, ``backend`` is not one of :data:`BACKENDS`, or an
             ``address`` is given for ``loky``.
-        RuntimeError: the backend's package (Ray, Dask) is not installed.
+        RuntimeError: the backend's package (Ray, Dask) is not installed, or the backend
+            could not start (or reach the cluster at ``address``): the message names the
+            backend and the error it raised. Raised when the first result is asked for.
     """
     check_choice("backend", backend, BACKENDS)
     if workers is not None:
@@ -451,9 +453,19 @@ def _dask_client(workers: int | None, address: str | None) -> Any:
         from dask.distributed import Client
     except ImportError as error:
         raise RuntimeError("backend 'dask' needs Dask: pip install 'dask[distributed]'") from error
-    if address is not None:
-        return Client(address)  # closing it leaves the cluster, which is not ours, running
-    return Client(processes=True, n_workers=workers)
+    try:
+        if address is not None:
+            return Client(address)  # closing it leaves the cluster, which is not ours, running
+        return Client(processes=True, n_workers=workers)
+    except Exception as error:  # Dask raises OSError, TimeoutError, ValueError...
+        raise RuntimeError(_not_started("dask", address, error)) from error
+
+
+def _not_started(backend: str, address: str | None, error: BaseException) -> str:
+    """The message for a backend that could not start (or reach the cluster at ``address``)."""
+    where = f"the cluster at {address!r}" if address is not None else "a local cluster"
+    reason = " ".join(str(error).split()) or type(error).__name__
+    return f"backend {backend!r} could not start on {where}: {type(error).__name__}: {reason}"
 
 
 def _ray_results(
@@ -465,7 +477,10 @@ def _ray_results(
     except ImportError as error:
         raise RuntimeError("backend 'ray' needs Ray: pip install 'ray[default]'") from error
     if not ray.is_initialized():
-        ray.init(address=address)
+        try:
+            ray.init(address=address)
+        except Exception as error:  # Ray raises ConnectionError, RuntimeError, plain Exception...
+            raise RuntimeError(_not_started("ray", address, error)) from error
     remote = ray.remote(num_cpus=1)(_indexed)
     waiting = list(enumerate(tasks))[::-1]
     running: list[Any] = []

@@ -10,7 +10,11 @@ interval over the seeds) and one figure per env, ``eval_reward_<env>.png``.
 or JSON (``.json``), holding one mapping with the keys below. Every key and value is checked
 before anything runs: a value of the wrong type is a ``TypeError``, a wrong value (an unknown
 name, a number out of range, an unknown key anywhere) a ``ValueError``, and the message names
-the field (``agents[1].kwargs.gamma``), the value and what is allowed.
+the field (``agents[1].kwargs.gamma``), the value and what is allowed. A key given twice in
+one mapping is refused (YAML's merge key ``<<`` keeps its meaning), and so is a file that would
+make the reader work far beyond a sweep's needs: over 1 MB, nested over 32 levels, or standing
+for over 100 000 values once YAML's aliases are expanded
+(:mod:`delayed_rl.experiments.sweep.reading`). A sweep has at most 100 000 runs.
 
 ``agents`` (required)
     A non-empty list. Each entry is an agent's name, or a mapping with the keys
@@ -74,17 +78,20 @@ the field (``agents[1].kwargs.gamma``), the value and what is allowed.
     that is not only the reward, e.g. ``observation Poisson(lam=2)``) names it in the results.
 
 ``seeds`` (default 3)
-    A count ``n`` (seeds ``0 .. n − 1``) or a list of distinct integers ≥ 0. Seed ``s`` seeds
+    A count ``n`` (seeds ``0 .. n − 1``) or a list of distinct integers in ``[0, 2**32 − 1]``
+    (:data:`~delayed_rl.experiments.sweep.schema.MAX_SEED`), at most
+    :data:`~delayed_rl.experiments.sweep.schema.MAX_SEEDS` (10 000) of them. Seed ``s`` seeds
     the agent (``seed=s``: its random choices and its training env's first reset, delays
     included); the evaluation env is reset with seed ``s`` + :data:`EVAL_SEED_OFFSET`.
 
 ``steps`` (default 100 000)
     Training steps per run (``learn(steps)``; SB3's on-policy algorithms round up to whole
-    rollouts).
+    rollouts), at most ``learn()``'s bound, 2**40.
 
 ``eval_episodes`` or ``eval_steps`` (default ``eval_episodes: 10``)
     The greedy evaluation after training (``predict(obs, deterministic=True)``, no learning,
-    on a fresh env under the same delays): that many whole episodes, or that many steps.
+    on a fresh env under the same delays): that many whole episodes (at most 10**6), or that
+    many steps (at most 10**9).
     Continuing envs, whose episodes never end (the grid worlds), need ``eval_steps``; an
     episode longer than :data:`MAX_EVAL_EPISODE_STEPS` fails its run.
 
@@ -134,7 +141,12 @@ with the same output folder skips the runs already there — matched by agent, e
 and ``run_id``, so a run whose configuration changed (more steps, another argument) runs again
 — and appends the rest; an interrupted sweep keeps what finished. Rows of runs no longer in
 the file are kept in ``results.csv`` (after the sweep's own, which are in the file's order:
-agent, env, delay, seed), but left out of the summary.
+agent, env, delay, seed), but left out of the summary. The file is checked row by row before
+a sweep resumes from it (:func:`~delayed_rl.experiments.sweep.results.check_result_row`): a
+row cut short at the end of the file (the sweep stopped while writing it) is left out with a
+warning and its run runs again; any other bad row (a value that does not parse, ``nan``, a
+wrong number of values) stops the sweep with an error naming the file, the line and the
+column, for you to correct or delete.
 
 **Determinism and backends.** Every run builds its env and agent from its own configuration
 and seed, so the numbers (all but ``wall_s``) are the same whatever runs them: in this process
@@ -152,6 +164,7 @@ from pathlib import Path
 from typing import Any
 
 from delayed_rl.experiments.runner import RunProgress, iter_tasks
+from delayed_rl.experiments.sweep.reading import read_sweep_file
 from delayed_rl.experiments.sweep.results import (
     EXTRA_COLUMNS,
     RESULT_COLUMNS,
@@ -200,7 +213,6 @@ from delayed_rl.experiments.sweep.schema import (
     SweepDelay,
     SweepEnv,
     parse_sweep,
-    read_sweep_file,
 )
 
 __all__ = [

@@ -8,16 +8,18 @@ into one figure per env.
 from __future__ import annotations
 
 import csv
+import io
 import math
 import os
 import re
 import textwrap
+import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from delayed_rl.experiments.runner import mean_ci95
-from delayed_rl.experiments.sweep.schema import Sweep
+from delayed_rl.experiments.sweep.schema import MAX_SEED, MAX_STEPS, Sweep
 
 #: The columns of ``results.csv`` that every sweep writes, in this order.
 RESULT_COLUMNS = ("agent", "env", "delay", "seed", "steps", "train_reward", "eval_reward", "wall_s")
@@ -47,25 +49,108 @@ def run_key(row: Mapping[str, Any]) -> tuple[str, ...]:
 
 
 def read_results(path: Path) -> list[dict[str, str]]:
-    """The complete rows of ``path`` (none when there is no such file).
+    """The rows of ``path``, each checked (none when there is no such file).
 
-    A row missing a value (a write cut short) is left out, so its run runs again.
+    A file that does not end with a line break ends with a row whose write was cut short (the
+    sweep was stopped while appending it): that row is left out, with a warning, so its run
+    runs again. Every other row must be whole and valid (:func:`check_result_row`): a row of
+    the wrong length, a value that does not parse (``abc`` for a number, ``nan``, a seed
+    out of range, a cut ``run_id``) is refused with its line number, not resumed from.
 
     Raises:
-        ValueError: the file's columns are not a sweep's (:data:`RESULT_COLUMNS` and the extras).
+        ValueError: the file's columns are not a sweep's (:data:`RESULT_COLUMNS` and the
+            extras), or a row is not valid; the message names the file, the line and the
+            column.
     """
     if not path.exists():
         return []
-    with open(path, newline="", encoding="utf-8") as handle:
-        reader = csv.DictReader(handle)
-        if reader.fieldnames is None:
+    text = path.read_text(encoding="utf-8")
+    cut = ""
+    if text and not text.endswith("\n"):
+        text, cut = text[: text.rfind("\n") + 1], text[text.rfind("\n") + 1 :]
+    reader = csv.DictReader(io.StringIO(text, newline=""), restkey=_REST)
+    try:
+        fieldnames = reader.fieldnames
+        if fieldnames is None:
             return []
-        if tuple(reader.fieldnames) != _COLUMNS:
+        if tuple(fieldnames) != _COLUMNS:
             raise ValueError(
-                f"{path} has the columns {reader.fieldnames}, not a sweep's {list(_COLUMNS)}: "
-                "give the sweep another output folder"
+                f"{path}, line 1: the columns are {fieldnames}, not a sweep's "
+                f"{list(_COLUMNS)}: give the sweep another output folder"
             )
-        return [row for row in reader if all(row.get(c) not in (None, "") for c in _COLUMNS)]
+        rows = []
+        for row in reader:
+            try:
+                rows.append(check_result_row(row))
+            except ValueError as error:
+                raise ValueError(
+                    f"{path}, line {reader.line_num}: {error}; correct or delete the line (its "
+                    "run then runs again)"
+                ) from None
+    except csv.Error as error:
+        raise ValueError(f"{path}, line {reader.line_num}: not a CSV row: {error}") from None
+    if cut.strip():
+        lines = text.count("\n") + 1
+        warnings.warn(
+            f"{path}, line {lines}: a row cut short (the file ends inside it), left out: its "
+            "run runs again",
+            stacklevel=2,
+        )
+    return rows
+
+
+_REST = "\0rest"  # the key csv.DictReader gives the values beyond the header's columns
+_RUN_ID = re.compile(r"[0-9a-f]{16}")
+
+
+def check_result_row(row: Mapping[str, Any]) -> dict[str, str]:
+    """Return a row of ``results.csv`` (as ``csv.DictReader`` reads it) after checking it.
+
+    Every column of :data:`RESULT_COLUMNS` and :data:`EXTRA_COLUMNS` holds a value and no more:
+    non-empty labels (``agent``, ``env``, ``delay``); ``seed`` an integer in
+    ``[0, MAX_SEED]``; ``steps`` an integer in ``[1, MAX_STEPS]``; ``train_reward`` and
+    ``eval_reward`` finite numbers; ``wall_s`` a finite number ``>= 0``; ``eval_unit``
+    ``episode`` or ``step``; ``run_id`` 16 hexadecimal digits, as :meth:`Sweep.runs` makes it.
+
+    Raises:
+        ValueError: the row has more or fewer values than the header, or a value is not
+            valid (the message names the column, the value and what is allowed).
+    """
+    if _REST in row or any(row.get(column) is None for column in _COLUMNS):
+        given = sum(row.get(column) is not None for column in _COLUMNS) + len(row.get(_REST, ()))
+        raise ValueError(f"the row has {given} values, the header {len(_COLUMNS)}")
+    for column in ("agent", "env", "delay"):
+        if not row[column]:
+            raise ValueError(f"{column} must be a non-empty label, got ''")
+    _integer(row, "seed", 0, MAX_SEED)
+    _integer(row, "steps", 1, MAX_STEPS)
+    for column in ("train_reward", "eval_reward", "wall_s"):
+        value = _number(row, column)
+        if column == "wall_s" and value < 0:
+            raise ValueError(f"wall_s must be a number >= 0 (seconds), got {row[column]!r}")
+    if row["eval_unit"] not in ("episode", "step"):
+        raise ValueError(f"eval_unit must be 'episode' or 'step', got {row['eval_unit']!r}")
+    if not _RUN_ID.fullmatch(row["run_id"]):
+        raise ValueError(f"run_id must be 16 hexadecimal digits, got {row['run_id']!r}")
+    return {column: row[column] for column in _COLUMNS}
+
+
+def _integer(row: Mapping[str, str], column: str, low: int, high: int) -> int:
+    text = row[column]
+    if not re.fullmatch(r"[0-9]{1,20}", text) or not low <= int(text) <= high:
+        raise ValueError(f"{column} must be an integer in [{low}, {high}], got {text!r}")
+    return int(text)
+
+
+def _number(row: Mapping[str, str], column: str) -> float:
+    text = row[column]
+    try:
+        value = float(text) if len(text) <= 40 else math.nan
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        raise ValueError(f"{column} must be a finite number, got {text[:40]!r}")
+    return value
 
 
 def write_results(path: Path, rows: Sequence[Mapping[str, Any]]) -> None:

@@ -1,7 +1,10 @@
 """The sweep file's format: its names and defaults, reading the file, and checking every field.
 
-:func:`read_sweep_file` reads a YAML or JSON file; :func:`parse_sweep` checks what it holds,
-field by field, and returns the plan, a :class:`Sweep`, whose :meth:`Sweep.runs` lists the runs.
+:func:`~delayed_rl.experiments.sweep.reading.read_sweep_file` reads a YAML or JSON file;
+:func:`parse_sweep` checks what it holds, field by field, and returns the plan, a :class:`Sweep`,
+whose :meth:`Sweep.runs` lists the runs. Every size a file sets is bounded by a stated limit
+(:data:`MAX_STEPS`, :data:`MAX_EVAL_STEPS`, :data:`MAX_EVAL_EPISODES`, :data:`MAX_SEEDS`,
+:data:`MAX_SEED`, :data:`MAX_RUNS`), checked before anything is built or run.
 :mod:`delayed_rl.experiments.sweep` documents the format.
 """
 
@@ -14,13 +17,14 @@ import json
 import numbers
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 
 import delayed_rl  # noqa: F401  (registers the env ids)
 from delayed_rl._validation import check_choice, check_int, check_real
+from delayed_rl.agents._loop import MAX_TIMESTEPS
+from delayed_rl.agents.hyperparameters import check_limit
 from delayed_rl.delays import as_delay
 
 #: The library's agents by the names a sweep file, and ``delayed-rl train --agent``, use.
@@ -44,6 +48,23 @@ PLACEHOLDERS = ("$delay", "$delay_mean", "$delay_steps")
 DEFAULT_SEEDS = 3
 DEFAULT_STEPS = 100_000
 DEFAULT_EVAL_EPISODES = 10
+
+MAX_STEPS = MAX_TIMESTEPS
+"""The most training steps of a run: ``learn()``'s own bound, 2**40."""
+MAX_EVAL_STEPS = 10**9
+"""The most evaluation steps of a run (``eval_steps``)."""
+MAX_EVAL_EPISODES = 10**6
+"""The most evaluation episodes of a run (``eval_episodes``; each at most
+:data:`~delayed_rl.experiments.sweep.runs.MAX_EVAL_EPISODE_STEPS` steps)."""
+MAX_SEEDS = 10_000
+"""The most seeds a sweep runs (a count, or the length of a list of seeds)."""
+MAX_SEED = 2**32 - 1
+"""The largest seed: what every agent accepts (stable-baselines3 seeds numpy's legacy generator,
+which takes 32 bits)."""
+MAX_RUNS = 100_000
+"""The most runs (agents × envs × delays × seeds) in one sweep."""
+
+_HERE = "delayed_rl.experiments.sweep.schema"
 
 _TOP_KEYS = ("name", "agents", "envs", "delays", "seeds", "steps", "eval_episodes", "eval_steps")
 _AGENT_KEYS = ("name", "label", "kwargs", "steps", "envs")
@@ -139,38 +160,7 @@ class Sweep:
         return {**labels, "run_id": run_id, "config": config}
 
 
-# ---------------------------------------------------------------------------------- reading
-def read_sweep_file(path: str | Path) -> Any:
-    """The content of a sweep file: YAML for ``.yaml``/``.yml``, JSON for ``.json``.
-
-    Raises:
-        OSError: the file cannot be read (e.g. there is none).
-        ValueError: its suffix is none of those, or its text is not valid YAML or JSON.
-        RuntimeError: it is YAML and PyYAML (the ``sweep`` extra) is not installed.
-    """
-    path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in (".yaml", ".yml", ".json"):
-        raise ValueError(f"a sweep file must end in .yaml, .yml or .json, got {str(path)!r}")
-    text = path.read_text(encoding="utf-8")
-    if suffix == ".json":
-        try:
-            return json.loads(text)
-        except json.JSONDecodeError as error:
-            raise ValueError(f"{path} is not valid JSON: {error}") from None
-    try:
-        import yaml
-    except ImportError:
-        raise RuntimeError(
-            f"reading the YAML sweep file {path} needs PyYAML: pip install 'delayed-rl[sweep]' "
-            "(or write the sweep as .json)"
-        ) from None
-    try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError as error:
-        raise ValueError(f"{path} is not valid YAML: {' '.join(str(error).split())}") from None
-
-
+# ---------------------------------------------------------------------------------- checking
 def parse_sweep(data: Any, name: str = "sweep", source: str = "sweep") -> Sweep:
     """Check a sweep file's content (a mapping, see the package docstring) and return its plan.
 
@@ -192,16 +182,30 @@ def parse_sweep(data: Any, name: str = "sweep", source: str = "sweep") -> Sweep:
     for i, agent in enumerate(agents):
         for j, label in enumerate(agent.envs or ()):
             check_choice(f"agents[{i}].envs[{j}] (an env label)", label, env_labels)
+    seeds = _parse_seeds(data.get("seeds", DEFAULT_SEEDS))
+    pairs = sum(len(agent.envs) if agent.envs else len(envs) for agent in agents)
+    runs = pairs * len(delays) * len(seeds)
+    if runs > MAX_RUNS:
+        raise ValueError(
+            f"the sweep has {runs:,} runs ({pairs} (agent, env) pairs × {len(delays)} delays × "
+            f"{len(seeds)} seeds), more than MAX_RUNS = {MAX_RUNS:,} ({_HERE}): split it"
+        )
     return Sweep(
         name=_text("name", data.get("name", name)),
         agents=agents,
         envs=envs,
         delays=delays,
-        seeds=_parse_seeds(data.get("seeds", DEFAULT_SEEDS)),
-        steps=check_int("steps", data.get("steps", DEFAULT_STEPS), 1),
+        seeds=seeds,
+        steps=_steps("steps", data.get("steps", DEFAULT_STEPS)),
         evaluation=_parse_evaluation("", data) or Evaluation("episode", DEFAULT_EVAL_EPISODES),
         source=source,
     )
+
+
+def _steps(where: str, value: Any, optional: bool = False) -> int | None:
+    """A run's training steps: an integer in ``[1, MAX_STEPS]``."""
+    steps = check_int(where, value, 1, optional=optional)
+    return check_limit(where, steps, MAX_STEPS, f"MAX_STEPS = 2**40 ({_HERE}; learn()'s bound)")
 
 
 def _mapping(where: str, value: Any, what: str = "a mapping") -> Mapping[str, Any]:
@@ -337,7 +341,7 @@ def _parse_agent(where: str, entry: Any) -> SweepAgent:
         name=name,
         label=_text(f"{where}.label", entry.get("label", name)),
         kwargs=kwargs,
-        steps=check_int(f"{where}.steps", entry.get("steps"), 1, optional=True),
+        steps=_steps(f"{where}.steps", entry.get("steps"), optional=True),
         envs=envs,
     )
 
@@ -379,7 +383,7 @@ def _parse_env(where: str, entry: Any) -> SweepEnv:
         id=env_id,
         label=_text(f"{where}.label", entry.get("label", env_id)),
         kwargs=kwargs,
-        steps=check_int(f"{where}.steps", entry.get("steps"), 1, optional=True),
+        steps=_steps(f"{where}.steps", entry.get("steps"), optional=True),
         evaluation=_parse_evaluation(f"{where}.", entry),
     )
 
@@ -393,9 +397,15 @@ def _parse_evaluation(prefix: str, entry: Mapping[str, Any]) -> Evaluation | Non
             f"{steps!r}): give one of them"
         )
     if episodes is not None:
-        return Evaluation("episode", check_int(f"{prefix}eval_episodes", episodes, 1))
+        limit = f"MAX_EVAL_EPISODES = 10**6 ({_HERE})"
+        count = check_int(f"{prefix}eval_episodes", episodes, 1)
+        return Evaluation(
+            "episode", check_limit(f"{prefix}eval_episodes", count, MAX_EVAL_EPISODES, limit)
+        )
     if steps is not None:
-        return Evaluation("step", check_int(f"{prefix}eval_steps", steps, 1))
+        limit = f"MAX_EVAL_STEPS = 10**9 ({_HERE})"
+        count = check_int(f"{prefix}eval_steps", steps, 1)
+        return Evaluation("step", check_limit(f"{prefix}eval_steps", count, MAX_EVAL_STEPS, limit))
     return None
 
 
@@ -444,13 +454,30 @@ def _parse_delay(where: str, entry: Any) -> SweepDelay:
 
 
 def _parse_seeds(value: Any) -> tuple[int, ...]:
+    """``seeds``: a count in ``[1, MAX_SEEDS]``, or up to that many distinct seeds in a list.
+
+    Each seed of a list lies in ``[0, MAX_SEED]``.
+    """
     if not isinstance(value, list):
         count = check_int("seeds", value, 1, note=" (a count), or a list of seeds")
-        return tuple(range(count))
+        return tuple(
+            range(check_limit("seeds", count, MAX_SEEDS, f"MAX_SEEDS = {MAX_SEEDS:,} ({_HERE})"))
+        )
     if not value:
         raise ValueError("seeds must be a count >= 1 or a non-empty list of seeds, got []")
-    seeds = tuple(check_int(f"seeds[{i}]", seed, 0) for i, seed in enumerate(value))
+    if len(value) > MAX_SEEDS:
+        raise ValueError(
+            f"seeds must list at most MAX_SEEDS = {MAX_SEEDS:,} seeds ({_HERE}), got {len(value):,}"
+        )
+    limit = f"MAX_SEED = 2**32 - 1 ({_HERE})"
+    seeds = tuple(
+        check_limit(f"seeds[{i}]", check_int(f"seeds[{i}]", seed, 0), MAX_SEED, limit)
+        for i, seed in enumerate(value)
+    )
+    first: dict[int, int] = {}
     for i, seed in enumerate(seeds):
-        if seed in seeds[:i]:
-            raise ValueError(f"seeds[{i}] repeats the seed {seed}: seeds must differ")
+        if first.setdefault(seed, i) != i:
+            raise ValueError(
+                f"seeds[{i}] repeats the seed {seed} of seeds[{first[seed]}]: seeds must differ"
+            )
     return seeds
