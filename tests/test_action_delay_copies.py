@@ -197,3 +197,26 @@ def test_numpy_delays_given_to_make_give_a_json_spec(kwarg: str, value) -> None:
     assert json.loads(text)["kwargs"][kwarg] == float(value)
     rebuilt = gym.make(gym.envs.registration.EnvSpec.from_json(text))
     assert rebuilt.spec.to_json() == text
+
+
+@pytest.mark.parametrize(
+    "space",
+    [
+        spaces.Graph(spaces.Box(0.0, 1.0, (2,)), spaces.Discrete(3)),
+        spaces.Sequence(spaces.Box(0.0, 1.0, (2,))),
+        spaces.OneOf((spaces.Discrete(2), spaces.Box(0.0, 1.0, (2,)))),
+        spaces.Text(5),
+    ],
+    ids=lambda space: type(space).__name__,
+)
+def test_other_spaces_pass_through_as_copies_of_their_own_kind(space) -> None:
+    space.seed(0)
+    initial, action = space.sample(), space.sample()
+    env = ActionDelay(Editor(space), Constant(1), initial_action=initial)
+    env.reset(seed=0)
+    first = env.step(action)[-1]["executed_action"]
+    second = env.step(space.sample())[-1]["executed_action"]
+    assert type(first) is type(initial) and space.contains(first)
+    assert space.contains(second)
+    assert str(second) == str(action)  # every space here prints its sample's values
+

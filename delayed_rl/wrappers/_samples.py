@@ -22,8 +22,9 @@ __all__ = ["as_action", "copy_sample"]
 def copy_sample(sample: Any) -> Any:
     """A copy of ``sample`` that shares nothing mutable with it.
 
-    Numpy arrays are copied; dicts (Gymnasium's ``Dict`` samples), tuples (``Tuple``) and lists
-    are rebuilt around copies of their entries, recursively. Everything else (Python and numpy
+    Numpy arrays are copied; dicts (Gymnasium's ``Dict`` samples), tuples (``Tuple``,
+    ``OneOf`` and ``Sequence`` samples; a named tuple, such as ``Graph``'s ``GraphInstance``,
+    keeps its type) and lists are rebuilt around copies of their entries, recursively. Everything else (Python and numpy
     scalars, strings) is immutable and returned as it is.
 
     Example:
@@ -38,7 +39,10 @@ def copy_sample(sample: Any) -> Any:
     if isinstance(sample, dict):
         return type(sample)((key, copy_sample(value)) for key, value in sample.items())
     if isinstance(sample, tuple):
-        return tuple(copy_sample(value) for value in sample)
+        copied = (copy_sample(value) for value in sample)
+        if hasattr(sample, "_fields"):  # a named tuple: Graph's GraphInstance
+            return type(sample)(*copied)
+        return tuple(copied)
     if isinstance(sample, list):
         return [copy_sample(value) for value in sample]
     return sample
