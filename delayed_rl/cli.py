@@ -36,12 +36,27 @@ import gymnasium as gym
 
 import delayed_rl
 from delayed_rl._validation import check_fraction, check_int, check_probability, check_real
+from delayed_rl.agents._loop import MAX_TIMESTEPS_TEXT
+from delayed_rl.agents.hyperparameters import MAX_SEED, check_limit
 from delayed_rl.envs import env_ids
 from delayed_rl.experiments import NAMES
-from delayed_rl.experiments.runner import BACKENDS
+from delayed_rl.experiments.runner import (
+    BACKENDS,
+    MAX_SEED_TEXT,
+    MAX_SEEDS,
+    MAX_SEEDS_TEXT,
+    MAX_WORKERS,
+    MAX_WORKERS_TEXT,
+)
 from delayed_rl.experiments.sweep import AGENTS as SWEEP_AGENTS
 from delayed_rl.experiments.sweep.runs import EpisodeTooLong, greedy_rollout
-from delayed_rl.experiments.sweep.schema import Evaluation, env_id_hint
+from delayed_rl.experiments.sweep.schema import (
+    MAX_EVAL_EPISODES,
+    MAX_EVAL_STEPS,
+    MAX_STEPS,
+    Evaluation,
+    env_id_hint,
+)
 
 #: The name :func:`_checked` gives the library's checks, cut from their messages again: argparse
 #: already names the option (``argument --steps: must be an integer >= 1, got 0``).
@@ -77,12 +92,31 @@ def _checked(kind: type, check: Callable[..., Any], *bounds: Any) -> Callable[[s
     return parse
 
 
+def _limited(low: int, limit: int, limit_text: str) -> Callable[[str], int]:
+    """An argparse ``type``: an integer ``>= low`` and at most ``limit``, named ``limit_text``."""
+
+    def check(name: str, value: Any) -> int:
+        return check_limit(name, check_int(name, value, low), limit, limit_text)
+
+    return _checked(int, check)
+
+
 _float = _checked(float, check_real)
 _non_negative_float = _checked(float, check_real, 0.0)
 _probability = _checked(float, check_probability)
 _learning_rate = _checked(float, check_fraction)
 _non_negative_int = _checked(int, check_int, 0)
 _positive_int = _checked(int, check_int, 1)
+_steps = _limited(1, MAX_STEPS, MAX_TIMESTEPS_TEXT)
+_seeds = _limited(1, MAX_SEEDS, MAX_SEEDS_TEXT)
+_seed = _limited(0, MAX_SEED, MAX_SEED_TEXT)
+_workers = _limited(1, MAX_WORKERS, MAX_WORKERS_TEXT)
+_eval_steps = _limited(
+    1, MAX_EVAL_STEPS, "MAX_EVAL_STEPS = 10**9 (delayed_rl.experiments.sweep.schema)"
+)
+_eval_episodes = _limited(
+    1, MAX_EVAL_EPISODES, "MAX_EVAL_EPISODES = 10**6 (delayed_rl.experiments.sweep.schema)"
+)
 
 #: ``--agent`` choices: the agent class for each (the sweep files' names of the agents whose
 #: options ``train`` has).
@@ -345,26 +379,24 @@ def _add_bench_options(parser: argparse.ArgumentParser, default_out: str) -> Non
     """The options ``bench`` and ``reproduce`` share: seeds, steps, workers, output, progress."""
     parser.add_argument(
         "--seeds",
-        type=_positive_int,
+        type=_seeds,
         default=None,
         help="runs per condition (default: the thesis's, or 2 with --quick)",
     )
     parser.add_argument(
         "--steps",
-        type=_positive_int,
+        type=_steps,
         default=None,
         help="training steps per run (default: the thesis's)",
     )
-    parser.add_argument("--workers", type=_positive_int, default=1, help="parallel processes")
+    parser.add_argument("--workers", type=_workers, default=1, help="parallel processes")
     parser.add_argument(
         "--backend",
         choices=BACKENDS,
         default="loky",
         help="joblib backend: loky (default), ray or dask",
     )
-    parser.add_argument(
-        "--seed", type=_non_negative_int, default=0, help="first seed, >= 0 (default 0)"
-    )
+    parser.add_argument("--seed", type=_seed, default=0, help="first seed, >= 0 (default 0)")
     parser.add_argument("--out", default=default_out, help=f"output folder (default {default_out})")
     parser.add_argument("--quick", action="store_true", help="a scaled-down run, in seconds")
     parser.add_argument(
@@ -417,7 +449,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="delay rewards by Poisson(λ) steps (default: undelayed)",
     )
     train.add_argument(
-        "--steps", type=_positive_int, default=100_000, help="training steps (default 100000)"
+        "--steps", type=_steps, default=100_000, help="training steps (default 100000)"
     )
     train.add_argument(
         "--learning-rate", type=_learning_rate, default=0.1, help="α in (0, 1] (default 0.1)"
@@ -462,7 +494,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     train.add_argument(
         "--seed",
-        type=_non_negative_int,
+        type=_seed,
         default=None,
         help="seeds the agent and the env (default: unseeded)",
     )
@@ -500,26 +532,26 @@ def build_parser() -> argparse.ArgumentParser:
     length = evaluate.add_mutually_exclusive_group()
     length.add_argument(
         "--episodes",
-        type=_positive_int,
+        type=_eval_episodes,
         default=None,
         help=f"run this many episodes (default {EPISODES})",
     )
     length.add_argument(
         "--steps",
-        type=_positive_int,
+        type=_eval_steps,
         default=None,
         help="run this many steps (for continuing envs)",
     )
     evaluate.add_argument(
         "--max-episode-steps",
-        type=_positive_int,
+        type=_eval_steps,
         default=MAX_EPISODE_STEPS,
         help="with --episodes: fail when an episode runs longer than this "
         f"(default {MAX_EPISODE_STEPS})",
     )
     evaluate.add_argument(
         "--seed",
-        type=_non_negative_int,
+        type=_seed,
         default=None,
         help="seeds the env's first reset (default: unseeded)",
     )
@@ -553,7 +585,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sweep.add_argument(
         "--workers",
-        type=_positive_int,
+        type=_workers,
         metavar="N",
         help="runs at once (default: 1 with loky, in this process; every core of the cluster "
         "with ray or dask)",
@@ -584,19 +616,14 @@ def build_parser() -> argparse.ArgumentParser:
 def _check_train_arguments(args: argparse.Namespace) -> None:
     """Refuse bad ``train`` values as bad usage (exit 2), before training rather than after.
 
-    A ``--save`` with no file name (``""``, ``"."``), and ``--steps`` above ``MAX_TIMESTEPS``.
+    A ``--save`` with no file name (``""``, ``"."``).
     """
-    from delayed_rl.agents._loop import MAX_TIMESTEPS, MAX_TIMESTEPS_TEXT
     from delayed_rl.agents.save_util import check_model_path
 
     try:
         check_model_path(args.save)
     except (TypeError, ValueError) as error:
         args.parser.error(f"argument --save: {str(error).removeprefix('path ')}")
-    if args.steps > MAX_TIMESTEPS:
-        args.parser.error(
-            f"argument --steps: must be at most {MAX_TIMESTEPS_TEXT}, got {args.steps}"
-        )
 
 
 def main(argv: Sequence[str] | None = None) -> int:

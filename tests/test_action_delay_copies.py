@@ -219,4 +219,3 @@ def test_other_spaces_pass_through_as_copies_of_their_own_kind(space) -> None:
     assert type(first) is type(initial) and space.contains(first)
     assert space.contains(second)
     assert str(second) == str(action)  # every space here prints its sample's values
-

@@ -149,6 +149,33 @@ def test_evaluate_with_episodes_on_a_continuing_env_fails_clearly(tmp_path, caps
         ("bench delay-sweep --backend spark", "argument --backend: invalid choice: 'spark'"),
         ("reproduce --seed -3", "argument --seed: must be an integer >= 0, got -3"),
         ("bench delay-sweep --seed -5", "argument --seed: must be an integer >= 0, got -5"),
+        # sizes beyond the stated limits, refused before anything starts
+        (
+            "bench mmq-gridworld --seeds 10001",
+            "argument --seeds: must be at most MAX_SEEDS = 10,000",
+        ),
+        (
+            "bench mmq-gridworld --steps 1099511627777",
+            "--steps: must be at most MAX_TIMESTEPS = 2**40",
+        ),
+        ("reproduce --steps 100000000000000000000", "--steps: must be at most MAX_TIMESTEPS"),
+        (
+            "bench roulette --seed 9223372036854775808",
+            "--seed: must be at most MAX_SEED = 2**63 - 1",
+        ),
+        ("bench roulette --workers 1025", "--workers: must be at most MAX_WORKERS = 1024"),
+        (
+            TRAIN + "--steps 1099511627777",
+            "argument --steps: must be at most MAX_TIMESTEPS = 2**40",
+        ),
+        (TRAIN + "--seed 9223372036854775808", "argument --seed: must be at most MAX_SEED"),
+        (
+            f"evaluate m.npz --env {GRID} --steps 1000000001",
+            "--steps: must be at most MAX_EVAL_STEPS",
+        ),
+        (f"evaluate m.npz --env {GRID} --episodes 1000001", "must be at most MAX_EVAL_EPISODES"),
+        (f"evaluate m.npz --env {GRID} --max-episode-steps 10000000000", "at most MAX_EVAL_STEPS"),
+        ("sweep s.yaml --workers 5000", "argument --workers: must be at most MAX_WORKERS = 1024"),
         ("bench --seed -5 delay-sweep", "argument --seed: must be an integer >= 0, got -5"),
     ],
 )
@@ -521,23 +548,12 @@ def test_evaluate_on_a_bad_agent_file_exits_1_with_one_line(tmp_path, capsys, ma
     assert str(bad) in err and fragment in err, err
 
 
-def test_train_refuses_a_save_path_without_a_file_name_or_too_many_steps(
-    tmp_path, capsys, monkeypatch
-):
-    """Bad usage, exit 2, before training (the step limit lowered to keep the test short)."""
-    from delayed_rl.agents import _loop
-
+def test_train_refuses_a_save_path_without_a_file_name(tmp_path, capsys):
+    """Bad usage, exit 2, before training (``--steps`` beyond its limit: the bad-usage table)."""
     argv = _train(tmp_path, "--agent", "q")
     argv[argv.index("--save") + 1] = ""
     with pytest.raises(SystemExit) as exit_info:
         main(argv)
     assert exit_info.value.code == 2
     assert "argument --save: must name a model file" in capsys.readouterr().err
-    monkeypatch.setattr(_loop, "MAX_TIMESTEPS", 100)
-    argv = _train(tmp_path, "--agent", "q")
-    argv[argv.index("--steps") + 1] = "101"
-    with pytest.raises(SystemExit) as exit_info:
-        main(argv)
-    assert exit_info.value.code == 2
-    assert "argument --steps: must be at most MAX_TIMESTEPS" in capsys.readouterr().err
     assert not (tmp_path / "agent.npz").exists()

@@ -217,10 +217,16 @@ def plan(**changes) -> dict:
         ({"steps": 2**40 + 1}, r"^steps must be at most MAX_STEPS"),
         ({"eval_steps": 10**14}, r"^eval_steps must be at most MAX_EVAL_STEPS = 10\*\*9"),
         ({"eval_episodes": 10**7}, r"^eval_episodes must be at most MAX_EVAL_EPISODES = 10\*\*6"),
-        ({"seeds": 10**6}, r"^seeds must be at most MAX_SEEDS = 10,000"),
+        (
+            {"seeds": 10**6},
+            r"^seeds must be at most MAX_SEEDS = 10,000 \(delayed_rl.experiments.runner\)",
+        ),
         ({"seeds": 10**30}, r"^seeds must be at most MAX_SEEDS"),
-        ({"seeds": [0, 2**40]}, r"^seeds\[1\] must be at most MAX_SEED = 2\*\*32 - 1"),
-        ({"seeds": list(range(10_001))}, r"^seeds must list at most MAX_SEEDS = 10,000 seeds"),
+        ({"seeds": [0, 2**40]}, r"^seeds\[1\] must be at most MAX_SWEEP_SEED = 2\*\*32 - 1"),
+        (
+            {"seeds": list(range(10_001))},
+            r"^seeds must list at most MAX_SEEDS = 10,000 \(.*\), got 10,001 seeds",
+        ),
         ({"agents": [{"name": "q", "steps": 10**21}]}, r"^agents\[0\]\.steps must be at most"),
         (
             {"envs": [{"id": GRID, "eval_steps": 10**10}]},
@@ -228,7 +234,7 @@ def plan(**changes) -> dict:
         ),
         ({"envs": [{"id": GRID, "steps": 10**13}]}, r"^envs\[0\]\.steps must be at most"),
     ],
-    ids=repr,
+    ids=lambda value: repr(value)[:60],
 )
 def test_sizes_beyond_the_limits_are_refused_naming_the_limit(changes, message):
     with pytest.raises(ValueError, match=message):

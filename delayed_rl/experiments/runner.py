@@ -43,9 +43,15 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from delayed_rl._validation import check_bool, check_choice, check_int, check_real
+from delayed_rl.agents._loop import MAX_TIMESTEPS, MAX_TIMESTEPS_TEXT
+from delayed_rl.agents.hyperparameters import MAX_SEED, check_limit
 
 #: The joblib backends :func:`run_tasks` can hand the runs to.
 BACKENDS = ("loky", "ray", "dask")
+MAX_SEEDS = 10_000
+"""The most seeds (runs per condition) an experiment or a sweep runs."""
+MAX_WORKERS = 1024
+"""The most parallel workers asked for (a process or a cluster task each)."""
 AGREES, DIFFERS, INCONCLUSIVE, REFERENCE = "agrees", "differs", "inconclusive", "reference"
 #: A claim's possible verdicts (see the module docstring).
 VERDICTS = (AGREES, DIFFERS, INCONCLUSIVE, REFERENCE)
@@ -70,7 +76,10 @@ class Config:
 
     Raises:
         TypeError: a field has the wrong type (e.g. ``seeds="3"``).
-        ValueError: a field is out of range (e.g. ``workers=0``) or ``backend`` is unknown.
+        ValueError: a field is out of range (e.g. ``workers=0``; ``seeds`` above
+            :data:`MAX_SEEDS`, ``steps`` above ``MAX_TIMESTEPS`` = 2**40, ``workers`` above
+            :data:`MAX_WORKERS`, ``base_seed`` above ``MAX_SEED`` = 2**63 − 1) or ``backend``
+            is unknown.
     """
 
     seeds: int | None = None
@@ -81,12 +90,36 @@ class Config:
     base_seed: int = 0
 
     def __post_init__(self) -> None:
-        self.seeds = check_int("seeds", self.seeds, 1, optional=True)
-        self.steps = check_int("steps", self.steps, 1, optional=True)
+        self.seeds = check_limit(
+            "seeds", check_int("seeds", self.seeds, 1, optional=True), MAX_SEEDS, MAX_SEEDS_TEXT
+        )
+        self.steps = check_limit(
+            "steps",
+            check_int("steps", self.steps, 1, optional=True),
+            MAX_TIMESTEPS,
+            MAX_TIMESTEPS_TEXT,
+        )
         self.quick = check_bool("quick", self.quick)
-        self.workers = check_int("workers", self.workers, 1)
+        self.workers = check_workers("workers", self.workers)
         self.backend = check_choice("backend", self.backend, BACKENDS)
-        self.base_seed = check_int("base_seed", self.base_seed, 0)
+        self.base_seed = check_limit(
+            "base_seed", check_int("base_seed", self.base_seed, 0), MAX_SEED, MAX_SEED_TEXT
+        )
+
+
+MAX_SEEDS_TEXT = f"MAX_SEEDS = {MAX_SEEDS:,} (delayed_rl.experiments.runner)"
+MAX_WORKERS_TEXT = f"MAX_WORKERS = {MAX_WORKERS} (delayed_rl.experiments.runner)"
+MAX_SEED_TEXT = "MAX_SEED = 2**63 - 1 (delayed_rl.agents.hyperparameters)"
+
+
+def check_workers(name: str, workers: Any) -> int:
+    """Return ``workers``, an integer in ``[1, MAX_WORKERS]``, after checking it.
+
+    Raises:
+        TypeError: it is not an integer.
+        ValueError: it is below 1 or above :data:`MAX_WORKERS`.
+    """
+    return check_limit(name, check_int(name, workers, 1), MAX_WORKERS, MAX_WORKERS_TEXT)
 
 
 @dataclass
@@ -331,7 +364,7 @@ def iter_tasks(
     """
     check_choice("backend", backend, BACKENDS)
     if workers is not None:
-        check_int("workers", workers, 1)
+        check_workers("workers", workers)
     if address is not None:
         if not isinstance(address, str):
             raise TypeError(f"address must be a string, got {address!r} ({type(address).__name__})")

@@ -79,8 +79,8 @@ for over 100 000 values once YAML's aliases are expanded
 
 ``seeds`` (default 3)
     A count ``n`` (seeds ``0 .. n − 1``) or a list of distinct integers in ``[0, 2**32 − 1]``
-    (:data:`~delayed_rl.experiments.sweep.schema.MAX_SEED`), at most
-    :data:`~delayed_rl.experiments.sweep.schema.MAX_SEEDS` (10 000) of them. Seed ``s`` seeds
+    (:data:`~delayed_rl.experiments.sweep.schema.MAX_SWEEP_SEED`), at most
+    :data:`~delayed_rl.experiments.runner.MAX_SEEDS` (10 000) of them. Seed ``s`` seeds
     the agent (``seed=s``: its random choices and its training env's first reset, delays
     included); the evaluation env is reset with seed ``s`` + :data:`EVAL_SEED_OFFSET`.
 

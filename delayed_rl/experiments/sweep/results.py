@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from delayed_rl.experiments.runner import mean_ci95
-from delayed_rl.experiments.sweep.schema import MAX_SEED, MAX_STEPS, Sweep
+from delayed_rl.experiments.sweep.schema import MAX_STEPS, MAX_SWEEP_SEED, Sweep
 
 #: The columns of ``results.csv`` that every sweep writes, in this order.
 RESULT_COLUMNS = ("agent", "env", "delay", "seed", "steps", "train_reward", "eval_reward", "wall_s")
@@ -108,7 +108,7 @@ def check_result_row(row: Mapping[str, Any]) -> dict[str, str]:
 
     Every column of :data:`RESULT_COLUMNS` and :data:`EXTRA_COLUMNS` holds a value and no more:
     non-empty labels (``agent``, ``env``, ``delay``); ``seed`` an integer in
-    ``[0, MAX_SEED]``; ``steps`` an integer in ``[1, MAX_STEPS]``; ``train_reward`` and
+    ``[0, MAX_SWEEP_SEED]``; ``steps`` an integer in ``[1, MAX_STEPS]``; ``train_reward`` and
     ``eval_reward`` finite numbers; ``wall_s`` a finite number ``>= 0``; ``eval_unit``
     ``episode`` or ``step``; ``run_id`` 16 hexadecimal digits, as :meth:`Sweep.runs` makes it.
 
@@ -122,7 +122,7 @@ def check_result_row(row: Mapping[str, Any]) -> dict[str, str]:
     for column in ("agent", "env", "delay"):
         if not row[column]:
             raise ValueError(f"{column} must be a non-empty label, got ''")
-    _integer(row, "seed", 0, MAX_SEED)
+    _integer(row, "seed", 0, MAX_SWEEP_SEED)
     _integer(row, "steps", 1, MAX_STEPS)
     for column in ("train_reward", "eval_reward", "wall_s"):
         value = _number(row, column)

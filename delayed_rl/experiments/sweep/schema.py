@@ -3,8 +3,8 @@
 :func:`~delayed_rl.experiments.sweep.reading.read_sweep_file` reads a YAML or JSON file;
 :func:`parse_sweep` checks what it holds, field by field, and returns the plan, a :class:`Sweep`,
 whose :meth:`Sweep.runs` lists the runs. Every size a file sets is bounded by a stated limit
-(:data:`MAX_STEPS`, :data:`MAX_EVAL_STEPS`, :data:`MAX_EVAL_EPISODES`, :data:`MAX_SEEDS`,
-:data:`MAX_SEED`, :data:`MAX_RUNS`), checked before anything is built or run.
+(:data:`MAX_STEPS`, :data:`MAX_EVAL_STEPS`, :data:`MAX_EVAL_EPISODES`, :data:`~delayed_rl.experiments.runner.MAX_SEEDS`,
+:data:`MAX_SWEEP_SEED`, :data:`MAX_RUNS`), checked before anything is built or run.
 :mod:`delayed_rl.experiments.sweep` documents the format.
 """
 
@@ -26,6 +26,7 @@ from delayed_rl._validation import check_choice, check_int, check_real
 from delayed_rl.agents._loop import MAX_TIMESTEPS
 from delayed_rl.agents.hyperparameters import check_limit
 from delayed_rl.delays import as_delay
+from delayed_rl.experiments.runner import MAX_SEEDS, MAX_SEEDS_TEXT
 
 #: The library's agents by the names a sweep file, and ``delayed-rl train --agent``, use.
 AGENTS = {
@@ -56,9 +57,7 @@ MAX_EVAL_STEPS = 10**9
 MAX_EVAL_EPISODES = 10**6
 """The most evaluation episodes of a run (``eval_episodes``; each at most
 :data:`~delayed_rl.experiments.sweep.runs.MAX_EVAL_EPISODE_STEPS` steps)."""
-MAX_SEEDS = 10_000
-"""The most seeds a sweep runs (a count, or the length of a list of seeds)."""
-MAX_SEED = 2**32 - 1
+MAX_SWEEP_SEED = 2**32 - 1
 """The largest seed: what every agent accepts (stable-baselines3 seeds numpy's legacy generator,
 which takes 32 bits)."""
 MAX_RUNS = 100_000
@@ -456,22 +455,18 @@ def _parse_delay(where: str, entry: Any) -> SweepDelay:
 def _parse_seeds(value: Any) -> tuple[int, ...]:
     """``seeds``: a count in ``[1, MAX_SEEDS]``, or up to that many distinct seeds in a list.
 
-    Each seed of a list lies in ``[0, MAX_SEED]``.
+    Each seed of a list lies in ``[0, MAX_SWEEP_SEED]``.
     """
     if not isinstance(value, list):
         count = check_int("seeds", value, 1, note=" (a count), or a list of seeds")
-        return tuple(
-            range(check_limit("seeds", count, MAX_SEEDS, f"MAX_SEEDS = {MAX_SEEDS:,} ({_HERE})"))
-        )
+        return tuple(range(check_limit("seeds", count, MAX_SEEDS, MAX_SEEDS_TEXT)))
     if not value:
         raise ValueError("seeds must be a count >= 1 or a non-empty list of seeds, got []")
     if len(value) > MAX_SEEDS:
-        raise ValueError(
-            f"seeds must list at most MAX_SEEDS = {MAX_SEEDS:,} seeds ({_HERE}), got {len(value):,}"
-        )
-    limit = f"MAX_SEED = 2**32 - 1 ({_HERE})"
+        raise ValueError(f"seeds must list at most {MAX_SEEDS_TEXT}, got {len(value):,} seeds")
+    limit = f"MAX_SWEEP_SEED = 2**32 - 1 ({_HERE})"
     seeds = tuple(
-        check_limit(f"seeds[{i}]", check_int(f"seeds[{i}]", seed, 0), MAX_SEED, limit)
+        check_limit(f"seeds[{i}]", check_int(f"seeds[{i}]", seed, 0), MAX_SWEEP_SEED, limit)
         for i, seed in enumerate(value)
     )
     first: dict[int, int] = {}
