@@ -55,6 +55,9 @@ class Digest:
             value, bool
         ):
             array = np.ascontiguousarray(value)
+            if array.dtype.hasobject:  # an int beyond int64: object arrays' bytes are addresses
+                self._hash.update(f"int{value!r}".encode())
+                return
             self._hash.update(f"{array.dtype.str}{array.shape}".encode())
             self._hash.update(array.tobytes())
         else:

@@ -1,0 +1,166 @@
+"""Fingerprints of seeded runs of every agent, on both training paths: proof that a change kept them.
+
+``python benchmarks/seeded_runs.py`` trains every agent of the library, with its options, on
+both the Python and the compiled path, on several envs and under every episode-end mode, and
+prints one SHA-256 per run of everything the run produced: the Q-table, every learned array
+(delay estimates, pmfs, reward models), the training record (``learn(..., record=True)``), the
+greedy actions, and the arrays a saved model file holds. It adds the runs of
+``tests/cpu_probe.py`` (the e-puck, DeconvQ on Taxi, ``reproduce --quick``).
+
+``--write`` stores them in ``benchmarks/seeded_runs.json`` with the package versions;
+``--check`` compares against that file and lists every run that changed. A change that must
+keep behaviour (a re-layering, a rename) is checked with ``--check`` on the same package
+versions; the numbers are the same on any x86-64 CPU (the docs' "Same seed, same bits").
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.metadata
+import json
+import sys
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+
+import cpu_probe  # noqa: E402  (tests/cpu_probe.py: the Digest and the CPU probe's runs)
+
+import delayed_rl  # noqa: E402, F401  (registers the envs)
+from delayed_rl import agents  # noqa: E402
+from delayed_rl.delays import Geometric, Poisson  # noqa: E402
+from delayed_rl.wrappers import PoissonRewardDelay, RewardDelay  # noqa: E402
+
+RESULTS = Path(__file__).with_suffix(".json")
+PACKAGES = ("numpy", "numba", "gymnasium", "pymunk", "llvmlite")
+STEPS = 4000
+
+#: Every agent with its options: (name, class name, keyword arguments).
+AGENTS: list[tuple[str, str, dict]] = [
+    ("q", "QLearning", {}),
+    ("q-decay", "QLearning", {"exploration_initial_eps": 1.0, "exploration_final_eps": 0.05}),
+    ("fixed", "FixedDelayQLearning", {"delay_estimate": 3}),
+    ("mmq", "MultipleModelQLearning", {"max_delay_estimate": 8}),
+    ("mmq-step", "MultipleModelQLearning", {"max_delay_estimate": 9, "delay_step": 3}),
+    ("mmq-trace", "MultipleModelQLearning", {"max_delay_estimate": 8, "delay_trace": 0.9}),
+    ("mmq-greedy", "MultipleModelQLearning", {"max_delay_estimate": 8, "greedy_window": 200}),
+    ("mmq-kernel", "MultipleModelQLearning", {"max_delay_estimate": 8, "reward_kernel": 1.5}),
+    ("expected-credit", "ExpectedCreditQLearning", {"delay": Poisson(3.0), "max_delay": 20}),
+    ("oracle", "OracleQLearning", {}),
+    ("deconv-known", "DeconvolutionQLearning", {"delay": Poisson(3.0), "max_delay": 20}),
+    ("deconv-learned", "DeconvolutionQLearning", {"max_delay": 20}),
+]
+
+#: The envs: (name, maker, whether the oracle's arrivals are recorded by the maker).
+ENVS: dict[str, Callable[[str, bool], gym.Env]] = {
+    "grid5-flush": lambda mode, rec: PoissonRewardDelay(
+        gym.make("delayed_rl/GridWorld-5x5-v0"), lam=3.0, max_delay=20, record_arrivals=rec
+    ),
+    "frozenlake-carry": lambda mode, rec: RewardDelay(
+        gym.make("FrozenLake-v1"),
+        Geometric(0.4),
+        max_delay=20,
+        on_episode_end="carry",
+        record_arrivals=rec,
+    ),
+    "taxi-drop": lambda mode, rec: RewardDelay(
+        gym.make("Taxi-v4"),
+        Poisson(2.0),
+        max_delay=20,
+        on_episode_end="drop",
+        record_arrivals=rec,
+    ),
+}
+
+
+def _file_arrays(agent) -> dict:
+    """What a saved model file holds: its arrays, and its metadata but the class's module path.
+
+    (Not the zip's bytes, which hold dates; not ``class`` and ``library_version``, which name
+    where the code lives rather than what it learned.)
+    """
+    with tempfile.TemporaryDirectory() as folder:
+        path = agent.save(Path(folder) / "model")
+        with np.load(path, allow_pickle=False) as archive:
+            content = {name: archive[name] for name in sorted(archive.files)}
+    metadata = json.loads(str(content.pop("metadata")))
+    metadata.pop("class")
+    metadata.pop("library_version")
+    return {**content, "metadata": json.dumps(metadata, sort_keys=True)}  # text: its big ints
+
+
+def agent_run(name: str, env_name: str, compiled: bool) -> str:
+    """Train one agent on one env on one path; hash everything it learned and recorded."""
+    _, class_name, kwargs = next(entry for entry in AGENTS if entry[0] == name)
+    cls = getattr(agents, class_name)
+    env = ENVS[env_name](env_name, class_name == "OracleQLearning")
+    extra = {"on_episode_end": env.on_episode_end} if class_name == "DeconvolutionQLearning" else {}
+    if class_name == "DeconvolutionQLearning":
+        extra["solve_interval"] = 1000
+    agent = cls(env, q_init=2.0, seed=7, **kwargs, **extra)
+    agent.learn(STEPS, fused=compiled, record=True, log_interval=None)
+    digest = cpu_probe.Digest()
+    digest.add(agent.q_table)
+    for attribute in ("delay_pmf", "reward_model", "mean_delay", "delay_estimates"):
+        value = getattr(agent, attribute, None)
+        if value is not None:
+            digest.add(np.asarray(value))
+    digest.add(dict(agent.training_log))
+    states = np.arange(env.observation_space.n)
+    digest.add(agent.predict(states, deterministic=True)[0])
+    digest.add(_file_arrays(agent))
+    return digest.hexdigest()
+
+
+def runs() -> dict[str, Callable[[], str]]:
+    """Every run by name: the agents' grid, then the CPU probe's."""
+    table: dict[str, Callable[[], str]] = {}
+    for name, *_ in AGENTS:
+        for env_name in ENVS:
+            for compiled in (False, True):
+                path = "compiled" if compiled else "python"
+                key = f"{name}/{env_name}/{path}"
+                table[key] = lambda n=name, e=env_name, c=compiled: agent_run(n, e, c)
+    for key, run in cpu_probe.runs().items():
+        table[f"probe/{key}"] = run
+    return table
+
+
+def main() -> int:
+    """Print, write (``--write``) or check (``--check``) the fingerprints."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    action = parser.add_mutually_exclusive_group()
+    action.add_argument("--write", action="store_true", help=f"store them in {RESULTS.name}")
+    action.add_argument("--check", action="store_true", help=f"compare with {RESULTS.name}")
+    parser.add_argument("names", nargs="*", help="runs to do (default: all)")
+    args = parser.parse_args()
+    table = runs()
+    hashes = {}
+    for key in args.names or table:
+        hashes[key] = table[key]()
+        print(f"{key}: {hashes[key]}", file=sys.stderr)
+    versions = {name: importlib.metadata.version(name) for name in PACKAGES}
+    if args.write:
+        payload = {"versions": versions, "steps": STEPS, "hashes": hashes}
+        RESULTS.write_text(json.dumps(payload, indent=1) + "\n")
+        return 0
+    if args.check:
+        stored = json.loads(RESULTS.read_text())
+        if stored["versions"] != versions:
+            print(f"note: recorded with {stored['versions']}, running {versions}")
+        changed = [k for k in hashes if stored["hashes"].get(k) != hashes[k]]
+        for key in changed:
+            print(f"changed: {key}")
+        print(f"{len(hashes) - len(changed)} of {len(hashes)} runs unchanged")
+        return 1 if changed else 0
+    json.dump(hashes, sys.stdout, indent=1)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
