@@ -1,6 +1,6 @@
 """Per-step cost of ``learn()`` for Q-learning and MMQ, against a minimal Q-learning loop.
 
-This measures the Python path (``learn(fused=False)``); ``benchmarks/speed.py`` sets it beside
+This measures the Python path (``learn(compiled=False)``); ``benchmarks/speed.py`` sets it beside
 the compiled one. In one process, repeats interleaved so machine noise hits all alike:
 
 - the floor: a minimal hand-written Q-learning loop (Python lists, ε-greedy, first arg-max) on
@@ -113,21 +113,21 @@ def seconds_per_step(run: Callable[[int], object], steps: int) -> float:
             gc.enable()
 
 
-def learners(fused: bool) -> dict[str, Callable[[int], object]]:
+def learners(compiled: bool) -> dict[str, Callable[[int], object]]:
     """``name: run(steps)`` of every configuration (and, on the Python path, of the floor)."""
     runs: dict[str, Callable[[int], object]] = {}
-    if not fused:
+    if not compiled:
         runs[FLOOR] = MinimalQLearning(make_env(9)).learn
     for name, config in configurations().items():
         agent = make_agent(*config)
         runs[name] = lambda steps, agent=agent: agent.learn(
-            steps, reset_num_timesteps=False, fused=fused
+            steps, reset_num_timesteps=False, compiled=compiled
         )
     return runs
 
 
 def measure_repeats(
-    steps: int, repeats: int, fused: bool = False, rounds: int = 1
+    steps: int, repeats: int, compiled: bool = False, rounds: int = 1
 ) -> list[dict[str, list[float]]]:
     """Seconds per step of each configuration in each round, one dict per repeat.
 
@@ -136,7 +136,7 @@ def measure_repeats(
     configuration once, back to back. On the Python path
     the floor (:data:`FLOOR`) is measured too, first in each round.
     """
-    runs = learners(fused)
+    runs = learners(compiled)
     for run in runs.values():
         run(WARM_UP)
     result = []
@@ -162,9 +162,9 @@ def ratio_to_floor(repeat: dict[str, list[float]], name: str) -> float:
     return float(np.median([t / f for t, f in zip(repeat[name], repeat[FLOOR], strict=True)]))
 
 
-def measure(steps: int, repeats: int, fused: bool = False) -> dict[str, float]:
+def measure(steps: int, repeats: int, compiled: bool = False) -> dict[str, float]:
     """Fastest seconds per step of each configuration (the floor left out), on one path."""
-    best = fastest(measure_repeats(steps, repeats, fused))
+    best = fastest(measure_repeats(steps, repeats, compiled))
     return {name: min(r[name] for r in best) for name in configurations()}
 
 
@@ -201,7 +201,7 @@ def main() -> None:
     per_repeat = measure_repeats(args.steps, args.repeats, rounds=args.rounds)
     best = fastest(per_repeat)
 
-    print(f"learn(fused=False) cost per step, µs (min–median–max of {args.repeats} repeats)")
+    print(f"learn(compiled=False) cost per step, µs (min–median–max of {args.repeats} repeats)")
     print(f"{'configuration':<18} {'µs/step':>20} {'vs minimal loop':>18}")
     for name in per_repeat[0]:
         cost = spread([r[name] * 1e6 for r in best])

@@ -43,7 +43,7 @@ def time_run(make: Callable[[], TabularAgent], steps: int) -> float:
     start = time.perf_counter()
     agent.learn(steps, log_interval=None)
     elapsed = time.perf_counter() - start
-    assert agent.last_learn_path == "fused"
+    assert agent.last_learn_path == "compiled"
     return elapsed
 
 

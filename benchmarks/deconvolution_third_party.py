@@ -9,7 +9,7 @@ rewards flushed at episode ends, the wrapper's default). Per seed it trains:
 - ``Q undelayed``: Q-learning without delays (the reference).
 
 All with the library's default hyper-parameters (α = 0.1, γ = 0.9, ε = 0.1, ``q_init`` = 0) and
-``learn(..., fused=False)``: the Python path, the one that runs any ``Discrete`` env. The score
+``learn(..., compiled=False)``: the Python path, the one that runs any ``Discrete`` env. The score
 is the greedy policy's mean undelayed return over 100 episodes (reset seeds 0..99) of the plain
 env, each cut at 200 steps (CliffWalking has no time limit of its own; a policy that loops
 scores −200 there). Reported: the mean over seeds with its 95 % CI (Student t), each seed's
@@ -81,7 +81,7 @@ def main() -> None:
             for seed in range(args.seeds):
                 agent = make_agent(name, env_id, args.lam, args.max_delay, seed)
                 started = time.perf_counter()
-                agent.learn(int(steps), log_interval=None, fused=False)
+                agent.learn(int(steps), log_interval=None, compiled=False)
                 seconds.append(time.perf_counter() - started)
                 scores.append(greedy_return(agent, env_id))
             mean, ci = mean_ci95(scores)

@@ -8,7 +8,9 @@ greedy actions, and the arrays a saved model file holds. It adds the runs of
 ``tests/cpu_probe.py`` (the e-puck, DeconvQ on Taxi, ``reproduce --quick``).
 
 ``--write`` stores them in ``benchmarks/seeded_runs.json`` with the package versions;
-``--check`` compares against that file and lists every run that changed. A change that must
+``--check`` compares against that file and lists every run that changed. A run whose output
+changed on purpose (a renamed label in a summary, say) is re-recorded with a ``history`` entry
+saying what changed and why. A change that must
 keep behaviour (a re-layering, a rename) is checked with ``--check`` on the same package
 versions; the numbers are the same on any x86-64 CPU (the docs' "Same seed, same bits").
 """
@@ -103,7 +105,7 @@ def agent_run(name: str, env_name: str, compiled: bool) -> str:
     if class_name == "DeconvolutionQLearning":
         extra["solve_interval"] = 1000
     agent = cls(env, q_init=2.0, seed=7, **kwargs, **extra)
-    agent.learn(STEPS, fused=compiled, record=True, log_interval=None)
+    agent.learn(STEPS, compiled=compiled, record=True, log_interval=None)
     digest = cpu_probe.Digest()
     digest.add(agent.q_table)
     for attribute in ("delay_pmf", "reward_model", "mean_delay", "delay_estimates"):
@@ -145,8 +147,9 @@ def main() -> int:
         hashes[key] = table[key]()
         print(f"{key}: {hashes[key]}", file=sys.stderr)
     versions = {name: importlib.metadata.version(name) for name in PACKAGES}
-    if args.write:
-        payload = {"versions": versions, "steps": STEPS, "hashes": hashes}
+    if args.write:  # (the history of deliberate changes, if any, is kept)
+        history = json.loads(RESULTS.read_text()).get("history", []) if RESULTS.exists() else []
+        payload = {"versions": versions, "steps": STEPS, "hashes": hashes, "history": history}
         RESULTS.write_text(json.dumps(payload, indent=1) + "\n")
         return 0
     if args.check:

@@ -53,7 +53,7 @@ ready = time.perf_counter()
 agent = MMQ(gym.make("delayed_rl/GridWorld-9x9-v0", reward_delay=13), max_delay_estimate=50,
             q_init=10.0, seed=0)
 agent.learn(1_000_000, log_interval=None)
-assert agent.last_learn_path == "fused"
+assert agent.last_learn_path == "compiled"
 print(time.perf_counter() - ready, ready - start)
 """
 
@@ -140,12 +140,12 @@ def toy_text_runs(steps: int) -> dict[str, Callable[[], float]]:
     from delayed_rl.agents import QLearning
     from delayed_rl.wrappers import PoissonRewardDelay
 
-    def learn(fused: bool) -> Callable[[], float]:
+    def learn(compiled: bool) -> Callable[[], float]:
         def run() -> float:
             agent = QLearning(PoissonRewardDelay(gym.make("Taxi-v4"), 5.0), seed=0)
-            n = steps if fused else steps // 20
+            n = steps if compiled else steps // 20
             start = time.perf_counter()
-            agent.learn(n, fused=fused, log_interval=None)
+            agent.learn(n, compiled=compiled, log_interval=None)
             return (time.perf_counter() - start) / n
 
         return run
@@ -160,7 +160,7 @@ def toy_text_runs(steps: int) -> dict[str, Callable[[], float]]:
                 env.reset()
         return (time.perf_counter() - start) / len(actions)
 
-    QLearning(PoissonRewardDelay(gym.make("Taxi-v4"), 5.0)).learn(1000, fused=True)  # compile
+    QLearning(PoissonRewardDelay(gym.make("Taxi-v4"), 5.0)).learn(1000, compiled=True)  # compile
     return {"compiled": learn(True), "Python path": learn(False), "bare env step": bare}
 
 
@@ -191,7 +191,7 @@ def compiled_agent_runs(steps: int) -> dict[str, Callable[[], float]]:
             agent = make()
             start = time.perf_counter()
             agent.learn(steps, log_interval=None)
-            assert agent.last_learn_path == "fused"
+            assert agent.last_learn_path == "compiled"
             return (time.perf_counter() - start) / steps
 
         return timed
@@ -222,13 +222,13 @@ def epuck_runs(steps: int) -> dict[str, Callable[[], float]]:
 
     MMQ(line_env(), max_delay_estimate=150, q_init=10.0).learn(500)  # compile the loop first
 
-    def training(fused: bool) -> Callable[[], float]:
+    def training(compiled: bool) -> Callable[[], float]:
         def run() -> float:
             agent = MMQ(line_env(), max_delay_estimate=150, q_init=10.0, seed=0)
-            n = steps if fused else steps // 2
+            n = steps if compiled else steps // 2
             start = time.perf_counter()
-            agent.learn(n, log_interval=None, fused=fused)
-            assert agent.last_learn_path == ("fused" if fused else "python")
+            agent.learn(n, log_interval=None, compiled=compiled)
+            assert agent.last_learn_path == ("compiled" if compiled else "python")
             return (time.perf_counter() - start) / n
 
         return run
@@ -293,17 +293,22 @@ def main() -> None:
     per_repeat = agent_step_cost.measure_repeats(10_000 // scale, 3, rounds=3)
     best = agent_step_cost.fastest(per_repeat)
     python = {name: min(r[name] for r in best) for name in agent_step_cost.configurations()}
-    fused = agent_step_cost.measure(300_000 // scale, 3, fused=True)
+    compiled = agent_step_cost.measure(300_000 // scale, 3, compiled=True)
     lines += markdown_table(
         "learn() cost per step (µs; GridWorld with Poisson(13) delays)",
         ["configuration", "Python path", "compiled path", "speed-up"],
         [
-            (n, f"{python[n] * 1e6:.2f}", f"{fused[n] * 1e6:.3f}", f"{python[n] / fused[n]:.0f}×")
+            (
+                n,
+                f"{python[n] * 1e6:.2f}",
+                f"{compiled[n] * 1e6:.3f}",
+                f"{python[n] / compiled[n]:.0f}×",
+            )
             for n in python
         ],
     )
-    q_gain = python["9x9, |Λ|=1"] / fused["9x9, |Λ|=1"]
-    mmq_gain = python["9x9, |Λ|=51"] / fused["9x9, |Λ|=51"]
+    q_gain = python["9x9, |Λ|=1"] / compiled["9x9, |Λ|=1"]
+    mmq_gain = python["9x9, |Λ|=51"] / compiled["9x9, |Λ|=51"]
     scaling = python["9x9, |Λ|=151"] / python["9x9, |Λ|=1"]
     world = python["30x30, |Λ|=51"] / python["9x9, |Λ|=51"]
     lines += [

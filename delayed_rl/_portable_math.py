@@ -14,7 +14,7 @@ these functions do:
 The functions here are fdlibm's algorithms (Sun's freely distributable libm, the reference of
 Java's ``StrictMath``): an argument reduction and a polynomial, written with the four basic
 operations only, each rounded once (IEEE 754 guarantees their bits everywhere), in a fixed
-order. numba compiles them without reassociation or fused operations (it never allows LLVM to
+order. numba compiles them without reassociation or compiled operations (it never allows LLVM to
 contract ``a * b + c``), and without numba they run as plain Python on the same doubles, so a
 compiled call, a Python call and a call on another CPU return the same bits. Their error is
 below one unit in the last place on the arguments the library uses (tested against
@@ -33,7 +33,7 @@ import math
 
 import numpy as np
 
-from delayed_rl.fast._numba import jit
+from delayed_rl._numba import jit
 
 __all__ = [
     "atan2",

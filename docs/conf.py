@@ -68,11 +68,12 @@ API_SECTIONS = [
     ("Wrappers", "delayed_rl.wrappers"),
     ("Delay distributions", "delayed_rl.delays"),
     ("Environments", "delayed_rl.envs"),
-    ("The compiled path", "delayed_rl.fast"),
+    ("The compiled path", "delayed_rl.compiled"),
     ("Experiments", "delayed_rl.experiments"),
     ("The command line", "delayed_rl.cli"),
     ("Internals", "delayed_rl._delay_line"),
     ("Internals: validation", "delayed_rl._validation"),
+    ("Internals: numba", "delayed_rl._numba"),
 ]
 
 

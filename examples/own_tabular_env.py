@@ -5,7 +5,7 @@ action 1 pays 1 and goes back to 0; action 0 always goes back to 0 and pays noth
 arrive Poisson(3) steps late. Because the env exposes its dynamics as Gymnasium's toy-text envs
 do (``P[s][a]``: a list of ``(probability, next_state, reward, terminated)``, and
 ``initial_state_distrib``), ``learn()`` runs compiled by itself; ``reset``/``step`` are still
-what the Python path (``fused=False``), evaluation and your own loops use, so the two must agree.
+what the Python path (``compiled=False``), evaluation and your own loops use, so the two must agree.
 
 Run::
 

@@ -134,11 +134,11 @@ AGENTS: dict[str, Callable[[gym.Env], object]] = {
 }
 
 
-def agent_run(name: str, fused: bool, steps: int = 6000) -> str:
+def agent_run(name: str, compiled: bool, steps: int = 6000) -> str:
     """Train one agent briefly on a delayed 5×5 grid world; hash its learned arrays."""
     env = _grid(record=name == "oracle")
     agent = AGENTS[name](env)
-    agent.learn(steps, fused=fused)
+    agent.learn(steps, compiled=compiled)
     digest = Digest()
     digest.add(agent.q_table)
     for attribute in ("delay_pmf", "reward_model", "mean_delay"):
@@ -153,18 +153,18 @@ def taxi_deconv_run(steps: int = 4000) -> str:
     """DeconvQ with the delay learned on Taxi: 3000 pairs, the hashed statistics and CG solves."""
     env = PoissonRewardDelay(gym.make("Taxi-v4"), lam=2.0, max_delay=10)
     agent = DeconvQ(env, max_delay=10, solve_interval=2000, seed=4)
-    agent.learn(steps, fused=False)
+    agent.learn(steps, compiled=False)
     digest = Digest()
     for value in (agent.q_table, agent.delay_pmf, agent.reward_model):
         digest.add(value)
     return digest.hexdigest()
 
 
-def epuck_agent_run(fused: bool, steps: int = 1500) -> str:
+def epuck_agent_run(compiled: bool, steps: int = 1500) -> str:
     """MMQ on the delayed e-puck line follower, on either training path."""
     env = gym.make("delayed_rl/EPuckLineFollow-v0", reward_delay=20)
     agent = MultipleModelQLearning(env, max_delay_estimate=30, q_init=1.0, seed=2)
-    agent.learn(steps, fused=fused)
+    agent.learn(steps, compiled=compiled)
     digest = Digest()
     digest.add(agent.q_table)
     digest.add(_velocities(env.unwrapped))
@@ -205,14 +205,14 @@ def runs() -> dict[str, Callable[[], str]]:
         name: (lambda kwargs=kwargs: epuck_run(kwargs)) for name, kwargs in EPUCK_CONFIGS.items()
     }
     for name in AGENTS:
-        for fused in (False, True):
-            path = "compiled" if fused else "python"
-            table[f"{name}-{path}"] = lambda name=name, fused=fused: agent_run(name, fused)
+        for compiled in (False, True):
+            path = "compiled" if compiled else "python"
+            table[f"{name}-{path}"] = lambda name=name, compiled=compiled: agent_run(name, compiled)
     table["taxi-deconv-learned-python"] = taxi_deconv_run
     table["experiments-quick"] = experiments_run
-    for fused in (False, True):
-        path = "compiled" if fused else "python"
-        table[f"epuck-mmq-{path}"] = lambda fused=fused: epuck_agent_run(fused)
+    for compiled in (False, True):
+        path = "compiled" if compiled else "python"
+        table[f"epuck-mmq-{path}"] = lambda compiled=compiled: epuck_agent_run(compiled)
     return table
 
 

@@ -123,7 +123,7 @@ def fake_grid_run(
         "optimal": optimal,
         "second_half_optimal": late,
         "ns_per_step": 100.0,
-        "path": "fused",
+        "path": "compiled",
         "snapshot_steps": np.array([50, 100]),
         "snapshot_optimal": np.array([False, optimal]),
         "snapshot_greedy": np.array([0.0, greedy]),

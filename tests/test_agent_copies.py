@@ -51,12 +51,12 @@ def assert_predicts_from_its_own_table(agent):
 
 @pytest.mark.parametrize("cls", [QLearning, FixedDelayQLearning, MMQ])
 @pytest.mark.parametrize("duplicate", [copy.deepcopy, pickled], ids=["deepcopy", "pickle"])
-@pytest.mark.parametrize("fused", [False, None], ids=["python", "default"])
-def test_a_copy_learns_into_the_table_it_predicts_from(cls, duplicate, fused):
-    original = make(cls).learn(300, fused=fused)
+@pytest.mark.parametrize("compiled", [False, None], ids=["python", "default"])
+def test_a_copy_learns_into_the_table_it_predicts_from(cls, duplicate, compiled):
+    original = make(cls).learn(300, compiled=compiled)
     twin = duplicate(original)
     assert not np.shares_memory(twin.q_table, original.q_table)
-    twin.learn(3_000, fused=fused, reset_num_timesteps=False)
+    twin.learn(3_000, compiled=compiled, reset_num_timesteps=False)
     assert not np.array_equal(twin.q_table, original.q_table)  # it learned
     assert_predicts_from_its_own_table(twin)
     assert_predicts_from_its_own_table(original)
@@ -64,18 +64,18 @@ def test_a_copy_learns_into_the_table_it_predicts_from(cls, duplicate, fused):
 
 @pytest.mark.parametrize("cls", [QLearning, MMQ])
 @pytest.mark.parametrize("duplicate", [copy.deepcopy, pickled], ids=["deepcopy", "pickle"])
-@pytest.mark.parametrize("fused", [False, None], ids=["python", "default"])
+@pytest.mark.parametrize("compiled", [False, None], ids=["python", "default"])
 @pytest.mark.parametrize("restart", [False, True], ids=["continue", "restart"])
-def test_a_copy_continues_exactly_as_the_original(cls, duplicate, fused, restart):
+def test_a_copy_continues_exactly_as_the_original(cls, duplicate, compiled, restart):
     """Same seed, same history: the copy's next ``learn()`` equals the original's.
 
     ``restart=False`` continues the episode, the pending rewards and, on the default path, the
     compiled run (with its own generator) of the first ``learn()``.
     """
-    original = make(cls).learn(700, fused=fused)
+    original = make(cls).learn(700, compiled=compiled)
     twin = duplicate(original)
     for agent in (original, twin):
-        agent.learn(2_000, fused=fused, reset_num_timesteps=restart)
+        agent.learn(2_000, compiled=compiled, reset_num_timesteps=restart)
         agent.update(3, 1, 1.0, 4)  # and the transitions a user drives, from the same state
     np.testing.assert_array_equal(twin.q_table, original.q_table)
     assert twin.num_timesteps == original.num_timesteps
@@ -84,14 +84,14 @@ def test_a_copy_continues_exactly_as_the_original(cls, duplicate, fused, restart
     assert twin.exploration_rate == original.exploration_rate
 
 
-@pytest.mark.parametrize("fused", [False, None], ids=["python", "default"])
-def test_a_saved_agent_continues_exactly_as_the_original(tmp_path, fused):
-    original = make(MMQ).learn(700, fused=fused)
+@pytest.mark.parametrize("compiled", [False, None], ids=["python", "default"])
+def test_a_saved_agent_continues_exactly_as_the_original(tmp_path, compiled):
+    original = make(MMQ).learn(700, compiled=compiled)
     loaded = MMQ.load(original.save(tmp_path / "m"), env=gym.make(GRID5, reward_delay=2))
     assert_predicts_from_its_own_table(loaded)
     original.set_env(gym.make(GRID5, reward_delay=2))  # a fresh env, as the loaded agent's
     for agent in (original, loaded):
-        agent.learn(2_000, fused=fused, reset_num_timesteps=False)
+        agent.learn(2_000, compiled=compiled, reset_num_timesteps=False)
     np.testing.assert_array_equal(loaded.q_table, original.q_table)
     assert_predicts_from_its_own_table(loaded)
 
@@ -101,7 +101,7 @@ def test_a_deep_copy_before_any_training_learns_on_its_own():
     original = QLearning(gym.make(GRID5), seed=0)
     twin = copy.deepcopy(original)
     twin.learn(5_000)
-    twin.learn(1_000, fused=False)  # the Python path on the copy's tables
+    twin.learn(1_000, compiled=False)  # the Python path on the copy's tables
     assert np.all(original.q_table == 0.0) and np.any(twin.q_table != 0.0)
     assert_predicts_from_its_own_table(twin)
 
@@ -111,7 +111,7 @@ def test_a_shallow_copy_shares_the_tables():
     original = make(MMQ).learn(500)
     twin = copy.copy(original)
     assert np.shares_memory(twin.q_table, original.q_table) and twin.env is original.env
-    twin.learn(1_000, fused=False, reset_num_timesteps=False)
+    twin.learn(1_000, compiled=False, reset_num_timesteps=False)
     np.testing.assert_array_equal(twin.q_table, original.q_table)
     assert_predicts_from_its_own_table(twin)
     assert_predicts_from_its_own_table(original)
@@ -130,7 +130,7 @@ def test_what_cannot_be_copied_is_dropped_and_said():
     for duplicate in (copy.deepcopy, pickled):
         with pytest.warns(UserWarning, match="cannot be copied.*set_env"):
             twin = duplicate(agent)
-        assert twin.env is None and twin._fused is None
+        assert twin.env is None and twin._compiled is None
         np.testing.assert_array_equal(twin.q_table, agent.q_table)
         twin.set_env(gym.make(GRID5))
         twin.learn(100, reset_num_timesteps=False)

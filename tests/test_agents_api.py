@@ -136,8 +136,8 @@ def test_bad_learn_arguments():
         agent.learn(10, log_interval=0)
     with pytest.raises(TypeError, match=r"reset_num_timesteps must be a bool, got 1 \(int\)"):
         agent.learn(10, reset_num_timesteps=1)
-    with pytest.raises(TypeError, match="fused must be a bool, got 'yes'"):
-        agent.learn(10, fused="yes")
+    with pytest.raises(TypeError, match="compiled must be a bool, got 'yes'"):
+        agent.learn(10, compiled="yes")
     with pytest.raises(TypeError, match="callback must be None, a callback object"):
         agent.learn(10, callback=42)
     with pytest.raises(TypeError, match=r"callback\[1\] must be None"):
@@ -211,7 +211,7 @@ def test_shifted_discrete_spaces():
 def test_learn_on_continuing_env_and_record():
     env = gym.make(GRID5, reward_delay=3)
     agent = MMQ(env, max_delay_estimate=6, q_init=10.0, seed=1)
-    assert agent.learn(3_000, record=True, fused=False) is agent  # steps the env object itself
+    assert agent.learn(3_000, record=True, compiled=False) is agent  # steps the env object itself
     log = agent.training_log
     assert set(log) == set(RECORD_KEYS)
     assert all(len(v) == 3_000 for v in log.values())
@@ -230,7 +230,7 @@ def test_learn_on_continuing_env_and_record():
 def test_episode_end_resets_env_and_history():
     env = GridWorldEnv(size=5, max_steps=100)
     agent = MMQ(env, max_delay_estimate=5, q_init=10.0, seed=2).learn(
-        1_050, record=True, fused=False
+        1_050, record=True, compiled=False
     )
     done = agent.training_log["episode_end"]
     np.testing.assert_array_equal(np.flatnonzero(done), np.arange(99, 1_000, 100))
@@ -240,20 +240,22 @@ def test_episode_end_resets_env_and_history():
     assert agent.logger.dumps[-1]["time/episodes"] == 10
 
 
-@pytest.mark.parametrize("fused", [False, True])
-def test_reset_num_timesteps_false_continues_exactly(fused):
+@pytest.mark.parametrize("compiled", [False, True])
+def test_reset_num_timesteps_false_continues_exactly(compiled):
     """learn(a) + learn(b, reset_num_timesteps=False) == learn(a + b) with constant schedules."""
     one = MMQ(gym.make(GRID5, reward_delay=2), max_delay_estimate=4, q_init=8.0, seed=3)
-    one.learn(1_500, fused=fused)
+    one.learn(1_500, compiled=compiled)
     two = MMQ(gym.make(GRID5, reward_delay=2), max_delay_estimate=4, q_init=8.0, seed=3)
-    two.learn(1_000, fused=fused).learn(500, reset_num_timesteps=False, fused=fused)
+    two.learn(1_000, compiled=compiled).learn(500, reset_num_timesteps=False, compiled=compiled)
     assert two.num_timesteps == 1_500
     np.testing.assert_array_equal(one.q_table, two.q_table)
-    if fused:  # the compiled path never stepped the env object: nothing pending to report
+    if compiled:  # the compiled path never stepped the env object: nothing pending to report
         return
     # the default restarts the clock and resets the env (to the start cell)
     with pytest.warns(UserWarning, match="reset\\(\\) in the middle of an episode"):
-        two.learn(10, record=True, fused=False)  # the wrapper reports the pending rewards it drops
+        two.learn(
+            10, record=True, compiled=False
+        )  # the wrapper reports the pending rewards it drops
     assert two.num_timesteps == 10 and two.training_log["obs"][0] == 24
 
 
@@ -276,7 +278,9 @@ def test_learning_rate_schedule_gets_progress_remaining():
 
     scheduled = QLearning(gym.make(GRID5), learning_rate=schedule, q_init=5.0, seed=0).learn(1_000)
     constant = QLearning(gym.make(GRID5), learning_rate=0.1, q_init=5.0, seed=0)
-    constant.learn(1_000, fused=False)  # a schedule runs on the Python path: compare like with like
+    constant.learn(
+        1_000, compiled=False
+    )  # a schedule runs on the Python path: compare like with like
     np.testing.assert_array_equal(scheduled.q_table, constant.q_table)
     assert seen[-1] == pytest.approx(1 / 1_000) and max(seen) == 1.0
     assert all(a >= b for a, b in zip(seen[1:], seen[2:], strict=False))

@@ -102,7 +102,7 @@ def test_the_agent_finds_the_optimal_loop_where_q_learning_does_not(known):
         delay = Poisson(4.0) if known else None
         agent = DeconvQ(_grid(lam=4.0), delay=delay, max_delay=20, q_init=25.0, seed=seed)
         agent.learn(60_000, log_interval=None)
-        assert agent.last_learn_path == "fused"
+        assert agent.last_learn_path == "compiled"
         assert greedy_average_reward(agent, 5) == pytest.approx(optimum, abs=0.002)
         if not known:  # the learned pmf is near Poisson(4). Measured over seeds 0-9 at 60k
             # steps: total variation 0.13-0.20; means 4.02-5.10, average 4.73, sd 0.34 (thin
@@ -133,7 +133,7 @@ def test_it_is_anonymous_the_oracle_keys_change_nothing():
     for wrap in (lambda env: env, _StripOracleKeys):
         env = wrap(RewardDelay(GridWorldEnv(size=4), Poisson(3.0), record_arrivals=True))
         agent = DeconvQ(env, max_delay=12, solve_interval=2_000, q_init=20.0, seed=4)
-        agent.learn(10_000, fused=False)  # the Python path: the one that sees info at all
+        agent.learn(10_000, compiled=False)  # the Python path: the one that sees info at all
         tables.append((agent.q_table.copy(), agent.delay_pmf))
     np.testing.assert_array_equal(tables[0][0], tables[1][0])
     np.testing.assert_array_equal(tables[0][1], tables[1][1])
@@ -333,7 +333,7 @@ def test_the_compiled_and_python_paths_learn_the_same_from_the_same_steps():
 
     The same Q-table, statistics, reward model and learned pmf, to the last bit.
     """
-    from delayed_rl.fast.kernel import replay
+    from delayed_rl.compiled.kernel import replay
 
     rng = np.random.default_rng(11)
     n = 7_000
@@ -377,7 +377,7 @@ def test_the_python_path_runs_gymnasiums_tabular_envs_with_the_defaults(env_id, 
     from delayed_rl.wrappers import PoissonRewardDelay
 
     env = PoissonRewardDelay(gym.make(env_id), 3.0)
-    agent = DeconvQ(env, seed=0).learn(6_000, fused=False, record=True)
+    agent = DeconvQ(env, seed=0).learn(6_000, compiled=False, record=True)
     assert agent.last_learn_path == "python" and agent._regression.layout == layout
     assert agent._regression.nbytes < 64 * 2**20
     agent.solve()  # the last solve may be thousands of steps old: the check is of the estimator

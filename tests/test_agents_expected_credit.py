@@ -21,8 +21,8 @@ import delayed_rl  # noqa: F401  (registers the env ids)
 from delayed_rl.agents import ExpectedCreditQLearning, FixedDelayQLearning, QLearning, load_agent
 from delayed_rl.agents.expected_credit import MAX_LAGS, TAIL, credit_weights
 from delayed_rl.agents.hyperparameters import HYPERPARAMETER_NAMES
+from delayed_rl.compiled import NotCompilable
 from delayed_rl.delays import Constant, Delay, Empirical, Geometric, Poisson, Uniform
-from delayed_rl.fast import NotCompilable
 
 GRID3, GRID5 = "delayed_rl/GridWorld-3x3-v0", "delayed_rl/GridWorld-5x5-v0"
 SETTINGS = {"q_init": 20.0}
@@ -132,20 +132,20 @@ def test_delay_is_required_and_the_shared_hyperparameters_are_shown():
 
 
 def test_it_runs_compiled_by_default_where_the_stack_compiles():
-    # the compiled rule is the Python one update for update: tests/test_fused_credit.py
+    # the compiled rule is the Python one update for update: tests/test_compiled_credit.py
     agent = ExpectedCreditQLearning(gym.make(GRID3, reward_delay=2), delay=2, seed=0)
     tables = agent.compiled_tables()
     np.testing.assert_array_equal(tables.delay_estimates, np.flatnonzero(agent.credit_weights))
     np.testing.assert_array_equal(tables.lag_rates, 0.1 * agent.credit_weights)  # all > 0
     agent.learn(100)
-    assert agent.last_learn_path == "fused"
-    agent.learn(100, fused=False)
+    assert agent.last_learn_path == "compiled"
+    agent.learn(100, compiled=False)
     assert agent.last_learn_path == "python"
     agent = ExpectedCreditQLearning(
         gym.make(GRID3, reward_delay=2), delay=2, learning_rate=lambda p: p
     )
     with pytest.raises(NotCompilable, match="the learning rate is a schedule"):
-        agent.learn(100, fused=True)
+        agent.learn(100, compiled=True)
 
 
 # ---------------------------------------------------------------------- the rule, by hand
@@ -176,23 +176,23 @@ def test_update_shares_each_steps_td_update_by_the_weights():
 
 
 # ---------------------------------------------------------------------- reductions
-@pytest.mark.parametrize("fused", [False, True])
+@pytest.mark.parametrize("compiled", [False, True])
 @pytest.mark.parametrize("k", [0, 1, 3])
 @pytest.mark.parametrize("make", [{}, {"max_steps": 7}])
-def test_a_constant_delay_is_fixed_delay_q_learning_update_for_update(k, make, fused):
+def test_a_constant_delay_is_fixed_delay_q_learning_update_for_update(k, make, compiled):
     tables = []
     for cls, own in ((ExpectedCreditQLearning, {"delay": Constant(k)}),
                      (FixedDelayQLearning, {"delay_estimate": k})):  # fmt: skip
         env = gym.make(GRID5, reward_delay=Constant(k), **make)
-        tables.append(cls(env, **own, seed=5, **SETTINGS).learn(4_000, fused=fused).q_table)
+        tables.append(cls(env, **own, seed=5, **SETTINGS).learn(4_000, compiled=compiled).q_table)
     np.testing.assert_array_equal(*tables)
 
 
-@pytest.mark.parametrize("fused", [False, True])
-def test_no_delay_is_q_learning(fused):
+@pytest.mark.parametrize("compiled", [False, True])
+def test_no_delay_is_q_learning(compiled):
     agent = ExpectedCreditQLearning(gym.make(GRID5), Poisson(0.0), seed=1, **SETTINGS)
-    q = QLearning(gym.make(GRID5), seed=1, **SETTINGS).learn(4_000, fused=fused)
-    np.testing.assert_array_equal(agent.learn(4_000, fused=fused).q_table, q.q_table)
+    q = QLearning(gym.make(GRID5), seed=1, **SETTINGS).learn(4_000, compiled=compiled)
+    np.testing.assert_array_equal(agent.learn(4_000, compiled=compiled).q_table, q.q_table)
 
 
 # ---------------------------------------------------------------------- behaviour
@@ -203,7 +203,7 @@ def test_under_poisson_delays_it_beats_q_learning_on_the_same_rewards():
         for cls, own in ((ExpectedCreditQLearning, {"delay": 3}), (QLearning, {})):
             env = gym.make(GRID5, reward_delay=3)
             agent = cls(env, **own, seed=seed, **SETTINGS)
-            agent.learn(20_000, fused=False, log_interval=None, record=True)
+            agent.learn(20_000, compiled=False, log_interval=None, record=True)
             rewards.append(agent.training_log["undelayed_reward"].mean())
         # measured 0.582–0.620 against 0.036–0.091 over seeds 0–9
         assert rewards[0] > rewards[1] + 0.3, (seed, rewards)

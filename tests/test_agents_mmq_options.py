@@ -2,7 +2,7 @@
 
 With the defaults MMQ is the thesis's rule, draw for draw. With an option on, the Python path and
 the compiled loop still agree to the bit: on scripted transitions (``update()`` against
-:func:`~delayed_rl.fast.kernel.replay`), and on a ``learn()`` run replayed through the compiled
+:func:`~delayed_rl.compiled.kernel.replay`), and on a ``learn()`` run replayed through the compiled
 loop with the acting models it drew (the two paths of ``learn()`` draw from different streams, so
 their runs agree in distribution only).
 """
@@ -22,7 +22,7 @@ import pytest
 import delayed_rl  # noqa: F401  (registers the env ids)
 from delayed_rl.agents import MMQ, FixedDelayQLearning, QLearning, mmq
 from delayed_rl.agents.mmq import greedy_actions
-from delayed_rl.fast.kernel import credit_kernel, replay
+from delayed_rl.compiled.kernel import credit_kernel, replay
 
 GRID5 = "delayed_rl/GridWorld-5x5-v0"
 STATES = np.arange(25)
@@ -51,7 +51,7 @@ def recorded_run(agent, steps):
         assert not locals_["truncated"]  # the grid never ends its episodes: one script
         return True
 
-    agent.learn(steps, callback=record, fused=False, log_interval=None)
+    agent.learn(steps, callback=record, compiled=False, log_interval=None)
     s, a, s2, terminated, reward, acting = (np.array(column) for column in zip(*rows, strict=True))
     return np.stack([s, a, s2], axis=1), terminated, reward, acting
 
@@ -63,14 +63,14 @@ def recorded_run(agent, steps):
 PINNED = {True: "5701b5a0d24b8919", False: "71356b05a87c31d0"}
 
 
-@pytest.mark.parametrize("fused", [True, False], ids=["compiled", "python"])
-def test_defaults_are_the_thesis_rule_draw_for_draw(fused):
-    plain = make().learn(5_000, fused=fused, log_interval=None)
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "python"])
+def test_defaults_are_the_thesis_rule_draw_for_draw(compiled):
+    plain = make().learn(5_000, compiled=compiled, log_interval=None)
     explicit = make(reward_kernel=None, delay_trace=None, greedy_window=None)
-    explicit.learn(5_000, fused=fused, log_interval=None)
-    assert plain.last_learn_path == ("fused" if fused else "python")
+    explicit.learn(5_000, compiled=compiled, log_interval=None)
+    assert plain.last_learn_path == ("compiled" if compiled else "python")
     np.testing.assert_array_equal(explicit.q_table, plain.q_table)
-    assert hashlib.sha256(plain.q_table.tobytes()).hexdigest()[:16] == PINNED[fused]
+    assert hashlib.sha256(plain.q_table.tobytes()).hexdigest()[:16] == PINNED[compiled]
     np.testing.assert_array_equal(plain.greedy_table, plain.q_table)
     assert plain.delay_trace_values is None
     assert (plain.reward_kernel, plain.delay_trace, plain.greedy_window) == (None, None, None)
@@ -133,15 +133,15 @@ def test_a_learn_run_replayed_through_the_compiled_loop_is_identical(options):
         np.testing.assert_array_equal(agent.delay_trace_values, trace)
 
 
-@pytest.mark.parametrize("fused", [True, False], ids=["compiled", "python"])
-def test_runs_continue_across_learn_calls(fused):
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "python"])
+def test_runs_continue_across_learn_calls(compiled):
     """In pieces with ``reset_num_timesteps=False`` as in one go: tables, trace, average."""
     options = {"reward_kernel": 2.0, "delay_trace": 0.8, "greedy_window": 700}
-    whole = make(**options).learn(3_000, fused=fused, log_interval=None)
+    whole = make(**options).learn(3_000, compiled=compiled, log_interval=None)
     pieces = make(**options)
     for steps in (1_000, 7, 1_993):
-        pieces.learn(steps, fused=fused, reset_num_timesteps=False, log_interval=None)
-    assert pieces.last_learn_path == ("fused" if fused else "python")
+        pieces.learn(steps, compiled=compiled, reset_num_timesteps=False, log_interval=None)
+    assert pieces.last_learn_path == ("compiled" if compiled else "python")
     np.testing.assert_array_equal(pieces.q_table, whole.q_table)
     np.testing.assert_array_equal(pieces.delay_trace_values, whole.delay_trace_values)
     np.testing.assert_array_equal(pieces.greedy_table, whole.greedy_table)
@@ -177,12 +177,12 @@ def test_kernel_credits_each_table_the_weighted_reward():
     assert weights[3] == pytest.approx(math.exp(-9 / 8), rel=1e-15)
 
 
-@pytest.mark.parametrize("fused", [True, False], ids=["compiled", "python"])
-def test_a_very_wide_kernel_is_the_thesis_rule(fused):
-    plain = make().learn(3_000, fused=fused, log_interval=None)
-    overflowing = make(reward_kernel=1e200).learn(3_000, fused=fused, log_interval=None)
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "python"])
+def test_a_very_wide_kernel_is_the_thesis_rule(compiled):
+    plain = make().learn(3_000, compiled=compiled, log_interval=None)
+    overflowing = make(reward_kernel=1e200).learn(3_000, compiled=compiled, log_interval=None)
     np.testing.assert_array_equal(overflowing.q_table, plain.q_table)  # every weight exactly 1
-    narrow = make(reward_kernel=0.5).learn(3_000, fused=fused, log_interval=None)
+    narrow = make(reward_kernel=0.5).learn(3_000, compiled=compiled, log_interval=None)
     assert not np.allclose(narrow.q_table, plain.q_table)
 
 
@@ -261,11 +261,11 @@ def test_trace_one_is_full_credit_once_every_model_has_acted():
     np.testing.assert_array_equal(trace, np.ones(4))
 
 
-@pytest.mark.parametrize("fused", [True, False], ids=["compiled", "python"])
-def test_trace_carries_over_episode_ends(fused):
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "python"])
+def test_trace_carries_over_episode_ends(compiled):
     env = gym.make(GRID5, reward_delay=2, max_steps=7)  # an episode every 7 steps
     agent = MMQ(env, max_delay_estimate=4, q_init=10.0, seed=1, delay_trace=0.5)
-    agent.learn(35, fused=fused, record=True, log_interval=None)
+    agent.learn(35, compiled=compiled, record=True, log_interval=None)
     drawn = agent.training_log["acting_delay_index"]
     assert agent.training_log["episode_end"].sum() == 5
     expected = np.zeros(agent.n_models)
@@ -275,15 +275,15 @@ def test_trace_carries_over_episode_ends(fused):
 
 
 # ---------------------------------------------------------------------- the greedy readout
-@pytest.mark.parametrize("fused", [True, False], ids=["compiled", "python"])
-def test_greedy_table_is_the_moving_average_of_the_q_table(fused):
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "python"])
+def test_greedy_table_is_the_moving_average_of_the_q_table(compiled):
     window = 1_000
     interval = window // 100
     agent = make(greedy_window=window)
     np.testing.assert_array_equal(agent.greedy_table, agent.q_table)  # before any update
     average = None
     for _ in range(300):
-        agent.learn(interval, fused=fused, reset_num_timesteps=False, log_interval=None)
+        agent.learn(interval, compiled=compiled, reset_num_timesteps=False, log_interval=None)
         q = agent.q_table.copy()
         average = q if average is None else average + (interval / window) * (q - average)
     np.testing.assert_array_equal(agent.greedy_table, average)
@@ -302,15 +302,15 @@ def test_greedy_table_is_the_moving_average_of_the_q_table(fused):
         agent.greedy_table[0, 0, 0] = 1.0
 
 
-@pytest.mark.parametrize("fused", [True, False], ids=["compiled", "python"])
-def test_greedy_updates_fall_on_the_same_training_steps_in_one_run(fused):
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "python"])
+def test_greedy_updates_fall_on_the_same_training_steps_in_one_run(compiled):
     """One ``learn()`` call averages at every ``interval``-th step, as the pieces above did."""
     window = 250  # interval 2
-    whole = make(greedy_window=window).learn(999, fused=fused, log_interval=None)
+    whole = make(greedy_window=window).learn(999, compiled=compiled, log_interval=None)
     pieces = make(greedy_window=window)
     average = None
     for steps in [2] * 499 + [1]:
-        pieces.learn(steps, fused=fused, reset_num_timesteps=False, log_interval=None)
+        pieces.learn(steps, compiled=compiled, reset_num_timesteps=False, log_interval=None)
         if pieces.num_timesteps % 2 == 0:
             q = pieces.q_table.copy()
             average = q if average is None else average + (2 / window) * (q - average)
@@ -355,26 +355,26 @@ def assert_same_state(a, b):
     )
 
 
-@pytest.mark.parametrize("fused", [True, False], ids=["compiled", "python"])
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "python"])
 @pytest.mark.parametrize(
     "duplicate",
     [copy.deepcopy, lambda agent: pickle.loads(pickle.dumps(agent))],
     ids=["deepcopy", "pickle"],
 )
-def test_copies_keep_the_options_and_continue_exactly(fused, duplicate):
-    original = make(**ALL).learn(1_001, fused=fused, log_interval=None)
+def test_copies_keep_the_options_and_continue_exactly(compiled, duplicate):
+    original = make(**ALL).learn(1_001, compiled=compiled, log_interval=None)
     twin = duplicate(original)
     assert_same_state(twin, original)
     assert not np.shares_memory(twin.delay_trace_values, original._trace)
     for agent in (original, twin):
-        agent.learn(1_500, fused=fused, reset_num_timesteps=False, log_interval=None)
+        agent.learn(1_500, compiled=compiled, reset_num_timesteps=False, log_interval=None)
         agent.update(3, 1, 1.0, 4)
     assert_same_state(twin, original)
 
 
-@pytest.mark.parametrize("fused", [True, False], ids=["compiled", "python"])
-def test_save_load_keeps_the_options_and_training_continues_exactly(tmp_path, fused):
-    original = make(**ALL).learn(1_001, fused=fused, log_interval=None)
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "python"])
+def test_save_load_keeps_the_options_and_training_continues_exactly(tmp_path, compiled):
+    original = make(**ALL).learn(1_001, compiled=compiled, log_interval=None)
     path = original.save(tmp_path / "m")
     with np.load(path) as data:
         saved = json.loads(str(data["metadata"]))["hyperparameters"]
@@ -383,7 +383,7 @@ def test_save_load_keeps_the_options_and_training_continues_exactly(tmp_path, fu
     assert_same_state(loaded, original)
     original.set_env(gym.make(GRID5, reward_delay=3))  # a fresh env, as the loaded agent's
     for agent in (original, loaded):
-        agent.learn(1_500, fused=fused, reset_num_timesteps=False, log_interval=None)
+        agent.learn(1_500, compiled=compiled, reset_num_timesteps=False, log_interval=None)
     assert_same_state(loaded, original)
 
 

@@ -28,9 +28,9 @@ from delayed_rl.agents import (
     TabularAgent,
     load_agent,
 )
+from delayed_rl.compiled import NotCompilable
 from delayed_rl.delays import Constant, Poisson
 from delayed_rl.experiments.training import greedy_average_reward
-from delayed_rl.fast import NotCompilable
 from delayed_rl.wrappers import RewardDelay
 
 GRID3, GRID5 = "delayed_rl/GridWorld-3x3-v0", "delayed_rl/GridWorld-5x5-v0"
@@ -88,15 +88,15 @@ def test_the_wrapper_is_found_anywhere_in_the_stack_and_sets_the_history():
 
 
 def test_it_runs_compiled_by_default_where_the_stack_compiles():
-    # the compiled rule is the Python one update for update: tests/test_fused_credit.py
+    # the compiled rule is the Python one update for update: tests/test_compiled_credit.py
     agent = OracleQLearning(oracle_env(), seed=0)
     assert agent.compiled_tables().held_transitions == agent.history_length > 0
     agent.learn(100)
-    assert agent.last_learn_path == "fused"
-    agent.learn(100, fused=False)
+    assert agent.last_learn_path == "compiled"
+    agent.learn(100, compiled=False)
     assert agent.last_learn_path == "python"
     with pytest.raises(NotCompilable, match="wrapper RecordInfos is not supported"):
-        OracleQLearning(RecordInfos(oracle_env()), seed=0).learn(100, fused=True)
+        OracleQLearning(RecordInfos(oracle_env()), seed=0).learn(100, compiled=True)
 
 
 # ---------------------------------------------------------------------- the rule, by hand
@@ -210,20 +210,22 @@ def test_learning_reads_neither_the_undelayed_reward_nor_the_received_one():
 
 
 # ---------------------------------------------------------------------- reductions
-@pytest.mark.parametrize("fused", [False, True])
-def test_without_delay_it_is_q_learning_update_for_update(fused):
+@pytest.mark.parametrize("compiled", [False, True])
+def test_without_delay_it_is_q_learning_update_for_update(compiled):
     oracle = OracleQLearning(oracle_env(GRID5, Constant(0)), seed=3, **SETTINGS)
-    q = QLearning(gym.make(GRID5), seed=3, **SETTINGS).learn(5_000, fused=fused)
-    np.testing.assert_array_equal(oracle.learn(5_000, fused=fused).q_table, q.q_table)
+    q = QLearning(gym.make(GRID5), seed=3, **SETTINGS).learn(5_000, compiled=compiled)
+    np.testing.assert_array_equal(oracle.learn(5_000, compiled=compiled).q_table, q.q_table)
 
 
-@pytest.mark.parametrize("fused", [False, True])
+@pytest.mark.parametrize("compiled", [False, True])
 @pytest.mark.parametrize("k", [1, 3])
-def test_under_a_constant_delay_it_is_fixed_delay_q_learning(k, fused):
+def test_under_a_constant_delay_it_is_fixed_delay_q_learning(k, compiled):
     oracle = OracleQLearning(oracle_env(GRID5, Constant(k)), seed=2, **SETTINGS)
     env = gym.make(GRID5, reward_delay=Constant(k))
-    fixed = FixedDelayQLearning(env, delay_estimate=k, seed=2, **SETTINGS).learn(5_000, fused=fused)
-    np.testing.assert_array_equal(oracle.learn(5_000, fused=fused).q_table, fixed.q_table)
+    fixed = FixedDelayQLearning(env, delay_estimate=k, seed=2, **SETTINGS).learn(
+        5_000, compiled=compiled
+    )
+    np.testing.assert_array_equal(oracle.learn(5_000, compiled=compiled).q_table, fixed.q_table)
 
 
 # ---------------------------------------------------------------------- behaviour
@@ -234,7 +236,7 @@ def test_under_poisson_delays_it_learns_what_undelayed_q_learning_learns():
         oracle = OracleQLearning(oracle_env(GRID5, Poisson(3.0)), seed=seed, **SETTINGS)
         q = QLearning(gym.make(GRID5), seed=seed, **SETTINGS)
         for agent in (oracle, q):
-            agent.learn(20_000, fused=False, log_interval=None, record=True)
+            agent.learn(20_000, compiled=False, log_interval=None, record=True)
         assert greedy_average_reward(oracle, 5) == pytest.approx(optimum), seed
         # measured 0.0036–0.0097 over seeds 0–9: 5× margin
         gap = np.abs(oracle.q_table.max(axis=(1, 2)) - q.q_table.max(axis=(1, 2))).max()

@@ -11,8 +11,8 @@ import pytest
 from support import binned_chisquare
 
 import delayed_rl  # noqa: F401
+from delayed_rl.compiled import CompiledRun
 from delayed_rl.delays import AliasTable, Poisson
-from delayed_rl.fast import FusedRun
 from delayed_rl.wrappers import RewardDelay
 
 ALPHA = 1e-3
@@ -68,10 +68,10 @@ def test_poisson_scalar_and_shaped_draws():
 
 
 @pytest.mark.parametrize("max_delay", [None, 6])
-def test_fused_run_draws_poisson_delays(max_delay):
+def test_compiled_run_draws_poisson_delays(max_delay):
     """The compiled run's delays are Poisson(λ), capped like the wrapper's (the tail at the cap)."""
     env = RewardDelay(gym.make("delayed_rl/GridWorld-3x3-v0").unwrapped, 9.0, max_delay=max_delay)
-    run = FusedRun(env, np.array([0]), seed=4)
+    run = CompiledRun(env, np.array([0]), seed=4)
     draws = np.concatenate([run._draw_delays(10_000) for _ in range(5)])
     pmf = Poisson(9.0).pmf(np.arange(60))
     if max_delay is not None:

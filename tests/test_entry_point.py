@@ -1,11 +1,11 @@
-"""``delayed_rl.fast._numba.entry_point``: a compiled function called without numba's dispatch."""
+"""``delayed_rl._numba.entry_point``: a compiled function called without numba's dispatch."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from delayed_rl.fast._numba import HAVE_NUMBA, entry_point, jit
+from delayed_rl._numba import HAVE_NUMBA, entry_point, jit
 
 pytestmark = pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed")
 

@@ -26,8 +26,8 @@ def run_example(name: str, *args: str, capsys: pytest.CaptureFixture) -> str:
 def test_own_tabular_env_trains_on_the_compiled_path(capsys):
     out = run_example("own_tabular_env.py", "--steps", "50000", capsys=capsys)
     lines = out.strip().splitlines()
-    assert len(lines) == 2 and all("trained on the fused path" in line for line in lines)
-    assert "DeconvolutionQLearning: trained on the fused path, greedy actions [1, 1]" in lines[1]
+    assert len(lines) == 2 and all("trained on the compiled path" in line for line in lines)
+    assert "DeconvolutionQLearning: trained on the compiled path, greedy actions [1, 1]" in lines[1]
 
 
 @pytest.mark.sb3

@@ -71,7 +71,7 @@ def base(tmp_path_factory) -> Base:
     env = gym.make(GRID3, reward_delay=1)
     path = (
         QLearning(env, q_init=5.0, seed=0)
-        .learn(300, fused=False)
+        .learn(300, compiled=False)
         .save(tmp_path_factory.mktemp("good") / "good")
     )
     with np.load(path) as data:

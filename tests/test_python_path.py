@@ -123,7 +123,7 @@ def test_compiled_credit_weights_are_the_numpy_ones(options: str) -> None:
 def _trained(agent_class, **kwargs):
     env = RewardDelay(GridWorldEnv(size=4, max_steps=40), Poisson(2))
     agent = agent_class(env, q_init=5.0, seed=3, **kwargs)
-    return agent.learn(1_500, fused=False)
+    return agent.learn(1_500, compiled=False)
 
 
 @pytest.mark.parametrize(
@@ -140,10 +140,10 @@ def test_copies_learn_into_their_own_tables(agent_class, kwargs, duplicate) -> N
     agent = _trained(agent_class, **kwargs)
     twin = duplicate(agent)
     before = agent.q_table.copy()
-    twin.learn(1_000, reset_num_timesteps=False, fused=False)
+    twin.learn(1_000, reset_num_timesteps=False, compiled=False)
     np.testing.assert_array_equal(agent.q_table, before)
     assert not np.array_equal(twin.q_table, before)
-    agent.learn(1_000, reset_num_timesteps=False, fused=False)
+    agent.learn(1_000, reset_num_timesteps=False, compiled=False)
     np.testing.assert_array_equal(agent.q_table, twin.q_table)
     for trained in (agent, twin):
         v_max, _ = exact_cache(trained.q_table)

@@ -3,7 +3,7 @@
 :meth:`~delayed_rl.agents.base.TabularAgent.learn` is split as stable-baselines3 splits its own:
 a setup that checks the arguments and builds a :class:`LearnRun`, one of two step loops —
 :func:`python_loop` here, which runs any ``Discrete`` env, or the compiled loop of
-:mod:`delayed_rl.agents._fused` — and a finish that logs and closes the callbacks.
+:mod:`delayed_rl.agents._compiled` — and a finish that logs and closes the callbacks.
 """
 
 from __future__ import annotations

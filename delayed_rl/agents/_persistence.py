@@ -56,7 +56,7 @@ _STREAMS = (("rng_state", "rng_block"), ("predict_rng_state", "predict_rng_block
 _SCHEDULE_FIELDS = {"linear": ("start", "end", "end_fraction"), "constant": ("value",)}
 _SCHEDULE_FIELDS["callable"] = _SCHEDULE_FIELDS["constant"]  # and its "repr", a string
 _STEPS_NOTE = " (MAX_TIMESTEPS = 2**40, delayed_rl.agents._loop.MAX_TIMESTEPS)"  # array checks
-_OPTIONAL = ("env", "_fused", "_logger")
+_OPTIONAL = ("env", "_compiled", "_logger")
 """What a copy keeps when it can be copied, and drops (``None``) otherwise."""
 
 
@@ -436,7 +436,7 @@ def _dropped(agent: Any, name: str, error: Exception) -> None:
 def _without_env(state: dict[str, Any]) -> dict[str, Any]:
     """A state whose env was dropped: no compiled run either; the next env is reset."""
     if state.get("env") is None:
-        state["_fused"] = None
+        state["_compiled"] = None
         state["_episode_ended"] = True
     return state
 
@@ -447,7 +447,7 @@ class CopyProtocol:
     ``copy.deepcopy`` and ``pickle`` copy every attribute but the :attr:`_derived` ones, which
     :meth:`_rebuild_derived` recomputes on the copy (a view of a table would otherwise become a
     separate array: the copy would learn into one and act from the other). The env, the compiled
-    run (``_fused``: its state and random generator, so the copy continues it identically) and
+    run (``_compiled``: its state and random generator, so the copy continues it identically) and
     the logger are copied when they can be, dropped otherwise (an env with a warning).
     ``copy.copy`` shares every attribute with the original.
     """

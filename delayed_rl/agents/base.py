@@ -34,7 +34,7 @@ import numpy as np
 
 from delayed_rl._validation import check_bool
 from delayed_rl.agents import _persistence
-from delayed_rl.agents._fused import CompiledTables, check_fused, compiled_loop, compiled_run
+from delayed_rl.agents._compiled import CompiledTables, check_compiled, compiled_loop, compiled_run
 from delayed_rl.agents._loop import (
     RECORD_DTYPES,
     TrainingLog,
@@ -98,7 +98,7 @@ class TabularAgent(_persistence.CopyProtocol, ABC):
         exploration_rate: the current ε.
         training_log: after ``learn(..., record=True)``, one array per step for each key of
             :data:`RECORD_KEYS`.
-        last_learn_path: ``"fused"`` or ``"python"``: the loop the last ``learn()`` ran on.
+        last_learn_path: ``"compiled"`` or ``"python"``: the loop the last ``learn()`` ran on.
 
     ``copy.deepcopy`` and ``pickle`` give an independent agent that resumes exactly (own tables,
     streams, env, compiled run); what cannot be copied is dropped: an env (with a warning: call
@@ -111,7 +111,7 @@ class TabularAgent(_persistence.CopyProtocol, ABC):
     """Those a model file may lack (added since files were first written): their defaults apply."""
     n_models: int = 1
     """How many delay models the agent acts from (|Λ|; 1 for a single Q-table)."""
-    fused_chunk: int = 1_000
+    compiled_chunk: int = 1_000
     """Steps per compiled call when callbacks are attached (they are called between calls)."""
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
@@ -159,7 +159,7 @@ class TabularAgent(_persistence.CopyProtocol, ABC):
         self.exploration_rate = self.exploration_schedule(1.0)
         self.num_timesteps = 0
         self._logger: Any = None
-        self._fused: Any = None
+        self._compiled: Any = None
         self.training_log: dict[str, np.ndarray] = TrainingLog()
         self._uniform = UniformStream.from_seed(self.seed)
         self._predict_uniform = UniformStream.from_seed(self.seed, (PREDICT_STREAM,))
@@ -200,7 +200,7 @@ class TabularAgent(_persistence.CopyProtocol, ABC):
         """The arrays the compiled path trains in place, or ``None`` (no compiled twin).
 
         An agent whose rule is MMQ's (any Λ) returns its own Q-table, its cache and Λ; the
-        compiled loop (:mod:`delayed_rl.fast`) then runs the same rule on them. The default,
+        compiled loop (:mod:`delayed_rl.compiled`) then runs the same rule on them. The default,
         ``None``, keeps ``learn()`` on the Python path.
         """
         return None
@@ -231,10 +231,10 @@ class TabularAgent(_persistence.CopyProtocol, ABC):
         """
         self.env = check_spaces_match(make_env(env), self.observation_space, self.action_space)
         self._vec_env = None
-        self._fused = None  # a compiled run belongs to the episode it was in
+        self._compiled = None  # a compiled run belongs to the episode it was in
         self._env_seeded = False
         self._episode_ended = True
-        #: A compiled run left the env mid-episode (see ``_fused._leave_compiled_episode``).
+        #: A compiled run left the env mid-episode (see ``_compiled._leave_compiled_episode``).
         self._compiled_episode = False
         self._end_episode()
 
@@ -368,7 +368,7 @@ class TabularAgent(_persistence.CopyProtocol, ABC):
         reset_num_timesteps: bool = True,
         progress_bar: bool = False,
         record: bool = False,
-        fused: bool | None = None,
+        compiled: bool | None = None,
     ) -> TabularAgent:
         """Train for ``total_timesteps`` steps of the env (SB3's signature and semantics).
 
@@ -396,12 +396,12 @@ class TabularAgent(_persistence.CopyProtocol, ABC):
                 ``reward`` (received), ``undelayed_reward`` (a reward-delay wrapper's
                 ``info["undelayed_reward"]``, else the reward), ``acting_delay_index`` (into
                 ``delay_estimates``) and ``episode_end``.
-            fused: run the whole loop compiled (:mod:`delayed_rl.fast`, which says what
+            compiled: run the whole loop compiled (:mod:`delayed_rl.compiled`, which says what
                 compiles and how callbacks see a compiled run): ``None`` (default) does when it
                 can — the agent has :meth:`compiled_tables`, the env stack compiles, the
                 learning rate is constant and no ``callback`` is given (``progress_bar`` is
                 fine); ``False`` never does; ``True`` must (raises
-                :class:`~delayed_rl.fast.NotCompilable` with the reason otherwise). Both paths
+                :class:`~delayed_rl.compiled.NotCompilable` with the reason otherwise). Both paths
                 apply the same update rule; their random streams differ, so seeded runs agree
                 in distribution, not step by step.
 
@@ -412,7 +412,7 @@ class TabularAgent(_persistence.CopyProtocol, ABC):
             TypeError: an argument has the wrong type.
             ValueError: a bad value, or the agent has no env.
         """
-        fused = check_fused(fused, callback)
+        compiled = check_compiled(compiled, callback)
         run = setup_learn(
             self,
             total_timesteps,
@@ -423,12 +423,12 @@ class TabularAgent(_persistence.CopyProtocol, ABC):
             progress_bar,
             record,
         )
-        fused_run = compiled_run(self, fused, reset_num_timesteps)
-        self.last_learn_path = "python" if fused_run is None else "fused"
-        if fused_run is None:
+        prepared = compiled_run(self, compiled, reset_num_timesteps)
+        self.last_learn_path = "python" if prepared is None else "compiled"
+        if prepared is None:
             python_loop(self, run)
         else:
-            compiled_loop(self, fused_run, run)
+            compiled_loop(self, prepared, run)
         finish_learn(self, run)
         return self
 

@@ -43,7 +43,7 @@ import gymnasium as gym
 import numpy as np
 
 from delayed_rl._validation import check_choice, check_int, check_real
-from delayed_rl.agents._fused import CompiledTables
+from delayed_rl.agents._compiled import CompiledTables
 from delayed_rl.agents._loop import MAX_TIMESTEPS
 from delayed_rl.agents._persistence import check_state_array
 from delayed_rl.agents._regression import STATISTICS_LIMIT, RewardRegression, statistics_bytes
@@ -51,8 +51,8 @@ from delayed_rl.agents.expected_credit import credit_weights
 from delayed_rl.agents.hyperparameters import MAX_ABS_VALUE, check_limit, shares_hyperparameters
 from delayed_rl.agents.mmq import MAX_TABLE_BYTES, table_bytes
 from delayed_rl.agents.qlearning import QLearning
+from delayed_rl.compiled.kernel import RewardModel
 from delayed_rl.delays import Delay, Empirical
-from delayed_rl.fast.kernel import RewardModel
 from delayed_rl.wrappers.reward_delay import find_reward_delay
 
 __all__ = [

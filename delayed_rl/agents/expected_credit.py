@@ -39,12 +39,12 @@ import gymnasium as gym
 import numpy as np
 
 from delayed_rl._delay_line import ring_size
+from delayed_rl._numba import jit as _jit
 from delayed_rl._validation import check_int
-from delayed_rl.agents._fused import CompiledTables
+from delayed_rl.agents._compiled import CompiledTables
 from delayed_rl.agents.hyperparameters import shares_hyperparameters
 from delayed_rl.agents.qlearning import QLearning
 from delayed_rl.delays import Delay, Empirical, as_delay
-from delayed_rl.fast._numba import jit as _jit
 
 __all__ = ["ExpectedCreditQLearning", "credit_weights"]
 
@@ -133,7 +133,7 @@ class ExpectedCreditQLearning(QLearning):
     reward, never the wrapper's ``info``. ``q_table`` has shape ``(|S|, 1, |A|)`` and acting is
     Q-learning's, so ``predict``, ``greedy_actions`` and ``save``/``load`` work as for
     :class:`~delayed_rl.agents.QLearning`. ``learn()`` runs compiled when the env stack does
-    (:mod:`delayed_rl.fast`), with the same rule.
+    (:mod:`delayed_rl.compiled`), with the same rule.
 
     Args:
         env: the training env (``Discrete`` observation and action spaces) or an env id.

@@ -34,14 +34,14 @@ import gymnasium as gym
 import numpy as np
 
 from delayed_rl._delay_line import ring_size
+from delayed_rl._numba import jit as _jit
 from delayed_rl._validation import check_int, check_real
-from delayed_rl.agents._fused import CompiledTables
+from delayed_rl.agents._compiled import CompiledTables
 from delayed_rl.agents._loop import MAX_TIMESTEPS, MAX_TIMESTEPS_TEXT
 from delayed_rl.agents._persistence import check_state_array
 from delayed_rl.agents.base import TabularAgent
 from delayed_rl.agents.hyperparameters import MAX_ABS_VALUE, check_limit, shares_hyperparameters
-from delayed_rl.fast._numba import jit as _jit
-from delayed_rl.fast.kernel import TableAverage, credit_kernel
+from delayed_rl.compiled.kernel import TableAverage, credit_kernel
 
 __all__ = ["MAX_TABLE_BYTES", "MMQ", "MultipleModelQLearning", "greedy_actions", "table_bytes"]
 

@@ -40,7 +40,7 @@ import gymnasium as gym
 import numpy as np
 
 from delayed_rl._delay_line import delay_bound, ring_size
-from delayed_rl.agents._fused import CompiledTables
+from delayed_rl.agents._compiled import CompiledTables
 from delayed_rl.agents.env_util import make_env
 from delayed_rl.agents.hyperparameters import check_value, shares_hyperparameters
 from delayed_rl.agents.qlearning import QLearning
@@ -61,8 +61,8 @@ class OracleQLearning(QLearning):
     ``(|S|, 1, |A|)`` and acting is Q-learning's (ε-greedy, random tie-breaks), so
     ``predict``, ``greedy_actions`` and ``save``/``load`` work as for
     :class:`~delayed_rl.agents.QLearning`. ``learn()`` runs compiled when the env stack does
-    (:mod:`delayed_rl.fast`): the compiled loop keeps the record of who emitted each reward
-    itself (:mod:`delayed_rl.fast.arrivals`) and makes the same updates in the same order.
+    (:mod:`delayed_rl.compiled`): the compiled loop keeps the record of who emitted each reward
+    itself (:mod:`delayed_rl.compiled.arrivals`) and makes the same updates in the same order.
 
     Args:
         env: the training env, wrapped in ``RewardDelay(env, delay, record_arrivals=True)``

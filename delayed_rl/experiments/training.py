@@ -7,7 +7,7 @@ reach, and MMQ's estimates do not converge to the true values (V* ≈ 2.2 on 9×
 all models in every target inflates them, to ≈ 21.4 along the route in the thesis's Table 5.1
 (≈ 18 in ours). A sensitivity check (seeds 0–4, 1M steps, greedy reward over 1000 steps) is
 in ``benchmarks/REPORT.md``.
-On these tabular envs ``learn()`` takes its compiled path (:mod:`delayed_rl.fast`).
+On these tabular envs ``learn()`` takes its compiled path (:mod:`delayed_rl.compiled`).
 """
 
 from __future__ import annotations

@@ -411,7 +411,7 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
     ) -> None:
         """Show the flush-trap watch steps of this stack that did not go through :meth:`step`.
 
-        The compiled training path (:mod:`delayed_rl.fast`) steps the env's tables or robot
+        The compiled training path (:mod:`delayed_rl.compiled`) steps the env's tables or robot
         itself, not this wrapper; it passes each chunk's emitted rewards and episode ends here,
         so an agent trained either way is warned alike. The steps count towards
         :data:`FLUSH_WATCH_STEPS` after those taken through :meth:`step`.

@@ -14,7 +14,7 @@ bit:
 - :func:`drive` on :func:`handles`: all the sub-steps of a robot step, and the pose read after
   them, in one compiled (numba) loop that calls the C functions by address. The
   differential-drive arithmetic between the calls is the same expressions, compiled without
-  reassociation or fused operations, and the heading's sine and cosine are
+  reassociation or compiled operations, and the heading's sine and cosine are
   ``delayed_rl._portable_math.sincos``'s on both routes (the same bits compiled or not, on
   every CPU; the C library's ``sin`` and ``cos`` pick a variant by CPU). Only on platforms where a ``cpVect`` argument or result (a struct of two doubles)
   is passed exactly like two doubles (the System V x86-64 and AArch64 conventions of Linux and
@@ -34,7 +34,7 @@ import pymunk
 from numpy.typing import NDArray
 
 from delayed_rl import _portable_math as portable_math
-from delayed_rl.fast._numba import HAVE_NUMBA, entry_point, jit
+from delayed_rl._numba import HAVE_NUMBA, entry_point, jit
 
 __all__ = [
     "PythonCalls",
@@ -286,7 +286,7 @@ def handles(
 def drive_entry() -> Any:
     """:func:`drive` as the robot calls it at every step, without numba's per-call dispatch.
 
-    Its arguments' types are fixed (:func:`~delayed_rl.fast._numba.entry_point`): the
+    Its arguments' types are fixed (:func:`~delayed_rl._numba.entry_point`): the
     :func:`handles` array, five floats, a bool, two floats, the sub-step count and three floats.
     """
     return entry_point(drive, np.zeros(8, np.int64), *[0.0] * 5, False, 1.0, 1.0, 1, *[1.0] * 3)

@@ -12,7 +12,7 @@ rounded once as IEEE 754 requires of every CPU. No complex arithmetic (numpy's c
 and absolute values run SIMD loops chosen for the CPU, some with fused multiply-adds), no
 ``hypot`` (a C library function) and no ``np.maximum`` (whose SIMD loops treat −0.0 their own
 way): a product of complex numbers is written out as ``ar·br − ai·bi``, ``ar·bi + ai·br``, a
-distance as ``sqrt(x·x + y·y)``, a clip as comparisons. numba compiles them without fused
+distance as ``sqrt(x·x + y·y)``, a clip as comparisons. numba compiles them without compiled
 operations or reassociation, for any target CPU. ``tests/test_linefollow_kernels.py`` checks
 both paths against each other on random queries and ``tests/test_cpu_independence.py`` checks
 whole trajectories with numpy's SIMD loops and numba's host-CPU code turned off.
@@ -28,7 +28,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from delayed_rl.fast._numba import HAVE_NUMBA, jit
+from delayed_rl._numba import HAVE_NUMBA, jit
 
 __all__ = [
     "CameraArrays",

@@ -13,6 +13,7 @@ from gymnasium import spaces
 from numpy.typing import ArrayLike, NDArray
 
 from delayed_rl import _portable_math as portable_math
+from delayed_rl._numba import entry_point
 from delayed_rl._validation import (
     check_choice,
     check_fraction,
@@ -25,7 +26,6 @@ from delayed_rl.envs.linefollow import _kernels
 from delayed_rl.envs.linefollow.camera import CENTRE_PIXEL, N_PIXELS, Camera, line_centroid
 from delayed_rl.envs.linefollow.robot import EPuckRobot
 from delayed_rl.envs.linefollow.track import TRACK_NAMES, Track, make_track
-from delayed_rl.fast._numba import entry_point
 
 __all__ = [
     "CONTROL_PERIOD",
@@ -224,7 +224,7 @@ class EPuckLineFollowEnv(gym.Env):
     env runs the numpy and Python code they mirror, several times slower, with the same
     trajectories to the last bit. With centroid states, discrete actions and no
     ``command_latency``, the agents' ``learn()`` steps the env inside their compiled training
-    loop (:mod:`delayed_rl.fast.robot`), again to the last bit.
+    loop (:mod:`delayed_rl.compiled.robot`), again to the last bit.
 
     An argument of the wrong type (``max_steps="5"``, ``motor_lag=True``, ``action_mode=1``)
     raises ``TypeError``; one of the right type but out of range (``max_steps=0``,
@@ -559,7 +559,7 @@ class EPuckLineFollowEnv(gym.Env):
         """The current track's :meth:`_compiled_arguments`, made again when the track changes.
 
         With them, ``_observe`` is :func:`_kernels.observe` compiled for their types, called
-        without numba's dispatch (:func:`~delayed_rl.fast._numba.entry_point`): the pose, the
+        without numba's dispatch (:func:`~delayed_rl._numba.entry_point`): the pose, the
         hint and the noise levels are converted to its float and int arguments.
         """
         track = self.track

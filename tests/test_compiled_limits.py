@@ -10,10 +10,10 @@ import pytest
 
 import delayed_rl  # noqa: F401  (registers the ids)
 from delayed_rl.agents import QLearning
+from delayed_rl.compiled import CompiledRun, NotCompilable
+from delayed_rl.compiled.run import RING_LIMIT
 from delayed_rl.delays import Uniform
 from delayed_rl.envs.gridworld import GridWorldEnv
-from delayed_rl.fast import FusedRun, NotCompilable
-from delayed_rl.fast.run import RING_LIMIT
 from delayed_rl.wrappers import RewardDelay
 
 
@@ -49,7 +49,7 @@ def test_the_step_log_stays_small_however_long_the_run():
     agent.learn(2_000_000, log_interval=None)
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
-    assert agent.last_learn_path == "fused"
+    assert agent.last_learn_path == "compiled"
     assert peak < 16 * 2**20, peak
 
 
@@ -57,7 +57,7 @@ def test_a_delay_that_could_outrun_the_ring_limit_runs_on_the_python_path():
     """``Uniform(0, 2**27)`` on a continuing env: 1 GiB of ring compiled; the Python path instead."""
     env = RewardDelay(GridWorldEnv(size=3), Uniform(0, 2**27))
     with pytest.raises(NotCompilable, match=r"can reach 134217728 steps.*limit is 4194304 slots"):
-        FusedRun(env, np.array([0]), seed=0)
+        CompiledRun(env, np.array([0]), seed=0)
     agent = QLearning(env, seed=0)
     tracemalloc.start()
     agent.learn(20_000, log_interval=None)
@@ -73,7 +73,7 @@ def test_episodes_that_end_bound_the_ring_without_changing_what_is_delivered():
     Each episode's delivered rewards still sum to its undelayed rewards (flush).
     """
     env = RewardDelay(GridWorldEnv(size=3, max_steps=50), Uniform(0, 2**27))
-    run = FusedRun(env, np.array([0]), seed=1)
+    run = CompiledRun(env, np.array([0]), seed=1)
     assert run.delay_clip == 50
     q = np.zeros((9, 1, 4))
     flat = q.reshape(9, -1)

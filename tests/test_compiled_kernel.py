@@ -10,15 +10,15 @@ import pytest
 from support import ScriptedDelay
 
 import delayed_rl  # noqa: F401
-from delayed_rl.delays import Constant, Empirical, Geometric, Poisson, Uniform
-from delayed_rl.fast import FusedRun, NotCompilable, inspect_stack
-from delayed_rl.fast.kernel import (
+from delayed_rl.compiled import CompiledRun, NotCompilable, inspect_stack
+from delayed_rl.compiled.kernel import (
     TableAverage,
     _rescan,
     _rescan_lanes,
     _rescan_scalar,
     replay,
 )
+from delayed_rl.delays import Constant, Empirical, Geometric, Poisson, Uniform
 from delayed_rl.wrappers import RewardDelay
 
 
@@ -52,7 +52,7 @@ def test_roulette_walk_through_tables_3_2_to_3_5():
 
 def test_constant_delay_ring_delivers_k_steps_late():
     env = RewardDelay(gym.make("delayed_rl/GridWorld-3x3-v0").unwrapped, Constant(3))
-    run = FusedRun(env, np.array([0]), seed=1)
+    run = CompiledRun(env, np.array([0]), seed=1)
     q = np.zeros((9, 1, 4))
     log = _run(run, q, _cache(q), 5000, 0, 0.1, 0.9, 1.0, 1.0, 1)
     np.testing.assert_array_equal(log.reward[3:], log.undelayed_reward[:-3])
@@ -61,7 +61,7 @@ def test_constant_delay_ring_delivers_k_steps_late():
 
 def test_flush_at_episode_end_conserves_each_episode():
     env = gym.make("delayed_rl/GridWorld-v0", size=4, max_steps=50, reward_delay=8)
-    run = FusedRun(env, np.array([0, 4]), seed=2)
+    run = CompiledRun(env, np.array([0, 4]), seed=2)
     q = np.zeros((16, 2, 4))
     log = _run(run, q, _cache(q), 5000, 0, 0.1, 0.9, 0.5, 0.5, 1)
     ends = np.flatnonzero(log.episode_end) + 1
@@ -77,7 +77,7 @@ def test_same_seed_same_run_and_tables_follow_the_env():
     logs = []
     for _ in range(2):
         q = np.zeros((1, 1, 2))
-        run = FusedRun(env, np.array([0]), seed=7)
+        run = CompiledRun(env, np.array([0]), seed=7)
         logs.append(_run(run, q, _cache(q), 38_000, 0, 0.1, 0.9, 1.0, 1.0, 1))
     np.testing.assert_array_equal(logs[0].undelayed_reward, logs[1].undelayed_reward)
     even = logs[0].undelayed_reward[logs[0].action == 0]
@@ -105,7 +105,7 @@ def test_cached_maxima_stay_exact(q_init):
     env = gym.make("delayed_rl/GridWorld-v0", size=4, max_steps=300, reward_delay=3)
     q = np.full((16, 8, 4), q_init)
     qmax, qcell = _cache(q)
-    run = FusedRun(env, np.arange(8), seed=3)
+    run = CompiledRun(env, np.arange(8), seed=3)
     _run(run, q, (qmax, qcell), 20_000, 0, 0.3, 0.9, 0.2, 0.2, 1)
     brute = q.reshape(16, -1).max(axis=1)
     np.testing.assert_array_equal(qmax, brute)
@@ -148,7 +148,7 @@ def test_a_rescan_of_a_row_with_a_nan_stays_in_the_row(rescan):
 def test_an_average_the_loop_cannot_keep_is_refused():
     env = gym.make("delayed_rl/GridWorld-v0", size=4, reward_delay=3)
     q = np.zeros((16, 2, 4))
-    run = FusedRun(env, np.arange(2), seed=0)
+    run = CompiledRun(env, np.arange(2), seed=0)
     good = TableAverage(np.zeros_like(q), np.zeros(2, np.int64), 5, 0.1)
     bad = {
         "table": good._replace(table=np.zeros((16, 2, 3))),
@@ -184,7 +184,7 @@ def test_tie_counts_kept_within_a_call_match_a_fresh_count(env_id, kwargs):
     for chunk in (3000, 1):
         q = np.zeros((env.observation_space.n, 6, env.action_space.n))
         cache = _cache(q)
-        run = FusedRun(env, np.arange(6), seed=9)
+        run = CompiledRun(env, np.arange(6), seed=9)
         parts = [
             _run(run, q, cache, chunk, start, 1.0, 0.0, 0.1, 0.1, 1)
             for start in range(0, 3000, chunk)
@@ -241,7 +241,9 @@ def test_compiled_delay_ring_matches_the_wrapper(mode, delay, max_delay):
     grid = gym.make("delayed_rl/GridWorld-v0", size=4, max_steps=40).unwrapped
     env = RewardDelay(grid, ScriptedDelay(draws), max_delay=max_delay, on_episode_end=mode)
     q = np.zeros((16, 1, 4))
-    log = _run(FusedRun(env, np.array([0]), seed=5), q, _cache(q), 4000, 0, 0.1, 0.9, 1.0, 1.0, 1)
+    log = _run(
+        CompiledRun(env, np.array([0]), seed=5), q, _cache(q), 4000, 0, 0.1, 0.9, 1.0, 1.0, 1
+    )
     assert log.episode_end.sum() == 100 and np.count_nonzero(log.undelayed_reward) > 100
     replay = _Replay(log.undelayed_reward, log.episode_end, log.terminated)
     wrapper = RewardDelay(replay, ScriptedDelay(draws), max_delay=max_delay, on_episode_end=mode)
@@ -299,7 +301,7 @@ def test_time_limits_compile_and_deliver_what_the_python_stack_does(mode, inner,
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         log = _run(
-            FusedRun(env, np.array([0]), seed=3), q, _cache(q), 3000, 0, 0.1, 0.9, 1.0, 1.0, 1
+            CompiledRun(env, np.array([0]), seed=3), q, _cache(q), 3000, 0, 0.1, 0.9, 1.0, 1.0, 1
         )
     np.testing.assert_array_equal(
         np.flatnonzero(log.episode_end) + 1, np.arange(length, 3001, length)
@@ -324,7 +326,7 @@ def test_time_limits_compile_and_deliver_what_the_python_stack_does(mode, inner,
 
 def _credit_table(steps, **options):
     """The Q-table after ``steps`` compiled MMQ steps, Λ = {0, 1, 2}, on GridWorld-3x3, seed 0."""
-    run = FusedRun(
+    run = CompiledRun(
         RewardDelay(gym.make("delayed_rl/GridWorld-3x3-v0"), Constant(1)), np.arange(3), 0
     )
     q = np.full((9, 3, 4), 1.0)

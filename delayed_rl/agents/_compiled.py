@@ -3,7 +3,7 @@
 An agent whose learning rule has a compiled twin says so through
 :meth:`~delayed_rl.agents.base.TabularAgent.compiled_tables`, which returns the arrays the
 compiled path trains in place (:class:`CompiledTables`); the shell never reaches into an agent's
-internals. :func:`compiled_run` builds (or continues) the :class:`~delayed_rl.fast.FusedRun` of
+internals. :func:`compiled_run` builds (or continues) the :class:`~delayed_rl.compiled.CompiledRun` of
 the agent's env, and :func:`compiled_loop` runs a ``learn()`` call's steps on it, chunk by chunk,
 replaying each chunk's steps to the callbacks.
 """
@@ -18,7 +18,7 @@ import numpy as np
 from delayed_rl._validation import check_bool
 from delayed_rl.agents._loop import LearnRun, step_locals
 
-__all__ = ["MAX_CHUNK", "CompiledTables", "check_fused", "compiled_loop", "compiled_run"]
+__all__ = ["MAX_CHUNK", "CompiledTables", "check_compiled", "compiled_loop", "compiled_run"]
 
 MAX_CHUNK = 1 << 16
 """The most steps one compiled call takes: its step log (42 bytes a step) stays a few MiB
@@ -37,20 +37,20 @@ class CompiledTables(NamedTuple):
         v_cell: the flat index into ``q`` of an entry holding that max.
         delay_estimates: Λ, sorted ascending (``int64``).
         reward_model: learn from estimated mean rewards, fed the steps
-            (:class:`~delayed_rl.fast.kernel.RewardModel`); ``None``: the delivered rewards.
+            (:class:`~delayed_rl.compiled.kernel.RewardModel`); ``None``: the delivered rewards.
         chunk_limit: the most steps the next chunk may take (``None``: no limit).
         after_chunk: called with each chunk's length once it has run (``None``: nothing).
         credit_kernel: MMQ's reward kernel, a weight per distance ``|λ̂ − λ̂*|`` in steps
-            (:func:`~delayed_rl.fast.kernel.credit_kernel`); ``None``: off.
+            (:func:`~delayed_rl.compiled.kernel.credit_kernel`); ``None``: off.
         trace_decay: β of MMQ's delay trace; ``None``: off.
         trace: the delay trace (one float64 per model, the agent's own: updated in place);
             read only with ``trace_decay``.
         lag_rates: the learning rate of each of Λ's lags when they all update one table
             (expected credit); ``None``: one table per lag, each learning at α.
         held_transitions: the oracle's history length: the run credits each transition with
-            its own reward (:mod:`delayed_rl.fast.arrivals`); ``None``: the delivered rewards.
+            its own reward (:mod:`delayed_rl.compiled.arrivals`); ``None``: the delivered rewards.
         average: a moving average of ``q`` the run keeps up to date, step by step
-            (:class:`~delayed_rl.fast.kernel.TableAverage`: MMQ's greedy window); ``None``:
+            (:class:`~delayed_rl.compiled.kernel.TableAverage`: MMQ's greedy window); ``None``:
             none.
     """
 
@@ -69,20 +69,20 @@ class CompiledTables(NamedTuple):
     average: Any = None
 
 
-def check_fused(fused: Any, callback: Any) -> bool | None:
-    """``learn()``'s ``fused`` checked; ``None`` (automatic) becomes ``False`` with a callback.
+def check_compiled(compiled: Any, callback: Any) -> bool | None:
+    """``learn()``'s ``compiled`` checked; ``None`` (automatic) becomes ``False`` with a callback.
 
     Callbacks see the exact per-step model on the Python path, so the automatic choice takes it.
 
     Raises:
-        TypeError: ``fused`` is neither ``None`` nor a bool.
+        TypeError: ``compiled`` is neither ``None`` nor a bool.
     """
-    if fused is not None:
-        return check_bool("fused", fused)
+    if compiled is not None:
+        return check_bool("compiled", compiled)
     return False if callback is not None else None
 
 
-def compiled_run(agent: Any, fused: bool | None, restart: bool) -> Any:
+def compiled_run(agent: Any, compiled: bool | None, restart: bool) -> Any:
     """The compiled run to train with, or ``None`` for the Python loop (see ``learn``).
 
     A run continues (same episode, history and pending rewards) across ``learn()`` calls
@@ -93,13 +93,13 @@ def compiled_run(agent: Any, fused: bool | None, restart: bool) -> Any:
     wrapper then warns of the pending rewards it discards).
 
     Raises:
-        NotCompilable: ``fused=True`` and the run cannot be compiled (the message says why).
+        NotCompilable: ``compiled=True`` and the run cannot be compiled (the message says why).
     """
-    if fused is False:
+    if compiled is False:
         _leave_compiled_episode(agent)
         return None
-    from delayed_rl.fast import FusedRun, NotCompilable
-    from delayed_rl.fast.robot import linked
+    from delayed_rl.compiled import CompiledRun, NotCompilable
+    from delayed_rl.compiled.robot import linked
 
     try:
         if not agent._lr_constant:
@@ -107,21 +107,21 @@ def compiled_run(agent: Any, fused: bool | None, restart: bool) -> Any:
         tables = agent.compiled_tables()
         if tables is None:
             raise NotCompilable(f"{type(agent).__name__} has no compiled learning rule")
-        cached = agent._fused
+        cached = agent._compiled
         stepped = linked(agent.env.unwrapped)  # the run steps the env itself (the e-puck)
         moved = stepped and not agent._compiled_episode  # the env is not where a run left it
         if cached is None or cached[0] is not agent.env or restart or moved:
             if moved and agent.env.unwrapped._steps:  # the Python loop left it mid-episode:
                 agent._obs = agent._reset_env()  # its delay wrapper says what the reset discards
             seed = int(agent._uniform.rng.integers(2**63))
-            fused_run = FusedRun(
+            compiled_run = CompiledRun(
                 agent.env, tables.delay_estimates, seed, held_transitions=tables.held_transitions
             )
-            agent._fused = (agent.env, fused_run)
-        return agent._fused[1]
+            agent._compiled = (agent.env, compiled_run)
+        return agent._compiled[1]
     except NotCompilable:
-        if fused:
-            agent._fused = None
+        if compiled:
+            agent._compiled = None
             raise
         _leave_compiled_episode(agent)
         return None
@@ -136,10 +136,10 @@ def _leave_compiled_episode(agent: Any) -> None:
     """
     if agent._compiled_episode:
         agent._obs = agent._reset_env()
-    agent._fused = None
+    agent._compiled = None
 
 
-def compiled_loop(agent: Any, fused_run: Any, run: LearnRun) -> None:
+def compiled_loop(agent: Any, compiled_run: Any, run: LearnRun) -> None:
     """Take ``run.n_steps`` steps on the compiled path, in chunks between callbacks and logs.
 
     Should a chunk or a callback raise (``KeyboardInterrupt`` included), the run is dropped and
@@ -147,25 +147,25 @@ def compiled_loop(agent: Any, fused_run: Any, run: LearnRun) -> None:
     state and the agent's tables out of step with each other.
     """
     try:
-        _compiled_chunks(agent, fused_run, run)
+        _compiled_chunks(agent, compiled_run, run)
     except BaseException:
-        agent._fused = None
+        agent._compiled = None
         agent._episode_ended = True
         agent._compiled_episode = False
         raise
-    if fused_run.robot is None:
+    if compiled_run.robot is None:
         agent._episode_ended = True  # the env object was not stepped: reset it next time
     else:  # the run stepped the env: a compiled continuation goes on from where it is
         agent._episode_ended = False
         agent._compiled_episode = True
-        agent._obs = int(fused_run.state[0])
+        agent._obs = int(compiled_run.state[0])
 
 
-def _compiled_chunks(agent: Any, fused_run: Any, run: LearnRun) -> None:
+def _compiled_chunks(agent: Any, compiled_run: Any, run: LearnRun) -> None:
     eps_steps = max(1, round(agent.exploration_fraction * run.total_timesteps))
     if agent.exploration_initial_eps == agent.exploration_final_eps:
         eps_steps = 1
-    chunk = agent.fused_chunk if run.callback is not None else MAX_CHUNK
+    chunk = agent.compiled_chunk if run.callback is not None else MAX_CHUNK
     if run.log_interval is not None:
         chunk = min(chunk, run.log_interval)
     while run.steps_done < run.n_steps:
@@ -173,7 +173,7 @@ def _compiled_chunks(agent: Any, fused_run: Any, run: LearnRun) -> None:
         length = min(chunk, run.n_steps - run.steps_done, run.next_log - run.steps_done)
         if tables.chunk_limit is not None:
             length = min(length, tables.chunk_limit)
-        out = fused_run.run(
+        out = compiled_run.run(
             tables.q,
             tables.v_max,
             tables.v_cell,
@@ -202,7 +202,7 @@ def _compiled_chunks(agent: Any, fused_run: Any, run: LearnRun) -> None:
         agent._progress_remaining = 1.0 - (agent.num_timesteps - 1) / run.total_timesteps
         agent.exploration_rate = agent.exploration_schedule(agent._progress_remaining)
         if run.callback is not None and not _replay_to_callback(
-            agent, run, out, int(fused_run.state[0]), agent.num_timesteps - length
+            agent, run, out, int(compiled_run.state[0]), agent.num_timesteps - length
         ):
             break
         run.log_if_due(agent)

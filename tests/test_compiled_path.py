@@ -10,9 +10,9 @@ import delayed_rl  # noqa: F401
 from delayed_rl.agents import MMQ, FixedDelayQLearning, QLearning
 from delayed_rl.agents.callbacks import BaseCallback
 from delayed_rl.agents.schedules import LinearSchedule
+from delayed_rl.compiled import NotCompilable
+from delayed_rl.compiled.kernel import replay
 from delayed_rl.delays import Geometric
-from delayed_rl.fast import NotCompilable
-from delayed_rl.fast.kernel import replay
 from delayed_rl.wrappers import RewardDelay
 
 
@@ -32,24 +32,27 @@ def test_scripted_transitions_give_identical_tables(lags):
     np.testing.assert_array_equal(agent.q_table, q)
 
 
-def _mean_rewards(make_agent, fused: bool, seeds: range) -> np.ndarray:
+def _mean_rewards(make_agent, compiled: bool, seeds: range) -> np.ndarray:
     """Each seed's mean undelayed training reward over 20k steps, on one path."""
     out = []
     for seed in seeds:
         agent = make_agent(seed)
-        agent.learn(20_000, record=True, fused=fused)
-        assert agent.last_learn_path == ("fused" if fused else "python")
+        agent.learn(20_000, record=True, compiled=compiled)
+        assert agent.last_learn_path == ("compiled" if compiled else "python")
         out.append(agent.training_log["undelayed_reward"].mean())
     return np.array(out)
 
 
 def _assert_paths_agree(make_agent, n_seeds: int) -> tuple[np.ndarray, np.ndarray]:
     """Both paths on disjoint seeds: mean rewards equal within 4 standard errors of the gap."""
-    fused = _mean_rewards(make_agent, True, range(n_seeds))
+    compiled = _mean_rewards(make_agent, True, range(n_seeds))
     python = _mean_rewards(make_agent, False, range(100, 100 + n_seeds))
-    gap_se = np.sqrt(fused.var(ddof=1) / fused.size + python.var(ddof=1) / python.size)
-    assert abs(fused.mean() - python.mean()) < 4 * gap_se + 1e-3 * fused.mean(), (fused, python)
-    return fused, python
+    gap_se = np.sqrt(compiled.var(ddof=1) / compiled.size + python.var(ddof=1) / python.size)
+    assert abs(compiled.mean() - python.mean()) < 4 * gap_se + 1e-3 * compiled.mean(), (
+        compiled,
+        python,
+    )
+    return compiled, python
 
 
 @pytest.mark.statistical
@@ -60,8 +63,8 @@ def test_seeded_runs_agree_in_distribution():
         env = gym.make("delayed_rl/GridWorld-5x5-v0", reward_delay=5)
         return MMQ(env, delay_estimates=list(range(9)), q_init=10.0, seed=seed)
 
-    fused, _ = _assert_paths_agree(make_agent, 6)
-    assert fused.mean() > 0.3  # both learn the 9-step route (optimum 10/9 ≈ 1.11)
+    compiled, _ = _assert_paths_agree(make_agent, 6)
+    assert compiled.mean() > 0.3  # both learn the 9-step route (optimum 10/9 ≈ 1.11)
 
 
 @pytest.mark.statistical
@@ -83,26 +86,26 @@ def test_auto_falls_back_and_can_be_switched_off_or_forced():
     agent = QLearning(scaled, seed=0).learn(500)
     assert agent.last_learn_path == "python"
     with pytest.raises(NotCompilable, match="TransformReward"):
-        agent.learn(500, fused=True)
+        agent.learn(500, compiled=True)
     scheduled = QLearning(
         "delayed_rl/GridWorld-3x3-v0", learning_rate=LinearSchedule(0.5, 0.1, 1.0)
     )
     assert scheduled.learn(500).last_learn_path == "python"
     with pytest.raises(NotCompilable, match="schedule"):
-        scheduled.learn(500, fused=True)
+        scheduled.learn(500, compiled=True)
     plain = QLearning("delayed_rl/GridWorld-3x3-v0", seed=0)
-    assert plain.learn(500).last_learn_path == "fused"
-    assert plain.learn(500, fused=False).last_learn_path == "python"
-    with pytest.raises(TypeError, match="fused must be a bool"):
-        plain.learn(10, fused="yes")
+    assert plain.learn(500).last_learn_path == "compiled"
+    assert plain.learn(500, compiled=False).last_learn_path == "python"
+    with pytest.raises(TypeError, match="compiled must be a bool"):
+        plain.learn(10, compiled="yes")
 
 
-def test_fused_fills_the_diagnostics_and_the_record():
+def test_compiled_fills_the_diagnostics_and_the_record():
     agent = MMQ(
         gym.make("delayed_rl/GridWorld-5x5-v0", reward_delay=3), max_delay_estimate=6, seed=1
     )
     agent.learn(5000, record=True, log_interval=1000)
-    assert agent.last_learn_path == "fused" and agent.num_timesteps == 5000
+    assert agent.last_learn_path == "compiled" and agent.num_timesteps == 5000
     assert {key: len(value) for key, value in agent.training_log.items()} == dict.fromkeys(
         agent.training_log, 5000
     )
@@ -141,9 +144,9 @@ def test_callbacks_see_every_step_and_stop_at_the_chunk_end():
 
     recorder = Recorder()
     agent = QLearning("delayed_rl/GridWorld-3x3-v0", seed=0)
-    agent.fused_chunk = 500
-    agent.learn(10_000, callback=recorder, record=True, fused=True)
-    assert agent.last_learn_path == "fused"
+    agent.compiled_chunk = 500
+    agent.learn(10_000, callback=recorder, record=True, compiled=True)
+    assert agent.last_learn_path == "compiled"
     assert recorder.n_calls == 2700 and agent.num_timesteps == 3000  # stops at its chunk's end
     steps, obs, actions, rewards, _ = map(np.array, zip(*recorder.seen, strict=True))
     np.testing.assert_array_equal(steps, np.arange(1, 2701))

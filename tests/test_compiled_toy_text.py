@@ -58,7 +58,7 @@ def test_gym_make_toy_text_runs_compiled_and_is_the_python_rule(env_id, kwargs, 
         env = RewardDelay(env, Geometric(0.3), on_episode_end="carry")
     settings = {"delay_estimates": [0, 2, 4], "learning_rate": 0.5, "seed": 1}
     agent = MultipleModelQLearning(env, **settings).learn(STEPS, record=True)
-    assert agent.last_learn_path == "fused"  # compiled by default
+    assert agent.last_learn_path == "compiled"  # compiled by default
     log = agent.training_log
     s2 = logged_next_states(env, log)
     ends = np.flatnonzero(log["episode_end"])
@@ -85,7 +85,7 @@ def test_slippery_frozen_lake_compiles_with_the_tables_probabilities():
     env = gym.make("FrozenLake-v1")
     agent = QLearning(env, seed=0, exploration_initial_eps=1.0, exploration_final_eps=1.0)
     agent.learn(60_000, record=True)
-    assert agent.last_learn_path == "fused"
+    assert agent.last_learn_path == "compiled"
     log = agent.training_log
     keep = ~log["episode_end"][:-1].astype(bool)  # steps whose next state is logged
     s, a, s2 = log["obs"][:-1][keep], log["action"][:-1][keep], log["obs"][1:][keep]
@@ -97,12 +97,12 @@ def test_slippery_frozen_lake_compiles_with_the_tables_probabilities():
     assert np.all(np.abs(counts / n - 1 / 3) < 4 * np.sqrt(2 / 9 / n))
 
 
-@pytest.mark.parametrize("fused", [True, False], ids=["compiled", "python"])
-def test_an_agent_is_warned_of_the_flush_trap_on_either_path(fused):
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "python"])
+def test_an_agent_is_warned_of_the_flush_trap_on_either_path(compiled):
     env = PoissonRewardDelay(gym.make("FrozenLake-v1"), lam=5)
     with pytest.warns(UserWarning, match="at an episode's final step"):
-        QLearning(env, seed=0).learn(20_000, fused=fused)
+        QLearning(env, seed=0).learn(20_000, compiled=compiled)
     env = PoissonRewardDelay(gym.make("Taxi-v4"), lam=5)  # rewards along the way
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        QLearning(env, seed=0).learn(5_000, fused=fused)
+        QLearning(env, seed=0).learn(5_000, compiled=compiled)

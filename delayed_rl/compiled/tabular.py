@@ -32,7 +32,7 @@ A user's own tabular env compiles when it follows the same protocol: give it ``P
         # reset() and step() as usual: the Python path, and the checks, use them
 
 ``examples/own_tabular_env.py`` is that env, trained on both paths. (The e-puck line follower
-has no tables; the compiled loop steps it itself, :mod:`delayed_rl.fast.robot`.)
+has no tables; the compiled loop steps it itself, :mod:`delayed_rl.compiled.robot`.)
 """
 
 from __future__ import annotations
@@ -163,7 +163,7 @@ def inspect_stack(env: gym.Env, tables: bool = True) -> tuple[TabularModel, Rewa
 
     The model's ``max_steps`` and ``cut_steps`` include the stack's ``TimeLimit`` wrappers (see the
     module docstring). With ``tables=False`` the env's own tables are not read (an env the
-    compiled loop steps itself, :mod:`delayed_rl.fast.robot`): the model's are empty.
+    compiled loop steps itself, :mod:`delayed_rl.compiled.robot`): the model's are empty.
 
     Raises:
         NotCompilable: if a wrapper or the env itself is outside the protocol.

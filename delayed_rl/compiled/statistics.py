@@ -3,7 +3,7 @@
 :class:`~delayed_rl.agents.deconvolution.DeconvolutionQLearning` regresses each received reward
 on the (state, action) pairs of the steps before it (see :mod:`delayed_rl.agents._regression`
 for the model and the solves). :func:`observe` adds one step to the statistics; the Python path
-calls it once a step, and the compiled loop (:func:`delayed_rl.fast.kernel.run_chunk`) inlines the
+calls it once a step, and the compiled loop (:func:`delayed_rl.compiled.kernel.run_chunk`) inlines the
 same function, so both paths keep identical statistics.
 
 **Co-occurrence rows.** The counts of "pair ``i`` followed ``m`` steps later by pair ``j``" are
@@ -24,7 +24,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from delayed_rl.fast._numba import jit as _jit
+from delayed_rl._numba import jit as _jit
 
 __all__ = ["Statistics", "find_row", "observe"]
 

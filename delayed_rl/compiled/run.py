@@ -9,9 +9,9 @@ import warnings
 import numpy as np
 
 from delayed_rl._delay_line import delay_bound, draw_delays, regrow_ring, ring_size
-from delayed_rl.fast import arrivals, kernel
-from delayed_rl.fast.robot import RobotLink, linked
-from delayed_rl.fast.tabular import NotCompilable, inspect_stack
+from delayed_rl.compiled import arrivals, kernel
+from delayed_rl.compiled.robot import RobotLink, linked
+from delayed_rl.compiled.tabular import NotCompilable, inspect_stack
 
 _MODES = {"flush": kernel.FLUSH, "drop": kernel.DROP, "carry": kernel.CARRY}
 
@@ -28,23 +28,23 @@ DELAY_BLOCK = 4096
 how ``learn()`` splits it (``log_interval``, callbacks)."""
 
 
-class FusedRun:
+class CompiledRun:
     """The state of a compiled training run on one env stack: history, delay ring, clocks.
 
     The Q-table and its cached maxima belong to the agent and are updated in place. A tabular
     env is simulated from its tables with the run's generator; its env object is not stepped.
-    The e-puck env (:mod:`delayed_rl.fast.robot`) is stepped itself, with its own generator
+    The e-puck env (:mod:`delayed_rl.compiled.robot`) is stepped itself, with its own generator
     drawing its noise: the run starts where the env is (reset it first, as ``learn()`` does) and
     leaves it where the run is.
 
     Args:
-        env: the env stack (see :mod:`delayed_rl.fast.tabular` for what compiles).
+        env: the env stack (see :mod:`delayed_rl.compiled.tabular` for what compiles).
         delay_estimates: Λ, the agent's delay estimates (sorted), one per Q-table model.
         seed: seeds the run's own generators: one in the compiled code (actions, env
-            outcomes: :func:`~delayed_rl.fast.kernel.next_uniform`) and, apart from it, the
+            outcomes: :func:`~delayed_rl.compiled.kernel.next_uniform`) and, apart from it, the
             reward delays'. No other run, thread or copy draws from them.
         held_transitions: for the oracle (who learns each transition from its own reward,
-            :mod:`delayed_rl.fast.arrivals`), how many recent transitions it credits; ``None``:
+            :mod:`delayed_rl.compiled.arrivals`), how many recent transitions it credits; ``None``:
             the run learns from the delivered rewards.
 
     Attributes:
@@ -55,10 +55,10 @@ class FusedRun:
             compiled code keeps them to read the acting model off the cached arg-max unless the
             max is tied).
         arrivals: the oracle's record of who emitted each pending reward
-            (:class:`~delayed_rl.fast.arrivals.Arrivals`), or ``None``.
+            (:class:`~delayed_rl.compiled.arrivals.Arrivals`), or ``None``.
         wrapper: the stack's reward-delay wrapper, or ``None``; its flush-trap watch sees the
             run's steps (:meth:`~delayed_rl.wrappers.RewardDelay.watch_steps_taken_elsewhere`).
-        robot: the link to the e-puck env the run steps (:class:`~delayed_rl.fast.robot.RobotLink`),
+        robot: the link to the e-puck env the run steps (:class:`~delayed_rl.compiled.robot.RobotLink`),
             or ``None`` for a tabular env.
 
     Raises:
@@ -186,19 +186,19 @@ class FusedRun:
             eps_final: ε from training step ``eps_steps`` on (linear in between).
             eps_steps: the length of the ε ramp (>= 1).
             reward_model: learn from estimated mean rewards (see
-                :class:`~delayed_rl.fast.kernel.RewardModel`); ``None``: the delivered rewards.
+                :class:`~delayed_rl.compiled.kernel.RewardModel`); ``None``: the delivered rewards.
             credit_kernel: the reward kernel's weights by distance in steps
-                (:func:`~delayed_rl.fast.kernel.credit_kernel`); ``None``: off.
+                (:func:`~delayed_rl.compiled.kernel.credit_kernel`); ``None``: off.
             trace_decay: β of the delay trace (``None``: off; then ``trace`` is not read).
             trace: the delay trace, one float64 per model, updated in place (the agent's).
             lag_rates: the learning rate of each lag, for a rule crediting several lags in one
-                table (:attr:`~delayed_rl.fast.kernel.Rule.lag_rates`); ``None``: α for all.
+                table (:attr:`~delayed_rl.compiled.kernel.Rule.lag_rates`); ``None``: α for all.
             average: a moving average of ``q`` to keep up to date
-                (:class:`~delayed_rl.fast.kernel.TableAverage`, its table shaped as ``q``);
+                (:class:`~delayed_rl.compiled.kernel.TableAverage`, its table shaped as ``q``);
                 ``None``: none.
 
         Returns:
-            One entry per step (:class:`~delayed_rl.fast.kernel.StepLog`); :attr:`state`
+            One entry per step (:class:`~delayed_rl.compiled.kernel.StepLog`); :attr:`state`
             ``[0]`` is the state after the last.
 
         Raises:
@@ -275,7 +275,7 @@ class FusedRun:
 
 
 def _check_average(average: kernel.TableAverage, shape: tuple[int, ...]) -> None:
-    """Refuse a :class:`~delayed_rl.fast.kernel.TableAverage` the compiled loop cannot use.
+    """Refuse a :class:`~delayed_rl.compiled.kernel.TableAverage` the compiled loop cannot use.
 
     Raises:
         ValueError: the table is not a C-contiguous float64 array of ``shape``, the clock not

@@ -12,8 +12,8 @@ import pytest
 
 import delayed_rl  # noqa: F401  (registers the ids)
 from delayed_rl.agents import MMQ, QLearning
-from delayed_rl.fast import FusedRun
-from delayed_rl.fast.kernel import generator_state, next_uniform
+from delayed_rl.compiled import CompiledRun
+from delayed_rl.compiled.kernel import generator_state, next_uniform
 
 MASK = (1 << 64) - 1
 
@@ -75,7 +75,7 @@ def _two_part_run(seed: int, between=None) -> np.ndarray:
     if between is not None:
         between()
     agent.learn(20_000, reset_num_timesteps=False)
-    assert agent.last_learn_path == "fused"
+    assert agent.last_learn_path == "compiled"
     return agent.q_table.copy()
 
 
@@ -105,7 +105,7 @@ def test_runs_in_threads_match_runs_alone():
 @pytest.mark.parametrize("copier", [copy.deepcopy, lambda run: copy.deepcopy(copy.deepcopy(run))])
 def test_a_copied_run_continues_exactly_like_the_original(copier):
     env = _grid()
-    run = FusedRun(env, np.arange(4), seed=5)
+    run = CompiledRun(env, np.arange(4), seed=5)
     q = np.full((25, 4, 4), 10.0)
     flat = q.reshape(25, -1)
     cache = [flat.max(axis=1), np.arange(25) * 16 + flat.argmax(axis=1)]
@@ -134,7 +134,7 @@ def test_how_learn_splits_a_run_changes_nothing():
     for log_interval in (None, 777, 10_000):
         agent = MMQ(_grid(), max_delay_estimate=6, q_init=20.0, seed=8)
         agent.learn(150_000, log_interval=log_interval)
-        assert agent.last_learn_path == "fused"
+        assert agent.last_learn_path == "compiled"
         tables.append(agent.q_table.copy())
     for table in tables[1:]:
         np.testing.assert_array_equal(tables[0], table)

@@ -1,6 +1,6 @@
 """The compiled expected-credit and oracle rules: the Python rule, update for update.
 
-Each test lets the compiled loop act and learn (``learn(fused=True, record=True)``), then feeds
+Each test lets the compiled loop act and learn (``learn(compiled=True, record=True)``), then feeds
 the same transitions, one by one, to a fresh agent's Python ``update()`` — for the oracle through
 a Python ``RewardDelay`` with the same scripted delays, whose ``info["reward_arrivals"]`` it
 reads — and asserts the two Q-tables are equal to the last bit.
@@ -64,8 +64,8 @@ def test_compiled_expected_credit_is_the_python_rule(mode, delay, max_delay):
     env = RewardDelay(grid(), delay, max_delay=max_delay, on_episode_end=mode)
     make = {"delay": delay, "max_delay": max_delay, **SETTINGS}
     compiled = ExpectedCreditQLearning(env, seed=3, **make)
-    compiled.learn(STEPS, fused=True, record=True)
-    assert compiled.last_learn_path == "fused"
+    compiled.learn(STEPS, compiled=True, record=True)
+    assert compiled.last_learn_path == "compiled"
     log = compiled.training_log
     assert np.count_nonzero(log["reward"]) > 50  # rewards came, and got credited
     python = ExpectedCreditQLearning(env, seed=3, **make)
@@ -93,8 +93,8 @@ def test_compiled_oracle_is_the_python_rule(mode, max_steps):
     )
     compiled = OracleQLearning(env, seed=5, **SETTINGS)
     assert compiled.history_length == 32  # a ScriptedDelay of mean 1: 1 + 10 + 20 steps back
-    compiled.learn(STEPS, fused=True, record=True)
-    assert compiled.last_learn_path == "fused"
+    compiled.learn(STEPS, compiled=True, record=True)
+    assert compiled.last_learn_path == "compiled"
     log = compiled.training_log
     replayed = RewardDelay(
         LoggedGrid(log, 4), ScriptedDelay(draws), record_arrivals=True, on_episode_end=mode
@@ -136,5 +136,5 @@ def test_the_compiled_rules_learn_the_grid_under_poisson_delays(agent):
     else:
         trained = ExpectedCreditQLearning(env, delay=5.0, max_delay=30, seed=0, **settings)
     trained.learn(100_000)  # compiled by default
-    assert trained.last_learn_path == "fused"
+    assert trained.last_learn_path == "compiled"
     assert is_optimal(greedy_policy(trained), 5)

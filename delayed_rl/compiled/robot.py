@@ -5,7 +5,7 @@ actions is a tabular env to an agent (``Discrete(41)`` states, ``Discrete(7)`` a
 dynamics are a physics simulation rather than a table ``P``. Its step is already compiled piece
 by piece (the Chipmunk sub-steps, :func:`~delayed_rl.envs.linefollow._chipmunk.drive`; the
 camera and the track position, :func:`~delayed_rl.envs.linefollow._kernels.observe`); here the
-Python between the pieces is compiled too, so :func:`~delayed_rl.fast.kernel.run_chunk` steps
+Python between the pieces is compiled too, so :func:`~delayed_rl.compiled.kernel.run_chunk` steps
 the robot itself (:func:`robot_step`) and a whole training chunk runs without returning to
 Python.
 
@@ -18,7 +18,7 @@ fraction of a millisecond each): putting a lost robot back on the track
 (``lost_line="recover"``), which rebuilds its pymunk space, and the reset at an episode's end.
 
 What compiles (:class:`RobotLink` says why not, as
-:class:`~delayed_rl.fast.tabular.NotCompilable`): ``observation_mode="centroid"``,
+:class:`~delayed_rl.compiled.tabular.NotCompilable`): ``observation_mode="centroid"``,
 ``action_mode="discrete"``, no ``command_latency``, a fixed track (not ``track="random"``
 without a ``track_seed``), no ``render_mode``, and a platform where the env's own compiled
 physics and camera are in use. Motor lag, wheel slip, camera noise, line contrast, both
@@ -39,13 +39,13 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from delayed_rl import _portable_math as portable_math
+from delayed_rl._numba import HAVE_NUMBA
+from delayed_rl._numba import jit as _jit
+from delayed_rl.compiled.tabular import NotCompilable
 from delayed_rl.envs.linefollow import _chipmunk, _kernels
 from delayed_rl.envs.linefollow.camera import CENTRE_PIXEL, line_centroid
 from delayed_rl.envs.linefollow.env import MAX_WHEEL_SPEED, WHEEL_SPEED_ACTIONS, EPuckLineFollowEnv
 from delayed_rl.envs.linefollow.robot import AXLE_LENGTH, METRES_PER_STEP
-from delayed_rl.fast._numba import HAVE_NUMBA
-from delayed_rl.fast._numba import jit as _jit
-from delayed_rl.fast.tabular import NotCompilable
 
 __all__ = ["Robot", "RobotLink", "linked", "robot_reset", "robot_step"]
 
@@ -76,7 +76,7 @@ _SEGMENT, _LOST, _STEPS = range(3)
 
 
 class Robot(NamedTuple):
-    """The e-puck env as :func:`~delayed_rl.fast.kernel.run_chunk` steps it.
+    """The e-puck env as :func:`~delayed_rl.compiled.kernel.run_chunk` steps it.
 
     Attributes:
         handles: the Chipmunk functions and objects of the env's robot

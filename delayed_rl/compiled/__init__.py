@@ -1,17 +1,17 @@
-"""The compiled (numba) training path for tabular envs and the e-puck; see :class:`FusedRun`.
+"""The compiled (numba) training path for tabular envs and the e-puck; see :class:`CompiledRun`.
 
-``agent.learn()`` runs on it by itself when it can (``learn(fused=None)``, the default): the
+``agent.learn()`` runs on it by itself when it can (``learn(compiled=None)``, the default): the
 agent's rule has a compiled twin (``agent.compiled_tables()`` is not ``None``: every agent of
 :mod:`delayed_rl.agents` — MMQ, Q-learning, fixed-delay Q-learning, deconvolution Q-learning,
-expected credit and the oracle), the env stack compiles (:mod:`delayed_rl.fast.tabular` states the
+expected credit and the oracle), the env stack compiles (:mod:`delayed_rl.compiled.tabular` states the
 protocol), the learning rate is constant and no callback is given (a progress bar is fine).
-``learn(fused=False)`` never does and ``learn(fused=True)`` must (else
+``learn(compiled=False)`` never does and ``learn(compiled=True)`` must (else
 :class:`NotCompilable` says why).
 
 - The update rule is the Python path's; the random streams differ, so seeded runs agree in
   distribution, not step by step. Each path is reproducible from the agent's seed.
 - A tabular env object is not stepped: the compiled loop reads the env's tables. The e-puck
-  line follower is (:mod:`delayed_rl.fast.robot`): the compiled loop steps its robot, its own
+  line follower is (:mod:`delayed_rl.compiled.robot`): the compiled loop steps its robot, its own
   generator drawing its noise, and leaves the env where the run is. Either way the next
   Python-path ``learn()`` resets the env (the run's pending rewards are in the run, not in the
   env's delay wrapper).
@@ -19,15 +19,15 @@ protocol), the learning rate is constant and no callback is given (a progress ba
   version per combination of the rule's options: a reward model, the oracle's record, MMQ's
   credit options, a greedy window, the e-puck), 5-10 s each, and caches it on disk beside the
   package: later runs, processes and workers load it in a fraction of a second.
-- Callbacks (with ``fused=True``) still get one ``on_step()`` per step, with that step's
+- Callbacks (with ``compiled=True``) still get one ``on_step()`` per step, with that step's
   ``locals`` (``info`` holds only ``undelayed_reward``), but they run after each compiled chunk
-  of ``agent.fused_chunk`` steps: the model they see (an ``EvalCallback``'s evaluation, a
+  of ``agent.compiled_chunk`` steps: the model they see (an ``EvalCallback``'s evaluation, a
   ``CheckpointCallback``'s file) is the one at the chunk's end, and a callback's ``False`` stops
   training at the end of its chunk.
 """
 
-from delayed_rl.fast.kernel import HAVE_NUMBA
-from delayed_rl.fast.run import FusedRun
-from delayed_rl.fast.tabular import NotCompilable, TabularModel, inspect_stack
+from delayed_rl.compiled.kernel import HAVE_NUMBA
+from delayed_rl.compiled.run import CompiledRun
+from delayed_rl.compiled.tabular import NotCompilable, TabularModel, inspect_stack
 
-__all__ = ["HAVE_NUMBA", "FusedRun", "NotCompilable", "TabularModel", "inspect_stack"]
+__all__ = ["HAVE_NUMBA", "CompiledRun", "NotCompilable", "TabularModel", "inspect_stack"]

@@ -4,7 +4,7 @@ One function, :func:`run_chunk`, advances a whole training run by a chunk of ste
 (Q-table, cached maxima, history ring, delay ring, clocks) lives in arrays owned by the caller,
 so a run proceeds chunk by chunk, with callbacks and the progress bar between chunks. Its
 arguments come in named groups (:class:`QCache`, :class:`Rule`, the env's
-:class:`~delayed_rl.fast.tabular.TabularModel`, :class:`DelayLine`, :class:`History`,
+:class:`~delayed_rl.compiled.tabular.TabularModel`, :class:`DelayLine`, :class:`History`,
 :class:`StepLog`, :class:`Script`), which numba compiles as tuples.
 
 The update rule is the one of :mod:`delayed_rl.agents.mmq` (its module docstring states it
@@ -20,12 +20,12 @@ import numpy as np
 
 from delayed_rl import _portable_math as portable_math
 from delayed_rl._delay_line import ring_size
-from delayed_rl.fast._numba import HAVE_NUMBA  # noqa: F401  (re-exported: delayed_rl.fast)
-from delayed_rl.fast._numba import jit as _jit
-from delayed_rl.fast.arrivals import end_pending, take_due
-from delayed_rl.fast.arrivals import record as record_arrival
-from delayed_rl.fast.robot import robot_reset, robot_step
-from delayed_rl.fast.statistics import observe
+from delayed_rl._numba import HAVE_NUMBA  # noqa: F401  (re-exported: delayed_rl.compiled)
+from delayed_rl._numba import jit as _jit
+from delayed_rl.compiled.arrivals import end_pending, take_due
+from delayed_rl.compiled.arrivals import record as record_arrival
+from delayed_rl.compiled.robot import robot_reset, robot_step
+from delayed_rl.compiled.statistics import observe
 
 #: Episode-end modes of the reward buffer, as integers for the compiled code.
 FLUSH, DROP, CARRY = 0, 1, 2
@@ -381,7 +381,7 @@ class DelayLine(NamedTuple):
         episode_end_mode: :data:`FLUSH`, :data:`DROP` or :data:`CARRY`.
         discarded: one float, to which the loop adds the pending reward it discards when a
             ``TimeLimit`` above the reward delay cuts an episode
-            (:attr:`~delayed_rl.fast.tabular.TabularModel.cut_steps`; not under "carry").
+            (:attr:`~delayed_rl.compiled.tabular.TabularModel.cut_steps`; not under "carry").
     """
 
     delays: np.ndarray
@@ -469,7 +469,7 @@ class RewardModel(NamedTuple):
     Attributes:
         rewards: ``R̂`` per (state, action) pair ``s·|A| + a``.
         stats: the regression's statistics, fed every step's pair, delivered reward and
-            episode end (:func:`delayed_rl.fast.statistics.observe`).
+            episode end (:func:`delayed_rl.compiled.statistics.observe`).
     """
 
     rewards: np.ndarray
@@ -510,7 +510,7 @@ def run_chunk(
     lags (expected credit, :attr:`Rule.lag_rates`) the lags' increments to one entry add up.
 
     The oracle (``arrivals`` given): instead, the loop records who emitted each reward
-    (:mod:`delayed_rl.fast.arrivals`) and, for every transition whose reward arrives at the step
+    (:mod:`delayed_rl.compiled.arrivals`) and, for every transition whose reward arrives at the step
     (oldest first; all pending ones at a flushing episode end), makes the Q-learning update of
     that transition with its own reward, one after the other, if it is among the
     ``arrivals.held`` most recent.
@@ -540,7 +540,7 @@ def run_chunk(
     Args:
         cache: the Q-table, its cache and the delay trace (:class:`QCache`), updated in place.
         rule: Λ, α, γ, the ε schedule and the credit options (:class:`Rule`).
-        env: the env's outcome tables (:class:`~delayed_rl.fast.tabular.TabularModel`).
+        env: the env's outcome tables (:class:`~delayed_rl.compiled.tabular.TabularModel`).
         line: the reward delay (:class:`DelayLine`).
         history: the episode's transitions and the clocks (:class:`History`), updated in place.
         log: receives one entry per step (:class:`StepLog`).
@@ -549,11 +549,11 @@ def run_chunk(
         rng: the run's generator state (:func:`next_uniform`), advanced in place.
         model: a reward model (:class:`RewardModel`; Λ must then be {0}), or ``None``: learn
             from the delivered rewards.
-        arrivals: the oracle's record (:class:`~delayed_rl.fast.arrivals.Arrivals`, Λ = {0},
+        arrivals: the oracle's record (:class:`~delayed_rl.compiled.arrivals.Arrivals`, Λ = {0},
             not with a script), or ``None``.
         average: a moving average of the Q-table to keep (:class:`TableAverage`), or ``None``.
         robot: the e-puck env to step instead of ``env``'s tables
-            (:class:`~delayed_rl.fast.robot.Robot`, not with a script), or ``None``.
+            (:class:`~delayed_rl.compiled.robot.Robot`, not with a script), or ``None``.
 
     Indices into the Q-table and its cache are cast to unsigned integers, which spares the
     compiled code numba's negative-index handling in the innermost loops (about 5%).
@@ -852,7 +852,7 @@ def replay(
             (``None``: zeros; only read with ``delay_trace``).
         acting: the acting model's index into Λ at each row (``None``: the greedy model).
     """
-    from delayed_rl.fast.tabular import TabularModel
+    from delayed_rl.compiled.tabular import TabularModel
 
     n = transitions.shape[0]
     estimates = np.asarray(delay_estimates, dtype=np.int64)

@@ -2,7 +2,7 @@
 
 :class:`~delayed_rl.agents.OracleQLearning` credits every delayed reward to the transition that
 emitted it. On the Python path it reads the wrapper's record; on the compiled path the loop
-(:func:`delayed_rl.fast.kernel.run_chunk`) keeps the record itself, in :class:`Arrivals`:
+(:func:`delayed_rl.compiled.kernel.run_chunk`) keeps the record itself, in :class:`Arrivals`:
 
 - a *pool* of the last ``P`` transitions, indexed by the run's clock ``e`` (slot ``e & (P − 1)``):
   the transition ``(s, a, s′, terminated)``, its reward and the clock ``due`` of the step that
@@ -23,7 +23,7 @@ from typing import NamedTuple
 import numpy as np
 
 from delayed_rl._delay_line import ring_size
-from delayed_rl.fast._numba import jit as _jit
+from delayed_rl._numba import jit as _jit
 
 __all__ = ["Arrivals", "regrow"]
 
