@@ -22,7 +22,8 @@ import pytest
 import delayed_rl  # noqa: F401  (registers the env ids)
 from delayed_rl.agents import MMQ, FixedDelayQLearning, QLearning, mmq
 from delayed_rl.agents.mmq import greedy_actions
-from delayed_rl.compiled.kernel import credit_kernel, replay
+from delayed_rl.compiled.kernel import replay
+from delayed_rl.compiled.state import credit_kernel
 
 GRID5 = "delayed_rl/GridWorld-5x5-v0"
 STATES = np.arange(25)

@@ -1,9 +1,21 @@
-"""The package's shape: no import cycles, and user subclasses of the agents save and load."""
+"""The package's shape: layers, no import cycles, and user subclasses of the agents save and load.
+
+The layers, from the bottom: the base (validation, delays, the delay line, the numba helpers,
+the portable maths) < {wrappers, envs} < the compiled training path < agents < {experiments,
+sweeps} < the command line. A module imports only from its own layer or below, counting what
+the ``__init__`` of every package on an imported module's path runs (importing
+``delayed_rl.envs.linefollow.env`` runs ``delayed_rl/envs/__init__.py`` and
+``delayed_rl/envs/linefollow/__init__.py``). The root package ``delayed_rl`` is every module's
+parent: it registers the env ids and imports its agents only on first use, so it is not a layer.
+"""
 
 from __future__ import annotations
 
 import ast
 import inspect
+import json
+import subprocess
+import sys
 import warnings
 from dataclasses import asdict
 from pathlib import Path
@@ -113,6 +125,126 @@ def find_cycles(graph: dict[str, set[str]]) -> list[list[str]]:
         if node not in index:
             visit(node)
     return components
+
+
+#: The layers, bottom first: (name, the module prefixes in it).
+LAYERS = [
+    (
+        "base",
+        (
+            "delayed_rl._validation",
+            "delayed_rl._version",
+            "delayed_rl.delays",
+            "delayed_rl._delay_line",
+            "delayed_rl._numba",
+            "delayed_rl._portable_math",
+        ),
+    ),
+    ("wrappers and envs", ("delayed_rl.wrappers", "delayed_rl.envs")),
+    ("the compiled path", ("delayed_rl.compiled",)),
+    ("agents", ("delayed_rl.agents", "delayed_rl.deep")),
+    ("experiments and sweeps", ("delayed_rl.experiments", "delayed_rl.sweep")),
+    ("the command line", ("delayed_rl.cli",)),
+]
+
+
+def layer_of(module: str) -> int | None:
+    """The index in :data:`LAYERS` of ``module`` (``None``: the root package)."""
+    for index, (_, prefixes) in enumerate(LAYERS):
+        if any(module == p or module.startswith(p + ".") for p in prefixes):
+            return index
+    return None
+
+
+def _packages_of(module: str) -> set[str]:
+    """The packages on ``module``'s path, the root's subpackages down to its parent."""
+    parts = module.split(".")
+    return {".".join(parts[:k]) for k in range(2, len(parts))}
+
+
+def with_parents(graph: dict[str, set[str]]) -> dict[str, set[str]]:
+    """``graph`` plus the ``__init__`` of every package an import runs.
+
+    Importing ``N`` from ``M`` runs the ``__init__`` of ``N``'s packages, except those on
+    ``M``'s own path, which were imported before ``M`` was.
+    """
+    full = {}
+    for module, imported in graph.items():
+        edges = set(imported)
+        for name in imported:
+            edges |= _packages_of(name) - _packages_of(module) - {module}
+        full[module] = {name for name in edges if name in graph} - {module}
+    return full
+
+
+def test_every_module_is_in_a_layer():
+    assert [m for m in import_graph() if layer_of(m) is None] == ["delayed_rl"]
+
+
+def test_imports_only_go_down_the_layers():
+    upward = [
+        f"{module} ({LAYERS[layer_of(module)][0]}) imports {name} ({LAYERS[layer_of(name)][0]})"
+        for module, imported in sorted(with_parents(import_graph()).items())
+        if module != "delayed_rl"
+        for name in sorted(imported)
+        if name != "delayed_rl" and layer_of(name) > layer_of(module)
+    ]
+    assert upward == []
+
+
+def test_the_layer_check_sees_an_upward_import_through_a_parent_package():
+    graph = {"delayed_rl.envs.x": {"delayed_rl.agents.y"}, "delayed_rl.agents": set()}
+    graph["delayed_rl.agents.y"] = set()
+    assert with_parents(graph)["delayed_rl.envs.x"] == {"delayed_rl.agents", "delayed_rl.agents.y"}
+
+
+def test_the_root_package_imports_only_the_registration():
+    assert import_graph()["delayed_rl"] == {
+        "delayed_rl.envs",
+        "delayed_rl._version",
+        "delayed_rl.agents",
+    }
+    imported = _modules_after("import delayed_rl")
+    assert {m for m in imported if m.startswith("delayed_rl")} == {
+        "delayed_rl",
+        "delayed_rl.envs",
+        "delayed_rl._version",
+    }
+
+
+def test_no_group_of_modules_imports_each_other_counting_parent_packages():
+    graph = with_parents(import_graph())
+    graph.pop("delayed_rl")  # every module's parent (see the module docstring)
+    assert find_cycles({m: edges - {"delayed_rl"} for m, edges in graph.items()}) == []
+
+
+HEAVY = ("pymunk", "torch", "matplotlib", "ray", "dask", "stable_baselines3")
+
+
+def _modules_after(statement: str) -> set[str]:
+    """The modules loaded by ``statement`` in a fresh interpreter."""
+    code = f"import sys, json; {statement}; print(json.dumps(sorted(sys.modules)))"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    return set(json.loads(done.stdout))
+
+
+@pytest.mark.parametrize(
+    "package",
+    [
+        "delayed_rl",
+        "delayed_rl.wrappers",
+        "delayed_rl.agents",
+        "delayed_rl.compiled",
+        "delayed_rl.envs",
+    ],
+)
+def test_importing_a_package_loads_no_heavy_dependency(package):
+    loaded = {name.split(".")[0] for name in _modules_after(f"import {package}")}
+    assert loaded.isdisjoint(HEAVY), sorted(loaded & set(HEAVY))
+
+
+def test_the_e_puck_loads_pymunk_when_it_is_used():
+    assert "pymunk" in _modules_after("import delayed_rl.envs.linefollow")
 
 
 def test_the_cycle_finder_finds_a_cycle():

@@ -12,12 +12,12 @@ from support import ScriptedDelay
 import delayed_rl  # noqa: F401
 from delayed_rl.compiled import CompiledRun, NotCompilable, inspect_stack
 from delayed_rl.compiled.kernel import (
-    TableAverage,
     _rescan,
     _rescan_lanes,
     _rescan_scalar,
     replay,
 )
+from delayed_rl.compiled.state import TableAverage
 from delayed_rl.delays import Constant, Empirical, Geometric, Poisson, Uniform
 from delayed_rl.wrappers import RewardDelay
 

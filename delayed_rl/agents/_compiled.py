@@ -37,11 +37,11 @@ class CompiledTables(NamedTuple):
         v_cell: the flat index into ``q`` of an entry holding that max.
         delay_estimates: Λ, sorted ascending (``int64``).
         reward_model: learn from estimated mean rewards, fed the steps
-            (:class:`~delayed_rl.compiled.kernel.RewardModel`); ``None``: the delivered rewards.
+            (:class:`~delayed_rl.compiled.state.RewardModel`); ``None``: the delivered rewards.
         chunk_limit: the most steps the next chunk may take (``None``: no limit).
         after_chunk: called with each chunk's length once it has run (``None``: nothing).
         credit_kernel: MMQ's reward kernel, a weight per distance ``|λ̂ − λ̂*|`` in steps
-            (:func:`~delayed_rl.compiled.kernel.credit_kernel`); ``None``: off.
+            (:func:`~delayed_rl.compiled.state.credit_kernel`); ``None``: off.
         trace_decay: β of MMQ's delay trace; ``None``: off.
         trace: the delay trace (one float64 per model, the agent's own: updated in place);
             read only with ``trace_decay``.
@@ -50,7 +50,7 @@ class CompiledTables(NamedTuple):
         held_transitions: the oracle's history length: the run credits each transition with
             its own reward (:mod:`delayed_rl.compiled.arrivals`); ``None``: the delivered rewards.
         average: a moving average of ``q`` the run keeps up to date, step by step
-            (:class:`~delayed_rl.compiled.kernel.TableAverage`: MMQ's greedy window); ``None``:
+            (:class:`~delayed_rl.compiled.state.TableAverage`: MMQ's greedy window); ``None``:
             none.
     """
 

@@ -51,7 +51,7 @@ from delayed_rl.agents.expected_credit import credit_weights
 from delayed_rl.agents.hyperparameters import MAX_ABS_VALUE, check_limit, shares_hyperparameters
 from delayed_rl.agents.mmq import MAX_TABLE_BYTES, table_bytes
 from delayed_rl.agents.qlearning import QLearning
-from delayed_rl.compiled.kernel import RewardModel
+from delayed_rl.compiled.state import RewardModel
 from delayed_rl.delays import Delay, Empirical
 from delayed_rl.wrappers.reward_delay import find_reward_delay
 

@@ -41,7 +41,7 @@ from delayed_rl.agents._loop import MAX_TIMESTEPS, MAX_TIMESTEPS_TEXT
 from delayed_rl.agents._persistence import check_state_array
 from delayed_rl.agents.base import TabularAgent
 from delayed_rl.agents.hyperparameters import MAX_ABS_VALUE, check_limit, shares_hyperparameters
-from delayed_rl.compiled.kernel import TableAverage, credit_kernel
+from delayed_rl.compiled.state import TableAverage, credit_kernel
 
 __all__ = ["MAX_TABLE_BYTES", "MMQ", "MultipleModelQLearning", "greedy_actions", "table_bytes"]
 

@@ -26,8 +26,22 @@ protocol), the learning rate is constant and no callback is given (a progress ba
   training at the end of its chunk.
 """
 
-from delayed_rl.compiled.kernel import HAVE_NUMBA
-from delayed_rl.compiled.run import CompiledRun
+from typing import Any
+
+from delayed_rl._numba import HAVE_NUMBA
 from delayed_rl.compiled.tabular import NotCompilable, TabularModel, inspect_stack
 
 __all__ = ["HAVE_NUMBA", "CompiledRun", "NotCompilable", "TabularModel", "inspect_stack"]
+
+
+def __getattr__(name: str) -> Any:
+    """:class:`CompiledRun`, imported on first use.
+
+    The loop it runs can step the e-puck, whose physics (pymunk) an agent that trains on a
+    grid need not load.
+    """
+    if name == "CompiledRun":
+        from delayed_rl.compiled.run import CompiledRun
+
+        return CompiledRun
+    raise AttributeError(f"module 'delayed_rl.compiled' has no attribute {name!r}")

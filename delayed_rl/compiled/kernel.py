@@ -3,33 +3,37 @@
 One function, :func:`run_chunk`, advances a whole training run by a chunk of steps. All state
 (Q-table, cached maxima, history ring, delay ring, clocks) lives in arrays owned by the caller,
 so a run proceeds chunk by chunk, with callbacks and the progress bar between chunks. Its
-arguments come in named groups (:class:`QCache`, :class:`Rule`, the env's
-:class:`~delayed_rl.compiled.tabular.TabularModel`, :class:`DelayLine`, :class:`History`,
-:class:`StepLog`, :class:`Script`), which numba compiles as tuples.
+arguments come in named groups (:mod:`delayed_rl.compiled.state`: ``QCache``, ``Rule``, the
+env's :class:`~delayed_rl.compiled.tabular.TabularModel`, ``DelayLine``, ``History``,
+``StepLog``, ``Script``), which numba compiles as tuples.
 
 The update rule is the one of :mod:`delayed_rl.agents.mmq` (its module docstring states it
-exactly), options included (the reward kernel and the delay trace, :class:`Rule`); the exactness
+exactly), options included (the reward kernel and the delay trace, :class:`~delayed_rl.compiled.state.Rule`); the exactness
 tests drive both on scripted transitions.
 """
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
 import numpy as np
 
-from delayed_rl import _portable_math as portable_math
-from delayed_rl._delay_line import ring_size
 from delayed_rl._numba import HAVE_NUMBA  # noqa: F401  (re-exported: delayed_rl.compiled)
 from delayed_rl._numba import jit as _jit
 from delayed_rl.compiled.arrivals import end_pending, take_due
 from delayed_rl.compiled.arrivals import record as record_arrival
 from delayed_rl.compiled.robot import robot_reset, robot_step
+from delayed_rl.compiled.state import (
+    CARRY,
+    FLUSH,
+    DelayLine,
+    History,
+    QCache,
+    RewardModel,
+    Rule,
+    Script,
+    StepLog,
+    credit_kernel,
+)
 from delayed_rl.compiled.statistics import observe
-
-#: Episode-end modes of the reward buffer, as integers for the compiled code.
-FLUSH, DROP, CARRY = 0, 1, 2
-
 
 _MULTIPLIER_5, _MULTIPLIER_9 = np.uint64(5), np.uint64(9)
 _TO_UNIT = 1.0 / 9007199254740992.0  # 2**-53: 53 random bits as a float in [0, 1)
@@ -296,204 +300,6 @@ def _write(qf, qmax, qcell, qties, qsecond, s, cell, new, row_size):
             qmax[s], qcell[s], qties[s], qsecond[s] = _rescan(qf, s * row_size, row_size)
 
 
-class QCache(NamedTuple):
-    """The agent's Q-table and its exact cache, updated in place by :func:`run_chunk`.
-
-    Attributes:
-        q: the Q-values, shape (|S|, |Λ|, |A|).
-        v_max: each state's max over (λ̂, a).
-        v_cell: the flat index into ``q`` of an entry holding it.
-        ties: how many entries of the state's row hold it (counted afresh at the start of each
-            call, then kept exact).
-        trace: the delay trace ``e(λ̂)``, one value per model, updated in place when
-            :attr:`Rule.trace_decay` is on; else ``None``.
-    """
-
-    q: np.ndarray
-    v_max: np.ndarray
-    v_cell: np.ndarray
-    ties: np.ndarray
-    trace: np.ndarray | None = None
-
-
-class Rule(NamedTuple):
-    """The learning rule's constants: Λ, α, γ, the ε schedule and MMQ's credit options.
-
-    With both options off (the defaults) every model is credited the delivered reward ``r_t``
-    (the thesis's rule). Otherwise model ``j`` is credited ``r_t · w_t(j)``, ``w_t(j)`` the
-    product of the options that are on: the kernel's ``credit_kernel[|Λ[j] − Λ[m_t]|]`` and the
-    trace's ``e_t(j)``, ``m_t`` the acting model of step ``t``.
-
-    Attributes:
-        delay_estimates: Λ, sorted ascending (``int64``).
-        learning_rate: α.
-        gamma: γ.
-        eps_initial: ε at step 0.
-        eps_final: ε from step ``eps_steps`` on (linear in between).
-        eps_steps: the length of the ε ramp, in steps (>= 1).
-        credit_kernel: the reward kernel's weight by the distance ``|λ̂ − λ̂*|`` in steps (index
-            0 to ``max Λ − min Λ``, from :func:`credit_kernel`); ``None``: off.
-        trace_decay: β of the delay trace (each step ``e ← β e``, then ``e(m_t) ← 1``; the
-            trace is :attr:`QCache.trace`); ``None``: off.
-        lag_rates: the learning rate of each lag (one per entry of ``delay_estimates``), for a
-            rule that credits several lags in *one* table (expected credit: ``α·w(k)``);
-            ``None``: α for every lag.
-
-    The Q-table has either one table per lag (MMQ: lag ``j`` updates table ``j``) or a single
-    table that every lag updates (expected credit); the loop tells them by the table's shape.
-    """
-
-    delay_estimates: np.ndarray
-    learning_rate: float
-    gamma: float
-    eps_initial: float
-    eps_final: float
-    eps_steps: int
-    credit_kernel: np.ndarray | None = None
-    trace_decay: float | None = None
-    lag_rates: np.ndarray | None = None
-
-
-def credit_kernel(delay_estimates: np.ndarray, width: float) -> np.ndarray:
-    """The reward kernel's weights ``exp(−d² / (2σ²))`` for ``d = 0 .. max Λ − min Λ`` steps.
-
-    Both training paths read a model's weight off this one array (so they agree to the bit):
-    the weight of model λ̂ when λ̂* acts is ``weights[|λ̂ − λ̂*|]``. The exponential is
-    ``delayed_rl._portable_math.exp``, the same bits on every CPU.
-
-    Args:
-        delay_estimates: Λ, sorted ascending.
-        width: σ > 0, in steps (so large that ``σ²`` overflows: every weight 1).
-    """
-    distance = np.arange(int(delay_estimates[-1] - delay_estimates[0]) + 1, dtype=np.float64)
-    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
-        weights = portable_math.exp_array(-(distance * distance) / (2.0 * width * width))
-    weights[0] = 1.0  # d = 0 is full credit, even where σ² underflows to 0
-    return weights
-
-
-class DelayLine(NamedTuple):
-    """The reward delay: this chunk's delays, the ring of pending rewards, the episode-end mode.
-
-    Attributes:
-        delays: one delay per step of the chunk (its length is the chunk's length).
-        ring: the pending rewards, a power-of-two ring longer than every delay in ``delays``.
-        episode_end_mode: :data:`FLUSH`, :data:`DROP` or :data:`CARRY`.
-        discarded: one float, to which the loop adds the pending reward it discards when a
-            ``TimeLimit`` above the reward delay cuts an episode
-            (:attr:`~delayed_rl.compiled.tabular.TabularModel.cut_steps`; not under "carry").
-    """
-
-    delays: np.ndarray
-    ring: np.ndarray
-    episode_end_mode: int
-    discarded: np.ndarray = np.zeros(1)
-
-
-class History(NamedTuple):
-    """The episode's transitions (rings of a power-of-two length > max Λ) and the run's clocks.
-
-    Attributes:
-        s: the state of each step.
-        a: the action.
-        s2: the next state.
-        terminated: whether the step was terminal.
-        clocks: ``[s, history length, episode steps, delay clock]``, carried between chunks.
-    """
-
-    s: np.ndarray
-    a: np.ndarray
-    s2: np.ndarray
-    terminated: np.ndarray
-    clocks: np.ndarray
-
-    @classmethod
-    def empty(cls, longest_delay: int) -> History:
-        """An empty history whose rings hold ``longest_delay + 1`` steps, clocks at 0."""
-        size = ring_size(longest_delay + 1)
-        rings = [np.zeros(size, dtype) for dtype in (np.int64, np.int64, np.int64, np.bool_)]
-        return cls(*rings, np.zeros(4, np.int64))
-
-
-class StepLog(NamedTuple):
-    """One entry per step of a chunk (arrays of the chunk's length, filled by :func:`run_chunk`).
-
-    Attributes:
-        undelayed_reward: the env's reward.
-        reward: the reward delivered (delayed).
-        obs: the state acted in.
-        action: the action.
-        acting_delay_index: the acting model's index into Λ.
-        episode_end: the episode ended at this step (terminated or truncated).
-        terminated: the step was terminal.
-    """
-
-    undelayed_reward: np.ndarray
-    reward: np.ndarray
-    obs: np.ndarray
-    action: np.ndarray
-    acting_delay_index: np.ndarray
-    episode_end: np.ndarray
-    terminated: np.ndarray
-
-    @classmethod
-    def empty(cls, steps: int) -> StepLog:
-        """A log of ``steps`` zeroed entries."""
-        floats = [np.zeros(steps) for _ in range(2)]
-        ints = [np.zeros(steps, np.int64) for _ in range(3)]
-        return cls(*floats, *ints, np.zeros(steps, np.bool_), np.zeros(steps, np.bool_))
-
-
-class Script(NamedTuple):
-    """Scripted transitions replayed instead of acting in the env.
-
-    Attributes:
-        transitions: rows ``(s, a, s′)``.
-        terminated: one flag per row.
-        rewards: the reward received at each row's step.
-        acting: the acting model's index into Λ at each row's step (what the reward kernel
-            centres on and the delay trace marks); empty: the greedy model of the row's state,
-            the lowest index whose table holds the state's max (as MMQ's ``update()``), looked
-            up only when a credit option is on (else 0).
-    """
-
-    transitions: np.ndarray
-    terminated: np.ndarray
-    rewards: np.ndarray
-    acting: np.ndarray = np.zeros(0, np.int64)
-
-
-class RewardModel(NamedTuple):
-    """Learn from estimated mean rewards instead of the delivered ones (deconvolution).
-
-    Attributes:
-        rewards: ``R̂`` per (state, action) pair ``s·|A| + a``.
-        stats: the regression's statistics, fed every step's pair, delivered reward and
-            episode end (:func:`delayed_rl.compiled.statistics.observe`).
-    """
-
-    rewards: np.ndarray
-    stats: tuple
-
-
-class TableAverage(NamedTuple):
-    """A moving average of the Q-table, updated every ``every`` steps (MMQ's greedy window).
-
-    Attributes:
-        table: the average, shaped as the Q-table, updated in place after every ``every``-th
-            step's update: ``table ← table + rate · (q − table)``, the first time ``table ← q``.
-        clock: ``[steps since the last update, updates so far]`` (``int64``), carried between
-            calls.
-        every: the steps between updates (>= 1).
-        rate: the weight of an update.
-    """
-
-    table: np.ndarray
-    clock: np.ndarray
-    every: int
-    rate: float
-
-
 def run_chunk(
     cache, rule, env, line, history, log, script, start_step, rng, model, arrivals, average, robot
 ):
@@ -507,7 +313,7 @@ def run_chunk(
     ``target = r_t + γ (1 − terminated) max Q[s′]``, the max over every (λ̂, a′) of ``s′``; all
     TD errors ``target − Q`` of a step are computed before its writes (a parallel update), then
     each entry moves by ``rate · error``, lag after lag. With a Q-table of one model for several
-    lags (expected credit, :attr:`Rule.lag_rates`) the lags' increments to one entry add up.
+    lags (expected credit, :attr:`~delayed_rl.compiled.state.Rule.lag_rates`) the lags' increments to one entry add up.
 
     The oracle (``arrivals`` given): instead, the loop records who emitted each reward
     (:mod:`delayed_rl.compiled.arrivals`) and, for every transition whose reward arrives at the step
@@ -515,7 +321,7 @@ def run_chunk(
     that transition with its own reward, one after the other, if it is among the
     ``arrivals.held`` most recent.
 
-    The cache (:class:`QCache`) is kept exact: a state's row is rescanned only when the cached
+    The cache (:class:`~delayed_rl.compiled.state.QCache`) is kept exact: a state's row is rescanned only when the cached
     arg-max entry decreases to or below an upper bound of the row's other entries (kept for the
     call, see :func:`_write`), or while it is tied; the acting model is read off ``v_cell``
     unless the max is tied, where choosing costs a scan. Random draws happen exactly where the
@@ -533,25 +339,25 @@ def run_chunk(
     (5-10 s, cached on disk as all compiled code here) for each combination a machine meets:
     about one per kind of agent.
 
-    MMQ's credit options (:class:`Rule`): the delay trace is decayed and the acting model's entry
+    MMQ's credit options (:class:`~delayed_rl.compiled.state.Rule`): the delay trace is decayed and the acting model's entry
     set to 1 at every step, before the step's update; the per-model weight of the reward is
     computed only when an option is on, so the thesis's rule pays nothing for them.
 
     Args:
-        cache: the Q-table, its cache and the delay trace (:class:`QCache`), updated in place.
-        rule: Λ, α, γ, the ε schedule and the credit options (:class:`Rule`).
+        cache: the Q-table, its cache and the delay trace (:class:`~delayed_rl.compiled.state.QCache`), updated in place.
+        rule: Λ, α, γ, the ε schedule and the credit options (:class:`~delayed_rl.compiled.state.Rule`).
         env: the env's outcome tables (:class:`~delayed_rl.compiled.tabular.TabularModel`).
-        line: the reward delay (:class:`DelayLine`).
-        history: the episode's transitions and the clocks (:class:`History`), updated in place.
-        log: receives one entry per step (:class:`StepLog`).
-        script: transitions to replay (:class:`Script`), or ``None``: act in the env.
+        line: the reward delay (:class:`~delayed_rl.compiled.state.DelayLine`).
+        history: the episode's transitions and the clocks (:class:`~delayed_rl.compiled.state.History`), updated in place.
+        log: receives one entry per step (:class:`~delayed_rl.compiled.state.StepLog`).
+        script: transitions to replay (:class:`~delayed_rl.compiled.state.Script`), or ``None``: act in the env.
         start_step: the training step of the chunk's first step (for the ε schedule).
         rng: the run's generator state (:func:`next_uniform`), advanced in place.
-        model: a reward model (:class:`RewardModel`; Λ must then be {0}), or ``None``: learn
+        model: a reward model (:class:`~delayed_rl.compiled.state.RewardModel`; Λ must then be {0}), or ``None``: learn
             from the delivered rewards.
         arrivals: the oracle's record (:class:`~delayed_rl.compiled.arrivals.Arrivals`, Λ = {0},
             not with a script), or ``None``.
-        average: a moving average of the Q-table to keep (:class:`TableAverage`), or ``None``.
+        average: a moving average of the Q-table to keep (:class:`~delayed_rl.compiled.state.TableAverage`), or ``None``.
         robot: the e-puck env to step instead of ``env``'s tables
             (:class:`~delayed_rl.compiled.robot.Robot`, not with a script), or ``None``.
 
@@ -572,7 +378,7 @@ def _loop(
     """:func:`run_chunk`'s loop, with the rule's optional parts as arguments of their own.
 
     numba leaves out the code of an absent part (``None``) only when it is an argument: its
-    dead-branch pruning does not see into tuples such as :class:`Rule`. :func:`run_chunk` is
+    dead-branch pruning does not see into tuples such as :class:`~delayed_rl.compiled.state.Rule`. :func:`run_chunk` is
     plain Python, called once a chunk: a compiled one would link a copy of each version of the
     loop into its own, doubling what numba compiles and caches.
     """

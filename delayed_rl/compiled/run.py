@@ -9,11 +9,11 @@ import warnings
 import numpy as np
 
 from delayed_rl._delay_line import delay_bound, draw_delays, regrow_ring, ring_size
-from delayed_rl.compiled import arrivals, kernel
+from delayed_rl.compiled import arrivals, kernel, state
 from delayed_rl.compiled.robot import RobotLink, linked
 from delayed_rl.compiled.tabular import NotCompilable, inspect_stack
 
-_MODES = {"flush": kernel.FLUSH, "drop": kernel.DROP, "carry": kernel.CARRY}
+_MODES = {"flush": state.FLUSH, "drop": state.DROP, "carry": state.CARRY}
 
 RING_LIMIT = 1 << 22
 """The most pending-reward slots a compiled run keeps (32 MiB of float64).
@@ -84,7 +84,7 @@ class CompiledRun:
         self.mode = _MODES[self.on_episode_end]
         self.delay_clip = self._delay_clip()
         self.delay_estimates = np.asarray(delay_estimates, dtype=np.int64)
-        self.history = kernel.History.empty(int(self.delay_estimates.max()))
+        self.history = state.History.empty(int(self.delay_estimates.max()))
         self.state = self.history.clocks
         self.ring = np.zeros(1)
         self.arrivals = (
@@ -117,7 +117,7 @@ class CompiledRun:
             return None
         clip = self.max_delay
         longest = min(n for n in (self.model.max_steps, self.model.cut_steps, math.inf) if n)
-        if longest < math.inf and self.mode != kernel.CARRY:
+        if longest < math.inf and self.mode != state.CARRY:
             clip = int(longest) if clip is None else min(clip, int(longest))
         reach = delay_bound(self.delay, clip)
         if reach >= RING_LIMIT:
@@ -165,13 +165,13 @@ class CompiledRun:
         eps_initial: float,
         eps_final: float,
         eps_steps: int,
-        reward_model: kernel.RewardModel | None = None,
+        reward_model: state.RewardModel | None = None,
         credit_kernel: np.ndarray | None = None,
         trace_decay: float | None = None,
         trace: np.ndarray | None = None,
         lag_rates: np.ndarray | None = None,
-        average: kernel.TableAverage | None = None,
-    ) -> kernel.StepLog:
+        average: state.TableAverage | None = None,
+    ) -> state.StepLog:
         """Advance ``steps`` steps, updating ``q`` and its cache in place; return the step log.
 
         Args:
@@ -186,19 +186,19 @@ class CompiledRun:
             eps_final: ε from training step ``eps_steps`` on (linear in between).
             eps_steps: the length of the ε ramp (>= 1).
             reward_model: learn from estimated mean rewards (see
-                :class:`~delayed_rl.compiled.kernel.RewardModel`); ``None``: the delivered rewards.
+                :class:`~delayed_rl.compiled.state.RewardModel`); ``None``: the delivered rewards.
             credit_kernel: the reward kernel's weights by distance in steps
-                (:func:`~delayed_rl.compiled.kernel.credit_kernel`); ``None``: off.
+                (:func:`~delayed_rl.compiled.state.credit_kernel`); ``None``: off.
             trace_decay: β of the delay trace (``None``: off; then ``trace`` is not read).
             trace: the delay trace, one float64 per model, updated in place (the agent's).
             lag_rates: the learning rate of each lag, for a rule crediting several lags in one
-                table (:attr:`~delayed_rl.compiled.kernel.Rule.lag_rates`); ``None``: α for all.
+                table (:attr:`~delayed_rl.compiled.state.Rule.lag_rates`); ``None``: α for all.
             average: a moving average of ``q`` to keep up to date
-                (:class:`~delayed_rl.compiled.kernel.TableAverage`, its table shaped as ``q``);
+                (:class:`~delayed_rl.compiled.state.TableAverage`, its table shaped as ``q``);
                 ``None``: none.
 
         Returns:
-            One entry per step (:class:`~delayed_rl.compiled.kernel.StepLog`); :attr:`state`
+            One entry per step (:class:`~delayed_rl.compiled.state.StepLog`); :attr:`state`
             ``[0]`` is the state after the last.
 
         Raises:
@@ -234,8 +234,8 @@ class CompiledRun:
             raise ValueError(f"lag_rates must be a float64 array of shape {estimates.shape}")
         if average is not None:
             _check_average(average, q.shape)
-        cache = kernel.QCache(q, v_max, v_cell, self.tie_counts, trace)
-        rule = kernel.Rule(
+        cache = state.QCache(q, v_max, v_cell, self.tie_counts, trace)
+        rule = state.Rule(
             delay_estimates=estimates,
             learning_rate=float(learning_rate),
             gamma=float(gamma),
@@ -246,8 +246,8 @@ class CompiledRun:
             trace_decay=None if trace_decay is None else float(trace_decay),
             lag_rates=lag_rates,
         )
-        line = kernel.DelayLine(delays, self.ring, self.mode, np.zeros(1))
-        log = kernel.StepLog.empty(steps)
+        line = state.DelayLine(delays, self.ring, self.mode, np.zeros(1))
+        log = state.StepLog.empty(steps)
         with contextlib.ExitStack() as stack:
             robot = None if self.robot is None else stack.enter_context(self.robot.arguments())
             kernel.run_chunk(
@@ -274,8 +274,8 @@ class CompiledRun:
         return log
 
 
-def _check_average(average: kernel.TableAverage, shape: tuple[int, ...]) -> None:
-    """Refuse a :class:`~delayed_rl.compiled.kernel.TableAverage` the compiled loop cannot use.
+def _check_average(average: state.TableAverage, shape: tuple[int, ...]) -> None:
+    """Refuse a :class:`~delayed_rl.compiled.state.TableAverage` the compiled loop cannot use.
 
     Raises:
         ValueError: the table is not a C-contiguous float64 array of ``shape``, the clock not
