@@ -370,3 +370,112 @@ def test_bad_inputs_raise_naming_the_argument(call, name, wrong_type, bad_value)
     if bad_value is not None:
         with pytest.raises(ValueError, match=name):
             call(bad_value)
+
+
+# --- a refused step changes nothing ------------------------------------------------------------
+#
+# Rewards of k · 2**1020 (|k| <= 6): their sums are exact, and pass float64's range (2**1024)
+# once |Σk| reaches 16, so the wrappers refuse steps at random points: a pending sum, the sum
+# due at one step, or an episode's flush. A refused step must leave the wrapper as it was:
+# conservation then holds exactly over the steps taken.
+
+UNIT = 2.0**1020
+huge = st.integers(-6, 6).map(lambda k: k * UNIT)
+
+
+def units(value) -> np.ndarray:
+    """``value`` (a multiple of :data:`UNIT`) in units, as exact integers: sums do not overflow."""
+    return np.asarray(np.asarray(value) / UNIT).round().astype(np.int64)
+
+
+huge_scripts = st.lists(st.tuples(huge, ends), min_size=1, max_size=50)
+short_delays = st.one_of(
+    st.integers(0, 6).map(Constant),
+    st.floats(0.0, 5.0).map(Poisson),
+    st.floats(0.2, 1.0).map(Geometric),
+)
+
+
+def _same(a, b) -> bool:
+    """Whether two saved states are equal (arrays by value, containers entry by entry)."""
+    if isinstance(a, np.ndarray):
+        return isinstance(b, np.ndarray) and a.shape == b.shape and np.array_equal(a, b)
+    if isinstance(a, (list, tuple)):
+        return len(a) == len(b) and all(map(_same, a, b))
+    return a == b
+
+
+def _single_state(env: RewardDelay) -> tuple:
+    sampler = env._sampler
+    return (
+        env._clock,
+        dict(env._due),
+        env._pending,
+        list(sampler.block),
+        sampler.rng.bit_generator.state,
+        env._episode_ended,
+    )
+
+
+@FUZZ
+@given(script=huge_scripts, delay=short_delays, mode=modes, seed=seeds)
+def test_a_single_env_step_refused_for_a_sum_beyond_float64_changes_nothing(
+    script, delay, mode, seed
+) -> None:
+    env = RewardDelay(ScriptEnv(script), delay, on_episode_end=mode)
+    emitted = delivered = dropped = 0  # in units: exact
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        env.reset(seed=seed)
+        ended = False
+        for _ in range(len(script)):
+            if ended:
+                _, info = env.reset()
+                dropped += units(info.get("dropped_reward", 0.0))
+            before = _single_state(env)
+            try:
+                _, reward, terminated, truncated, info = env.step(0)
+            except ValueError as error:
+                assert "float64" in str(error)
+                assert _same(_single_state(env), before)
+                ended = False
+                continue
+            emitted += units(info["undelayed_reward"])
+            delivered += units(reward)
+            dropped += units(info.get("dropped_reward", 0.0))
+            assert delivered + units(info["pending_reward"]) + dropped == emitted
+            ended = terminated or truncated
+
+
+@FUZZ
+@given(
+    scripts=st.lists(huge_scripts, min_size=1, max_size=3),
+    delay=short_delays,
+    mode=modes,
+    autoreset=st.sampled_from([AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP]),
+    seed=seeds,
+)
+def test_a_vector_step_refused_for_a_sum_beyond_float64_changes_nothing(
+    scripts, delay, mode, autoreset, seed
+) -> None:
+    n = len(scripts)
+    inner = SyncVectorEnv([_sub_env(s, None) for s in scripts], autoreset_mode=autoreset)
+    env = VectorRewardDelay(inner, delay, on_episode_end=mode)
+    emitted, delivered, dropped = (np.zeros(n, dtype=np.int64) for _ in range(3))  # in units
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        env.reset(seed=seed)
+        for _ in range(max(map(len, scripts))):
+            before = env.buffers._save()
+            try:
+                _, rewards, _, _, info = env.step(np.zeros(n, dtype=np.int64))
+            except ValueError as error:
+                assert "float64" in str(error)
+                assert _same(env.buffers._save(), before)
+                continue
+            emitted += units(np.where(info["_undelayed_reward"], info["undelayed_reward"], 0.0))
+            delivered += units(rewards)
+            if "dropped_reward" in info:
+                dropped += units(np.where(info["_dropped_reward"], info["dropped_reward"], 0.0))
+            pending = units(info["pending_reward"])
+            np.testing.assert_array_equal(delivered + pending + dropped, emitted)

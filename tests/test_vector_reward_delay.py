@@ -350,7 +350,7 @@ def test_huge_rewards_whose_sum_fits_are_exact_in_the_vector_buffers() -> None:
 
     buffers = RewardBuffers(1, Constant(20), None)
     for reward in (1e308, 1.0, -1e308, 1e308):
-        delivered, _ = buffers.push(np.array([reward]), np.array([True]))
+        delivered, _, _ = buffers.step(np.array([reward]), [True], [False], "flush")
         assert delivered[0] == 0.0 and np.isfinite(buffers.pending).all()
     np.testing.assert_array_equal(buffers.clear(np.array([True])), [1e308])
 

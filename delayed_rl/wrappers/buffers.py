@@ -12,6 +12,9 @@ from delayed_rl.wrappers.reward_delay import _BLOCK, delay_rng
 
 __all__ = ["INITIAL_RING", "MAX_RING_ENTRIES", "RING_PER_STEP", "RewardBuffers"]
 
+_SAFE_MAGNITUDE = 2.0**1020
+"""Below this, a sum of numbers whose magnitudes add up to it cannot pass float64's range."""
+
 MAX_RING_ENTRIES = 1 << 22
 """The most ring slots the buffers of one wrapper hold in all (float64: 32 MiB).
 
@@ -64,6 +67,7 @@ class RewardBuffers:
         self.rows = np.arange(num_envs)
         self._pending = np.zeros(num_envs)  # running sums, as RewardDelay._pending
         self._nonzero = np.zeros(num_envs, dtype=np.int64)  # nonzero slots in each ring
+        self._magnitude = np.zeros(num_envs)  # >= the sum of |r| pending: bounds every sum
         self.far: list[dict[int, float]] = [{} for _ in range(num_envs)]  # beyond the ring
         self._far_envs: set[int] = set()  # the envs whose ``far`` dict is not empty
         self.rngs = [delay_rng(None) for _ in range(num_envs)]
@@ -123,15 +127,30 @@ class RewardBuffers:
         self._resync()
         return delays
 
-    def push(self, rewards: np.ndarray, active: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Schedule this step's ``rewards`` and return ``(delivered, delays)``.
+    def step(
+        self, rewards: np.ndarray, active: np.ndarray, ended: np.ndarray, on_episode_end: str
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """One step of every env: schedule ``rewards``, deliver what is due, settle ended episodes.
 
-        Envs with ``active`` False (an autoreset step) emit nothing, deliver nothing, keep their
-        clocks and draw no delay; their delay is reported as 0.
+        This is the reward-delay rule of :class:`~delayed_rl.wrappers.RewardDelay`, for every
+        env at once. Envs with ``active`` False (an autoreset step) emit nothing, deliver
+        nothing, keep their clocks and draw no delay; their delay is reported as 0. The active
+        envs whose episode ``ended`` at this step settle what is still pending:
+        ``on_episode_end="flush"`` adds it to what they deliver, ``"drop"`` discards it,
+        ``"carry"`` keeps it.
+
+        A step refused with ``ValueError`` changes nothing: the buffers, clocks and delay
+        streams are as they were before it, so conservation holds and later steps work.
+
+        Returns:
+            ``(delivered, delays, settled)``: ``settled`` is each env's amount flushed (included
+            in ``delivered``) or dropped, 0 for the envs that did not end, or ``None`` when no
+            active env's episode ended or under ``"carry"``.
 
         Raises:
-            ValueError: a reward is NaN or infinite, or the rewards due at one step or all those
-                pending in an env sum to more than float64 can hold.
+            ValueError: a reward is NaN or infinite, or the rewards due at one step, all those
+                pending in an env, or those an env delivers at its episode's end sum to more
+                than float64 can hold.
         """
         rewards = np.asarray(rewards, dtype=np.float64)
         if not np.all(np.isfinite(rewards)):
@@ -140,8 +159,65 @@ class RewardBuffers:
                 f"sub-envs {bad} returned non-finite rewards {rewards[bad].tolist()}; "
                 "the reward-delay buffer refuses to store them"
             )
-        with np.errstate(over="ignore", invalid="ignore"):  # overflows are checked below
-            return self._push(rewards, np.asarray(active, dtype=bool))
+        active = np.asarray(active, dtype=bool)
+        ended = np.asarray(ended, dtype=bool) & active
+        # Only sums of magnitudes near float64's range can overflow: then, and only then, the
+        # state is saved, to be put back if the step is refused.
+        risky = float((self._magnitude + np.abs(rewards)).max(initial=0.0)) >= _SAFE_MAGNITUDE
+        saved = self._save() if risky else None
+        try:
+            with np.errstate(over="ignore", invalid="ignore"):  # overflows are checked here
+                delivered, delays = self._push(rewards, active)
+                settled = None
+                if ended.any() and on_episode_end != "carry":
+                    settled = self.clear(ended)
+                    if on_episode_end == "flush":
+                        delivered = delivered + settled
+                        if not np.all(np.isfinite(delivered)):
+                            self._overflow(
+                                np.flatnonzero(~np.isfinite(delivered)),
+                                "the rewards delivered at the episode's last step (due then, "
+                                "plus the flushed rest)",
+                            )
+        except ValueError:
+            if saved is not None:
+                self._restore(saved)
+            raise
+        return delivered, delays, settled
+
+    def _save(self) -> tuple:
+        """Everything :meth:`step` changes (copies), for :meth:`_restore`."""
+        return (
+            self.buffer.copy(),
+            self.clock.copy(),
+            self._pending.copy(),
+            self._nonzero.copy(),
+            self._magnitude.copy(),
+            [dict(book) for book in self.far],
+            set(self._far_envs),
+            self._block.copy(),
+            self._next.copy(),
+            self._sync,
+            [rng.bit_generator.state for rng in self.rngs],
+        )
+
+    def _restore(self, saved: tuple) -> None:
+        """Put back the state :meth:`_save` saved."""
+        (
+            self.buffer,
+            self.clock,
+            self._pending,
+            self._nonzero,
+            self._magnitude,
+            self.far,
+            self._far_envs,
+            self._block,
+            self._next,
+            self._sync,
+            states,
+        ) = saved
+        for rng, state in zip(self.rngs, states, strict=True):
+            rng.bit_generator.state = state
 
     def _push(self, rewards: np.ndarray, active: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`push` once the rewards are known to be finite."""
@@ -175,6 +251,7 @@ class RewardBuffers:
         else:
             self._nonzero[rows] += (new != 0.0).astype(np.int64) - (old != 0.0)
         self._pending += rewards
+        self._magnitude += np.abs(rewards)
         now = self.clock & mask
         if every:
             delivered = self.buffer[self.rows, now]
@@ -195,6 +272,7 @@ class RewardBuffers:
             for i in self._far_envs:
                 empty[i] = False
             self._pending[empty] = 0.0  # exactly 0 once nothing is pending
+            self._magnitude[empty] = 0.0
         self.clock += active
         return delivered, delays
 
@@ -256,6 +334,7 @@ class RewardBuffers:
         self.buffer[envs] = 0.0
         self._nonzero[envs] = 0
         self._pending[envs] = 0.0
+        self._magnitude[envs] = 0.0
         return amounts
 
     def _make_room(self, delays: np.ndarray) -> None:

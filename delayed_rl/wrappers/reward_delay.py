@@ -370,26 +370,44 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
         clock = self._clock
         self._clock = clock + 1
         due = self._due
+        before = self._pending  # (with ``previous`` and ``popped``: what a refusal puts back)
+        previous = popped = None
         if reward:  # a zero reward changes no sum (and is finite): nothing to schedule
             if reward - reward:  # inf or NaN (x - x is 0 for every finite float)
                 self._refuse(reward, delay)
             if self._watch is not None and not (terminated or truncated):
                 self._watch_see(True, ())  # a reward before an episode's end: no flush trap
             when = clock + delay
-            slot = due.get(when, 0.0) + reward
-            pending = self._pending + reward
+            previous = due.get(when)
+            slot = (previous or 0.0) + reward
+            pending = before + reward
             if slot - slot or pending - pending:  # NaN (true) once a sum passed float64's range
-                pending = self._checked_pending(when, slot)
+                try:
+                    pending = self._checked_pending(when, slot)
+                except ValueError:
+                    self._undo_step(delay, before)
+                    raise
             due[when] = slot
             self._pending = pending
         if clock in due:
-            delivered = due.pop(clock)
+            delivered = popped = due.pop(clock)
             pending = self._pending - delivered if due else 0.0  # exact 0 once all is in
             self._pending = exact_sum(due.values()) if pending - pending else pending
         else:
             delivered = 0.0
         if terminated or truncated:
-            delivered = self._settle_episode_end(delivered, info)
+            try:
+                delivered = self._settle_episode_end(delivered, info)
+            except ValueError:  # the flush passed float64's range: the step did not happen
+                if popped is not None:
+                    due[clock] = popped
+                if reward:
+                    if previous is None:
+                        due.pop(clock + delay)
+                    else:
+                        due[clock + delay] = previous
+                self._undo_step(delay, before)
+                raise
             if self._watch is not None:
                 self._watch_see(False, (reward,))
         info["undelayed_reward"] = reward
@@ -449,18 +467,20 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
         Raises:
             ValueError: the flushed sum is beyond float64's range.
         """
-        self._episode_ended = True
         if self.on_episode_end == "flush":
-            flushed = self._clear_pending()
-            info["flushed_reward"] = flushed
-            delivered += flushed
-            if delivered - delivered:
+            flushed = exact_sum(self._due.values())
+            total = delivered + flushed
+            if total - total:
                 raise ValueError(
                     "the rewards delivered at the episode's last step (due then, plus the "
                     "flushed rest) sum to more than float64 can hold; rescale the env's rewards"
                 )
+            self._clear_pending()
+            info["flushed_reward"] = flushed
+            delivered = total
         elif self.on_episode_end == "drop":
             info["dropped_reward"] = self._clear_pending()
+        self._episode_ended = True
         return delivered
 
     def _refuse(self, reward: float, delay: int) -> None:
@@ -469,9 +489,14 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
         Raises:
             ValueError: always (see :meth:`_checked_reward`).
         """
+        self._undo_step(delay, self._pending)
+        self._checked_reward(reward)
+
+    def _undo_step(self, delay: int, pending: float) -> None:
+        """Take back a step begun but refused: its delay, the clock, the pending sum."""
         self._delays.append(delay)
         self._clock -= 1
-        self._checked_reward(reward)
+        self._pending = pending
 
     def _checked_reward(self, reward: Any) -> float:
         """``reward`` as a Python float, checked (:func:`~delayed_rl._validation.check_reward`).

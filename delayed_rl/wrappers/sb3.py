@@ -143,19 +143,10 @@ class VecRewardDelay(VecEnvWrapper):
         """Finish the step; return the rewards due now (see the class docstring)."""
         obs, raw, dones, infos = self.venv.step_wait()
         rewards = checked_rewards(raw, self.num_envs, type(self).__name__)
-        delivered, delays = self.buffers.push(rewards, self._all)
         ended = np.asarray(dones, dtype=bool)
-        amounts = None
-        if ended.any() and self.on_episode_end != "carry":
-            amounts = self.buffers.clear(ended)
-            if self.on_episode_end == "flush":
-                delivered = delivered + amounts
-                if not np.all(np.isfinite(delivered)):
-                    raise ValueError(
-                        f"the rewards delivered at the last step of sub-envs "
-                        f"{np.flatnonzero(~np.isfinite(delivered)).tolist()} (due then, plus the "
-                        "flushed rest) sum to more than float64 can hold; rescale the rewards"
-                    )
+        delivered, delays, amounts = self.buffers.step(
+            rewards, self._all, ended, self.on_episode_end
+        )
         if self._watch is not None and self._watch.see_envs(
             int(self.buffers.clock.sum()), rewards, ended
         ):

@@ -201,21 +201,11 @@ class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
         obs, rewards, terminated, truncated, info = self.env.step(actions)
         rewards = checked_rewards(rewards, self.num_envs, type(self).__name__)
         active = ~self._resetting
-        delivered, delays = self.buffers.push(rewards, active)
         ended = (np.asarray(terminated) | np.asarray(truncated)) & active
-        if ended.any():
-            if self.on_episode_end == "flush":
-                flushed = self.buffers.clear(ended)
-                delivered = delivered + flushed
-                if not np.all(np.isfinite(delivered)):
-                    raise ValueError(
-                        f"the rewards delivered at the last step of sub-envs "
-                        f"{np.flatnonzero(~np.isfinite(delivered)).tolist()} (due then, plus the "
-                        "flushed rest) sum to more than float64 can hold; rescale the rewards"
-                    )
-                _with_mask(info, "flushed_reward", flushed, ended)
-            elif self.on_episode_end == "drop":
-                _with_mask(info, "dropped_reward", self.buffers.clear(ended), ended)
+        delivered, delays, settled = self.buffers.step(rewards, active, ended, self.on_episode_end)
+        if settled is not None:
+            key = "flushed_reward" if self.on_episode_end == "flush" else "dropped_reward"
+            _with_mask(info, key, settled, ended)
         emitted = np.where(active, rewards, 0.0)
         if self._watch is not None and self._watch.see_envs(
             int(self.buffers.clock.sum()), emitted, ended
