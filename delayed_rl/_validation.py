@@ -136,13 +136,16 @@ def check_real(
     allowed += interval + note
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
         raise TypeError(f"{name} must be {allowed}, {_got(value, True)}")
-    number = float(value)
+    try:
+        number = float(value)
+    except OverflowError:  # an int (or Fraction) beyond float64's range
+        raise ValueError(f"{name} must be {allowed}, {_got(value, False)}") from None
     if (
         not math.isfinite(number)
         or (low is not None and (number < low or (low_open and number == low)))
         or (high is not None and (number > high or (high_open and number == high)))
     ):
-        raise ValueError(f"{name} must be {allowed}, got {value!r}")
+        raise ValueError(f"{name} must be {allowed}, {_got(value, False)}")
     return number
 
 

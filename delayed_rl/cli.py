@@ -38,6 +38,7 @@ import delayed_rl
 from delayed_rl._validation import check_fraction, check_int, check_probability, check_real
 from delayed_rl.agents._loop import MAX_TIMESTEPS_TEXT
 from delayed_rl.agents.hyperparameters import MAX_SEED, check_limit
+from delayed_rl.delays import Poisson
 from delayed_rl.envs import env_ids
 from delayed_rl.experiments import NAMES
 from delayed_rl.experiments.runner import (
@@ -102,8 +103,8 @@ def _limited(low: int, limit: int, limit_text: str) -> Callable[[str], int]:
 
 
 _float = _checked(float, check_real)
-_non_negative_float = _checked(float, check_real, 0.0)
 _probability = _checked(float, check_probability)
+_poisson_mean = _checked(float, check_real, 0.0, Poisson.MAX_LAM)
 _learning_rate = _checked(float, check_fraction)
 _non_negative_int = _checked(int, check_int, 0)
 _positive_int = _checked(int, check_int, 1)
@@ -444,7 +445,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     train.add_argument(
         "--reward-delay",
-        type=_non_negative_float,
+        type=_poisson_mean,
         metavar="λ",
         help="delay rewards by Poisson(λ) steps (default: undelayed)",
     )
@@ -524,7 +525,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     evaluate.add_argument(
         "--reward-delay",
-        type=_non_negative_float,
+        type=_poisson_mean,
         metavar="λ",
         help="delay rewards by Poisson(λ) steps (the reported reward is the "
         "undelayed one either way)",

@@ -470,19 +470,24 @@ def as_delay(delay: Delay | float | Mapping[str, Any], name: str = "delay") -> D
         TypeError: if ``delay`` is neither a :class:`Delay`, a real number (a bool is not) nor a
             dict, or a description's parameter has the wrong type.
         ValueError: if ``delay`` is a number that is not a valid λ (negative, NaN, infinite,
-            above :attr:`Poisson.MAX_LAM`: that message names ``lam``), or a dict that describes no distribution (no or an
+            above :attr:`Poisson.MAX_LAM`), or a dict that describes no distribution (no or an
             unknown ``"type"``, missing or extra parameters, a parameter's bad value).
 
-    A number's message names ``name`` (``"reward_delay must be a number >= 0 (a Poisson mean),
-    got -1"``), not Poisson's own ``lam``; a description's bad parameter is named as the
-    description names it (``lam``, ``k``...), after ``name``.
+    Every message starts with ``name``: a number's (``"reward_delay must be a number in [0,
+    9.22337e+18] (a Poisson mean), got -1"``), not Poisson's own ``lam``, and a description's
+    (``"reward_delay: k must be an integer >= 0, got 2.5"``).
     """
     if isinstance(delay, Delay):
         return delay
     if isinstance(delay, numbers.Real) and not isinstance(delay, (bool, np.bool_)):
-        return Poisson(check_real(name, delay, 0.0, note=" (a Poisson mean)"))
+        return Poisson(check_real(name, delay, 0.0, Poisson.MAX_LAM, note=" (a Poisson mean)"))
     if isinstance(delay, Mapping):
-        return _from_dict(delay, name)
+        try:
+            return _from_dict(delay, name)
+        except (TypeError, ValueError) as error:  # a parameter's check names the parameter only
+            if str(error).startswith(name):
+                raise
+            raise type(error)(f"{name}: {error}") from None
     raise TypeError(
         f"{name} must be a delayed_rl.delays.Delay (Poisson, Constant, Geometric, Uniform, "
         f"Empirical), a number read as a Poisson mean or a Delay.to_dict() description, got "
@@ -494,9 +499,16 @@ def delay_spec(delay: Any) -> Any:
     """The JSON-able form of a delay argument, as wrappers record it for env specs.
 
     A :class:`Delay` becomes its :meth:`~Delay.to_dict` description (kept as it is if it cannot
-    describe itself), a number a plain ``int`` or ``float``; anything else is returned unchanged
-    (the wrapper's own check refuses it). :func:`as_delay` reads every form back.
+    describe itself), a number a plain ``int`` or ``float``, a description the ``to_dict()`` of
+    the delay it describes (its numpy numbers and arrays as Python numbers and lists); anything
+    else is returned unchanged (the wrapper's own check refuses it). :func:`as_delay` reads every
+    form back.
     """
+    if isinstance(delay, Mapping):
+        try:
+            delay = as_delay(delay)
+        except (TypeError, ValueError):
+            return delay
     if isinstance(delay, Delay):
         try:
             return delay.to_dict()

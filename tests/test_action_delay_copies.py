@@ -219,3 +219,20 @@ def test_other_spaces_pass_through_as_copies_of_their_own_kind(space) -> None:
     assert type(first) is type(initial) and space.contains(first)
     assert space.contains(second)
     assert str(second) == str(action)  # every space here prints its sample's values
+
+
+@pytest.mark.parametrize(
+    ("wrapper", "delay"),
+    [
+        ("RewardDelay", {"type": "Constant", "k": np.int64(2)}),
+        ("ObservationDelay", {"type": "Geometric", "p": np.float32(0.5)}),
+        ("ActionDelay", {"type": "Empirical", "pmf": np.array([0.25, 0.75])}),
+    ],
+)
+def test_a_description_holding_numpy_values_gives_a_json_spec(wrapper, delay) -> None:
+    from delayed_rl import wrappers
+
+    env = getattr(wrappers, wrapper)(gym.make("CartPole-v1"), delay)
+    text = env.spec.to_json()
+    rebuilt = gym.make(gym.envs.registration.EnvSpec.from_json(text))
+    assert rebuilt.spec.to_json() == text

@@ -171,7 +171,7 @@ def test_the_episode_end_mode_is_read_from_the_wrapper_and_conflicts_are_refused
     ("kwargs", "error", "match"),
     [
         ({"delay": "poisson"}, TypeError, "delay must be None"),
-        ({"delay": -1.0}, ValueError, "^delay must be a number >= 0"),
+        ({"delay": -1.0}, ValueError, "^delay must be a number in \\[0, "),
         ({"max_delay": -1}, ValueError, "max_delay must be None or an integer >= 0"),
         ({"max_delay": 2.5}, TypeError, "max_delay must be None or an integer"),
         ({"solve_interval": 0}, ValueError, "solve_interval must be an integer >= 1"),

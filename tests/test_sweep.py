@@ -204,7 +204,7 @@ def joblib_table(tmp_path_factory) -> list[dict[str, str]]:
         (
             lambda d: d.update(delays=[-1]),
             ValueError,
-            "delays[0] must be a number >= 0 (a Poisson mean), got -1",
+            "delays[0] must be a number in [0, 9.22337e+18] (a Poisson mean), got -1",
         ),
         (
             lambda d: d.update(delays=[{"type": "Geometric", "p": 2}]),

@@ -417,12 +417,7 @@ def _distribution(where: str, value: Any) -> dict[str, Any]:
             f"{where} must be a number (a Poisson mean) or a distribution's description such as "
             f"{{type: Geometric, p: 0.25}}, got {value!r} ({type(value).__name__})"
         )
-    try:
-        return as_delay(dict(value) if isinstance(value, Mapping) else value, where).to_dict()
-    except (TypeError, ValueError) as error:  # a parameter's check names only the parameter
-        if str(error).startswith(where):
-            raise
-        raise type(error)(f"{where}: {error}") from None
+    return as_delay(dict(value) if isinstance(value, Mapping) else value, where).to_dict()
 
 
 def _distribution_label(description: Mapping[str, Any]) -> str:
