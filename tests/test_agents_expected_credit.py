@@ -106,7 +106,11 @@ def test_delay_is_a_delay_a_poisson_mean_or_a_description():
         ({"delay": "3"}, TypeError, "delay must be a delayed_rl.delays.Delay"),
         ({"delay": None}, TypeError, "delay must be a delayed_rl.delays.Delay"),
         ({"delay": True}, TypeError, "delay must be a delayed_rl.delays.Delay"),
-        ({"delay": -1}, ValueError, "delay must be a number in \\[0, .*\\] \\(a Poisson mean\\), got -1"),
+        (
+            {"delay": -1},
+            ValueError,
+            "delay must be a number in \\[0, .*\\] \\(a Poisson mean\\), got -1",
+        ),
         ({"delay": float("nan")}, ValueError, "delay must be a number in \\[0, "),
         ({"delay": {"type": "Nope"}}, ValueError, "delay must be a dict with a 'type' in"),
         ({"delay": 3, "max_delay": -1}, ValueError, "max_delay must be None or an integer >= 0"),

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from gymnasium import spaces
 
-from delayed_rl.envs._actions import ActionCheck
+from delayed_rl.envs._actions import ActionCheck, _is_integer
 from delayed_rl.envs.gridworld import GridWorldEnv
 from delayed_rl.envs.roulette import RouletteEnv
 
@@ -92,11 +92,15 @@ def test_envs_refuse_what_their_space_does_not_contain(make, allowed) -> None:
     env = make()
     env.reset(seed=0)
     for action in CANDIDATES:
-        if env.action_space.contains(action):
+        if env.action_space.contains(action) and not isinstance(action, bool):
             continue
-        with pytest.raises(ValueError) as error:
-            env.step(action)
-        assert str(error.value) == f"action must be {allowed}, got {action!r}"
+        if _is_integer(action):
+            with pytest.raises(ValueError) as error:
+                env.step(action)
+            assert str(error.value) == f"action must be {allowed}, got {action!r}"
+        else:  # not an integer at all: a TypeError, whatever Discrete.contains says
+            with pytest.raises(TypeError, match=r"^action must be an integer .*not a bool\), got"):
+                env.step(action)
 
 
 @pytest.mark.parametrize("action", [2, np.int64(2), np.int32(2), np.uint8(2), np.array(2)])
@@ -118,13 +122,16 @@ def test_copies_check_their_own_space() -> None:
 @pytest.mark.parametrize("make", [lambda: GridWorldEnv(size=3), RouletteEnv])
 @pytest.mark.parametrize("action", [True, False])
 def test_envs_refuse_a_bool_for_an_action_with_a_type_error(make, action) -> None:
+    """A bool is not an action (``np.True_`` neither: the candidates' test)."""
     env = make()
     env.reset(seed=0)
-    with pytest.raises(TypeError, match=rf"^action must be an integer .*not a bool, got {action}"):
+    with pytest.raises(
+        TypeError, match=rf"^action must be an integer .*not a bool\), got {action}"
+    ):
         env.step(action)
 
 
 def test_the_bool_refusal_is_the_envs_choice_not_the_checks_default() -> None:
     ActionCheck(spaces.Discrete(2), "0 or 1").check(True)  # Discrete.contains(True) holds
     with pytest.raises(TypeError, match="not a bool"):
-        ActionCheck(spaces.Discrete(2), "0 or 1", refuse_bool=True).check(True)
+        ActionCheck(spaces.Discrete(2), "0 or 1", integers_only=True).check(True)

@@ -628,6 +628,20 @@ def test_a_pose_in_any_sequence_form_gives_the_same_start():
     assert env.reset(seed=0, options={"pose": poses[2]})[1]["pose"] == pytest.approx(starts[0])
 
 
+@pytest.mark.parametrize("options", [["pose"], "pose", 5, (("pose", (0, 0, 0)),)], ids=repr)
+def test_options_that_are_not_a_dict_are_a_type_error(options):
+    with pytest.raises(TypeError, match=r"^options must be None or a dict"):
+        EPuckLineFollowEnv().reset(seed=0, options=options)
+
+
+@pytest.mark.parametrize(
+    "options", [{"pose": (10**400, 0, 0)}, {"start_progress": 10**400}], ids=["pose", "progress"]
+)
+def test_ints_beyond_float64_in_options_are_a_value_error_naming_them(options):
+    with pytest.raises(ValueError, match=r"options\['(pose|start_progress)'\]"):
+        EPuckLineFollowEnv().reset(seed=0, options=options)
+
+
 def test_start_progress_of_the_wrong_type_is_a_type_error():
     with pytest.raises(TypeError, match="start_progress"):
         EPuckLineFollowEnv().reset(seed=0, options={"start_progress": "0.5"})

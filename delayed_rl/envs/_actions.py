@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numbers
 from typing import Any
 
 import numpy as np
@@ -17,24 +18,24 @@ class ActionCheck:
     scalar whose type casts to the space's dtype, is answered by one range comparison; anything
     else (``bool``, ``int`` subclasses, 0-d arrays, floats, strings, ...) is handed to
     ``space.contains``. The fast path only answers where ``contains`` would accept, so what is
-    accepted and what is rejected is exactly Gymnasium's, except that with ``refuse_bool`` a
-    Python ``bool`` (which ``Discrete.contains`` takes for an ``int``: ``True`` is 1) raises
-    ``TypeError``, as the library refuses a bool for a number everywhere. (A numpy ``np.bool_``
-    is not in a ``Discrete`` space for Gymnasium: it raises ``ValueError`` like any other value
-    outside the space.)
+    accepted and what is rejected is exactly Gymnasium's. With ``integers_only``, what is not an
+    integer at all (a ``bool`` or ``np.bool_``, which ``Discrete.contains`` may take for 1 and
+    0, a float, a string, ``None``, an array that is not a 0-d integer array) raises
+    ``TypeError`` rather than ``ValueError``, as the library's checks do everywhere; an integer
+    outside the space raises ``ValueError``.
 
     Args:
         space: the env's action space (fixed for the env's lifetime).
         allowed: what is allowed, for the message (``"0 (bet even) or 1 (bet 13)"``).
-        refuse_bool: refuse ``True`` and ``False`` with a ``TypeError``.
+        integers_only: refuse what is not an integer with a ``TypeError``.
     """
 
-    __slots__ = ("space", "allowed", "refuse_bool", "_types", "_start", "_stop")
+    __slots__ = ("space", "allowed", "integers_only", "_types", "_start", "_stop")
 
-    def __init__(self, space: spaces.Discrete, allowed: str, *, refuse_bool: bool = False):
+    def __init__(self, space: spaces.Discrete, allowed: str, *, integers_only: bool = False):
         self.space = space
         self.allowed = allowed
-        self.refuse_bool = refuse_bool
+        self.integers_only = integers_only
         self._types = frozenset(
             {int}
             | {
@@ -50,16 +51,23 @@ class ActionCheck:
         """Return if ``action`` is in the space, else raise (a method: cheaper than ``__call__``).
 
         Raises:
-            TypeError: ``action`` is a ``bool`` and ``refuse_bool`` is set.
+            TypeError: ``action`` is not an integer and ``integers_only`` is set.
             ValueError: ``action`` is not in the space (whatever its type); the message names
                 the argument, says what is allowed and shows the value.
         """
         if type(action) in self._types and self._start <= action < self._stop:
             return
-        if self.refuse_bool and isinstance(action, bool):
+        if self.integers_only and not _is_integer(action):
             raise TypeError(
-                f"action must be an integer {self.allowed}, not a bool, got {action!r} "
-                f"({type(action).__name__})"
+                f"action must be an integer {self.allowed} (an int, a numpy integer or a 0-d "
+                f"integer array; not a bool), got {action!r} ({type(action).__name__})"
             )
         if not self.space.contains(action):
             raise ValueError(f"action must be {self.allowed}, got {action!r}")
+
+
+def _is_integer(value: object) -> bool:
+    """Whether ``value`` is an integer: an ``int``, a numpy integer or a 0-d integer array."""
+    if isinstance(value, np.ndarray):
+        return value.shape == () and value.dtype.kind in "iu"
+    return isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_))

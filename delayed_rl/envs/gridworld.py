@@ -51,8 +51,9 @@ class GridWorldEnv(gym.Env):
 
     ## Action Space
     ``Discrete(4)``: 0 up, 1 right, 2 down, 3 left (the thesis's actions 1–4). An action is an
-    ``int``, a numpy integer or a 0-d integer array; ``True`` and ``False`` raise ``TypeError``
-    (Gymnasium's ``Discrete.contains`` would read them as 1 and 0).
+    ``int``, a numpy integer or a 0-d integer array; anything else (``True`` and ``False``,
+    which Gymnasium's ``Discrete.contains`` would read as 1 and 0, a float, a string...) raises
+    ``TypeError``, an integer outside 0–3 ``ValueError``.
 
     ## Observation Space
     ``Discrete(size²)``: the cell index, row-major from the top-left corner, so the thesis's state
@@ -118,7 +119,7 @@ class GridWorldEnv(gym.Env):
         self.observation_space = spaces.Discrete(self.n_states)
         self.action_space = spaces.Discrete(4)
         self._check_action = ActionCheck(
-            self.action_space, "in Discrete(4) (0 up, 1 right, 2 down, 3 left)", refuse_bool=True
+            self.action_space, "in Discrete(4) (0 up, 1 right, 2 down, 3 left)", integers_only=True
         ).check
         self.next_state, self.reward_table = self._build_tables()
         self.P = {
@@ -173,8 +174,8 @@ class GridWorldEnv(gym.Env):
         """Move (or collect the +10 and warp home); truncate after ``max_steps`` if set.
 
         Raises:
-            TypeError: ``action`` is a ``bool``: ``Discrete.contains`` would take ``True`` for
-                1, but a bool is not an action here (nor a number anywhere in this library).
+            TypeError: ``action`` is not an integer (a bool, which ``Discrete.contains`` would
+                take for 1 or 0, is not an action here, nor a number anywhere in this library).
             ValueError: ``action`` is not in the action space (Gymnasium's
                 ``Discrete.contains``, answered fast for ``int`` and numpy integers).
         """

@@ -25,8 +25,8 @@ class RouletteEnv(gym.Env):
 
     ## Action Space
     ``Discrete(2)``: 0 bets 1 on even, 1 bets 1 on number 13 (the thesis's actions 1 and 2).
-    ``True`` and ``False`` raise ``TypeError`` (Gymnasium's ``Discrete.contains`` would read
-    them as 1 and 0).
+    What is not an integer (``True`` and ``False`` included, which Gymnasium's
+    ``Discrete.contains`` would read as 1 and 0) raises ``TypeError``.
 
     ## Observation Space
     ``Discrete(1)``: there is one state, the roulette table (always 0).
@@ -68,7 +68,7 @@ class RouletteEnv(gym.Env):
         self.observation_space = spaces.Discrete(1)
         self.action_space = spaces.Discrete(2)
         self._check_action = ActionCheck(
-            self.action_space, "0 (bet even) or 1 (bet 13)", refuse_bool=True
+            self.action_space, "0 (bet even) or 1 (bet 13)", integers_only=True
         ).check
         self.P = {
             0: {
@@ -92,8 +92,8 @@ class RouletteEnv(gym.Env):
         """Spin the wheel for one $1 bet; ``info["pocket"]`` names the pocket (``"00"``...).
 
         Raises:
-            TypeError: ``action`` is a ``bool`` (``Discrete.contains`` would take ``True`` for
-                1, but a bool is not an action here).
+            TypeError: ``action`` is not an integer (a bool included, which
+                ``Discrete.contains`` would take for 1 or 0).
             ValueError: ``action`` is not in the action space (Gymnasium's
                 ``Discrete.contains``, answered fast for ``int`` and numpy integers).
         """

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Mapping
 from types import MappingProxyType
 from typing import Any, SupportsFloat
 
@@ -362,7 +363,7 @@ class EPuckLineFollowEnv(gym.Env):
                 real numbers, metres and radians; bools and strings are not numbers).
 
         Raises:
-            TypeError: ``options['pose']`` is not a sequence of numbers (a string, ``None``,
+            TypeError: ``options`` is not a dict, ``options['pose']`` is not a sequence of numbers (a string, ``None``,
                 an entry that is not a real number), or ``options['start_progress']`` is not
                 a number.
             ValueError: ``options`` holds an unknown key or both keys, ``options['pose']``
@@ -371,6 +372,11 @@ class EPuckLineFollowEnv(gym.Env):
         """
         super().reset(seed=seed)
         options = {} if options is None else options
+        if not isinstance(options, Mapping):
+            raise TypeError(
+                f"options must be None or a dict (keys {list(_RESET_OPTIONS)}), got "
+                f"{options!r} ({type(options).__name__})"
+            )
         unknown = set(options) - set(_RESET_OPTIONS)
         if unknown or len(options) > 1:
             raise ValueError(
