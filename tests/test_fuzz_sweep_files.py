@@ -15,6 +15,7 @@ import contextlib
 import csv
 import io
 import json
+import socket
 import sys
 import types
 import warnings
@@ -413,9 +414,24 @@ def set_cell(lines: list[str], line: int, column: str, value: str) -> list[str]:
 @pytest.mark.parametrize(
     ("line", "column", "value", "message"),
     [
-        (2, "eval_reward", "nan", r"line 2: eval_reward must be a finite number, got 'nan'"),
-        (3, "train_reward", "inf", r"line 3: train_reward must be a finite number"),
-        (4, "eval_reward", "abc", r"line 4: eval_reward must be a finite number, got 'abc'"),
+        (
+            2,
+            "eval_reward",
+            "nan",
+            r"line 2: eval_reward must be a decimal number of magnitude at most MAX_ABS_VALUE = 2\*\*200, got 'nan'",
+        ),
+        (
+            3,
+            "train_reward",
+            "inf",
+            r"line 3: train_reward must be a decimal number of magnitude at most MAX_ABS_VALUE = 2\*\*200",
+        ),
+        (
+            4,
+            "eval_reward",
+            "abc",
+            r"line 4: eval_reward must be a decimal number of magnitude at most MAX_ABS_VALUE = 2\*\*200, got 'abc'",
+        ),
         (2, "wall_s", "-1", r"line 2: wall_s must be a number >= 0"),
         (3, "seed", "-1", r"line 3: seed must be an integer in \[0, 4294967295\], got '-1'"),
         (3, "seed", "1.5", r"line 3: seed must be an integer"),
@@ -423,7 +439,10 @@ def set_cell(lines: list[str], line: int, column: str, value: str) -> list[str]:
         (5, "eval_unit", "epoch", r"line 5: eval_unit must be 'episode' or 'step'"),
         (2, "run_id", "3f2a", r"line 2: run_id must be 16 hexadecimal digits, got '3f2a'"),
         (4, "agent", "", r"line 4: agent must be a non-empty label"),
-        (3, "eval_reward", "1" * 5000, r"line 3: eval_reward must be a finite number"),
+        (3, "eval_reward", "1" * 5000, r"line 3: eval_reward must be a decimal number"),
+        (2, "eval_reward", "1e308", r"line 2: eval_reward must be a decimal number"),
+        (3, "train_reward", "1_000", r"line 3: train_reward must be a decimal number"),
+        (4, "eval_reward", " 0.5 ", r"line 4: eval_reward must be a decimal number"),
     ],
 )
 def test_a_bad_value_is_refused_with_its_line_and_column(
@@ -553,3 +572,79 @@ def test_yaml_types_that_are_not_json_are_refused_naming_the_field(tmp_path, tag
     text = VALID_YAML.replace("learning_rate: 0.2", f"learning_rate: {tag}")
     with pytest.raises(TypeError, match=r"^agents\[1\]\.kwargs\.learning_rate"):
         parse_sweep(read_sweep_file(write(tmp_path, "s.yaml", text)))
+
+
+# --- values that would pass the checks, then break the sweep -------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("changes", "exc", "message"),
+    [
+        ({"name": "x" * 1001}, ValueError, r"^name must be at most MAX_TEXT = 1000 characters"),
+        (
+            {"envs": [{"id": GRID, "label": "y" * 900_000, "eval_steps": 20}]},
+            ValueError,
+            r"^envs\[0\]\.label must be at most MAX_TEXT",
+        ),
+        ({"name": "\ud800"}, ValueError, r"^name must be text UTF-8 can write"),
+        ({"agents": [{"name": "q", "label": "a\udfffb"}]}, ValueError, r"agents\[0\]\.label"),
+    ],
+    ids=["long name", "long label", "lone surrogate", "surrogate label"],
+)
+def test_text_a_results_file_could_not_hold_is_refused(changes, exc, message):
+    with pytest.raises(exc, match=message):
+        parse_sweep(plan(**changes))
+
+
+def test_building_an_agent_that_asks_for_too_much_memory_is_a_value_error(monkeypatch):
+    from delayed_rl.experiments.sweep import check_sweep, runs
+
+    def huge(config, env):
+        raise MemoryError("Unable to allocate 745. GiB for an array")
+
+    monkeypatch.setattr(runs, "make_model", huge)
+    with pytest.raises(ValueError, match=r"asks? for more memory than this machine has"):
+        check_sweep(parse_sweep(plan()))
+
+
+def test_a_results_file_that_is_not_utf8_names_its_line(finished, tmp_path):
+    text = (finished / RESULTS_FILE).read_bytes()
+    path = tmp_path / RESULTS_FILE
+    path.write_bytes(text + b"\x80\x81\r\n")
+    lines = text.count(b"\n") + 1
+    with pytest.raises(ValueError, match=rf"results.csv, line {lines}: not UTF-8 text"):
+        read_results(path)
+
+
+def test_a_run_given_twice_is_kept_once_if_it_agrees_and_refused_if_not(finished, tmp_path):
+    lines = (finished / RESULTS_FILE).read_text(encoding="utf-8").splitlines(keepends=True)
+    again = set_cell(list(lines), 2, "wall_s", "99.5")[1]  # the same run, another time
+    path, _ = corrupt(finished, tmp_path, lambda lines: [*lines, again])
+    assert read_results(path) == read_results(finished / RESULTS_FILE)
+    other = set_cell(list(lines), 2, "eval_reward", "99")[1]
+    path, _ = corrupt(finished, tmp_path, lambda lines: [*lines, other])
+    message = rf"results.csv, line {len(lines) + 1}: the run of line 2 again, with other results"
+    with pytest.raises(ValueError, match=message):
+        read_results(path)
+
+
+def test_ray_at_an_address_nobody_answers_is_one_error_line_at_once(tmp_path, capsys, monkeypatch):
+    fake = types.ModuleType("ray")
+    fake.is_initialized = lambda: False
+
+    def init(address=None):
+        raise AssertionError("ray.init was called: it would wait for minutes")
+
+    fake.init = init
+    monkeypatch.setitem(sys.modules, "ray", fake)
+    with socket.socket() as probe:  # a port of this machine that nothing listens on
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    path = write(tmp_path, "s.yaml", VALID_YAML)
+    argv = ["sweep", str(path), "--out", str(tmp_path / "o"), "--backend", "ray"]
+    assert main([*argv, "--address", f"127.0.0.1:{port}"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith(
+        f"error: backend 'ray' could not start on the cluster at '127.0.0.1:{port}': "
+        "ConnectionRefusedError"
+    )

@@ -34,6 +34,7 @@ import contextlib
 import csv
 import json
 import math
+import socket
 import sys
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field
@@ -494,6 +495,31 @@ def _dask_client(workers: int | None, address: str | None) -> Any:
         raise RuntimeError(_not_started("dask", address, error)) from error
 
 
+#: How long a cluster's address may take to answer before the backend is said not to start.
+CONNECT_TIMEOUT = 10.0
+
+
+def _check_reachable(backend: str, address: str | None) -> None:
+    """Refuse at once a ``host:port`` (or ``ray://host:port``) address that nobody answers.
+
+    (Ray's own connection waits for minutes for an address that does not answer.) Other
+    addresses (``"auto"``, ``None``) are left to the backend.
+
+    Raises:
+        RuntimeError: nothing accepted a TCP connection at the address within
+            :data:`CONNECT_TIMEOUT` seconds.
+    """
+    if address is None:
+        return
+    host, _, port = address.removeprefix(f"{backend}://").rpartition(":")
+    if not host or not port.isdigit():
+        return
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=CONNECT_TIMEOUT).close()
+    except (OSError, ValueError, OverflowError) as error:
+        raise RuntimeError(_not_started(backend, address, error)) from None
+
+
 def _not_started(backend: str, address: str | None, error: BaseException) -> str:
     """The message for a backend that could not start (or reach the cluster at ``address``)."""
     where = f"the cluster at {address!r}" if address is not None else "a local cluster"
@@ -510,6 +536,7 @@ def _ray_results(
     except ImportError as error:
         raise RuntimeError("backend 'ray' needs Ray: pip install 'ray[default]'") from error
     if not ray.is_initialized():
+        _check_reachable("ray", address)
         try:
             ray.init(address=address)
         except Exception as error:  # Ray raises ConnectionError, RuntimeError, plain Exception...

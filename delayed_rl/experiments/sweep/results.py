@@ -18,6 +18,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from delayed_rl.agents.hyperparameters import MAX_ABS_VALUE
 from delayed_rl.experiments.runner import mean_ci95
 from delayed_rl.experiments.sweep.schema import MAX_STEPS, MAX_SWEEP_SEED, Sweep
 
@@ -55,7 +56,9 @@ def read_results(path: Path) -> list[dict[str, str]]:
     sweep was stopped while appending it): that row is left out, with a warning, so its run
     runs again. Every other row must be whole and valid (:func:`check_result_row`): a row of
     the wrong length, a value that does not parse (``abc`` for a number, ``nan``, a seed
-    out of range, a cut ``run_id``) is refused with its line number, not resumed from.
+    out of range, a cut ``run_id``) is refused with its line number, not resumed from. A run
+    given twice (two sweeps on one folder may both run it) is kept once when both rows agree on
+    everything but ``wall_s``, and refused, naming both lines, when they do not.
 
     Raises:
         ValueError: the file's columns are not a sweep's (:data:`RESULT_COLUMNS` and the
@@ -64,7 +67,11 @@ def read_results(path: Path) -> list[dict[str, str]]:
     """
     if not path.exists():
         return []
-    text = path.read_text(encoding="utf-8")
+    try:
+        text = path.read_bytes().decode("utf-8")
+    except UnicodeDecodeError as error:
+        line = path.read_bytes()[: error.start].count(b"\n") + 1
+        raise ValueError(f"{path}, line {line}: not UTF-8 text ({error.reason})") from None
     cut = ""
     if text and not text.endswith("\n"):
         text, cut = text[: text.rfind("\n") + 1], text[text.rfind("\n") + 1 :]
@@ -79,14 +86,25 @@ def read_results(path: Path) -> list[dict[str, str]]:
                 f"{list(_COLUMNS)}: give the sweep another output folder"
             )
         rows = []
+        first: dict[tuple[str, ...], tuple[int, dict[str, str]]] = {}
         for row in reader:
             try:
-                rows.append(check_result_row(row))
+                row = check_result_row(row)
             except ValueError as error:
                 raise ValueError(
                     f"{path}, line {reader.line_num}: {error}; correct or delete the line (its "
                     "run then runs again)"
                 ) from None
+            line, seen = first.setdefault(run_key(row), (reader.line_num, row))
+            if seen is not row:  # the same run twice: kept once if the results agree
+                if _results(seen) != _results(row):
+                    raise ValueError(
+                        f"{path}, line {reader.line_num}: the run of line {line} again, with "
+                        "other results; delete the line that is wrong (or both: the run then "
+                        "runs again)"
+                    )
+                continue
+            rows.append(row)
     except csv.Error as error:
         raise ValueError(f"{path}, line {reader.line_num}: not a CSV row: {error}") from None
     if cut.strip():
@@ -108,8 +126,9 @@ def check_result_row(row: Mapping[str, Any]) -> dict[str, str]:
 
     Every column of :data:`RESULT_COLUMNS` and :data:`EXTRA_COLUMNS` holds a value and no more:
     non-empty labels (``agent``, ``env``, ``delay``); ``seed`` an integer in
-    ``[0, MAX_SWEEP_SEED]``; ``steps`` an integer in ``[1, MAX_STEPS]``; ``train_reward`` and
-    ``eval_reward`` finite numbers; ``wall_s`` a finite number ``>= 0``; ``eval_unit``
+    ``[0, MAX_SWEEP_SEED]``; ``steps`` an integer in ``[1, MAX_STEPS]``; ``train_reward``,
+    ``eval_reward`` and ``wall_s`` decimal numbers of magnitude at most ``MAX_ABS_VALUE``
+    (2**200, so that their means and intervals stay finite), ``wall_s >= 0``; ``eval_unit``
     ``episode`` or ``step``; ``run_id`` 16 hexadecimal digits, as :meth:`Sweep.runs` makes it.
 
     Raises:
@@ -142,15 +161,24 @@ def _integer(row: Mapping[str, str], column: str, low: int, high: int) -> int:
     return int(text)
 
 
+_NUMBER = re.compile(r"-?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]{1,3})?")
+
+
 def _number(row: Mapping[str, str], column: str) -> float:
+    """A number column: decimal text, of magnitude at most ``MAX_ABS_VALUE`` (2**200)."""
     text = row[column]
-    try:
-        value = float(text) if len(text) <= 40 else math.nan
-    except ValueError:
-        value = math.nan
-    if not math.isfinite(value):
-        raise ValueError(f"{column} must be a finite number, got {text[:40]!r}")
+    value = float(text) if len(text) <= 40 and _NUMBER.fullmatch(text) else math.nan
+    if not abs(value) <= MAX_ABS_VALUE:
+        raise ValueError(
+            f"{column} must be a decimal number of magnitude at most MAX_ABS_VALUE = 2**200, "
+            f"got {text[:40]!r}"
+        )
     return value
+
+
+def _results(row: Mapping[str, str]) -> tuple[str, ...]:
+    """What a run's row says of its results (all but its time, which differs run to run)."""
+    return tuple(row[column] for column in _COLUMNS if column != "wall_s")
 
 
 def write_results(path: Path, rows: Sequence[Mapping[str, Any]]) -> None:

@@ -102,7 +102,8 @@ def check_sweep(sweep: Sweep) -> None:
     observation space), fails here, before any run, naming the agent, env and delay.
 
     Raises:
-        TypeError, ValueError: one of them cannot be built; the message says which and why.
+        TypeError, ValueError: one of them cannot be built, or building it asks for more memory
+            than the machine has; the message says which and why.
         RuntimeError: an extra the sweep needs is not installed (stable-baselines3).
     """
     seen = set()
@@ -120,6 +121,11 @@ def check_sweep(sweep: Sweep) -> None:
             raise TypeError(f"{where}: {_one_line(error)}") from None
         except (ValueError, AssertionError, ImportError, gym.error.Error) as error:
             raise ValueError(f"{where}: {_one_line(error)}") from None
+        except (MemoryError, OverflowError) as error:  # e.g. SB3's n_steps: 10**11
+            raise ValueError(
+                f"{where}: its arguments ask for more memory than this machine has "
+                f"({type(error).__name__}: {_one_line(error)}); check its kwargs"
+            ) from None
         finally:
             if env is not None:
                 env.close()

@@ -60,6 +60,8 @@ MAX_EVAL_EPISODES = 10**6
 MAX_SWEEP_SEED = 2**32 - 1
 """The largest seed: what every agent accepts (stable-baselines3 seeds numpy's legacy generator,
 which takes 32 bits)."""
+MAX_TEXT = 1000
+"""The longest name, label or env id in a sweep file (they are written in every row)."""
 MAX_RUNS = 100_000
 """The most runs (agents × envs × delays × seeds) in one sweep."""
 
@@ -230,10 +232,24 @@ def _check_keys(
 
 
 def _text(where: str, value: Any) -> str:
+    """A name, label or id: a non-empty string of at most :data:`MAX_TEXT` characters.
+
+    It must be encodable as UTF-8 (no lone surrogate, which a JSON escape can make): it is
+    written to ``results.csv`` and ``summary.md``.
+    """
     if not isinstance(value, str):
         raise TypeError(f"{where} must be a string, got {value!r} ({type(value).__name__})")
     if not value.strip():
         raise ValueError(f"{where} must be a non-empty string, got {value!r}")
+    if len(value) > MAX_TEXT:
+        raise ValueError(
+            f"{where} must be at most MAX_TEXT = {MAX_TEXT} characters ({_HERE}), got "
+            f"{len(value):,}: {value[:40]!r}..."
+        )
+    try:
+        value.encode("utf-8")
+    except UnicodeEncodeError as error:
+        raise ValueError(f"{where} must be text UTF-8 can write, got {value!r}: {error}") from None
     return value
 
 
