@@ -157,34 +157,6 @@ def _one_line(error: BaseException) -> str:
     return text
 
 
-class _DeprecatedAlias(argparse.Action):
-    """An option's old name: stores like the new one, and says on stderr that it is deprecated.
-
-    Args:
-        option_strings: the old flag, e.g. ``["--delay"]``.
-        dest: the new option's ``dest``, so both names fill one attribute.
-        new: the new flag, named in the warning.
-        **kwargs: the other ``add_argument`` arguments (``type``, ``metavar``, ``help``...).
-    """
-
-    def __init__(self, option_strings: Sequence[str], dest: str, new: str, **kwargs: Any):
-        super().__init__(option_strings, dest, **kwargs)
-        self.new = new
-
-    def __call__(
-        self,
-        parser: argparse.ArgumentParser,
-        namespace: argparse.Namespace,
-        values: Any,
-        option_string: str | None = None,
-    ) -> None:
-        print(
-            f"{parser.prog}: warning: {option_string} is deprecated; use {self.new}",
-            file=sys.stderr,
-        )
-        setattr(namespace, self.dest, values)
-
-
 def _list(args: argparse.Namespace) -> int:
     """``delayed-rl list``: print the registered envs, the agents and the experiments."""
     print("Environments (gymnasium.make(id, reward_delay=λ) adds a Poisson reward delay):")
@@ -474,17 +446,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--delay-estimate",
         type=_non_negative_int,
         metavar="K",
-        help="--agent fixed: the constant delay in steps that it assumes (required for it; "
-        "--delay, its old name, still works but is deprecated)",
-    )
-    train.add_argument(
-        "--delay",
-        dest="delay_estimate",
-        action=_DeprecatedAlias,
-        new="--delay-estimate",
-        type=_non_negative_int,
-        metavar="K",
-        help=argparse.SUPPRESS,
+        help="--agent fixed: the constant delay in steps that it assumes (required for it)",
     )
     train.add_argument(
         "--max-delay-estimate",

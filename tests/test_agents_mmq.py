@@ -360,15 +360,3 @@ def test_delay_estimate_arguments():
         FixedDelayQLearning(env, delay_estimate=2.5)
     with pytest.raises(ValueError, match="delay_estimate must be an integer >= 0, got -1"):
         FixedDelayQLearning(env, -1)
-
-
-def test_fixed_delay_keeps_its_deprecated_delay_name():
-    """``delay=k`` (the old name of ``delay_estimate``) builds the same agent, with a warning."""
-    env = gym.make("delayed_rl/GridWorld-3x3-v0")
-    with pytest.warns(DeprecationWarning, match="delay_estimate=k"):
-        old = FixedDelayQLearning(env, delay=3)
-    assert old.delay_estimate == 3 and old.delay_estimates == [3]
-    with pytest.warns(DeprecationWarning, match="read delay_estimate"):
-        assert old.delay == 3
-    with pytest.raises(TypeError, match="not both"):
-        FixedDelayQLearning(env, 3, delay=3)

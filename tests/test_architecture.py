@@ -16,7 +16,6 @@ import inspect
 import json
 import subprocess
 import sys
-import warnings
 from dataclasses import asdict
 from pathlib import Path
 
@@ -304,17 +303,17 @@ def test_a_file_of_an_undefined_class_names_it(tmp_path):
         load_agent(path)
 
 
-def test_deprecated_names_still_work(tmp_path):
-    agent = QLearning("delayed_rl/GridWorld-3x3-v0", seed=0).learn(50, record=True)
-    with pytest.warns(DeprecationWarning, match="episode_end"):
-        np.testing.assert_array_equal(agent.training_log["done"], agent.training_log["episode_end"])
-    from delayed_rl.agents import serialization
+def test_the_removed_names_are_gone():
+    """0.x renames leave no alias behind (CHANGELOG.md lists them)."""
+    import importlib
 
-    with pytest.warns(DeprecationWarning, match="agent.save"):
-        path = serialization.save_agent(agent, tmp_path / "old")
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        assert type(load_agent(path)) is QLearning
+    with pytest.raises(ModuleNotFoundError):
+        importlib.import_module("delayed_rl.agents.serialization")
+    agent = QLearning("delayed_rl/GridWorld-3x3-v0", seed=0).learn(50, record=True)
+    assert "done" not in agent.training_log and "episode_end" in agent.training_log
+    with pytest.raises(TypeError):
+        FixedDelayQLearning("delayed_rl/GridWorld-3x3-v0", delay=3)
+    assert not hasattr(FixedDelayQLearning("delayed_rl/GridWorld-3x3-v0", 3), "delay")
 
 
 @pytest.mark.parametrize("cls", [MMQ, QLearning, FixedDelayQLearning])

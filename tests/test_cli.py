@@ -83,13 +83,6 @@ def test_train_passes_the_agent_options(tmp_path, capsys):
     assert load_agent(tmp_path / "agent.npz").delay_estimates == [3]
 
 
-def test_delay_is_a_deprecated_alias_of_delay_estimate(tmp_path, capsys):
-    assert main(_train(tmp_path, "--agent", "fixed", "--delay", "2", "--steps", "100")) == 0
-    err = capsys.readouterr().err
-    assert err == "delayed-rl train: warning: --delay is deprecated; use --delay-estimate\n"
-    assert load_agent(tmp_path / "agent.npz").delay_estimates == [2]
-
-
 def test_evaluate_counts_episodes_on_an_episodic_env(tmp_path, capsys):
     env = "delayed_rl/EPuckLineFollow-v0"
     options = f"--env {env} --agent q --steps 500 --seed 0 --no-progress"
@@ -139,7 +132,7 @@ def test_evaluate_with_episodes_on_a_continuing_env_fails_clearly(tmp_path, caps
         (TRAIN + "--seed -1", "argument --seed: must be an integer >= 0, got -1"),
         (f"train --env {GRID} --agent fixed --save x", "--agent fixed needs --delay-estimate K"),
         (TRAIN + "--delay-estimate 2", "--delay-estimate is for --agent fixed, not --agent q"),
-        (TRAIN + "--delay 2", "--delay-estimate is for --agent fixed, not --agent q"),
+        (TRAIN + "--delay 2", "--delay-estimate is for --agent fixed, not --agent q"),  # a prefix
         (TRAIN + "--max-delay-estimate 9", "--max-delay-estimate is for --agent mmq or deconv"),
         ("evaluate m.npz --env Nope-v9", "unknown env id 'Nope-v9'"),
         (f"evaluate m.npz --env {GRID} --steps 5 --episodes 2", "not allowed with argument"),

@@ -8,7 +8,6 @@ a setup that checks the arguments and builds a :class:`LearnRun`, one of two ste
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -24,7 +23,6 @@ __all__ = [
     "MAX_TIMESTEPS",
     "RECORD_DTYPES",
     "LearnRun",
-    "TrainingLog",
     "advance_schedules",
     "finish_learn",
     "log_metrics",
@@ -61,24 +59,6 @@ MAX_RECORD_BYTES = 2**30
 The record takes 41 bytes a step (:data:`RECORD_DTYPES`), allocated when ``learn()`` starts: up
 to about 26 million steps. A longer recorded call is refused before anything is allocated.
 """
-
-
-class TrainingLog(dict):
-    """``agent.training_log``: one array per key of :data:`RECORD_DTYPES`, one entry per step.
-
-    The key ``"done"`` (the name of ``"episode_end"`` before version 0.2) still reads
-    ``"episode_end"``, with a ``DeprecationWarning``.
-    """
-
-    def __missing__(self, key: str) -> Any:
-        if key == "done" and "episode_end" in self:
-            warnings.warn(
-                'training_log["done"] is deprecated: read training_log["episode_end"]',
-                DeprecationWarning,
-                stacklevel=2,
-            )
-            return self["episode_end"]
-        raise KeyError(key)
 
 
 @dataclass
@@ -312,9 +292,7 @@ def finish_learn(agent: Any, run: LearnRun) -> None:
     """What ends every ``learn()``: the record, the last metrics, the callbacks' ends."""
     agent._progress_remaining = 1.0 - agent.num_timesteps / max(run.total_timesteps, 1)
     if run.log:
-        agent.training_log = TrainingLog(
-            (key, value[: run.steps_done]) for key, value in run.log.items()
-        )
+        agent.training_log = dict((key, value[: run.steps_done]) for key, value in run.log.items())
     if agent.num_timesteps > agent._statistics.log_start[1]:
         log_metrics(agent, run.reward_total, run.undelayed_total)
     if run.callback is not None:

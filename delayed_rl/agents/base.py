@@ -37,7 +37,6 @@ from delayed_rl.agents import _persistence
 from delayed_rl.agents._compiled import CompiledTables, check_compiled, compiled_loop, compiled_run
 from delayed_rl.agents._loop import (
     RECORD_DTYPES,
-    TrainingLog,
     finish_learn,
     python_loop,
     setup_learn,
@@ -160,7 +159,7 @@ class TabularAgent(_persistence.CopyProtocol, ABC):
         self.num_timesteps = 0
         self._logger: Any = None
         self._compiled: Any = None
-        self.training_log: dict[str, np.ndarray] = TrainingLog()
+        self.training_log: dict[str, np.ndarray] = {}
         self._uniform = UniformStream.from_seed(self.seed)
         self._predict_uniform = UniformStream.from_seed(self.seed, (PREDICT_STREAM,))
 

@@ -9,7 +9,6 @@ identical tables for the same seed and env.
 
 from __future__ import annotations
 
-import warnings
 from typing import Any
 
 import gymnasium as gym
@@ -75,10 +74,8 @@ class FixedDelayQLearning(MultipleModelQLearning):
     Args:
         env: the training env (``Discrete`` observation and action spaces) or an env id.
         delay_estimate: the assumed delay, a number of steps (an integer >= 0; 0 is plain
-            Q-learning). Called ``delay`` before version 0.2, a name now kept for delay
-            *distributions* (:mod:`delayed_rl.delays`); ``delay=`` still works, with a
-            ``DeprecationWarning``.
-        delay: the deprecated name of ``delay_estimate`` (keyword only).
+            Q-learning). (``delay`` names delay *distributions* in this library:
+            :mod:`delayed_rl.delays`.)
         **hyperparameters: the hyper-parameters every agent shares, by keyword: see
             :class:`~delayed_rl.agents.base.TabularAgent`.
     """
@@ -91,19 +88,8 @@ class FixedDelayQLearning(MultipleModelQLearning):
         self,
         env: gym.Env | str,
         delay_estimate: int | None = None,
-        *,
-        delay: int | None = None,
         **hyperparameters: Any,
     ):
-        if delay is not None:
-            if delay_estimate is not None:
-                raise TypeError("give delay_estimate (delay is its deprecated name), not both")
-            warnings.warn(
-                "FixedDelayQLearning(delay=k) is deprecated: use delay_estimate=k",
-                DeprecationWarning,
-                stacklevel=2,
-            )
-            delay_estimate = delay
         if delay_estimate is None:
             raise TypeError("FixedDelayQLearning needs delay_estimate, the assumed delay in steps")
         check_int("delay_estimate", delay_estimate, 0)
@@ -113,16 +99,6 @@ class FixedDelayQLearning(MultipleModelQLearning):
     def delay_estimate(self) -> int:
         """The assumed delay, in steps."""
         return int(self._delay_estimates[0])
-
-    @property
-    def delay(self) -> int:
-        """Deprecated name of :attr:`delay_estimate`."""
-        warnings.warn(
-            "FixedDelayQLearning.delay is deprecated: read delay_estimate",
-            DeprecationWarning,
-            stacklevel=2,
-        )
-        return self.delay_estimate
 
     def _set_hyperparameters(self, *, delay_estimates: Any = None, **kwargs: Any) -> None:
         if delay_estimates is not None and len(_estimates(delay_estimates)) != 1:

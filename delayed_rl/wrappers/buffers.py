@@ -163,7 +163,9 @@ class RewardBuffers:
         ended = np.asarray(ended, dtype=bool) & active
         # Only sums of magnitudes near float64's range can overflow: then, and only then, the
         # state is saved, to be put back if the step is refused.
-        risky = float((self._magnitude + np.abs(rewards)).max(initial=0.0)) >= _SAFE_MAGNITUDE
+        with np.errstate(over="ignore"):  # an infinite bound is risky too
+            magnitude = self._magnitude + np.abs(rewards)
+        risky = float(magnitude.max(initial=0.0)) >= _SAFE_MAGNITUDE
         saved = self._save() if risky else None
         try:
             with np.errstate(over="ignore", invalid="ignore"):  # overflows are checked here
