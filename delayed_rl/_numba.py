@@ -36,8 +36,8 @@ def entry_point(function: Callable, *example: Any) -> Callable:
     """The compiled ``function`` for arguments of the types of ``example``, without dispatch.
 
     Calling a compiled function from Python first finds the numba types of its arguments and
-    picks the compiled version for them: about 2 µs for the e-puck camera's 14 arguments, more
-    than the reading itself. The callable returned skips that step: it converts each scalar
+    picks the compiled version for them: for the e-puck camera's 14 arguments, more than the
+    reading itself (measured: ``benchmarks/SPEED.md``). The callable returned skips that step: it converts each scalar
     argument to the type of its ``example`` as ``float()`` and ``int()`` do (a numeric string
     too) and takes an array's memory as the example's dtype, dimensions and layout *without
     checking them*. So it is for internal calls whose arguments the caller made itself, of

@@ -183,8 +183,8 @@ class Poisson(Delay):
 
     Delays are drawn by table look-up (an :class:`AliasTable` of the pmf, built on first use and
     ending where the remaining tail weighs less than 1e-20, far below a uniform draw's 2⁻⁵³
-    resolution): about 7 ns a draw in batches, against about 40 ns for numpy's transformed
-    rejection, which was the largest part of the delay wrappers' and the compiled path's cost.
+    resolution): several times cheaper than numpy's transformed rejection, which was the largest
+    part of the delay wrappers' and the compiled path's cost (measured: ``benchmarks/SPEED.md``).
     Beyond λ ≈ 30 000 the table would pass 65 536 entries and numpy's ``poisson`` draws instead.
 
     Args:

@@ -17,8 +17,9 @@ protocol), the learning rate is constant and no callback is given (a progress ba
   env's delay wrapper).
 - Compiling: numba compiles the loop the first time a machine trains a kind of agent (one
   version per combination of the rule's options: a reward model, the oracle's record, MMQ's
-  credit options, a greedy window, the e-puck), 5-10 s each, and caches it on disk beside the
-  package: later runs, processes and workers load it in a fraction of a second.
+  credit options, a greedy window, the e-puck), which takes seconds, and caches it on disk
+  beside the package: later runs, processes and workers load it from there
+  (``benchmarks/SPEED.md``).
 - Callbacks (with ``compiled=True``) still get one ``on_step()`` per step, with that step's
   ``locals`` (``info`` holds only ``undelayed_reward``), but they run after each compiled chunk
   of ``agent.compiled_chunk`` steps: the model they see (an ``EvalCallback``'s evaluation, a

@@ -306,7 +306,8 @@ def run_chunk(
     """Advance training by ``line.delays.shape[0]`` steps.
 
     One loop, written out: splitting its step into compiled helpers (choose, env step, delay,
-    learn) measured 1.3-3× slower here, even inlined, so the phases are marked by comments.
+    learn) measured slower, even inlined (``benchmarks/SPEED.md``), so the phases are marked by
+    comments.
 
     The MMQ update: at each step, for every model ``j`` whose step ``t − Λ[j]`` is in this
     episode's history, with (s, a, s′, terminated) that step's transition,
@@ -333,11 +334,9 @@ def run_chunk(
     The optional parts (``script``, ``model``, ``arrivals``, ``average``, ``robot`` and the
     rule's credit options) are ``None`` when absent, and numba compiles the loop once for each
     combination of the parts present, leaving the code of the absent ones out (:func:`_loop`).
-    Measured on the 9×9 grid under Poisson(13) delays, against one loop that tested for each
-    part at every step: MMQ and its variants 13-23 % faster, expected credit 24 %,
-    deconvolution Q-learning and the oracle within a few percent. The price is a first compile
-    (5-10 s, cached on disk as all compiled code here) for each combination a machine meets:
-    about one per kind of agent.
+    That is faster than one loop testing for each part at every step (``benchmarks/SPEED.md``);
+    the price is a first compile (cached on disk as all compiled code here) for each
+    combination a machine meets: about one per kind of agent.
 
     MMQ's credit options (:class:`~delayed_rl.compiled.state.Rule`): the delay trace is decayed and the acting model's entry
     set to 1 at every step, before the step's update; the per-model weight of the reward is
@@ -557,7 +556,7 @@ def _loop(
             if not per_lag:  # one table: the TD error now, before any write of the step
                 targets[j] -= qf[cells[j]]
         # ... then the writes, lag after lag (several lags' increments to one entry add up).
-        # This is _write, inlined: the call measured 1.4-3x slower in this loop.
+        # This is _write, inlined: the call measured slower in this loop (benchmarks/SPEED.md).
         for j in range(count):
             sj = states[j]
             cell = cells[j]

@@ -13,8 +13,8 @@ The compiled step is :meth:`EPuckLineFollowEnv.step` to the last bit: the same C
 env's own pymunk space, the same camera and reward arithmetic, and every random number drawn
 from the env's own ``np_random`` (numba draws from a numpy ``Generator`` in place, the same
 stream) at the same point of the step. A seeded env therefore walks the same trajectory for the
-same actions on either path. Two rare events go back to Python, to the env's own code (a
-fraction of a millisecond each): putting a lost robot back on the track
+same actions on either path. Two rare events go back to Python, to the env's own code
+(``benchmarks/SPEED.md``): putting a lost robot back on the track
 (``lost_line="recover"``), which rebuilds its pymunk space, and the reset at an episode's end.
 
 What compiles (:class:`RobotLink` says why not, as

@@ -53,11 +53,8 @@ Claims, verdicts from the 95 % CIs over seeds (:mod:`.common`'s rules):
 
 Cost: pretraining dominates; it runs on the compiled path (the e-puck stepped inside the
 compiled training loop), the continuations on the real configuration on the Python path (its
-command latency does not compile). In a full ``delayed-rl reproduce`` on this 2-core machine
-(two workers busy), 500k pretraining steps took about 2 s for Q, 3 s for MMQ and 4 s for
-DeconvQ learned (4–8 µs a step), the continuations well under a second each: the default 4
-seeds cost about 40 core-seconds. ``summary.json`` records each pretraining's wall time (mean
-and CI, ``pretrain_seconds``). The pretraining is :func:`.linefollow.training_run`'s, whose
+command latency does not compile); ``benchmarks/SPEED.md`` has their cost. ``summary.json``
+records each pretraining's wall time (mean and CI, ``pretrain_seconds``). The pretraining is :func:`.linefollow.training_run`'s, whose
 first steps are ``linefollow``'s, ``linefollow-deconv``'s and ``controllers``' training of the
 same learner and seed: run together (``delayed-rl reproduce``), each trains once.
 """

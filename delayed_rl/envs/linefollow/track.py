@@ -81,7 +81,7 @@ TRACK_NAMES = ("oval", "racetrack", "figure8", "random")
 #: The most vertices a track's dense centreline may have: 200 m of line at
 #: :data:`SAMPLE_SPACING`. A 2000-step episode drives at most 4.9 m (300 steps/s ≈ 3.9 cm/s for
 #: 128 s) and the thesis's track is 5.1 m long, so every realistic track is far below it; at the
-#: limit a track takes about 30 MB and builds and checks in a few seconds.
+#: limit a track still builds and checks in seconds (``benchmarks/SPEED.md``).
 MAX_TRACK_VERTICES = 40_000
 #: About what one dense vertex costs (its geometry, its nine entries in the spatial grid, its
 #: window for hinted lookups and the compiled queries' copy of its geometry and grid entries).
@@ -838,7 +838,7 @@ def random_track(
 
 @functools.lru_cache(maxsize=64)
 def _seeded_random_track(seed: int) -> Track:
-    """``random_track(seed)``, cached (a track takes tens of milliseconds to draw and check)."""
+    """``random_track(seed)``, cached (drawing and checking a track is the costly part)."""
     return random_track(seed)
 
 
