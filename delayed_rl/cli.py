@@ -6,7 +6,7 @@
 - ``delayed-rl bench NAME``: one thesis experiment over seeds, written to ``--out/NAME``;
 - ``delayed-rl reproduce``: every experiment;
 - ``delayed-rl sweep FILE``: your own agents × envs × delays × seeds, from a YAML or JSON file
-  (:mod:`delayed_rl.experiments.sweep` documents the file), written to ``--out``.
+  (:mod:`delayed_rl.sweep` documents the file), written to ``--out``.
 
 Exit codes: 0 success, 2 bad usage (unknown names, bad values, in options or in a sweep file's
 fields or syntax; argparse's usage and one ``error:`` line), 1 a failure while running (a
@@ -38,6 +38,7 @@ import delayed_rl
 from delayed_rl._validation import check_fraction, check_int, check_probability, check_real
 from delayed_rl.agents._loop import MAX_TIMESTEPS_TEXT
 from delayed_rl.agents.hyperparameters import MAX_SEED, check_limit
+from delayed_rl.agents.registry import AGENTS as AGENT_NAMES
 from delayed_rl.delays import Poisson
 from delayed_rl.envs import env_ids
 from delayed_rl.experiments import NAMES
@@ -49,9 +50,8 @@ from delayed_rl.experiments.runner import (
     MAX_WORKERS,
     MAX_WORKERS_TEXT,
 )
-from delayed_rl.experiments.sweep import AGENTS as SWEEP_AGENTS
-from delayed_rl.experiments.sweep.runs import EpisodeTooLong, greedy_rollout
-from delayed_rl.experiments.sweep.schema import (
+from delayed_rl.sweep.runs import EpisodeTooLong, greedy_rollout
+from delayed_rl.sweep.schema import (
     MAX_EVAL_EPISODES,
     MAX_EVAL_STEPS,
     MAX_STEPS,
@@ -112,16 +112,14 @@ _steps = _limited(1, MAX_STEPS, MAX_TIMESTEPS_TEXT)
 _seeds = _limited(1, MAX_SEEDS, MAX_SEEDS_TEXT)
 _seed = _limited(0, MAX_SEED, MAX_SEED_TEXT)
 _workers = _limited(1, MAX_WORKERS, MAX_WORKERS_TEXT)
-_eval_steps = _limited(
-    1, MAX_EVAL_STEPS, "MAX_EVAL_STEPS = 10**9 (delayed_rl.experiments.sweep.schema)"
-)
+_eval_steps = _limited(1, MAX_EVAL_STEPS, "MAX_EVAL_STEPS = 10**9 (delayed_rl.sweep.schema)")
 _eval_episodes = _limited(
-    1, MAX_EVAL_EPISODES, "MAX_EVAL_EPISODES = 10**6 (delayed_rl.experiments.sweep.schema)"
+    1, MAX_EVAL_EPISODES, "MAX_EVAL_EPISODES = 10**6 (delayed_rl.sweep.schema)"
 )
 
 #: ``--agent`` choices: the agent class for each (the sweep files' names of the agents whose
 #: options ``train`` has).
-AGENTS = {key: SWEEP_AGENTS[key] for key in ("q", "fixed", "mmq", "deconv")}
+AGENTS = {key: AGENT_NAMES[key] for key in ("q", "fixed", "mmq", "deconv")}
 #: The agents that take ``--max-delay-estimate``: MMQ's λ̂max, deconvolution's longest delay.
 _MAX_DELAY_AGENTS = ("mmq", "deconv")
 #: What ``--episodes`` waits for an episode to end before calling the env continuing.
@@ -329,7 +327,7 @@ def _bench_progress(args: argparse.Namespace) -> bool:
 
 def _sweep(args: argparse.Namespace) -> int:
     """``delayed-rl sweep FILE``: run the file's runs that ``--out`` lacks; print the summary."""
-    from delayed_rl.experiments.sweep import load_sweep, run_sweep
+    from delayed_rl.sweep import load_sweep, run_sweep
 
     if args.address is not None and args.backend == "loky":
         args.parser.error("--address is for --backend ray or dask")
@@ -533,7 +531,7 @@ def build_parser() -> argparse.ArgumentParser:
         "evaluate each greedily, and write results.csv (one row per run), summary.csv, "
         "summary.md and one figure per env into --out. A rerun with the same --out runs only "
         "what its results.csv lacks. The file's fields are documented in "
-        "delayed_rl.experiments.sweep; examples/sweep.yaml is a commented example.",
+        "delayed_rl.sweep; examples/sweep.yaml is a commented example.",
     )
     sweep.add_argument(
         "file",

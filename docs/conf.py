@@ -70,6 +70,7 @@ API_SECTIONS = [
     ("Environments", "delayed_rl.envs"),
     ("The compiled path", "delayed_rl.compiled"),
     ("Experiments", "delayed_rl.experiments"),
+    ("Sweeps", "delayed_rl.sweep"),
     ("The command line", "delayed_rl.cli"),
     ("Internals", "delayed_rl._delay_line"),
     ("Internals: validation", "delayed_rl._validation"),

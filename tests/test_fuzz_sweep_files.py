@@ -27,8 +27,8 @@ from hypothesis import strategies as st
 from support import examples
 
 from delayed_rl.cli import main
-from delayed_rl.experiments.sweep import parse_sweep, read_sweep_file, reading, run_sweep, schema
-from delayed_rl.experiments.sweep.results import RESULTS_FILE, read_results
+from delayed_rl.sweep import parse_sweep, read_sweep_file, reading, run_sweep, schema
+from delayed_rl.sweep.results import RESULTS_FILE, read_results
 
 GRID = "delayed_rl/GridWorld-3x3-v0"
 VALID_YAML = f"""\
@@ -597,7 +597,7 @@ def test_text_a_results_file_could_not_hold_is_refused(changes, exc, message):
 
 
 def test_building_an_agent_that_asks_for_too_much_memory_is_a_value_error(monkeypatch):
-    from delayed_rl.experiments.sweep import check_sweep, runs
+    from delayed_rl.sweep import check_sweep, runs
 
     def huge(config, env):
         raise MemoryError("Unable to allocate 745. GiB for an array")

@@ -18,7 +18,7 @@ import pytest
 
 from delayed_rl.cli import main
 from delayed_rl.delays import Constant, Poisson
-from delayed_rl.experiments.sweep import (
+from delayed_rl.sweep import (
     RESULT_COLUMNS,
     RunError,
     load_sweep,
@@ -28,8 +28,8 @@ from delayed_rl.experiments.sweep import (
     resolve_placeholders,
     run_sweep,
 )
-from delayed_rl.experiments.sweep import results as sweep_results
-from delayed_rl.experiments.sweep import runs as sweep_runs
+from delayed_rl.sweep import results as sweep_results
+from delayed_rl.sweep import runs as sweep_runs
 from delayed_rl.wrappers import ObservationDelay, RewardDelay
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "sweep.yaml"

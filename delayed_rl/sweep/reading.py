@@ -54,7 +54,7 @@ def read_sweep_file(path: str | Path) -> Any:
     if len(raw) > MAX_FILE_BYTES:
         raise ValueError(
             f"{path} is larger than MAX_FILE_BYTES = {MAX_FILE_BYTES:,} bytes "
-            "(delayed_rl.experiments.sweep.reading): a sweep file is a few dozen lines"
+            "(delayed_rl.sweep.reading): a sweep file is a few dozen lines"
         )
     try:
         text = raw.decode("utf-8")
@@ -94,7 +94,7 @@ def _read_json(path: Path, text: str) -> Any:
     except RecursionError:
         raise ValueError(
             f"{path} is nested deeper than MAX_DEPTH = {MAX_DEPTH} levels "
-            "(delayed_rl.experiments.sweep.reading)"
+            "(delayed_rl.sweep.reading)"
         ) from None
     except ValueError as error:  # json.JSONDecodeError, or an integer of too many digits
         raise ValueError(f"{path} is not valid JSON: {error}") from None
@@ -159,7 +159,7 @@ def _loader_class(yaml: Any) -> type:
                 raise _Refused(
                     self.peek_event().start_mark,
                     f"values nested deeper than MAX_DEPTH = {MAX_DEPTH} levels "
-                    "(delayed_rl.experiments.sweep.reading)",
+                    "(delayed_rl.sweep.reading)",
                 )
             self.depth += 1
             try:
@@ -214,7 +214,7 @@ def _check_expansion(path: Path, root: Any, yaml: Any) -> None:
                 raise ValueError(
                     f"{path} stands for more than MAX_VALUES = {MAX_VALUES:,} values, or "
                     f"MAX_FILE_BYTES = {MAX_FILE_BYTES:,} characters, once its aliases are "
-                    f"expanded (delayed_rl.experiments.sweep.reading): {_where(node)}"
+                    f"expanded (delayed_rl.sweep.reading): {_where(node)}"
                 )
             sizes[key] = (values, chars)
             continue
@@ -255,13 +255,13 @@ def _check_size(path: Path, data: Any) -> None:
         if count > MAX_VALUES:
             raise ValueError(
                 f"{path} holds more than MAX_VALUES = {MAX_VALUES:,} values "
-                "(delayed_rl.experiments.sweep.reading)"
+                "(delayed_rl.sweep.reading)"
             )
         if isinstance(value, dict | list):
             if depth > MAX_DEPTH:
                 raise ValueError(
                     f"{path} is nested deeper than MAX_DEPTH = {MAX_DEPTH} levels "
-                    "(delayed_rl.experiments.sweep.reading)"
+                    "(delayed_rl.sweep.reading)"
                 )
             items = value.items() if isinstance(value, dict) else enumerate(value)
             stack.extend((item, depth + 1) for _, item in items)

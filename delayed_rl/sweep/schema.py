@@ -1,11 +1,11 @@
 """The sweep file's format: its names and defaults, reading the file, and checking every field.
 
-:func:`~delayed_rl.experiments.sweep.reading.read_sweep_file` reads a YAML or JSON file;
+:func:`~delayed_rl.sweep.reading.read_sweep_file` reads a YAML or JSON file;
 :func:`parse_sweep` checks what it holds, field by field, and returns the plan, a :class:`Sweep`,
 whose :meth:`Sweep.runs` lists the runs. Every size a file sets is bounded by a stated limit
 (:data:`MAX_STEPS`, :data:`MAX_EVAL_STEPS`, :data:`MAX_EVAL_EPISODES`, :data:`~delayed_rl.experiments.runner.MAX_SEEDS`,
 :data:`MAX_SWEEP_SEED`, :data:`MAX_RUNS`), checked before anything is built or run.
-:mod:`delayed_rl.experiments.sweep` documents the format.
+:mod:`delayed_rl.sweep` documents the format.
 """
 
 from __future__ import annotations
@@ -25,20 +25,10 @@ import delayed_rl  # noqa: F401  (registers the env ids)
 from delayed_rl._validation import check_choice, check_int, check_real
 from delayed_rl.agents._loop import MAX_TIMESTEPS
 from delayed_rl.agents.hyperparameters import check_limit
+from delayed_rl.agents.registry import AGENTS, agent_class
 from delayed_rl.delays import as_delay
 from delayed_rl.experiments.runner import MAX_SEEDS, MAX_SEEDS_TEXT
 
-#: The library's agents by the names a sweep file, and ``delayed-rl train --agent``, use.
-AGENTS = {
-    "q": "QLearning",
-    "fixed": "FixedDelayQLearning",
-    "mmq": "MultipleModelQLearning",
-    "deconv": "DeconvolutionQLearning",
-    "oracle": "OracleQLearning",
-    "expected-credit": "ExpectedCreditQLearning",
-}
-#: The agents whose env must record which transition emitted each reward.
-ARRIVAL_AGENTS = ("oracle",)
 #: The stable-baselines3 algorithms a sweep runs, as ``sb3:NAME``.
 SB3_ALGORITHMS = ("A2C", "DDPG", "DQN", "PPO", "SAC", "TD3")
 SB3_PREFIX = "sb3:"
@@ -56,7 +46,7 @@ MAX_EVAL_STEPS = 10**9
 """The most evaluation steps of a run (``eval_steps``)."""
 MAX_EVAL_EPISODES = 10**6
 """The most evaluation episodes of a run (``eval_episodes``; each at most
-:data:`~delayed_rl.experiments.sweep.runs.MAX_EVAL_EPISODE_STEPS` steps)."""
+:data:`~delayed_rl.sweep.runs.MAX_EVAL_EPISODE_STEPS` steps)."""
 MAX_SWEEP_SEED = 2**32 - 1
 """The largest seed: what every agent accepts (stable-baselines3 seeds numpy's legacy generator,
 which takes 32 bits)."""
@@ -65,7 +55,7 @@ MAX_TEXT = 1000
 MAX_RUNS = 100_000
 """The most runs (agents × envs × delays × seeds) in one sweep."""
 
-_HERE = "delayed_rl.experiments.sweep.schema"
+_HERE = "delayed_rl.sweep.schema"
 
 _TOP_KEYS = ("name", "agents", "envs", "delays", "seeds", "steps", "eval_episodes", "eval_steps")
 _AGENT_KEYS = ("name", "label", "kwargs", "steps", "envs")
@@ -298,12 +288,6 @@ def _kwargs(where: str, value: Any, refused: Sequence[str], why: str) -> dict[st
     return kwargs
 
 
-def _agent_class(name: str) -> type:
-    from delayed_rl import agents
-
-    return getattr(agents, AGENTS[name])
-
-
 def _agent_name(where: str, value: Any) -> str:
     name = _text(where, value)
     allowed = (*AGENTS, *(SB3_PREFIX + algorithm for algorithm in SB3_ALGORITHMS))
@@ -324,7 +308,7 @@ def _check_agent_kwargs(where: str, name: str, kwargs: Mapping[str, Any]) -> Non
             )
     if name.startswith(SB3_PREFIX):
         return  # the algorithm's own check, when check_sweep builds it, names the argument
-    cls = _agent_class(name)
+    cls = agent_class(name)
     allowed = [p for p in inspect.signature(cls).parameters if p not in ("env", "seed")]
     for key in kwargs:
         if key not in allowed:

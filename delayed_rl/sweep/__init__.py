@@ -14,7 +14,7 @@ the field (``agents[1].kwargs.gamma``), the value and what is allowed. A key giv
 one mapping is refused (YAML's merge key ``<<`` keeps its meaning), and so is a file that would
 make the reader work far beyond a sweep's needs: over 1 MB, nested over 32 levels, or standing
 for over 100 000 values once YAML's aliases are expanded
-(:mod:`delayed_rl.experiments.sweep.reading`). A sweep has at most 100 000 runs.
+(:mod:`delayed_rl.sweep.reading`). A sweep has at most 100 000 runs.
 
 ``agents`` (required)
     A non-empty list. Each entry is an agent's name, or a mapping with the keys
@@ -79,7 +79,7 @@ for over 100 000 values once YAML's aliases are expanded
 
 ``seeds`` (default 3)
     A count ``n`` (seeds ``0 .. n − 1``) or a list of distinct integers in ``[0, 2**32 − 1]``
-    (:data:`~delayed_rl.experiments.sweep.schema.MAX_SWEEP_SEED`), at most
+    (:data:`~delayed_rl.sweep.schema.MAX_SWEEP_SEED`), at most
     :data:`~delayed_rl.experiments.runner.MAX_SEEDS` (10 000) of them. Seed ``s`` seeds
     the agent (``seed=s``: its random choices and its training env's first reset, delays
     included); the evaluation env is reset with seed ``s`` + :data:`EVAL_SEED_OFFSET`.
@@ -142,7 +142,7 @@ and ``run_id``, so a run whose configuration changed (more steps, another argume
 — and appends the rest; an interrupted sweep keeps what finished. Rows of runs no longer in
 the file are kept in ``results.csv`` (after the sweep's own, which are in the file's order:
 agent, env, delay, seed), but left out of the summary. The file is checked row by row before
-a sweep resumes from it (:func:`~delayed_rl.experiments.sweep.results.check_result_row`): a
+a sweep resumes from it (:func:`~delayed_rl.sweep.results.check_result_row`): a
 row cut short at the end of the file (the sweep stopped while writing it) is left out with a
 warning and its run runs again; any other bad row (a value that does not parse, ``nan``, a
 wrong number of values) stops the sweep with an error naming the file, the line and the
@@ -164,8 +164,8 @@ from pathlib import Path
 from typing import Any
 
 from delayed_rl.experiments.runner import RunProgress, iter_tasks
-from delayed_rl.experiments.sweep.reading import read_sweep_file
-from delayed_rl.experiments.sweep.results import (
+from delayed_rl.sweep.reading import read_sweep_file
+from delayed_rl.sweep.results import (
     EXTRA_COLUMNS,
     RESULT_COLUMNS,
     RESULTS_FILE,
@@ -183,7 +183,7 @@ from delayed_rl.experiments.sweep.results import (
     write_results,
     write_summary_csv,
 )
-from delayed_rl.experiments.sweep.runs import (
+from delayed_rl.sweep.runs import (
     EVAL_SEED_OFFSET,
     MAX_EVAL_EPISODE_STEPS,
     RunError,
@@ -197,9 +197,7 @@ from delayed_rl.experiments.sweep.runs import (
     run_sweep_task,
     train,
 )
-from delayed_rl.experiments.sweep.schema import (
-    AGENTS,
-    ARRIVAL_AGENTS,
+from delayed_rl.sweep.schema import (
     DEFAULT_EVAL_EPISODES,
     DEFAULT_SEEDS,
     DEFAULT_STEPS,
@@ -216,8 +214,6 @@ from delayed_rl.experiments.sweep.schema import (
 )
 
 __all__ = [
-    "AGENTS",
-    "ARRIVAL_AGENTS",
     "DEFAULT_EVAL_EPISODES",
     "DEFAULT_SEEDS",
     "DEFAULT_STEPS",

@@ -16,13 +16,12 @@ from typing import Any
 
 import gymnasium as gym
 
+from delayed_rl.agents.registry import ARRIVAL_AGENTS, agent_class
 from delayed_rl.delays import Delay, as_delay
-from delayed_rl.experiments.sweep.schema import (
-    ARRIVAL_AGENTS,
+from delayed_rl.sweep.schema import (
     SB3_PREFIX,
     Evaluation,
     Sweep,
-    _agent_class,
 )
 
 #: Added to a run's seed to seed its evaluation env (training and evaluation differ).
@@ -44,8 +43,8 @@ def reward_delay(config: Mapping[str, Any]) -> Delay:
 def resolve_placeholders(kwargs: Mapping[str, Any], delay: Delay) -> dict[str, Any]:
     """``kwargs`` with each placeholder value replaced by ``delay``.
 
-    The placeholders are :data:`~delayed_rl.experiments.sweep.schema.PLACEHOLDERS`; the sweep
-    file's reference, :mod:`delayed_rl.experiments.sweep`, says what each one becomes.
+    The placeholders are :data:`~delayed_rl.sweep.schema.PLACEHOLDERS`; the sweep
+    file's reference, :mod:`delayed_rl.sweep`, says what each one becomes.
     """
     values = {"$delay": delay, "$delay_mean": delay.mean, "$delay_steps": round(delay.mean)}
     return {
@@ -59,7 +58,7 @@ def make_env(config: Mapping[str, Any]) -> gym.Env:
 
     Action and observation delays are stacked by :func:`~delayed_rl.wrappers.wrap_delays`; the
     reward delay, outermost, is a :class:`~delayed_rl.wrappers.RewardDelay` that records
-    arrivals for the agents of :data:`ARRIVAL_AGENTS` (which get ``Constant(0)`` when the run
+    arrivals for the agents of :data:`~delayed_rl.agents.registry.ARRIVAL_AGENTS` (which get ``Constant(0)`` when the run
     delays no reward).
     """
     from delayed_rl.wrappers import RewardDelay, wrap_delays
@@ -92,7 +91,7 @@ def make_model(config: Mapping[str, Any], env: gym.Env) -> Any:
     if name.startswith(SB3_PREFIX):
         kwargs = {"policy": "MlpPolicy", **kwargs}
         return _sb3_class(name)(env=env, seed=config["seed"], **kwargs)
-    return _agent_class(name)(env, seed=config["seed"], **kwargs)
+    return agent_class(name)(env, seed=config["seed"], **kwargs)
 
 
 def check_sweep(sweep: Sweep) -> None:

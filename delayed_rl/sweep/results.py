@@ -20,7 +20,7 @@ from typing import Any
 
 from delayed_rl.agents.hyperparameters import MAX_ABS_VALUE
 from delayed_rl.experiments.runner import mean_ci95
-from delayed_rl.experiments.sweep.schema import MAX_STEPS, MAX_SWEEP_SEED, Sweep
+from delayed_rl.sweep.schema import MAX_STEPS, MAX_SWEEP_SEED, Sweep
 
 #: The columns of ``results.csv`` that every sweep writes, in this order.
 RESULT_COLUMNS = ("agent", "env", "delay", "seed", "steps", "train_reward", "eval_reward", "wall_s")
