@@ -6,7 +6,7 @@ Python a compiled function without numba's per-call dispatch, for calls made at 
 
 For developers: numba's cache checks only the source file of the function it compiled, not
 those of the compiled functions it calls. After editing a callee in another module (e.g.
-:func:`delayed_rl.compiled.statistics.observe`, which the loop of
+:func:`delayed_rl.compiled.deconvolution_statistics.observe`, which the loop of
 :func:`delayed_rl.compiled.kernel.run_chunk` calls), delete the ``*.nbi``/``*.nbc`` files under
 ``delayed_rl/`` or the caller keeps running the old callee. An installed upgrade rewrites every
 file, so users are not affected.

@@ -53,7 +53,7 @@ def test_public_exports():
     assert delayed_rl.QLearning is QLearning
     assert delayed_rl.FixedDelayQLearning is FixedDelayQLearning
     from delayed_rl.agents import ProportionalController
-    from delayed_rl.agents.controllers import ProportionalController as Controller
+    from delayed_rl.agents.proportional import ProportionalController as Controller
 
     assert ProportionalController is Controller
 

@@ -281,7 +281,7 @@ def _track():
 
 
 def _predict(**kwargs):
-    from delayed_rl.agents.controllers import ProportionalController
+    from delayed_rl.agents.proportional import ProportionalController
 
     return ProportionalController().predict(**{"observation": 0, **kwargs})
 

@@ -17,7 +17,7 @@ import pytest  # noqa: E402
 from gymnasium.utils.env_checker import check_env  # noqa: E402
 
 import delayed_rl  # noqa: E402, F401  (registers the ids)
-from delayed_rl.agents.controllers import ProportionalController  # noqa: E402
+from delayed_rl.agents.proportional import ProportionalController  # noqa: E402
 from delayed_rl.envs.linefollow.camera import Camera  # noqa: E402
 from delayed_rl.envs.linefollow.env import (  # noqa: E402
     CONTROL_PERIOD,

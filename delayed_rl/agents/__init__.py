@@ -12,7 +12,7 @@
   by deconvolving the delayed reward stream, with the delay known or learned;
 - :func:`load_agent`: load any of them from a file, whatever its class;
 - ``ProportionalController`` (thesis Eqs. 5.8–5.9), imported from
-  :mod:`delayed_rl.agents.controllers` on first access.
+  :mod:`delayed_rl.agents.proportional` on first access.
 
 All share :class:`~delayed_rl.agents.base.TabularAgent`: ``learn``, ``predict``, ``update``,
 ``save``/``load``, ``get_env``/``set_env``, ``logger``, and SB3 callbacks.
@@ -50,7 +50,7 @@ __all__ = [
 def __getattr__(name: str):
     # lazy: the controller module is only imported when it is asked for
     if name == "ProportionalController":
-        from delayed_rl.agents.controllers import ProportionalController
+        from delayed_rl.agents.proportional import ProportionalController
 
         return ProportionalController
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -4,7 +4,7 @@ With each reward delayed independently by ``d ~ p``, the reward received at step
 ``E[y_t | history] = Σ_k p(k) · R(x_{t−k})``, with ``x_j`` the (state, action) pair of step ``j``
 and ``R`` the unknown mean rewards: a linear model in ``R`` for a known ``p``, and in ``p`` for a
 known ``R``. :class:`RewardRegression` keeps sufficient statistics of that regression
-(:mod:`delayed_rl.compiled.statistics`), so a least-squares solve never revisits the history:
+(:mod:`delayed_rl.compiled.deconvolution_statistics`), so a least-squares solve never revisits the history:
 
 - ``cooc``: for each ordered couple of pairs, how often the earlier was followed ``m`` steps
   later by the later one (``m`` in ``0..K``), within a segment (an episode, or the whole stream
@@ -39,7 +39,7 @@ import numpy as np
 
 from delayed_rl._numba import jit as _jit
 from delayed_rl.agents.hyperparameters import MAX_ABS_VALUE
-from delayed_rl.compiled.statistics import Statistics, _slot, find_row, observe
+from delayed_rl.compiled.deconvolution_statistics import Statistics, _slot, find_row, observe
 
 __all__ = [
     "DENSE_SOLVE_PAIRS",
@@ -632,7 +632,7 @@ class RewardRegression:
         a step). Nothing is restored unless every check passes.
 
         Args:
-            arrays: the arrays, by the names of :class:`~delayed_rl.compiled.statistics.Statistics`.
+            arrays: the arrays, by the names of :class:`~delayed_rl.compiled.deconvolution_statistics.Statistics`.
             prefix: what the messages put before those names (a model file's
                 ``"regression_"``).
 

@@ -20,6 +20,7 @@ from delayed_rl._numba import HAVE_NUMBA  # noqa: F401  (re-exported: delayed_rl
 from delayed_rl._numba import jit as _jit
 from delayed_rl.compiled.arrivals import end_pending, take_due
 from delayed_rl.compiled.arrivals import record as record_arrival
+from delayed_rl.compiled.deconvolution_statistics import observe
 from delayed_rl.compiled.robot import robot_reset, robot_step
 from delayed_rl.compiled.state import (
     CARRY,
@@ -33,7 +34,6 @@ from delayed_rl.compiled.state import (
     StepLog,
     credit_kernel,
 )
-from delayed_rl.compiled.statistics import observe
 
 _MULTIPLIER_5, _MULTIPLIER_9 = np.uint64(5), np.uint64(9)
 _TO_UNIT = 1.0 / 9007199254740992.0  # 2**-53: 53 random bits as a float in [0, 1)

@@ -194,7 +194,7 @@ class RewardModel(NamedTuple):
     Attributes:
         rewards: ``R̂`` per (state, action) pair ``s·|A| + a``.
         stats: the regression's statistics, fed every step's pair, delivered reward and
-            episode end (:func:`delayed_rl.compiled.statistics.observe`).
+            episode end (:func:`delayed_rl.compiled.deconvolution_statistics.observe`).
     """
 
     rewards: np.ndarray

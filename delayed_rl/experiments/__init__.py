@@ -5,8 +5,8 @@ from __future__ import annotations
 import importlib
 
 from delayed_rl._validation import check_choice
+from delayed_rl.experiments.pool import run_experiment, run_experiments
 from delayed_rl.experiments.runner import Config, Experiment, Summary
-from delayed_rl.experiments.schedule import run_experiment, run_experiments
 
 _MODULES = {
     "delay-sweep": "delay_sweep",

@@ -73,7 +73,7 @@ def tasks(config: Config) -> list[dict]:
 
 def _run_proportional(delayed: bool, steps: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """The P controller's undelayed rewards and true centroids over ``steps`` steps."""
-    from delayed_rl.agents.controllers import ProportionalController
+    from delayed_rl.agents.proportional import ProportionalController
     from delayed_rl.delays import Poisson
     from delayed_rl.wrappers import ObservationDelay
 

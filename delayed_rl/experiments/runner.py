@@ -4,7 +4,7 @@ An experiment module defines an :class:`Experiment`: its name, the thesis figure
 ``tasks(config)`` (one picklable task per (condition, seed)), ``run_task(task)`` (a dict of
 results, numbers or numpy arrays) and ``summarize(tasks, results, config)`` (the claims checked
 against the thesis, as :class:`Claim` rows, plus curves and figures).
-:func:`~delayed_rl.experiments.schedule.run_experiment` runs the tasks through joblib — on its
+:func:`~delayed_rl.experiments.pool.run_experiment` runs the tasks through joblib — on its
 default ``loky`` process pool, or handed to Ray or Dask — and :func:`write_outputs` writes
 ``curves.csv``, ``summary.json``, the figures and ``report.md`` into the output folder. Tasks
 that need the same computation (of one experiment or several) name it as one
@@ -68,7 +68,7 @@ class Config:
 
     Attributes:
         seeds: the number of seeds, independent runs per condition (``None``: the experiment's
-            default, see :func:`~delayed_rl.experiments.schedule.run_experiment`).
+            default, see :func:`~delayed_rl.experiments.pool.run_experiment`).
         steps: training steps per run (``None``: the experiment's thesis-scale default).
         quick: a scaled-down version that runs in seconds (fewer steps, seeds and conditions).
         workers: parallel worker processes (1 runs in this process).
@@ -195,7 +195,7 @@ class Summary:
 class SharedRun(NamedTuple):
     """The computation behind a task, where tasks (of one experiment or several) share one.
 
-    :func:`~delayed_rl.experiments.schedule.run_experiments` runs each distinct ``(run, task)``
+    :func:`~delayed_rl.experiments.pool.run_experiments` runs each distinct ``(run, task)``
     once and hands every task behind it ``view(result)``.
 
     **Pooled runs.** With ``pooled`` the name of a list in ``task`` (its *items*: say, the
@@ -596,7 +596,7 @@ def write_index(
     experiment's verdict counts and cost, each linking to its ``NAME/report.md``. The cost is
     the core-seconds of the experiment's runs (``extra["run_seconds"]``, a run shared between
     experiments counted in each, marked in the ``shared runs`` column), as they ran together on
-    one pool (:mod:`.schedule`).
+    one pool (:mod:`.pool`).
 
     Args:
         out: the folder of the experiments' folders.

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import delayed_rl  # noqa: F401  (registers the ids)
-from delayed_rl.agents.controllers import ProportionalController
+from delayed_rl.agents.proportional import ProportionalController
 from delayed_rl.envs.linefollow.camera import line_centroid
 from delayed_rl.envs.linefollow.env import WHEEL_SPEED_ACTIONS, EPuckLineFollowEnv
 

@@ -10,8 +10,8 @@ import pytest
 from delayed_rl.experiments import Config, get_experiment, run_experiment, run_experiments
 from delayed_rl.experiments import anonymous_delay as ad
 from delayed_rl.experiments import future_work as fw
+from delayed_rl.experiments.pool import pool_key, run_key
 from delayed_rl.experiments.runner import Experiment, SharedRun, Summary
-from delayed_rl.experiments.schedule import pool_key, run_key
 
 CALLS: list[dict] = []
 
@@ -169,7 +169,7 @@ def broken_powers(task: dict) -> dict:
 @pytest.mark.parametrize(
     ("run", "message"),
     [
-        (not_a_dict, r"test_schedule\.not_a_dict.* returned a list, not a dict"),
+        (not_a_dict, r"test_pool\.not_a_dict.* returned a list, not a dict"),
         (broken_powers, r"one result per item \(2\); .*broken_powers.* returned list of 1"),
     ],
 )
