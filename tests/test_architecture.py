@@ -333,3 +333,29 @@ def test_every_agent_shows_the_shared_hyperparameters_with_the_one_set_of_defaul
 
 def _own_arguments(cls):
     return {"delay_estimate": 1} if cls is FixedDelayQLearning else {}
+
+
+def test_module_docstrings_are_docs_not_manuals():
+    """A module docstring is at most 60 lines: a file format or a method goes in ``docs/``."""
+    long = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        doc = ast.get_docstring(ast.parse(path.read_text(encoding="utf-8")), clean=False)
+        if doc and doc.count("\n") + 1 > 60:
+            long.append((_module_name(path), doc.count("\n") + 1))
+    assert long == []
+
+
+def test_no_measured_timing_is_written_in_the_code():
+    """Speed lives in benchmarks/SPEED.md, which the code may link, not in docstrings."""
+    import re
+
+    timing = re.compile(
+        r"\d\s?(ns|µs)\b( a| per)|\d+\s?-\s?\d+\s?% faster|\d(\.\d+)?-\d+(\.\d+)?[x×] slower"
+    )
+    found = [
+        f"{path.relative_to(PACKAGE)}:{number}"
+        for path in sorted(PACKAGE.rglob("*.py"))
+        for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1)
+        if timing.search(line)
+    ]
+    assert found == []

@@ -13,8 +13,8 @@ learners on the grid world, each with the thesis's hyper-parameters (α = 0.1, �
 - ``DeconvQ learned``: :class:`~delayed_rl.agents.DeconvQ` learning the delay on 0..50;
 - ``oracle``: :class:`~delayed_rl.agents.OracleQLearning`, which is told which transition each
   reward came from (the non-anonymous upper bound);
-- ``Q undelayed``: Q-learning without any delay (the reference; nothing in it depends on the
-  delay, so the three delays of a world share one run per seed, :func:`shared_run`).
+- ``Q undelayed``: Q-learning without any delay (the reference; one run per seed and world,
+  shared by its three delays: :func:`shared_run`).
 
 Settings: the 9×9 grid with mean delay λ = 13 (1M steps a run) and the 7×7 grid with λ = 8
 (300k steps), each under three delays of mean λ: Poisson(λ) (the thesis's), geometric
@@ -28,41 +28,30 @@ Per run, from the undelayed reward stream (``training_log["undelayed_reward"]``)
 - the greedy 1000-step average: the agent's deterministic greedy policy walked from the start
   cell of the undelayed grid (:func:`walk_average`); the policy is *optimal* when that average
   is at least ``LOOP_FRACTION`` = 0.95 of the optimum ``10 / (2(n − 1) + 1)``;
-- greedy snapshots: the run learns in ``SNAPSHOTS`` = 50 pieces (every ``steps // 50`` steps,
-  20k at 1M; ``learn(..., reset_num_timesteps=False)``, which trains exactly as one call does)
-  and after each piece records whether the greedy policy is optimal. The share of snapshots in
-  the second half of training that are optimal tells a policy that settled from one that keeps
-  flipping between routes;
-- the delay estimate: DeconvQ's ``delay_pmf`` and ``mean_delay``; MMQ's acting-delay share (how
-  often each λ̂ acted) and its mean;
-- MMQ's runs also keep a greedy window (the averaged table of ``greedy_window`` =
-  ``steps // 10``), which changes nothing of how MMQ learns or acts; the snapshots read both
-  tables, this experiment reports the current one's, ``future-work``'s greedy-window variant
-  the averaged one's, from the same runs (:func:`shared_run`);
-- ns/step: the wall time of ``learn`` over the steps, the greedy evaluations excluded (MMQ's
-  includes keeping its greedy window's average, a pass over the table every hundredth of the window); a
-  2000-step run of a twin agent, untimed, loads the compiled kernels first (once per kind of
-  agent in a worker process).
+- greedy snapshots: the run learns in ``SNAPSHOTS`` = 50 pieces (``learn(...,
+  reset_num_timesteps=False)``, which trains exactly as one call does) and after each records
+  whether the greedy policy is optimal: a policy that settled, or one that keeps flipping;
+- the delay estimate: DeconvQ's ``delay_pmf`` and ``mean_delay``; MMQ's acting-delay share;
+- MMQ's runs also keep a greedy window (``greedy_window`` = ``steps // 10``), which changes
+  nothing of how MMQ learns; ``future-work`` reports its snapshots from the same runs;
+- ns/step: the wall time of ``learn`` over the steps, greedy evaluations excluded, after an
+  untimed warm-up run that loads the compiled kernels.
 
 ``summary.json`` holds the full table (``table``: one row per setting and agent, every metric
 with its 95 % CI). The claims, per setting, with verdicts computed from the runs by
 :mod:`.common`'s rules (each row's ``criterion`` states its own):
 
-- DeconvQ learned walks the optimal loop on at least 95 % of the seeds: the count rule, the
-  Wilson 95 % interval of the share of optimal seeds inside [0.95, 1] (20 of 20 seeds give
-  [0.84, 1], so at 20 seeds this row is at best ``inconclusive``: it can fail, not pass);
+- DeconvQ learned walks the optimal loop on at least 95 % of the seeds: the count rule (the
+  Wilson 95 % interval inside [0.95, 1]; at 20 seeds at best ``inconclusive``);
 - DeconvQ learned's training reward within 5 % of the oracle's (per seed, relative to the
   oracle's mean): the band 0 ± 0.05;
 - DeconvQ learned's mean delay: the band λ ± 10 %;
 - MMQ walks the optimal loop on at least 95 % of the seeds (the thesis's Fig. 5.9 and Table 5.1
   result, here carried to other worlds and delays): the count rule, as DeconvQ's;
-- MMQ's greedy snapshots in the second half of training are optimal at least 90 % of the time:
-  the per-seed share's 95 % CI over seeds inside [0.9, 1];
-- MMQ earns more than delayed Q-learning during learning (paired by seed): the direction rule,
-  above 0.
+- MMQ's greedy snapshots in the second half are optimal at least 90 % of the time (CI inside);
+- MMQ earns more than delayed Q-learning during learning (paired by seed, the direction rule).
 
-Figures, per setting: learning curves with 95 % bands (the optimum dashed), the delay estimates
-(DeconvQ learned's pmf and MMQ's acting share, mean over seeds with a band) over the true pmf,
+Figures, per setting: learning curves with 95 % bands, the delay estimates over the true pmf,
 and the share of seeds whose greedy policy is optimal at each snapshot.
 
 The pieces shared with ``future-work`` (:mod:`.future_work`, MMQ variants on the same settings)
