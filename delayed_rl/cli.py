@@ -388,10 +388,25 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=delayed_rl.__version__)
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    _add_list_command(commands)
+    _add_train_command(commands)
+    _add_evaluate_command(commands)
+    _add_bench_command(commands)
+    _add_reproduce_command(commands)
+    _add_sweep_command(commands)
+    return parser
+
+
+def _add_list_command(commands: Any) -> None:
+    """The ``list`` sub-command's parser."""
     listing = commands.add_parser(
         "list", help="list the registered envs, the agents and the experiments"
     )
     listing.set_defaults(run=_list)
+
+
+def _add_train_command(commands: Any) -> None:
+    """The ``train`` sub-command's parser."""
     train = commands.add_parser(
         "train",
         help="train a tabular agent and save it",
@@ -422,6 +437,30 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument(
         "--steps", type=_steps, default=100_000, help="training steps (default 100000)"
     )
+    _add_agent_options(train)
+    train.add_argument(
+        "--seed",
+        type=_seed,
+        default=None,
+        help="seeds the agent and the env (default: unseeded)",
+    )
+    train.add_argument(
+        "--progress",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="show a progress bar (default: when stderr is a terminal)",
+    )
+    train.add_argument(
+        "--save",
+        required=True,
+        metavar="PATH",
+        help="where to save the agent (.npz appended when PATH has no suffix)",
+    )
+    train.set_defaults(run=_train, parser=train)
+
+
+def _add_agent_options(train: argparse.ArgumentParser) -> None:
+    """``train``'s hyper-parameter options: α, γ, ε, the initial Q-value and the delays."""
     train.add_argument(
         "--learning-rate", type=_learning_rate, default=0.1, help="α in (0, 1] (default 0.1)"
     )
@@ -453,25 +492,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="--agent mmq: the largest delay estimate λ̂max; --agent deconv: the longest delay "
         "its learned pmf covers (default 50 for both)",
     )
-    train.add_argument(
-        "--seed",
-        type=_seed,
-        default=None,
-        help="seeds the agent and the env (default: unseeded)",
-    )
-    train.add_argument(
-        "--progress",
-        action=argparse.BooleanOptionalAction,
-        default=None,
-        help="show a progress bar (default: when stderr is a terminal)",
-    )
-    train.add_argument(
-        "--save",
-        required=True,
-        metavar="PATH",
-        help="where to save the agent (.npz appended when PATH has no suffix)",
-    )
-    train.set_defaults(run=_train, parser=train)
+
+
+def _add_evaluate_command(commands: Any) -> None:
+    """The ``evaluate`` sub-command's parser."""
     evaluate = commands.add_parser(
         "evaluate",
         help="run a saved agent greedily and report its average reward",
@@ -517,13 +541,25 @@ def build_parser() -> argparse.ArgumentParser:
         help="seeds the env's first reset (default: unseeded)",
     )
     evaluate.set_defaults(run=_evaluate)
+
+
+def _add_bench_command(commands: Any) -> None:
+    """The ``bench`` sub-command's parser."""
     bench = commands.add_parser("bench", help="run one thesis experiment over seeds")
     bench.add_argument("name", choices=NAMES, help="the experiment")
     _add_bench_options(bench, "runs")
     bench.set_defaults(run=_bench)
+
+
+def _add_reproduce_command(commands: Any) -> None:
+    """The ``reproduce`` sub-command's parser."""
     reproduce = commands.add_parser("reproduce", help="run every thesis experiment")
     _add_bench_options(reproduce, "runs")
     reproduce.set_defaults(run=_bench, name="all")
+
+
+def _add_sweep_command(commands: Any) -> None:
+    """The ``sweep`` sub-command's parser."""
     sweep = commands.add_parser(
         "sweep",
         help="run your own agents × envs × delays × seeds, from a YAML or JSON file",
@@ -571,7 +607,6 @@ def build_parser() -> argparse.ArgumentParser:
         help="show a progress bar on stderr (default: when stderr is a terminal)",
     )
     sweep.set_defaults(run=_sweep, parser=sweep)
-    return parser
 
 
 def _check_train_arguments(args: argparse.Namespace) -> None:
