@@ -36,7 +36,7 @@ import gymnasium as gym
 
 import delayed_rl
 from delayed_rl._validation import check_fraction, check_int, check_probability, check_real
-from delayed_rl.agents._loop import MAX_TIMESTEPS_TEXT
+from delayed_rl.agents._loop import MAX_TIMESTEPS, MAX_TIMESTEPS_TEXT
 from delayed_rl.agents.hyperparameters import MAX_SEED, check_limit
 from delayed_rl.agents.registry import AGENTS as AGENT_NAMES
 from delayed_rl.delays import Poisson
@@ -47,14 +47,12 @@ from delayed_rl.experiments.runner import (
     MAX_SEED_TEXT,
     MAX_SEEDS,
     MAX_SEEDS_TEXT,
-    MAX_WORKERS,
-    MAX_WORKERS_TEXT,
+    check_workers,
 )
 from delayed_rl.sweep.runs import EpisodeTooLong, greedy_rollout
 from delayed_rl.sweep.schema import (
     MAX_EVAL_EPISODES,
     MAX_EVAL_STEPS,
-    MAX_STEPS,
     Evaluation,
     env_id_hint,
 )
@@ -108,10 +106,10 @@ _poisson_mean = _checked(float, check_real, 0.0, Poisson.MAX_LAM)
 _learning_rate = _checked(float, check_fraction)
 _non_negative_int = _checked(int, check_int, 0)
 _positive_int = _checked(int, check_int, 1)
-_steps = _limited(1, MAX_STEPS, MAX_TIMESTEPS_TEXT)
+_steps = _limited(1, MAX_TIMESTEPS, MAX_TIMESTEPS_TEXT)
 _seeds = _limited(1, MAX_SEEDS, MAX_SEEDS_TEXT)
 _seed = _limited(0, MAX_SEED, MAX_SEED_TEXT)
-_workers = _limited(1, MAX_WORKERS, MAX_WORKERS_TEXT)
+_workers = _checked(int, check_workers)
 _eval_steps = _limited(1, MAX_EVAL_STEPS, "MAX_EVAL_STEPS = 10**9 (delayed_rl.sweep.schema)")
 _eval_episodes = _limited(
     1, MAX_EVAL_EPISODES, "MAX_EVAL_EPISODES = 10**6 (delayed_rl.sweep.schema)"

@@ -162,3 +162,26 @@ def fake_line_run(average: float, total_error: float, mean_delay: float | None) 
             "mean_delay": mean_delay,
         }
     return result
+
+
+def same(a, b) -> bool:
+    """Whether two space samples are equal, entry by entry (arrays by value)."""
+    if isinstance(a, dict):
+        return isinstance(b, dict) and a.keys() == b.keys() and all(same(a[k], b[k]) for k in a)
+    if isinstance(a, tuple):
+        return isinstance(b, tuple) and len(a) == len(b) and all(map(same, a, b))
+    return bool(np.array_equal(a, b))
+
+
+def scribble(sample) -> None:
+    """Overwrite every array of a space sample in place, and every other entry of its dicts."""
+    if isinstance(sample, np.ndarray):
+        sample[...] = 1 if sample.dtype.kind in "iub" else 0.5
+    elif isinstance(sample, dict):
+        for key, value in list(sample.items()):
+            scribble(value)
+            if not isinstance(value, np.ndarray | dict | tuple):
+                sample[key] = "scribbled"
+    elif isinstance(sample, tuple):
+        for value in sample:
+            scribble(value)

@@ -14,6 +14,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium import spaces
+from support import same, scribble
 
 from delayed_rl.delays import Constant, Poisson
 from delayed_rl.wrappers import ActionDelay, VectorActionDelay
@@ -34,28 +35,6 @@ SPACES = {
         }
     ),
 }
-
-
-def same(a, b) -> bool:
-    """Whether two samples are equal, entry by entry (arrays by value)."""
-    if isinstance(a, dict):
-        return isinstance(b, dict) and a.keys() == b.keys() and all(same(a[k], b[k]) for k in a)
-    if isinstance(a, tuple):
-        return isinstance(b, tuple) and len(a) == len(b) and all(map(same, a, b))
-    return bool(np.array_equal(a, b))
-
-
-def scribble(sample) -> None:
-    """Overwrite every array of ``sample`` in place, and every entry of its dicts."""
-    if isinstance(sample, np.ndarray):
-        sample[...] = 1 if sample.dtype.kind in "iub" else 0.9
-    elif isinstance(sample, dict):
-        for key, value in list(sample.items()):
-            scribble(value)
-            sample[key] = "scribbled" if not isinstance(value, np.ndarray | dict | tuple) else value
-    elif isinstance(sample, tuple):
-        for value in sample:
-            scribble(value)
 
 
 class Editor(gym.Env):

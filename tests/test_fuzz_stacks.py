@@ -27,7 +27,7 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from support import examples
+from support import examples, same, scribble
 
 from delayed_rl.delays import Constant, Empirical, Geometric, Poisson, Uniform
 from delayed_rl.wrappers import (
@@ -72,27 +72,6 @@ eighths = st.integers(-64, 64).map(lambda k: k / 8)
 ends = st.sampled_from([NONE] * 8 + [TERMINATE, TRUNCATE])
 scripts = st.lists(st.tuples(eighths, ends), min_size=1, max_size=40)
 modes = st.sampled_from(EPISODE_END_MODES)
-
-
-def same(a, b) -> bool:
-    """Whether two samples are equal, entry by entry (arrays by value and dtype kind)."""
-    if isinstance(a, dict):
-        return isinstance(b, dict) and a.keys() == b.keys() and all(same(a[k], b[k]) for k in a)
-    if isinstance(a, tuple):
-        return isinstance(b, tuple) and len(a) == len(b) and all(map(same, a, b))
-    return bool(np.array_equal(a, b))
-
-
-def scribble(sample) -> None:
-    """Overwrite every array of ``sample`` in place (dicts and tuples recursively)."""
-    if isinstance(sample, np.ndarray):
-        sample[...] = 1 if sample.dtype.kind in "iub" else 0.5
-    elif isinstance(sample, dict):
-        for value in sample.values():
-            scribble(value)
-    elif isinstance(sample, tuple):
-        for value in sample:
-            scribble(value)
 
 
 class ScriptedEditor(gym.Env):

@@ -214,8 +214,8 @@ def plan(**changes) -> dict:
 @pytest.mark.parametrize(
     ("changes", "message"),
     [
-        ({"steps": 10**21}, r"^steps must be at most MAX_STEPS = 2\*\*40"),
-        ({"steps": 2**40 + 1}, r"^steps must be at most MAX_STEPS"),
+        ({"steps": 10**21}, r"^steps must be at most MAX_TIMESTEPS = 2\*\*40"),
+        ({"steps": 2**40 + 1}, r"^steps must be at most MAX_TIMESTEPS"),
         ({"eval_steps": 10**14}, r"^eval_steps must be at most MAX_EVAL_STEPS = 10\*\*9"),
         ({"eval_episodes": 10**7}, r"^eval_episodes must be at most MAX_EVAL_EPISODES = 10\*\*6"),
         (
@@ -263,7 +263,7 @@ def test_the_cli_refuses_a_huge_step_count_with_exit_2(tmp_path, capsys):
     path = write(
         tmp_path, "s.yaml", VALID_YAML.replace("steps: 200", "steps: 1000000000000000000000")
     )
-    assert "steps must be at most MAX_STEPS" in cli_error(path, capsys)
+    assert "steps must be at most MAX_TIMESTEPS" in cli_error(path, capsys)
 
 
 # --- backends that cannot start --------------------------------------------------------------

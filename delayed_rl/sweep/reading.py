@@ -18,6 +18,7 @@ YAML is read with PyYAML's safe loader (no Python objects, no code): the ``sweep
 
 from __future__ import annotations
 
+import functools
 import json
 from pathlib import Path
 from typing import Any
@@ -111,7 +112,7 @@ def _read_yaml(path: Path, text: str) -> Any:
         ) from None
     loader = None
     try:
-        loader = _loader_class(yaml)(text)  # (its reader refuses control characters at once)
+        loader = _loader_class()(text)  # (its reader refuses control characters at once)
         loader.name = str(path)  # what PyYAML's messages call the text
         node = loader.get_single_node()  # composed within MAX_DEPTH; nothing constructed yet
         if node is None:
@@ -140,16 +141,13 @@ class _Refused(ValueError):
         self.line = mark.line + 1
 
 
-_LOADERS: dict[int, type] = {}
-
-
-def _loader_class(yaml: Any) -> type:
+@functools.cache
+def _loader_class() -> type:
     """PyYAML's ``SafeLoader``, composing at most :data:`MAX_DEPTH` levels, refusing repeated keys.
 
     (Made on first use, so that PyYAML is imported only to read a YAML file.)
     """
-    if id(yaml) in _LOADERS:
-        return _LOADERS[id(yaml)]
+    import yaml
 
     class SweepLoader(yaml.SafeLoader):
         depth = 0
@@ -186,7 +184,6 @@ def _loader_class(yaml: Any) -> type:
                         )
             return super().construct_mapping(node, deep=deep)
 
-    _LOADERS[id(yaml)] = SweepLoader
     return SweepLoader
 
 

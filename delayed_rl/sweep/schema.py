@@ -3,7 +3,7 @@
 :func:`~delayed_rl.sweep.reading.read_sweep_file` reads a YAML or JSON file;
 :func:`parse_sweep` checks what it holds, field by field, and returns the plan, a :class:`Sweep`,
 whose :meth:`Sweep.runs` lists the runs. Every size a file sets is bounded by a stated limit
-(:data:`MAX_STEPS`, :data:`MAX_EVAL_STEPS`, :data:`MAX_EVAL_EPISODES`, :data:`~delayed_rl.experiments.runner.MAX_SEEDS`,
+(``learn()``'s ``MAX_TIMESTEPS``, :data:`MAX_EVAL_STEPS`, :data:`MAX_EVAL_EPISODES`, :data:`~delayed_rl.experiments.runner.MAX_SEEDS`,
 :data:`MAX_SWEEP_SEED`, :data:`MAX_RUNS`), checked before anything is built or run.
 :mod:`delayed_rl.sweep` documents the format.
 """
@@ -23,7 +23,7 @@ import gymnasium as gym
 
 import delayed_rl  # noqa: F401  (registers the env ids)
 from delayed_rl._validation import check_choice, check_int, check_real
-from delayed_rl.agents._loop import MAX_TIMESTEPS
+from delayed_rl.agents._loop import MAX_TIMESTEPS, MAX_TIMESTEPS_TEXT
 from delayed_rl.agents.hyperparameters import check_limit
 from delayed_rl.agents.registry import AGENTS, agent_class
 from delayed_rl.delays import as_delay
@@ -40,8 +40,6 @@ DEFAULT_SEEDS = 3
 DEFAULT_STEPS = 100_000
 DEFAULT_EVAL_EPISODES = 10
 
-MAX_STEPS = MAX_TIMESTEPS
-"""The most training steps of a run: ``learn()``'s own bound, 2**40."""
 MAX_EVAL_STEPS = 10**9
 """The most evaluation steps of a run (``eval_steps``)."""
 MAX_EVAL_EPISODES = 10**6
@@ -194,9 +192,9 @@ def parse_sweep(data: Any, name: str = "sweep", source: str = "sweep") -> Sweep:
 
 
 def _steps(where: str, value: Any, optional: bool = False) -> int | None:
-    """A run's training steps: an integer in ``[1, MAX_STEPS]``."""
+    """A run's training steps: an integer in ``[1, MAX_TIMESTEPS]`` (``learn()``'s bound)."""
     steps = check_int(where, value, 1, optional=optional)
-    return check_limit(where, steps, MAX_STEPS, f"MAX_STEPS = 2**40 ({_HERE}; learn()'s bound)")
+    return check_limit(where, steps, MAX_TIMESTEPS, MAX_TIMESTEPS_TEXT)
 
 
 def _mapping(where: str, value: Any, what: str = "a mapping") -> Mapping[str, Any]:

@@ -163,13 +163,13 @@ class RewardBuffers:
         ended = np.asarray(ended, dtype=bool) & active
         # Only sums of magnitudes near float64's range can overflow: then, and only then, the
         # state is saved, to be put back if the step is refused.
+        magnitude = np.abs(rewards)
         with np.errstate(over="ignore"):  # an infinite bound is risky too
-            magnitude = self._magnitude + np.abs(rewards)
-        risky = float(magnitude.max(initial=0.0)) >= _SAFE_MAGNITUDE
+            risky = float((self._magnitude + magnitude).max(initial=0.0)) >= _SAFE_MAGNITUDE
         saved = self._save() if risky else None
         try:
             with np.errstate(over="ignore", invalid="ignore"):  # overflows are checked here
-                delivered, delays = self._push(rewards, active)
+                delivered, delays = self._push(rewards, active, magnitude)
                 settled = None
                 if ended.any() and on_episode_end != "carry":
                     settled = self.clear(ended)
@@ -221,8 +221,13 @@ class RewardBuffers:
         for rng, state in zip(self.rngs, states, strict=True):
             rng.bit_generator.state = state
 
-    def _push(self, rewards: np.ndarray, active: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`push` once the rewards are known to be finite."""
+    def _push(
+        self, rewards: np.ndarray, active: np.ndarray, magnitude: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Schedule and deliver (:meth:`step`), the rewards known to be finite.
+
+        ``magnitude`` is ``|rewards|``, which :meth:`step` computed for its risk check.
+        """
         every = bool(active.all())
         if not every:
             rewards = np.where(active, rewards, 0.0)
@@ -253,7 +258,7 @@ class RewardBuffers:
         else:
             self._nonzero[rows] += (new != 0.0).astype(np.int64) - (old != 0.0)
         self._pending += rewards
-        self._magnitude += np.abs(rewards)
+        self._magnitude += magnitude if every else np.where(active, magnitude, 0.0)
         now = self.clock & mask
         if every:
             delivered = self.buffer[self.rows, now]

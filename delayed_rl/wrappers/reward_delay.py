@@ -475,7 +475,7 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
                     "the rewards delivered at the episode's last step (due then, plus the "
                     "flushed rest) sum to more than float64 can hold; rescale the env's rewards"
                 )
-            self._clear_pending()
+            self._empty()
             info["flushed_reward"] = flushed
             delivered = total
         elif self.on_episode_end == "drop":
@@ -558,9 +558,13 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
             ValueError: the sum is beyond float64's range.
         """
         total = exact_sum(self._due.values())
+        self._empty()
+        return total
+
+    def _empty(self) -> None:
+        """Empty the buffer (its sum already taken, or not wanted)."""
         self._due.clear()
         self._pending = 0.0
-        return total
 
 
 class PoissonRewardDelay(RewardDelay):
