@@ -36,7 +36,7 @@ import gymnasium as gym
 import numpy as np
 
 import delayed_rl  # noqa: F401  (registers the env ids)
-from delayed_rl.agents import DEFAULTS, MMQ, QLearning
+from delayed_rl.agents import DEFAULTS, MultipleModelQLearning, QLearning
 
 MODEL_COUNTS = (1, 11, 51, 151)
 LAMBDA = 13
@@ -53,11 +53,11 @@ def make_env(size: int) -> gym.Env:
     return gym.make("delayed_rl/GridWorld-v0", size=size, reward_delay=LAMBDA)
 
 
-def make_agent(size: int, n_models: int) -> MMQ:
+def make_agent(size: int, n_models: int) -> MultipleModelQLearning:
     """An agent on a ``size``×``size`` grid with Poisson(13) delays and ``n_models`` models."""
     if n_models == 1:
         return QLearning(make_env(size), **SETTINGS)
-    return MMQ(make_env(size), delay_estimates=list(range(n_models)), **SETTINGS)
+    return MultipleModelQLearning(make_env(size), delay_estimates=list(range(n_models)), **SETTINGS)
 
 
 def configurations() -> dict[str, tuple[int, int]]:

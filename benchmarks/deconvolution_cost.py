@@ -21,7 +21,7 @@ from collections.abc import Callable
 import gymnasium as gym
 
 import delayed_rl  # noqa: F401  (registers the env ids)
-from delayed_rl.agents import MMQ, DeconvQ, TabularAgent
+from delayed_rl.agents import DeconvolutionQLearning, MultipleModelQLearning, TabularAgent
 
 LAMBDA = 13
 
@@ -31,9 +31,15 @@ def _env() -> gym.Env:
 
 
 AGENTS: dict[str, Callable[[], TabularAgent]] = {
-    "MMQ, 51 models": lambda: MMQ(_env(), max_delay_estimate=50, q_init=25.0, seed=1),
-    "DeconvQ, delay learned": lambda: DeconvQ(_env(), max_delay=50, q_init=25.0, seed=1),
-    "DeconvQ, delay known": lambda: DeconvQ(_env(), delay=float(LAMBDA), q_init=25.0, seed=1),
+    "MMQ, 51 models": lambda: MultipleModelQLearning(
+        _env(), max_delay_estimate=50, q_init=25.0, seed=1
+    ),
+    "DeconvQ, delay learned": lambda: DeconvolutionQLearning(
+        _env(), max_delay=50, q_init=25.0, seed=1
+    ),
+    "DeconvQ, delay known": lambda: DeconvolutionQLearning(
+        _env(), delay=float(LAMBDA), q_init=25.0, seed=1
+    ),
 }
 
 

@@ -28,7 +28,7 @@ import time
 import gymnasium as gym
 import numpy as np
 
-from delayed_rl.agents import DeconvQ, QLearning, TabularAgent
+from delayed_rl.agents import DeconvolutionQLearning, QLearning, TabularAgent
 from delayed_rl.experiments.runner import mean_ci95
 from delayed_rl.wrappers import PoissonRewardDelay
 
@@ -59,7 +59,7 @@ def make_agent(name: str, env_id: str, lam: float, max_delay: int, seed: int) ->
     env = PoissonRewardDelay(gym.make(env_id), lam)
     if name == "Q":
         return QLearning(env, seed=seed)
-    return DeconvQ(env, max_delay=max_delay, seed=seed)
+    return DeconvolutionQLearning(env, max_delay=max_delay, seed=seed)
 
 
 def main() -> None:

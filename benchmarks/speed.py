@@ -48,9 +48,9 @@ import time
 start = time.perf_counter()
 import gymnasium as gym
 import delayed_rl
-from delayed_rl.agents import MMQ
+from delayed_rl.agents import MultipleModelQLearning
 ready = time.perf_counter()
-agent = MMQ(gym.make("delayed_rl/GridWorld-9x9-v0", reward_delay=13), max_delay_estimate=50,
+agent = MultipleModelQLearning(gym.make("delayed_rl/GridWorld-9x9-v0", reward_delay=13), max_delay_estimate=50,
             q_init=10.0, seed=0)
 agent.learn(1_000_000, log_interval=None)
 assert agent.last_learn_path == "compiled"
@@ -177,13 +177,15 @@ def compiled_agent_runs(steps: int) -> dict[str, Callable[[], float]]:
 
     makers = {
         "Q-learning": lambda: agents.QLearning(grid()),
-        "MMQ |Λ| = 51": lambda: agents.MMQ(grid(), max_delay_estimate=50),
+        "MMQ |Λ| = 51": lambda: agents.MultipleModelQLearning(grid(), max_delay_estimate=50),
         "expected credit (51 lags)": lambda: agents.ExpectedCreditQLearning(
             grid(), 13.0, max_delay=50
         ),
         "oracle": lambda: agents.OracleQLearning(grid(record=True)),
-        "DeconvQ, delay known": lambda: agents.DeconvQ(grid(), delay=Poisson(13.0), max_delay=50),
-        "DeconvQ, delay learned": lambda: agents.DeconvQ(grid(), max_delay=50),
+        "DeconvQ, delay known": lambda: agents.DeconvolutionQLearning(
+            grid(), delay=Poisson(13.0), max_delay=50
+        ),
+        "DeconvQ, delay learned": lambda: agents.DeconvolutionQLearning(grid(), max_delay=50),
     }
 
     def run(make: Callable[[], Any]) -> Callable[[], float]:
@@ -214,17 +216,19 @@ def epuck_runs(steps: int) -> dict[str, Callable[[], float]]:
     Beside each, its floor: pymunk's bare solver for one env step; the training loop on both
     paths (the compiled one steps the robot itself), beside the env's own steps alone.
     """
-    from delayed_rl.agents import MMQ
+    from delayed_rl.agents import MultipleModelQLearning
     from delayed_rl.envs.linefollow.env import EPuckLineFollowEnv
     from delayed_rl.experiments.linefollow import line_env
 
     env = EPuckLineFollowEnv("racetrack", max_steps=None, lost_line="recover")
 
-    MMQ(line_env(), max_delay_estimate=150, q_init=10.0).learn(500)  # compile the loop first
+    MultipleModelQLearning(line_env(), max_delay_estimate=150, q_init=10.0).learn(
+        500
+    )  # compile the loop first
 
     def training(compiled: bool) -> Callable[[], float]:
         def run() -> float:
-            agent = MMQ(line_env(), max_delay_estimate=150, q_init=10.0, seed=0)
+            agent = MultipleModelQLearning(line_env(), max_delay_estimate=150, q_init=10.0, seed=0)
             n = steps if compiled else steps // 2
             start = time.perf_counter()
             agent.learn(n, log_interval=None, compiled=compiled)

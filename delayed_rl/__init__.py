@@ -1,8 +1,9 @@
 """delayed-rl: stochastically delayed rewards for Gymnasium, and Multiple Model Q-learning.
 
 Importing the package registers its env ids (``gym.make("delayed_rl/GridWorld-9x9-v0")``) and
-nothing else; the agents named here are imported on first use (``delayed_rl.MMQ``), so that
-``import delayed_rl.wrappers`` stays as light as the wrappers.
+nothing else; the agents named here are imported on first use
+(``delayed_rl.MultipleModelQLearning``), so that ``import delayed_rl.wrappers`` stays as light
+as the wrappers.
 """
 
 from typing import Any
@@ -10,8 +11,8 @@ from typing import Any
 from delayed_rl import envs as _envs  # noqa: F401  (registers the env ids)
 from delayed_rl._version import __version__
 
-__all__ = ["MMQ", "FixedDelayQLearning", "MultipleModelQLearning", "QLearning", "__version__"]
-_AGENTS = ("MMQ", "FixedDelayQLearning", "MultipleModelQLearning", "QLearning")
+__all__ = ["FixedDelayQLearning", "MultipleModelQLearning", "QLearning", "__version__"]
+_AGENTS = ("FixedDelayQLearning", "MultipleModelQLearning", "QLearning")
 
 
 def __getattr__(name: str) -> Any:

@@ -36,8 +36,8 @@ import gymnasium as gym
 
 import delayed_rl
 from delayed_rl._validation import check_fraction, check_int, check_probability, check_real
-from delayed_rl.agents._loop import MAX_TIMESTEPS, MAX_TIMESTEPS_TEXT
-from delayed_rl.agents.hyperparameters import MAX_SEED, check_limit
+from delayed_rl.agents.common.hyperparameters import MAX_SEED, check_limit
+from delayed_rl.agents.common.python_loop import MAX_TIMESTEPS, MAX_TIMESTEPS_TEXT
 from delayed_rl.agents.registry import AGENTS as AGENT_NAMES
 from delayed_rl.delays import Poisson
 from delayed_rl.envs import env_ids
@@ -612,7 +612,7 @@ def _check_train_arguments(args: argparse.Namespace) -> None:
 
     A ``--save`` with no file name (``""``, ``"."``).
     """
-    from delayed_rl.agents.save_util import check_model_path
+    from delayed_rl.agents.common.save_util import check_model_path
 
     try:
         check_model_path(args.save)

@@ -17,7 +17,7 @@ import argparse
 import gymnasium as gym
 
 import delayed_rl  # noqa: F401  (registers the ids)
-from delayed_rl.agents import MMQ
+from delayed_rl.agents import MultipleModelQLearning
 
 
 def main() -> None:
@@ -28,7 +28,9 @@ def main() -> None:
     robot = gym.make(
         "delayed_rl/EPuckLineFollow-v0", reward_delay=90, lost_line="recover", max_steps=None
     )
-    agent = MMQ(robot, max_delay_estimate=150, q_init=10.0, seed=0, exploration_fraction=0.5)
+    agent = MultipleModelQLearning(
+        robot, max_delay_estimate=150, q_init=10.0, seed=0, exploration_fraction=0.5
+    )
     obs, _ = robot.reset(seed=0)
     earned = 0.0
     for step in range(args.steps):

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import delayed_rl  # noqa: F401  (registers the env ids)
-from delayed_rl.agents import MMQ, FixedDelayQLearning, QLearning
+from delayed_rl.agents import FixedDelayQLearning, MultipleModelQLearning, QLearning
 from delayed_rl.agents.mmq import greedy_actions
 
 GRID5 = "delayed_rl/GridWorld-5x5-v0"
@@ -20,7 +20,7 @@ STATES = np.arange(25)
 
 def make(cls=QLearning, **options):
     env = gym.make(GRID5, reward_delay=2)
-    if cls is MMQ:
+    if cls is MultipleModelQLearning:
         options.setdefault("max_delay_estimate", 4)
     if cls is FixedDelayQLearning:
         options.setdefault("delay_estimate", 2)
@@ -49,7 +49,7 @@ def assert_predicts_from_its_own_table(agent):
     )
 
 
-@pytest.mark.parametrize("cls", [QLearning, FixedDelayQLearning, MMQ])
+@pytest.mark.parametrize("cls", [QLearning, FixedDelayQLearning, MultipleModelQLearning])
 @pytest.mark.parametrize("duplicate", [copy.deepcopy, pickled], ids=["deepcopy", "pickle"])
 @pytest.mark.parametrize("compiled", [False, None], ids=["python", "default"])
 def test_a_copy_learns_into_the_table_it_predicts_from(cls, duplicate, compiled):
@@ -62,7 +62,7 @@ def test_a_copy_learns_into_the_table_it_predicts_from(cls, duplicate, compiled)
     assert_predicts_from_its_own_table(original)
 
 
-@pytest.mark.parametrize("cls", [QLearning, MMQ])
+@pytest.mark.parametrize("cls", [QLearning, MultipleModelQLearning])
 @pytest.mark.parametrize("duplicate", [copy.deepcopy, pickled], ids=["deepcopy", "pickle"])
 @pytest.mark.parametrize("compiled", [False, None], ids=["python", "default"])
 @pytest.mark.parametrize("restart", [False, True], ids=["continue", "restart"])
@@ -86,8 +86,10 @@ def test_a_copy_continues_exactly_as_the_original(cls, duplicate, compiled, rest
 
 @pytest.mark.parametrize("compiled", [False, None], ids=["python", "default"])
 def test_a_saved_agent_continues_exactly_as_the_original(tmp_path, compiled):
-    original = make(MMQ).learn(700, compiled=compiled)
-    loaded = MMQ.load(original.save(tmp_path / "m"), env=gym.make(GRID5, reward_delay=2))
+    original = make(MultipleModelQLearning).learn(700, compiled=compiled)
+    loaded = MultipleModelQLearning.load(
+        original.save(tmp_path / "m"), env=gym.make(GRID5, reward_delay=2)
+    )
     assert_predicts_from_its_own_table(loaded)
     original.set_env(gym.make(GRID5, reward_delay=2))  # a fresh env, as the loaded agent's
     for agent in (original, loaded):
@@ -108,7 +110,7 @@ def test_a_deep_copy_before_any_training_learns_on_its_own():
 
 def test_a_shallow_copy_shares_the_tables():
     """``copy.copy`` shares the arrays, the env and the run: it predicts from the shared table."""
-    original = make(MMQ).learn(500)
+    original = make(MultipleModelQLearning).learn(500)
     twin = copy.copy(original)
     assert np.shares_memory(twin.q_table, original.q_table) and twin.env is original.env
     twin.learn(1_000, compiled=False, reset_num_timesteps=False)

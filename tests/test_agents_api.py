@@ -15,14 +15,13 @@ from gymnasium.wrappers import DiscretizeObservation
 
 import delayed_rl
 from delayed_rl.agents import (
-    MMQ,
     RECORD_KEYS,
     FixedDelayQLearning,
     LinearSchedule,
     MultipleModelQLearning,
     QLearning,
 )
-from delayed_rl.agents.callbacks import BaseCallback, ProgressBarCallback
+from delayed_rl.agents.common.callbacks import BaseCallback, ProgressBarCallback
 from delayed_rl.envs.gridworld import GridWorldEnv
 
 GRID5 = "delayed_rl/GridWorld-5x5-v0"
@@ -49,7 +48,7 @@ class ShiftedEnv(gym.Env):
 
 
 def test_public_exports():
-    assert delayed_rl.MMQ is MMQ is MultipleModelQLearning
+    assert delayed_rl.MultipleModelQLearning is MultipleModelQLearning is MultipleModelQLearning
     assert delayed_rl.QLearning is QLearning
     assert delayed_rl.FixedDelayQLearning is FixedDelayQLearning
     from delayed_rl.agents import ProportionalController
@@ -90,7 +89,7 @@ def test_non_discrete_spaces_say_how_to_discretise():
         QLearning(gym.make("MountainCar-v0"))
     continuous_actions = DiscretizeObservation(gym.make("MountainCarContinuous-v0"), bins=5)
     with pytest.raises(TypeError, match="Discrete action_space.*DiscretizeAction"):
-        MMQ(continuous_actions)
+        MultipleModelQLearning(continuous_actions)
     # following the hint works
     agent = QLearning(DiscretizeObservation(gym.make("MountainCar-v0"), bins=10), seed=0)
     assert agent.q_table.shape == (100, 1, 3)
@@ -123,7 +122,7 @@ def test_non_discrete_spaces_say_how_to_discretise():
 def test_bad_hyperparameters_name_argument_and_value(kwargs, error, message):
     """Wrong type: TypeError; right type out of range: ValueError; the message names both."""
     with pytest.raises(error, match=message) as raised:
-        MMQ(GRID5, max_delay_estimate=3, **kwargs)
+        MultipleModelQLearning(GRID5, max_delay_estimate=3, **kwargs)
     assert type(raised.value) is error
 
 
@@ -165,7 +164,7 @@ def test_bad_update_arguments():
 
 
 def test_predict_single_batched_and_validated():
-    agent = MMQ(GRID5, max_delay_estimate=3, q_init=5.0, seed=0).learn(2_000)
+    agent = MultipleModelQLearning(GRID5, max_delay_estimate=3, q_init=5.0, seed=0).learn(2_000)
     action, state = agent.predict(24, deterministic=True)
     assert isinstance(action, int) and state is None
     assert agent.predict(np.int64(24), deterministic=True)[0] == action
@@ -210,7 +209,7 @@ def test_shifted_discrete_spaces():
 
 def test_learn_on_continuing_env_and_record():
     env = gym.make(GRID5, reward_delay=3)
-    agent = MMQ(env, max_delay_estimate=6, q_init=10.0, seed=1)
+    agent = MultipleModelQLearning(env, max_delay_estimate=6, q_init=10.0, seed=1)
     assert agent.learn(3_000, record=True, compiled=False) is agent  # steps the env object itself
     log = agent.training_log
     assert set(log) == set(RECORD_KEYS)
@@ -229,7 +228,7 @@ def test_learn_on_continuing_env_and_record():
 
 def test_episode_end_resets_env_and_history():
     env = GridWorldEnv(size=5, max_steps=100)
-    agent = MMQ(env, max_delay_estimate=5, q_init=10.0, seed=2).learn(
+    agent = MultipleModelQLearning(env, max_delay_estimate=5, q_init=10.0, seed=2).learn(
         1_050, record=True, compiled=False
     )
     done = agent.training_log["episode_end"]
@@ -243,9 +242,13 @@ def test_episode_end_resets_env_and_history():
 @pytest.mark.parametrize("compiled", [False, True])
 def test_reset_num_timesteps_false_continues_exactly(compiled):
     """learn(a) + learn(b, reset_num_timesteps=False) == learn(a + b) with constant schedules."""
-    one = MMQ(gym.make(GRID5, reward_delay=2), max_delay_estimate=4, q_init=8.0, seed=3)
+    one = MultipleModelQLearning(
+        gym.make(GRID5, reward_delay=2), max_delay_estimate=4, q_init=8.0, seed=3
+    )
     one.learn(1_500, compiled=compiled)
-    two = MMQ(gym.make(GRID5, reward_delay=2), max_delay_estimate=4, q_init=8.0, seed=3)
+    two = MultipleModelQLearning(
+        gym.make(GRID5, reward_delay=2), max_delay_estimate=4, q_init=8.0, seed=3
+    )
     two.learn(1_000, compiled=compiled).learn(500, reset_num_timesteps=False, compiled=compiled)
     assert two.num_timesteps == 1_500
     np.testing.assert_array_equal(one.q_table, two.q_table)
@@ -367,9 +370,9 @@ def test_works_without_stable_baselines3_or_tqdm():
         sys.modules["stable_baselines3"] = None
         sys.modules["tqdm"] = None
         import delayed_rl
-        from delayed_rl.agents import MMQ
+        from delayed_rl.agents import MultipleModelQLearning
         steps = []
-        agent = MMQ("delayed_rl/GridWorld-3x3-v0", max_delay_estimate=3, seed=0)
+        agent = MultipleModelQLearning("delayed_rl/GridWorld-3x3-v0", max_delay_estimate=3, seed=0)
         agent.learn(500, callback=lambda l, g: steps.append(l["reward"]), progress_bar=True)
         assert len(steps) == 500 and agent.num_timesteps == 500
         venv = agent.get_env()
@@ -403,24 +406,24 @@ class HugeEnv(gym.Env):
             r"delay_estimate must keep the tables within MAX_TABLE_BYTES = 1 GiB .*got 1000000000",
         ),
         (
-            lambda: MMQ(GRID5, max_delay_estimate=10**7),
+            lambda: MultipleModelQLearning(GRID5, max_delay_estimate=10**7),
             r"max_delay_estimate must keep the tables .*got 10000000: 10000001 delay model",
         ),
         (
-            lambda: MMQ(GRID5, max_delay_estimate=10**30, delay_step=10**29),
+            lambda: MultipleModelQLearning(GRID5, max_delay_estimate=10**30, delay_step=10**29),
             r"max_delay_estimate must keep the tables .* GiB",
         ),
         (
-            lambda: MMQ(GRID5, delay_estimates=[0, 10**30]),
+            lambda: MultipleModelQLearning(GRID5, delay_estimates=[0, 10**30]),
             r"delay_estimates must keep the tables .*got \[0, 10+\]",
         ),
         pytest.param(  # 100,000 delays checked one by one under tracemalloc
-            lambda: MMQ(GRID5, delay_estimates=range(0, 10**8, 10**3)),
+            lambda: MultipleModelQLearning(GRID5, delay_estimates=range(0, 10**8, 10**3)),
             r"delay_estimates must keep the tables .*got \[0, \.\.\., 99999000\] \(100000 values\)",
             marks=pytest.mark.large,
         ),
         (
-            lambda: MMQ(HugeEnv()),
+            lambda: MultipleModelQLearning(HugeEnv()),
             r"MultipleModelQLearning\(max_delay_estimate=50\) on an env of 100000000 states and 4 "
             r"actions needs 15\d GiB of tables .*over MAX_TABLE_BYTES",
         ),
@@ -445,7 +448,7 @@ def test_the_table_limit_fits_the_thesis_and_far_larger():
 
     assert table_bytes(81, 4, 51, 50) < 2**18  # the thesis's 9×9 grid world, Λ = 0..50
     assert table_bytes(10**5, 10, 101, 100) < MAX_TABLE_BYTES  # 10⁵ states, 101 delay models
-    agent = MMQ("delayed_rl/GridWorld-9x9-v0", max_delay_estimate=50)
+    agent = MultipleModelQLearning("delayed_rl/GridWorld-9x9-v0", max_delay_estimate=50)
     assert agent.q_table.nbytes == 81 * 51 * 4 * 8
     QLearning(DiscretizeObservation(gym.make("MountainCar-v0"), bins=300))  # 90 000 states
 
@@ -486,13 +489,13 @@ def test_update_names_the_argument_and_what_is_allowed(args, error, match):
 )
 def test_hyperparameters_above_their_stated_limits_are_refused(kwargs, match):
     with pytest.raises(ValueError, match=match):
-        MMQ(GRID5, max_delay_estimate=2, **kwargs)
+        MultipleModelQLearning(GRID5, max_delay_estimate=2, **kwargs)
 
 
 def test_learn_refuses_work_above_its_limits_before_starting():
     import tracemalloc
 
-    from delayed_rl.agents._loop import MAX_RECORD_BYTES, MAX_TIMESTEPS
+    from delayed_rl.agents.common.python_loop import MAX_RECORD_BYTES, MAX_TIMESTEPS
 
     agent = QLearning(GRID5, seed=0).learn(10)
     with pytest.raises(

@@ -8,8 +8,8 @@ import pytest
 
 import delayed_rl  # noqa: F401  (registers the ids)
 from delayed_rl.agents import QLearning, load_agent
-from delayed_rl.agents._regression import RewardRegression, project_to_simplex
-from delayed_rl.agents.deconvolution import DeconvolutionQLearning, DeconvQ
+from delayed_rl.agents.deconvolution import DeconvolutionQLearning
+from delayed_rl.agents.deconvolution.regression import RewardRegression, project_to_simplex
 from delayed_rl.delays import Constant, Empirical, Geometric, Poisson
 from delayed_rl.envs.gridworld import GridWorldEnv
 from delayed_rl.experiments.training import greedy_average_reward
@@ -100,7 +100,9 @@ def test_the_agent_finds_the_optimal_loop_where_q_learning_does_not(known):
     optimum = 10 / 9
     for seed in range(3):
         delay = Poisson(4.0) if known else None
-        agent = DeconvQ(_grid(lam=4.0), delay=delay, max_delay=20, q_init=25.0, seed=seed)
+        agent = DeconvolutionQLearning(
+            _grid(lam=4.0), delay=delay, max_delay=20, q_init=25.0, seed=seed
+        )
         agent.learn(60_000, log_interval=None)
         assert agent.last_learn_path == "compiled"
         assert greedy_average_reward(agent, 5) == pytest.approx(optimum, abs=0.002)
@@ -132,7 +134,7 @@ def test_it_is_anonymous_the_oracle_keys_change_nothing():
     tables = []
     for wrap in (lambda env: env, _StripOracleKeys):
         env = wrap(RewardDelay(GridWorldEnv(size=4), Poisson(3.0), record_arrivals=True))
-        agent = DeconvQ(env, max_delay=12, solve_interval=2_000, q_init=20.0, seed=4)
+        agent = DeconvolutionQLearning(env, max_delay=12, solve_interval=2_000, q_init=20.0, seed=4)
         agent.learn(10_000, compiled=False)  # the Python path: the one that sees info at all
         tables.append((agent.q_table.copy(), agent.delay_pmf))
     np.testing.assert_array_equal(tables[0][0], tables[1][0])
@@ -143,7 +145,9 @@ def test_save_load_resumes_exactly(tmp_path):
     def fresh_env():
         return RewardDelay(GridWorldEnv(size=4, max_steps=40), Poisson(2.0), on_episode_end="drop")
 
-    original = DeconvQ(fresh_env(), max_delay=10, solve_interval=1_500, q_init=20.0, seed=6)
+    original = DeconvolutionQLearning(
+        fresh_env(), max_delay=10, solve_interval=1_500, q_init=20.0, seed=6
+    )
     original.learn(5_000)
     path = original.save(tmp_path / "deconv")
     loaded = load_agent(path, env=fresh_env())
@@ -157,14 +161,19 @@ def test_save_load_resumes_exactly(tmp_path):
 
 
 def test_the_episode_end_mode_is_read_from_the_wrapper_and_conflicts_are_refused():
-    agent = DeconvQ(RewardDelay(GridWorldEnv(size=3, max_steps=9), 2.0, on_episode_end="carry"))
+    agent = DeconvolutionQLearning(
+        RewardDelay(GridWorldEnv(size=3, max_steps=9), 2.0, on_episode_end="carry")
+    )
     assert agent.assumed_episode_end == "carry"
     agent.learn(200)
     with pytest.raises(
         ValueError, match="on_episode_end='carry' but this env's RewardDelay uses 'drop'"
     ):
         agent.set_env(RewardDelay(GridWorldEnv(size=3, max_steps=9), 2.0, on_episode_end="drop"))
-    assert DeconvQ(GridWorldEnv(size=3), on_episode_end="drop").assumed_episode_end == "drop"
+    assert (
+        DeconvolutionQLearning(GridWorldEnv(size=3), on_episode_end="drop").assumed_episode_end
+        == "drop"
+    )
 
 
 @pytest.mark.parametrize(
@@ -202,7 +211,7 @@ def test_the_episode_end_mode_is_read_from_the_wrapper_and_conflicts_are_refused
 )
 def test_bad_arguments(kwargs, error, match):
     with pytest.raises(error, match=match):
-        DeconvQ(GridWorldEnv(size=3), **kwargs)
+        DeconvolutionQLearning(GridWorldEnv(size=3), **kwargs)
 
 
 def _fed(layout, steps, mode="flush", support=6, seed=3):
@@ -276,12 +285,12 @@ def test_the_hashed_layout_holds_the_same_counts_and_gives_the_same_solves(mode)
 
 def test_conjugate_gradients_agree_with_the_dense_solve(monkeypatch):
     """Above DENSE_SOLVE_PAIRS pairs R̂ comes from CG: the same solution as the dense Cholesky solve, to 1e-7."""
-    from delayed_rl.agents import _regression
+    from delayed_rl.agents.deconvolution import regression as regression_module
 
     regression = _fed("hashed", 4000, "flush")
     pmf = Poisson(2.5).pmf(np.arange(7))
     dense = regression.solve_rewards(pmf, 1e-3)
-    monkeypatch.setattr(_regression, "DENSE_SOLVE_PAIRS", 10)
+    monkeypatch.setattr(regression_module, "DENSE_SOLVE_PAIRS", 10)
     regression._last_rewards = np.zeros(64)  # a cold start
     np.testing.assert_allclose(regression.solve_rewards(pmf, 1e-3), dense, atol=1e-7)
 
@@ -290,7 +299,7 @@ def test_the_layout_is_chosen_by_size_and_the_hashed_table_grows_with_what_is_se
     """Direct while the counts fit DIRECT_LIMIT; hashed above, sized by the couples that occur."""
     assert RewardRegression(100, 50).layout == "direct"
     big = GridWorldEnv(size=20)  # 1600 pairs: 1600² · 51 · 4 bytes = 498 MiB direct
-    agent = DeconvQ(big, max_delay=50, q_init=20.0, seed=0)
+    agent = DeconvolutionQLearning(big, max_delay=50, q_init=20.0, seed=0)
     assert agent._regression.layout == "hashed"
     agent.learn(3_000)
     regression = agent._regression
@@ -305,10 +314,10 @@ def test_the_layout_is_chosen_by_size_and_the_hashed_table_grows_with_what_is_se
 
 
 def test_a_hashed_table_that_would_outgrow_the_limit_is_refused(monkeypatch):
-    from delayed_rl.agents import _regression
+    from delayed_rl.agents.deconvolution import regression as regression_module
 
-    monkeypatch.setattr(_regression, "STATISTICS_LIMIT", 2**20)
-    agent = DeconvQ(GridWorldEnv(size=20), max_delay=50, q_init=20.0, seed=0)
+    monkeypatch.setattr(regression_module, "STATISTICS_LIMIT", 2**20)
+    agent = DeconvolutionQLearning(GridWorldEnv(size=20), max_delay=50, q_init=20.0, seed=0)
     with pytest.raises(ValueError, match=r"max_delay=50: the co-occurrence rows .* MiB"):
         agent.learn(20_000)
 
@@ -344,7 +353,8 @@ def test_the_compiled_and_python_paths_learn_the_same_from_the_same_steps():
     rewards = np.where(rng.random(n) < 0.1, rng.choice([-1.0, 10.0], size=n), 0.0)
     env = RewardDelay(GridWorldEnv(size=4), Poisson(2.0), on_episode_end="drop")
     python, compiled = (
-        DeconvQ(env, max_delay=8, solve_interval=2_500, q_init=5.0, seed=0) for _ in range(2)
+        DeconvolutionQLearning(env, max_delay=8, solve_interval=2_500, q_init=5.0, seed=0)
+        for _ in range(2)
     )
     for (s, a, s2), reward, end in zip(rows.tolist(), rewards.tolist(), ends.tolist(), strict=True):
         python.update(s, a, reward, s2, terminated=end)
@@ -377,7 +387,7 @@ def test_the_python_path_runs_gymnasiums_tabular_envs_with_the_defaults(env_id, 
     from delayed_rl.wrappers import PoissonRewardDelay
 
     env = PoissonRewardDelay(gym.make(env_id), 3.0)
-    agent = DeconvQ(env, seed=0).learn(6_000, compiled=False, record=True)
+    agent = DeconvolutionQLearning(env, seed=0).learn(6_000, compiled=False, record=True)
     assert agent.last_learn_path == "python" and agent._regression.layout == layout
     assert agent._regression.nbytes < 64 * 2**20
     agent.solve()  # the last solve may be thousands of steps old: the check is of the estimator
@@ -395,7 +405,7 @@ def test_the_python_path_runs_gymnasiums_tabular_envs_with_the_defaults(env_id, 
 
 
 def test_a_solve_whose_mean_rewards_pass_max_abs_value_is_refused(monkeypatch):
-    agent = DeconvQ(GridWorldEnv(size=3), max_delay=4, seed=0)
+    agent = DeconvolutionQLearning(GridWorldEnv(size=3), max_delay=4, seed=0)
     agent.update(0, 0, 1.0, 1)
     monkeypatch.setattr(RewardRegression, "solve_rewards", lambda *args: np.full(36, np.inf))
     with pytest.raises(ValueError, match=r"mean reward of inf, beyond MAX_ABS_VALUE = 2\*\*200"):
@@ -405,7 +415,9 @@ def test_a_solve_whose_mean_rewards_pass_max_abs_value_is_refused(monkeypatch):
 
 def test_a_shorter_solve_interval_given_to_load_shortens_the_pending_gap(tmp_path):
     """Saved 500 steps into a 1000-step gap; loaded with ``solve_interval=200``: it solves next."""
-    agent = DeconvQ(GridWorldEnv(size=3), max_delay=4, q_init=5.0, seed=0).learn(1_500)
+    agent = DeconvolutionQLearning(GridWorldEnv(size=3), max_delay=4, q_init=5.0, seed=0).learn(
+        1_500
+    )
     path = agent.save(tmp_path / "deconv")
     kept = load_agent(path, GridWorldEnv(size=3))
     shortened = load_agent(path, GridWorldEnv(size=3), custom_objects={"solve_interval": 200})

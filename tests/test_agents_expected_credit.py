@@ -19,8 +19,8 @@ import pytest
 
 import delayed_rl  # noqa: F401  (registers the env ids)
 from delayed_rl.agents import ExpectedCreditQLearning, FixedDelayQLearning, QLearning, load_agent
+from delayed_rl.agents.common.hyperparameters import HYPERPARAMETER_NAMES
 from delayed_rl.agents.expected_credit import MAX_LAGS, TAIL, credit_weights
-from delayed_rl.agents.hyperparameters import HYPERPARAMETER_NAMES
 from delayed_rl.compiled import NotCompilable
 from delayed_rl.delays import Constant, Delay, Empirical, Geometric, Poisson, Uniform
 

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from support import examples
 
 import delayed_rl  # noqa: F401  (registers the env ids)
-from delayed_rl.agents import MMQ, FixedDelayQLearning, MultipleModelQLearning, QLearning
+from delayed_rl.agents import FixedDelayQLearning, MultipleModelQLearning, QLearning
 from delayed_rl.delays import Constant
 from delayed_rl.envs.gridworld import GridWorldEnv
 from delayed_rl.envs.roulette import BET_13, BET_EVEN
@@ -24,7 +24,7 @@ ALPHA, GAMMA, Q0 = 0.1, 0.9, 50.0
 
 
 def roulette_agent() -> MultipleModelQLearning:
-    return MMQ(
+    return MultipleModelQLearning(
         gym.make("delayed_rl/Roulette-v0"),
         learning_rate=ALPHA,
         gamma=GAMMA,
@@ -145,7 +145,9 @@ transitions = st.lists(
 def test_matches_reference_and_cache_is_exact(delays, q_init, steps):
     """Same tables as the brute-force reference, and the cached max/arg-max always exact."""
     env = GridWorldEnv(size=3)
-    agent = MMQ(env, q_init=q_init, delay_estimates=delays, learning_rate=0.3, gamma=0.9)
+    agent = MultipleModelQLearning(
+        env, q_init=q_init, delay_estimates=delays, learning_rate=0.3, gamma=0.9
+    )
     reference = ReferenceMMQ(9, 4, sorted(delays), q_init, 0.3, 0.9)
     for s, a, r, s2, terminated, truncated, rare in steps:
         terminated, truncated = terminated and rare == 0, truncated and rare == 1
@@ -168,8 +170,8 @@ def test_vector_and_scalar_paths_agree(values, s, seed):
     """The one-model fast path and the batched path give identical tables and caches."""
     rng = np.random.default_rng(seed)
     env = GridWorldEnv(size=3)
-    scalar = MMQ(env, delay_estimates=[0])
-    batched = MMQ(env, delay_estimates=[0])
+    scalar = MultipleModelQLearning(env, delay_estimates=[0])
+    batched = MultipleModelQLearning(env, delay_estimates=[0])
     for agent in (scalar, batched):
         agent._q[:3] = np.array(values).reshape(3, 1, 4)
         agent._rebuild_cache()
@@ -188,7 +190,9 @@ def test_vector_and_scalar_paths_agree(values, s, seed):
 
 def test_terminal_transition_does_not_bootstrap():
     env = GridWorldEnv(size=3)
-    agent = MMQ(env, q_init=5.0, delay_estimates=[0, 1], learning_rate=0.5, gamma=0.9)
+    agent = MultipleModelQLearning(
+        env, q_init=5.0, delay_estimates=[0, 1], learning_rate=0.5, gamma=0.9
+    )
     agent.update(1, 0, 0.0, 2)
     agent.update(2, 0, 1.0, 3, terminated=True)
     # λ̂=0, the terminal step itself: target = r (no bootstrap)
@@ -211,7 +215,7 @@ def test_q_learning_is_mmq_with_lambda_zero():
         return agent.learn(5_000, record=True)
 
     q = run(QLearning)
-    mmq = run(MMQ, delay_estimates=[0])
+    mmq = run(MultipleModelQLearning, delay_estimates=[0])
     fixed = run(FixedDelayQLearning, delay_estimate=0)
     for other in (mmq, fixed):
         np.testing.assert_array_equal(q.q_table, other.q_table)
@@ -273,7 +277,7 @@ def test_fixed_delay_updates_nothing_before_k_steps():
 
 def test_acting_picks_best_model_then_best_action():
     env = GridWorldEnv(size=3)
-    agent = MMQ(
+    agent = MultipleModelQLearning(
         env, delay_estimates=[0, 4, 9], exploration_initial_eps=0.0, exploration_final_eps=0.0
     )
     agent._q[2, 1, 3] = 7.0  # model λ̂=4 holds the best value at state 2, on action 3
@@ -291,7 +295,7 @@ def test_tie_breaks_are_uniform_at_both_levels():
 
     12 cells, 6000 draws: each count ~ Binomial(6000, 1/12), sd ≈ 21.4; 5 sd bound.
     """
-    agent = MMQ(GridWorldEnv(size=3), delay_estimates=[0, 1, 2], seed=3)
+    agent = MultipleModelQLearning(GridWorldEnv(size=3), delay_estimates=[0, 1, 2], seed=3)
     counts = np.zeros((3, 4))
     for _ in range(6000):
         model, action = agent._choose(0, 0.0, agent._uniform)
@@ -306,7 +310,7 @@ def test_two_level_tie_break_is_over_models_first():
     Not 3:1, as a flat tie-break over cells would give. 4000 draws, sd of a count = 31.6; 5 sd
     bound.
     """
-    agent = MMQ(GridWorldEnv(size=3), delay_estimates=[0, 1], seed=5)
+    agent = MultipleModelQLearning(GridWorldEnv(size=3), delay_estimates=[0, 1], seed=5)
     agent._q[0] = 0.0
     agent._q[0, 0, :3] = 1.0
     agent._q[0, 1, 2] = 1.0
@@ -317,7 +321,7 @@ def test_two_level_tie_break_is_over_models_first():
 
 def test_exploration_rate_one_is_uniform_over_actions():
     """ε = 1: actions uniform regardless of the table. 4000 draws; sd of a count ≈ 27.4."""
-    agent = MMQ(GridWorldEnv(size=3), delay_estimates=[0, 1], seed=1)
+    agent = MultipleModelQLearning(GridWorldEnv(size=3), delay_estimates=[0, 1], seed=1)
     agent._q[0, 0, 2] = 100.0
     agent._rebuild_cache()
     actions = np.array([agent._choose(0, 1.0, agent._uniform)[1] for _ in range(4000)])
@@ -327,7 +331,9 @@ def test_exploration_rate_one_is_uniform_over_actions():
 
 def test_acting_share_and_record_during_learn():
     env = gym.make("delayed_rl/GridWorld-5x5-v0", reward_delay=2)
-    agent = MMQ(env, max_delay_estimate=4, q_init=10.0, seed=0).learn(3_000, record=True)
+    agent = MultipleModelQLearning(env, max_delay_estimate=4, q_init=10.0, seed=0).learn(
+        3_000, record=True
+    )
     share = agent.acting_delay_share
     assert share.shape == (5,) and share.sum() == pytest.approx(1.0)
     index = agent.training_log["acting_delay_index"]
@@ -338,24 +344,28 @@ def test_acting_share_and_record_during_learn():
 
 def test_delay_estimate_arguments():
     env = GridWorldEnv(size=3)
-    assert MMQ(env).delay_estimates == list(range(51))  # the thesis's λ̂max = 50
-    assert MMQ(env, max_delay_estimate=10, delay_step=5).delay_estimates == [0, 5, 10]
-    assert MMQ(env, delay_estimates=[7, 2, 0]).delay_estimates == [0, 2, 7]
-    assert MMQ(env, delay_estimates=range(3, 6)).q_table.shape == (9, 3, 4)
+    assert MultipleModelQLearning(env).delay_estimates == list(range(51))  # the thesis's λ̂max = 50
+    assert MultipleModelQLearning(env, max_delay_estimate=10, delay_step=5).delay_estimates == [
+        0,
+        5,
+        10,
+    ]
+    assert MultipleModelQLearning(env, delay_estimates=[7, 2, 0]).delay_estimates == [0, 2, 7]
+    assert MultipleModelQLearning(env, delay_estimates=range(3, 6)).q_table.shape == (9, 3, 4)
     with pytest.raises(ValueError, match="either delay_estimates or max_delay_estimate"):
-        MMQ(env, delay_estimates=[1], max_delay_estimate=3)
+        MultipleModelQLearning(env, delay_estimates=[1], max_delay_estimate=3)
     with pytest.raises(ValueError, match="distinct"):
-        MMQ(env, delay_estimates=[1, 1])
+        MultipleModelQLearning(env, delay_estimates=[1, 1])
     with pytest.raises(ValueError, match="delay_estimates"):
-        MMQ(env, delay_estimates=[])
+        MultipleModelQLearning(env, delay_estimates=[])
     with pytest.raises(ValueError, match="delay_estimates"):
-        MMQ(env, delay_estimates=[-1, 2])
+        MultipleModelQLearning(env, delay_estimates=[-1, 2])
     with pytest.raises(TypeError, match="delay_estimates"):
-        MMQ(env, delay_estimates="012")
+        MultipleModelQLearning(env, delay_estimates="012")
     with pytest.raises(ValueError, match="max_delay_estimate must be an integer >= 0, got -1"):
-        MMQ(env, max_delay_estimate=-1)
+        MultipleModelQLearning(env, max_delay_estimate=-1)
     with pytest.raises(ValueError, match="delay_step must be an integer >= 1, got 0"):
-        MMQ(env, delay_step=0)
+        MultipleModelQLearning(env, delay_step=0)
     with pytest.raises(TypeError, match="delay_estimate must be an integer >= 0, got 2.5"):
         FixedDelayQLearning(env, delay_estimate=2.5)
     with pytest.raises(ValueError, match="delay_estimate must be an integer >= 0, got -1"):

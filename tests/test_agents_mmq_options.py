@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 import delayed_rl  # noqa: F401  (registers the env ids)
-from delayed_rl.agents import MMQ, FixedDelayQLearning, QLearning, mmq
+from delayed_rl.agents import FixedDelayQLearning, MultipleModelQLearning, QLearning, mmq
 from delayed_rl.agents.mmq import greedy_actions
 from delayed_rl.compiled.kernel import replay
 from delayed_rl.compiled.state import credit_kernel
@@ -31,7 +31,7 @@ STATES = np.arange(25)
 
 def make(delay=3, lags=6, **options):
     env = gym.make(GRID5, reward_delay=delay)
-    return MMQ(env, max_delay_estimate=lags, q_init=10.0, seed=3, **options)
+    return MultipleModelQLearning(env, max_delay_estimate=lags, q_init=10.0, seed=3, **options)
 
 
 def recorded_run(agent, steps):
@@ -95,7 +95,7 @@ def test_scripted_transitions_give_identical_tables(options, lags):
     transitions = rng.integers(0, [6, 4, 6], size=(n, 3))
     rewards = rng.normal(scale=2.0, size=n)
     terminated = rng.random(n) < 0.02
-    agent = MMQ(GRID5, delay_estimates=lags, q_init=1.0, **options)
+    agent = MultipleModelQLearning(GRID5, delay_estimates=lags, q_init=1.0, **options)
     for (s, a, s2), reward, done in zip(transitions, rewards, terminated, strict=True):
         agent.update(int(s), int(a), float(reward), int(s2), bool(done))
     q = np.full(agent.q_table.shape, 1.0)
@@ -162,7 +162,7 @@ def test_kernel_credits_each_table_the_weighted_reward():
         return q
 
     # the Python path: update()'s acting model is the greedy one, model 0 (all rows tie)
-    agent = MMQ(GRID5, delay_estimates=lags, gamma=0.0, reward_kernel=sigma)
+    agent = MultipleModelQLearning(GRID5, delay_estimates=lags, gamma=0.0, reward_kernel=sigma)
     for (s, a, s2), reward in zip(transitions, rewards, strict=True):
         agent.update(int(s), int(a), float(reward), int(s2))
     np.testing.assert_allclose(agent.q_table, expected(0), rtol=1e-15, atol=0)
@@ -265,7 +265,7 @@ def test_trace_one_is_full_credit_once_every_model_has_acted():
 @pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "python"])
 def test_trace_carries_over_episode_ends(compiled):
     env = gym.make(GRID5, reward_delay=2, max_steps=7)  # an episode every 7 steps
-    agent = MMQ(env, max_delay_estimate=4, q_init=10.0, seed=1, delay_trace=0.5)
+    agent = MultipleModelQLearning(env, max_delay_estimate=4, q_init=10.0, seed=1, delay_trace=0.5)
     agent.learn(35, compiled=compiled, record=True, log_interval=None)
     drawn = agent.training_log["acting_delay_index"]
     assert agent.training_log["episode_end"].sum() == 5
@@ -321,10 +321,12 @@ def test_greedy_updates_fall_on_the_same_training_steps_in_one_run(compiled):
 
 
 def test_greedy_window_counts_update_steps_and_small_windows():
-    agent = MMQ(GRID5, delay_estimates=[0, 1], greedy_window=1)  # interval 1, weight 1: G = Q
+    agent = MultipleModelQLearning(
+        GRID5, delay_estimates=[0, 1], greedy_window=1
+    )  # interval 1, weight 1: G = Q
     agent.update(0, 1, 5.0, 1)
     np.testing.assert_array_equal(agent.greedy_table, agent.q_table)
-    agent = MMQ(GRID5, delay_estimates=[0, 1], greedy_window=300)  # interval 3
+    agent = MultipleModelQLearning(GRID5, delay_estimates=[0, 1], greedy_window=300)  # interval 3
     for step in range(5):
         agent.update(step, 1, 5.0, step + 1)
         if step == 2:
@@ -380,7 +382,7 @@ def test_save_load_keeps_the_options_and_training_continues_exactly(tmp_path, co
     with np.load(path) as data:
         saved = json.loads(str(data["metadata"]))["hyperparameters"]
     assert {name: saved[name] for name in ALL} == ALL
-    loaded = MMQ.load(path, env=gym.make(GRID5, reward_delay=3))
+    loaded = MultipleModelQLearning.load(path, env=gym.make(GRID5, reward_delay=3))
     assert_same_state(loaded, original)
     original.set_env(gym.make(GRID5, reward_delay=3))  # a fresh env, as the loaded agent's
     for agent in (original, loaded):
@@ -399,7 +401,7 @@ def test_files_written_before_the_options_load_with_the_defaults(tmp_path):
     arrays["metadata"] = np.array(json.dumps(metadata))
     with open(tmp_path / "old.npz", "wb") as file:
         np.savez(file, **arrays)
-    old = MMQ.load(tmp_path / "old.npz")
+    old = MultipleModelQLearning.load(tmp_path / "old.npz")
     assert (old.reward_kernel, old.delay_trace, old.greedy_window) == (None, None, None)
     np.testing.assert_array_equal(old.q_table, agent.q_table)
 
@@ -411,7 +413,7 @@ def test_a_file_missing_the_trace_is_refused(tmp_path):
     with open(tmp_path / "bad.npz", "wb") as file:
         np.savez(file, **arrays)
     with pytest.raises(ValueError, match="delay_trace must be a float64 array"):
-        MMQ.load(tmp_path / "bad.npz")
+        MultipleModelQLearning.load(tmp_path / "bad.npz")
 
 
 def test_single_model_agents_do_not_take_the_options(tmp_path):
@@ -447,4 +449,4 @@ def test_single_model_agents_do_not_take_the_options(tmp_path):
 )
 def test_bad_option_values_are_refused_with_the_argument_named(options, error, message):
     with pytest.raises(error, match=message):
-        MMQ(GRID5, **options)
+        MultipleModelQLearning(GRID5, **options)

@@ -17,7 +17,7 @@ import gymnasium as gym
 import numpy as np
 
 import delayed_rl  # noqa: F401  (registers the env ids)
-from delayed_rl.agents import MMQ, QLearning
+from delayed_rl.agents import MultipleModelQLearning, QLearning
 
 SEEDS = range(5)
 STEPS = 60_000
@@ -33,7 +33,11 @@ def test_mmq_beats_q_learning_on_9x9_with_poisson_13_delays():
     mmq, q = [], []
     for seed in SEEDS:
         env = gym.make("delayed_rl/GridWorld-9x9-v0", reward_delay=13)
-        mmq.append(average_undelayed_reward(MMQ(env, max_delay_estimate=50, seed=seed, **SETTINGS)))
+        mmq.append(
+            average_undelayed_reward(
+                MultipleModelQLearning(env, max_delay_estimate=50, seed=seed, **SETTINGS)
+            )
+        )
         env = gym.make("delayed_rl/GridWorld-9x9-v0", reward_delay=13)
         q.append(average_undelayed_reward(QLearning(env, seed=seed, **SETTINGS)))
     gaps = np.array(mmq) - np.array(q)

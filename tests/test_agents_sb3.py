@@ -8,7 +8,7 @@ import warnings
 import numpy as np
 import pytest
 
-from delayed_rl.agents import MMQ, QLearning
+from delayed_rl.agents import MultipleModelQLearning, QLearning
 from delayed_rl.envs.gridworld import GridWorldEnv
 
 # Every test imports stable-baselines3 (and so torch, over a second), each in its body: not at
@@ -63,13 +63,13 @@ def test_eval_callback(tmp_path):
 def test_checkpoint_callback(tmp_path):
     from stable_baselines3.common.callbacks import CheckpointCallback
 
-    agent = MMQ(grid(), max_delay_estimate=3, seed=0)
+    agent = MultipleModelQLearning(grid(), max_delay_estimate=3, seed=0)
     agent.learn(2_000, callback=CheckpointCallback(save_freq=500, save_path=str(tmp_path)))
     names = sorted(p.name for p in tmp_path.iterdir())
     assert names == [f"rl_model_{n}_steps.zip" for n in (1000, 1500, 2000, 500)]
-    assert MMQ.load(tmp_path / "rl_model_1500_steps.zip").num_timesteps == 1_500
+    assert MultipleModelQLearning.load(tmp_path / "rl_model_1500_steps.zip").num_timesteps == 1_500
     np.testing.assert_array_equal(
-        MMQ.load(tmp_path / "rl_model_2000_steps.zip").q_table, agent.q_table
+        MultipleModelQLearning.load(tmp_path / "rl_model_2000_steps.zip").q_table, agent.q_table
     )
 
 
@@ -93,7 +93,7 @@ def test_callback_list_and_progress_bar(tmp_path):
     progress = ProgressBarCallback()
     stop = StopTrainingOnMaxEpisodes(max_episodes=5)
     checkpoint = CheckpointCallback(save_freq=100, save_path=str(tmp_path))
-    agent = MMQ(grid(max_steps=40), max_delay_estimate=4, seed=0)
+    agent = MultipleModelQLearning(grid(max_steps=40), max_delay_estimate=4, seed=0)
     agent.learn(1_000, callback=CallbackList([progress, stop, checkpoint]))
     assert agent.num_timesteps == 200
     assert progress.pbar.n == 200 and progress.pbar.total == 1_000
@@ -108,7 +108,9 @@ def test_evaluate_policy_matches_a_hand_rollout():
     from stable_baselines3.common.evaluation import evaluate_policy
     from stable_baselines3.common.monitor import Monitor
 
-    agent = MMQ(grid(size=3, max_steps=500), max_delay_estimate=2, q_init=15.0, seed=1)
+    agent = MultipleModelQLearning(
+        grid(size=3, max_steps=500), max_delay_estimate=2, q_init=15.0, seed=1
+    )
     agent.learn(5_000)
     mean, std = evaluate_policy(agent, Monitor(grid(size=3, max_steps=60)), n_eval_episodes=3)
     assert std == 0.0  # deterministic policy, deterministic env
@@ -123,7 +125,7 @@ def test_evaluate_policy_matches_a_hand_rollout():
 def test_configure_logger_records_metrics(tmp_path):
     from stable_baselines3.common.logger import configure
 
-    agent = MMQ(grid(max_steps=100), max_delay_estimate=5, seed=0)
+    agent = MultipleModelQLearning(grid(max_steps=100), max_delay_estimate=5, seed=0)
     agent.set_logger(configure(str(tmp_path), ["csv"]))
     agent.learn(3_000, log_interval=1_000)
     with open(tmp_path / "progress.csv") as file:

@@ -11,9 +11,9 @@ import pytest
 
 import delayed_rl  # noqa: F401  (registers the env ids)
 from delayed_rl.agents import (
-    MMQ,
     FixedDelayQLearning,
     LinearSchedule,
+    MultipleModelQLearning,
     QLearning,
     TabularAgent,
     load_agent,
@@ -24,15 +24,19 @@ GRID5 = "delayed_rl/GridWorld-5x5-v0"
 
 def trained_mmq(seed=0, steps=2_000):
     env = gym.make(GRID5, reward_delay=2)
-    return MMQ(env, max_delay_estimate=5, q_init=10.0, seed=seed).learn(steps)
+    return MultipleModelQLearning(env, max_delay_estimate=5, q_init=10.0, seed=seed).learn(steps)
 
 
 def test_round_trip_predicts_identically(tmp_path):
     agent = trained_mmq()
     path = agent.save(tmp_path / "model")
     assert path == tmp_path / "model.npz" and path.exists()
-    for loaded in (MMQ.load(path), MMQ.load(tmp_path / "model"), load_agent(path)):
-        assert type(loaded) is MMQ and loaded.env is None
+    for loaded in (
+        MultipleModelQLearning.load(path),
+        MultipleModelQLearning.load(tmp_path / "model"),
+        load_agent(path),
+    ):
+        assert type(loaded) is MultipleModelQLearning and loaded.env is None
         np.testing.assert_array_equal(loaded.q_table, agent.q_table)
         assert loaded.delay_estimates == agent.delay_estimates
         assert loaded.num_timesteps == agent.num_timesteps == 2_000
@@ -44,7 +48,7 @@ def test_round_trip_predicts_identically(tmp_path):
         )
         np.testing.assert_array_equal(loaded.preferred_delay(states), agent.preferred_delay(states))
     # the exploring predict draws from a saved stream too
-    a, b = MMQ.load(path), MMQ.load(path)
+    a, b = MultipleModelQLearning.load(path), MultipleModelQLearning.load(path)
     np.testing.assert_array_equal(a.predict(states)[0], b.predict(states)[0])
 
 
@@ -80,7 +84,7 @@ def test_resumed_training_continues_where_it_stopped(tmp_path):
     """
     original = trained_mmq(seed=5)
     path = original.save(tmp_path / "checkpoint")
-    resumed = MMQ.load(path, env=gym.make(GRID5, reward_delay=2))
+    resumed = MultipleModelQLearning.load(path, env=gym.make(GRID5, reward_delay=2))
     original.set_env(gym.make(GRID5, reward_delay=2))
     for agent in (original, resumed):
         agent.learn(1_000, reset_num_timesteps=False)
@@ -115,10 +119,10 @@ def test_checkpoint_style_names_are_kept(tmp_path):
 def test_loading_into_env_with_other_spaces(tmp_path):
     path = trained_mmq(steps=10).save(tmp_path / "m")
     with pytest.raises(ValueError, match=r"m.npz into this env: the env's observation_space"):
-        MMQ.load(path, env=gym.make("delayed_rl/GridWorld-3x3-v0"))
+        MultipleModelQLearning.load(path, env=gym.make("delayed_rl/GridWorld-3x3-v0"))
     with pytest.raises(ValueError, match="observation_space is Discrete.1."):
-        MMQ.load(path, env="delayed_rl/Roulette-v0")
-    agent = MMQ.load(path)
+        MultipleModelQLearning.load(path, env="delayed_rl/Roulette-v0")
+    agent = MultipleModelQLearning.load(path)
     with pytest.raises(ValueError, match="no env to learn from"):
         agent.learn(10)
     agent.set_env(GRID5)
@@ -130,7 +134,7 @@ def test_wrong_class_and_missing_file(tmp_path):
     with pytest.raises(ValueError, match="holds a MultipleModelQLearning model, not a QLearning"):
         QLearning.load(path)
     with pytest.raises(FileNotFoundError, match="no model file"):
-        MMQ.load(tmp_path / "absent")
+        MultipleModelQLearning.load(tmp_path / "absent")
 
 
 def rewrite(path, target, **changes):
@@ -199,7 +203,7 @@ def test_corrupt_or_foreign_files_are_refused(tmp_path, make_file, message):
     good = trained_mmq(steps=10).save(tmp_path / "good")
     bad = make_file(good, tmp_path / "bad.npz")
     with pytest.raises(ValueError, match=message):
-        MMQ.load(bad)
+        MultipleModelQLearning.load(bad)
 
 
 def test_bad_hyperparameters_in_file(tmp_path):
@@ -209,7 +213,7 @@ def test_bad_hyperparameters_in_file(tmp_path):
     metadata["hyperparameters"]["gamma"] = 5.0
     bad = rewrite(good, tmp_path / "bad.npz", metadata=np.array(json.dumps(metadata)))
     with pytest.raises(ValueError, match=r"bad.npz: invalid hyper-parameters: gamma must be"):
-        MMQ.load(bad)
+        MultipleModelQLearning.load(bad)
 
 
 def test_pickled_arrays_are_never_loaded(tmp_path):
@@ -222,7 +226,7 @@ def test_pickled_arrays_are_never_loaded(tmp_path):
     with open(target, "wb") as file:
         np.savez(file, **arrays)
     with pytest.raises(ValueError, match="allow_pickle=False"):
-        MMQ.load(target)
+        MultipleModelQLearning.load(target)
 
 
 @pytest.mark.sb3

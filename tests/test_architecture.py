@@ -26,13 +26,13 @@ import pytest
 import delayed_rl
 from delayed_rl.agents import (
     DEFAULTS,
-    MMQ,
     FixedDelayQLearning,
+    MultipleModelQLearning,
     QLearning,
     TabularAgent,
     load_agent,
 )
-from delayed_rl.agents.hyperparameters import HYPERPARAMETER_NAMES
+from delayed_rl.agents.common.hyperparameters import HYPERPARAMETER_NAMES
 
 PACKAGE = Path(delayed_rl.__file__).parent
 
@@ -254,8 +254,8 @@ def test_the_cycle_finder_finds_a_cycle():
 
 def test_the_import_graph_sees_the_package():
     graph = import_graph()
-    assert "delayed_rl._validation" in graph["delayed_rl.agents.base"]
-    assert "delayed_rl.agents.save_util" in graph["delayed_rl.agents._persistence"]
+    assert "delayed_rl._validation" in graph["delayed_rl.agents.common.base"]
+    assert "delayed_rl.agents.common.save_util" in graph["delayed_rl.agents.common.persistence"]
     assert len(graph) > 30
 
 
@@ -264,11 +264,11 @@ def test_no_import_cycles_in_the_package():
 
 
 def test_save_util_imports_no_agent():
-    imported = import_graph()["delayed_rl.agents.save_util"]
+    imported = import_graph()["delayed_rl.agents.common.save_util"]
     assert not {name for name in imported if name.startswith("delayed_rl.agents")}
 
 
-class MyMMQ(MMQ):
+class MyMMQ(MultipleModelQLearning):
     """A user's subclass, defined at module level."""
 
 
@@ -276,7 +276,12 @@ def test_a_user_subclass_saves_and_loads_as_itself(tmp_path):
     env = gym.make("delayed_rl/GridWorld-3x3-v0", reward_delay=1)
     agent = MyMMQ(env, max_delay_estimate=3, q_init=5.0, seed=1).learn(2_000)
     path = agent.save(tmp_path / "mine")
-    for loaded in (MyMMQ.load(path), MMQ.load(path), load_agent(path), TabularAgent.load(path)):
+    for loaded in (
+        MyMMQ.load(path),
+        MultipleModelQLearning.load(path),
+        load_agent(path),
+        TabularAgent.load(path),
+    ):
         assert type(loaded) is MyMMQ
         np.testing.assert_array_equal(loaded.q_table, agent.q_table)
     with pytest.raises(ValueError, match="holds a MyMMQ model, not a QLearning"):
@@ -292,13 +297,14 @@ def test_a_subclass_defined_in_a_function_saves_and_loads(tmp_path):
 
 
 def test_a_file_of_an_undefined_class_names_it(tmp_path):
+    from delayed_rl.agents.common import persistence
+
     class Gone(QLearning):
         pass
 
     path = Gone("delayed_rl/Roulette-v0", seed=0).save(tmp_path / "gone")
-    from delayed_rl.agents import _persistence
 
-    del _persistence.AGENT_CLASSES[_persistence.class_key(Gone)]
+    del persistence.AGENT_CLASSES[persistence.class_key(Gone)]
     with pytest.raises(ValueError, match="unknown agent class .*Gone.*import the module"):
         load_agent(path)
 
@@ -316,7 +322,7 @@ def test_the_removed_names_are_gone():
     assert not hasattr(FixedDelayQLearning("delayed_rl/GridWorld-3x3-v0", 3), "delay")
 
 
-@pytest.mark.parametrize("cls", [MMQ, QLearning, FixedDelayQLearning])
+@pytest.mark.parametrize("cls", [MultipleModelQLearning, QLearning, FixedDelayQLearning])
 def test_every_agent_shows_the_shared_hyperparameters_with_the_one_set_of_defaults(cls):
     shown = inspect.signature(cls).parameters
     for name, default in {**asdict(DEFAULTS), "seed": None, "verbose": 0}.items():

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from delayed_rl.agents import (
-    DeconvQ,
+    DeconvolutionQLearning,
     ExpectedCreditQLearning,
     MultipleModelQLearning,
     QLearning,
@@ -523,12 +523,12 @@ def test_evaluate_of_a_path_without_a_file_name_exits_1_naming_it(path, capsys):
             "delay must be",
         ),
         (
-            lambda env: DeconvQ(env, max_delay=4),
+            lambda env: DeconvolutionQLearning(env, max_delay=4),
             {"max_delay": 10**9},
             "max_delay must be at most MAX_MODELLED_DELAY",
         ),
         (
-            lambda env: DeconvQ(env, max_delay=4),
+            lambda env: DeconvolutionQLearning(env, max_delay=4),
             {"arrays": {"delay_pmf": np.array([2.0, -1.0, 0.0, 0.0, 0.0])}},
             "delay_pmf must hold numbers in [0, 1]",
         ),

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 import delayed_rl  # noqa: F401
-from delayed_rl.agents import MMQ, FixedDelayQLearning, QLearning
-from delayed_rl.agents.callbacks import BaseCallback
-from delayed_rl.agents.schedules import LinearSchedule
+from delayed_rl.agents import FixedDelayQLearning, MultipleModelQLearning, QLearning
+from delayed_rl.agents.common.callbacks import BaseCallback
+from delayed_rl.agents.common.schedules import LinearSchedule
 from delayed_rl.compiled import NotCompilable
 from delayed_rl.compiled.kernel import replay
 from delayed_rl.delays import Geometric
@@ -24,7 +24,9 @@ def test_scripted_transitions_give_identical_tables(lags):
     transitions = rng.integers(0, [6, 4, 6], size=(n, 3))  # (s, a, s') on 6 of the 81 cells
     rewards = rng.normal(scale=2.0, size=n)
     terminated = rng.random(n) < 0.02
-    agent = MMQ("delayed_rl/GridWorld-v0", delay_estimates=lags, q_init=1.0, gamma=0.9)
+    agent = MultipleModelQLearning(
+        "delayed_rl/GridWorld-v0", delay_estimates=lags, q_init=1.0, gamma=0.9
+    )
     for (s, a, s2), reward, done in zip(transitions, rewards, terminated, strict=True):
         agent.update(int(s), int(a), float(reward), int(s2), bool(done))
     q = np.full(agent.q_table.shape, 1.0)
@@ -61,7 +63,7 @@ def test_seeded_runs_agree_in_distribution():
 
     def make_agent(seed):
         env = gym.make("delayed_rl/GridWorld-5x5-v0", reward_delay=5)
-        return MMQ(env, delay_estimates=list(range(9)), q_init=10.0, seed=seed)
+        return MultipleModelQLearning(env, delay_estimates=list(range(9)), q_init=10.0, seed=seed)
 
     compiled, _ = _assert_paths_agree(make_agent, 6)
     assert compiled.mean() > 0.3  # both learn the 9-step route (optimum 10/9 ≈ 1.11)
@@ -101,7 +103,7 @@ def test_auto_falls_back_and_can_be_switched_off_or_forced():
 
 
 def test_compiled_fills_the_diagnostics_and_the_record():
-    agent = MMQ(
+    agent = MultipleModelQLearning(
         gym.make("delayed_rl/GridWorld-5x5-v0", reward_delay=3), max_delay_estimate=6, seed=1
     )
     agent.learn(5000, record=True, log_interval=1000)

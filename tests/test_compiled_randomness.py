@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import delayed_rl  # noqa: F401  (registers the ids)
-from delayed_rl.agents import MMQ, QLearning
+from delayed_rl.agents import MultipleModelQLearning, QLearning
 from delayed_rl.compiled import CompiledRun
 from delayed_rl.compiled.kernel import generator_state, next_uniform
 
@@ -70,7 +70,7 @@ def _grid():
 
 def _two_part_run(seed: int, between=None) -> np.ndarray:
     """An MMQ agent trained 20k steps, then 20k more; ``between`` runs in between."""
-    agent = MMQ(_grid(), max_delay_estimate=6, q_init=20.0, seed=seed)
+    agent = MultipleModelQLearning(_grid(), max_delay_estimate=6, q_init=20.0, seed=seed)
     agent.learn(20_000)
     if between is not None:
         between()
@@ -132,7 +132,7 @@ def test_how_learn_splits_a_run_changes_nothing():
     """Chunks (log_interval, the chunk cap) do not change a seeded compiled run."""
     tables = []
     for log_interval in (None, 777, 10_000):
-        agent = MMQ(_grid(), max_delay_estimate=6, q_init=20.0, seed=8)
+        agent = MultipleModelQLearning(_grid(), max_delay_estimate=6, q_init=20.0, seed=8)
         agent.learn(150_000, log_interval=log_interval)
         assert agent.last_learn_path == "compiled"
         tables.append(agent.q_table.copy())

@@ -147,8 +147,8 @@ def test_copies_continue_alike_and_apart():
     "make",
     [
         lambda env: agents.QLearning(env, seed=0),
-        lambda env: agents.MMQ(env, max_delay_estimate=12, seed=0),
-        lambda env: agents.DeconvQ(env, max_delay=12, seed=0),
+        lambda env: agents.MultipleModelQLearning(env, max_delay_estimate=12, seed=0),
+        lambda env: agents.DeconvolutionQLearning(env, max_delay=12, seed=0),
         lambda env: agents.ExpectedCreditQLearning(env, delay=Poisson(5.0), max_delay=12, seed=0),
     ],
     ids=["Q", "MMQ", "DeconvQ", "expected credit"],
@@ -186,7 +186,7 @@ def test_learned_policy_is_the_python_paths_kind():
     rewards = {}
     for compiled in (True, False):
         env = RewardDelay(EPuckLineFollowEnv(lost_line="recover", max_steps=None), Poisson(3.0))
-        agent = agents.MMQ(env, max_delay_estimate=10, seed=1, q_init=10.0)
+        agent = agents.MultipleModelQLearning(env, max_delay_estimate=10, seed=1, q_init=10.0)
         agent.learn(30_000, log_interval=None, record=True, compiled=compiled)
         rewards[compiled] = agent.training_log["undelayed_reward"][-10_000:].mean()
     random_walk = CONFIGS["clean, recover"] | {"lost_line_steps": 50}
@@ -266,7 +266,7 @@ def test_a_new_env_or_a_reset_starts_a_new_compiled_run():
 
 
 def test_an_interrupted_compiled_run_is_dropped_and_the_env_reset():
-    from delayed_rl.agents.callbacks import BaseCallback
+    from delayed_rl.agents.common.callbacks import BaseCallback
 
     class Interrupt(BaseCallback):
         def _on_step(self) -> bool:

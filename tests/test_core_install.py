@@ -38,16 +38,16 @@ _TRAIN = textwrap.dedent(
     import json, sys
     import gymnasium as gym
     import numpy as np
-    from delayed_rl.agents import DeconvQ
-    from delayed_rl.agents._regression import DENSE_SOLVE_PAIRS
+    from delayed_rl.agents import DeconvolutionQLearning
+    from delayed_rl.agents.deconvolution.regression import DENSE_SOLVE_PAIRS
     from delayed_rl.delays import Poisson
 
-    learned = DeconvQ(
+    learned = DeconvolutionQLearning(
         gym.make("delayed_rl/GridWorld-v0", size=5, reward_delay=3), max_delay=10, seed=0
     )
     learned.learn(3000)
     big = gym.make("delayed_rl/GridWorld-v0", size=12, reward_delay=3)
-    known = DeconvQ(big, delay=Poisson(3), max_delay=10, seed=0)
+    known = DeconvolutionQLearning(big, delay=Poisson(3), max_delay=10, seed=0)
     assert known.n_states * known.n_actions > DENSE_SOLVE_PAIRS
     known.learn(3000)
     print(json.dumps({

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from gymnasium import spaces
 
-from delayed_rl.agents import MMQ, QLearning
+from delayed_rl.agents import MultipleModelQLearning, QLearning
 from delayed_rl.compiled import NotCompilable
 from delayed_rl.wrappers import DiscreteObservation, wrap_delays
 
@@ -115,4 +115,4 @@ def test_blackjack_learns_under_delayed_rewards_on_the_python_path():
     assert np.abs(log["undelayed_reward"]).sum() > 1_000  # hands were won and lost
     assert len(np.unique(log["obs"])) > 100  # many (sum, dealer card, ace) states were seen
     with pytest.raises(NotCompilable, match="DiscreteObservation"):
-        MMQ(env, max_delay_estimate=4, seed=0).learn(10, compiled=True)
+        MultipleModelQLearning(env, max_delay_estimate=4, seed=0).learn(10, compiled=True)

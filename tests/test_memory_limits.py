@@ -222,18 +222,18 @@ def test_the_longest_tracks_allowed_build_in_seconds() -> None:
 
 
 def test_deconvq_tables_too_large_fail_before_allocating() -> None:
-    from delayed_rl.agents import DeconvQ
+    from delayed_rl.agents import DeconvolutionQLearning
 
     env = GridWorldEnv(size=200)  # 160,000 pairs: 1025 reward sums each would take 1.2 GiB
     peak = peak_of_error(
-        lambda: DeconvQ(env, max_delay=1024),
+        lambda: DeconvolutionQLearning(env, max_delay=1024),
         ValueError,
         r"DeconvolutionQLearning\(max_delay=1024\) on an env of 40000 states and 4 actions needs "
         r"1.\d+ GiB of tables .*over MAX_TABLE_BYTES = 1 GiB",
     )
     assert peak < MB
     peak = peak_of_error(
-        lambda: DeconvQ(env, max_delay=10**9),
+        lambda: DeconvolutionQLearning(env, max_delay=10**9),
         ValueError,
         "max_delay must be at most MAX_MODELLED_DELAY = 1024",
     )
@@ -243,9 +243,15 @@ def test_deconvq_tables_too_large_fail_before_allocating() -> None:
 def test_deconvq_statistics_a_file_declares_are_checked_before_they_are_read(
     tmp_path, monkeypatch
 ) -> None:
-    from delayed_rl.agents import DeconvQ, deconvolution, save_util
+    from delayed_rl.agents import DeconvolutionQLearning
+    from delayed_rl.agents.deconvolution import agent as deconvolution
+    from delayed_rl.agents.common import save_util
 
-    path = DeconvQ(GridWorldEnv(size=3), max_delay=5, seed=0).learn(50).save(tmp_path / "d")
+    path = (
+        DeconvolutionQLearning(GridWorldEnv(size=3), max_delay=5, seed=0)
+        .learn(50)
+        .save(tmp_path / "d")
+    )
     monkeypatch.setattr(deconvolution, "STATISTICS_LIMIT", 2**10)  # its counts take 7.8 KiB
 
     def never(*args, **kwargs):
@@ -255,4 +261,4 @@ def test_deconvq_statistics_a_file_declares_are_checked_before_they_are_read(
     with pytest.raises(
         ValueError, match=r"regression_cooc and regression_keys declare 0 MiB, more"
     ):
-        DeconvQ.load(path)
+        DeconvolutionQLearning.load(path)

@@ -29,16 +29,16 @@ from support import examples
 
 import delayed_rl  # noqa: F401  (registers the env ids)
 from delayed_rl.agents import (
-    MMQ,
-    DeconvQ,
+    DeconvolutionQLearning,
     ExpectedCreditQLearning,
     FixedDelayQLearning,
+    MultipleModelQLearning,
     OracleQLearning,
     QLearning,
     load_agent,
-    save_util,
 )
-from delayed_rl.agents import _regression as regression_module
+from delayed_rl.agents.common import save_util
+from delayed_rl.agents.deconvolution import regression as regression_module
 from delayed_rl.agents.mmq import MAX_TABLE_BYTES
 from delayed_rl.delays import Poisson
 from delayed_rl.envs.gridworld import GridWorldEnv
@@ -572,14 +572,14 @@ def test_bit_flips_are_refused_or_harmless(base, tmp_path, compress):
 )
 def test_a_refused_table_names_its_size_before_allocating(tmp_path, delays):
     """The tables a file declares are checked against MAX_TABLE_BYTES before allocation."""
-    good = MMQ(GRID3, max_delay_estimate=2, seed=0).save(tmp_path / "mmq")
+    good = MultipleModelQLearning(GRID3, max_delay_estimate=2, seed=0).save(tmp_path / "mmq")
     with np.load(good) as data:
         arrays = {key: data[key] for key in data.files}
     metadata = json.loads(str(arrays.pop("metadata")))
     metadata["hyperparameters"]["delay_estimates"] = delays
     path = tmp_path / "big.npz"
     path.write_bytes(npz(arrays, metadata))
-    message = str(refused(path, MMQ))
+    message = str(refused(path, MultipleModelQLearning))
     assert "delay_estimates must keep the tables within MAX_TABLE_BYTES = 1 GiB" in message
     assert "GiB" in message and MAX_TABLE_BYTES == 2**30
 
@@ -587,7 +587,7 @@ def test_a_refused_table_names_its_size_before_allocating(tmp_path, delays):
 def test_every_library_agent_round_trips_through_the_checks(tmp_path):
     """The checks accept what ``save`` writes, whatever the class and its state."""
     env = gym.make("delayed_rl/GridWorld-5x5-v0", reward_delay=2)
-    agent = MMQ(env, max_delay_estimate=6, q_init=5.0, seed=3).learn(2_000)
+    agent = MultipleModelQLearning(env, max_delay_estimate=6, q_init=5.0, seed=3).learn(2_000)
     agent.predict(np.arange(25))  # the predict stream has a partial block
     loaded = load_agent(agent.save(tmp_path / "m"))
     np.testing.assert_array_equal(loaded.q_table, agent.q_table)
@@ -652,7 +652,7 @@ KINDS = {
         lambda e: FixedDelayQLearning(e, delay_estimate=2, q_init=5.0, seed=0), _grid_env
     ),
     "MMQ with options": Kind(
-        lambda e: MMQ(
+        lambda e: MultipleModelQLearning(
             e,
             max_delay_estimate=3,
             reward_kernel=1.0,
@@ -668,13 +668,17 @@ KINDS = {
     ),
     "OracleQLearning": Kind(lambda e: OracleQLearning(e, q_init=5.0, seed=0), _oracle_env),
     "DeconvQ known delay": Kind(
-        lambda e: DeconvQ(e, delay=Poisson(2.0), max_delay=6, q_init=5.0, seed=0), _episodic_env
+        lambda e: DeconvolutionQLearning(e, delay=Poisson(2.0), max_delay=6, q_init=5.0, seed=0),
+        _episodic_env,
     ),
     "DeconvQ learned delay": Kind(
-        lambda e: DeconvQ(e, max_delay=5, q_init=5.0, seed=0), lambda: _episodic_env("drop")
+        lambda e: DeconvolutionQLearning(e, max_delay=5, q_init=5.0, seed=0),
+        lambda: _episodic_env("drop"),
     ),
     "DeconvQ hashed statistics": Kind(
-        lambda e: DeconvQ(e, max_delay=5, q_init=5.0, seed=0), _episodic_env, hashed=True
+        lambda e: DeconvolutionQLearning(e, max_delay=5, q_init=5.0, seed=0),
+        _episodic_env,
+        hashed=True,
     ),
 }
 TRAINED = 900
@@ -778,9 +782,9 @@ def agent_corpus(base: Base) -> list[AgentCase]:
 
 def _sound_tables(agent: Any) -> list[np.ndarray]:
     tables = [agent.q_table]
-    if isinstance(agent, MMQ):
+    if isinstance(agent, MultipleModelQLearning):
         tables.append(agent.greedy_table)
-    if isinstance(agent, DeconvQ):
+    if isinstance(agent, DeconvolutionQLearning):
         tables += [agent.reward_model, agent.delay_pmf]
         pmf = agent.delay_pmf
         assert pmf.min() >= 0.0 and abs(pmf.sum() - 1.0) < 1e-6, pmf

@@ -15,12 +15,11 @@ import numpy as np
 import pytest
 from gymnasium import spaces
 
-from delayed_rl.agents import MMQ, FixedDelayQLearning, QLearning
-from delayed_rl.agents._streams import UniformStream
+from delayed_rl.agents import FixedDelayQLearning, MultipleModelQLearning, QLearning
+from delayed_rl.agents.common.streams import UniformStream
 from delayed_rl.agents.mmq import (
     _FULL_CREDIT,
     _NO_OPTION,
-    MultipleModelQLearning,
     _credit_weights,
     _update_batch,
 )
@@ -131,7 +130,7 @@ def _trained(agent_class, **kwargs):
     [
         (QLearning, {}),
         (FixedDelayQLearning, {"delay_estimate": 2}),
-        (MMQ, {"max_delay_estimate": 4}),
+        (MultipleModelQLearning, {"max_delay_estimate": 4}),
     ],
 )
 @pytest.mark.parametrize("duplicate", [copy.deepcopy, lambda a: pickle.loads(pickle.dumps(a))])
@@ -157,7 +156,7 @@ def test_single_model_agents_choose_with_the_action_choice() -> None:
     """One model: the behaviour policy is the action choice, the same draws as MMQ's."""
     assert QLearning._choose is MultipleModelQLearning._choose_action
     assert FixedDelayQLearning._choose is MultipleModelQLearning._choose_action
-    q, mmq = _trained(QLearning), _trained(MMQ, delay_estimates=[0])
+    q, mmq = _trained(QLearning), _trained(MultipleModelQLearning, delay_estimates=[0])
     np.testing.assert_array_equal(q.q_table, mmq.q_table)
     for agent in (q, mmq):
         agent._q[...] = 1.0  # every action tied: a random tie-break at every greedy step

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from delayed_rl.agents._regression import (
+from delayed_rl.agents.deconvolution.regression import (
     _cholesky_factor,
     _cholesky_solve,
     _dot,

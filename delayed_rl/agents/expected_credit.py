@@ -41,8 +41,8 @@ import numpy as np
 from delayed_rl._delay_line import ring_size
 from delayed_rl._numba import jit as _jit
 from delayed_rl._validation import check_int
-from delayed_rl.agents._compiled import CompiledTables
-from delayed_rl.agents.hyperparameters import shares_hyperparameters
+from delayed_rl.agents.common.compiled_loop import CompiledTables
+from delayed_rl.agents.common.hyperparameters import shares_hyperparameters
 from delayed_rl.agents.qlearning import QLearning
 from delayed_rl.delays import Delay, Empirical, as_delay
 
@@ -143,7 +143,7 @@ class ExpectedCreditQLearning(QLearning):
         max_delay: the wrapper's ``max_delay`` when delays are clipped (the weight of the last
             lag is then the clipped mass); also a cap on the lags credited. ``None``: no clip.
         **hyperparameters: the hyper-parameters every agent shares, by keyword: see
-            :class:`~delayed_rl.agents.base.TabularAgent`.
+            :class:`~delayed_rl.agents.common.base.TabularAgent`.
 
     Raises:
         TypeError: ``delay`` is neither a ``Delay``, a number nor a description, or

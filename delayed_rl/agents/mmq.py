@@ -36,14 +36,18 @@ import numpy as np
 from delayed_rl._delay_line import ring_size
 from delayed_rl._numba import jit as _jit
 from delayed_rl._validation import check_int, check_real
-from delayed_rl.agents._compiled import CompiledTables
-from delayed_rl.agents._loop import MAX_TIMESTEPS, MAX_TIMESTEPS_TEXT
-from delayed_rl.agents._persistence import check_state_array
-from delayed_rl.agents.base import TabularAgent
-from delayed_rl.agents.hyperparameters import MAX_ABS_VALUE, check_limit, shares_hyperparameters
+from delayed_rl.agents.common.base import TabularAgent
+from delayed_rl.agents.common.compiled_loop import CompiledTables
+from delayed_rl.agents.common.hyperparameters import (
+    MAX_ABS_VALUE,
+    check_limit,
+    shares_hyperparameters,
+)
+from delayed_rl.agents.common.persistence import check_state_array
+from delayed_rl.agents.common.python_loop import MAX_TIMESTEPS, MAX_TIMESTEPS_TEXT
 from delayed_rl.compiled.state import TableAverage, credit_kernel
 
-__all__ = ["MAX_TABLE_BYTES", "MMQ", "MultipleModelQLearning", "greedy_actions", "table_bytes"]
+__all__ = ["MAX_TABLE_BYTES", "MultipleModelQLearning", "greedy_actions", "table_bytes"]
 
 DEFAULT_MAX_DELAY_ESTIMATE = 50  # the thesis's λ̂max in the 9×9 grid world (section 5.1.1)
 MAX_TABLE_BYTES = 2**30
@@ -53,7 +57,7 @@ The tables: the Q-table (|S|·|Λ|·|A| float64), its cache, the episode histori
 paths (rings of the next power of two above max Λ) and the per-model arrays (see
 :func:`table_bytes`). The thesis's 9×9 grid world with |Λ| = 51 takes 0.2 MiB; 10⁵ states × 101
 delay models × 10 actions, 0.8 GiB. A request above (``FixedDelayQLearning(delay_estimate=10**9)``,
-``MMQ(max_delay_estimate=10**7)``) is refused with the size it would take, before anything is
+``MultipleModelQLearning(max_delay_estimate=10**7)``) is refused with the size it would take, before anything is
 allocated; a model file declaring such tables is refused the same way. Raise it (with
 ``save_util.MAX_MODEL_BYTES``, so files load back) for larger tables.
 """
@@ -75,7 +79,7 @@ OPTION_NAMES = ("reward_kernel", "delay_trace", "greedy_window")
 """MMQ's own options beyond the thesis's rule (constructor arguments, saved with the agent)."""
 _GREEDY_UPDATES = 100  # the averaged table is updated about this many times per window
 _VALUE_RANGE = (-MAX_ABS_VALUE, MAX_ABS_VALUE)  # a model file's tables (see MAX_ABS_VALUE)
-_VALUE_NOTE = " (|value| <= MAX_ABS_VALUE = 2**200, delayed_rl.agents.hyperparameters)"
+_VALUE_NOTE = " (|value| <= MAX_ABS_VALUE = 2**200, delayed_rl.agents.common.hyperparameters)"
 
 
 def table_bytes(
@@ -440,7 +444,7 @@ class MultipleModelQLearning(TabularAgent):
         **hyperparameters: the hyper-parameters every agent shares, by keyword
             (``learning_rate``, ``gamma``, ``exploration_initial_eps``,
             ``exploration_final_eps``, ``exploration_fraction``, ``q_init``, ``seed``,
-            ``verbose``): see :class:`~delayed_rl.agents.base.TabularAgent`. ε applies at both
+            ``verbose``): see :class:`~delayed_rl.agents.common.base.TabularAgent`. ε applies at both
             levels; set ``q_init`` above the achievable values for optimistic exploration (the
             thesis does; e.g. 50 in the Roulette example).
 
@@ -451,9 +455,9 @@ class MultipleModelQLearning(TabularAgent):
     Example:
         >>> import gymnasium as gym
         >>> import delayed_rl
-        >>> from delayed_rl.agents import MMQ
+        >>> from delayed_rl.agents import MultipleModelQLearning
         >>> env = gym.make("delayed_rl/GridWorld-5x5-v0", reward_delay=3)
-        >>> agent = MMQ(env, max_delay_estimate=10, q_init=20.0, seed=0).learn(2_000)
+        >>> agent = MultipleModelQLearning(env, max_delay_estimate=10, q_init=20.0, seed=0).learn(2_000)
         >>> agent.q_table.shape
         (25, 11, 4)
     """
@@ -936,7 +940,7 @@ class MultipleModelQLearning(TabularAgent):
         """Check every state array against this agent's tables, then set them.
 
         ``q_table`` (and ``greedy_table``) must be float64 of the agent's shape with every entry
-        within ±:data:`~delayed_rl.agents.hyperparameters.MAX_ABS_VALUE`; ``delay_estimates``
+        within ±:data:`~delayed_rl.agents.common.hyperparameters.MAX_ABS_VALUE`; ``delay_estimates``
         must be Λ as the metadata gives it; ``delay_trace`` in [0, 1]; ``greedy_clock`` the
         steps since the average's last update (below its interval) and the updates made (at
         most ``MAX_TIMESTEPS``). Nothing is set unless every array passes.
@@ -1018,7 +1022,3 @@ class MultipleModelQLearning(TabularAgent):
         if options or "greedy_window" not in vars(self):  # loading (a file may lack them)
             self._set_options(**options)
         super()._set_hyperparameters(**kwargs)
-
-
-MMQ = MultipleModelQLearning
-"""Short alias of :class:`MultipleModelQLearning`."""

@@ -40,9 +40,9 @@ import gymnasium as gym
 import numpy as np
 
 from delayed_rl._delay_line import delay_bound, ring_size
-from delayed_rl.agents._compiled import CompiledTables
-from delayed_rl.agents.env_util import make_env
-from delayed_rl.agents.hyperparameters import check_value, shares_hyperparameters
+from delayed_rl.agents.common.compiled_loop import CompiledTables
+from delayed_rl.agents.common.env_util import make_env
+from delayed_rl.agents.common.hyperparameters import check_value, shares_hyperparameters
 from delayed_rl.agents.qlearning import QLearning
 from delayed_rl.wrappers.reward_delay import find_reward_delay
 
@@ -69,7 +69,7 @@ class OracleQLearning(QLearning):
             (anywhere in its wrapper stack). ``gym.make(id, reward_delay=...)`` does not record
             arrivals: wrap ``gym.make(id)`` yourself.
         **hyperparameters: the hyper-parameters every agent shares, by keyword: see
-            :class:`~delayed_rl.agents.base.TabularAgent`.
+            :class:`~delayed_rl.agents.common.base.TabularAgent`.
 
     Raises:
         ValueError: the env has no ``RewardDelay`` with ``record_arrivals=True`` (also from
@@ -195,7 +195,7 @@ class OracleQLearning(QLearning):
             TypeError: an argument has the wrong type, or ``arrivals`` is missing.
             ValueError: an argument is outside its space, an arrival comes from a later step or
                 has a non-finite value (or one above
-                :data:`~delayed_rl.agents.hyperparameters.MAX_ABS_VALUE` in magnitude), or the
+                :data:`~delayed_rl.agents.common.hyperparameters.MAX_ABS_VALUE` in magnitude), or the
                 agent has no env.
         """
         if self.env is None:

@@ -14,7 +14,7 @@ from typing import Any
 import gymnasium as gym
 
 from delayed_rl._validation import check_int
-from delayed_rl.agents.hyperparameters import shares_hyperparameters
+from delayed_rl.agents.common.hyperparameters import shares_hyperparameters
 from delayed_rl.agents.mmq import OPTION_NAMES, MultipleModelQLearning, check_delay_estimates
 
 __all__ = ["FixedDelayQLearning", "QLearning"]
@@ -39,7 +39,7 @@ class QLearning(MultipleModelQLearning):
     Args:
         env: the training env (``Discrete`` observation and action spaces) or an env id.
         **hyperparameters: the hyper-parameters every agent shares, by keyword: see
-            :class:`~delayed_rl.agents.base.TabularAgent`.
+            :class:`~delayed_rl.agents.common.base.TabularAgent`.
 
     Example:
         >>> import delayed_rl
@@ -77,7 +77,7 @@ class FixedDelayQLearning(MultipleModelQLearning):
             Q-learning). (``delay`` names delay *distributions* in this library:
             :mod:`delayed_rl.delays`.)
         **hyperparameters: the hyper-parameters every agent shares, by keyword: see
-            :class:`~delayed_rl.agents.base.TabularAgent`.
+            :class:`~delayed_rl.agents.common.base.TabularAgent`.
     """
 
     _hyperparameter_names = _SINGLE_MODEL_NAMES

@@ -1,7 +1,7 @@
 """The sufficient statistics of deconvolution Q-learning's regression, and their compiled step.
 
 :class:`~delayed_rl.agents.deconvolution.DeconvolutionQLearning` regresses each received reward
-on the (state, action) pairs of the steps before it (see :mod:`delayed_rl.agents._regression`
+on the (state, action) pairs of the steps before it (see :mod:`delayed_rl.agents.deconvolution.regression`
 for the model and the solves). :func:`observe` adds one step to the statistics; the Python path
 calls it once a step, and the compiled loop (:func:`delayed_rl.compiled.kernel.run_chunk`) inlines the
 same function, so both paths keep identical statistics.
@@ -15,7 +15,7 @@ share one type:
 - *hashed* (``keys`` of a power-of-two length): a row only for each couple that occurred, found
   by open addressing (linear probing from the upper bits of a multiplicative hash of ``j·P + i``;
   ``-1`` marks a free slot). Memory follows the couples seen, not ``P²``: the layout for envs with many pairs. The
-  caller keeps the table at most half full (:meth:`~delayed_rl.agents._regression.RewardRegression.reserve`).
+  caller keeps the table at most half full (:meth:`~delayed_rl.agents.deconvolution.regression.RewardRegression.reserve`).
 """
 
 from __future__ import annotations

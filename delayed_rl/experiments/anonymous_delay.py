@@ -9,8 +9,8 @@ learners on the grid world, each with the thesis's hyper-parameters (α = 0.1, �
 - ``MMQ``: Multiple Model Q-learning, Λ = {0, ..., 50} (the thesis's rule);
 - ``expected credit``: :class:`~delayed_rl.agents.ExpectedCreditQLearning` given the true delay
   (its pmf clipped to 50 lags, the horizon every learner here has);
-- ``DeconvQ known``: :class:`~delayed_rl.agents.DeconvQ` given the true delay (``max_delay`` 50);
-- ``DeconvQ learned``: :class:`~delayed_rl.agents.DeconvQ` learning the delay on 0..50;
+- ``DeconvQ known``: :class:`~DeconvolutionQLearning` given the true delay (``max_delay`` 50);
+- ``DeconvQ learned``: :class:`~DeconvolutionQLearning` learning the delay on 0..50;
 - ``oracle``: :class:`~delayed_rl.agents.OracleQLearning`, which is told which transition each
   reward came from (the non-anonymous upper bound);
 - ``Q undelayed``: Q-learning without any delay (the reference; one run per seed and world,
@@ -244,11 +244,13 @@ def make_agent(name: str, size: int, delay: Delay, seed: int, steps: int | None 
         return agents.QLearning(env, **common)
     if name == "MMQ":
         window = None if steps is None else max(1, steps // WINDOW_DIVISOR)
-        return agents.MMQ(env, max_delay_estimate=LAMBDA_MAX, greedy_window=window, **common)
+        return agents.MultipleModelQLearning(
+            env, max_delay_estimate=LAMBDA_MAX, greedy_window=window, **common
+        )
     if name == "expected credit":
         return agents.ExpectedCreditQLearning(env, delay=delay, max_delay=LAMBDA_MAX, **common)
     known = delay if name == "DeconvQ known" else None
-    return agents.DeconvQ(env, delay=known, max_delay=LAMBDA_MAX, **common)
+    return agents.DeconvolutionQLearning(env, delay=known, max_delay=LAMBDA_MAX, **common)
 
 
 def optimal_average(size: int) -> float:

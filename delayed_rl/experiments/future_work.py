@@ -1,6 +1,6 @@
 """``future-work`` (beyond the thesis): variants of MMQ on the ``anonymous-delay`` settings.
 
-Each variant changes one piece of MMQ's rule (:class:`~delayed_rl.agents.MMQ`'s keyword
+Each variant changes one piece of MMQ's rule (:class:`~MultipleModelQLearning`'s keyword
 arguments; ``None`` keeps the thesis's rule), all with Λ = {0, ..., 50} and the thesis's
 hyper-parameters (α = 0.1, γ = 0.9, constant ε = 0.1, ``q_init`` = 25):
 
@@ -81,9 +81,9 @@ def options(variant: str, steps: int) -> dict[str, Any]:
 
 def make_variant(variant: str, size: int, delay: Any, steps: int, seed: int) -> Any:
     """MMQ with Λ = {0..50} and ``variant``'s options on the ``size`` grid under ``delay``."""
-    from delayed_rl.agents import MMQ
+    from delayed_rl.agents import MultipleModelQLearning
 
-    return MMQ(
+    return MultipleModelQLearning(
         shared.grid(size, delay),
         max_delay_estimate=shared.LAMBDA_MAX,
         **options(variant, steps),

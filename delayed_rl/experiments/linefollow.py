@@ -89,14 +89,14 @@ def make_agent(kind: str, env: gym.Env, seed: int) -> Any:
     """A thesis-setting learner on ``env``, one of :data:`LEARNERS`.
 
     ``"Q"`` (Q-learning), ``"MMQ"`` (Λ = {0, ..., 150}) or ``"DeconvQ learned"``
-    (:class:`~delayed_rl.agents.DeconvQ` learning the delay on 0..150), with the thesis's
+    (:class:`~DeconvolutionQLearning` learning the delay on 0..150), with the thesis's
     hyper-parameters and ``q_init`` = :data:`Q_INIT`.
 
     Raises:
         TypeError: ``kind`` is not a string.
         ValueError: ``kind`` is not one of :data:`LEARNERS`.
     """
-    from delayed_rl.agents import DeconvQ, MultipleModelQLearning, QLearning
+    from delayed_rl.agents import DeconvolutionQLearning, MultipleModelQLearning, QLearning
 
     check_choice("kind", kind, LEARNERS)
     common = thesis_hyperparameters(seed, q_init=Q_INIT)
@@ -104,7 +104,7 @@ def make_agent(kind: str, env: gym.Env, seed: int) -> Any:
         return QLearning(env, **common)
     if kind == "MMQ":
         return MultipleModelQLearning(env, max_delay_estimate=LAMBDA_MAX, **common)
-    return DeconvQ(env, delay=None, max_delay=LAMBDA_MAX, **common)
+    return DeconvolutionQLearning(env, delay=None, max_delay=LAMBDA_MAX, **common)
 
 
 def line_error(centroids: np.ndarray) -> np.ndarray:

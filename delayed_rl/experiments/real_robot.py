@@ -26,7 +26,7 @@ Both continuations start from the same agent state and the same env seed (the fi
 after ``set_env`` uses the agent's seed), so their difference is paired by seed. (The control
 runs on the compiled path; the stand-in's command latency keeps the real run on the Python
 path, so their agents' random draws differ.) Agents: ``MMQ``,
-``Q`` and, beyond the thesis, ``DeconvQ learned`` (:class:`~delayed_rl.agents.DeconvQ`
+``Q`` and, beyond the thesis, ``DeconvQ learned`` (:class:`~DeconvolutionQLearning`
 learning the delay on 0..150, as in ``linefollow-deconv``). Default 4 seeds (the thesis's two
 runs are seeds ``base_seed`` and ``base_seed + 1``, drawn alone in the figures' first panels;
 all four give the 95 % CIs, with 3 degrees of freedom, a choice made when a seed cost minutes

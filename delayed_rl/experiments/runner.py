@@ -44,8 +44,8 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from delayed_rl._validation import check_bool, check_choice, check_int, check_real
-from delayed_rl.agents._loop import MAX_TIMESTEPS, MAX_TIMESTEPS_TEXT
-from delayed_rl.agents.hyperparameters import MAX_SEED, check_limit
+from delayed_rl.agents.common.hyperparameters import MAX_SEED, check_limit
+from delayed_rl.agents.common.python_loop import MAX_TIMESTEPS, MAX_TIMESTEPS_TEXT
 
 #: The joblib backends :func:`run_tasks` can hand the runs to.
 BACKENDS = ("loky", "ray", "dask")
@@ -110,7 +110,7 @@ class Config:
 
 MAX_SEEDS_TEXT = f"MAX_SEEDS = {MAX_SEEDS:,} (delayed_rl.experiments.runner)"
 MAX_WORKERS_TEXT = f"MAX_WORKERS = {MAX_WORKERS} (delayed_rl.experiments.runner)"
-MAX_SEED_TEXT = "MAX_SEED = 2**63 - 1 (delayed_rl.agents.hyperparameters)"
+MAX_SEED_TEXT = "MAX_SEED = 2**63 - 1 (delayed_rl.agents.common.hyperparameters)"
 
 
 def check_workers(name: str, workers: Any) -> int:

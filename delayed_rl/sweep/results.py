@@ -18,8 +18,8 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from delayed_rl.agents._loop import MAX_TIMESTEPS
-from delayed_rl.agents.hyperparameters import MAX_ABS_VALUE
+from delayed_rl.agents.common.hyperparameters import MAX_ABS_VALUE
+from delayed_rl.agents.common.python_loop import MAX_TIMESTEPS
 from delayed_rl.experiments.runner import mean_ci95
 from delayed_rl.sweep.schema import MAX_SWEEP_SEED, Sweep
 

@@ -23,8 +23,8 @@ import gymnasium as gym
 
 import delayed_rl  # noqa: F401  (registers the env ids)
 from delayed_rl._validation import check_choice, check_int, check_real
-from delayed_rl.agents._loop import MAX_TIMESTEPS, MAX_TIMESTEPS_TEXT
-from delayed_rl.agents.hyperparameters import check_limit
+from delayed_rl.agents.common.hyperparameters import check_limit
+from delayed_rl.agents.common.python_loop import MAX_TIMESTEPS, MAX_TIMESTEPS_TEXT
 from delayed_rl.agents.registry import AGENTS, agent_class
 from delayed_rl.delays import as_delay
 from delayed_rl.experiments.runner import MAX_SEEDS, MAX_SEEDS_TEXT

@@ -1,9 +1,9 @@
-"""The Python training loop of :meth:`~delayed_rl.agents.base.TabularAgent.learn`.
+"""The Python training loop of :meth:`~delayed_rl.agents.common.base.TabularAgent.learn`.
 
-:meth:`~delayed_rl.agents.base.TabularAgent.learn` is split as stable-baselines3 splits its own:
+:meth:`~delayed_rl.agents.common.base.TabularAgent.learn` is split as stable-baselines3 splits its own:
 a setup that checks the arguments and builds a :class:`LearnRun`, one of two step loops —
 :func:`python_loop` here, which runs any ``Discrete`` env, or the compiled loop of
-:mod:`delayed_rl.agents._compiled` — and a finish that logs and closes the callbacks.
+:mod:`delayed_rl.agents.common.compiled_loop` — and a finish that logs and closes the callbacks.
 """
 
 from __future__ import annotations
@@ -14,9 +14,9 @@ from typing import Any
 import numpy as np
 
 from delayed_rl._validation import check_bool, check_int
-from delayed_rl.agents._statistics import TrainingStatistics
-from delayed_rl.agents.callbacks import as_callback
-from delayed_rl.agents.hyperparameters import check_limit
+from delayed_rl.agents.common.callbacks import as_callback
+from delayed_rl.agents.common.hyperparameters import check_limit
+from delayed_rl.agents.common.statistics import TrainingStatistics
 
 __all__ = [
     "MAX_RECORD_BYTES",
@@ -51,7 +51,7 @@ the agent's step count (``num_timesteps``) past it, before anything starts; a mo
 path's millions of steps a second; the bound keeps every step count, schedule clock and
 ``learn()``'s progress arithmetic far inside int64 and float64's exact integers (``2**53``).
 """
-MAX_TIMESTEPS_TEXT = "MAX_TIMESTEPS = 2**40 (delayed_rl.agents._loop.MAX_TIMESTEPS)"
+MAX_TIMESTEPS_TEXT = "MAX_TIMESTEPS = 2**40 (delayed_rl.agents.common.python_loop.MAX_TIMESTEPS)"
 """How messages name :data:`MAX_TIMESTEPS`."""
 MAX_RECORD_BYTES = 2**30
 """The most memory ``learn(..., record=True)`` may allocate for its record (1 GiB).
@@ -263,7 +263,7 @@ def setup_learn(
     if record and n_steps * _RECORD_STEP_BYTES > MAX_RECORD_BYTES:
         raise ValueError(
             f"total_timesteps with record=True must keep the record within MAX_RECORD_BYTES = "
-            f"1 GiB (delayed_rl.agents._loop.MAX_RECORD_BYTES; {_RECORD_STEP_BYTES} bytes a "
+            f"1 GiB (delayed_rl.agents.common.python_loop.MAX_RECORD_BYTES; {_RECORD_STEP_BYTES} bytes a "
             f"step: at most {MAX_RECORD_BYTES // _RECORD_STEP_BYTES} steps), got {n_steps}"
         )
     if agent.env is None:

@@ -1,7 +1,7 @@
 """Schedules of the training progress, with stable-baselines3's conventions.
 
 A schedule is a callable of ``progress_remaining``, which falls from 1 at the start of a
-:meth:`~delayed_rl.agents.base.TabularAgent.learn` call to 0 at its end, and returns a value
+:meth:`~delayed_rl.agents.common.base.TabularAgent.learn` call to 0 at its end, and returns a value
 (a learning rate, an exploration rate). Any callable with that signature works, SB3's
 ``LinearSchedule`` included; the two classes here also describe themselves to
 :func:`schedule_to_json`, so a saved model restores them exactly.

@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from delayed_rl._numba import jit as _jit
-from delayed_rl.agents.hyperparameters import MAX_ABS_VALUE
+from delayed_rl.agents.common.hyperparameters import MAX_ABS_VALUE
 from delayed_rl.compiled.deconvolution_statistics import Statistics, _slot, find_row, observe
 
 __all__ = [
@@ -628,7 +628,7 @@ class RewardRegression:
         ``1..K + 1``, every end is flushed exactly under ``"flush"`` (none under ``"carry"``,
         whose stream never ends) and only a flushed one holds a reward; the reward sums are
         finite and within the step count times
-        :data:`~delayed_rl.agents.hyperparameters.MAX_ABS_VALUE` (each sums at most one reward
+        :data:`~delayed_rl.agents.common.hyperparameters.MAX_ABS_VALUE` (each sums at most one reward
         a step). Nothing is restored unless every check passes.
 
         Args:
@@ -701,7 +701,7 @@ class RewardRegression:
             raise ValueError(
                 f"{prefix}cooc and {prefix}keys take {nbytes / 2**20:,.0f} MiB, more than the "
                 f"limit of STATISTICS_LIMIT = {STATISTICS_LIMIT / 2**20:.0f} MiB "
-                "(delayed_rl.agents._regression.STATISTICS_LIMIT)"
+                "(delayed_rl.agents.deconvolution.regression.STATISTICS_LIMIT)"
             )
         counters = arrays["counters"]
         length, steps, n_ends, flush, carry, pairs, used = (int(v) for v in counters)
@@ -762,7 +762,7 @@ class RewardRegression:
             if not np.all(np.isfinite(sums)) or np.any(np.abs(sums) > bound):
                 raise ValueError(
                     f"{prefix}{name} must hold finite reward sums within the step count times "
-                    f"MAX_ABS_VALUE = 2**200 (delayed_rl.agents.hyperparameters.MAX_ABS_VALUE)"
+                    f"MAX_ABS_VALUE = 2**200 (delayed_rl.agents.common.hyperparameters.MAX_ABS_VALUE)"
                 )
         if np.any(arrays["end_rewards"][~flushed]):
             raise ValueError(f"{prefix}end_rewards: only a flushed end holds a reward")

@@ -5,7 +5,7 @@ the reward received at step ``t`` has expectation ``Σ_k p(k) · R(s_{t−k}, a_
 convolution of the delay pmf with the mean rewards ``R`` of the (state, action) pairs visited.
 :class:`DeconvolutionQLearning` undoes it:
 
-1. it keeps the sufficient statistics of that regression (:mod:`delayed_rl.agents._regression`:
+1. it keeps the sufficient statistics of that regression (:mod:`delayed_rl.agents.deconvolution.regression`:
    ``O(K)`` per step, never the history) and, after 1000, 2000, 4000, ... steps and then every
    ``solve_interval`` steps (the gaps double until they reach it), solves the least
    squares for ``R̂`` — with the delay pmf known (``delay=``), or estimated with it (``delay=None``:
@@ -19,7 +19,7 @@ episode ends — never ``info["undelayed_reward"]``, ``reward_delay`` or ``rewar
 **Sizes.** The statistics take ``(K + 1)·P²`` 4-byte counts for ``P`` (state, action) pairs
 while that fits 64 MiB (the grid worlds); above (Taxi's 3000 pairs), a hashed table holds only
 the couples of pairs that occurred within ``K`` steps of each other, so memory follows what the
-agent has seen (:mod:`delayed_rl.agents._regression`). Both paths run either layout; a
+agent has seen (:mod:`delayed_rl.agents.deconvolution.regression`). Both paths run either layout; a
 compiled step costs about 1.4 MMQ(|Λ| = 51) steps and the solves bring a 1M-step run on
 GridWorld-9x9 to about 2.6 times MMQ's time, a known delay's to about MMQ's
 (``benchmarks/deconvolution_cost.py``).
@@ -43,12 +43,20 @@ import gymnasium as gym
 import numpy as np
 
 from delayed_rl._validation import check_choice, check_int, check_real
-from delayed_rl.agents._compiled import CompiledTables
-from delayed_rl.agents._loop import MAX_TIMESTEPS
-from delayed_rl.agents._persistence import check_state_array
-from delayed_rl.agents._regression import STATISTICS_LIMIT, RewardRegression, statistics_bytes
+from delayed_rl.agents.common.compiled_loop import CompiledTables
+from delayed_rl.agents.common.hyperparameters import (
+    MAX_ABS_VALUE,
+    check_limit,
+    shares_hyperparameters,
+)
+from delayed_rl.agents.common.persistence import check_state_array
+from delayed_rl.agents.common.python_loop import MAX_TIMESTEPS
+from delayed_rl.agents.deconvolution.regression import (
+    STATISTICS_LIMIT,
+    RewardRegression,
+    statistics_bytes,
+)
 from delayed_rl.agents.expected_credit import credit_weights
-from delayed_rl.agents.hyperparameters import MAX_ABS_VALUE, check_limit, shares_hyperparameters
 from delayed_rl.agents.mmq import MAX_TABLE_BYTES, table_bytes
 from delayed_rl.agents.qlearning import QLearning
 from delayed_rl.compiled.state import RewardModel
@@ -60,7 +68,6 @@ __all__ = [
     "MAX_MODELLED_DELAY",
     "MAX_SOLVE_INTERVAL",
     "PMF_TOLERANCE",
-    "DeconvQ",
     "DeconvolutionQLearning",
 ]
 
@@ -142,7 +149,7 @@ class DeconvolutionQLearning(QLearning):
             :data:`MAX_DELAY_ITERATIONS`, 100).
         on_episode_end: ``"flush"``, ``"drop"``, ``"carry"`` or ``None`` (see above).
         **hyperparameters: the hyper-parameters every agent shares, by keyword: see
-            :class:`~delayed_rl.agents.base.TabularAgent`.
+            :class:`~delayed_rl.agents.common.base.TabularAgent`.
 
     The tables (Q-table, reward model, statistics and the solves' workspace) must fit
     ``delayed_rl.agents.mmq.MAX_TABLE_BYTES``, checked before anything is allocated. A model
@@ -152,9 +159,9 @@ class DeconvolutionQLearning(QLearning):
     Example:
         >>> import gymnasium as gym
         >>> import delayed_rl
-        >>> from delayed_rl.agents import DeconvQ
+        >>> from delayed_rl.agents import DeconvolutionQLearning
         >>> env = gym.make("delayed_rl/GridWorld-3x3-v0", reward_delay=2)
-        >>> agent = DeconvQ(env, max_delay=8, q_init=10.0, seed=0).learn(20_000)
+        >>> agent = DeconvolutionQLearning(env, max_delay=8, q_init=10.0, seed=0).learn(20_000)
         >>> agent.predict(8, deterministic=True)[0] in (0, 3)  # from the start: up or left
         True
         >>> agent.delay_pmf.shape  # the learned pmf on 0..max_delay
@@ -218,7 +225,7 @@ class DeconvolutionQLearning(QLearning):
             "ridge",
             check_real("ridge", ridge, 0.0, low_open=True),
             MAX_ABS_VALUE,
-            "MAX_ABS_VALUE = 2**200 (delayed_rl.agents.hyperparameters.MAX_ABS_VALUE)",
+            "MAX_ABS_VALUE = 2**200 (delayed_rl.agents.common.hyperparameters.MAX_ABS_VALUE)",
         )
         self.delay_iterations = check_limit(
             "delay_iterations",
@@ -273,7 +280,7 @@ class DeconvolutionQLearning(QLearning):
         """Refuse tables above ``MAX_TABLE_BYTES``, before any is allocated.
 
         The Q-table and its cache, the reward model and the regression's statistics and solves
-        (:func:`~delayed_rl.agents._regression.statistics_bytes`) together.
+        (:func:`~delayed_rl.agents.deconvolution.regression.statistics_bytes`) together.
 
         Raises:
             ValueError: the message names ``max_delay``, the env's size and the memory needed.
@@ -380,7 +387,7 @@ class DeconvolutionQLearning(QLearning):
             worst = float(rewards[int(np.argmin(within))])
             raise ValueError(
                 f"the reward model's solve gave a mean reward of {worst!r}, beyond MAX_ABS_VALUE "
-                f"= 2**200 (delayed_rl.agents.hyperparameters): the received rewards "
+                f"= 2**200 (delayed_rl.agents.common.hyperparameters): the received rewards "
                 f"(mean {regression.mean_reward!r}) are too large for ridge={self.ridge!r}"
             )
         return rewards
@@ -429,7 +436,7 @@ class DeconvolutionQLearning(QLearning):
             raise ValueError(
                 f"regression_cooc and regression_keys declare {nbytes / 2**20:,.0f} MiB, more "
                 f"than the limit of STATISTICS_LIMIT = {STATISTICS_LIMIT / 2**20:.0f} MiB "
-                "(delayed_rl.agents._regression.STATISTICS_LIMIT)"
+                "(delayed_rl.agents.deconvolution.regression.STATISTICS_LIMIT)"
             )
 
     def _set_state_arrays(self, arrays: dict[str, np.ndarray], where: str) -> None:
@@ -437,7 +444,7 @@ class DeconvolutionQLearning(QLearning):
 
         Beyond Q-learning's arrays: ``assumed_episode_end`` an index of
         :data:`EPISODE_END_MODES` (the ``on_episode_end`` given, if one was); the statistics as
-        :meth:`~delayed_rl.agents._regression.RewardRegression.restore` checks them;
+        :meth:`~delayed_rl.agents.deconvolution.regression.RewardRegression.restore` checks them;
         ``reward_model`` one mean reward per pair within ±``MAX_ABS_VALUE``; ``delay_pmf`` on
         the simplex (finite, ``>= 0``, summing to 1 within :data:`PMF_TOLERANCE`) and, for a
         known delay, that delay's pmf; ``solve_clock`` ``[steps since the last solve, the
@@ -493,7 +500,7 @@ class DeconvolutionQLearning(QLearning):
             np.float64,
             -MAX_ABS_VALUE,
             MAX_ABS_VALUE,
-            note=" (MAX_ABS_VALUE = 2**200, delayed_rl.agents.hyperparameters)",
+            note=" (MAX_ABS_VALUE = 2**200, delayed_rl.agents.common.hyperparameters)",
         )
         pmf = _check_pmf(arrays.get("delay_pmf"), k1, self._known_pmf)
         since, after = (
@@ -559,10 +566,6 @@ class DeconvolutionQLearning(QLearning):
     def _record_model_metrics(self, logger: Any) -> None:
         logger.record("deconv/mean_delay", self.mean_delay)
         logger.record("deconv/reward_model_max", float(self._reward_model.max()))
-
-
-DeconvQ = DeconvolutionQLearning
-"""Short alias of :class:`DeconvolutionQLearning`."""
 
 
 def _check_pmf(pmf: Any, size: int, known: np.ndarray | None) -> np.ndarray:

@@ -2,8 +2,8 @@
 
 :class:`TabularAgent` owns everything that is not the learning rule: the env, argument checks,
 :meth:`~TabularAgent.learn` with SB3's callback protocol, logger and progress bar,
-:meth:`~TabularAgent.predict`, and model files (:mod:`~delayed_rl.agents.save_util`); envs are
-made and checked in :mod:`~delayed_rl.agents.env_util`. A subclass supplies the learning rule:
+:meth:`~TabularAgent.predict`, and model files (:mod:`~delayed_rl.agents.common.save_util`); envs are
+made and checked in :mod:`~delayed_rl.agents.common.env_util`. A subclass supplies the learning rule:
 
 - ``_setup_model()``: allocate the tables (hyper-parameters and spaces are set);
 - ``_choose(s, eps, uniform) -> (acting model index, action index)``: one behaviour choice,
@@ -13,7 +13,7 @@ made and checked in :mod:`~delayed_rl.agents.env_util`. A subclass supplies the 
 - ``_greedy_actions(states)``: the deterministic policy;
 - ``_end_episode()``: forget the episode's history;
 - ``_get_state_arrays()`` / ``_set_state_arrays(arrays, where)``: what a model file holds
-  (optional, see :mod:`._persistence`: ``_state_array_specs``, ``_derived``, ``_rebuild_derived``);
+  (optional, see :mod:`.persistence`: ``_state_array_specs``, ``_derived``, ``_rebuild_derived``);
 - ``n_models`` (default 1): how many delay models it acts from, for the acting counts;
 - :meth:`~TabularAgent.compiled_tables` (optional): the arrays of its compiled twin.
 
@@ -33,37 +33,42 @@ import gymnasium as gym
 import numpy as np
 
 from delayed_rl._validation import check_bool
-from delayed_rl.agents import _persistence
-from delayed_rl.agents._compiled import CompiledTables, check_compiled, compiled_loop, compiled_run
-from delayed_rl.agents._loop import (
-    RECORD_DTYPES,
-    finish_learn,
-    python_loop,
-    setup_learn,
+from delayed_rl.agents.common import persistence
+from delayed_rl.agents.common.compiled_loop import (
+    CompiledTables,
+    check_compiled,
+    compiled_loop,
+    compiled_run,
 )
-from delayed_rl.agents._statistics import TrainingStatistics
-from delayed_rl.agents._streams import PREDICT_STREAM, UniformStream
-from delayed_rl.agents.env_util import (
+from delayed_rl.agents.common.env_util import (
     SpaceIndex,
     check_discrete,
     check_spaces_match,
     make_env,
     vec_env_view,
 )
-from delayed_rl.agents.hyperparameters import (
+from delayed_rl.agents.common.hyperparameters import (
     DEFAULTS,
     HYPERPARAMETER_NAMES,
     check_hyperparameters,
     check_value,
 )
-from delayed_rl.agents.logger import Logger
-from delayed_rl.agents.schedules import (
+from delayed_rl.agents.common.logger import Logger
+from delayed_rl.agents.common.python_loop import (
+    RECORD_DTYPES,
+    finish_learn,
+    python_loop,
+    setup_learn,
+)
+from delayed_rl.agents.common.schedules import (
     ConstantSchedule,
     LinearSchedule,
     Schedule,
     check_schedule_value,
     schedule_to_json,
 )
+from delayed_rl.agents.common.statistics import TrainingStatistics
+from delayed_rl.agents.common.streams import PREDICT_STREAM, UniformStream
 
 __all__ = ["RECORD_KEYS", "TabularAgent", "load_agent"]
 
@@ -71,7 +76,7 @@ RECORD_KEYS = tuple(RECORD_DTYPES)
 """The arrays of ``agent.training_log`` after ``learn(..., record=True)``."""
 
 
-class TabularAgent(_persistence.CopyProtocol, ABC):
+class TabularAgent(persistence.CopyProtocol, ABC):
     """Shell of the tabular agents: stable-baselines3's names and semantics on a Q-table.
 
     Args:
@@ -86,7 +91,7 @@ class TabularAgent(_persistence.CopyProtocol, ABC):
             Equal to ``exploration_initial_eps`` (the default, 0.1) gives a constant ε.
         exploration_fraction: the fraction of training over which ε moves, in (0, 1].
         q_init: the initial value of every Q-table entry (optimistic when above the values),
-            within ±:data:`~delayed_rl.agents.hyperparameters.MAX_ABS_VALUE` (2**200).
+            within ±:data:`~delayed_rl.agents.common.hyperparameters.MAX_ABS_VALUE` (2**200).
         seed: seeds the agent's random choices and the env's first reset after it is set
             (``None``, or an integer in ``[0, MAX_SEED]``, ``MAX_SEED = 2**63 - 1``).
         verbose: 0 silent, 1 prints the logged metrics at every dump.
@@ -115,7 +120,7 @@ class TabularAgent(_persistence.CopyProtocol, ABC):
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
-        _persistence.AGENT_CLASSES[_persistence.class_key(cls)] = cls
+        persistence.AGENT_CLASSES[persistence.class_key(cls)] = cls
 
     def __init__(
         self,
@@ -208,7 +213,7 @@ class TabularAgent(_persistence.CopyProtocol, ABC):
     def get_env(self) -> Any:
         """The training env as a one-env SB3 ``VecEnv`` (as SB3's ``get_env()``), or ``None``.
 
-        See :func:`~delayed_rl.agents.env_util.vec_env_view`. The agent steps :attr:`env`
+        See :func:`~delayed_rl.agents.common.env_util.vec_env_view`. The agent steps :attr:`env`
         itself; do not step this view during ``learn()``.
         """
         if self.env is not None and self._vec_env is None:
@@ -349,7 +354,7 @@ class TabularAgent(_persistence.CopyProtocol, ABC):
             TypeError: an argument has the wrong type (``obs``, ``action`` and ``next_obs``
                 must each be one integer, or a 0-d integer array: a batch is refused).
             ValueError: an argument is outside its space, or the reward is not finite or above
-                :data:`~delayed_rl.agents.hyperparameters.MAX_ABS_VALUE` in magnitude.
+                :data:`~delayed_rl.agents.common.hyperparameters.MAX_ABS_VALUE` in magnitude.
         """
         s = self._obs_index.index(obs, "obs")
         s2 = self._obs_index.index(next_obs, "next_obs")
@@ -378,13 +383,13 @@ class TabularAgent(_persistence.CopyProtocol, ABC):
 
         Args:
             total_timesteps: how many env steps to take (``reset_num_timesteps=False``: more);
-                at most :data:`~delayed_rl.agents._loop.MAX_TIMESTEPS` (2**40), and with
+                at most :data:`~delayed_rl.agents.common.python_loop.MAX_TIMESTEPS` (2**40), and with
                 ``reset_num_timesteps=False`` the step count may not pass it either; with
                 ``record=True``, at most what
-                :data:`~delayed_rl.agents._loop.MAX_RECORD_BYTES` holds (41 bytes a step).
+                :data:`~delayed_rl.agents.common.python_loop.MAX_RECORD_BYTES` holds (41 bytes a step).
             callback: ``None``, a stable-baselines3 callback (``EvalCallback``,
                 ``CheckpointCallback``, ``StopTrainingOnMaxEpisodes``, ``CallbackList``, ...), a
-                :mod:`delayed_rl.agents.callbacks` callback, a callable
+                :mod:`delayed_rl.agents.common.callbacks` callback, a callable
                 ``fn(locals_, globals_) -> bool`` (``False`` stops training), or a list of these.
             log_interval: record and dump metrics every this many *steps* (episodes may never
                 end in a continuing task); ``None`` logs only at the end.
@@ -446,7 +451,7 @@ class TabularAgent(_persistence.CopyProtocol, ABC):
             ValueError: ``path`` has no file name (``""``, ``"."``), or the file would pass
                 ``save_util.MAX_MODEL_BYTES``.
         """
-        return _persistence.save(self, path)
+        return persistence.save(self, path)
 
     @classmethod
     def load(
@@ -481,7 +486,7 @@ class TabularAgent(_persistence.CopyProtocol, ABC):
                 is not defined in this process: import its module first), or ``env``'s spaces
                 do not match (the message says which).
         """
-        return _persistence.load_as(cls, path, custom_objects, env)
+        return persistence.load_as(cls, path, custom_objects, env)
 
 
 load_agent = TabularAgent.load

@@ -1,7 +1,7 @@
-"""The compiled step loop of :meth:`~delayed_rl.agents.base.TabularAgent.learn`.
+"""The compiled step loop of :meth:`~delayed_rl.agents.common.base.TabularAgent.learn`.
 
 An agent whose learning rule has a compiled twin says so through
-:meth:`~delayed_rl.agents.base.TabularAgent.compiled_tables`, which returns the arrays the
+:meth:`~delayed_rl.agents.common.base.TabularAgent.compiled_tables`, which returns the arrays the
 compiled path trains in place (:class:`CompiledTables`); the shell never reaches into an agent's
 internals. :func:`compiled_run` builds (or continues) the :class:`~delayed_rl.compiled.CompiledRun` of
 the agent's env, and :func:`compiled_loop` runs a ``learn()`` call's steps on it, chunk by chunk,
@@ -16,7 +16,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from delayed_rl._validation import check_bool
-from delayed_rl.agents._loop import LearnRun, step_locals
+from delayed_rl.agents.common.python_loop import LearnRun, step_locals
 
 __all__ = ["MAX_CHUNK", "CompiledTables", "check_compiled", "compiled_loop", "compiled_run"]
 

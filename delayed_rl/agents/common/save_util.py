@@ -4,7 +4,7 @@ Pure file I/O: this module knows the file format, not the agents (it imports no 
 A model file is a NumPy ``.npz`` archive holding the learned arrays and one string array,
 ``metadata``: JSON with a format marker and version, the agent's class (module and qualified
 name), its hyper-parameters, spaces and training clock (see
-:meth:`~delayed_rl.agents.base.TabularAgent.save`).
+:meth:`~delayed_rl.agents.common.base.TabularAgent.save`).
 
 Reading is defensive (:class:`ModelFile`): a model file can never run code (no pickles: an array
 of Python objects is refused from its header) and never makes the reader allocate more than it
@@ -127,7 +127,7 @@ def write_model_file(path: str | Path, metadata: dict[str, Any], arrays: dict[st
         if taken > globals()[limit]:
             raise ValueError(
                 f"cannot save to {path}: {what} take {_size(taken)}, over {limit} = "
-                f"{_size(globals()[limit])} (delayed_rl.agents.save_util.{limit}): it would "
+                f"{_size(globals()[limit])} (delayed_rl.agents.common.save_util.{limit}): it would "
                 "not load"
             )
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -381,7 +381,7 @@ def _members(archive: zipfile.ZipFile, where: str) -> dict[str, zipfile.ZipInfo]
     if total > MAX_MODEL_BYTES:
         raise ValueError(
             f"{where}: its arrays would take {_size(total)} once decompressed, over "
-            f"MAX_MODEL_BYTES = {_size(MAX_MODEL_BYTES)} (delayed_rl.agents.save_util."
+            f"MAX_MODEL_BYTES = {_size(MAX_MODEL_BYTES)} (delayed_rl.agents.common.save_util."
             "MAX_MODEL_BYTES): refused before decompressing"
         )
     return members

@@ -1,9 +1,9 @@
 """An agent's state to and from a model file's contents, copies and pickles; the class registry.
 
-:mod:`~delayed_rl.agents.save_util` reads and writes the files; this module decides what an
+:mod:`~delayed_rl.agents.common.save_util` reads and writes the files; this module decides what an
 agent puts in them (hyper-parameters, spaces, learned arrays, random streams, training clock) and
 rebuilds an agent from them, checking every field with the constructor's own checks before
-anything is allocated. Every :class:`~delayed_rl.agents.base.TabularAgent` subclass is
+anything is allocated. Every :class:`~delayed_rl.agents.common.base.TabularAgent` subclass is
 registered here under ``"module.QualName"`` when it is defined, so a file names its class and
 loading finds it again, a user's subclass included.
 
@@ -24,12 +24,12 @@ import numpy as np
 
 from delayed_rl._validation import check_int, check_probability, check_real
 from delayed_rl._version import __version__
-from delayed_rl.agents import save_util
-from delayed_rl.agents._loop import MAX_TIMESTEPS, MAX_TIMESTEPS_TEXT
-from delayed_rl.agents._statistics import TrainingStatistics
-from delayed_rl.agents._streams import UniformStream
-from delayed_rl.agents.hyperparameters import check_limit
-from delayed_rl.agents.schedules import schedule_from_json
+from delayed_rl.agents.common import save_util
+from delayed_rl.agents.common.hyperparameters import check_limit
+from delayed_rl.agents.common.python_loop import MAX_TIMESTEPS, MAX_TIMESTEPS_TEXT
+from delayed_rl.agents.common.schedules import schedule_from_json
+from delayed_rl.agents.common.statistics import TrainingStatistics
+from delayed_rl.agents.common.streams import UniformStream
 
 __all__ = ["AGENT_CLASSES", "CopyProtocol", "check_state_array", "class_key", "load_as", "save"]
 
@@ -55,7 +55,9 @@ _METADATA_KEYS = frozenset(
 _STREAMS = (("rng_state", "rng_block"), ("predict_rng_state", "predict_rng_block"))
 _SCHEDULE_FIELDS = {"linear": ("start", "end", "end_fraction"), "constant": ("value",)}
 _SCHEDULE_FIELDS["callable"] = _SCHEDULE_FIELDS["constant"]  # and its "repr", a string
-_STEPS_NOTE = " (MAX_TIMESTEPS = 2**40, delayed_rl.agents._loop.MAX_TIMESTEPS)"  # array checks
+_STEPS_NOTE = (
+    " (MAX_TIMESTEPS = 2**40, delayed_rl.agents.common.python_loop.MAX_TIMESTEPS)"  # array checks
+)
 _OPTIONAL = ("env", "_compiled", "_logger")
 """What a copy keeps when it can be copied, and drops (``None``) otherwise."""
 
@@ -267,10 +269,11 @@ def _check_headers(
 
 
 def _saved_class(name: Any, where: str) -> type:
-    """The agent class a model file names.
+    """The agent class a model file names (``"module.QualName"``, :func:`class_key`).
 
-    Files written before classes were named with their module hold the bare class name; it is
-    looked up among the library's own agents.
+    The library's own agents are found by their class name wherever their module is: a file
+    naming ``delayed_rl.<any module>.<Name>`` (or the bare ``<Name>``) loads as the library's
+    agent class ``<Name>``, so a file saved before a module moved still loads.
 
     Raises:
         ValueError: no class of that name is defined in this process.
@@ -279,10 +282,11 @@ def _saved_class(name: Any, where: str) -> type:
         raise ValueError(f"{where}: class in the metadata must be a class name, got {name!r}")
     if name in AGENT_CLASSES:
         return AGENT_CLASSES[name]
+    bare = name.rsplit(".", 1)[-1] if name.startswith("delayed_rl.") else name
     builtin = [
         cls
         for key, cls in AGENT_CLASSES.items()
-        if key.startswith("delayed_rl.") and cls.__name__ == name
+        if key.startswith("delayed_rl.") and cls.__name__ == bare
     ]
     if len(builtin) == 1:
         return builtin[0]
@@ -342,7 +346,7 @@ def _restore_clock(
     """Restore the step count, the schedules' clock, the random streams and the acting counts.
 
     ``num_timesteps`` and every acting count must lie in ``[0, MAX_TIMESTEPS]``
-    (:data:`~delayed_rl.agents._loop.MAX_TIMESTEPS`), ``progress_remaining`` and
+    (:data:`~delayed_rl.agents.common.python_loop.MAX_TIMESTEPS`), ``progress_remaining`` and
     ``exploration_rate`` in [0, 1], the random blocks in [0, 1).
 
     Raises:

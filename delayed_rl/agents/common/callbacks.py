@@ -1,6 +1,6 @@
 """Training callbacks with stable-baselines3's protocol, usable without stable-baselines3.
 
-:meth:`~delayed_rl.agents.base.TabularAgent.learn` drives any object with SB3's callback methods
+:meth:`~delayed_rl.agents.common.base.TabularAgent.learn` drives any object with SB3's callback methods
 (``init_callback``, ``on_training_start``, ``on_rollout_start``, ``update_locals``, ``on_step``,
 ``on_rollout_end``, ``on_training_end``): SB3's own callbacks (``EvalCallback``,
 ``CheckpointCallback``, ``StopTrainingOnMaxEpisodes``, ``CallbackList``,
@@ -283,6 +283,6 @@ def _one_callback(obj: Any, name: str) -> Any:
         return FunctionCallback(obj)
     raise TypeError(
         f"{name} must be None, a callback object (stable-baselines3's BaseCallback or "
-        "delayed_rl.agents.callbacks.BaseCallback), a callable fn(locals_, globals_) -> bool, "
+        "delayed_rl.agents.common.callbacks.BaseCallback), a callable fn(locals_, globals_) -> bool, "
         f"or a list of those; got {obj!r}"
     )

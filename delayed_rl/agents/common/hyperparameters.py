@@ -8,7 +8,7 @@ from dataclasses import asdict, dataclass
 from typing import Any, TypeVar
 
 from delayed_rl._validation import check_fraction, check_int, check_probability, check_real
-from delayed_rl.agents.schedules import Schedule, as_learning_rate_schedule
+from delayed_rl.agents.common.schedules import Schedule, as_learning_rate_schedule
 
 __all__ = [
     "DEFAULTS",
@@ -52,7 +52,7 @@ MAX_ABS_VALUE = 2.0**200
 """The largest magnitude of a value the agents are given to learn from (about 1.6e60).
 
 It bounds ``q_init``, every entry of a Q-table, averaged table or reward model a model file
-holds, the reward of :meth:`~delayed_rl.agents.base.TabularAgent.update` (and an oracle's
+holds, the reward of :meth:`~delayed_rl.agents.common.base.TabularAgent.update` (and an oracle's
 arrivals), and DeconvQ's ``ridge``; a value above is refused (``ValueError`` naming it).
 
 Why this bound: no update can then overflow float64 (largest value about ``2**1024``).
@@ -87,7 +87,7 @@ def check_limit(name: str, value: Any, limit: int | float, limit_name: str) -> A
         value: its value (``None`` passes).
         limit: the largest value allowed.
         limit_name: the constant, with where it lives, e.g.
-            ``"MAX_SEED = 2**63 - 1 (delayed_rl.agents.hyperparameters.MAX_SEED)"``.
+            ``"MAX_SEED = 2**63 - 1 (delayed_rl.agents.common.hyperparameters.MAX_SEED)"``.
 
     Raises:
         ValueError: ``value`` is above ``limit``.
@@ -97,7 +97,7 @@ def check_limit(name: str, value: Any, limit: int | float, limit_name: str) -> A
     return value
 
 
-_MAX_ABS_VALUE = "MAX_ABS_VALUE = 2**200 (delayed_rl.agents.hyperparameters.MAX_ABS_VALUE)"
+_MAX_ABS_VALUE = "MAX_ABS_VALUE = 2**200 (delayed_rl.agents.common.hyperparameters.MAX_ABS_VALUE)"
 
 
 def check_value(name: str, value: Any) -> float:
@@ -122,7 +122,10 @@ def check_seed(name: str, value: Any) -> int | None:
     """
     seed = check_int(name, value, 0, optional=True)
     return check_limit(
-        name, seed, MAX_SEED, "MAX_SEED = 2**63 - 1 (delayed_rl.agents.hyperparameters.MAX_SEED)"
+        name,
+        seed,
+        MAX_SEED,
+        "MAX_SEED = 2**63 - 1 (delayed_rl.agents.common.hyperparameters.MAX_SEED)",
     )
 
 
@@ -137,7 +140,7 @@ def shares_hyperparameters(init: _Init) -> _Init:
     """Mark ``__init__(self, env, ..., **hyperparameters)`` as taking the shared hyper-parameters.
 
     The constructor passes ``**hyperparameters`` on to
-    :class:`~delayed_rl.agents.base.TabularAgent`, so their defaults live in one place
+    :class:`~delayed_rl.agents.common.base.TabularAgent`, so their defaults live in one place
     (:data:`DEFAULTS`); its signature, as ``help()``, ``inspect`` and the documentation show it,
     lists them by name, keyword-only, with those defaults.
     """
