@@ -11,8 +11,8 @@
 Exit codes: 0 success, 2 bad usage (unknown names, bad values, in options or in a sweep file's
 fields or syntax; argparse's usage and one ``error:`` line), 1 a failure while running (a
 missing, corrupt or oversized model file, a missing sweep file, an env the agent cannot use,
-tables over ``delayed_rl.agents.mmq.MAX_TABLE_BYTES``, a sweep's run that fails, running out of
-memory, ...), reported as one ``error: ...`` line on stderr, without a traceback; 130 after
+tables over ``delayed_rl.agents.common.q_table.MAX_TABLE_BYTES``, a sweep's run that fails,
+running out of memory, ...), reported as one ``error: ...`` line on stderr, without a traceback; 130 after
 Ctrl-C (a second Ctrl-C quits at once, see :func:`console`).
 
 Option values are checked by :mod:`delayed_rl._validation`, the library's own checks, so the

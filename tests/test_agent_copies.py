@@ -12,7 +12,7 @@ import pytest
 
 import delayed_rl  # noqa: F401  (registers the env ids)
 from delayed_rl.agents import FixedDelayQLearning, MultipleModelQLearning, QLearning
-from delayed_rl.agents.mmq import greedy_actions
+from delayed_rl.agents.common.q_table import greedy_actions
 
 GRID5 = "delayed_rl/GridWorld-5x5-v0"
 STATES = np.arange(25)

@@ -444,7 +444,7 @@ def test_tables_over_the_limit_are_refused_before_allocating(make, message):
 
 
 def test_the_table_limit_fits_the_thesis_and_far_larger():
-    from delayed_rl.agents.mmq import MAX_TABLE_BYTES, table_bytes
+    from delayed_rl.agents.common.q_table import MAX_TABLE_BYTES, table_bytes
 
     assert table_bytes(81, 4, 51, 50) < 2**18  # the thesis's 9×9 grid world, Λ = 0..50
     assert table_bytes(10**5, 10, 101, 100) < MAX_TABLE_BYTES  # 10⁵ states, 101 delay models

@@ -20,6 +20,7 @@ import pytest
 import delayed_rl  # noqa: F401  (registers the env ids)
 from delayed_rl.agents import ExpectedCreditQLearning, FixedDelayQLearning, QLearning, load_agent
 from delayed_rl.agents.common.hyperparameters import HYPERPARAMETER_NAMES
+from delayed_rl.agents.common.q_agent import QAgent
 from delayed_rl.agents.expected_credit import MAX_LAGS, TAIL, credit_weights
 from delayed_rl.compiled import NotCompilable
 from delayed_rl.delays import Constant, Delay, Empirical, Geometric, Poisson, Uniform
@@ -228,7 +229,7 @@ def test_save_and_load_round_trip(tmp_path, delay, max_delay):
     env = gym.make(GRID3, reward_delay=delay)
     agent = ExpectedCreditQLearning(env, delay, max_delay, seed=0, **SETTINGS).learn(1_000)
     path = agent.save(tmp_path / "credit")
-    for loaded in (ExpectedCreditQLearning.load(path), load_agent(path), QLearning.load(path)):
+    for loaded in (ExpectedCreditQLearning.load(path), load_agent(path), QAgent.load(path)):
         assert type(loaded) is ExpectedCreditQLearning
         assert loaded.delay == delay and loaded.max_delay == max_delay
         np.testing.assert_array_equal(loaded.credit_weights, agent.credit_weights)

@@ -83,7 +83,7 @@ def test_roulette_round_four_uses_all_models_max():
     agent = roulette_agent()
     for action, reward in ((BET_EVEN, 0.0), (BET_13, 35.0), (BET_EVEN, -1.0)):
         agent.update(0, action, reward, 0)
-    assert agent._v_max[0] == 53.0
+    assert agent._table.v_max[0] == 53.0
     before = agent.q_table.copy()
     agent.update(0, BET_13, 1.0, 0)  # round 4 on 13; credits rounds 4, 3, 2
     assert agent.q_table[0, 0, BET_13] == pytest.approx(
@@ -155,9 +155,9 @@ def test_matches_reference_and_cache_is_exact(delays, q_init, steps):
         reference.update(s, a, r, s2, terminated, truncated)
         np.testing.assert_array_equal(agent.q_table, reference.q)
         rows = agent.q_table.reshape(9, -1)
-        np.testing.assert_array_equal(agent._v_max, rows.max(axis=1))
-        cells = agent._v_cell - np.arange(9) * rows.shape[1]
-        np.testing.assert_array_equal(rows[np.arange(9), cells], agent._v_max)
+        np.testing.assert_array_equal(agent._table.v_max, rows.max(axis=1))
+        cells = agent._table.v_cell - np.arange(9) * rows.shape[1]
+        np.testing.assert_array_equal(rows[np.arange(9), cells], agent._table.v_max)
 
 
 @settings(max_examples=examples(40), deadline=None)
@@ -173,18 +173,17 @@ def test_vector_and_scalar_paths_agree(values, s, seed):
     scalar = MultipleModelQLearning(env, delay_estimates=[0])
     batched = MultipleModelQLearning(env, delay_estimates=[0])
     for agent in (scalar, batched):
-        agent._q[:3] = np.array(values).reshape(3, 1, 4)
-        agent._rebuild_cache()
+        agent._table.values[:3] = np.array(values).reshape(3, 1, 4)
+        agent._table.rebuild_cache()
     for _ in range(30):
         a, s2, r = int(rng.integers(4)), int(rng.integers(9)), float(rng.normal())
         scalar.update(s, a, r, s2)
         # the same one-model update, forced through the batched path
-        batched._hist_s[0], batched._hist_s2[0] = s, s2
-        batched._hist_cell[0] = s * batched._row_size + a
-        batched._update_models(1, np.array([0]), r, False)
+        batched._history.record(0, s, s2, s * batched._table.row_size + a)
+        batched._update_models(1, r, False, None, 0)
         np.testing.assert_array_equal(scalar.q_table, batched.q_table)
-        np.testing.assert_array_equal(scalar._v_max, batched._v_max)
-        np.testing.assert_array_equal(scalar._v_cell, batched._v_cell)
+        np.testing.assert_array_equal(scalar._table.v_max, batched._table.v_max)
+        np.testing.assert_array_equal(scalar._table.v_cell, batched._table.v_cell)
         s = s2
 
 
@@ -280,9 +279,9 @@ def test_acting_picks_best_model_then_best_action():
     agent = MultipleModelQLearning(
         env, delay_estimates=[0, 4, 9], exploration_initial_eps=0.0, exploration_final_eps=0.0
     )
-    agent._q[2, 1, 3] = 7.0  # model λ̂=4 holds the best value at state 2, on action 3
-    agent._q[2, 2, 0] = 6.0
-    agent._rebuild_cache()
+    agent._table.values[2, 1, 3] = 7.0  # model λ̂=4 holds the best value at state 2, on action 3
+    agent._table.values[2, 2, 0] = 6.0
+    agent._table.rebuild_cache()
     for _ in range(20):
         assert agent._choose(2, 0.0, agent._uniform) == (1, 3)
     assert agent.preferred_delay(2) == 4
@@ -311,10 +310,10 @@ def test_two_level_tie_break_is_over_models_first():
     bound.
     """
     agent = MultipleModelQLearning(GridWorldEnv(size=3), delay_estimates=[0, 1], seed=5)
-    agent._q[0] = 0.0
-    agent._q[0, 0, :3] = 1.0
-    agent._q[0, 1, 2] = 1.0
-    agent._rebuild_cache()
+    agent._table.values[0] = 0.0
+    agent._table.values[0, 0, :3] = 1.0
+    agent._table.values[0, 1, 2] = 1.0
+    agent._table.rebuild_cache()
     models = [agent._choose(0, 0.0, agent._uniform)[0] for _ in range(4000)]
     assert abs(models.count(1) - 2000) < 5 * np.sqrt(4000 * 0.25)
 
@@ -322,8 +321,8 @@ def test_two_level_tie_break_is_over_models_first():
 def test_exploration_rate_one_is_uniform_over_actions():
     """ε = 1: actions uniform regardless of the table. 4000 draws; sd of a count ≈ 27.4."""
     agent = MultipleModelQLearning(GridWorldEnv(size=3), delay_estimates=[0, 1], seed=1)
-    agent._q[0, 0, 2] = 100.0
-    agent._rebuild_cache()
+    agent._table.values[0, 0, 2] = 100.0
+    agent._table.rebuild_cache()
     actions = np.array([agent._choose(0, 1.0, agent._uniform)[1] for _ in range(4000)])
     counts = np.bincount(actions, minlength=4)
     assert np.all(np.abs(counts - 1000) < 5 * np.sqrt(4000 * 0.25 * 0.75))

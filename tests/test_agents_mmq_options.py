@@ -20,8 +20,9 @@ import numpy as np
 import pytest
 
 import delayed_rl  # noqa: F401  (registers the env ids)
-from delayed_rl.agents import FixedDelayQLearning, MultipleModelQLearning, QLearning, mmq
-from delayed_rl.agents.mmq import greedy_actions
+from delayed_rl.agents import FixedDelayQLearning, MultipleModelQLearning, QLearning
+from delayed_rl.agents.common import q_table
+from delayed_rl.agents.common.q_table import greedy_actions
 from delayed_rl.compiled.kernel import replay
 from delayed_rl.compiled.state import credit_kernel
 
@@ -335,9 +336,9 @@ def test_greedy_window_counts_update_steps_and_small_windows():
 
 
 def test_the_averaged_table_counts_towards_the_memory_limit(monkeypatch):
-    plain = mmq.table_bytes(25, 4, 7, 6)
-    assert mmq.table_bytes(25, 4, 7, 6, averaged_table=True) == plain + 8 * 25 * 7 * 4
-    monkeypatch.setattr(mmq, "MAX_TABLE_BYTES", plain + 100)
+    plain = q_table.table_bytes(25, 4, 7, 6)
+    assert q_table.table_bytes(25, 4, 7, 6, averaged_table=True) == plain + 8 * 25 * 7 * 4
+    monkeypatch.setattr(q_table, "MAX_TABLE_BYTES", plain + 100)
     make()  # fits
     with pytest.raises(ValueError, match="needs .* GiB of tables"):
         make(greedy_window=100)
@@ -368,7 +369,7 @@ def test_copies_keep_the_options_and_continue_exactly(compiled, duplicate):
     original = make(**ALL).learn(1_001, compiled=compiled, log_interval=None)
     twin = duplicate(original)
     assert_same_state(twin, original)
-    assert not np.shares_memory(twin.delay_trace_values, original._trace)
+    assert not np.shares_memory(twin.delay_trace_values, original._credit.trace)
     for agent in (original, twin):
         agent.learn(1_500, compiled=compiled, reset_num_timesteps=False, log_interval=None)
         agent.update(3, 1, 1.0, 4)
@@ -422,7 +423,6 @@ def test_single_model_agents_do_not_take_the_options(tmp_path):
         path = agent.learn(200).save(tmp_path / type(agent).__name__)
         loaded = type(agent).load(path)
         np.testing.assert_array_equal(loaded.q_table, agent.q_table)
-        np.testing.assert_array_equal(loaded.greedy_table, loaded.q_table)
         with pytest.raises(ValueError, match="custom_objects may override"):
             type(agent).load(path, custom_objects={"greedy_window": 10})
     with pytest.raises(TypeError, match="unexpected keyword argument 'reward_kernel'"):

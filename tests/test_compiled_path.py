@@ -128,7 +128,7 @@ def test_grid_dynamics_and_cache_hold_on_the_fused_path():
     )
     np.testing.assert_array_equal(log["obs"][1:], env.next_state[log["obs"], log["action"]][:-1])
     flat = agent.q_table.reshape(9, -1)
-    np.testing.assert_array_equal(agent._v_max, flat.max(axis=1))
+    np.testing.assert_array_equal(agent._table.v_max, flat.max(axis=1))
 
 
 def test_callbacks_see_every_step_and_stop_at_the_chunk_end():

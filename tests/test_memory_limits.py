@@ -244,8 +244,8 @@ def test_deconvq_statistics_a_file_declares_are_checked_before_they_are_read(
     tmp_path, monkeypatch
 ) -> None:
     from delayed_rl.agents import DeconvolutionQLearning
-    from delayed_rl.agents.deconvolution import agent as deconvolution
     from delayed_rl.agents.common import save_util
+    from delayed_rl.agents.deconvolution import agent as deconvolution
 
     path = (
         DeconvolutionQLearning(GridWorldEnv(size=3), max_delay=5, seed=0)

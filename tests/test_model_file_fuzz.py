@@ -38,8 +38,8 @@ from delayed_rl.agents import (
     load_agent,
 )
 from delayed_rl.agents.common import save_util
+from delayed_rl.agents.common.q_table import MAX_TABLE_BYTES
 from delayed_rl.agents.deconvolution import regression as regression_module
-from delayed_rl.agents.mmq import MAX_TABLE_BYTES
 from delayed_rl.delays import Poisson
 from delayed_rl.envs.gridworld import GridWorldEnv
 from delayed_rl.wrappers import RewardDelay

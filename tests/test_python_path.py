@@ -17,12 +17,7 @@ from gymnasium import spaces
 
 from delayed_rl.agents import FixedDelayQLearning, MultipleModelQLearning, QLearning
 from delayed_rl.agents.common.streams import UniformStream
-from delayed_rl.agents.mmq import (
-    _FULL_CREDIT,
-    _NO_OPTION,
-    _credit_weights,
-    _update_batch,
-)
+from delayed_rl.agents.mmq.updates import FULL_CREDIT, NO_OPTION, credit_weights, update_models
 from delayed_rl.delays import Poisson
 from delayed_rl.envs.gridworld import GridWorldEnv
 from delayed_rl.wrappers import RewardDelay
@@ -82,13 +77,13 @@ def test_compiled_batch_update_is_the_numpy_one(seed: int) -> None:
     if seed % 3 == 0:  # transitions grouped by state: several models update one state
         positions = history[0].argsort()[:n_models]
     r, alpha, gamma, terminal = float(rng.choice([-1.0, 0.0, 1.0])), 0.5, 0.9, bool(seed % 2)
-    weights = rng.choice([0.0, 0.5, 1.0], n_models) if seed % 4 == 1 else _FULL_CREDIT
+    weights = rng.choice([0.0, 0.5, 1.0], n_models) if seed % 4 == 1 else FULL_CREDIT
     expected = [q.copy(), v_max.copy(), v_cell.copy()]
-    credit = r if weights is _FULL_CREDIT else r * weights
+    credit = r if weights is FULL_CREDIT else r * weights
     numpy_update(*expected, history, positions, credit, alpha, gamma, terminal)
     q_flat = q.reshape(-1)
     args = (positions, n_models, 0, ring - 1, r, weights, alpha, gamma, terminal, n_actions)
-    _update_batch(q_flat, v_max, v_cell, history, *args)
+    update_models(q_flat, v_max, v_cell, history, *args)
     for got, want in zip((q, v_max, v_cell), expected, strict=True):
         np.testing.assert_array_equal(got, want)
 
@@ -107,10 +102,10 @@ def test_compiled_credit_weights_are_the_numpy_ones(options: str) -> None:
         if kernel is not None:
             expected = kernel[np.abs(estimates - estimates[acting])]
             expected = expected if expected_trace is None else expected * expected_trace
-        got = _credit_weights(
-            _NO_OPTION if trace is None else trace,
+        got = credit_weights(
+            NO_OPTION if trace is None else trace,
             0.7,
-            _NO_OPTION if kernel is None else kernel,
+            NO_OPTION if kernel is None else kernel,
             estimates,
             acting,
         )
@@ -146,21 +141,20 @@ def test_copies_learn_into_their_own_tables(agent_class, kwargs, duplicate) -> N
     np.testing.assert_array_equal(agent.q_table, twin.q_table)
     for trained in (agent, twin):
         v_max, _ = exact_cache(trained.q_table)
-        np.testing.assert_array_equal(trained._v_max, v_max)
+        np.testing.assert_array_equal(trained._table.v_max, v_max)
         rows = trained.q_table.reshape(trained.n_states, -1)
-        cells = trained._v_cell - np.arange(trained.n_states) * rows.shape[1]
+        cells = trained._table.v_cell - np.arange(trained.n_states) * rows.shape[1]
         np.testing.assert_array_equal(rows[np.arange(trained.n_states), cells], v_max)
 
 
 def test_single_model_agents_choose_with_the_action_choice() -> None:
     """One model: the behaviour policy is the action choice, the same draws as MMQ's."""
-    assert QLearning._choose is MultipleModelQLearning._choose_action
-    assert FixedDelayQLearning._choose is MultipleModelQLearning._choose_action
+    assert QLearning._choose is FixedDelayQLearning._choose  # the one-table choice of QAgent
     q, mmq = _trained(QLearning), _trained(MultipleModelQLearning, delay_estimates=[0])
     np.testing.assert_array_equal(q.q_table, mmq.q_table)
     for agent in (q, mmq):
-        agent._q[...] = 1.0  # every action tied: a random tie-break at every greedy step
-        agent._rebuild_cache()
+        agent._table.values[...] = 1.0  # every action tied: a random tie-break at every greedy step
+        agent._table.rebuild_cache()
     draws = [[agent._choose(s % 16, 0.3, agent._uniform) for s in range(300)] for agent in (q, mmq)]
     assert draws[0] == draws[1]
     assert len({action for _, action in draws[0]}) == 4

@@ -38,12 +38,13 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from delayed_rl._delay_line import ring_size
 from delayed_rl._numba import jit as _jit
 from delayed_rl._validation import check_int
 from delayed_rl.agents.common.compiled_loop import CompiledTables
 from delayed_rl.agents.common.hyperparameters import shares_hyperparameters
-from delayed_rl.agents.qlearning import QLearning
+from delayed_rl.agents.common.q_agent import QAgent
+from delayed_rl.agents.common.q_table import first_max
+from delayed_rl.agents.common.transition_ring import TransitionRing
 from delayed_rl.delays import Delay, Empirical, as_delay
 
 __all__ = ["ExpectedCreditQLearning", "credit_weights"]
@@ -123,7 +124,7 @@ def _describe(delay: Delay, weights: np.ndarray) -> dict[str, Any]:
         return Empirical(weights / weights.sum()).to_dict()
 
 
-class ExpectedCreditQLearning(QLearning):
+class ExpectedCreditQLearning(QAgent):
     """Q-learning that spreads every received reward over the past by the delay's pmf.
 
     For rewards delayed by a known distribution (e.g. :class:`~delayed_rl.wrappers.RewardDelay`
@@ -165,7 +166,7 @@ class ExpectedCreditQLearning(QLearning):
         True
     """
 
-    _hyperparameter_names = (*QLearning._hyperparameter_names, "delay", "max_delay")
+    _hyperparameter_names = (*QAgent._hyperparameter_names, "delay", "max_delay")
 
     @shares_hyperparameters
     def __init__(
@@ -219,11 +220,7 @@ class ExpectedCreditQLearning(QLearning):
     # ------------------------------------------------------------------ model
     def _setup_model(self) -> None:
         super()._setup_model()
-        size = ring_size(self._last_lag + 1)
-        self._credit_mask = size - 1
-        self._credit_s = np.zeros(size, dtype=np.int64)
-        self._credit_s2 = np.zeros(size, dtype=np.int64)
-        self._credit_cell = np.zeros(size, dtype=np.int64)  # s·|A| + a
+        self._history = TransitionRing(self._last_lag)
 
     def compiled_tables(self) -> CompiledTables:
         """The Q-table and its cache, the lags and each lag's rate ``α·w(k)``: the rule compiles.
@@ -240,10 +237,7 @@ class ExpectedCreditQLearning(QLearning):
         self, s: int, a: int, r: float, s2: int, terminated: bool, truncated: bool
     ) -> None:
         t = self._t
-        j = t & self._credit_mask
-        self._credit_s[j] = s
-        self._credit_s2[j] = s2
-        self._credit_cell[j] = s * self.n_actions + a
+        self._history.record(t, s, s2, s * self.n_actions + a)
         n = self._lags.size if t >= self._last_lag else self._credit_valid[t]
         if n == 1:
             self._credit_one(t, r, terminated)
@@ -254,24 +248,24 @@ class ExpectedCreditQLearning(QLearning):
 
     def _credit_one(self, t: int, r: float, terminated: bool) -> None:
         """The update of the one creditable lag, the smallest (Python scalars, faster)."""
-        lag, v_max = self._first_lag, self._v_max
-        position = (t - lag) & self._credit_mask
-        s = self._credit_s.item(position)
-        cell = self._credit_cell.item(position)
-        bootstrap = 0.0 if terminated and lag == 0 else v_max.item(self._credit_s2.item(position))
-        self._write_entry(s, cell, r + self.gamma * bootstrap, self._alpha * self._first_weight)
+        lag, table, history = self._first_lag, self._table, self._history
+        j = (t - lag) & history.mask
+        bootstrap = 0.0 if terminated and lag == 0 else table.v_max_items[history.s2[j]]
+        target = r + self.gamma * bootstrap
+        table.write(history.s[j], history.cell[j], target, self._alpha * self._first_weight)
 
     def _credit_many(self, t: int, n: int, r: float, terminated: bool) -> None:
         """The updates of the first ``n`` lags: all TD errors first, increments summed."""
+        table = self._table
         _credit_lags(
-            self._q_flat,
-            self._v_max,
-            self._v_cell,
-            (self._credit_s, self._credit_s2, self._credit_cell),
+            table.flat,
+            table.v_max,
+            table.v_cell,
+            self._history.rows,
             self._lags[:n],
             self._alpha * self._lag_weights[:n],
             t,
-            self._credit_mask,
+            self._history.mask,
             r,
             self.gamma,
             terminated and self._first_lag == 0,  # only the current step can be terminal
@@ -286,7 +280,7 @@ def _credit_lags(q_flat, v_max, v_cell, history, lags, rates, t, mask, r, gamma,
     ``rates[j] · δ_j`` added in lag order, then each touched state's max and its first arg-max
     recomputed: the order of operations of the numpy version it replaced, to the last bit.
     """
-    hist_s, hist_s2, hist_cell = history
+    hist_s, hist_s2, hist_cell = history[0], history[1], history[2]
     n = lags.shape[0]
     n_actions = q_flat.shape[0] // v_max.shape[0]
     errors = np.empty(n)
@@ -309,10 +303,4 @@ def _credit_lags(q_flat, v_max, v_cell, history, lags, rates, t, mask, r, gamma,
                 break
         if seen:
             continue
-        base = s * n_actions
-        best, arg = q_flat[base], 0
-        for a in range(1, n_actions):
-            if q_flat[base + a] > best:
-                best, arg = q_flat[base + a], a
-        v_max[s] = best
-        v_cell[s] = base + arg
+        v_max[s], v_cell[s] = first_max(q_flat, s * n_actions, (s + 1) * n_actions)

@@ -43,13 +43,13 @@ from delayed_rl._delay_line import delay_bound, ring_size
 from delayed_rl.agents.common.compiled_loop import CompiledTables
 from delayed_rl.agents.common.env_util import make_env
 from delayed_rl.agents.common.hyperparameters import check_value, shares_hyperparameters
-from delayed_rl.agents.qlearning import QLearning
+from delayed_rl.agents.common.q_agent import QAgent
 from delayed_rl.wrappers.reward_delay import find_reward_delay
 
 __all__ = ["OracleQLearning"]
 
 
-class OracleQLearning(QLearning):
+class OracleQLearning(QAgent):
     """Q-learning that credits every delayed reward to the transition that emitted it.
 
     The upper bound of what any delayed-reward agent can learn from the same experience: it reads
@@ -121,7 +121,7 @@ class OracleQLearning(QLearning):
         self._arrivals = None
 
     def compiled_tables(self) -> CompiledTables:
-        """Q-learning's tables, and how many recent transitions the oracle credits."""
+        """The Q-table and its cache, and how many recent transitions the oracle credits."""
         return super().compiled_tables()._replace(held_transitions=self.history_length)
 
     # ------------------------------------------------------------------ env
@@ -263,7 +263,7 @@ class OracleQLearning(QLearning):
     def _credit(self, arrivals: Sequence[tuple[int, float]]) -> None:
         """The update of each arrival's transition, one after the other (see the module)."""
         start, mask, n_actions = self._episode_start, self._ring_mask, self.n_actions
-        steps, v_max = self._past_step, self._v_max
+        steps, table = self._past_step, self._table
         alpha, gamma = self._alpha, self.gamma
         for emitted, value in arrivals:
             clock = start + emitted
@@ -273,5 +273,7 @@ class OracleQLearning(QLearning):
             steps[j] = -1  # each transition has one reward: it is updated once
             cell = self._past_cell.item(j)
             s = cell // n_actions
-            bootstrap = 0.0 if self._past_terminated.item(j) else v_max.item(self._past_s2.item(j))
-            self._write_entry(s, cell, value + gamma * bootstrap, alpha)
+            bootstrap = (
+                0.0 if self._past_terminated.item(j) else table.v_max.item(self._past_s2.item(j))
+            )
+            table.write(s, cell, value + gamma * bootstrap, alpha)

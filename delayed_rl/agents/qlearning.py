@@ -1,10 +1,12 @@
-"""Q-learning and fixed-delay Q-learning: Multiple Model Q-learning with a single model.
+"""Q-learning and fixed-delay Q-learning: one Q-table, each reward credited to one step.
 
-``QLearning`` is MMQ with Λ = {0} (every reward credited to the step that just happened, the
-textbook rule, thesis Eq. 3.2); ``FixedDelayQLearning(delay_estimate=k)`` is MMQ with Λ = {k} (every
-reward credited to the step ``k`` steps back, the constant-delay agents of thesis Fig. 5.6). Both
-run MMQ's code, so ``QLearning`` and ``MultipleModelQLearning(delay_estimates=[0])`` produce
-identical tables for the same seed and env.
+``QLearning`` credits every reward to the step that just happened (the textbook rule, thesis
+Eq. 3.2); ``FixedDelayQLearning(delay_estimate=k)`` credits it to the step ``k`` steps back (the
+constant-delay agents of thesis Fig. 5.6). Both are Multiple Model Q-learning with a single
+model, Λ = {0} and Λ = {k}: ``QLearning`` and ``MultipleModelQLearning(delay_estimates=[0])``
+produce identical tables for the same seed and env, and so do ``FixedDelayQLearning`` and
+``MultipleModelQLearning(delay_estimates=[k])`` (the rules are written plainly in
+:mod:`delayed_rl.agents.reference`).
 """
 
 from __future__ import annotations
@@ -12,24 +14,17 @@ from __future__ import annotations
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 
 from delayed_rl._validation import check_int
 from delayed_rl.agents.common.hyperparameters import shares_hyperparameters
-from delayed_rl.agents.mmq import OPTION_NAMES, MultipleModelQLearning, check_delay_estimates
+from delayed_rl.agents.common.q_agent import QAgent, check_delay_estimates
+from delayed_rl.agents.common.transition_ring import TransitionRing
 
 __all__ = ["FixedDelayQLearning", "QLearning"]
 
-_SINGLE_MODEL_NAMES = tuple(
-    name for name in MultipleModelQLearning._hyperparameter_names if name not in OPTION_NAMES
-)  # MMQ's options are not exposed: with one model, the kernel and the trace are moot
 
-
-def _estimates(delay_estimates: Any) -> list[int]:
-    """Λ as a file gives it, checked as MMQ checks it (a sequence of distinct integers >= 0)."""
-    return check_delay_estimates(None, None, delay_estimates).tolist()
-
-
-class QLearning(MultipleModelQLearning):
+class QLearning(QAgent):
     """Tabular Q-learning (Watkins), ε-greedy with random tie-breaks.
 
     ``Q(s, a) += α (r + γ (1 − terminated) max_a′ Q(s′, a′) − Q(s, a))`` after every step. Under
@@ -49,20 +44,18 @@ class QLearning(MultipleModelQLearning):
         True
     """
 
-    _hyperparameter_names = _SINGLE_MODEL_NAMES
-    _choose = MultipleModelQLearning._choose_action  # one model: the choice is its action's
-
     @shares_hyperparameters
     def __init__(self, env: gym.Env | str, **hyperparameters: Any):
-        super().__init__(env, delay_estimates=[0], **hyperparameters)
+        super().__init__(env, **hyperparameters)
 
-    def _set_hyperparameters(self, *, delay_estimates: Any = None, **kwargs: Any) -> None:
-        if delay_estimates is not None and _estimates(delay_estimates) != [0]:
-            raise ValueError(f"QLearning has delay_estimates [0], got {delay_estimates!r}")
-        super()._set_hyperparameters(delay_estimates=delay_estimates, **kwargs)
+    def _learn_transition(
+        self, s: int, a: int, r: float, s2: int, terminated: bool, truncated: bool
+    ) -> None:
+        self._q_learning_update(s, a, r, s2, terminated)
+        self.num_timesteps += 1
 
 
-class FixedDelayQLearning(MultipleModelQLearning):
+class FixedDelayQLearning(QAgent):
     """Q-learning that assumes every reward arrives exactly ``delay_estimate`` steps late.
 
     The reward received at step ``t`` is credited to the transition of step
@@ -80,9 +73,6 @@ class FixedDelayQLearning(MultipleModelQLearning):
             :class:`~delayed_rl.agents.common.base.TabularAgent`.
     """
 
-    _hyperparameter_names = _SINGLE_MODEL_NAMES
-    _choose = MultipleModelQLearning._choose_action  # one model: the choice is its action's
-
     @shares_hyperparameters
     def __init__(
         self,
@@ -93,17 +83,43 @@ class FixedDelayQLearning(MultipleModelQLearning):
         if delay_estimate is None:
             raise TypeError("FixedDelayQLearning needs delay_estimate, the assumed delay in steps")
         check_int("delay_estimate", delay_estimate, 0)
-        super().__init__(env, delay_estimates=[int(delay_estimate)], **hyperparameters)
+        estimates = check_delay_estimates([delay_estimate], "delay_estimate")
+        super().__init__(
+            env,
+            delay_estimates=estimates,
+            delay_argument=("delay_estimate", int(delay_estimate)),
+            **hyperparameters,
+        )
 
     @property
     def delay_estimate(self) -> int:
         """The assumed delay, in steps."""
         return int(self._delay_estimates[0])
 
-    def _set_hyperparameters(self, *, delay_estimates: Any = None, **kwargs: Any) -> None:
-        if delay_estimates is not None and len(_estimates(delay_estimates)) != 1:
+    def _check_saved_delay_estimates(self, values: Any) -> np.ndarray:
+        checked = check_delay_estimates(values)
+        if checked.size != 1:
             raise ValueError(
-                f"FixedDelayQLearning has one delay estimate, got delay_estimates="
-                f"{delay_estimates!r}"
+                f"FixedDelayQLearning has one delay estimate, got delay_estimates={values!r}"
             )
-        super()._set_hyperparameters(delay_estimates=delay_estimates, **kwargs)
+        return checked
+
+    def _setup_model(self) -> None:
+        super()._setup_model()
+        self._history = TransitionRing(self.delay_estimate)
+
+    def _learn_transition(
+        self, s: int, a: int, r: float, s2: int, terminated: bool, truncated: bool
+    ) -> None:
+        lag, t = self.delay_estimate, self._t
+        if not lag:
+            self._q_learning_update(s, a, r, s2, terminated)
+        else:  # the transition lag steps back, never terminal (only the current step can be)
+            history, table = self._history, self._table
+            history.record(t, s, s2, s * table.row_size + a)
+            if t >= lag:
+                j = (t - lag) & history.mask
+                target = r + self.gamma * table.v_max_items[history.s2[j]]
+                table.write(history.s[j], history.cell[j], target, self._alpha)
+        self.num_timesteps += 1
+        self._t = 0 if (terminated or truncated) else t + 1

@@ -52,7 +52,7 @@ FORMAT_VERSION = 1
 MAX_MODEL_BYTES = 2**30 + 2**24
 """The most bytes a model file's arrays may hold once decompressed (1 GiB + 16 MiB).
 
-Room for the largest tables an agent may allocate (``delayed_rl.agents.mmq.MAX_TABLE_BYTES``,
+Room for the largest tables an agent may allocate (``delayed_rl.agents.common.q_table.MAX_TABLE_BYTES``,
 1 GiB) plus the metadata and the small arrays. ``save`` refuses to write more and loading refuses
 a file that declares more (a zip bomb) before decompressing it. Raise both limits together to
 work with larger tables.

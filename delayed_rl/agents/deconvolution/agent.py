@@ -51,14 +51,14 @@ from delayed_rl.agents.common.hyperparameters import (
 )
 from delayed_rl.agents.common.persistence import check_state_array
 from delayed_rl.agents.common.python_loop import MAX_TIMESTEPS
+from delayed_rl.agents.common.q_agent import QAgent
+from delayed_rl.agents.common.q_table import MAX_TABLE_BYTES, table_bytes
 from delayed_rl.agents.deconvolution.regression import (
     STATISTICS_LIMIT,
     RewardRegression,
     statistics_bytes,
 )
 from delayed_rl.agents.expected_credit import credit_weights
-from delayed_rl.agents.mmq import MAX_TABLE_BYTES, table_bytes
-from delayed_rl.agents.qlearning import QLearning
 from delayed_rl.compiled.state import RewardModel
 from delayed_rl.delays import Delay, Empirical
 from delayed_rl.wrappers.reward_delay import find_reward_delay
@@ -107,7 +107,7 @@ _OWN_NAMES = {  # this class's own constructor arguments, and their defaults
 }
 
 
-class DeconvolutionQLearning(QLearning):
+class DeconvolutionQLearning(QAgent):
     """Q-learning on mean rewards estimated by deconvolving the delayed reward stream.
 
     See the module docstring for the rule. The reward model ``R̂`` is 0 until the first solve, so
@@ -152,7 +152,7 @@ class DeconvolutionQLearning(QLearning):
             :class:`~delayed_rl.agents.common.base.TabularAgent`.
 
     The tables (Q-table, reward model, statistics and the solves' workspace) must fit
-    ``delayed_rl.agents.mmq.MAX_TABLE_BYTES``, checked before anything is allocated. A model
+    ``delayed_rl.agents.common.q_table.MAX_TABLE_BYTES``, checked before anything is allocated. A model
     file is checked as the constructor checks its arguments, and its arrays as
     :meth:`_set_state_arrays` says.
 
@@ -168,7 +168,7 @@ class DeconvolutionQLearning(QLearning):
         (9,)
     """
 
-    _hyperparameter_names = (*QLearning._hyperparameter_names, *_OWN_NAMES)
+    _hyperparameter_names = (*QAgent._hyperparameter_names, *_OWN_NAMES)
 
     @shares_hyperparameters
     def __init__(
@@ -298,7 +298,7 @@ class DeconvolutionQLearning(QLearning):
                 f"states and {self.n_actions} actions needs {size / 2**30:.3g} GiB of tables "
                 f"(delays modelled up to {self._support} steps: {self._support + 1} reward sums "
                 f"per (state, action) pair), over MAX_TABLE_BYTES = "
-                f"{MAX_TABLE_BYTES / 2**30:g} GiB (delayed_rl.agents.mmq.MAX_TABLE_BYTES): use a "
+                f"{MAX_TABLE_BYTES / 2**30:g} GiB (delayed_rl.agents.common.q_table.MAX_TABLE_BYTES): use a "
                 "shorter max_delay or a smaller state space"
             )
 
@@ -355,7 +355,8 @@ class DeconvolutionQLearning(QLearning):
         self, s: int, a: int, r: float, s2: int, terminated: bool, truncated: bool
     ) -> None:
         pair = s * self.n_actions + a
-        super()._learn_transition(s, a, float(self._reward_model[pair]), s2, terminated, truncated)
+        self._q_learning_update(s, a, float(self._reward_model[pair]), s2, terminated)
+        self.num_timesteps += 1
         self._regression.observe(pair, r, terminated or truncated)
         self._since_solve += 1
         if self._since_solve >= self._solve_after:
