@@ -210,33 +210,16 @@ class CompiledRun:
                 one it can keep (its table a C-contiguous float64 array shaped as ``q``, its
                 clock two int64 counters, ``every`` ≥ 1, ``rate`` finite).
         """
-        if isinstance(steps, (bool, np.bool_)) or not isinstance(steps, (int, np.integer)):
-            raise TypeError(f"steps must be an integer >= 0, got {steps!r}")
-        if steps < 0:
-            raise ValueError(f"steps must be an integer >= 0, got {steps!r}")
+        _check_steps(steps)
         delays = self._draw_delays(steps)
         self._fit_ring(int(delays.max(initial=0)))
-        if self.tie_counts.shape != v_max.shape:
-            self.tie_counts = np.zeros(v_max.shape, dtype=np.int64)
-        estimates = self.delay_estimates
-        span = int(estimates[-1] - estimates[0])
-        if credit_kernel is not None and (
-            credit_kernel.dtype != np.float64 or credit_kernel.shape[0] <= span
-        ):
-            raise ValueError("credit_kernel must hold a float64 weight per distance in Λ's span")
-        if trace_decay is None:
-            trace = None
-        elif trace is None or trace.dtype != np.float64 or trace.shape != estimates.shape:
-            raise ValueError(f"trace must be a float64 array of shape {estimates.shape}")
-        if lag_rates is not None and (
-            lag_rates.dtype != np.float64 or lag_rates.shape != estimates.shape
-        ):
-            raise ValueError(f"lag_rates must be a float64 array of shape {estimates.shape}")
+        self._fit_tie_counts(v_max.shape)
+        trace = _checked_credit(self.delay_estimates, credit_kernel, trace_decay, trace, lag_rates)
         if average is not None:
             _check_average(average, q.shape)
         cache = state.QCache(q, v_max, v_cell, self.tie_counts, trace)
         rule = state.Rule(
-            delay_estimates=estimates,
+            delay_estimates=self.delay_estimates,
             learning_rate=float(learning_rate),
             gamma=float(gamma),
             eps_initial=float(eps_initial),
@@ -246,6 +229,29 @@ class CompiledRun:
             trace_decay=None if trace_decay is None else float(trace_decay),
             lag_rates=lag_rates,
         )
+        return self._advance(cache, rule, delays, steps, start_step, reward_model, average)
+
+    def _fit_tie_counts(self, shape: tuple[int, ...]) -> None:
+        """Give :attr:`tie_counts` the shape of the agent's ``v_max`` (zeros when it changes)."""
+        if self.tie_counts.shape != shape:
+            self.tie_counts = np.zeros(shape, dtype=np.int64)
+
+    def _advance(
+        self,
+        cache: state.QCache,
+        rule: state.Rule,
+        delays: np.ndarray,
+        steps: int,
+        start_step: int,
+        reward_model: state.RewardModel | None,
+        average: state.TableAverage | None,
+    ) -> state.StepLog:
+        """Take the chunk's ``steps`` in the compiled loop, with its ``delays``; return their log.
+
+        The e-puck's arguments are lent to the loop for the chunk
+        (:meth:`~delayed_rl.compiled.robot.RobotLink.arguments`); what the loop saw is then
+        passed on (:meth:`_report`).
+        """
         line = state.DelayLine(delays, self.ring, self.mode, np.zeros(1))
         log = state.StepLog.empty(steps)
         with contextlib.ExitStack() as stack:
@@ -261,17 +267,72 @@ class CompiledRun:
                 int(start_step),
                 self.rng_state, reward_model, self.arrivals, average, robot,
             )  # fmt: skip
+        self._report(line, log)
+        return log
+
+    def _report(self, line: state.DelayLine, log: state.StepLog) -> None:
+        """Pass on what the chunk's loop saw: reward the resets discarded, the steps it took.
+
+        The discarded reward (by a TimeLimit above the RewardDelay) is warned of; the steps go to
+        the wrapper's flush-trap watch. Called from :meth:`run` through :meth:`_advance`: the
+        stack levels count those two calls.
+        """
         if line.discarded[0] != 0.0:
             warnings.warn(
                 f"a TimeLimit above the RewardDelay cut episodes short: the resets discarded "
                 f"{line.discarded[0]} of pending reward (on_episode_end={self.on_episode_end!r}); "
                 "end episodes inside the RewardDelay wrapper to have them flushed",
-                stacklevel=4,
+                stacklevel=6,
             )
         if self.wrapper is not None:
             ends = log.episode_end.astype(bool)
-            self.wrapper.watch_steps_taken_elsewhere(log.undelayed_reward, ends, stacklevel=6)
-        return log
+            self.wrapper.watch_steps_taken_elsewhere(log.undelayed_reward, ends, stacklevel=8)
+
+
+def _check_steps(steps: object) -> None:
+    """Refuse a step count that is not an integer ``>= 0`` (a bool is not one).
+
+    Raises:
+        TypeError: ``steps`` is not an integer.
+        ValueError: ``steps`` is negative.
+    """
+    if isinstance(steps, (bool, np.bool_)) or not isinstance(steps, (int, np.integer)):
+        raise TypeError(f"steps must be an integer >= 0, got {steps!r}")
+    if steps < 0:
+        raise ValueError(f"steps must be an integer >= 0, got {steps!r}")
+
+
+def _checked_credit(
+    estimates: np.ndarray,
+    credit_kernel: np.ndarray | None,
+    trace_decay: float | None,
+    trace: np.ndarray | None,
+    lag_rates: np.ndarray | None,
+) -> np.ndarray | None:
+    """Check the credit options against Λ (``estimates``); return the trace the loop is to read.
+
+    The kernel first, then the trace, then the lag rates. The trace is ``None`` (not read) when
+    ``trace_decay`` is, whatever was passed.
+
+    Raises:
+        ValueError: ``credit_kernel`` is not a float64 weight per distance in Λ's span, or
+            ``trace_decay`` is given without a ``trace`` of one float64 per model, or
+            ``lag_rates`` is not one float64 per lag.
+    """
+    span = int(estimates[-1] - estimates[0])
+    if credit_kernel is not None and (
+        credit_kernel.dtype != np.float64 or credit_kernel.shape[0] <= span
+    ):
+        raise ValueError("credit_kernel must hold a float64 weight per distance in Λ's span")
+    if trace_decay is None:
+        trace = None
+    elif trace is None or trace.dtype != np.float64 or trace.shape != estimates.shape:
+        raise ValueError(f"trace must be a float64 array of shape {estimates.shape}")
+    if lag_rates is not None and (
+        lag_rates.dtype != np.float64 or lag_rates.shape != estimates.shape
+    ):
+        raise ValueError(f"lag_rates must be a float64 array of shape {estimates.shape}")
+    return trace
 
 
 def _check_average(average: state.TableAverage, shape: tuple[int, ...]) -> None:

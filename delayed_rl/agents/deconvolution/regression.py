@@ -640,34 +640,38 @@ class RewardRegression:
             ValueError: an array is missing, of the wrong shape or type, or out of range (the
                 message names it).
         """
-        missing = [name for name in Statistics._fields if name not in arrays and name != "keys"]
-        if missing or ("keys" not in arrays and np.ndim(arrays.get("cooc")) != 3):
-            raise ValueError(
-                f"missing statistics: {[prefix + name for name in missing or ['keys']]}"
-            )
+        _check_present(arrays, prefix)
         arrays = _upgraded(dict(arrays), self.n_pairs)
+        rows = _table_rows(arrays, self.n_pairs, prefix)
+        self._check_types(arrays, rows, prefix)
+        arrays = {
+            name: arrays[name].astype(ours.dtype, copy=False) for name, ours in self._fields()
+        }
+        _check_bytes(arrays["cooc"], arrays["keys"], prefix)
+        counters = arrays["counters"]
+        self._check_counters(counters, arrays["end_lengths"].shape[0], prefix)
+        steps, used = int(counters[1]), int(counters[6])
+        _check_counts(arrays["cooc"], steps, prefix)
+        _check_table(arrays["keys"], arrays["cooc"], used, self.n_pairs, prefix)
+        self._check_windows(arrays, prefix)
+        _check_reward_sums(arrays, steps, prefix)
+        self.stats = Statistics(*(arrays[name].copy() for name in Statistics._fields))
+        self.reserve(1)
+
+    def _check_types(self, arrays: dict[str, Any], rows: int, prefix: str) -> None:
+        """Refuse an array that is not of the dtype and shape of this regression's statistics.
+
+        The shapes follow from ``K``, ``P``, the counts' ``rows`` (:func:`_table_rows`) and the
+        end arrays' length; a byte order other than the machine's is accepted.
+
+        Raises:
+            ValueError: naming the first array of :class:`Statistics`' order that is not.
+        """
         k1, n_pairs = self.max_delay + 1, self.n_pairs
-        keys = arrays["keys"]
-        if not isinstance(keys, np.ndarray) or keys.dtype != np.int64 or keys.ndim != 1:
-            raise ValueError(f"{prefix}keys must be a 1-d int64 array")
-        hashed = keys.size > 0
-        if hashed and keys.size & (keys.size - 1):
-            raise ValueError(f"{prefix}keys must have a power-of-two length, got {keys.size}")
-        end_lengths, cooc = arrays["end_lengths"], arrays["cooc"]
-        if not isinstance(end_lengths, np.ndarray) or end_lengths.ndim != 1:
-            raise ValueError(
-                f"{prefix}end_lengths must be a 1-d int64 array (one length per segment end)"
-            )
-        rows = keys.size if hashed else n_pairs * n_pairs
-        if isinstance(cooc, np.ndarray) and cooc.ndim == 2 and cooc.shape[0] != rows:
-            raise ValueError(
-                f"{prefix}cooc has {cooc.shape[0]} rows but {prefix}keys says {rows} ("
-                + (f"a hashed table of {rows} rows)" if hashed else f"the direct layout's {rows})")
-            )
-        ends = end_lengths.shape[0]
+        ends = arrays["end_lengths"].shape[0]
         shapes = {
-            "cooc": (keys.size if hashed else n_pairs * n_pairs, k1),
-            "keys": keys.shape,
+            "cooc": (rows, k1),
+            "keys": arrays["keys"].shape,
             "by_lag": (k1, n_pairs),
             "window": (k1,),
             "counters": (7,),
@@ -676,7 +680,7 @@ class RewardRegression:
             "end_rewards": (ends,),
             "end_flushed": (ends,),
         }
-        for name, ours in zip(Statistics._fields, self.stats, strict=True):
+        for name, ours in self._fields():
             value = arrays[name]
             if (
                 not isinstance(value, np.ndarray)
@@ -693,18 +697,17 @@ class RewardRegression:
                     f"{prefix}{name} must be a {ours.dtype} array of shape {shapes[name]}"
                     f"{per_end}, got {got}"
                 )
-        arrays = {
-            name: arrays[name].astype(ours.dtype, copy=False) for name, ours in self._fields()
-        }
-        nbytes = arrays["cooc"].nbytes + keys.nbytes
-        if nbytes > STATISTICS_LIMIT:
-            raise ValueError(
-                f"{prefix}cooc and {prefix}keys take {nbytes / 2**20:,.0f} MiB, more than the "
-                f"limit of STATISTICS_LIMIT = {STATISTICS_LIMIT / 2**20:.0f} MiB "
-                "(delayed_rl.agents.deconvolution.regression.STATISTICS_LIMIT)"
-            )
-        counters = arrays["counters"]
-        length, steps, n_ends, flush, carry, pairs, used = (int(v) for v in counters)
+
+    def _check_counters(self, counters: np.ndarray, ends: int, prefix: str) -> None:
+        """Refuse counters out of range, or of another episode-end mode than this one's.
+
+        Raises:
+            ValueError: the window's length is not in ``0..K + 1``, the steps are negative, the
+                segment ends are not ``ends`` (the end arrays' length) or the pairs not ``P``;
+                or the flush and carry flags are not this regression's.
+        """
+        k1, n_pairs = self.max_delay + 1, self.n_pairs
+        length, steps, n_ends, flush, carry, pairs, _ = (int(v) for v in counters)
         if not 0 <= length <= k1 or steps < 0 or n_ends != ends or pairs != n_pairs:
             raise ValueError(
                 f"{prefix}counters must be [window length in 0..{k1}, steps >= 0, segment ends "
@@ -716,38 +719,23 @@ class RewardRegression:
                 f"{prefix}counters' flush and carry ({flush}, {carry}) disagree with the "
                 f"episode-end mode ({int(self.flush)}, {int(self.carry)})"
             )
-        cooc = arrays["cooc"]
-        if np.any(cooc < 0):
-            raise ValueError(f"{prefix}cooc must hold counts >= 0")
-        if int(cooc[:, 0].sum(dtype=np.int64)) != steps:
-            raise ValueError(
-                f"{prefix}cooc's lag-0 counts must add up to the step count {steps} (one a "
-                f"step, {prefix}counters[1]), got {int(cooc[:, 0].sum(dtype=np.int64))}"
-            )
-        if hashed:
-            in_use = keys != -1
-            if used != int(in_use.sum()) or 2 * used > keys.size:
-                raise ValueError(
-                    f"{prefix}counters[6] (the hashed table's rows in use) must be the number "
-                    f"of {prefix}keys in use ({int(in_use.sum())}, at most half of "
-                    f"{keys.size}), got {used}"
-                )
-            if np.any(keys[in_use] < 0) or np.any(keys[in_use] >= n_pairs * n_pairs):
-                raise ValueError(f"{prefix}keys: a key names a couple outside the env's pairs")
-            if not _all_found(keys):
-                raise ValueError(
-                    f"{prefix}keys: the hashed table's keys are not where lookups find them"
-                )
-            if np.any(cooc[~in_use]):
-                raise ValueError(f"{prefix}cooc: a free row of the hashed table holds counts")
-        elif used:
-            raise ValueError(f"{prefix}counters[6] must be 0 in the direct layout, got {used}")
+
+    def _check_windows(self, arrays: dict[str, np.ndarray], prefix: str) -> None:
+        """Refuse windows that do not hold the env's pairs, or segment ends this mode cannot have.
+
+        Raises:
+            ValueError: a window holds a pair outside ``0..P − 1``, an ended window's length is
+                outside ``1..K + 1``, a carried-over stream has an end, or an end is not flushed
+                exactly under ``"flush"``.
+        """
+        k1, n_pairs = self.max_delay + 1, self.n_pairs
         indices = np.concatenate([arrays["window"], arrays["end_windows"].ravel()])
         if indices.size and (indices.min() < 0 or indices.max() >= n_pairs):
             raise ValueError(
                 f"{prefix}window and {prefix}end_windows must hold pairs in 0..{n_pairs - 1}"
             )
         lengths, flushed = arrays["end_lengths"], arrays["end_flushed"]
+        ends = lengths.shape[0]
         if ends and (lengths.min() < 1 or lengths.max() > k1):
             raise ValueError(f"{prefix}end_lengths must hold lengths in 1..{k1}")
         if self.carry and ends:
@@ -756,18 +744,6 @@ class RewardRegression:
             raise ValueError(
                 f"{prefix}end_flushed must be {self.flush} for every end (the episode-end mode)"
             )
-        bound = max(steps, 1) * MAX_ABS_VALUE
-        for name in ("by_lag", "end_rewards"):
-            sums = arrays[name]
-            if not np.all(np.isfinite(sums)) or np.any(np.abs(sums) > bound):
-                raise ValueError(
-                    f"{prefix}{name} must hold finite reward sums within the step count times "
-                    f"MAX_ABS_VALUE = 2**200 (delayed_rl.agents.common.hyperparameters.MAX_ABS_VALUE)"
-                )
-        if np.any(arrays["end_rewards"][~flushed]):
-            raise ValueError(f"{prefix}end_rewards: only a flushed end holds a reward")
-        self.stats = Statistics(*(arrays[name].copy() for name in Statistics._fields))
-        self.reserve(1)
 
     def _fields(self) -> list[tuple[str, Any]]:
         """``(name, array)`` of each statistic, in :class:`Statistics`' order."""
@@ -911,3 +887,126 @@ def _upgraded(arrays: dict[str, Any], n_pairs: int) -> dict[str, Any]:
     if counters.shape == (5,):
         arrays["counters"] = np.append(counters, [n_pairs, 0]).astype(counters.dtype)
     return arrays
+
+
+def _check_present(arrays: dict[str, Any], prefix: str) -> None:
+    """Refuse statistics with an array missing (``keys`` may be, in an earlier version's).
+
+    Raises:
+        ValueError: naming the missing arrays (``keys`` when only it is, the counts not being
+            an earlier version's ``cooc[m, i, j]``).
+    """
+    missing = [name for name in Statistics._fields if name not in arrays and name != "keys"]
+    if missing or ("keys" not in arrays and np.ndim(arrays.get("cooc")) != 3):
+        raise ValueError(f"missing statistics: {[prefix + name for name in missing or ['keys']]}")
+
+
+def _table_rows(arrays: dict[str, Any], n_pairs: int, prefix: str) -> int:
+    """The rows the counts must have: the hashed table's, or the direct layout's ``P²``.
+
+    First the arrays the other shapes follow from are checked: the keys (empty for the direct
+    layout), the end lengths (one per segment end) and the counts' rows against the keys.
+
+    Raises:
+        ValueError: ``keys`` is not a 1-d int64 array of a power-of-two length (or empty),
+            ``end_lengths`` is not 1-d, or a 2-d ``cooc`` has other rows than the keys say.
+    """
+    keys = arrays["keys"]
+    if not isinstance(keys, np.ndarray) or keys.dtype != np.int64 or keys.ndim != 1:
+        raise ValueError(f"{prefix}keys must be a 1-d int64 array")
+    hashed = keys.size > 0
+    if hashed and keys.size & (keys.size - 1):
+        raise ValueError(f"{prefix}keys must have a power-of-two length, got {keys.size}")
+    end_lengths, cooc = arrays["end_lengths"], arrays["cooc"]
+    if not isinstance(end_lengths, np.ndarray) or end_lengths.ndim != 1:
+        raise ValueError(
+            f"{prefix}end_lengths must be a 1-d int64 array (one length per segment end)"
+        )
+    rows = keys.size if hashed else n_pairs * n_pairs
+    if isinstance(cooc, np.ndarray) and cooc.ndim == 2 and cooc.shape[0] != rows:
+        raise ValueError(
+            f"{prefix}cooc has {cooc.shape[0]} rows but {prefix}keys says {rows} ("
+            + (f"a hashed table of {rows} rows)" if hashed else f"the direct layout's {rows})")
+        )
+    return rows
+
+
+def _check_bytes(cooc: np.ndarray, keys: np.ndarray, prefix: str) -> None:
+    """Refuse counts and keys that take more than :data:`STATISTICS_LIMIT` bytes.
+
+    Raises:
+        ValueError: naming the MiB they take and the limit.
+    """
+    nbytes = cooc.nbytes + keys.nbytes
+    if nbytes > STATISTICS_LIMIT:
+        raise ValueError(
+            f"{prefix}cooc and {prefix}keys take {nbytes / 2**20:,.0f} MiB, more than the "
+            f"limit of STATISTICS_LIMIT = {STATISTICS_LIMIT / 2**20:.0f} MiB "
+            "(delayed_rl.agents.deconvolution.regression.STATISTICS_LIMIT)"
+        )
+
+
+def _check_counts(cooc: np.ndarray, steps: int, prefix: str) -> None:
+    """Refuse negative counts, or lag-0 counts that do not add up to ``steps`` (one a step).
+
+    Raises:
+        ValueError: a count is negative or the lag-0 counts' sum is not ``steps``.
+    """
+    if np.any(cooc < 0):
+        raise ValueError(f"{prefix}cooc must hold counts >= 0")
+    if int(cooc[:, 0].sum(dtype=np.int64)) != steps:
+        raise ValueError(
+            f"{prefix}cooc's lag-0 counts must add up to the step count {steps} (one a "
+            f"step, {prefix}counters[1]), got {int(cooc[:, 0].sum(dtype=np.int64))}"
+        )
+
+
+def _check_table(keys: np.ndarray, cooc: np.ndarray, used: int, n_pairs: int, prefix: str) -> None:
+    """Refuse a hashed table lookups would not read back, or a direct layout counting rows in use.
+
+    Hashed: ``used`` (``counters[6]``) counts the keys in use, at most half the table; each key
+    names a couple of the env's pairs and sits where a lookup finds it; a free row holds no
+    counts. Direct: ``used`` is 0.
+
+    Raises:
+        ValueError: naming the first of those that fails.
+    """
+    if not keys.size:
+        if used:
+            raise ValueError(f"{prefix}counters[6] must be 0 in the direct layout, got {used}")
+        return
+    in_use = keys != -1
+    if used != int(in_use.sum()) or 2 * used > keys.size:
+        raise ValueError(
+            f"{prefix}counters[6] (the hashed table's rows in use) must be the number "
+            f"of {prefix}keys in use ({int(in_use.sum())}, at most half of "
+            f"{keys.size}), got {used}"
+        )
+    if np.any(keys[in_use] < 0) or np.any(keys[in_use] >= n_pairs * n_pairs):
+        raise ValueError(f"{prefix}keys: a key names a couple outside the env's pairs")
+    if not _all_found(keys):
+        raise ValueError(f"{prefix}keys: the hashed table's keys are not where lookups find them")
+    if np.any(cooc[~in_use]):
+        raise ValueError(f"{prefix}cooc: a free row of the hashed table holds counts")
+
+
+def _check_reward_sums(arrays: dict[str, np.ndarray], steps: int, prefix: str) -> None:
+    """Refuse reward sums that are not finite or too large, or a reward at an end not flushed.
+
+    Each sum holds at most one reward a step, so its bound is the step count (at least 1) times
+    :data:`~delayed_rl.agents.common.hyperparameters.MAX_ABS_VALUE`.
+
+    Raises:
+        ValueError: ``by_lag`` or ``end_rewards`` holds a sum out of bounds, or an end that is
+            not flushed holds a reward.
+    """
+    bound = max(steps, 1) * MAX_ABS_VALUE
+    for name in ("by_lag", "end_rewards"):
+        sums = arrays[name]
+        if not np.all(np.isfinite(sums)) or np.any(np.abs(sums) > bound):
+            raise ValueError(
+                f"{prefix}{name} must hold finite reward sums within the step count times "
+                f"MAX_ABS_VALUE = 2**200 (delayed_rl.agents.common.hyperparameters.MAX_ABS_VALUE)"
+            )
+    if np.any(arrays["end_rewards"][~arrays["end_flushed"]]):
+        raise ValueError(f"{prefix}end_rewards: only a flushed end holds a reward")

@@ -244,6 +244,96 @@ def _check_size(points: FloatArray, name: str = "points") -> None:
         )
 
 
+def _polyline_vertices(points: ArrayLike) -> FloatArray:
+    """The vertices of a user's closed polyline, its closing point (a repeat of the first) cut.
+
+    Raises:
+        TypeError: ``points`` is not an array-like of numbers.
+        ValueError: the polyline is not of shape ``(n + 1, 2)``, holds non-finite values, has
+            fewer than 4 points or is not closed (last == first, within 1 µm).
+    """
+    p = _as_points(points)
+    if not np.all(np.isfinite(p)):
+        bad = np.argwhere(~np.isfinite(p))[0, 0]
+        raise ValueError(f"track polyline must be finite, got point {bad} = {p[bad].tolist()}")
+    if len(p) < 4:
+        raise ValueError(
+            f"track polyline needs at least 3 distinct points plus the closing point "
+            f"(last == first), got {len(p)} points"
+        )
+    if _norms(p[-1:] - p[:1])[0] > 1e-6:
+        raise ValueError(
+            f"track polyline must be closed: its last point {p[-1].tolist()} must equal its "
+            f"first point {p[0].tolist()} (repeat the first point at the end)"
+        )
+    return p[:-1]
+
+
+def _check_segments(p: FloatArray) -> None:
+    """Refuse a closed polyline ``p`` with a segment of no length (a repeated vertex).
+
+    Raises:
+        ValueError: naming the first repeated vertex.
+    """
+    seg = _norms(np.roll(p, -1, axis=0) - p)
+    if np.any(seg <= 1e-9):
+        bad = int(np.argmax(seg <= 1e-9))
+        raise ValueError(
+            f"track polyline has repeated consecutive points at index {bad}: "
+            f"{p[bad].tolist()}; every segment must have a positive length"
+        )
+
+
+def _tightest_turn(p: FloatArray, min_turn_radius: float) -> float:
+    """The smallest turning radius (m) at a vertex of the closed polyline ``p``.
+
+    Raises:
+        ValueError: it is below ``min_turn_radius`` (naming the vertex).
+    """
+    radii = turn_radii(p)
+    worst = int(np.argmin(radii))
+    if radii[worst] < min_turn_radius:
+        raise ValueError(
+            f"track polyline turns too sharply at point {worst} {p[worst].tolist()}: turning "
+            f"radius {radii[worst]:.4g} m < min_turn_radius {min_turn_radius} m (the robot "
+            f"cannot follow it); smooth the corner or pass a smaller min_turn_radius"
+        )
+    return float(radii[worst])
+
+
+def _check_corners(p: FloatArray, max_corner_angle: float) -> None:
+    """Refuse a closed polyline ``p`` that kinks by more than ``max_corner_angle`` degrees.
+
+    Raises:
+        ValueError: naming the sharpest vertex.
+    """
+    angles = corner_angles(p)
+    sharpest = int(np.argmax(angles))
+    if angles[sharpest] > max_corner_angle + 1e-9:
+        raise ValueError(
+            f"track polyline kinks by {angles[sharpest]:.4g}° at point {sharpest} "
+            f"{p[sharpest].tolist()} > max_corner_angle {max_corner_angle}° (the camera loses "
+            f"the line at sharp corners); add vertices to round the corner"
+        )
+
+
+def _check_crossings(p: FloatArray) -> None:
+    """Refuse a closed polyline ``p`` that crosses itself.
+
+    Raises:
+        ValueError: naming the first two segments that meet, and how many crossings there are.
+    """
+    crossings = self_intersections(p)
+    if crossings:
+        i, j = crossings[0]
+        raise ValueError(
+            f"track polyline crosses itself: segment {i} {p[i].tolist()}→"
+            f"{p[(i + 1) % len(p)].tolist()} meets segment {j} {p[j].tolist()}→"
+            f"{p[(j + 1) % len(p)].tolist()} ({len(crossings)} crossing(s)); pass "
+            f"allow_crossings=True for a figure-eight"
+        )
+
+
 def _resample(points: FloatArray, spacing: float) -> FloatArray:
     """A closed polyline through every vertex of ``points`` with segments at most ``spacing``."""
     q = np.roll(points, -1, axis=0)
@@ -386,61 +476,14 @@ class Track:
             "max_corner_angle", max_corner_angle, 0.0, 180.0, low_open=True, note=" (degrees)"
         )
         allow_crossings = check_bool("allow_crossings", allow_crossings)
-        p = _as_points(points)
-        if not np.all(np.isfinite(p)):
-            bad = np.argwhere(~np.isfinite(p))[0, 0]
-            raise ValueError(f"track polyline must be finite, got point {bad} = {p[bad].tolist()}")
-        if len(p) < 4:
-            raise ValueError(
-                f"track polyline needs at least 3 distinct points plus the closing point "
-                f"(last == first), got {len(p)} points"
-            )
-        if _norms(p[-1:] - p[:1])[0] > 1e-6:
-            raise ValueError(
-                f"track polyline must be closed: its last point {p[-1].tolist()} must equal its "
-                f"first point {p[0].tolist()} (repeat the first point at the end)"
-            )
-        p = p[:-1]
+        p = _polyline_vertices(points)
         _check_size(p)
-        seg = _norms(np.roll(p, -1, axis=0) - p)
-        if np.any(seg <= 1e-9):
-            bad = int(np.argmax(seg <= 1e-9))
-            raise ValueError(
-                f"track polyline has repeated consecutive points at index {bad}: "
-                f"{p[bad].tolist()}; every segment must have a positive length"
-            )
-        radii = turn_radii(p)
-        worst = int(np.argmin(radii))
-        if radii[worst] < min_turn_radius:
-            raise ValueError(
-                f"track polyline turns too sharply at point {worst} {p[worst].tolist()}: turning "
-                f"radius {radii[worst]:.4g} m < min_turn_radius {min_turn_radius} m (the robot "
-                f"cannot follow it); smooth the corner or pass a smaller min_turn_radius"
-            )
-        angles = corner_angles(p)
-        sharpest = int(np.argmax(angles))
-        if angles[sharpest] > max_corner_angle + 1e-9:
-            raise ValueError(
-                f"track polyline kinks by {angles[sharpest]:.4g}° at point {sharpest} "
-                f"{p[sharpest].tolist()} > max_corner_angle {max_corner_angle}° (the camera loses "
-                f"the line at sharp corners); add vertices to round the corner"
-            )
+        _check_segments(p)
+        radius = _tightest_turn(p, min_turn_radius)
+        _check_corners(p, max_corner_angle)
         if not allow_crossings:
-            crossings = self_intersections(p)
-            if crossings:
-                i, j = crossings[0]
-                raise ValueError(
-                    f"track polyline crosses itself: segment {i} {p[i].tolist()}→"
-                    f"{p[(i + 1) % len(p)].tolist()} meets segment {j} {p[j].tolist()}→"
-                    f"{p[(j + 1) % len(p)].tolist()} ({len(crossings)} crossing(s)); pass "
-                    f"allow_crossings=True for a figure-eight"
-                )
-        return cls(
-            p,
-            name=name,
-            min_turn_radius=float(radii[worst]),
-            allow_crossings=allow_crossings,
-        )
+            _check_crossings(p)
+        return cls(p, name=name, min_turn_radius=radius, allow_crossings=allow_crossings)
 
     def _build_index(self) -> None:
         """Build the spatial grid and the padded segment windows behind the queries.
@@ -797,6 +840,34 @@ def random_track(
     mean_radius = check_real(
         "mean_radius", mean_radius, 2 * min_turn_radius, note=" (2 * min_turn_radius, m)"
     )
+    _check_mean_radius(mean_radius)
+    harmonics = check_int("harmonics", harmonics, 2)
+    max_tries = check_int("max_tries", max_tries, 1)
+    name = "random" if seed is None or isinstance(seed, np.random.Generator) else f"random-{seed}"
+    rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+    theta = np.linspace(0.0, 2 * np.pi, 16384, endpoint=False)
+    cos_theta, sin_theta = portable_math.cos_array(theta), portable_math.sin_array(theta)
+    k = np.arange(2, harmonics + 1)
+    for _ in range(max_tries):
+        r = _polar_radii(rng, mean_radius, k, theta)
+        if r.min() <= 0.2 * mean_radius:
+            continue
+        curve = np.column_stack([r * cos_theta, r * sin_theta])
+        track = _accepted_track(curve, name, min_turn_radius, clearance)
+        if track is not None:
+            return track
+    raise ValueError(
+        f"no random track with min_turn_radius={min_turn_radius} and clearance={clearance} "
+        f"found in {max_tries} draws; relax them or raise mean_radius"
+    )
+
+
+def _check_mean_radius(mean_radius: float) -> None:
+    """Refuse a ``mean_radius`` whose random tracks would pass :data:`MAX_TRACK_VERTICES`.
+
+    Raises:
+        ValueError: naming the track's length, its vertices, the limit and the largest radius.
+    """
     circumference = 2 * np.pi * mean_radius
     if circumference / SAMPLE_SPACING > MAX_TRACK_VERTICES:
         largest = MAX_TRACK_VERTICES * SAMPLE_SPACING / (2 * np.pi)
@@ -806,34 +877,39 @@ def random_track(
             f"the limit is {MAX_TRACK_VERTICES:,} vertices (MAX_TRACK_VERTICES): mean_radius "
             f"must be at most {largest:.3g} m"
         )
-    harmonics = check_int("harmonics", harmonics, 2)
-    max_tries = check_int("max_tries", max_tries, 1)
-    name = "random" if seed is None or isinstance(seed, np.random.Generator) else f"random-{seed}"
-    rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
-    theta = np.linspace(0.0, 2 * np.pi, 16384, endpoint=False)
-    cos_theta, sin_theta = portable_math.cos_array(theta), portable_math.sin_array(theta)
-    k = np.arange(2, harmonics + 1)
-    for _ in range(max_tries):
-        amp = rng.uniform(0.0, 0.35, size=k.size) / (k - 1)
-        phase = rng.uniform(0.0, 2 * np.pi, size=k.size)
-        r = mean_radius * (
-            1.0
-            + (amp[:, None] * portable_math.cos_array(k[:, None] * theta + phase[:, None])).sum(0)
-        )
-        if r.min() <= 0.2 * mean_radius:
-            continue
-        curve = np.column_stack([r * cos_theta, r * sin_theta])
-        if turn_radii(curve).min() < min_turn_radius:
-            continue
-        if _dense_vertices(curve)[1] / SAMPLE_SPACING > MAX_TRACK_VERTICES:
-            continue  # too long a track (only near the largest mean_radius)
-        track = _smooth_track(curve, name)
-        if track.min_turn_radius >= min_turn_radius and track.clearance(0.5) >= clearance:
-            return track
-    raise ValueError(
-        f"no random track with min_turn_radius={min_turn_radius} and clearance={clearance} "
-        f"found in {max_tries} draws; relax them or raise mean_radius"
+
+
+def _polar_radii(
+    rng: np.random.Generator, mean_radius: float, k: NDArray, theta: FloatArray
+) -> FloatArray:
+    """One draw of :func:`random_track`'s r(θ) = R·(1 + Σₖ aₖ cos(kθ + φₖ)) at the angles ``theta``.
+
+    The amplitudes first (uniform in [0, 0.35), divided by k − 1), then the phases.
+    """
+    amp = rng.uniform(0.0, 0.35, size=k.size) / (k - 1)
+    phase = rng.uniform(0.0, 2 * np.pi, size=k.size)
+    return mean_radius * (
+        1.0 + (amp[:, None] * portable_math.cos_array(k[:, None] * theta + phase[:, None])).sum(0)
     )
+
+
+def _accepted_track(
+    curve: FloatArray, name: str, min_turn_radius: float, clearance: float
+) -> Track | None:
+    """The track of a drawn ``curve`` if :func:`random_track` accepts it, else ``None``.
+
+    Accepted: its tightest turn is at least ``min_turn_radius`` (as drawn and once resampled),
+    it needs at most :data:`MAX_TRACK_VERTICES` dense vertices, and parts of it more than half a
+    metre apart along it stay at least ``clearance`` apart.
+    """
+    if turn_radii(curve).min() < min_turn_radius:
+        return None
+    if _dense_vertices(curve)[1] / SAMPLE_SPACING > MAX_TRACK_VERTICES:
+        return None  # too long a track (only near the largest mean_radius)
+    track = _smooth_track(curve, name)
+    if track.min_turn_radius >= min_turn_radius and track.clearance(0.5) >= clearance:
+        return track
+    return None
 
 
 @functools.lru_cache(maxsize=64)
