@@ -15,6 +15,7 @@ from support import examples
 
 import delayed_rl  # noqa: F401  (registers the env ids)
 from delayed_rl.agents import FixedDelayQLearning, MultipleModelQLearning, QLearning
+from delayed_rl.agents.reference import ReferenceMMQ
 from delayed_rl.delays import Constant
 from delayed_rl.envs.gridworld import GridWorldEnv
 from delayed_rl.envs.roulette import BET_13, BET_EVEN
@@ -93,32 +94,6 @@ def test_roulette_round_four_uses_all_models_max():
         before[0, 1, BET_EVEN] + ALPHA * (1 + 47.7 - 53)
     )
     assert agent.q_table[0, 2, BET_13] == pytest.approx(Q0 + ALPHA * (1 + 47.7 - Q0))
-
-
-class ReferenceMMQ:
-    """MMQ's rule as its module docstring states it, written the slow obvious way (lists, brute-force maxima)."""
-
-    def __init__(self, n_states, n_actions, delays, q_init, alpha, gamma):
-        self.delays = list(delays)
-        self.q = np.full((n_states, len(delays), n_actions), q_init)
-        self.alpha, self.gamma = alpha, gamma
-        self.history: list[tuple[int, int, int, bool]] = []
-
-    def update(self, s, a, r, s2, terminated, truncated):
-        self.history.append((s, a, s2, terminated))
-        t = len(self.history) - 1
-        targets = []
-        for i, lag in enumerate(self.delays):
-            if t - lag < 0:
-                continue
-            hs, ha, hs2, done = self.history[t - lag]
-            best = max(self.q[hs2].ravel().tolist())
-            targets.append((hs, i, ha, r + self.gamma * (0.0 if done else best)))
-        for hs, i, ha, target in targets:  # all targets first, then the writes
-            old = float(self.q[hs, i, ha])
-            self.q[hs, i, ha] = old + self.alpha * (target - old)
-        if terminated or truncated:
-            self.history.clear()
 
 
 transitions = st.lists(
