@@ -252,52 +252,52 @@ def _rescan_lanes(qf, base, size):
 
 
 @_jit
-def _prime_cache(qf, qmax, qcell, row_size, ties, second):
+def _prime_cache(qf, v_max, v_cell, row_size, ties, second):
     """Count each state's ties to its cached max and bound the rest (the start of a call).
 
-    ``ties[s]``: how many entries of state ``s``'s row equal ``qmax[s]``; ``second[s]``: the
-    max of the row's entries other than ``qcell[s]``.
+    ``ties[s]``: how many entries of state ``s``'s row equal ``v_max[s]``; ``second[s]``: the
+    max of the row's entries other than ``v_cell[s]``.
     """
-    for s in range(qmax.shape[0]):
+    for s in range(v_max.shape[0]):
         ties[s] = 0
         second[s] = -np.inf
         for i in range(s * row_size, (s + 1) * row_size):
-            ties[s] += qf[i] == qmax[s]
-            if i != qcell[s] and qf[i] > second[s]:
+            ties[s] += qf[i] == v_max[s]
+            if i != v_cell[s] and qf[i] > second[s]:
                 second[s] = qf[i]
 
 
 @_jit
-def _write(qf, qmax, qcell, qties, qsecond, s, cell, new, row_size):
+def _write(qf, v_max, v_cell, v_ties, v_second, s, cell, new, row_size):
     """Set ``qf[cell]``, an entry of state ``s``'s row, to ``new``, keeping the cache exact.
 
-    The cache of a state: its max ``qmax``, the flat index ``qcell`` of an entry holding it, how
-    many entries hold it (``qties``) and ``qsecond``, an upper bound of the other entries (every
-    one but ``qcell``'s; exact after a rescan, raised by each write to them). The row is
+    The cache of a state: its max ``v_max``, the flat index ``v_cell`` of an entry holding it, how
+    many entries hold it (``v_ties``) and ``v_second``, an upper bound of the other entries (every
+    one but ``v_cell``'s; exact after a rescan, raised by each write to them). The row is
     rescanned only when the cached arg-max entry decreases to or below that bound, or while
     tied.
     """
     old = qf[cell]
     qf[cell] = new
-    best = qmax[s]
+    best = v_max[s]
     if new > best:  # a new unique max (a former holder elsewhere joins the others)
-        if qcell[s] != cell and best > qsecond[s]:
-            qsecond[s] = best
-        qmax[s] = new
-        qcell[s] = cell
-        qties[s] = 1
-    elif qcell[s] != cell:  # one of the others
+        if v_cell[s] != cell and best > v_second[s]:
+            v_second[s] = best
+        v_max[s] = new
+        v_cell[s] = cell
+        v_ties[s] = 1
+    elif v_cell[s] != cell:  # one of the others
         if new == best:
-            qties[s] += old != new
+            v_ties[s] += old != new
         elif old == best:  # an entry holding the max fell
-            qties[s] -= 1
-        if new > qsecond[s]:
-            qsecond[s] = new
+            v_ties[s] -= 1
+        if new > v_second[s]:
+            v_second[s] = new
     elif new < best:  # the cached arg-max fell: still above the others, else rescan
-        if qties[s] == 1 and new > qsecond[s]:
-            qmax[s] = new
+        if v_ties[s] == 1 and new > v_second[s]:
+            v_max[s] = new
         else:
-            qmax[s], qcell[s], qties[s], qsecond[s] = _rescan(qf, s * row_size, row_size)
+            v_max[s], v_cell[s], v_ties[s], v_second[s] = _rescan(qf, s * row_size, row_size)
 
 
 def run_chunk(
@@ -384,7 +384,7 @@ def _loop(
     estimates = rule.delay_estimates
     alpha, gamma = rule.learning_rate, rule.gamma
     eps_initial, eps_final, eps_steps = rule.eps_initial, rule.eps_final, rule.eps_steps
-    q, qmax, qcell, qties, trace = cache.q, cache.v_max, cache.v_cell, cache.ties, cache.trace
+    q, v_max, v_cell, v_ties, trace = cache.q, cache.v_max, cache.v_cell, cache.ties, cache.trace
     has_kernel = kernel_weights is not None
     has_trace = decay is not None
     weighted = has_kernel or has_trace
@@ -400,8 +400,8 @@ def _loop(
     n_actions = q.shape[2]
     row_size = n_models * n_actions
     qf = q.reshape(q.size)  # the Q-table, flat: entry (s, j, a) is qf[(s·|Λ| + j)·|A| + a]
-    qsecond = np.empty(qmax.shape[0])  # the others' bound (see _write), made afresh each call
-    _prime_cache(qf, qmax, qcell, row_size, qties, qsecond)
+    v_second = np.empty(v_max.shape[0])  # the others' bound (see _write), made afresh each call
+    _prime_cache(qf, v_max, v_cell, row_size, v_ties, v_second)
     hmask = hist_s.shape[0] - 1
     bmask = buffer.shape[0] - 1
     targets = np.zeros(n_lags)
@@ -445,10 +445,10 @@ def _loop(
                 acting = 0
             elif next_uniform(rng) < eps:
                 acting = _below(rng, n_models)
-            elif qties[s] == 1:  # the one model holding the state's max
-                acting = (qcell[s] // n_actions) % n_models
+            elif v_ties[s] == 1:  # the one model holding the state's max
+                acting = (v_cell[s] // n_actions) % n_models
             else:  # a uniformly random model among those holding it
-                acting = _pick_model(qf, s * row_size, n_models, n_actions, qmax[s], rng)
+                acting = _pick_model(qf, s * row_size, n_models, n_actions, v_max[s], rng)
             if next_uniform(rng) < eps:
                 action = _below(rng, n_actions)
             else:  # a uniformly random action among the model's best
@@ -523,11 +523,11 @@ def _loop(
                     continue  # a transition the oracle does not hold
                 p = e & pmask
                 cell = np.uint64(arrivals.s[p] * row_size + arrivals.a[p])
-                bootstrap = 0.0 if arrivals.terminated[p] else gamma * qmax[arrivals.s2[p]]
+                bootstrap = 0.0 if arrivals.terminated[p] else gamma * v_max[arrivals.s2[p]]
                 old = qf[cell]
                 new = old + alpha * (arrivals.value[p] + bootstrap - old)
                 sp = np.uint64(arrivals.s[p])
-                _write(qf, qmax, qcell, qties, qsecond, sp, cell, new, row_size)
+                _write(qf, v_max, v_cell, v_ties, v_second, sp, cell, new, row_size)
             n_lags_now = 0  # (the lags below do not learn)
         else:
             n_lags_now = n_lags
@@ -539,7 +539,7 @@ def _loop(
                 count = j
                 break
             pos = np.uint64((hist_count - 1 - estimate) & hmask)
-            bootstrap = 0.0 if hist_term[pos] else gamma * qmax[np.uint64(hist_s2[pos])]
+            bootstrap = 0.0 if hist_term[pos] else gamma * v_max[np.uint64(hist_s2[pos])]
             credited = delivered
             if has_model:  # the estimated mean reward of the pair (Λ = {0}: this step's)
                 credited = model.rewards[hist_s[pos] * n_actions + hist_a[pos]]
@@ -566,25 +566,25 @@ def _loop(
             # the error computed before the step's writes
             new = old + rate * (targets[j] - old if per_lag else targets[j])
             qf[cell] = new
-            best = qmax[sj]
+            best = v_max[sj]
             if new > best:  # a new unique max (a former holder elsewhere joins the others)
-                if qcell[sj] != cell and best > qsecond[sj]:
-                    qsecond[sj] = best
-                qmax[sj] = new
-                qcell[sj] = cell
-                qties[sj] = 1
-            elif qcell[sj] != cell:  # one of the others
+                if v_cell[sj] != cell and best > v_second[sj]:
+                    v_second[sj] = best
+                v_max[sj] = new
+                v_cell[sj] = cell
+                v_ties[sj] = 1
+            elif v_cell[sj] != cell:  # one of the others
                 if new == best:
-                    qties[sj] += old != new
+                    v_ties[sj] += old != new
                 elif old == best:  # an entry holding the max fell
-                    qties[sj] -= 1
-                if new > qsecond[sj]:
-                    qsecond[sj] = new
+                    v_ties[sj] -= 1
+                if new > v_second[sj]:
+                    v_second[sj] = new
             elif new < best:  # the cached arg-max fell: still above the others, else rescan
-                if qties[sj] == 1 and new > qsecond[sj]:
-                    qmax[sj] = new
+                if v_ties[sj] == 1 and new > v_second[sj]:
+                    v_max[sj] = new
                 else:
-                    qmax[sj], qcell[sj], qties[sj], qsecond[sj] = _rescan(
+                    v_max[sj], v_cell[sj], v_ties[sj], v_second[sj] = _rescan(
                         qf, sj * row_size, row_size
                     )
         if has_model:  # after the update, as the Python path: this step informs the next solve
