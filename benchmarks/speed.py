@@ -218,7 +218,7 @@ def epuck_runs(steps: int) -> dict[str, Callable[[], float]]:
     """
     from delayed_rl.agents import MultipleModelQLearning
     from delayed_rl.envs.linefollow.env import EPuckLineFollowEnv
-    from delayed_rl.experiments.linefollow import line_env
+    from delayed_rl.experiments.framework.line_following import line_env
 
     env = EPuckLineFollowEnv("racetrack", max_steps=None, lost_line="recover")
 

@@ -42,7 +42,7 @@ from delayed_rl.agents.registry import AGENTS as AGENT_NAMES
 from delayed_rl.delays import Poisson
 from delayed_rl.envs import env_ids
 from delayed_rl.experiments import NAMES
-from delayed_rl.experiments.runner import (
+from delayed_rl.experiments.framework.runner import (
     BACKENDS,
     MAX_SEED_TEXT,
     MAX_SEEDS,
@@ -301,7 +301,7 @@ def _bench(args: argparse.Namespace) -> int:
     experiments = [get_experiment(name) for name in names]
     summaries = run_experiments(experiments, config, out, _bench_progress(args), report)
     if args.name == "all":
-        from delayed_rl.experiments.runner import write_index
+        from delayed_rl.experiments.framework.runner import write_index
 
         ran = list(zip(experiments, summaries, strict=True))
         index = write_index(out, ran, time.perf_counter() - started)
@@ -318,7 +318,7 @@ def _bench_progress(args: argparse.Namespace) -> bool:
     """
     if args.progress is not None:
         return args.progress
-    from delayed_rl.experiments.runner import tqdm_installed
+    from delayed_rl.experiments.framework.runner import tqdm_installed
 
     return sys.stderr.isatty() and tqdm_installed()
 

@@ -99,7 +99,7 @@ def fake_grid_run(
     mean_delay: float | None,
     late: float,
 ) -> tuple[dict, dict]:
-    """A ``(task, result)`` pair shaped like ``anonymous_delay.run_task``'s, for summaries.
+    """A ``(task, result)`` pair shaped like ``delay_settings.run_agent``'s, for summaries.
 
     One 100-step run on the 7×7 grid under Poisson(8): its greedy policy ``optimal`` (or not) at
     the end, ``average`` its training reward, ``late`` the share of second-half snapshots

@@ -55,18 +55,21 @@ def _imports(path: Path, modules: set[str]) -> set[str]:
     ``from a.b import c`` is an edge to ``a.b.c`` when that is a module, else to ``a.b``; imports
     under ``if TYPE_CHECKING:`` never run and are left out.
     """
-    tree = ast.parse(path.read_text(encoding="utf-8"))
+    return _source_imports(
+        _module_name(path), path.name == "__init__.py", path.read_text(encoding="utf-8"), modules
+    )
+
+
+def _source_imports(module: str, is_package: bool, source: str, modules: set[str]) -> set[str]:
+    """:func:`_imports` of the ``source`` of ``module`` (a package's ``__init__`` if ``is_package``)."""
+    tree = ast.parse(source)
     skipped = {
         id(node)
         for branch in ast.walk(tree)
         if isinstance(branch, ast.If) and _is_type_checking(branch)
         for node in ast.walk(branch)
     }
-    package = (
-        _module_name(path)
-        if path.name == "__init__.py"
-        else _module_name(path.parent / "__init__.py")
-    )
+    package = module if is_package else module.rpartition(".")[0]
     found = set()
     for node in ast.walk(tree):
         if id(node) in skipped:
@@ -81,7 +84,7 @@ def _imports(path: Path, modules: set[str]) -> set[str]:
                 base = ".".join(anchor + ([base] if base else []))
             for alias in node.names:
                 found.add(f"{base}.{alias.name}" if f"{base}.{alias.name}" in modules else base)
-    return {name for name in found if name in modules} - {_module_name(path)}
+    return {name for name in found if name in modules} - {module}
 
 
 def import_graph() -> dict[str, set[str]]:
@@ -215,6 +218,95 @@ def test_no_group_of_modules_imports_each_other_counting_parent_packages():
     graph = with_parents(import_graph())
     graph.pop("delayed_rl")  # every module's parent (see the module docstring)
     assert find_cycles({m: edges - {"delayed_rl"} for m, edges in graph.items()}) == []
+
+
+EXPERIMENTS = PACKAGE / "experiments"
+#: The experiments' own groups: the thesis's experiments and those beyond it.
+GROUPS = ("thesis", "beyond")
+
+
+def experiment_modules() -> set[str]:
+    """Every experiment module: those ``get_experiment`` imports, and every module of the groups."""
+    from delayed_rl.experiments import _MODULES
+
+    named = {f"delayed_rl.experiments.{module}" for module in _MODULES.values()}
+    grouped = {
+        _module_name(path)
+        for group in GROUPS
+        for path in (EXPERIMENTS / group).rglob("*.py")
+        if path.name != "__init__.py"
+    }
+    return named | grouped
+
+
+def experiment_imports(graph: dict[str, set[str]], experiments: set[str]) -> list[str]:
+    """``"A imports B"`` for every experiment module A of ``graph`` importing another, B."""
+    return [
+        f"{module} imports {other}"
+        for module in sorted(experiments & set(graph))
+        for other in sorted(graph[module] & experiments)
+    ]
+
+
+def test_no_experiment_module_imports_another():
+    """What experiments share is in ``experiments/framework/``, not in one of them."""
+    assert experiment_imports(import_graph(), experiment_modules()) == []
+
+
+def test_every_experiment_is_a_module_of_the_thesis_or_beyond_it():
+    from delayed_rl.experiments import _MODULES
+
+    assert [m for m in _MODULES.values() if m.split(".")[0] not in GROUPS] == []
+    assert {m.split(".")[0] for m in _MODULES.values()} == set(GROUPS)
+
+
+def test_the_framework_imports_no_experiment_module():
+    graph = with_parents(import_graph())
+    experiments = experiment_modules() | {f"delayed_rl.experiments.{g}" for g in GROUPS}
+    framework = {m for m in graph if m.startswith("delayed_rl.experiments.framework")}
+    assert len(framework) > 5
+    assert [
+        f"{m} imports {o}" for m in sorted(framework) for o in sorted(graph[m] & experiments)
+    ] == []
+
+
+#: The old layout's experiment modules, flat in ``experiments/``, and their imports of each other
+#: (at module level, inside a function, as ``from package import module``, relative).
+OLD_LAYOUT = {
+    "delayed_rl.experiments.controllers": (
+        "from delayed_rl.experiments import linefollow, plotting\n"
+        "from delayed_rl.experiments.linefollow import LAM, line_env\n"
+    ),
+    "delayed_rl.experiments.future_work": (
+        "def shared():\n    from delayed_rl.experiments import anonymous_delay as shared\n"
+    ),
+    "delayed_rl.experiments.real_robot": "import delayed_rl.experiments.linefollow_deconv\n",
+    "delayed_rl.experiments.mmq_gridworld": "from .anonymous_delay import band_plot\n",
+    "delayed_rl.experiments.thesis.linefollow": "from ..beyond import anonymous_delay\n",
+    "delayed_rl.experiments.roulette": "from delayed_rl.experiments import plotting\n",
+}
+
+
+def test_the_experiment_check_sees_every_form_of_import():
+    experiments = {
+        "delayed_rl.experiments.anonymous_delay",
+        "delayed_rl.experiments.linefollow",
+        "delayed_rl.experiments.linefollow_deconv",
+        "delayed_rl.experiments.beyond.anonymous_delay",
+        *OLD_LAYOUT,
+    }
+    modules = experiments | {"delayed_rl.experiments", "delayed_rl.experiments.plotting"}
+    graph = {
+        name: _source_imports(name, False, source, modules) for name, source in OLD_LAYOUT.items()
+    }
+    assert experiment_imports(graph, experiments) == [
+        "delayed_rl.experiments.controllers imports delayed_rl.experiments.linefollow",
+        "delayed_rl.experiments.future_work imports delayed_rl.experiments.anonymous_delay",
+        "delayed_rl.experiments.mmq_gridworld imports delayed_rl.experiments.anonymous_delay",
+        "delayed_rl.experiments.real_robot imports delayed_rl.experiments.linefollow_deconv",
+        "delayed_rl.experiments.thesis.linefollow imports "
+        "delayed_rl.experiments.beyond.anonymous_delay",
+    ]
 
 
 HEAVY = ("pymunk", "torch", "matplotlib", "ray", "dask", "stable_baselines3")

@@ -438,7 +438,7 @@ BENCH = "bench delay-sweep --quick --seeds 1 --steps 2000"
 def _scheduled_runs() -> int:
     """How many distinct runs :data:`BENCH` schedules (as the scheduler counts them)."""
     from delayed_rl.experiments import Config, get_experiment
-    from delayed_rl.experiments.pool import pool_key
+    from delayed_rl.experiments.framework.pool import pool_key
 
     experiment = get_experiment("delay-sweep")
     tasks = experiment.tasks(Config(quick=True, seeds=1, steps=2000))

@@ -182,8 +182,8 @@ CPU_DEPENDENT = re.compile(
 )
 #: Modules whose numbers never reach a seeded result: what they compute is drawn or printed.
 NOT_BIT_RELEVANT = {
-    "experiments/plotting.py",  # figures
-    "experiments/delay_sweep.py",  # a log-scale axis of a figure
+    "experiments/framework/plotting.py",  # figures
+    "experiments/thesis/delay_sweep.py",  # a log-scale axis of a figure
     "envs/linefollow/render.py",  # pixels of a picture
     "cli.py",
 }

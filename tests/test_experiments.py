@@ -10,8 +10,8 @@ import pytest
 
 from delayed_rl.cli import main
 from delayed_rl.experiments import NAMES, Config, get_experiment, run_experiment
-from delayed_rl.experiments.runner import VERDICTS, mean_ci95, run_tasks, running_average
-from delayed_rl.experiments.training import greedy_average_reward, grid_env, train
+from delayed_rl.experiments.framework.runner import VERDICTS, mean_ci95, run_tasks, running_average
+from delayed_rl.experiments.framework.training import greedy_average_reward, grid_env, train
 
 
 @pytest.mark.experiment
@@ -58,7 +58,7 @@ def test_mmq_gridworld_quick_separates_the_agents(tmp_path):
 
 
 def test_mmq_gridworld_learns_in_pieces_as_in_one_run():
-    from delayed_rl.experiments.mmq_gridworld import SIZE, run_task
+    from delayed_rl.experiments.thesis.mmq_gridworld import SIZE, run_task
 
     task = {"agent": "MMQ", "lags": list(range(51)), "lam": 13, "steps": 20_000, "seed": 3}
     pieces = run_task(task)
@@ -126,8 +126,8 @@ def test_bad_runner_arguments(call, error, message):
 
 
 def test_bad_experiment_arguments():
-    from delayed_rl.experiments.linefollow import make_agent
-    from delayed_rl.experiments.mmq_gridworld import behaviour_policy
+    from delayed_rl.experiments.framework.line_following import make_agent
+    from delayed_rl.experiments.thesis.mmq_gridworld import behaviour_policy
 
     with pytest.raises(
         ValueError, match=r"kind must be one of \('MMQ', 'Q', 'DeconvQ learned'\), got 'SARSA'"
@@ -140,7 +140,7 @@ def test_bad_experiment_arguments():
 
 
 def test_grid_tasks_pair_every_delayed_run_with_a_reference_of_its_world_and_seed():
-    from delayed_rl.experiments import world_size
+    from delayed_rl.experiments.thesis import world_size
 
     tasks = world_size.tasks(Config(quick=True, seeds=2, base_seed=5))
     references = [(t["size"], t["seed"]) for t in tasks if t.get("reference")]
@@ -161,13 +161,13 @@ def test_cli_bench_quick_writes_report(tmp_path, capsys):
 
 
 def test_line_error_counts_an_unseen_line_as_the_worst_offset():
-    from delayed_rl.experiments.linefollow import line_error
+    from delayed_rl.experiments.framework.line_following import line_error
 
     np.testing.assert_array_equal(line_error([0, 1, 19, 20, 21, 40]), [20, 19, 1, 0, 1, 20])
 
 
 def test_line_following_tasks_follow_the_thesis_scale_and_seeds():
-    from delayed_rl.experiments import controllers, linefollow
+    from delayed_rl.experiments.thesis import controllers, linefollow
 
     full = linefollow.tasks(Config(seeds=5, base_seed=7))
     assert sorted((t["agent"], t["seed"]) for t in full) == sorted(
@@ -182,7 +182,7 @@ def test_line_following_tasks_follow_the_thesis_scale_and_seeds():
 
 
 def test_delayed_observations_break_the_proportional_controller():
-    from delayed_rl.experiments.controllers import run_task
+    from delayed_rl.experiments.thesis.controllers import run_task
 
     task = {"train_steps": 0, "run_steps": 1700, "seed": 0}
     undelayed = run_task({**task, "controller": "P undelayed"})
@@ -195,7 +195,7 @@ def test_delayed_observations_break_the_proportional_controller():
 
 
 def test_learners_keep_learning_through_the_controllers_run():
-    from delayed_rl.experiments.controllers import run_task
+    from delayed_rl.experiments.thesis.controllers import run_task
 
     result = run_task({"controller": "Q", "train_steps": 500, "run_steps": 200, "seed": 1})
     assert result["steps"][-1] == 200 and result["curve"][-1] == pytest.approx(result["average"])
@@ -203,7 +203,7 @@ def test_learners_keep_learning_through_the_controllers_run():
 
 
 def test_linefollow_run_records_reward_and_accumulated_error():
-    from delayed_rl.experiments.linefollow import run_task
+    from delayed_rl.experiments.thesis.linefollow import run_task
 
     result = run_task({"agent": "MMQ", "steps": 1000, "seed": 0})
     assert result["steps"][-1] == 1000 and result["error"][-1] == result["total_error"]
@@ -213,7 +213,7 @@ def test_linefollow_run_records_reward_and_accumulated_error():
 
 
 def _fake_linefollow(mmq: tuple[float, float], q: tuple[float, float], seeds: int = 3):
-    from delayed_rl.experiments.linefollow import summarize
+    from delayed_rl.experiments.thesis.linefollow import summarize
 
     tasks, results = [], []
     for seed in range(seeds):
@@ -245,7 +245,7 @@ def test_linefollow_verdicts_follow_the_documented_rules():
 
 
 def test_behaviour_policy_is_the_two_level_epsilon_greedy_rule():
-    from delayed_rl.experiments.mmq_gridworld import behaviour_policy
+    from delayed_rl.experiments.thesis.mmq_gridworld import behaviour_policy
 
     q = np.zeros((2, 3, 4))
     q[0, 1, 2] = 5.0  # state 0: one model holds the max at action 2
@@ -280,7 +280,7 @@ def _value_iteration_policy(env, gamma: float = 0.9, sweeps: int = 200) -> np.nd
 
 def test_mmq_gridworld_counts_the_optimal_loop_over_a_finite_walk():
     """The optimal policy's 1000-step greedy walk counts as the optimal loop, a detour does not."""
-    from delayed_rl.experiments.mmq_gridworld import LOOP_FRACTION, SIZE
+    from delayed_rl.experiments.thesis.mmq_gridworld import LOOP_FRACTION, SIZE
 
     env = grid_env(SIZE, 0).unwrapped
     policy = _value_iteration_policy(env)
@@ -311,7 +311,7 @@ def _action(env, state: int, target: int) -> int:
 
 
 def test_reproduce_writes_an_index_of_every_experiment(tmp_path):
-    from delayed_rl.experiments.runner import Claim, Summary, write_index
+    from delayed_rl.experiments.framework.runner import Claim, Summary, write_index
 
     def claims(*verdicts):
         return [Claim("q", "t", 0.0, 0.1, 5, verdict) for verdict in verdicts]

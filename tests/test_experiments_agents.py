@@ -10,20 +10,23 @@ from support import fake_grid_run, fake_line_run
 
 from delayed_rl.cli import main
 from delayed_rl.experiments import NAMES, Config, get_experiment, run_experiment
-from delayed_rl.experiments import anonymous_delay as ad
-from delayed_rl.experiments import future_work as fw
-from delayed_rl.experiments import linefollow_deconv as lfd
-from delayed_rl.experiments.runner import VERDICTS
-from delayed_rl.experiments.training import greedy_average_reward
+from delayed_rl.experiments.beyond import anonymous_delay as ad
+from delayed_rl.experiments.beyond import future_work as fw
+from delayed_rl.experiments.beyond import linefollow_deconv as lfd
+from delayed_rl.experiments.framework import delay_settings as settings
+from delayed_rl.experiments.framework import setting_summaries as summaries
+from delayed_rl.experiments.framework import snapshot_runs as snapshots
+from delayed_rl.experiments.framework.runner import VERDICTS
+from delayed_rl.experiments.framework.training import greedy_average_reward
 
 UP, RIGHT, DOWN, LEFT = 0, 1, 2, 3
 
 
 # ---------------------------------------------------------------------- delays and policies
 @pytest.mark.parametrize("lam", [8, 13])
-@pytest.mark.parametrize("kind", ad.DELAYS)
+@pytest.mark.parametrize("kind", settings.DELAYS)
 def test_every_delay_has_mean_lambda(kind, lam):
-    delay = ad.make_delay(kind, lam)
+    delay = settings.make_delay(kind, lam)
     assert delay.mean == pytest.approx(lam)
     pmf = delay.pmf(np.arange(60 * lam))
     assert pmf.sum() == pytest.approx(1.0, abs=1e-9)
@@ -33,12 +36,12 @@ def test_every_delay_has_mean_lambda(kind, lam):
 
 
 def test_geometric_and_bimodal_delays_are_what_the_docstring_says():
-    geometric = ad.make_delay("geometric", 13)
+    geometric = settings.make_delay("geometric", 13)
     assert geometric.p == pytest.approx(1 / 14)
-    bimodal = ad.make_delay("bimodal", 8)
+    bimodal = settings.make_delay("bimodal", 8)
     np.testing.assert_allclose(bimodal.pmf([0, 1, 8, 15, 16, 17]), [0.5, 0, 0, 0, 0.5, 0])
-    assert ad.setting_label(9, "bimodal", 13) == "9×9 bimodal {0, 26}"
-    assert ad.slug(ad.setting_label(7, "geometric", 8)) == "7x7_geometric"
+    assert settings.setting_label(9, "bimodal", 13) == "9×9 bimodal {0, 26}"
+    assert summaries.slug(settings.setting_label(7, "geometric", 8)) == "7x7_geometric"
 
 
 def _loop_policy(size: int) -> np.ndarray:
@@ -59,51 +62,55 @@ class _Greedy:
 def test_the_optimal_loop_is_optimal_and_a_detour_is_not(size):
     policy = _loop_policy(size)
     loop = 2 * (size - 1) + 1
-    assert ad.walk_average(policy, size) == pytest.approx(10 * (1000 // loop) / 1000)
-    assert ad.walk_average(policy, size) == pytest.approx(
+    assert snapshots.walk_average(policy, size) == pytest.approx(10 * (1000 // loop) / 1000)
+    assert snapshots.walk_average(policy, size) == pytest.approx(
         greedy_average_reward(_Greedy(policy), size)
     )
-    assert ad.is_optimal(policy, size)
+    assert snapshots.is_optimal(policy, size)
     detour = policy.copy()
     start = size * size - 1
     detour[start - size] = DOWN  # back down to the start from the cell above it: a 2-cycle
-    assert ad.walk_average(detour, size) == 0.0 and not ad.is_optimal(detour, size)
+    assert snapshots.walk_average(detour, size) == 0.0 and not snapshots.is_optimal(detour, size)
     other_route = policy.copy()
     other_route[start] = LEFT  # one step left, then up that column: as short, still optimal
-    assert ad.is_optimal(other_route, size)
+    assert snapshots.is_optimal(other_route, size)
     wall = policy.copy()
     wall[start] = RIGHT  # into the wall forever
-    assert ad.walk_average(wall, size) == -1.0 and not ad.is_optimal(wall, size)
+    assert snapshots.walk_average(wall, size) == -1.0 and not snapshots.is_optimal(wall, size)
 
 
 def test_snapshots_read_the_greedy_policy_of_each_agent_kind():
-    delay = ad.make_delay("Poisson", 3)
+    delay = settings.make_delay("Poisson", 3)
     for name in ("Q", "MMQ", "DeconvQ learned", "oracle"):
-        agent = ad.make_agent(name, 5, delay, 0)
+        agent = settings.make_agent(name, 5, delay, 0)
         agent.learn(500, log_interval=None)
-        expected = ad.greedy_actions(agent.q_table)
-        np.testing.assert_array_equal(ad.greedy_policy(agent), expected)
-    deconv = ad.make_agent("DeconvQ known", 5, delay, 0).learn(500, log_interval=None)
-    np.testing.assert_array_equal(ad.greedy_policy(deconv), deconv.q_table[:, 0, :].argmax(1))
+        expected = snapshots.greedy_actions(agent.q_table)
+        np.testing.assert_array_equal(snapshots.greedy_policy(agent), expected)
+    deconv = settings.make_agent("DeconvQ known", 5, delay, 0).learn(500, log_interval=None)
+    np.testing.assert_array_equal(
+        snapshots.greedy_policy(deconv), deconv.q_table[:, 0, :].argmax(1)
+    )
 
 
 @pytest.mark.parametrize("name", ["MMQ", "DeconvQ learned", "expected credit", "oracle"])
 def test_learning_in_snapshot_pieces_equals_one_learn_call(name):
-    delay, steps = ad.make_delay("Poisson", 4), 2_600
-    whole = ad.make_agent(name, 5, delay, 3).learn(steps, log_interval=None, record=True)
-    pieces = ad.make_agent(name, 5, delay, 3)
-    run = ad.train_with_snapshots(pieces, steps, 5)
+    delay, steps = settings.make_delay("Poisson", 4), 2_600
+    whole = settings.make_agent(name, 5, delay, 3).learn(steps, log_interval=None, record=True)
+    pieces = settings.make_agent(name, 5, delay, 3)
+    run = snapshots.train_with_snapshots(pieces, steps, 5)
     np.testing.assert_array_equal(run["rewards"], whole.training_log["undelayed_reward"])
     np.testing.assert_array_equal(pieces.q_table, whole.q_table)
-    interval = steps // ad.SNAPSHOTS
+    interval = steps // snapshots.SNAPSHOTS
     assert run["snapshot_steps"][0] == interval and run["snapshot_steps"][-1] == steps
     assert np.all(np.diff(run["snapshot_steps"]) == interval)
-    assert run["snapshot_optimal"][-1] == ad.is_optimal(ad.greedy_policy(whole), 5)
-    assert run["snapshot_greedy"][-1] == pytest.approx(ad.walk_average(ad.greedy_policy(whole), 5))
+    assert run["snapshot_optimal"][-1] == snapshots.is_optimal(snapshots.greedy_policy(whole), 5)
+    assert run["snapshot_greedy"][-1] == pytest.approx(
+        snapshots.walk_average(snapshots.greedy_policy(whole), 5)
+    )
 
 
 def test_oracle_env_reports_arrivals():
-    env = ad.grid(5, ad.make_delay("Poisson", 2), record_arrivals=True)
+    env = settings.grid(5, settings.make_delay("Poisson", 2), record_arrivals=True)
     env.reset(seed=0)
     assert "reward_arrivals" in env.step(0)[4]
 
@@ -136,17 +143,17 @@ def test_future_work_options_scale_the_greedy_window():
 
 def test_bad_arguments():
     with pytest.raises(ValueError, match="kind must be one of"):
-        ad.make_delay("uniform", 3)
+        settings.make_delay("uniform", 3)
     with pytest.raises(ValueError, match="agent must be one of"):
-        ad.make_agent("SARSA", 5, ad.make_delay("Poisson", 2), 0)
+        settings.make_agent("SARSA", 5, settings.make_delay("Poisson", 2), 0)
     with pytest.raises(ValueError, match="steps"):
-        ad.make_agent("MMQ", 5, ad.make_delay("Poisson", 2), 0, steps=0)
+        settings.make_agent("MMQ", 5, settings.make_delay("Poisson", 2), 0, steps=0)
     with pytest.raises(TypeError, match="steps"):
-        ad.make_agent("MMQ", 5, ad.make_delay("Poisson", 2), 0, steps="1000")
-    agent = ad.make_agent("MMQ", 5, ad.make_delay("Poisson", 2), 0, steps=1000)
+        settings.make_agent("MMQ", 5, settings.make_delay("Poisson", 2), 0, steps="1000")
+    agent = settings.make_agent("MMQ", 5, settings.make_delay("Poisson", 2), 0, steps=1000)
     assert agent.greedy_window == 100
     with pytest.raises(TypeError, match="averaged"):
-        ad.greedy_policy(agent, averaged="yes")
+        snapshots.greedy_policy(agent, averaged="yes")
     with pytest.raises(ValueError, match=r"agent must be one of \('MMQ', 'DeconvQ learned', 'Q'\)"):
         lfd.run_task({"agent": "SARSA", "seed": 0, "steps": 10})
 
@@ -164,7 +171,7 @@ def test_anonymous_delay_small_run_writes_table_claims_and_figures(tmp_path):
     summary = run_experiment(experiment, Config(quick=True, seeds=1, steps=2_500), tmp_path, False)
     payload = json.loads((tmp_path / "summary.json").read_text())
     rows = {row["agent"]: row for row in payload["table"]}
-    assert set(rows) == set(ad.AGENTS)
+    assert set(rows) == set(settings.AGENTS)
     for row in rows.values():
         assert row["seeds"] == 1 and 0 <= row["optimal_seeds"] <= 1
         for key in ("greedy", "average", "second_half_optimal", "ns_per_step"):
@@ -249,12 +256,16 @@ def test_the_share_of_optimal_seeds_reads_its_wilson_interval():
         task, result = _fake("DeconvQ learned", seed, seed != 0, 0.7, 8, 1.0)
         tasks.append(task)
         results.append(result)
-    claim = ad.optimal_seeds_claim("DeconvQ learned", list(zip(tasks, results, strict=True)), "")
+    claim = summaries.optimal_seeds_claim(
+        "DeconvQ learned", list(zip(tasks, results, strict=True)), ""
+    )
     # 19 of 20: Wilson [0.76, 0.99], neither inside nor wholly outside [0.95, 1]
     assert claim.verdict == "inconclusive" and claim.note.startswith("19 of 20 seeds")
     for result in results[1:9]:
         result["optimal"] = False
-    claim = ad.optimal_seeds_claim("DeconvQ learned", list(zip(tasks, results, strict=True)), "")
+    claim = summaries.optimal_seeds_claim(
+        "DeconvQ learned", list(zip(tasks, results, strict=True)), ""
+    )
     assert claim.verdict == "differs" and claim.mean == pytest.approx(0.55)
 
 

@@ -5,16 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from delayed_rl.experiments import (
-    Config,
-    controllers,
-    linefollow,
-    linefollow_deconv,
-    real_robot,
-    run_experiment,
-    run_experiments,
-)
-from delayed_rl.experiments.linefollow import training_run, training_task
+from delayed_rl.experiments import Config, run_experiment, run_experiments
+from delayed_rl.experiments.beyond import linefollow_deconv
+from delayed_rl.experiments.framework.line_following import training_run, training_task
+from delayed_rl.experiments.thesis import controllers, linefollow, real_robot
 
 TIMINGS = {"ns_per_step", "pretrain_seconds"}
 

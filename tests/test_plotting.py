@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from delayed_rl.experiments import get_experiment, plotting
-from delayed_rl.experiments.runner import Config
+from delayed_rl.experiments import get_experiment
+from delayed_rl.experiments.framework import plotting
+from delayed_rl.experiments.framework.runner import Config
 
 
 @pytest.fixture
@@ -88,7 +89,7 @@ def test_heatmaps_have_one_labelled_colourbar(tmp_path, kept):
 
 
 def test_roulette_cells_print_the_tables_on_one_scale(tmp_path, kept):
-    from delayed_rl.experiments.roulette import THESIS_TABLES
+    from delayed_rl.experiments.thesis.roulette import THESIS_TABLES
 
     summary = _summary("roulette")
     fig = _draw(summary, "tables_3_3_to_3_5", tmp_path, kept)
@@ -134,7 +135,7 @@ def test_figures_compared_with_the_thesis_draw_its_values(
 
 
 def test_thesis_lines_sit_at_the_claims_values(tmp_path, kept):
-    from delayed_rl.experiments.controllers import THESIS
+    from delayed_rl.experiments.thesis.controllers import THESIS
 
     summary = _summary("controllers", seeds=1)
     ax = _draw(summary, "fig5_19_controllers", tmp_path, kept).axes[0]

@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 
 from delayed_rl.experiments import Config, get_experiment, run_experiment, run_experiments
-from delayed_rl.experiments import anonymous_delay as ad
-from delayed_rl.experiments import future_work as fw
-from delayed_rl.experiments.pool import pool_key, run_key
-from delayed_rl.experiments.runner import Experiment, SharedRun, Summary
+from delayed_rl.experiments.beyond import future_work as fw
+from delayed_rl.experiments.framework import delay_settings as settings
+from delayed_rl.experiments.framework import snapshot_runs as snapshots
+from delayed_rl.experiments.framework.pool import pool_key, run_key
+from delayed_rl.experiments.framework.runner import Experiment, SharedRun, Summary
 
 CALLS: list[dict] = []
 
@@ -214,32 +215,36 @@ def test_outputs_go_to_a_folder_per_experiment(tmp_path):
 
 def _quick_task(agent: str) -> dict:
     config = Config(quick=True, seeds=1, steps=6_000)
-    return next(t for t in ad.grid_tasks(config, (agent,)))
+    return next(t for t in settings.setting_tasks(config, (agent,)))
 
 
 def test_the_greedy_window_changes_nothing_of_how_mmq_learns():
     """MMQ's shared run (with the averaged table) trains as the thesis rule alone does."""
     task = _quick_task(fw.THESIS)
-    delay = ad.make_delay(task["delay"], task["lam"])
-    alone = ad.measure(fw.make_variant(fw.THESIS, task["size"], delay, task["steps"], 0), task)
+    delay = settings.make_delay(task["delay"], task["lam"])
+    alone = snapshots.measure(
+        fw.make_variant(fw.THESIS, task["size"], delay, task["steps"], 0), task
+    )
     shared = fw.run_task(task)
     np.testing.assert_array_equal(shared["curve"], alone["curve"])
     np.testing.assert_array_equal(shared["snapshot_optimal"], alone["snapshot_optimal"])
     np.testing.assert_array_equal(shared["estimate"], alone["estimate"])
-    assert not any(key.startswith(ad.AVERAGED) for key in shared)
+    assert not any(key.startswith(snapshots.AVERAGED) for key in shared)
 
 
 def test_the_greedy_window_variant_reads_the_averaged_table_of_the_same_run():
     task = {**_quick_task(fw.GREEDY_ONLY[0]), "agent": fw.GREEDY_ONLY[0]}
-    delay = ad.make_delay(task["delay"], task["lam"])
+    delay = settings.make_delay(task["delay"], task["lam"])
     agent = fw.make_variant(task["agent"], task["size"], delay, task["steps"], task["seed"])
-    own = ad.train_with_snapshots(agent, task["steps"], task["size"])
+    own = snapshots.train_with_snapshots(agent, task["steps"], task["size"])
     window = fw.run_task(task)
     np.testing.assert_array_equal(window["snapshot_greedy"], own["window_snapshot_greedy"])
-    assert window["greedy"] == ad.walk_average(ad.greedy_policy(agent, averaged=True), 7)
+    assert window["greedy"] == snapshots.walk_average(
+        snapshots.greedy_policy(agent, averaged=True), 7
+    )
     assert window["curve"].tolist() == fw.run_task({**task, "agent": fw.THESIS})["curve"].tolist()
     with pytest.raises(ValueError, match="no averaged table"):
-        ad.averaged_readout(ad.current_readout(window))
+        snapshots.averaged_readout(snapshots.current_readout(window))
 
 
 @pytest.mark.experiment

@@ -231,7 +231,7 @@ def test_tasks_follow_the_thesis_protocol():
 
 
 def test_a_task_continues_one_pretrained_agent_on_both_conditions():
-    from delayed_rl.experiments.real_robot import run_task
+    from delayed_rl.experiments.thesis.real_robot import run_task
 
     result = run_task({"agent": "MMQ", "seed": 0, "pretrain_steps": 300, "steps": 200})
     for condition in ("real", "control"):
@@ -263,7 +263,7 @@ def test_quick_run_writes_claims_and_figures(tmp_path):
 
 def _fake(mmq: float, q: float, error_ratio: float, control: float, seeds: int = 6):
     """Claims of synthetic runs: real averages ``mmq``, ``q``; control = real + ``control``."""
-    from delayed_rl.experiments.real_robot import summarize
+    from delayed_rl.experiments.thesis.real_robot import summarize
 
     tasks, results = [], []
     values = {"MMQ": mmq, "Q": q, "DeconvQ learned": q + 0.1}

@@ -15,19 +15,8 @@ import numpy as np
 import pytest
 from support import fake_grid_run, fake_line_run
 
-from delayed_rl.experiments import (
-    anonymous_delay,
-    controllers,
-    delay_sweep,
-    estimate_error,
-    future_work,
-    linefollow,
-    linefollow_deconv,
-    mmq_gridworld,
-    roulette,
-    world_size,
-)
-from delayed_rl.experiments.common import (
+from delayed_rl.experiments.beyond import anonymous_delay, future_work, linefollow_deconv
+from delayed_rl.experiments.framework.claims import (
     band_claim,
     count_claim,
     direction_claim,
@@ -38,13 +27,22 @@ from delayed_rl.experiments.common import (
     trend_claim,
     wilson_interval,
 )
-from delayed_rl.experiments.runner import (
+from delayed_rl.experiments.framework.runner import (
     VERDICTS,
     Claim,
     Config,
     Experiment,
     Summary,
     write_outputs,
+)
+from delayed_rl.experiments.thesis import (
+    controllers,
+    delay_sweep,
+    estimate_error,
+    linefollow,
+    mmq_gridworld,
+    roulette,
+    world_size,
 )
 
 

@@ -1,25 +1,31 @@
-"""The thesis experiments, one module each, on the shared runner (:mod:`.runner`)."""
+"""The experiments, one module each: the thesis's (:mod:`.thesis`) and beyond it (:mod:`.beyond`).
+
+Each module defines its ``EXPERIMENT`` on the framework (:mod:`.framework`: the runner, the pool,
+the claims' rules, the figures and the pieces several experiments share); no experiment module
+imports another. :func:`get_experiment` imports the one asked for.
+"""
 
 from __future__ import annotations
 
 import importlib
 
 from delayed_rl._validation import check_choice
-from delayed_rl.experiments.pool import run_experiment, run_experiments
-from delayed_rl.experiments.runner import Config, Experiment, Summary
+from delayed_rl.experiments.framework.pool import run_experiment, run_experiments
+from delayed_rl.experiments.framework.runner import Config, Experiment, Summary
 
+#: Each experiment's module, below this package, by the name ``delayed-rl bench NAME`` takes.
 _MODULES = {
-    "delay-sweep": "delay_sweep",
-    "world-size": "world_size",
-    "estimate-error": "estimate_error",
-    "mmq-gridworld": "mmq_gridworld",
-    "roulette": "roulette",
-    "controllers": "controllers",
-    "linefollow": "linefollow",
-    "anonymous-delay": "anonymous_delay",
-    "future-work": "future_work",
-    "linefollow-deconv": "linefollow_deconv",
-    "real-robot": "real_robot",
+    "delay-sweep": "thesis.delay_sweep",
+    "world-size": "thesis.world_size",
+    "estimate-error": "thesis.estimate_error",
+    "mmq-gridworld": "thesis.mmq_gridworld",
+    "roulette": "thesis.roulette",
+    "controllers": "thesis.controllers",
+    "linefollow": "thesis.linefollow",
+    "anonymous-delay": "beyond.anonymous_delay",
+    "future-work": "beyond.future_work",
+    "linefollow-deconv": "beyond.linefollow_deconv",
+    "real-robot": "thesis.real_robot",
 }
 #: The experiments' names, as ``delayed-rl bench NAME`` takes them.
 NAMES = tuple(_MODULES)

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from delayed_rl.experiments.runner import RunProgress, iter_tasks
+from delayed_rl.experiments.framework.runner import RunProgress, iter_tasks
 from delayed_rl.sweep.reading import read_sweep_file
 from delayed_rl.sweep.results import (
     EXTRA_COLUMNS,
@@ -186,8 +186,8 @@ def run_sweep(
             every core of the cluster with ``ray`` and ``dask``).
         backend: ``"loky"`` (joblib's process pool), ``"ray"`` or ``"dask"``.
         address: an existing Ray or Dask cluster to run on (``None``: a local one); see
-            :func:`~delayed_rl.experiments.runner.iter_tasks`.
-        progress: show the progress on stderr (:class:`~delayed_rl.experiments.runner.RunProgress`:
+            :func:`~delayed_rl.experiments.framework.runner.iter_tasks`.
+        progress: show the progress on stderr (:class:`~delayed_rl.experiments.framework.runner.RunProgress`:
             tqdm's bar, else a count line per run).
 
     Returns:

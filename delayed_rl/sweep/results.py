@@ -20,7 +20,7 @@ from typing import Any
 
 from delayed_rl.agents.common.hyperparameters import MAX_ABS_VALUE
 from delayed_rl.agents.common.python_loop import MAX_TIMESTEPS
-from delayed_rl.experiments.runner import mean_ci95
+from delayed_rl.experiments.framework.runner import mean_ci95
 from delayed_rl.sweep.schema import MAX_SWEEP_SEED, Sweep
 
 #: The columns of ``results.csv`` that every sweep writes, in this order.
@@ -357,7 +357,7 @@ def plot_env(path: Path, env: str, rows: Sequence[Mapping[str, Any]]) -> None:
         env: the env's label (the title).
         rows: the env's rows of :func:`summarize`.
     """
-    from delayed_rl.experiments import plotting
+    from delayed_rl.experiments.framework import plotting
 
     plt = plotting._pyplot()
     delays = list(dict.fromkeys(row["delay"] for row in rows))

@@ -4,20 +4,22 @@ from __future__ import annotations
 
 import numpy as np
 
-from delayed_rl.experiments import plotting
-from delayed_rl.experiments.common import (
-    curves_and_means,
+from delayed_rl.experiments.framework import plotting
+from delayed_rl.experiments.framework.claims import (
     direction_claim,
-    grid_task,
-    grid_tasks,
-    learning_curve_groups,
     mean_ci_n,
-    normalised,
     paired,
     reference_row,
     trend_claim,
 )
-from delayed_rl.experiments.runner import Config, Experiment, Summary
+from delayed_rl.experiments.framework.normalised_runs import (
+    curves_and_means,
+    grid_task,
+    grid_tasks,
+    learning_curve_groups,
+    normalised,
+)
+from delayed_rl.experiments.framework.runner import Config, Experiment, Summary
 
 LAMS = (1, 2, 5, 10, 20, 50)
 QUICK_LAMS = (2, 10, 50)

@@ -1,8 +1,9 @@
 """``linefollow-deconv`` (beyond the thesis): deconvolution Q-learning on the e-puck line follower.
 
 A module of its own (not a setting of ``anonymous-delay``): the e-puck runs share nothing with
-the grid worlds but the agents. The setting is ``linefollow``'s (:mod:`delayed_rl.experiments.linefollow`, whose env,
-constants and metrics this module reuses): ``delayed_rl/EPuckLineFollow-v0`` on the racetrack,
+the grid worlds but the agents. The setting is ``linefollow``'s (the framework's
+:mod:`~delayed_rl.experiments.framework.line_following`, whose env, learners, training run and
+metrics both use): ``delayed_rl/EPuckLineFollow-v0`` on the racetrack,
 discrete Table 5.2 actions, centroid states, put back on the track after 50 line-less steps,
 Poisson(90) reward delays, 150k steps a run, 5 seeds; α = 0.1, γ = 0.9, constant ε = 0.1,
 ``q_init`` = 10. Three learners:
@@ -15,18 +16,19 @@ Poisson(90) reward delays, 150k steps a run, 5 seeds; α = 0.1, γ = 0.9, consta
 ``--quick``: 2 seeds, 5k steps. 15 tasks at full size; MMQ's and Q's are ``linefollow``'s runs
 (the same env, settings and seeds), which ``delayed-rl reproduce`` runs once for both, and every
 learner's run is also the start of ``controllers``' and ``real-robot``'s longer training
-(:func:`.linefollow.training_run`: run together, each learner and seed trains once).
+(:func:`~.line_following.training_run`: run together, each learner and seed trains once).
 
 Metrics, as ``linefollow``'s: the average reward during learning (the undelayed reward's
 running mean) and the accumulated error Σ|Δ| (an unseen line counted as |Δ| = 20), plus the
 delay estimate (DeconvQ's ``delay_pmf`` and ``mean_delay``, MMQ's acting-delay share and its
 mean) and ns/step (``learn``'s wall time over the steps, on the compiled path).
 
-The claims, with verdicts computed from the runs by :mod:`.common`'s rules (each row's
+The claims, with verdicts computed from the runs by :mod:`~.framework.claims`' rules (each row's
 ``criterion`` states its own):
 
 - MMQ's and Q's average rewards against the thesis's ≈ 0.55 and ≈ 0.12 (Fig. 5.22), and
-  MMQ's accumulated error over Q's against ≈ 0.4 (Fig. 5.23): ``linefollow``'s bands;
+  MMQ's accumulated error over Q's against ≈ 0.4 (Fig. 5.23): ``linefollow``'s bands
+  (:mod:`~delayed_rl.experiments.framework.line_claims`);
 - DeconvQ learned's average reward: a ``reference`` row (no thesis value; the next rows test it);
 - DeconvQ learned minus Q, and minus MMQ, average reward (paired by seed): the direction rule,
   above 0;
@@ -42,17 +44,35 @@ from __future__ import annotations
 import numpy as np
 
 from delayed_rl._validation import check_choice
-from delayed_rl.experiments import linefollow, plotting
-from delayed_rl.experiments.anonymous_delay import DELAY_TOLERANCE, estimate_plot
-from delayed_rl.experiments.common import (
-    band_claim,
+from delayed_rl.experiments.framework import plotting
+from delayed_rl.experiments.framework.claims import (
     direction_claim,
     mean_ci_n,
     paired,
     reference_row,
+)
+from delayed_rl.experiments.framework.delay_estimates import ESTIMATE_LABELS, mean_delay_claim
+from delayed_rl.experiments.framework.line_claims import (
+    error_ratio_claim,
+    reward_claims,
+    thesis_error_ratio_lines,
+    thesis_reward_lines,
+)
+from delayed_rl.experiments.framework.line_following import (
+    LAM,
+    LAMBDA_MAX,
+    line_statistics,
+    logged_run,
+    training_cost,
+)
+from delayed_rl.experiments.framework.runner import (
+    Config,
+    Curve,
+    Experiment,
+    SharedRun,
+    Summary,
     seed_tasks,
 )
-from delayed_rl.experiments.runner import Config, Curve, Experiment, SharedRun, Summary
 
 #: The learners compared.
 AGENTS = ("MMQ", "DeconvQ learned", "Q")
@@ -69,7 +89,7 @@ def run_task(task: dict) -> dict:
     """Train one learner on the line follower; measure reward, error, delay estimate and cost.
 
     Returns:
-        :func:`.linefollow.run_task`'s results: ``linefollow``'s metrics (``steps``,
+        ``linefollow``'s results: :func:`~.line_following.run_metrics`' (``steps``,
         ``curve``, ``error``, ``average``, ``total_error``, ``visible``), ``ns_per_step``,
         ``path`` and the delay estimate.
     """
@@ -80,21 +100,16 @@ def shared_run(task: dict) -> SharedRun:
     """Every task's training run, pooled with the other line-following experiments'.
 
     MMQ's and Q's are ``linefollow``'s runs (the same env, settings and seeds); each learner's
-    is also the start of ``controllers``' and ``real-robot``'s (:func:`.linefollow.training_run`).
+    is also the start of ``controllers``' and ``real-robot``'s
+    (:func:`~.line_following.logged_run`).
     """
     check_choice("agent", task["agent"], AGENTS)
-    return linefollow.shared_run(task)
-
-
-#: DeconvQ's training cost per step on the line follower (µs; MMQ's and Q's are linefollow's).
-DECONV_STEP_MICROSECONDS = 14.0
+    return logged_run(task["agent"], task["seed"], task["steps"])
 
 
 def cost(task: dict) -> float:
-    """A task's estimated core-seconds, for scheduling (:func:`.linefollow.cost` for MMQ and Q)."""
-    if task["agent"] in linefollow.AGENTS:
-        return linefollow.cost(task)
-    return 1e-6 * DECONV_STEP_MICROSECONDS * task["steps"]
+    """A task's estimated core-seconds, for scheduling (:func:`~.line_following.training_cost`)."""
+    return training_cost(task["agent"], task["steps"])
 
 
 def _paired(runs: dict[str, list[dict]], ours: str, theirs: str, how: str) -> tuple:
@@ -117,29 +132,17 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
         agent, seed, steps = task["agent"], task["seed"], result["steps"]
         curves.append(Curve(agent, seed, steps, result["curve"]))
         curves.append(Curve(agent, seed, steps, result["error"], "accumulated_error"))
+    return Summary(_claims(runs), curves, _figures(runs), _statistics(runs))
+
+
+def _claims(runs: dict[str, list[dict]]) -> list:
+    """The claims of the module docstring, from each agent's runs (in the order of the seeds)."""
     stat = {agent: mean_ci_n([r["average"] for r in rs]) for agent, rs in runs.items()}
-    tolerance = linefollow.REWARD_TOLERANCE
     over_mmq = _paired(runs, "DeconvQ learned", "MMQ", "difference")
     over_q = _paired(runs, "DeconvQ learned", "Q", "difference")
-    error_ratio = _paired(runs, "DeconvQ learned", "MMQ", "ratio")
-    thesis_ratio = _paired(runs, "MMQ", "Q", "ratio")
     delays = mean_ci_n([r["mean_delay"] for r in runs["DeconvQ learned"]])
-    lam = linefollow.LAM
-    claims = [
-        band_claim(
-            "MMQ average reward during learning",
-            "≈ 0.55 (Fig. 5.22)",
-            stat["MMQ"],
-            linefollow.THESIS_REWARD["MMQ"],
-            tolerance,
-        ),
-        band_claim(
-            "Q average reward during learning",
-            "≈ 0.12 (Fig. 5.22)",
-            stat["Q"],
-            linefollow.THESIS_REWARD["Q"],
-            tolerance,
-        ),
+    return [
+        *reward_claims(stat),
         reference_row(
             "DeconvQ learned average reward during learning",
             stat["DeconvQ learned"],
@@ -162,30 +165,21 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
         direction_claim(
             "DeconvQ learned accumulated error / MMQ accumulated error",
             "extension: below 1",
-            error_ratio,
+            _paired(runs, "DeconvQ learned", "MMQ", "ratio"),
             "below",
             1.0,
             note="paired by seed",
         ),
-        band_claim(
-            "MMQ accumulated error / Q accumulated error",
-            "≈ 0.4 (Fig. 5.23)",
-            thesis_ratio,
-            linefollow.THESIS_ERROR_RATIO,
-            linefollow.RATIO_TOLERANCE,
-            note="paired by seed",
-        ),
-        band_claim(
-            "DeconvQ learned mean delay",
-            f"extension: the true mean {lam}",
-            delays,
-            lam,
-            DELAY_TOLERANCE * lam,
-        ),
+        error_ratio_claim(_paired(runs, "MMQ", "Q", "ratio"), "paired by seed"),
+        mean_delay_claim("DeconvQ learned mean delay", delays, LAM),
     ]
-    extra = {
-        **linefollow.line_statistics(runs),
-        "average_reward": {agent: stat[agent][:2] for agent in AGENTS},
+
+
+def _statistics(runs: dict[str, list[dict]]) -> dict:
+    """``summary.json``'s statistics per agent: line, reward, ns/step, mean delay, paths."""
+    return {
+        **line_statistics(runs),
+        "average_reward": {a: mean_ci_n([r["average"] for r in rs])[:2] for a, rs in runs.items()},
         "ns_per_step": {a: mean_ci_n([r["ns_per_step"] for r in rs])[:2] for a, rs in runs.items()},
         "mean_delay": {
             a: mean_ci_n([r["mean_delay"] for r in rs])[:2]
@@ -194,46 +188,41 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
         },
         "paths": {a: sorted({r["path"] for r in rs}) for a, rs in runs.items()},
     }
-    return Summary(claims, curves, _figures(runs), extra)
 
 
 def _figures(runs: dict[str, list[dict]]) -> dict:
     """Reward and accumulated-error curves with 95 % bands; the delay estimates over Poisson(90)."""
     from delayed_rl.delays import Poisson
 
-    title = (
-        f"line following, Poisson delays of mean λ = {linefollow.LAM}, "
-        f"λ̂max = {linefollow.LAMBDA_MAX}"
-    )
+    title = f"line following, Poisson delays of mean λ = {LAM}, λ̂max = {LAMBDA_MAX}"
     rewards = {a: [(r["steps"], r["curve"]) for r in rs] for a, rs in runs.items()}
     errors = {a: [(r["steps"], r["error"]) for r in rs] for a, rs in runs.items()}
-    labels = {"MMQ": "MMQ acting share", "DeconvQ learned": "DeconvQ learned pmf"}
     estimates = {
-        labels[a]: [(r["estimate_support"], r["estimate"]) for r in runs[a]]
-        for a in labels
+        ESTIMATE_LABELS[a]: [(r["estimate_support"], r["estimate"]) for r in runs[a]]
+        for a in ESTIMATE_LABELS
         if runs[a] and all("estimate" in r for r in runs[a])
     }
-    true_pmf = np.asarray(Poisson(linefollow.LAM).pmf(np.arange(linefollow.LAMBDA_MAX + 1)))
+    true_pmf = np.asarray(Poisson(LAM).pmf(np.arange(LAMBDA_MAX + 1)))
     return {
         "average_reward": plotting.figure(
             plotting.learning_curves,
             rewards,
             f"{title}: average reward (the thesis has no DeconvQ value)",
             "average reward (undelayed stream)",
-            linefollow.thesis_reward_lines(),
+            thesis_reward_lines(),
         ),
         "accumulated_error": plotting.figure(
             plotting.learning_curves,
             errors,
             f"{title}: accumulated error (the thesis has no DeconvQ value)",
             "accumulated error Σ|Δ| (pixels)",
-            thesis_ratios=linefollow.thesis_error_ratio_lines(),
+            thesis_ratios=thesis_error_ratio_lines(),
         ),
         "delay_estimate": plotting.figure(
-            estimate_plot,
+            plotting.estimate_plot,
             estimates,
             true_pmf,
-            f"{title}: delay estimates against the true Poisson({linefollow.LAM}) pmf",
+            f"{title}: delay estimates against the true Poisson({LAM}) pmf",
         ),
     }
 

@@ -4,7 +4,7 @@ An experiment module defines an :class:`Experiment`: its name, the thesis figure
 ``tasks(config)`` (one picklable task per (condition, seed)), ``run_task(task)`` (a dict of
 results, numbers or numpy arrays) and ``summarize(tasks, results, config)`` (the claims checked
 against the thesis, as :class:`Claim` rows, plus curves and figures).
-:func:`~delayed_rl.experiments.pool.run_experiment` runs the tasks through joblib — on its
+:func:`~delayed_rl.experiments.framework.pool.run_experiment` runs the tasks through joblib — on its
 default ``loky`` process pool, or handed to Ray or Dask — and :func:`write_outputs` writes
 ``curves.csv``, ``summary.json``, the figures and ``report.md`` into the output folder. Tasks
 that need the same computation (of one experiment or several) name it as one
@@ -14,7 +14,7 @@ Every task carries its own seed, so results do not depend on the number of worke
 
 **Verdicts.** A claim's verdict is one of :data:`VERDICTS`, computed from the measurement's
 95 % interval and the thesis's value by the rule its ``criterion`` states (the helpers of
-:mod:`.common` build every row and its criterion):
+:mod:`.claims` build every row and its criterion):
 
 - ``agrees``: the interval lies inside the thesis's band, or wholly on the claimed side;
 - ``differs``: it lies wholly outside the band, or wholly on the other side;
@@ -68,7 +68,7 @@ class Config:
 
     Attributes:
         seeds: the number of seeds, independent runs per condition (``None``: the experiment's
-            default, see :func:`~delayed_rl.experiments.pool.run_experiment`).
+            default, see :func:`~delayed_rl.experiments.framework.pool.run_experiment`).
         steps: training steps per run (``None``: the experiment's thesis-scale default).
         quick: a scaled-down version that runs in seconds (fewer steps, seeds and conditions).
         workers: parallel worker processes (1 runs in this process).
@@ -108,8 +108,8 @@ class Config:
         )
 
 
-MAX_SEEDS_TEXT = f"MAX_SEEDS = {MAX_SEEDS:,} (delayed_rl.experiments.runner)"
-MAX_WORKERS_TEXT = f"MAX_WORKERS = {MAX_WORKERS} (delayed_rl.experiments.runner)"
+MAX_SEEDS_TEXT = f"MAX_SEEDS = {MAX_SEEDS:,} (delayed_rl.experiments.framework.runner)"
+MAX_WORKERS_TEXT = f"MAX_WORKERS = {MAX_WORKERS} (delayed_rl.experiments.framework.runner)"
 MAX_SEED_TEXT = "MAX_SEED = 2**63 - 1 (delayed_rl.agents.common.hyperparameters)"
 
 
@@ -195,7 +195,7 @@ class Summary:
 class SharedRun(NamedTuple):
     """The computation behind a task, where tasks (of one experiment or several) share one.
 
-    :func:`~delayed_rl.experiments.pool.run_experiments` runs each distinct ``(run, task)``
+    :func:`~delayed_rl.experiments.framework.pool.run_experiments` runs each distinct ``(run, task)``
     once and hands every task behind it ``view(result)``.
 
     **Pooled runs.** With ``pooled`` the name of a list in ``task`` (its *items*: say, the
@@ -272,6 +272,18 @@ class Experiment:
     def task_cost(self, task: dict) -> float:
         """``task``'s estimated core-seconds: its :attr:`cost`, else :func:`default_cost`."""
         return float((self.cost or default_cost)(task))
+
+
+def seed_tasks(config: Config, agents: Sequence[str], **fields: object) -> list[dict]:
+    """One task per (seed, agent): ``{"agent", "seed", **fields}``, seed-major.
+
+    Seeds run from ``config.base_seed``, ``config.seeds`` of them.
+    """
+    return [
+        {"agent": agent, "seed": config.base_seed + i, **fields}
+        for i in range(config.seeds)
+        for agent in agents
+    ]
 
 
 def mean_ci95(values: Sequence[float]) -> tuple[float, float]:

@@ -2,16 +2,15 @@
 
 Three agents per seed (20 seeds): MMQ (Λ = {0..50}) and Q-learning under Poisson(13) reward
 delays, and undelayed Q-learning, 1M steps each with the thesis's hyper-parameters
-(:mod:`.training`). Each run learns in ``SNAPSHOTS`` pieces
-(:func:`~delayed_rl.experiments.anonymous_delay.train_with_snapshots`, which trains exactly as
-one ``learn`` call) and after each piece records whether the greedy policy is optimal (its
-1000-step walk scores ``LOOP_FRACTION`` of the optimal 17-step loop). The greedy policy of a
-learner under delays can keep flipping between the optimal loop and another route, so the
-final greedy policy is one draw of that: the report gives both the count of seeds whose final
-greedy policy is optimal (k of n) and, per seed, the share of second-half snapshots that are
-optimal.
+(:mod:`~delayed_rl.experiments.framework.training`). Each run learns in ``SNAPSHOTS`` pieces
+(:func:`~.snapshot_runs.train_with_snapshots`, which trains exactly as one ``learn`` call) and
+after each piece records whether the greedy policy is optimal (its 1000-step walk scores
+``LOOP_FRACTION`` of the optimal 17-step loop). The greedy policy of a learner under delays can
+keep flipping between the optimal loop and another route, so the final greedy policy is one
+draw of that: the report gives both the count of seeds whose final greedy policy is optimal
+(k of n) and, per seed, the share of second-half snapshots that are optimal.
 
-Claims (verdicts by :mod:`.common`'s rules; each row's ``criterion`` states its own):
+Claims (verdicts by :mod:`~.framework.claims`' rules; each row's ``criterion`` states its own):
 
 - MMQ's greedy average reward against the thesis's 0.59 ± 0.06; Q's against 0 ± 0.1;
 - MMQ's seeds whose final greedy policy is optimal, and MMQ's second-half snapshot share: more
@@ -27,21 +26,16 @@ Claims (verdicts by :mod:`.common`'s rules; each row's ``criterion`` states its 
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from pathlib import Path
+
 import numpy as np
 
 from delayed_rl._validation import check_probability
 from delayed_rl.agents import MultipleModelQLearning
-from delayed_rl.agents.mmq import greedy_actions
-from delayed_rl.experiments import plotting
-from delayed_rl.experiments.anonymous_delay import (
-    LOOP_FRACTION,
-    SNAPSHOTS,
-    band_plot,
-    optimal_average,
-    second_half_share,
-    train_with_snapshots,
-)
-from delayed_rl.experiments.common import (
+from delayed_rl.agents.common.q_table import greedy_actions
+from delayed_rl.experiments.framework import plotting
+from delayed_rl.experiments.framework.claims import (
     band_claim,
     count_claim,
     direction_claim,
@@ -50,8 +44,22 @@ from delayed_rl.experiments.common import (
     range_claim,
     reference_row,
 )
-from delayed_rl.experiments.runner import Config, Curve, Experiment, Summary, running_average
-from delayed_rl.experiments.training import (
+from delayed_rl.experiments.framework.runner import (
+    Claim,
+    Config,
+    Curve,
+    Experiment,
+    Summary,
+    running_average,
+)
+from delayed_rl.experiments.framework.snapshot_runs import (
+    LOOP_FRACTION,
+    SNAPSHOTS,
+    optimal_average,
+    second_half_share,
+    train_with_snapshots,
+)
+from delayed_rl.experiments.framework.training import (
     EPSILON,
     greedy_average_reward,
     grid_env,
@@ -127,7 +135,7 @@ def run_task(task: dict) -> dict:
     """Train one agent, then read off its curve, greedy score, visits, policies and Table 5.1 rows.
 
     The agent learns in :data:`SNAPSHOTS` pieces
-    (:func:`~delayed_rl.experiments.anonymous_delay.train_with_snapshots`), as one run.
+    (:func:`~.snapshot_runs.train_with_snapshots`), as one run.
 
     Returns:
         ``steps`` and ``curve`` (the running average reward), ``average`` (over the run),
@@ -172,6 +180,13 @@ def run_task(task: dict) -> dict:
     }
 
 
+#: The quantity of the second-half snapshot rows, and the note of the seed-count rows.
+_LATE = "share of second-half greedy snapshots optimal"
+_LOOP = f"optimal: a 1000-step greedy walk ≥ {LOOP_FRACTION} of the 17-step loop"
+#: The note of the second-half snapshot rows.
+_PER_SEED = "per seed, the share of its snapshots after half the steps"
+
+
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
     """Fig. 5.9's and Table 5.1's claims (see the module docstring), curves and figures."""
     by_agent: dict[str, list[dict]] = {}
@@ -197,16 +212,26 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
         for agent, runs in by_agent.items()
     }
     optimal_seeds = {a: sum(r["optimal"] for r in runs) for a, runs in by_agent.items()}
-    mmq = by_agent["MMQ"]
-    route_means = [np.mean([row[2] for row in r["route_table"]]) for r in mmq]
-    route_spread = [
-        np.mean([np.sqrt(row[3]) / abs(row[2]) for row in r["route_table"]]) for r in mmq
-    ]
-    late = "share of second-half greedy snapshots optimal"
-    loop = f"optimal: a 1000-step greedy walk ≥ {LOOP_FRACTION} of the 17-step loop"
     training = {a: {s: r["average"] for s, r in runs.items()} for a, runs in by_seed.items()}
-    undelayed = by_agent["Q undelayed"]
     claims = [
+        *_greedy_claims(stat, optimal_seeds, {a: len(runs) for a, runs in by_agent.items()}),
+        *_training_claims(stat, training),
+        *_undelayed_rows(stat, optimal_seeds, len(by_agent["Q undelayed"])),
+        *_route_claims(by_agent["MMQ"]),
+    ]
+    extra = _statistics(by_agent, optimal_seeds)
+    return Summary(claims, curves, _figures(by_agent, stat), extra)
+
+
+def _greedy_claims(stat: dict, optimal_seeds: dict, seeds: dict[str, int]) -> list[Claim]:
+    """MMQ's and Q's final greedy rewards, seeds optimal at the end, and second-half snapshots.
+
+    Args:
+        stat: each agent's ``(mean, ci, n)`` of each claim key.
+        optimal_seeds: each agent's count of seeds whose final greedy policy is optimal.
+        seeds: each agent's count of seeds.
+    """
+    return [
         band_claim(
             "MMQ greedy average reward (1000 steps)",
             "0.59 (near-optimal; optimum 0.588)",
@@ -218,17 +243,17 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
             "MMQ seeds whose final greedy policy is optimal",
             "near-optimal: most seeds",
             optimal_seeds["MMQ"],
-            len(mmq),
+            seeds["MMQ"],
             0.5,
-            note=loop,
+            note=_LOOP,
         ),
         range_claim(
-            f"MMQ {late}",
+            f"MMQ {_LATE}",
             "near-optimal: most of the time",
             stat["MMQ"]["second_half_optimal"],
             0.5,
             1.0,
-            note="per seed, the share of its snapshots after half the steps",
+            note=_PER_SEED,
         ),
         band_claim(
             "Q greedy average reward (1000 steps)",
@@ -241,19 +266,20 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
             "Q seeds whose final greedy policy is optimal",
             "≈ 0: few seeds",
             optimal_seeds["Q"],
-            len(by_agent["Q"]),
+            seeds["Q"],
             0.0,
             0.5,
-            note=loop,
+            note=_LOOP,
         ),
         range_claim(
-            f"Q {late}",
-            "≈ 0: rarely",
-            stat["Q"]["second_half_optimal"],
-            0.0,
-            0.5,
-            note="per seed, the share of its snapshots after half the steps",
+            f"Q {_LATE}", "≈ 0: rarely", stat["Q"]["second_half_optimal"], 0.0, 0.5, note=_PER_SEED
         ),
+    ]
+
+
+def _training_claims(stat: dict, training: dict[str, dict[int, float]]) -> list[Claim]:
+    """Fig. 5.9 during learning: MMQ's reward (a reference), MMQ above Q by seed, Q's ≈ 0."""
+    return [
         reference_row(
             "MMQ average reward during learning",
             stat["MMQ"]["average"],
@@ -272,13 +298,30 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
             0.0,
             NEAR_ZERO,
         ),
-        reference_row("undelayed Q average reward during learning", stat["Q undelayed"]["average"]),
+    ]
+
+
+def _undelayed_rows(stat: dict, optimal_seeds: dict, seeds: int) -> list[Claim]:
+    """Undelayed Q-learning's training and greedy rewards and snapshots, as reference rows."""
+    undelayed = stat["Q undelayed"]
+    return [
+        reference_row("undelayed Q average reward during learning", undelayed["average"]),
         reference_row(
             "undelayed Q greedy average reward (1000 steps)",
-            stat["Q undelayed"]["greedy"],
-            note=f"{optimal_seeds['Q undelayed']} of {len(undelayed)} seeds optimal at the end",
+            undelayed["greedy"],
+            note=f"{optimal_seeds['Q undelayed']} of {seeds} seeds optimal at the end",
         ),
-        reference_row(f"undelayed Q {late}", stat["Q undelayed"]["second_half_optimal"]),
+        reference_row(f"undelayed Q {_LATE}", undelayed["second_half_optimal"]),
+    ]
+
+
+def _route_claims(mmq: list[dict]) -> list[Claim]:
+    """Table 5.1 over MMQ's seeds: Q along the greedy route (mean over λ̂), and its spread."""
+    route_means = [np.mean([row[2] for row in r["route_table"]]) for r in mmq]
+    route_spread = [
+        np.mean([np.sqrt(row[3]) / abs(row[2]) for row in r["route_table"]]) for r in mmq
+    ]
+    return [
         direction_claim(
             "Table 5.1: mean over λ̂ of Q along the greedy route",
             f"≈ {THESIS_ROUTE_Q} (inflated above the true ≈ {TRUE_ROUTE_Q} by the max over models)",
@@ -296,12 +339,17 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
             SPREAD_LIMIT,
         ),
     ]
+
+
+def _statistics(by_agent: dict[str, list[dict]], optimal_seeds: dict) -> dict:
+    """``summary.json``'s extra: Table 5.1 of the first seed, MMQ's model share, optimal seeds."""
+    mmq = by_agent["MMQ"]
     table51 = [
         {"state": s + 1, "action": a + 1, "mean_q": m, "var_q": v}
         for s, a, m, v in mmq[0]["route_table"]
     ]
     share = np.mean([r["model_share"] for r in mmq], axis=0)
-    extra = {
+    return {
         "table_5_1_first_seed": table51,
         "mmq_model_share": share,
         "most_used_estimate": int(np.argmax(share)),
@@ -309,7 +357,10 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
         "snapshots": SNAPSHOTS,
         "loop_fraction": LOOP_FRACTION,
     }
-    return Summary(claims, curves, _figures(by_agent, stat), extra)
+
+
+#: Every figure's setting, in its title.
+_SETTING = f"{SIZE}×{SIZE}, Poisson delays of mean λ = {LAM}, MMQ with Λ = {{0..{LAMBDA_MAX}}}"
 
 
 def _figures(by_agent: dict[str, list[dict]], stat: dict[str, dict]) -> dict:
@@ -320,17 +371,13 @@ def _figures(by_agent: dict[str, list[dict]], stat: dict[str, dict]) -> dict:
         stat: each agent's ``(mean, ci, n)`` of ``"greedy"`` (and the other claim keys).
     """
     groups = {a: [(r["steps"], r["curve"]) for r in runs] for a, runs in by_agent.items()}
-    visits = {a: np.mean([r["visits"] for r in runs], axis=0) for a, runs in by_agent.items()}
     first = {a: runs[0] for a, runs in by_agent.items()}
-    setting = f"{SIZE}×{SIZE}, Poisson delays of mean λ = {LAM}, MMQ with Λ = {{0..{LAMBDA_MAX}}}"
     optimum = optimal_average(SIZE)
-    n = len(by_agent["MMQ"])
-    route = first["MMQ"]["route_table"]
-    figures = {
+    return {
         "fig5_9_mmq_vs_q": plotting.figure(
             plotting.learning_curves,
             groups,
-            f"{setting}: average reward during learning (Fig. 5.9)\n"
+            f"{_SETTING}: average reward during learning (Fig. 5.9)\n"
             "thesis: MMQ near-optimal (below the loop only by ε's exploration), Q ≈ 0",
             "average reward",
             [
@@ -341,52 +388,73 @@ def _figures(by_agent: dict[str, list[dict]], stat: dict[str, dict]) -> dict:
         "greedy_average_reward": plotting.figure(
             plotting.value_bars,
             {a: stat[a]["greedy"] for a in by_agent},
-            f"{setting}: the final greedy policy's average reward over 1000 steps",
+            f"{_SETTING}: the final greedy policy's average reward over 1000 steps",
             "greedy average reward",
             {a: (v, f"thesis {a} {v:.2f} (section 5.1.1)") for a, v in THESIS_GREEDY.items()},
         ),
-        "table5_1_route_q": plotting.figure(
-            plotting.errorbar_curve,
-            np.arange(len(route)),
-            [row[2] for row in route],
-            [np.sqrt(row[3]) for row in route],
-            f"{setting}: Q(s, a*, λ̂) along MMQ's greedy route, first seed (Table 5.1)",
-            "state along the greedy route (thesis numbering; a* its greedy action)",
-            "Q(s, a*, λ̂)",
-            thesis=[
-                (None, THESIS_ROUTE_Q, f"thesis ≈ {THESIS_ROUTE_Q} in every row (Table 5.1)"),
-                (None, TRUE_ROUTE_Q, f"true value ≈ {TRUE_ROUTE_Q} (V* of the route)"),
-            ],
-            label="measured: mean ± std over λ̂",
-            xticklabels=[str(row[0] + 1) for row in route],
-        ),
-        "fig5_10_visits": plotting.figure(
-            plotting.grid_heatmap,
-            visits,
-            f"{setting}: state visits during learning, mean over {n} seeds (Fig. 5.10)",
-            "visits per cell (mean over seeds)",
-        ),
-        "fig5_11_policies": plotting.figure(
-            plotting.grid_heatmap,
-            {a: r["visits"] for a, r in first.items()},
-            f"{setting}: deterministic greedy policies (arrows), first seed (Fig. 5.11)",
-            "visits per cell during learning (first seed)",
-            arrows={a: r["policy"] for a, r in first.items()},
-        ),
+        "table5_1_route_q": _route_figure(first["MMQ"]["route_table"]),
+        **_visit_figures(by_agent),
         "greedy_optimal_snapshots": plotting.figure(
-            band_plot,
+            plotting.band_plot,
             {
                 a: [(r["snapshot_steps"], r["snapshot_optimal"]) for r in runs]
                 for a, runs in by_agent.items()
             },
-            f"{setting}: share of seeds whose greedy policy is optimal\n"
+            f"{_SETTING}: share of seeds whose greedy policy is optimal\n"
             "thesis: MMQ's greedy policy near-optimal (most seeds), Q's ≈ 0 (loops in the centre)",
             "time step",
             "share of seeds optimal",
             (-0.05, 1.05),
         ),
+        **_policy_figures(first),
     }
+
+
+def _route_figure(route: list[tuple]) -> Callable[[Path], None]:
+    """Table 5.1: Q(s, a*, λ̂) along MMQ's greedy route (first seed), mean ± std over λ̂."""
+    return plotting.figure(
+        plotting.errorbar_curve,
+        np.arange(len(route)),
+        [row[2] for row in route],
+        [np.sqrt(row[3]) for row in route],
+        f"{_SETTING}: Q(s, a*, λ̂) along MMQ's greedy route, first seed (Table 5.1)",
+        "state along the greedy route (thesis numbering; a* its greedy action)",
+        "Q(s, a*, λ̂)",
+        thesis=[
+            (None, THESIS_ROUTE_Q, f"thesis ≈ {THESIS_ROUTE_Q} in every row (Table 5.1)"),
+            (None, TRUE_ROUTE_Q, f"true value ≈ {TRUE_ROUTE_Q} (V* of the route)"),
+        ],
+        label="measured: mean ± std over λ̂",
+        xticklabels=[str(row[0] + 1) for row in route],
+    )
+
+
+def _visit_figures(by_agent: dict[str, list[dict]]) -> dict:
+    """Figs. 5.10–5.11: state visits (mean over seeds), and the first seed's greedy policies."""
+    visits = {a: np.mean([r["visits"] for r in runs], axis=0) for a, runs in by_agent.items()}
+    first = {a: runs[0] for a, runs in by_agent.items()}
+    n = len(by_agent["MMQ"])
+    return {
+        "fig5_10_visits": plotting.figure(
+            plotting.grid_heatmap,
+            visits,
+            f"{_SETTING}: state visits during learning, mean over {n} seeds (Fig. 5.10)",
+            "visits per cell (mean over seeds)",
+        ),
+        "fig5_11_policies": plotting.figure(
+            plotting.grid_heatmap,
+            {a: r["visits"] for a, r in first.items()},
+            f"{_SETTING}: deterministic greedy policies (arrows), first seed (Fig. 5.11)",
+            "visits per cell during learning (first seed)",
+            arrows={a: r["policy"] for a, r in first.items()},
+        ),
+    }
+
+
+def _policy_figures(first: dict[str, dict]) -> dict:
+    """Figs. 5.12 and 5.15: each agent's ε-greedy P(a | s) per direction, first seed."""
     directions = ("P(up)", "P(right)", "P(down)", "P(left)")
+    figures = {}
     for agent, result in first.items():
         panels = dict(zip(directions, result["behaviour"], strict=True))
         title = f"{agent}: probabilistic (ε-greedy) policy, first seed (Figs. 5.12, 5.15)\n{_setting_of(agent)}"

@@ -27,7 +27,7 @@ ThesisLine = tuple
 
 
 def figure(draw: Callable[..., None], *args: Any, **kwargs: Any) -> Callable[[Path], None]:
-    """A figure of a :class:`~delayed_rl.experiments.runner.Summary`: ``draw`` once given a path.
+    """A figure of a :class:`~delayed_rl.experiments.framework.runner.Summary`: ``draw`` once given a path.
 
     Args:
         draw: one of this module's functions, e.g. :func:`learning_curves`.
@@ -202,6 +202,92 @@ def learning_curves(
         ax.set_ylim(*ylim)
     outside_legend(ax)
     _finish(fig, ax, path, title, xlabel, ylabel)
+
+
+def band_plot(
+    path: Path,
+    groups: dict[str, list[tuple[np.ndarray, np.ndarray]]],
+    title: str,
+    xlabel: str,
+    ylabel: str,
+    ylim: tuple[float, float] | None = None,
+    reference: tuple[float, str] | None = None,
+) -> None:
+    """Mean curve with a 95 % band per group; optional y-limits and a dashed reference line.
+
+    Args:
+        path: where to save the PNG.
+        groups: ``{label: [(x, y), ...]}``, one pair per seed, the same ``x`` within a label.
+        title: the title.
+        xlabel: the x-axis label.
+        ylabel: the y-axis label.
+        ylim: the y-axis limits (``None``: the curves after their first 5 % and the reference
+            line when there is one, else matplotlib's).
+        reference: ``(y, label)`` of a horizontal dashed line, e.g. the optimum.
+    """
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(9.5, 4.5))
+    for label, runs in groups.items():
+        x = runs[0][0]
+        values = np.vstack([y for _, y in runs]).astype(float)
+        mean = values.mean(axis=0)
+        (line,) = ax.plot(x, mean, label=band_label(label, len(runs)))
+        if len(runs) > 1:
+            half = 1.96 * values.std(axis=0, ddof=1) / np.sqrt(len(runs))
+            ax.fill_between(x, mean - half, mean + half, alpha=0.18, color=line.get_color())
+    if reference is not None:
+        ax.axhline(reference[0], color="black", linestyle="--", linewidth=1, label=reference[1])
+    if ylim is None and reference is not None:  # the optimum in view, the first 5 % cut off
+        settled = [y[x >= 0.05 * x[-1]] for runs in groups.values() for x, y in runs]
+        low = min(float(np.min(y)) for y in settled if y.size)
+        high = max(reference[0], max(float(np.max(y)) for y in settled if y.size))
+        ylim = (low - 0.05 * (high - low), high + 0.08 * (high - low))
+    if ylim is not None:
+        ax.set_ylim(*ylim)
+    outside_legend(ax)
+    _finish(fig, ax, path, title, xlabel, ylabel)
+
+
+def estimate_plot(
+    path: Path,
+    estimates: dict[str, list[tuple[np.ndarray, np.ndarray]]],
+    true_pmf: np.ndarray,
+    title: str,
+) -> None:
+    """Delay estimates (mean over seeds with a 95 % band) over the true pmf's bars.
+
+    Estimates over a coarser grid than every integer (MMQ with ``delay_step`` > 1) are drawn per
+    unit of delay (divided by their spacing), so every curve is on the pmf's scale. The x axis
+    spans the true pmf's support.
+
+    Args:
+        path: where to save the PNG.
+        estimates: ``{label: [(support, distribution), ...]}``, one pair per seed.
+        true_pmf: the true delay pmf on ``0, 1, ..., len − 1``.
+        title: the title.
+    """
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(9.5, 4.5))
+    ax.bar(np.arange(true_pmf.size), true_pmf, color="0.8", width=1.0, label="true pmf")
+    top = float(true_pmf.max())
+    for label, runs in estimates.items():
+        support = np.asarray(runs[0][0], dtype=float)
+        spacing = float(np.diff(support).min()) if support.size > 1 else 1.0
+        values = np.vstack([y for _, y in runs]) / spacing
+        mean = values.mean(axis=0)
+        (line,) = ax.plot(
+            support, mean, marker=".", markersize=3, label=band_label(label, len(runs))
+        )
+        if len(runs) > 1:
+            half = 1.96 * values.std(axis=0, ddof=1) / np.sqrt(len(runs))
+            lower = np.maximum(mean - half, 0)
+            ax.fill_between(support, lower, mean + half, alpha=0.25, color=line.get_color())
+            top = max(top, float((mean + half).max()))
+        top = max(top, float(mean.max()))
+    ax.set_xlim(-1, true_pmf.size)
+    ax.set_ylim(0, 1.1 * top)
+    outside_legend(ax)
+    _finish(fig, ax, path, title, "delay (steps)", "probability (pmf) or share of steps")
 
 
 def errorbar_curve(

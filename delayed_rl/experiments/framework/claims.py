@@ -1,8 +1,8 @@
-"""Pieces shared by the experiments: verdict rules, and the grid-world runs normalised by Eq. 5.3.
+"""The results' statistics and verdicts: 95 % intervals, and the rules that judge them.
 
-**Verdicts.** Every report row is built by one of the helpers below, which compute its verdict
-from the measurement's 95 % interval and the thesis's value by a stated rule, and write that
-rule into the row's ``criterion``:
+Every report row is built by one of the helpers below, which compute its verdict from the
+measurement's 95 % interval and the thesis's value by a stated rule, and write that rule into
+the row's ``criterion``:
 
 - :func:`band_claim` / :func:`range_claim`: a value against a band (the thesis's value ± a
   tolerance, or a range such as "in (0, 1)"): ``agrees`` when the 95 % CI lies inside the band,
@@ -21,34 +21,23 @@ rule into the row's ``criterion``:
 An interval that is NaN (no data, or a quantity that could not be formed) is ``inconclusive``.
 Differences and ratios of two conditions are formed per seed first (:func:`paired`), so their CI
 is over seeds too.
-
-**Normalised grid-world runs.** The grid-world experiments (``delay-sweep``, ``world-size``,
-``estimate-error``) share one design: for every seed and world size, an undelayed Q-learning
-*reference* run, and delayed runs whose average reward is divided by the reference's (the
-thesis's Eq. 5.3). :func:`grid_tasks` builds those tasks, :func:`grid_task` runs one, and
-:func:`normalised` pairs each delayed run with its reference.
 """
 
 from __future__ import annotations
 
 import math
-from collections import defaultdict
 from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from delayed_rl.experiments.runner import (
+from delayed_rl.experiments.framework.runner import (
     AGREES,
     DIFFERS,
     INCONCLUSIVE,
     REFERENCE,
     Claim,
-    Config,
-    Curve,
     mean_ci95,
-    running_average,
 )
-from delayed_rl.experiments.training import grid_env, train
 
 #: The standard normal 0.975 quantile, of the Wilson interval.
 _Z975 = 1.959964
@@ -321,113 +310,3 @@ def reference_row(
     mean, ci, n = stats
     criterion = "none: a reference, not tested"
     return Claim(quantity, thesis, mean, ci, n, REFERENCE, criterion, note, mean - ci, mean + ci)
-
-
-def seed_tasks(config: Config, agents: Sequence[str], **fields: object) -> list[dict]:
-    """One task per (seed, agent): ``{"agent", "seed", **fields}``, seed-major.
-
-    Seeds run from ``config.base_seed``, ``config.seeds`` of them.
-    """
-    return [
-        {"agent": agent, "seed": config.base_seed + i, **fields}
-        for i in range(config.seeds)
-        for agent in agents
-    ]
-
-
-def grid_tasks(config: Config, steps: int, runs: Sequence[dict]) -> list[dict]:
-    """The tasks of a normalised grid-world experiment, for every seed of ``config``.
-
-    Per seed, and per world size in the order ``runs`` first name it: the undelayed Q-learning
-    reference run in that world, then each of ``runs`` in that world.
-
-    Args:
-        config: the seeds (``config.seeds`` of them, from ``config.base_seed``).
-        steps: training steps of every run.
-        runs: one dict per delayed condition: ``size`` (the world's side), ``lam`` (the Poisson
-            mean delay), ``lags`` (the agent's delay estimates, ``[0]`` for Q-learning) and
-            ``condition`` (its label), plus any keys its experiment's ``summarize`` reads.
-
-    Returns:
-        The task dicts :func:`grid_task` runs, each with its ``steps`` and ``seed``; reference
-        runs have ``reference=True``.
-    """
-    sizes = list(dict.fromkeys(run["size"] for run in runs))
-    out = []
-    for i in range(config.seeds):
-        seed = config.base_seed + i
-        for size in sizes:
-            reference = {"size": size, "lam": 0, "lags": [0], "condition": "undelayed"}
-            out.append({**reference, "steps": steps, "seed": seed, "reference": True})
-            out += [{**run, "steps": steps, "seed": seed} for run in runs if run["size"] == size]
-    return out
-
-
-def grid_task(task: dict) -> dict:
-    """Train on ``GridWorld(size)`` with Poisson(``lam``) delays and estimates ``lags``.
-
-    Returns:
-        The learning curve (``steps``, ``curve``: the running average reward) and the
-        ``average`` reward over the whole run, from the undelayed reward stream.
-    """
-    agent = train(grid_env(task["size"], task["lam"]), task["lags"], task["steps"], task["seed"])
-    rewards = agent.training_log["undelayed_reward"]
-    steps, curve = running_average(rewards)
-    return {"steps": steps, "curve": curve, "average": float(rewards.mean())}
-
-
-def _references(tasks: list[dict], results: list[dict]) -> dict:
-    """The undelayed reference runs' results, keyed by ``(size, seed)``."""
-    return {
-        (task["size"], task["seed"]): result
-        for task, result in zip(tasks, results, strict=True)
-        if task.get("reference")
-    }
-
-
-def normalised(tasks: list[dict], results: list[dict]) -> dict:
-    """Eq. 5.3 per delayed task: its average reward over that of the matching undelayed run.
-
-    The curve is normalised step by step (NaN while the reference has earned nothing yet).
-
-    Returns:
-        ``{condition: [(seed, steps, normalised curve, normalised average), ...]}``, the
-        conditions in the order of ``tasks``.
-    """
-    reference = _references(tasks, results)
-    out = defaultdict(list)
-    for task, result in zip(tasks, results, strict=True):
-        if task.get("reference"):
-            continue
-        base = reference[(task["size"], task["seed"])]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            curve = np.where(base["curve"] > 0, result["curve"] / base["curve"], np.nan)
-        out[task["condition"]].append(
-            (task["seed"], result["steps"], curve, result["average"] / base["average"])
-        )
-    return out
-
-
-def curves_and_means(
-    per_condition: dict,
-) -> tuple[list[Curve], dict[str, tuple[float, float, int]]]:
-    """Curves for the CSV and (mean, 95 % CI, n) of the normalised average per condition.
-
-    Args:
-        per_condition: what :func:`normalised` returns.
-    """
-    curves, stats = [], {}
-    for condition, runs in per_condition.items():
-        for seed, steps, curve, _ in runs:
-            curves.append(Curve(condition, seed, steps, curve, "normalised_average_reward"))
-        stats[condition] = mean_ci_n([average for *_, average in runs])
-    return curves, stats
-
-
-def learning_curve_groups(per_condition: dict) -> dict[str, list[tuple[np.ndarray, np.ndarray]]]:
-    """``{condition: [(steps, normalised curve), ...]}``: the groups a learning-curve figure draws.
-
-    Args:
-        per_condition: what :func:`normalised` returns.
-    """
-    return {c: [(steps, curve) for _, steps, curve, _ in runs] for c, runs in per_condition.items()}

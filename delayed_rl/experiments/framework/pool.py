@@ -45,7 +45,7 @@ from pathlib import Path
 from typing import Any
 
 from delayed_rl._validation import check_bool
-from delayed_rl.experiments.runner import (
+from delayed_rl.experiments.framework.runner import (
     Config,
     Experiment,
     RunProgress,
@@ -184,7 +184,7 @@ def run_experiment(
         out: the output folder (``None``: write nothing, return the summary only).
         progress: report the progress: print a line saying how many runs start on how many
             workers, then count the runs on stderr as they finish
-            (:class:`~delayed_rl.experiments.runner.RunProgress`: tqdm's bar, else a line per
+            (:class:`~delayed_rl.experiments.framework.runner.RunProgress`: tqdm's bar, else a line per
             run).
 
     Returns:

@@ -10,10 +10,10 @@ latency, wheel slip on paper, motor lag, camera noise and a grey printed line.
 
 Per seed and agent, one task:
 
-1. pretraining: ``linefollow``'s setting (:mod:`delayed_rl.experiments.linefollow`, whose env, agents, constants and
-   metrics this module reuses): the clean simulation on the racetrack, discrete Table 5.2
-   actions, centroid states, put back on the track after 50 line-less steps, Poisson(90)
-   reward delays, α = 0.1, γ = 0.9, constant ε = 0.1, ``q_init`` = 10; 500k steps;
+1. pretraining: ``linefollow``'s setting (:mod:`~delayed_rl.experiments.framework.line_following`):
+   the clean simulation on the racetrack, discrete Table 5.2 actions, centroid states, put back
+   on the track after 50 line-less steps, Poisson(90) reward delays, α = 0.1, γ = 0.9, constant
+   ε = 0.1, ``q_init`` = 10; 500k steps;
 2. the **real** run: a copy of the pretrained agent (``copy.deepcopy``) moved to the real
    configuration (``set_env``), same Poisson(90) delay, learning on for 1,500 steps
    (``learn(1500, reset_num_timesteps=False)``);
@@ -25,23 +25,23 @@ Per seed and agent, one task:
 Both continuations start from the same agent state and the same env seed (the first reset
 after ``set_env`` uses the agent's seed), so their difference is paired by seed. (The control
 runs on the compiled path; the stand-in's command latency keeps the real run on the Python
-path, so their agents' random draws differ.) Agents: ``MMQ``,
-``Q`` and, beyond the thesis, ``DeconvQ learned`` (:class:`~DeconvolutionQLearning`
-learning the delay on 0..150, as in ``linefollow-deconv``). Default 4 seeds (the thesis's two
-runs are seeds ``base_seed`` and ``base_seed + 1``, drawn alone in the figures' first panels;
-all four give the 95 % CIs, with 3 degrees of freedom, a choice made when a seed cost minutes
-of pretraining; ``--seeds`` takes more); ``--steps`` sets the pretraining steps. ``--quick``: 2
+path, so their agents' random draws differ.) Agents: ``MMQ``, ``Q`` and, beyond the thesis,
+``DeconvQ learned`` (learning the delay on 0..150, as in ``linefollow-deconv``). Default 4
+seeds (the thesis's two runs are seeds ``base_seed`` and ``base_seed + 1``, drawn alone in the
+figures' first panels; all four give the 95 % CIs, with 3 degrees of freedom, a choice made
+when a seed cost minutes of pretraining; ``--seeds`` takes more); ``--steps`` sets the
+pretraining steps. ``--quick``: 2
 seeds, 5k pretraining steps, 300 steps per continuation.
 
 Metrics of each 1,500-step continuation, from its own ``training_log``: the average reward (the
 running mean of the undelayed reward, Figs. 5.24, 5.26) and the accumulated error Σ|Δ| (an
-unseen line counted as |Δ| = 20, :func:`.linefollow.line_error`; Figs. 5.25, 5.27).
+unseen line counted as |Δ| = 20, :func:`~.line_following.line_error`; Figs. 5.25, 5.27).
 
-Claims, verdicts from the 95 % CIs over seeds (:mod:`.common`'s rules):
+Claims, verdicts from the 95 % CIs over seeds (:mod:`~.framework.claims`' rules):
 
 - on the real configuration, MMQ's average reward against the thesis's ≈ 0.2 (run 1 just
   over, run 2 just under) and Q's against ≈ −0.25 (−0.2 and just under −0.3), each
-  ± ``linefollow.REWARD_TOLERANCE``; MMQ above Q (paired by seed);
+  ± :data:`~.line_claims.REWARD_TOLERANCE`; MMQ above Q (paired by seed);
 - Q's accumulated error over MMQ's (paired by seed) against the thesis's 1.55–1.7 (run 2,
   run 1), widened by :data:`ERROR_RATIO_TOLERANCE`;
 - the control runs' average rewards against Fig. 5.19's pretrained agents in simulation (MMQ
@@ -51,10 +51,10 @@ Claims, verdicts from the 95 % CIs over seeds (:mod:`.common`'s rules):
 - DeconvQ learned minus Q on the real configuration, above 0 (an extension), and DeconvQ's
   average reward there as a reference row.
 
-Cost: pretraining dominates; it runs on the compiled path (the e-puck stepped inside the
-compiled training loop), the continuations on the real configuration on the Python path (its
-command latency does not compile); ``benchmarks/SPEED.md`` has their cost. ``summary.json``
-records each pretraining's wall time (mean and CI, ``pretrain_seconds``). The pretraining is :func:`.linefollow.training_run`'s, whose
+Cost: pretraining dominates; it runs on the compiled path, the continuations on the real
+configuration on the Python path (its command latency does not compile);
+``benchmarks/SPEED.md`` has their cost, ``summary.json`` each pretraining's wall time
+(``pretrain_seconds``). The pretraining is :func:`~.line_following.training_run`'s, whose
 first steps are ``linefollow``'s, ``linefollow-deconv``'s and ``controllers``' training of the
 same learner and seed: run together (``delayed-rl reproduce``), each trains once.
 """
@@ -66,23 +66,38 @@ from typing import Any
 import numpy as np
 
 from delayed_rl._validation import check_choice
-from delayed_rl.experiments import linefollow, linefollow_deconv, plotting
-from delayed_rl.experiments.common import (
+from delayed_rl.experiments.framework import plotting
+from delayed_rl.experiments.framework.claims import (
     band_claim,
     direction_claim,
     mean_ci_n,
     paired,
     range_claim,
     reference_row,
+)
+from delayed_rl.experiments.framework.line_claims import REWARD_TOLERANCE
+from delayed_rl.experiments.framework.line_following import (
+    LAM,
+    LAMBDA_MAX,
+    REAL_ENV_ID,
+    UNSEEN_ERROR,
+    pooled_training,
+    training_cost,
+)
+from delayed_rl.experiments.framework.runner import (
+    Claim,
+    Config,
+    Curve,
+    Experiment,
+    SharedRun,
+    Summary,
     seed_tasks,
 )
-from delayed_rl.experiments.runner import Config, Curve, Experiment, SharedRun, Summary
 
-REAL_ENV_ID = linefollow.REAL_ENV_ID
 #: The learners compared.
 AGENTS = ("MMQ", "Q", "DeconvQ learned")
 CONDITIONS = ("real", "control")
-#: The env each condition continues on (a key of :data:`.linefollow.SETTINGS`).
+#: The env each condition continues on (a key of :data:`~.line_following.SETTINGS`).
 SETTING = {"real": "real", "control": "clean"}
 PRETRAIN_STEPS, QUICK_PRETRAIN_STEPS = 500_000, 5_000
 RUN_STEPS, QUICK_RUN_STEPS = 1_500, 300
@@ -110,7 +125,7 @@ def run_task(task: dict) -> dict:
     """Pretrain one agent in the clean simulation, then continue a copy on each condition.
 
     Returns:
-        ``{"real": ..., "control": ...}`` (:func:`.linefollow.run_metrics`'s metrics) and
+        ``{"real": ..., "control": ...}`` (:func:`~.line_following.run_metrics`' metrics) and
         ``pretrain_seconds``, the wall time of the pretraining.
     """
     return shared_run(task).alone()
@@ -120,7 +135,7 @@ def shared_run(task: dict) -> SharedRun:
     """The task's training run, pooled with the other line-following experiments'.
 
     Its first steps are ``linefollow``'s (or ``linefollow-deconv``'s) and ``controllers``' runs
-    of the same learner and seed (:func:`.linefollow.training_run`): run together, each learner
+    of the same learner and seed (:func:`~.line_following.training_run`): run together, each learner
     and seed trains once.
     """
     check_choice("agent", task["agent"], AGENTS)
@@ -128,8 +143,7 @@ def shared_run(task: dict) -> SharedRun:
         ["continue", task["pretrain_steps"], SETTING[condition], task["steps"]]
         for condition in CONDITIONS
     ]
-    run = linefollow.training_task(task["agent"], task["seed"], *continuations)
-    return SharedRun(linefollow.training_run, run, _by_condition, "readouts")
+    return pooled_training(task["agent"], task["seed"], continuations, _by_condition)
 
 
 def _by_condition(result: dict) -> dict:
@@ -143,7 +157,7 @@ def _by_condition(result: dict) -> dict:
 
 def cost(task: dict) -> float:
     """A task's estimated core-seconds, for scheduling: its pretraining and two runs."""
-    return linefollow_deconv.cost({**task, "steps": task["pretrain_steps"] + 2 * task["steps"]})
+    return training_cost(task["agent"], task["pretrain_steps"] + 2 * task["steps"])
 
 
 def _by_seed(runs: dict, agent: str, condition: str, key: str) -> dict[int, float]:
@@ -163,14 +177,27 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
             name = f"{agent} {condition}"
             curves.append(Curve(name, seed, r["steps"], r["curve"]))
             curves.append(Curve(name, seed, r["steps"], r["error"], "accumulated_error"))
+    claims = [*_real_claims(runs), *_control_claims(runs), *_deconv_claims(runs)]
+    seeds = sorted(runs["MMQ"])
+    extra = {**_statistics(runs, seeds), "protocol": _protocol(task_list)}
+    return Summary(claims, curves, _figures(runs, seeds), extra)
 
-    def stats(agent: str, condition: str, key: str = "average") -> tuple[float, float, int]:
-        return mean_ci_n(list(_by_seed(runs, agent, condition, key).values()))
 
-    def gap(agent: str) -> tuple[float, float, int]:
-        control = _by_seed(runs, agent, "control", "average")
-        return mean_ci_n(paired(control, _by_seed(runs, agent, "real", "average")))
+def _stats(
+    runs: dict, agent: str, condition: str, key: str = "average"
+) -> tuple[float, float, int]:
+    """(mean, CI, n) over the seeds of one agent's ``key`` in one condition."""
+    return mean_ci_n(list(_by_seed(runs, agent, condition, key).values()))
 
+
+def _gap(runs: dict, agent: str) -> tuple[float, float, int]:
+    """(mean, CI, n) of what the gap costs ``agent``: control minus real average reward, by seed."""
+    control = _by_seed(runs, agent, "control", "average")
+    return mean_ci_n(paired(control, _by_seed(runs, agent, "real", "average")))
+
+
+def _real_claims(runs: dict) -> list[Claim]:
+    """On the real robot: MMQ's and Q's average rewards, MMQ above Q, Q's error over MMQ's."""
     mmq_over_q = mean_ci_n(
         paired(_by_seed(runs, "MMQ", "real", "average"), _by_seed(runs, "Q", "real", "average"))
     )
@@ -181,29 +208,22 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
             "ratio",
         )
     )
-    deconv_over_q = mean_ci_n(
-        paired(
-            _by_seed(runs, "DeconvQ learned", "real", "average"),
-            _by_seed(runs, "Q", "real", "average"),
-        )
-    )
-    tolerance = linefollow.REWARD_TOLERANCE
     low = min(THESIS_ERROR_RATIOS.values()) - ERROR_RATIO_TOLERANCE
     high = max(THESIS_ERROR_RATIOS.values()) + ERROR_RATIO_TOLERANCE
-    claims = [
+    return [
         band_claim(
             "MMQ average reward on the real robot",
             "≈ 0.2 (run 1 just over, run 2 just under; Figs. 5.24, 5.26)",
-            stats("MMQ", "real"),
+            _stats(runs, "MMQ", "real"),
             THESIS_REAL["MMQ"],
-            tolerance,
+            REWARD_TOLERANCE,
         ),
         band_claim(
             "Q average reward on the real robot",
             "≈ −0.25 (run 1 −0.2, run 2 just under −0.3; Figs. 5.24, 5.26)",
-            stats("Q", "real"),
+            _stats(runs, "Q", "real"),
             THESIS_REAL["Q"],
-            tolerance,
+            REWARD_TOLERANCE,
         ),
         direction_claim(
             "MMQ minus Q average reward on the real robot (paired by seed)",
@@ -218,34 +238,52 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
             low,
             high,
             note=f"paired by seed; the thesis's range [1.55, 1.7] ± {ERROR_RATIO_TOLERANCE}; "
-            f"an unseen line counts |Δ| = {linefollow.UNSEEN_ERROR}",
+            f"an unseen line counts |Δ| = {UNSEEN_ERROR}",
         ),
+    ]
+
+
+def _control_claims(runs: dict) -> list[Claim]:
+    """In the clean simulation: MMQ's and Q's average rewards, and what the gap costs each."""
+    return [
         band_claim(
             "MMQ average reward, control (clean simulation)",
             "just over 0.6 (Fig. 5.19, pretrained MMQ in simulation, 1,700 steps)",
-            stats("MMQ", "control"),
+            _stats(runs, "MMQ", "control"),
             THESIS_SIM["MMQ"],
-            tolerance,
+            REWARD_TOLERANCE,
         ),
         band_claim(
             "Q average reward, control (clean simulation)",
             "≈ 0.3 (Fig. 5.19, pretrained Q in simulation, 1,700 steps)",
-            stats("Q", "control"),
+            _stats(runs, "Q", "control"),
             THESIS_SIM["Q"],
-            tolerance,
+            REWARD_TOLERANCE,
         ),
         direction_claim(
             "MMQ gap cost: control minus real average reward (paired by seed)",
             "> 0: worse on the robot than in simulation (section 5.3; ≈ 0.6 − 0.2)",
-            gap("MMQ"),
+            _gap(runs, "MMQ"),
             "above",
         ),
         direction_claim(
             "Q gap cost: control minus real average reward (paired by seed)",
             "> 0: worse on the robot than in simulation (section 5.3; ≈ 0.3 + 0.25)",
-            gap("Q"),
+            _gap(runs, "Q"),
             "above",
         ),
+    ]
+
+
+def _deconv_claims(runs: dict) -> list[Claim]:
+    """The extension: DeconvQ learned above Q on the real robot, and its reward as a reference."""
+    deconv_over_q = mean_ci_n(
+        paired(
+            _by_seed(runs, "DeconvQ learned", "real", "average"),
+            _by_seed(runs, "Q", "real", "average"),
+        )
+    )
+    return [
         direction_claim(
             "DeconvQ learned minus Q average reward on the real robot (paired by seed)",
             "extension: DeconvQ above Q",
@@ -254,20 +292,20 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
         ),
         reference_row(
             "DeconvQ learned average reward on the real robot",
-            stats("DeconvQ learned", "real"),
-            note=f"control: {stats('DeconvQ learned', 'control')[0]:.3f}",
+            _stats(runs, "DeconvQ learned", "real"),
+            note=f"control: {_stats(runs, 'DeconvQ learned', 'control')[0]:.3f}",
         ),
     ]
-    seeds = sorted(runs["MMQ"])
-    extra = {
-        "average_reward": {f"{a} {c}": stats(a, c)[:2] for a in AGENTS for c in CONDITIONS},
-        "accumulated_error": {
-            f"{a} {c}": stats(a, c, "total_error")[:2] for a in AGENTS for c in CONDITIONS
-        },
-        "line_visible_fraction": {
-            f"{a} {c}": stats(a, c, "visible")[:2] for a in AGENTS for c in CONDITIONS
-        },
-        "gap_cost": {a: gap(a)[:2] for a in AGENTS},
+
+
+def _statistics(runs: dict, seeds: list[int]) -> dict[str, Any]:
+    """``summary.json``'s statistics: per agent and condition, and the thesis's two runs."""
+    both = [(a, c) for a in AGENTS for c in CONDITIONS]
+    return {
+        "average_reward": {f"{a} {c}": _stats(runs, a, c)[:2] for a, c in both},
+        "accumulated_error": {f"{a} {c}": _stats(runs, a, c, "total_error")[:2] for a, c in both},
+        "line_visible_fraction": {f"{a} {c}": _stats(runs, a, c, "visible")[:2] for a, c in both},
+        "gap_cost": {a: _gap(runs, a)[:2] for a in AGENTS},
         "thesis_runs": {
             name: {
                 "seed": seed,
@@ -280,16 +318,19 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
         "pretrain_seconds": {
             a: mean_ci_n([r["pretrain_seconds"] for r in runs[a].values()])[:2] for a in AGENTS
         },
-        "protocol": {
-            "pretrain_steps": task_list[0]["pretrain_steps"],
-            "run_steps": task_list[0]["steps"],
-            "lambda": linefollow.LAM,
-            "lambda_max": linefollow.LAMBDA_MAX,
-            "real_env": REAL_ENV_ID,
-            "real_config": _real_config(),
-        },
     }
-    return Summary(claims, curves, _figures(runs, seeds), extra)
+
+
+def _protocol(task_list: list[dict]) -> dict[str, Any]:
+    """``summary.json``'s protocol: the steps, the delays and the real configuration."""
+    return {
+        "pretrain_steps": task_list[0]["pretrain_steps"],
+        "run_steps": task_list[0]["steps"],
+        "lambda": LAM,
+        "lambda_max": LAMBDA_MAX,
+        "real_env": REAL_ENV_ID,
+        "real_config": _real_config(),
+    }
 
 
 def _real_config() -> dict[str, float]:
@@ -333,7 +374,7 @@ def _figures(runs: dict, seeds: list[int]) -> dict:
                 label += " (no thesis value)"
             panels[metric].append((f"{n} seeds, {label}", groups, lines))
     title = (
-        f"Poisson delays of mean λ = {linefollow.LAM}, MMQ with λ̂max = {linefollow.LAMBDA_MAX}: "
+        f"Poisson delays of mean λ = {LAM}, MMQ with λ̂max = {LAMBDA_MAX}: "
         "pretrained in simulation, then learning on the"
     )
     return {

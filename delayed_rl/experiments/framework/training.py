@@ -16,7 +16,7 @@ import gymnasium as gym
 
 from delayed_rl._validation import check_int
 from delayed_rl.agents import MultipleModelQLearning
-from delayed_rl.agents.mmq import greedy_actions
+from delayed_rl.agents.common.q_table import greedy_actions
 
 #: The thesis's α and γ (Algorithm 1), the constant ε and the grid worlds' optimistic q_init.
 ALPHA, GAMMA, EPSILON, Q_INIT = 0.1, 0.9, 0.1, 25.0

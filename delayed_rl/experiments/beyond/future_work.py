@@ -18,16 +18,19 @@ rule and the greedy window are read off one run a seed: ``anonymous-delay``'s MM
 keeps the averaged table beside the current one (:func:`shared_run`). Run together (``delayed-rl
 reproduce``), the two experiments share those runs; run alone, this one makes them itself.
 
-Settings, seeds, metrics, snapshots and figures are ``anonymous-delay``'s
-(:mod:`.anonymous_delay`, whose functions this module calls): the 9×9 grid with λ = 13 (1M
-steps) and the 7×7 grid with λ = 8 (300k steps), each under Poisson, geometric and bimodal
-delays of mean λ, 20 seeds; 720 tasks at full size. ``--quick``: 7×7 under Poisson, 2 seeds,
-30k steps. The greedy policy of every variant is what its ``greedy_table`` (or ``predict``)
-gives; the delay estimate is the acting-delay share (drawn per unit of λ̂ for the Λ-step-3
-variant, so it is on the other curves' scale).
+Settings, seeds, metrics, snapshots and figures are ``anonymous-delay``'s (the framework's
+:mod:`~delayed_rl.experiments.framework.delay_settings`,
+:mod:`~delayed_rl.experiments.framework.snapshot_runs` and
+:mod:`~delayed_rl.experiments.framework.setting_summaries`, which both call): the 9×9 grid with
+λ = 13 (1M steps) and the 7×7 grid with λ = 8 (300k steps), each under Poisson, geometric and
+bimodal delays of mean λ, 20 seeds; 720 tasks at full size. ``--quick``: 7×7 under Poisson,
+2 seeds, 30k steps. The greedy policy of every variant is what its ``greedy_table`` (or
+``predict``) gives; the delay estimate is the acting-delay share (drawn per unit of λ̂ for the
+Λ-step-3 variant, so it is on the other curves' scale).
 
 The claims, per setting and variant, with verdicts computed from the runs by
-:mod:`.common`'s rules (each row's ``criterion`` states its own), as ``anonymous-delay``'s:
+:mod:`~delayed_rl.experiments.framework.claims`' rules (each row's ``criterion`` states its
+own), as ``anonymous-delay``'s:
 
 - the variant walks the optimal loop on at least 95 % of the seeds: the Wilson 95 % interval
   of the share of optimal seeds inside [0.95, 1] (at 20 seeds at best ``inconclusive``);
@@ -46,8 +49,9 @@ from __future__ import annotations
 from typing import Any
 
 from delayed_rl._validation import check_choice
-from delayed_rl.experiments import anonymous_delay as shared
-from delayed_rl.experiments.runner import Claim, Config, Experiment, SharedRun, Summary
+from delayed_rl.experiments.framework import delay_settings, setting_summaries, snapshot_runs
+from delayed_rl.experiments.framework.runner import Claim, Config, Experiment, SharedRun, Summary
+from delayed_rl.experiments.framework.training import thesis_hyperparameters
 
 THESIS = "MMQ (thesis)"
 VARIANTS: dict[str, dict[str, Any]] = {
@@ -56,7 +60,7 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "MMQ kernel σ=5": {"reward_kernel": 5.0},
     "MMQ trace β=0.9": {"delay_trace": 0.9},
     "MMQ Λ step 3": {"delay_step": 3},
-    "MMQ greedy window 100k": {"greedy_window": None},  # steps // anonymous_delay.WINDOW_DIVISOR
+    "MMQ greedy window 100k": {"greedy_window": None},  # steps // delay_settings.WINDOW_DIVISOR
 }
 """Each variant's keyword arguments to ``MMQ`` (the greedy window's is set from the steps)."""
 GREEDY_ONLY = ("MMQ greedy window 100k",)
@@ -75,7 +79,7 @@ def options(variant: str, steps: int) -> dict[str, Any]:
     check_choice("variant", variant, tuple(VARIANTS))
     chosen = dict(VARIANTS[variant])
     if "greedy_window" in chosen:
-        chosen["greedy_window"] = max(1, steps // shared.WINDOW_DIVISOR)
+        chosen["greedy_window"] = max(1, steps // delay_settings.WINDOW_DIVISOR)
     return chosen
 
 
@@ -84,10 +88,10 @@ def make_variant(variant: str, size: int, delay: Any, steps: int, seed: int) -> 
     from delayed_rl.agents import MultipleModelQLearning
 
     return MultipleModelQLearning(
-        shared.grid(size, delay),
-        max_delay_estimate=shared.LAMBDA_MAX,
+        delay_settings.grid(size, delay),
+        max_delay_estimate=delay_settings.LAMBDA_MAX,
         **options(variant, steps),
-        **shared.hyperparameters(seed),
+        **thesis_hyperparameters(seed),
     )
 
 
@@ -99,8 +103,11 @@ def shared_run(task: dict) -> SharedRun | None:
     """
     if task["agent"] not in (THESIS, *GREEDY_ONLY):
         return None
-    view = shared.current_readout if task["agent"] == THESIS else shared.averaged_readout
-    return SharedRun(shared.run_task, {**task, "agent": "MMQ"}, view)
+    if task["agent"] == THESIS:
+        view = snapshot_runs.current_readout
+    else:
+        view = snapshot_runs.averaged_readout
+    return SharedRun(delay_settings.run_agent, {**task, "agent": "MMQ"}, view)
 
 
 #: Compiled training cost per step (µs) of each variant on these grids, for scheduling only.
@@ -113,8 +120,8 @@ def cost(task: dict) -> float:
 
 
 def tasks(config: Config) -> list[dict]:
-    """Every (setting, variant, seed), as ``anonymous-delay``'s (:func:`~delayed_rl.experiments.anonymous_delay.grid_tasks`)."""
-    return shared.grid_tasks(config, tuple(VARIANTS))
+    """Every (setting, variant, seed), as ``anonymous-delay``'s (:func:`~.setting_tasks`)."""
+    return delay_settings.setting_tasks(config, tuple(VARIANTS))
 
 
 def run_task(task: dict) -> dict:
@@ -125,11 +132,13 @@ def run_task(task: dict) -> dict:
     run = shared_run(task)
     if run is not None:
         return run.alone()
-    delay = shared.make_delay(task["delay"], task["lam"])
+    delay = delay_settings.make_delay(task["delay"], task["lam"])
     size, steps, seed = task["size"], task["steps"], task["seed"]
     variant = task["agent"]
-    shared.warm_up(lambda: make_variant(variant, size, delay, steps, seed + 1), steps, variant)
-    return shared.measure(make_variant(task["agent"], size, delay, steps, seed), task)
+    snapshot_runs.warm_up(
+        lambda: make_variant(variant, size, delay, steps, seed + 1), steps, variant
+    )
+    return snapshot_runs.measure(make_variant(task["agent"], size, delay, steps, seed), task)
 
 
 def _setting_claims(setting: str, by_variant: dict[str, list[tuple]]) -> list[Claim]:
@@ -139,7 +148,7 @@ def _setting_claims(setting: str, by_variant: dict[str, list[tuple]]) -> list[Cl
     for variant, runs in by_variant.items():
         is_thesis = variant == THESIS
         claims.append(
-            shared.optimal_seeds_claim(
+            setting_summaries.optimal_seeds_claim(
                 variant,
                 runs,
                 "near-optimal greedy policy (Fig. 5.9)"
@@ -148,11 +157,13 @@ def _setting_claims(setting: str, by_variant: dict[str, list[tuple]]) -> list[Cl
             )
         )
         claims.append(
-            shared.stability_claim(variant, runs, "future work: a settled greedy policy (≥ 90 %)")
+            setting_summaries.stability_claim(
+                variant, runs, "future work: a settled greedy policy (≥ 90 %)"
+            )
         )
         if not is_thesis and thesis and variant not in GREEDY_ONLY:
             claims.append(
-                shared.paired_gap_claim(
+                setting_summaries.paired_gap_claim(
                     f"{setting}: {variant} minus {THESIS} training reward",
                     "future work: above the thesis rule",
                     runs,
@@ -164,25 +175,28 @@ def _setting_claims(setting: str, by_variant: dict[str, list[tuple]]) -> list[Cl
 
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
     """The claims per setting and variant, the full table (``extra["table"]``), the figures."""
-    groups = shared.group_runs(task_list, results)
+    groups = setting_summaries.group_runs(task_list, results)
     claims = [c for setting, runs in groups.items() for c in _setting_claims(setting, runs)]
     extra = {
-        "table": shared.result_table(groups),
+        "table": setting_summaries.result_table(groups),
         "variants": {
             name: options(name, task_list[0]["steps"]) if task_list else VARIANTS[name]
             for name in VARIANTS
         },
         "rules": {
-            "loop_fraction": shared.LOOP_FRACTION,
-            "seed_share": shared.SEED_SHARE,
-            "stable_share": shared.STABLE_SHARE,
-            "snapshots": shared.SNAPSHOTS,
-            "lambda_max": shared.LAMBDA_MAX,
+            "loop_fraction": snapshot_runs.LOOP_FRACTION,
+            "seed_share": setting_summaries.SEED_SHARE,
+            "stable_share": setting_summaries.STABLE_SHARE,
+            "snapshots": snapshot_runs.SNAPSHOTS,
+            "lambda_max": delay_settings.LAMBDA_MAX,
         },
     }
     estimators = tuple(name for name in VARIANTS if name not in GREEDY_ONLY)
-    figures = shared.setting_figures(groups, estimators=estimators, same_curves=GREEDY_ONLY)
-    return Summary(claims, shared.curves_of(task_list, results), figures, extra)
+    figures = setting_summaries.setting_figures(
+        groups, estimators=estimators, same_curves=GREEDY_ONLY
+    )
+    curves = setting_summaries.curves_of(task_list, results)
+    return Summary(claims, curves, figures, extra)
 
 
 EXPERIMENT = Experiment(

@@ -2,20 +2,22 @@
 
 from __future__ import annotations
 
-from delayed_rl.experiments import plotting
-from delayed_rl.experiments.common import (
+from delayed_rl.experiments.framework import plotting
+from delayed_rl.experiments.framework.claims import (
     band_claim,
-    curves_and_means,
     direction_claim,
-    grid_task,
-    grid_tasks,
-    learning_curve_groups,
     mean_ci_n,
-    normalised,
     paired,
     range_claim,
 )
-from delayed_rl.experiments.runner import Config, Experiment, Summary
+from delayed_rl.experiments.framework.normalised_runs import (
+    curves_and_means,
+    grid_task,
+    grid_tasks,
+    learning_curve_groups,
+    normalised,
+)
+from delayed_rl.experiments.framework.runner import Config, Experiment, Summary
 
 SIZES = (3, 5, 9)
 LAMS = (5, 50, 150)

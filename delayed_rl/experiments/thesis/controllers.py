@@ -1,6 +1,6 @@
 """``controllers`` (thesis Fig. 5.19): four line followers over 1700 steps of the racetrack, λ = 90.
 
-The contestants, each run for 1700 steps on the env of :func:`.linefollow.line_env` (racetrack,
+The contestants, each run for 1700 steps on the env of :func:`~.line_following.line_env` (racetrack,
 put back on the track after 50 line-less steps, Poisson(90) reward delay), all starting from the
 same pose for a given seed:
 
@@ -15,12 +15,12 @@ same pose for a given seed:
   Poisson(90) reward delay for ``steps`` steps (default 300k, twice the 150k of Figs. 5.20–5.23;
   the learning curves are flat by then), then their Q-tables start the 1700-step run on a fresh
   env, where they keep learning with ε = 0.1 as the thesis's did. The training is
-  :func:`.linefollow.training_run`'s: its first 150k steps are ``linefollow``'s run of the same
+  :func:`~.line_following.training_run`'s: its first 150k steps are ``linefollow``'s run of the same
   learner and seed, and ``real-robot`` continues it to 500k, so run together they train once.
 
 Metric: the running average of the undelayed reward over the 1700 steps (Fig. 5.19); the claim
-is its final value. Verdicts (:mod:`.common`'s rules): a controller's row is the band rule on the
-thesis's value ± 0.2; the thesis's order P > MMQ > Q > delayed P is three rows, one per
+is its final value. Verdicts (:mod:`~.framework.claims`' rules): a controller's row is the
+band rule on the thesis's value ± 0.2; the thesis's order P > MMQ > Q > delayed P is three rows, one per
 neighbouring pair, each the pair's difference paired by seed (every seed's four runs start from
 the same pose), the direction rule (above 0).
 """
@@ -29,15 +29,19 @@ from __future__ import annotations
 
 import numpy as np
 
-from delayed_rl.experiments import linefollow, plotting
-from delayed_rl.experiments.common import band_claim, direction_claim, mean_ci_n, paired
-from delayed_rl.experiments.linefollow import (
+from delayed_rl.experiments.framework import plotting
+from delayed_rl.experiments.framework.claims import band_claim, direction_claim, mean_ci_n, paired
+from delayed_rl.experiments.framework.line_following import (
     LAM,
     LAMBDA_MAX,
     line_env,
     line_statistics,
+    only_readout,
+    pooled_training,
+    run_metrics,
+    training_cost,
 )
-from delayed_rl.experiments.runner import (
+from delayed_rl.experiments.framework.runner import (
     Config,
     Curve,
     Experiment,
@@ -112,29 +116,28 @@ def shared_run(task: dict) -> SharedRun | None:
     """A learner's run: its training, pooled with the other line-following experiments'.
 
     Trained for ``train_steps``, a copy of it goes on for ``run_steps`` on a fresh env
-    (:func:`.linefollow.training_run`, whose first steps are ``linefollow``'s run of the same
+    (:func:`~.line_following.training_run`, whose first steps are ``linefollow``'s run of the same
     learner and seed and whose training ``real-robot`` continues); the P controllers' runs are
     their own (``None``).
     """
     if task["controller"].startswith("P "):
         return None
     continuation = ["continue", task["train_steps"], "clean", task["run_steps"]]
-    run = linefollow.training_task(task["controller"], task["seed"], continuation)
-    return SharedRun(linefollow.training_run, run, _continuation_metrics, "readouts")
+    return pooled_training(task["controller"], task["seed"], [continuation], _continuation_metrics)
 
 
 def _continuation_metrics(result: dict) -> dict:
     """A learner's run's metrics, as :func:`run_task` returns them, from its training run."""
-    return _pick(linefollow.only_readout(result))
+    return _pick(only_readout(result))
 
 
 def _metrics(log: dict) -> dict:
     """A run's metrics, as :func:`run_task` returns them, from its undelayed rewards and states."""
-    return _pick(linefollow.run_metrics(log))
+    return _pick(run_metrics(log))
 
 
 def _pick(metrics: dict) -> dict:
-    """The entries of :func:`.linefollow.run_metrics`' result that a controller's run reports."""
+    """The entries of :func:`~.line_following.run_metrics`' result that a controller's run reports."""
     return {key: metrics[key] for key in ("steps", "curve", "average", "total_error", "visible")}
 
 
@@ -142,7 +145,7 @@ def cost(task: dict) -> float:
     """A task's estimated core-seconds, for scheduling: a learner's training and its run."""
     learner = not task["controller"].startswith("P ")
     steps = task["run_steps"] + (task["train_steps"] if learner else 0)
-    return linefollow.cost({"steps": steps})
+    return training_cost(task["controller"], steps)
 
 
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:

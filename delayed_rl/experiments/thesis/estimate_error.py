@@ -4,18 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from delayed_rl.experiments import plotting
-from delayed_rl.experiments.common import (
-    band_claim,
+from delayed_rl.experiments.framework import plotting
+from delayed_rl.experiments.framework.claims import band_claim, direction_claim, mean_ci_n, paired
+from delayed_rl.experiments.framework.normalised_runs import (
     curves_and_means,
-    direction_claim,
     grid_task,
     grid_tasks,
-    mean_ci_n,
     normalised,
-    paired,
 )
-from delayed_rl.experiments.runner import Config, Experiment, Summary
+from delayed_rl.experiments.framework.runner import Config, Experiment, Summary
 
 LAM = 17
 #: The thesis's peak of Fig. 5.6: 60 % of the undelayed reward, at i = 0.

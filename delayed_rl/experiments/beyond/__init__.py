@@ -1,0 +1,1 @@
+"""Experiments beyond the thesis (its future work), one module each, on the same framework."""

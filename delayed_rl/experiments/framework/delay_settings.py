@@ -1,0 +1,179 @@
+"""The grid worlds under anonymous delays, which ``anonymous-delay`` and ``future-work`` share.
+
+Settings: the 9×9 grid with mean delay λ = 13 (1M steps a run) and the 7×7 grid with λ = 8
+(300k steps), each under three delays of mean λ (:func:`make_delay`): Poisson(λ) (the
+thesis's), geometric (``Geometric(p)`` with ``p = 1 / (λ + 1)``, mean ``(1 − p) / p = λ``) and
+a bimodal one (mass ½ at 0 and ½ at 2λ, an ``Empirical`` pmf); the quick setting is 7×7 under
+Poisson only, 30k steps. :func:`setting_tasks` makes one task per (setting, agent, seed).
+
+The learners (:data:`AGENTS`, :func:`make_agent`) have the thesis's hyper-parameters (α = 0.1,
+γ = 0.9, constant ε = 0.1, ``q_init`` = 25, :mod:`.training`) and model delays up to
+:data:`LAMBDA_MAX`. :func:`run_agent` trains one and measures it
+(:func:`~delayed_rl.experiments.framework.snapshot_runs.measure`): it is the run both
+experiments name when they share one (``future-work``'s thesis rule is ``anonymous-delay``'s
+MMQ run).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from delayed_rl._validation import check_choice, check_int
+from delayed_rl.delays import Delay, Empirical, Geometric, Poisson
+from delayed_rl.experiments.framework.runner import Config
+from delayed_rl.experiments.framework.snapshot_runs import measure, warm_up
+from delayed_rl.experiments.framework.training import thesis_hyperparameters
+
+#: (side, mean delay λ, steps a run) of the two worlds.
+SETTINGS = ((9, 13, 1_000_000), (7, 8, 300_000))
+QUICK_SIZE, QUICK_LAM, QUICK_STEPS = 7, 8, 30_000
+#: The three delay distributions of each world, all of mean λ (:func:`make_delay`).
+DELAYS = ("Poisson", "geometric", "bimodal")
+LAMBDA_MAX = 50
+"""The longest delay any learner models: MMQ's λ̂max, DeconvQ's ``max_delay``, expected credit's
+last lag."""
+#: The seven learners, in the tables' order (:func:`make_agent`).
+AGENTS = (
+    "Q",
+    "MMQ",
+    "expected credit",
+    "DeconvQ known",
+    "DeconvQ learned",
+    "oracle",
+    "Q undelayed",
+)
+WINDOW_DIVISOR = 10
+"""MMQ's runs keep a greedy window of ``steps // WINDOW_DIVISOR`` steps (100k of 1M): the
+averaged table ``future-work``'s greedy-window variant reads (:func:`make_agent`)."""
+
+
+def make_delay(kind: str, lam: float) -> Delay:
+    """The delay of mean ``lam``: ``"Poisson"``, ``"geometric"`` or ``"bimodal"`` (½ at 0, ½ at 2λ).
+
+    Raises:
+        TypeError: ``kind`` is not a string, or ``lam`` (bimodal) not an integer.
+        ValueError: ``kind`` is not one of :data:`DELAYS`, or ``lam`` is out of range.
+    """
+    check_choice("kind", kind, DELAYS)
+    if kind == "Poisson":
+        return Poisson(lam)
+    if kind == "geometric":
+        return Geometric(1.0 / (lam + 1.0))  # mean (1 − p) / p = λ
+    lam = check_int("lam", lam, 1)
+    pmf = np.zeros(2 * lam + 1)
+    pmf[0] = pmf[-1] = 0.5
+    return Empirical(pmf)
+
+
+def setting_label(size: int, kind: str, lam: float) -> str:
+    """A setting's name in the tables and figures, e.g. ``"7×7 Poisson(8)"``."""
+    names = {
+        "Poisson": f"Poisson({lam:g})",
+        "geometric": f"geometric (mean {lam:g})",
+        "bimodal": f"bimodal {{0, {2 * lam:g}}}",
+    }
+    return f"{size}×{size} {names[kind]}"
+
+
+def setting_tasks(config: Config, agents: Sequence[str]) -> list[dict]:
+    """One task per (setting, agent, seed): :data:`SETTINGS` × :data:`DELAYS`, or the quick one.
+
+    ``config.steps`` replaces every setting's own step count.
+
+    Returns:
+        Dicts with ``setting`` (its label), ``size``, ``lam``, ``delay`` (the kind), ``agent``,
+        ``steps`` and ``seed``.
+    """
+    if config.quick:
+        worlds, kinds = [(QUICK_SIZE, QUICK_LAM, QUICK_STEPS)], ("Poisson",)
+    else:
+        worlds, kinds = SETTINGS, DELAYS
+    return [
+        {
+            "setting": setting_label(size, kind, lam),
+            "size": size,
+            "lam": lam,
+            "delay": kind,
+            "agent": agent,
+            "steps": config.steps or steps,
+            "seed": config.base_seed + i,
+        }
+        for size, lam, steps in worlds
+        for kind in kinds
+        for agent in agents
+        for i in range(config.seeds)
+    ]
+
+
+def grid(size: int, delay: Delay | None = None, record_arrivals: bool = False) -> gym.Env:
+    """``delayed_rl/GridWorld-v0`` of side ``size``, its reward delayed by ``delay`` (if any).
+
+    Args:
+        size: the grid's side.
+        delay: the reward delay (``None``: undelayed).
+        record_arrivals: report ``info["reward_arrivals"]`` (what the oracle reads); the
+            :class:`~delayed_rl.wrappers.RewardDelay` is then put on top of ``gym.make``'s env.
+    """
+    import delayed_rl  # noqa: F401  (registers the ids)
+
+    if record_arrivals:
+        from delayed_rl.wrappers import RewardDelay
+
+        return RewardDelay(
+            gym.make("delayed_rl/GridWorld-v0", size=size), delay, record_arrivals=True
+        )
+    return gym.make("delayed_rl/GridWorld-v0", size=size, reward_delay=delay)
+
+
+def make_agent(name: str, size: int, delay: Delay, seed: int, steps: int | None = None) -> Any:
+    """One of :data:`AGENTS` on its own ``size`` grid under ``delay``.
+
+    ``Q`` is Q-learning on the delayed reward, ``MMQ`` Multiple Model Q-learning with
+    Λ = {0, ..., ``LAMBDA_MAX``}, ``expected credit`` and ``DeconvQ known`` are told the true
+    delay, ``DeconvQ learned`` learns it on 0..``LAMBDA_MAX``, the ``oracle`` is told which
+    transition each reward came from, and ``Q undelayed`` learns without any delay. Given the
+    run's ``steps``, MMQ also keeps the averaged table of a greedy window of
+    ``steps // WINDOW_DIVISOR`` steps (``greedy_window``), which changes nothing of how it learns
+    or acts: :func:`~.snapshot_runs.measure` reads both greedy policies off the one run.
+
+    Raises:
+        TypeError: ``name`` is not a string, or ``steps`` not an integer.
+        ValueError: ``name`` is not one of :data:`AGENTS`, or ``steps`` < 1.
+    """
+    from delayed_rl import agents
+
+    check_choice("agent", name, AGENTS)
+    steps = check_int("steps", steps, 1, optional=True)
+    common = thesis_hyperparameters(seed)
+    if name == "Q undelayed":
+        return agents.QLearning(grid(size), **common)
+    if name == "oracle":
+        return agents.OracleQLearning(grid(size, delay, record_arrivals=True), **common)
+    env = grid(size, delay)
+    if name == "Q":
+        return agents.QLearning(env, **common)
+    if name == "MMQ":
+        window = None if steps is None else max(1, steps // WINDOW_DIVISOR)
+        return agents.MultipleModelQLearning(
+            env, max_delay_estimate=LAMBDA_MAX, greedy_window=window, **common
+        )
+    if name == "expected credit":
+        return agents.ExpectedCreditQLearning(env, delay=delay, max_delay=LAMBDA_MAX, **common)
+    known = delay if name == "DeconvQ known" else None
+    return agents.DeconvolutionQLearning(env, delay=known, max_delay=LAMBDA_MAX, **common)
+
+
+def run_agent(task: dict) -> dict:
+    """Train one agent of :data:`AGENTS` in its setting (a task of :func:`setting_tasks`), measured.
+
+    A throw-away agent is trained first, untimed (:func:`~.snapshot_runs.warm_up`); the run's
+    result is :func:`~.snapshot_runs.measure`'s.
+    """
+    delay = make_delay(task["delay"], task["lam"])
+    size, seed, steps = task["size"], task["seed"], task["steps"]
+    warm_up(lambda: make_agent(task["agent"], size, delay, seed + 1, steps), steps, task["agent"])
+    return measure(make_agent(task["agent"], size, delay, seed, steps), task)

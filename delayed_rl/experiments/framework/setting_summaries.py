@@ -1,0 +1,232 @@
+"""Tables, claims and figures of the anonymous-delay settings' runs, setting by setting.
+
+``anonymous-delay`` and ``future-work`` run learners on the same settings
+(:mod:`.delay_settings`) and report them alike: :func:`group_runs` sorts the runs by setting
+and agent, :func:`result_table` makes ``summary.json``'s ``table`` (one :func:`agent_stats` row
+per setting and agent), :func:`curves_of` the curves, and :func:`setting_figures` the figures of
+each setting. The claims they share, with their rules:
+
+- :func:`optimal_seeds_claim`: the seeds whose final greedy policy is optimal, the count rule
+  (the Wilson 95 % interval inside ``[SEED_SHARE, 1]``: at 20 seeds at best ``inconclusive``);
+- :func:`stability_claim`: the share of second-half greedy snapshots that are optimal, the
+  per-seed share's CI inside ``[STABLE_SHARE, 1]``;
+- :func:`paired_gap_claim`: one learner's training reward above another's, paired by seed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from delayed_rl.experiments.framework import plotting
+from delayed_rl.experiments.framework.claims import (
+    count_claim,
+    direction_claim,
+    mean_ci_n,
+    paired,
+    range_claim,
+)
+from delayed_rl.experiments.framework.delay_estimates import ESTIMATE_LABELS
+from delayed_rl.experiments.framework.delay_settings import LAMBDA_MAX, make_delay
+from delayed_rl.experiments.framework.runner import Claim, Curve
+from delayed_rl.experiments.framework.snapshot_runs import LOOP_FRACTION, optimal_average
+
+#: The claims' rules: a share of seeds optimal, and the share of second-half snapshots that are.
+SEED_SHARE, STABLE_SHARE = 0.95, 0.90
+
+
+def group_runs(task_list: list[dict], results: list[dict]) -> dict[str, dict[str, list[tuple]]]:
+    """``{setting: {agent: [(task, result), ...]}}``, in the order of ``task_list``."""
+    groups: dict[str, dict[str, list[tuple]]] = {}
+    for task, result in zip(task_list, results, strict=True):
+        groups.setdefault(task["setting"], {}).setdefault(task["agent"], []).append((task, result))
+    return groups
+
+
+def agent_stats(runs: list[tuple[dict, dict]]) -> dict[str, Any]:
+    """One row of the table: one agent's metrics in one setting, over its seeds.
+
+    Args:
+        runs: the agent's ``(task, result)`` pairs, one per seed.
+
+    Returns:
+        ``optimal_seeds`` and ``seeds`` (k of n), then ``(mean, ci95, n)`` of ``greedy``,
+        ``average`` (training), ``second_half_optimal``, ``ns_per_step`` and, when the agent
+        estimates the delay, ``mean_delay``; with ``true_mean_delay``.
+    """
+    task0 = runs[0][0]
+    results = [result for _, result in runs]
+    row: dict[str, Any] = {
+        "optimal_seeds": int(sum(r["optimal"] for r in results)),
+        "seeds": len(results),
+    }
+    for key in ("greedy", "average", "second_half_optimal", "ns_per_step"):
+        row[key] = mean_ci_n([r[key] for r in results])
+    if all("mean_delay" in r for r in results):
+        row["mean_delay"] = mean_ci_n([r["mean_delay"] for r in results])
+    row["true_mean_delay"] = make_delay(task0["delay"], task0["lam"]).mean
+    row["paths"] = sorted({r["path"] for r in results})
+    return row
+
+
+def result_table(groups: dict[str, dict[str, list[tuple]]]) -> list[dict[str, Any]]:
+    """The full table for ``summary.json``: one :func:`agent_stats` row per (setting, agent)."""
+    table = []
+    for setting, by_agent in groups.items():
+        for agent, runs in by_agent.items():
+            row = agent_stats(runs)
+            flat: dict[str, Any] = {"setting": setting, "agent": agent}
+            for key, value in row.items():
+                if isinstance(value, tuple):
+                    flat[key], flat[f"{key}_ci95"], flat[f"{key}_n"] = value
+                else:
+                    flat[key] = value
+            table.append(flat)
+    return table
+
+
+def optimal_seeds_claim(
+    agent: str, runs: list[tuple], thesis: str, low: float = SEED_SHARE, high: float = 1.0
+) -> Claim:
+    """``agent``'s seeds whose final greedy policy is optimal, k of n: the share in [low, high].
+
+    The count rule (:func:`~delayed_rl.experiments.framework.claims.count_claim`): the Wilson 95 %
+    interval of the share against the band, ``[SEED_SHARE, 1]`` by default.
+    """
+    flags = [bool(result["optimal"]) for _, result in runs]
+    return count_claim(
+        f"{runs[0][0]['setting']}: {agent} seeds whose greedy policy is optimal",
+        thesis,
+        sum(flags),
+        len(flags),
+        low,
+        high,
+        note=f"optimal: a 1000-step greedy walk ≥ {LOOP_FRACTION} of the loop",
+    )
+
+
+def by_seed(runs: list[tuple], key: str) -> dict[int, float]:
+    """``{seed: result[key]}`` of ``(task, result)`` pairs."""
+    return {task["seed"]: result[key] for task, result in runs}
+
+
+def paired_gap_claim(
+    quantity: str, thesis: str, runs: list[tuple], baseline: list[tuple], key: str = "average"
+) -> Claim:
+    """``runs`` above ``baseline`` on ``key``: the direction rule on the paired-by-seed difference."""
+    gaps = paired(by_seed(runs, key), by_seed(baseline, key))
+    return direction_claim(quantity, thesis, mean_ci_n(gaps), "above", note="paired by seed")
+
+
+def stability_claim(
+    agent: str, runs: list[tuple], thesis: str, low: float = STABLE_SHARE, high: float = 1.0
+) -> Claim:
+    """``agent``'s share of second-half greedy snapshots that are optimal, in [low, high].
+
+    Per seed, the share of its snapshots after half the steps that are optimal; the 95 % CI
+    of its mean over the seeds against the band (``[STABLE_SHARE, 1]`` by default).
+    """
+    stats = mean_ci_n([result["second_half_optimal"] for _, result in runs])
+    return range_claim(
+        f"{runs[0][0]['setting']}: {agent} share of second-half greedy snapshots optimal",
+        thesis,
+        stats,
+        low,
+        high,
+        note="per seed, the share of its snapshots after half the steps that are optimal",
+    )
+
+
+def curves_of(task_list: list[dict], results: list[dict]) -> list[Curve]:
+    """The learning curves and the snapshot optimality of every run, for ``curves.csv``."""
+    curves = []
+    for task, result in zip(task_list, results, strict=True):
+        condition = f"{task['setting']} | {task['agent']}"
+        curves.append(Curve(condition, task["seed"], result["steps"], result["curve"]))
+        curves.append(
+            Curve(
+                condition,
+                task["seed"],
+                result["snapshot_steps"],
+                result["snapshot_optimal"].astype(np.float64),
+                "greedy_optimal",
+            )
+        )
+    return curves
+
+
+def slug(setting: str) -> str:
+    """A file-name form of a setting's label: ``"7×7 Poisson(8)"`` → ``"7x7_poisson"``."""
+    size, kind = setting.split(" ", 1)
+    return f"{size.replace('×', 'x')}_{kind.split('(')[0].split(' ')[0].lower()}"
+
+
+def setting_figures(
+    groups: dict[str, dict[str, list[tuple]]],
+    estimators: Sequence[str],
+    same_curves: Sequence[str] = (),
+) -> dict[str, Callable[[Path], None]]:
+    """Per setting: learning curves, the delay estimates of ``estimators``, optimal snapshots.
+
+    Args:
+        groups: what :func:`group_runs` returns.
+        estimators: the agents whose delay estimates are drawn (those that have one).
+        same_curves: agents left out of the learning curves because they train exactly as
+            another one (the title says so).
+    """
+    figures = {}
+    for setting, by_agent in groups.items():
+        task0 = next(iter(by_agent.values()))[0][0]
+        size, name = task0["size"], slug(setting)
+        optimum = (optimal_average(size), f"optimal loop ({optimal_average(size):.3f})")
+        curves = {
+            a: [(r["steps"], r["curve"]) for _, r in runs]
+            for a, runs in by_agent.items()
+            if a not in same_curves
+        }
+        left_out = [a for a in same_curves if a in by_agent]
+        suffix = f"\n({', '.join(left_out)}: the same curve as the thesis rule)" if left_out else ""
+        thesis = ""  # the thesis's Poisson statement, in words (Fig. 5.9 gives no value here)
+        if "Poisson" in setting:
+            above = ", above Q" if "Q" in by_agent else ""
+            thesis = f"\nthesis (Poisson, Fig. 5.9): MMQ near-optimal{above}"
+        snaps = {
+            a: [(r["snapshot_steps"], r["snapshot_optimal"]) for _, r in runs]
+            for a, runs in by_agent.items()
+        }
+        figures[f"learning_curves_{name}"] = plotting.figure(
+            plotting.band_plot,
+            curves,
+            f"{setting}: average reward during learning{thesis}{suffix}",
+            "time step",
+            "average reward (undelayed)",
+            None,
+            optimum,
+        )
+        figures[f"optimal_snapshots_{name}"] = plotting.figure(
+            plotting.band_plot,
+            snaps,
+            f"{setting}: share of seeds whose greedy policy is optimal{thesis}",
+            "time step",
+            "share of seeds optimal",
+            (-0.05, 1.05),
+        )
+        estimates = {
+            a: [(r["estimate_support"], r["estimate"]) for _, r in by_agent[a]]
+            for a in estimators
+            if a in by_agent and all("estimate" in r for _, r in by_agent[a])
+        }
+        if estimates:
+            delay = make_delay(task0["delay"], task0["lam"])
+            true_pmf = np.asarray(delay.pmf(np.arange(LAMBDA_MAX + 1)), dtype=float)
+            estimates = {ESTIMATE_LABELS.get(a, a): runs for a, runs in estimates.items()}
+            figures[f"delay_estimate_{name}"] = plotting.figure(
+                plotting.estimate_plot,
+                estimates,
+                true_pmf,
+                f"{setting}: delay estimates against the true pmf",
+            )
+    return figures
