@@ -12,7 +12,7 @@ from delayed_rl.agents.deconvolution import DeconvolutionQLearning
 from delayed_rl.agents.deconvolution.regression import RewardRegression, project_to_simplex
 from delayed_rl.delays import Constant, Empirical, Geometric, Poisson
 from delayed_rl.envs.gridworld import GridWorldEnv
-from delayed_rl.experiments.training import greedy_average_reward
+from delayed_rl.experiments.framework.training import greedy_average_reward
 from delayed_rl.wrappers import RewardDelay
 
 

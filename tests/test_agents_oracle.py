@@ -30,7 +30,7 @@ from delayed_rl.agents import (
 )
 from delayed_rl.compiled import NotCompilable
 from delayed_rl.delays import Constant, Poisson
-from delayed_rl.experiments.training import greedy_average_reward
+from delayed_rl.experiments.framework.training import greedy_average_reward
 from delayed_rl.wrappers import RewardDelay
 
 GRID3, GRID5 = "delayed_rl/GridWorld-3x3-v0", "delayed_rl/GridWorld-5x5-v0"

@@ -127,7 +127,7 @@ def test_compiled_oracle_is_the_python_rule(mode, max_steps):
 @pytest.mark.parametrize("agent", ["oracle", "expected credit"])
 def test_the_compiled_rules_learn_the_grid_under_poisson_delays(agent):
     """5×5 grid, Poisson(5) delays, 100k compiled steps: the greedy policy walks the loop."""
-    from delayed_rl.experiments.anonymous_delay import greedy_policy, is_optimal
+    from delayed_rl.experiments.framework.snapshot_runs import greedy_policy, is_optimal
 
     env = RewardDelay(gym.make("delayed_rl/GridWorld-5x5-v0"), Poisson(5.0), record_arrivals=True)
     settings = {"q_init": 25.0, "exploration_initial_eps": 0.1, "exploration_final_eps": 0.1}
