@@ -156,3 +156,36 @@ def test_callbacks_see_every_step_and_stop_at_the_chunk_end():
     np.testing.assert_array_equal(obs, log["obs"][:2700])
     np.testing.assert_array_equal(actions, log["action"][:2700])
     np.testing.assert_array_equal(rewards, log["undelayed_reward"][:2700])
+
+
+@pytest.mark.parametrize("mode", ["flush", "drop", "carry"])
+def test_the_compiled_delay_line_is_the_reward_delay_rule(mode, monkeypatch):
+    """Every step's delivered reward is the rule's (``ReferenceRewardDelay``), fed the same delays.
+
+    Taxi: rewards at every step (−1, −10, +20), episodes cut by its time limit below the
+    wrapper, so flushes, drops and carries all happen.
+    """
+    from delayed_rl.compiled.run import CompiledRun
+    from delayed_rl.delays import Poisson
+    from delayed_rl.wrappers.reference import ReferenceRewardDelay
+
+    drawn: list[np.ndarray] = []
+    draw = CompiledRun._draw_delays
+
+    def recorded(self, n):
+        delays = draw(self, n)
+        drawn.append(delays.copy())
+        return delays
+
+    monkeypatch.setattr(CompiledRun, "_draw_delays", recorded)
+    env = RewardDelay(gym.make("Taxi-v4"), Poisson(4.0), on_episode_end=mode)
+    agent = QLearning(env, q_init=0.0, seed=3).learn(6_000, compiled=True, record=True)
+    assert agent.last_learn_path == "compiled"
+    log, delays = agent.training_log, np.concatenate(drawn)
+    assert delays.size == log["reward"].size and log["episode_end"].sum() >= 20
+    reference = ReferenceRewardDelay(mode)
+    for emitted, delay, ended, delivered in zip(
+        log["undelayed_reward"].tolist(), delays.tolist(), log["episode_end"].tolist(),
+        log["reward"].tolist(), strict=True,
+    ):  # fmt: skip
+        assert delivered == pytest.approx(reference.delivered(emitted, delay, ended), abs=1e-9)

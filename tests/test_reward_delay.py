@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 import pickle
 import warnings
-from collections import defaultdict
 
 import gymnasium as gym
 import numpy as np
@@ -23,6 +22,7 @@ from delayed_rl.wrappers import (
     reward_delay,
     wrap_reward_delay,
 )
+from delayed_rl.wrappers.reference import ReferenceRewardDelay
 from delayed_rl.wrappers.reward_delay import FLUSH_WATCH_EPISODES, FLUSH_WATCH_STEPS
 
 TOL = 1e-9
@@ -99,44 +99,9 @@ class ConstantRewardEnv(gym.Env):
         return 0, self.reward, False, False, {}
 
 
-# --- an independent model of the semantics ---------------------------------------------------
-
-
-class Reference:
-    """The wrapper's semantics, written plainly: a schedule keyed by the wrapper's step clock.
-
-    Each reward is due at its emission clock plus its delay; at an episode's end what is still
-    due is flushed into the last step, dropped, or carried over, as ``on_episode_end`` says.
-    """
-
-    def __init__(self, mode: str):
-        self.mode = mode
-        self.clock = 0
-        self.due: dict[int, list[tuple[int, float]]] = defaultdict(list)
-
-    def pending(self) -> float:
-        return math.fsum(r for items in self.due.values() for _, r in items)
-
-    def step(self, reward: float, delay: int, ended: bool):
-        """Return (arrivals [(emission clock, value)], flushed, dropped)."""
-        self.due[self.clock + delay].append((self.clock, reward))
-        arrivals = self.due.pop(self.clock, [])
-        self.clock += 1
-        flushed = dropped = 0.0
-        if ended and self.mode != "carry":
-            rest = [item for due in sorted(self.due) for item in self.due[due]]
-            self.due.clear()
-            if self.mode == "flush":
-                arrivals = arrivals + rest
-                flushed = math.fsum(r for _, r in rest)
-            else:
-                dropped = math.fsum(r for _, r in rest)
-        return arrivals, flushed, dropped
-
-
 def run_and_check(env: RewardDelay, inner_seed: int, n_steps: int, mode: str, record: bool):
-    """Drive ``env`` with random actions; check every step against :class:`Reference`."""
-    ref = Reference(mode)
+    """Drive ``env`` with random actions; check every step against the rule's reference."""
+    ref = ReferenceRewardDelay(mode)
     rng = np.random.default_rng(inner_seed)
     obs, info = env.reset(seed=inner_seed)
     assert info["pending_reward"] == 0.0

@@ -6,7 +6,6 @@ import math
 import subprocess
 import sys
 import warnings
-from collections import defaultdict
 from typing import TYPE_CHECKING
 
 import gymnasium as gym
@@ -63,6 +62,7 @@ def test_importing_delayed_rl_does_not_import_torch_or_sb3() -> None:
 def test_vec_reward_delay_conservation_and_info(on_episode_end, delay) -> None:
     from stable_baselines3.common.env_util import make_vec_env
 
+    from delayed_rl.wrappers.reference import ReferenceRewardDelay
     from delayed_rl.wrappers.sb3 import VecRewardDelay
 
     n_envs = 3
@@ -71,12 +71,12 @@ def test_vec_reward_delay_conservation_and_info(on_episode_end, delay) -> None:
     env = VecRewardDelay(venv, delay, on_episode_end=on_episode_end, seed=9)
     env.reset()
     twin.reset()
-    due = [defaultdict(float) for _ in range(n_envs)]
+    refs = [ReferenceRewardDelay(on_episode_end) for _ in range(n_envs)]  # one per sub-env
     delivered_sum, undelayed_sum, dropped_sum = np.zeros(n_envs), np.zeros(n_envs), np.zeros(n_envs)
     ep_delivered, ep_undelayed = np.zeros(n_envs), np.zeros(n_envs)
     episodes = 0
     rng = np.random.default_rng(0)
-    for t in range(300):
+    for _ in range(300):
         actions = rng.integers(2, size=n_envs)
         _, rewards, dones, infos = env.step(actions)
         _, raw, raw_dones, _ = twin.step(actions)
@@ -88,22 +88,18 @@ def test_vec_reward_delay_conservation_and_info(on_episode_end, delay) -> None:
             assert isinstance(d, int) and d >= 0
             if delay.support_max is not None:
                 assert d <= delay.support_max
-            due[i][t + d] += info["undelayed_reward"]
-            expected = due[i].pop(t, 0.0)
+            arrivals, flushed, dropped = refs[i].step(info["undelayed_reward"], d, bool(dones[i]))
+            expected = math.fsum(r for _, r in arrivals)
             if dones[i]:
-                rest = math.fsum(due[i].values())
-                if on_episode_end != "carry":
-                    due[i].clear()
                 if on_episode_end == "flush":
-                    expected += rest
-                    assert info["flushed_reward"] == pytest.approx(rest, abs=1e-9)
+                    assert info["flushed_reward"] == pytest.approx(flushed, abs=1e-9)
                 elif on_episode_end == "drop":
-                    assert info["dropped_reward"] == pytest.approx(rest, abs=1e-9)
-                    dropped_sum[i] += rest
+                    assert info["dropped_reward"] == pytest.approx(dropped, abs=1e-9)
+                    dropped_sum[i] += dropped
                 else:
                     assert "flushed_reward" not in info and "dropped_reward" not in info
             assert rewards[i] == pytest.approx(expected, rel=1e-6, abs=1e-5)  # float32 output
-            assert info["pending_reward"] == pytest.approx(math.fsum(due[i].values()), abs=1e-9)
+            assert info["pending_reward"] == pytest.approx(refs[i].pending(), abs=1e-9)
             delivered_sum[i] += rewards[i]
             undelayed_sum[i] += info["undelayed_reward"]
             ep_delivered[i] += rewards[i]

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections import defaultdict
 
 import gymnasium as gym
 import numpy as np
@@ -13,6 +12,7 @@ from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 from delayed_rl.delays import Constant, Empirical, Poisson
 from delayed_rl.wrappers import EPISODE_END_MODES, VectorRewardDelay, reward_delay
+from delayed_rl.wrappers.reference import ReferenceRewardDelay
 from delayed_rl.wrappers.reward_delay import FLUSH_WATCH_EPISODES, FLUSH_WATCH_STEPS
 
 TOL = 1e-9
@@ -46,44 +46,13 @@ def make_vec(n: int, mode: AutoresetMode, p_end: float = 0.1, reward=None) -> Sy
     )
 
 
-class SubEnvReference:
-    """One sub-env's schedule, keyed by that sub-env's own step clock."""
-
-    def __init__(self, on_episode_end: str):
-        self.mode = on_episode_end
-        self.clock = 0
-        self.due: dict[int, float] = defaultdict(float)
-
-    def pending(self) -> float:
-        return math.fsum(self.due.values())
-
-    def step(self, reward: float, delay: int, ended: bool) -> tuple[float, float, float]:
-        self.due[self.clock + delay] += reward
-        delivered = self.due.pop(self.clock, 0.0)
-        self.clock += 1
-        flushed = dropped = 0.0
-        if ended and self.mode != "carry":
-            rest = self.pending()
-            self.due.clear()
-            if self.mode == "flush":
-                flushed = rest
-            else:
-                dropped = rest
-        return delivered + flushed, flushed, dropped
-
-    def clear(self) -> float:
-        lost = self.pending()
-        self.due.clear()
-        return lost
-
-
 def run_vector(autoreset: AutoresetMode, on_episode_end: str, delay, n_envs=3, steps=300, seed=0):
     env = VectorRewardDelay(make_vec(n_envs, autoreset), delay, on_episode_end=on_episode_end)
     twin = make_vec(n_envs, autoreset)  # the same sub-envs, undelayed, stepped in lockstep
     assert env.autoreset_mode == autoreset
     env.reset(seed=seed)
     twin.reset(seed=seed)
-    refs = [SubEnvReference(on_episode_end) for _ in range(n_envs)]
+    refs = [ReferenceRewardDelay(on_episode_end) for _ in range(n_envs)]  # one per sub-env
     resetting = np.zeros(n_envs, dtype=bool)  # NEXT_STEP: this step is sub-env i's reset step
     delivered_sum = np.zeros(n_envs)
     undelayed_sum = np.zeros(n_envs)
@@ -112,7 +81,8 @@ def run_vector(autoreset: AutoresetMode, on_episode_end: str, delay, n_envs=3, s
             d = int(info["reward_delay"][i])
             assert d >= 0
             assert info["undelayed_reward"][i] == raw[i]
-            expected, flushed, dropped = refs[i].step(float(raw[i]), d, bool(ended[i]))
+            arrivals, flushed, dropped = refs[i].step(float(raw[i]), d, bool(ended[i]))
+            expected = math.fsum(r for _, r in arrivals)
             assert rewards[i] == pytest.approx(expected, abs=TOL)
             if ended[i] and on_episode_end == "flush":
                 assert info["_flushed_reward"][i] and info["flushed_reward"][i] == pytest.approx(

@@ -473,7 +473,7 @@ def _loop(
             episode_steps += 1
             ended = terminated or env_truncated or (max_steps > 0 and episode_steps >= max_steps)
             cut = not ended and cut_steps > 0 and episode_steps >= cut_steps  # unseen by the delay
-            # the reward delay
+            # the reward delay: the rule of wrappers.reference.ReferenceRewardDelay, inlined
             due = clock + delays[t]
             buffer[due & bmask] += reward
             delivered = buffer[clock & bmask]
