@@ -24,6 +24,7 @@ import numpy as np
 import pytest
 
 import delayed_rl
+from delayed_rl import agents
 from delayed_rl.agents import (
     DEFAULTS,
     FixedDelayQLearning,
@@ -457,3 +458,67 @@ def test_no_measured_timing_is_written_in_the_code():
         if timing.search(line)
     ]
     assert found == []
+
+
+def _is_jitted(function: ast.FunctionDef) -> bool:
+    """Decorated by numba (``@_jit``, ``@jit``, ``@numba.njit(...)``): a compiled kernel."""
+    return any("jit" in ast.unparse(decorator) for decorator in function.decorator_list)
+
+
+def _long_functions(source: str, limit: int = 80) -> list[tuple[str, int]]:
+    tree = ast.parse(source)
+    return [
+        (node.name, node.end_lineno - node.lineno + 1)
+        for node in ast.walk(tree)
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
+        and node.end_lineno - node.lineno + 1 > limit
+        and not _is_jitted(node)
+    ]
+
+
+def test_no_function_outside_the_compiled_kernels_is_over_80_lines():
+    long = [
+        (_module_name(path), name, lines)
+        for path in sorted(PACKAGE.rglob("*.py"))
+        for name, lines in _long_functions(path.read_text(encoding="utf-8"))
+    ]
+    assert long == []
+
+
+def test_the_length_check_counts_a_long_function_and_spares_a_kernel():
+    body = "\n".join(f"    x{i} = {i}" for i in range(85))
+    assert _long_functions(f"def long():\n{body}\n") == [("long", 86)]
+    assert _long_functions(f"@_jit\ndef kernel():\n{body}\n") == []
+
+
+ALGORITHMS = [
+    QLearning,
+    FixedDelayQLearning,
+    MultipleModelQLearning,
+    agents.ExpectedCreditQLearning,
+    agents.OracleQLearning,
+    agents.DeconvolutionQLearning,
+]
+
+
+@pytest.mark.parametrize("cls", ALGORITHMS, ids=lambda cls: cls.__name__)
+def test_algorithms_are_siblings_over_the_one_q_base(cls):
+    """Every algorithm subclasses the tabular Q base, and no algorithm subclasses another."""
+    from delayed_rl.agents.common.q_agent import QAgent
+
+    assert cls.__mro__[1] is QAgent
+    assert not set(cls.__mro__[1:]) & set(ALGORITHMS)
+
+
+def test_mmq_is_at_most_300_lines():
+    source = inspect.getsource(MultipleModelQLearning)
+    assert source.count("\n") <= 300
+
+
+def test_every_algorithm_has_one_public_name():
+    """The long class name, and no alias of it in ``delayed_rl.agents`` or ``delayed_rl``."""
+    for cls in ALGORITHMS:
+        names = [name for name in agents.__all__ if getattr(agents, name) is cls]
+        assert names == [cls.__name__]
+    for alias in ("MMQ", "DeconvQ"):
+        assert not hasattr(agents, alias) and not hasattr(delayed_rl, alias)

@@ -14,6 +14,8 @@ tests drive both on scripted transitions.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from delayed_rl._numba import HAVE_NUMBA  # noqa: F401  (re-exported: delayed_rl.compiled)
@@ -662,15 +664,7 @@ def replay(
     n = transitions.shape[0]
     estimates = np.asarray(delay_estimates, dtype=np.int64)
     flat = q.reshape(q.shape[0], -1)
-    n_models = estimates.shape[0]
-    if delay_trace is not None and trace is None:
-        trace = np.zeros(n_models)
-    if trace is not None and (trace.dtype != np.float64 or trace.shape != (n_models,)):
-        raise ValueError(f"trace must be a float64 array of shape ({n_models},)")
-    if acting is not None:
-        acting = np.asarray(acting, np.int64)
-        if acting.shape != (n,) or (n and not 0 <= acting.min() <= acting.max() < n_models):
-            raise ValueError(f"acting must hold one model index in 0..{n_models - 1} per row")
+    trace, acting = _replay_options(n, estimates.shape[0], delay_trace, trace, acting)
     cache = QCache(
         q,
         flat.max(axis=1),
@@ -701,3 +695,23 @@ def replay(
         cache, rule, TabularModel.empty(), line, history, StepLog.empty(n), script, 0, no_draws,
         model, None, None, None,
     )  # fmt: skip
+
+
+def _replay_options(
+    n: int, n_models: int, delay_trace: float | None, trace: Any, acting: Any
+) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """:func:`replay`'s delay trace (zeros by default) and acting models, checked.
+
+    Raises:
+        ValueError: ``trace`` is not float64 of one value per model, or ``acting`` not one
+            model index per row.
+    """
+    if delay_trace is not None and trace is None:
+        trace = np.zeros(n_models)
+    if trace is not None and (trace.dtype != np.float64 or trace.shape != (n_models,)):
+        raise ValueError(f"trace must be a float64 array of shape ({n_models},)")
+    if acting is not None:
+        acting = np.asarray(acting, np.int64)
+        if acting.shape != (n,) or (n and not 0 <= acting.min() <= acting.max() < n_models):
+            raise ValueError(f"acting must hold one model index in 0..{n_models - 1} per row")
+    return trace, acting
