@@ -189,3 +189,20 @@ def test_the_compiled_delay_line_is_the_reward_delay_rule(mode, monkeypatch):
         log["reward"].tolist(), strict=True,
     ):  # fmt: skip
         assert delivered == pytest.approx(reference.delivered(emitted, delay, ended), abs=1e-9)
+
+
+def test_the_compiled_path_warns_at_the_line_that_called_learn():
+    """Both warnings of a compiled ``learn()`` name the caller's line, not the library's.
+
+    A TimeLimit above the RewardDelay makes the resets discard pending reward, and a delay far
+    longer than the episodes trips the flush-trap watch.
+    """
+    grid = gym.make("delayed_rl/GridWorld-v0", size=4).unwrapped
+    env = gym.wrappers.TimeLimit(RewardDelay(grid, Geometric(0.01)), 30)
+    agent = QLearning(env, seed=0)
+    with pytest.warns(UserWarning) as caught:
+        agent.learn(3000, compiled=True)
+    messages = {str(w.message).split(":")[0]: w for w in caught}
+    cut = messages["a TimeLimit above the RewardDelay cut episodes short"]
+    assert cut.filename == __file__
+    assert all(w.filename == __file__ for w in caught), [(w.filename, w.message) for w in caught]

@@ -274,15 +274,15 @@ class CompiledRun:
         """Pass on what the chunk's loop saw: reward the resets discarded, the steps it took.
 
         The discarded reward (by a TimeLimit above the RewardDelay) is warned of; the steps go to
-        the wrapper's flush-trap watch. Called from :meth:`run` through :meth:`_advance`: the
-        stack levels count those two calls.
+        the wrapper's flush-trap watch. Both warnings name the line that called the agent's
+        ``learn()``: the stack levels count the calls from there down to this one.
         """
         if line.discarded[0] != 0.0:
             warnings.warn(
                 f"a TimeLimit above the RewardDelay cut episodes short: the resets discarded "
                 f"{line.discarded[0]} of pending reward (on_episode_end={self.on_episode_end!r}); "
                 "end episodes inside the RewardDelay wrapper to have them flushed",
-                stacklevel=6,
+                stacklevel=7,
             )
         if self.wrapper is not None:
             ends = log.episode_end.astype(bool)
