@@ -60,9 +60,15 @@ def test_mmq_gridworld_quick_separates_the_agents(tmp_path):
 def test_mmq_gridworld_learns_in_pieces_as_in_one_run():
     from delayed_rl.experiments.thesis.mmq_gridworld import SIZE, run_task
 
-    task = {"agent": "MMQ", "lags": list(range(51)), "lam": 13, "steps": 20_000, "seed": 3}
+    task = {
+        "agent": "MMQ",
+        "delay_estimates": list(range(51)),
+        "lam": 13,
+        "steps": 20_000,
+        "seed": 3,
+    }
     pieces = run_task(task)
-    whole = train(grid_env(SIZE, 13), task["lags"], task["steps"], task["seed"])
+    whole = train(grid_env(SIZE, 13), task["delay_estimates"], task["steps"], task["seed"])
     log = whole.training_log
     assert pieces["average"] == float(log["undelayed_reward"].mean())
     assert pieces["greedy"] == greedy_average_reward(whole, SIZE)
@@ -150,7 +156,10 @@ def test_grid_tasks_pair_every_delayed_run_with_a_reference_of_its_world_and_see
         (size, lam, seed) for size in (3, 5, 9) for lam in (5, 50) for seed in (5, 6)
     )
     assert {t["steps"] for t in tasks} == {25_000}
-    assert all(t["lags"] == [0] and t["condition"].endswith(f"lambda={t['lam']}") for t in delayed)
+    assert all(
+        t["delay_estimates"] == [0] and t["condition"].endswith(f"lambda={t['lam']}")
+        for t in delayed
+    )
 
 
 def test_cli_bench_quick_writes_report(tmp_path, capsys):

@@ -29,7 +29,7 @@ def grid_tasks(config: Config, steps: int, runs: Sequence[dict]) -> list[dict]:
         config: the seeds (``config.seeds`` of them, from ``config.base_seed``).
         steps: training steps of every run.
         runs: one dict per delayed condition: ``size`` (the world's side), ``lam`` (the Poisson
-            mean delay), ``lags`` (the agent's delay estimates, ``[0]`` for Q-learning) and
+            mean delay), ``delay_estimates`` (Λ, ``[0]`` for Q-learning) and
             ``condition`` (its label), plus any keys its experiment's ``summarize`` reads.
 
     Returns:
@@ -41,20 +41,22 @@ def grid_tasks(config: Config, steps: int, runs: Sequence[dict]) -> list[dict]:
     for i in range(config.seeds):
         seed = config.base_seed + i
         for size in sizes:
-            reference = {"size": size, "lam": 0, "lags": [0], "condition": "undelayed"}
+            reference = {"size": size, "lam": 0, "delay_estimates": [0], "condition": "undelayed"}
             out.append({**reference, "steps": steps, "seed": seed, "reference": True})
             out += [{**run, "steps": steps, "seed": seed} for run in runs if run["size"] == size]
     return out
 
 
 def grid_task(task: dict) -> dict:
-    """Train on ``GridWorld(size)`` with Poisson(``lam``) delays and estimates ``lags``.
+    """Train on ``GridWorld(size)`` with Poisson(``lam``) delays and ``delay_estimates``.
 
     Returns:
         The learning curve (``steps``, ``curve``: the running average reward) and the
         ``average`` reward over the whole run, from the undelayed reward stream.
     """
-    agent = train(grid_env(task["size"], task["lam"]), task["lags"], task["steps"], task["seed"])
+    agent = train(
+        grid_env(task["size"], task["lam"]), task["delay_estimates"], task["steps"], task["seed"]
+    )
     rewards = agent.training_log["undelayed_reward"]
     steps, curve = running_average(rewards)
     return {"steps": steps, "curve": curve, "average": float(rewards.mean())}

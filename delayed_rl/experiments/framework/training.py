@@ -46,12 +46,16 @@ def thesis_hyperparameters(seed: int, q_init: float = Q_INIT) -> dict[str, float
     }
 
 
-def train(env: gym.Env, lags: list[int], steps: int, seed: int) -> MultipleModelQLearning:
-    """Train MMQ with delay estimates ``lags`` (``[0]``: Q-learning; ``[k]``: fixed delay k).
+def train(
+    env: gym.Env, delay_estimates: list[int], steps: int, seed: int
+) -> MultipleModelQLearning:
+    """Train MMQ with ``delay_estimates`` Λ (``[0]``: Q-learning; ``[k]``: fixed delay k).
 
     The agent's ``training_log`` holds the per-step record (``undelayed_reward``, ``obs``, ...).
     """
-    agent = MultipleModelQLearning(env, delay_estimates=list(lags), **thesis_hyperparameters(seed))
+    agent = MultipleModelQLearning(
+        env, delay_estimates=list(delay_estimates), **thesis_hyperparameters(seed)
+    )
     return agent.learn(steps, log_interval=None, record=True)
 
 

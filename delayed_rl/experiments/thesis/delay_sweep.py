@@ -34,7 +34,10 @@ def tasks(config: Config) -> list[dict]:
     """
     steps = config.steps or (20_000 if config.quick else 150_000)
     lams = QUICK_LAMS if config.quick else LAMS
-    runs = [{"size": 3, "lam": lam, "lags": [0], "condition": f"lambda={lam}"} for lam in lams]
+    runs = [
+        {"size": 3, "lam": lam, "delay_estimates": [0], "condition": f"lambda={lam}"}
+        for lam in lams
+    ]
     return grid_tasks(config, steps, runs)
 
 

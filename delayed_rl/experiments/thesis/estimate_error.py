@@ -32,7 +32,7 @@ def tasks(config: Config) -> list[dict]:
     steps = config.steps or (30_000 if config.quick else 150_000)
     errors = range(-15, 16, 5) if config.quick else range(-15, 16)
     runs = [
-        {"size": 9, "lam": LAM, "lags": [LAM + e], "condition": f"i={e}", "error": e}
+        {"size": 9, "lam": LAM, "delay_estimates": [LAM + e], "condition": f"i={e}", "error": e}
         for e in errors
     ]
     return grid_tasks(config, steps, runs)

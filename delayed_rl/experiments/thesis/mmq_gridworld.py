@@ -83,17 +83,17 @@ def tasks(config: Config) -> list[dict]:
     1M steps a run (100k with ``config.quick``).
     """
     steps = config.steps or (100_000 if config.quick else 1_000_000)
-    lags = {"MMQ": list(range(LAMBDA_MAX + 1)), "Q": [0], "Q undelayed": [0]}
+    estimates = {"MMQ": list(range(LAMBDA_MAX + 1)), "Q": [0], "Q undelayed": [0]}
     return [
         {
             "agent": agent,
-            "lags": lags[agent],
+            "delay_estimates": estimates[agent],
             "lam": 0 if agent == "Q undelayed" else LAM,
             "steps": steps,
             "seed": config.base_seed + i,
         }
         for i in range(config.seeds)
-        for agent in lags
+        for agent in estimates
     ]
 
 
@@ -149,7 +149,7 @@ def run_task(task: dict) -> dict:
     """
     agent = MultipleModelQLearning(
         grid_env(SIZE, task["lam"]),
-        delay_estimates=list(task["lags"]),
+        delay_estimates=list(task["delay_estimates"]),
         **thesis_hyperparameters(task["seed"]),
     )
     run = train_with_snapshots(agent, task["steps"], SIZE, keep_obs=True)

@@ -35,7 +35,12 @@ def tasks(config: Config) -> list[dict]:
     steps = config.steps or (25_000 if config.quick else 250_000)
     lams = (5, 50) if config.quick else LAMS
     runs = [
-        {"size": size, "lam": lam, "lags": [0], "condition": f"{size}x{size} lambda={lam}"}
+        {
+            "size": size,
+            "lam": lam,
+            "delay_estimates": [0],
+            "condition": f"{size}x{size} lambda={lam}",
+        }
         for size in SIZES
         for lam in lams
     ]
