@@ -17,7 +17,7 @@ from gymnasium import spaces
 
 from delayed_rl.agents import FixedDelayQLearning, MultipleModelQLearning, QLearning
 from delayed_rl.agents.common.streams import UniformStream
-from delayed_rl.agents.mmq.updates import FULL_CREDIT, NO_OPTION, credit_weights, update_models
+from delayed_rl.agents.mmq.updates import FULL_CREDIT, NO_OPTION, model_weights, update_models
 from delayed_rl.delays import Poisson
 from delayed_rl.envs.gridworld import GridWorldEnv
 from delayed_rl.wrappers import RewardDelay
@@ -89,7 +89,7 @@ def test_compiled_batch_update_is_the_numpy_one(seed: int) -> None:
 
 
 @pytest.mark.parametrize("options", ["kernel", "trace", "both"])
-def test_compiled_credit_weights_are_the_numpy_ones(options: str) -> None:
+def test_compiled_model_weights_are_the_numpy_ones(options: str) -> None:
     rng = np.random.default_rng(len(options))
     estimates = np.sort(rng.choice(40, 9, replace=False)).astype(np.int64)
     kernel = np.exp(-(np.arange(40.0) ** 2) / 8.0) if options != "trace" else None
@@ -102,7 +102,7 @@ def test_compiled_credit_weights_are_the_numpy_ones(options: str) -> None:
         if kernel is not None:
             expected = kernel[np.abs(estimates - estimates[acting])]
             expected = expected if expected_trace is None else expected * expected_trace
-        got = credit_weights(
+        got = model_weights(
             NO_OPTION if trace is None else trace,
             0.7,
             NO_OPTION if kernel is None else kernel,

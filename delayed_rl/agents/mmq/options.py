@@ -20,7 +20,7 @@ from delayed_rl.agents.common.hyperparameters import check_limit
 from delayed_rl.agents.common.persistence import check_state_array
 from delayed_rl.agents.common.python_loop import MAX_TIMESTEPS, MAX_TIMESTEPS_TEXT
 from delayed_rl.agents.common.q_agent import VALUE_NOTE, VALUE_RANGE
-from delayed_rl.agents.mmq.updates import NO_OPTION, credit_weights
+from delayed_rl.agents.mmq.updates import NO_OPTION, model_weights
 from delayed_rl.compiled.state import TableAverage, credit_kernel
 
 __all__ = ["GREEDY_UPDATES", "OPTION_NAMES", "CreditOptions", "GreedyAverage", "check_options"]
@@ -82,9 +82,9 @@ class CreditOptions:
         """Advance the trace to this step; each model's share ``w_t`` when ``acting`` acted.
 
         The products are the compiled loop's, in its order (kernel weight, then trace): one
-        compiled call (:func:`~delayed_rl.agents.mmq.updates.credit_weights`).
+        compiled call (:func:`~delayed_rl.agents.mmq.updates.model_weights`).
         """
-        return credit_weights(
+        return model_weights(
             NO_OPTION if self.trace is None else self.trace,
             0.0 if self.decay is None else self.decay,
             NO_OPTION if self.kernel is None else self.kernel,

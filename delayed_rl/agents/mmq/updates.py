@@ -1,7 +1,7 @@
 """A step's updates of MMQ's models, compiled: the rule of :mod:`delayed_rl.agents.mmq.mmq`.
 
 :func:`update_models` makes the |Λ| updates of a step in one call over the episode's
-:class:`~delayed_rl.agents.common.transition_ring.TransitionRing`, and :func:`credit_weights`
+:class:`~delayed_rl.agents.common.transition_ring.TransitionRing`, and :func:`model_weights`
 computes each model's share of the reward under the credit options. They run the operations of
 the numpy code they replaced in its order, so the tables are the same to the last bit; without
 numba they run as Python.
@@ -14,16 +14,16 @@ import numpy as np
 from delayed_rl._numba import jit as _jit
 from delayed_rl.agents.common.q_table import first_max
 
-__all__ = ["FULL_CREDIT", "NO_OPTION", "credit_weights", "update_models"]
+__all__ = ["FULL_CREDIT", "NO_OPTION", "model_weights", "update_models"]
 
 FULL_CREDIT = np.zeros(0)
 """The ``weights`` of :func:`update_models` without the options (every model gets ``r``)."""
 NO_OPTION = np.zeros(0)
-"""The trace or the kernel of :func:`credit_weights` when that option is off."""
+"""The trace or the kernel of :func:`model_weights` when that option is off."""
 
 
 @_jit
-def credit_weights(trace, decay, kernel, estimates, acting):
+def model_weights(trace, decay, kernel, estimates, acting):
     """Each model's share of the reward ``r`` at a step (MMQ's credit options), compiled.
 
     The delay trace (empty: off) decays by ``decay`` and the acting model's entry becomes 1;
