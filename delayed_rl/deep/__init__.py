@@ -1,0 +1,76 @@
+"""Deep RL under delayed rewards: reward models learned from the delayed stream, for SB3.
+
+A reward model learns ``R̂(s, a)`` from the rewards an env delivered (anonymously: it never
+reads when a reward was emitted), and a relabelling buffer hands stable-baselines3's algorithms
+``R̂`` in place of the delayed rewards:
+
+- :class:`DeconvolutionRewardModel`: ``R̂`` fitted so that its convolution with the delay's pmf
+  ``p`` explains the delivered rewards; ``p`` known or learned;
+- :class:`ReturnDecompositionRewardModel` (RRD) and :class:`IRCRRewardModel`: delay-agnostic
+  baselines that use only episode sums;
+- :class:`RelabelingReplayBuffer` (SAC, TD3, DQN) and :class:`RelabelingRolloutBuffer` (PPO, A2C,
+  with :class:`RewardModelCallback`);
+- :func:`load_reward_model`.
+
+Everything here needs torch and stable-baselines3 (``pip install "delayed-rl[sb3]"``); they are
+imported when a name is first used, not by ``import delayed_rl.deep``.
+
+Example:
+    >>> import gymnasium as gym
+    >>> from stable_baselines3 import SAC
+    >>> from delayed_rl.deep import DeconvolutionRewardModel, RelabelingReplayBuffer
+    >>> from delayed_rl.wrappers import RewardDelay
+    >>> env = RewardDelay(gym.make("Pendulum-v1"), 20)  # Poisson(20) delays, flushed
+    >>> model = DeconvolutionRewardModel(env.observation_space, env.action_space, delay=None,
+    ...                                  max_delay=60, seed=0)
+    >>> agent = SAC("MlpPolicy", env, replay_buffer_class=RelabelingReplayBuffer,
+    ...             replay_buffer_kwargs={"reward_model": model}, seed=0)
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+__all__ = [
+    "DeconvolutionRewardModel",
+    "IRCRRewardModel",
+    "RelabelingReplayBuffer",
+    "RelabelingRolloutBuffer",
+    "ReturnDecompositionRewardModel",
+    "RewardModel",
+    "RewardModelCallback",
+    "load_reward_model",
+]
+
+_HOMES = {
+    "DeconvolutionRewardModel": "deconvolution",
+    "IRCRRewardModel": "ircr",
+    "RelabelingReplayBuffer": "buffers",
+    "RelabelingRolloutBuffer": "buffers",
+    "ReturnDecompositionRewardModel": "return_decomposition",
+    "RewardModel": "reward_model",
+    "RewardModelCallback": "callbacks",
+    "load_reward_model": "files",
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _HOMES:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    try:
+        module = importlib.import_module(f"{__name__}.{_HOMES[name]}")
+    except ImportError as error:
+        if error.name and error.name.split(".")[0] in ("torch", "stable_baselines3"):
+            raise ImportError(
+                f"delayed_rl.deep.{name} needs torch and stable-baselines3, which are not "
+                f"installed ({error.name} is missing): install the sb3 extra, "
+                '`pip install "delayed-rl[sb3]"` (torch first, for its CPU build: '
+                "`pip install torch --index-url https://download.pytorch.org/whl/cpu`)"
+            ) from error
+        raise
+    return getattr(module, name)
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)

@@ -1,0 +1,198 @@
+"""The deconvolution reward model: ``R̂(s, a)`` fitted so that ``p ∗ R̂`` explains what arrived.
+
+With i.i.d. delays ``d ~ p``, the reward delivered at step ``t`` has the mean
+``E[y_t] = Σ_k p(k)·R(s_{t−k}, a_{t−k})``. :class:`DeconvolutionRewardModel` fits ``R̂`` by least
+squares on that sum, over windows of the history, with the weights of the wrapper's episode-end
+mode (``on_episode_end``, as :class:`~delayed_rl.wrappers.RewardDelay` takes it):
+
+- ``"flush"`` (the default): lags stay inside an episode, and the last step of an episode
+  collects the survival ``P(D ≥ k)`` of each earlier step's reward (all that was pending);
+- ``"drop"``: lags stay inside an episode and the tail is lost;
+- ``"carry"``: lags cross episode boundaries (pending rewards arrive in the next episode).
+
+``delay``: a known distribution (its pmf clipped to ``0..K``, the last lag holding the tail, as
+:func:`~delayed_rl.agents.expected_credit.credit_weights` makes it), or ``None`` to learn ``p``
+jointly, as a softmax over ``0..max_delay`` started uniform (``delay_pmf``, ``mean_delay``).
+A batch is ``ceil(batch_size / window)`` windows of ``window`` consecutive targets of one
+sub-env, drawn uniformly, each with the ``K`` steps before it: ``R̂`` is evaluated once a step and
+passed through the causal convolution with ``p``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import torch
+
+from delayed_rl._validation import check_choice, check_int, check_real
+from delayed_rl.agents.expected_credit import credit_weights
+from delayed_rl.deep.reward_model import RewardModel
+from delayed_rl.delays import Delay, Empirical, as_delay
+from delayed_rl.wrappers import EPISODE_END_MODES
+
+__all__ = ["MAX_MODELLED_DELAY", "DeconvolutionRewardModel"]
+
+MAX_MODELLED_DELAY = 4096
+"""The longest delay modelled (``K``): a window evaluates ``R̂`` on ``window + K`` steps."""
+
+
+class DeconvolutionRewardModel(RewardModel):
+    """``R̂(s, a)`` learned by deconvolving the delivered rewards, with ``p`` known or learned.
+
+    Args:
+        observation_space: the env's observation space (``Box`` or ``Discrete``).
+        action_space: its action space (``Box`` or ``Discrete``).
+        delay: the delay distribution (a :class:`~delayed_rl.delays.Delay`, a number read as a
+            Poisson mean, or a ``to_dict()`` description), or ``None`` to learn it.
+        max_delay: ``K``, the longest delay modelled: required with ``delay=None``; with a known
+            delay, a clip (``None``: where the pmf's tail falls below ``1e-12``).
+        on_episode_end: the wrapper's episode-end mode: ``"flush"``, ``"drop"`` or ``"carry"``.
+        window: targets per window of a batch.
+        delay_learning_rate: Adam's step size for ``p``'s logits (with ``delay=None``).
+        **kwargs: the :class:`~delayed_rl.deep.reward_model.RewardModel` settings
+            (``hidden_sizes``, ``learning_rate``, ``batch_size``, ``seed``...).
+
+    Raises:
+        TypeError, ValueError: a bad argument (the message names it); ``delay=None`` without a
+            ``max_delay``; a ``K`` above :data:`MAX_MODELLED_DELAY`.
+
+    Example:
+        >>> import gymnasium as gym
+        >>> env = gym.make("Pendulum-v1")
+        >>> model = DeconvolutionRewardModel(
+        ...     env.observation_space, env.action_space, delay=None, max_delay=60, seed=0
+        ... )
+        >>> round(model.mean_delay, 1)  # p starts uniform on 0..60
+        30.0
+    """
+
+    own_settings = ("delay", "max_delay", "on_episode_end", "window", "delay_learning_rate")
+
+    def __init__(
+        self,
+        observation_space: Any,
+        action_space: Any,
+        delay: Delay | float | dict | None = None,
+        max_delay: int | None = None,
+        *,
+        on_episode_end: str = "flush",
+        window: int = 64,
+        delay_learning_rate: float = 1e-2,
+        **kwargs: Any,
+    ):
+        self.max_delay = check_int("max_delay", max_delay, 0, MAX_MODELLED_DELAY, optional=True)
+        self.delay = None if delay is None else as_delay(delay)
+        self.on_episode_end = check_choice("on_episode_end", on_episode_end, EPISODE_END_MODES)
+        self.window = check_int("window", window, 1, 2**16)
+        self.delay_learning_rate = check_real(
+            "delay_learning_rate", delay_learning_rate, 0.0, 1e6, low_open=True
+        )
+        if self.delay is None:
+            if self.max_delay is None:
+                raise ValueError("max_delay must be given (an integer >= 0) when delay is None")
+            self._known_pmf = None
+            self.support = self.max_delay
+        else:
+            weights = credit_weights(self.delay, self.max_delay)
+            if weights.size - 1 > MAX_MODELLED_DELAY:
+                raise ValueError(
+                    f"delay must reach at most MAX_MODELLED_DELAY = {MAX_MODELLED_DELAY} steps, "
+                    f"got {self.delay!r}, which reaches {weights.size - 1}: give a max_delay"
+                )
+            self._known_pmf = torch.as_tensor(weights / weights.sum(), dtype=torch.float32)
+            self.support = weights.size - 1
+        super().__init__(observation_space, action_space, **kwargs)
+
+    def _make_parameters(self) -> None:
+        self.delay_logits = None
+        if self._known_pmf is None:
+            self.delay_logits = torch.nn.Parameter(torch.zeros(self.support + 1))
+
+    def _make_optimizer(self) -> torch.optim.Optimizer:
+        groups: list[dict[str, Any]] = [{"params": list(self.network.parameters())}]
+        if self.delay_logits is not None:
+            groups.append({"params": [self.delay_logits], "lr": self.delay_learning_rate})
+        return torch.optim.Adam(groups, lr=self.learning_rate)
+
+    def _extra_state(self) -> dict[str, torch.Tensor]:
+        return {} if self.delay_logits is None else {"delay_logits": self.delay_logits.detach()}
+
+    def _load_extra_state(self, tensors: dict[str, torch.Tensor]) -> None:
+        if self.delay_logits is not None:
+            with torch.no_grad():
+                self.delay_logits.copy_(tensors["delay_logits"])
+
+    def _settings(self) -> dict[str, Any]:
+        settings = super()._settings()
+        if self.delay is not None:
+            try:
+                settings["delay"] = self.delay.to_dict()
+            except NotImplementedError:  # a user's distribution: its clipped pmf
+                settings["delay"] = Empirical(self._known_pmf.double().numpy()).to_dict()
+        return settings
+
+    # ------------------------------------------------------------------ the delay
+    def _pmf(self) -> torch.Tensor:
+        """``p`` on ``0..K`` (learned: the softmax of the logits, with gradients)."""
+        if self.delay_logits is None:
+            return self._known_pmf
+        return torch.softmax(self.delay_logits, dim=0)
+
+    @property
+    def delay_pmf(self) -> np.ndarray:
+        """``p(k)`` for ``k = 0..K``, known or as learned so far (``float64``)."""
+        with torch.no_grad():
+            return self._pmf().double().numpy().copy()
+
+    @property
+    def mean_delay(self) -> float:
+        """The mean of :attr:`delay_pmf`."""
+        pmf = self.delay_pmf
+        return float(np.arange(pmf.size) @ pmf)
+
+    def metrics(self) -> dict[str, float]:
+        """The learned (or known) mean delay."""
+        return {"mean_delay": self.mean_delay}
+
+    # ------------------------------------------------------------------ the loss
+    def loss(self) -> torch.Tensor | None:
+        """The mean squared error of ``Σ_k w_t(k)·R̂(s_{t−k}, a_{t−k})`` against ``y_t``.
+
+        ``w_t(k)`` is ``p(k)`` (``P(D ≥ k)`` at an episode's last step under ``"flush"``), and 0
+        for a step of another episode (under ``"flush"`` and ``"drop"``) or before the stream.
+        """
+        history = self.history
+        k, length = self.support, self.window
+        lowest = history.oldest + k if history.oldest > 0 else 0
+        if history.steps_added - length < lowest:
+            return None
+        count = math.ceil(self.batch_size / length)
+        starts = self.rng.integers(lowest, history.steps_added - length + 1, size=count)
+        envs = self.rng.integers(0, history.n_envs, size=count)
+        steps = starts[:, None] + np.arange(-k, length)  # (windows, K + window)
+        valid = steps >= 0
+        rows = steps % history.capacity
+        columns = envs[:, None]
+        ends = history.episode_end[rows, columns] & valid
+        obs = history.obs[rows, columns].reshape(-1, *history.obs.shape[2:])
+        action = history.action[rows, columns].reshape(-1, *history.action.shape[2:])
+        rewards = self.network(torch.as_tensor(obs), torch.as_tensor(action))
+        rewards = rewards.reshape(count, k + length) * torch.as_tensor(valid)
+        lagged = rewards.unfold(1, k + 1, 1)  # [w, i, j] = R̂ of step i + j: lag K − j of i + K
+        allowed = torch.as_tensor(valid).unfold(1, k + 1, 1)
+        if self.on_episode_end != "carry":
+            episode = np.concatenate(
+                (np.zeros((count, 1), np.int64), np.cumsum(ends, 1)[:, :-1]), 1
+            )
+            episode = torch.as_tensor(episode)
+            allowed = allowed & (episode.unfold(1, k + 1, 1) == episode[:, k:, None])
+        pmf = self._pmf()
+        weights = pmf.flip(0).expand(count, length, k + 1)
+        if self.on_episode_end == "flush":
+            survival = pmf.flip(0).cumsum(0)  # [j] = P(D >= K − j)
+            weights = torch.where(torch.as_tensor(ends[:, k:, None]), survival, weights)
+        predicted = (lagged * weights * allowed).sum(-1)
+        delivered = torch.as_tensor(history.reward[rows[:, k:], columns], dtype=torch.float32)
+        return torch.mean((predicted - delivered) ** 2)

@@ -1,0 +1,166 @@
+"""Reading a reward model file, every part checked before it is used.
+
+The file (:meth:`~delayed_rl.deep.reward_model.RewardModel.save`) is a zip of
+``reward_model.json``, ``weights.pt`` and, once the model has seen a step, ``history.npz``. The
+JSON names the class (one of the library's) and its settings, which go through the class's own
+constructor checks; the tensors are read with ``torch.load(weights_only=True)`` and must match
+the model's names and shapes and be finite; the arrays are read without pickle and must have the
+history's shapes, dtypes and values (actions and observations inside their spaces).
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from delayed_rl.deep.encoding import SpaceEncoding
+from delayed_rl.deep.history import TransitionHistory
+from delayed_rl.deep.reward_model import FORMAT, MAX_FILE_BYTES, RewardModel
+
+__all__ = ["load_reward_model"]
+
+
+def _classes() -> dict[str, type[RewardModel]]:
+    from delayed_rl.deep.deconvolution import DeconvolutionRewardModel
+    from delayed_rl.deep.ircr import IRCRRewardModel
+    from delayed_rl.deep.return_decomposition import ReturnDecompositionRewardModel
+
+    kinds = (DeconvolutionRewardModel, ReturnDecompositionRewardModel, IRCRRewardModel)
+    return {kind.__name__: kind for kind in kinds}
+
+
+def _member(archive: zipfile.ZipFile, name: str, path: Path) -> bytes | None:
+    try:
+        info = archive.getinfo(name)
+    except KeyError:
+        return None
+    if info.file_size > MAX_FILE_BYTES:
+        raise ValueError(f"{path}: {name} is {info.file_size} bytes, over MAX_FILE_BYTES = 2**34")
+    return archive.read(name)
+
+
+def load_reward_model(path: str | Path) -> RewardModel:
+    """The model in the file at ``path`` (see the module docstring for the checks).
+
+    Raises:
+        ValueError: the file, or a part of it, is not what a reward model file holds.
+    """
+    path = Path(path)
+    try:
+        with zipfile.ZipFile(path) as archive:
+            header_bytes = _member(archive, "reward_model.json", path)
+            weights = _member(archive, "weights.pt", path)
+            arrays = _member(archive, "history.npz", path)
+    except (zipfile.BadZipFile, OSError, EOFError) as error:
+        raise ValueError(f"{path} is not a reward model file: {error}") from None
+    if header_bytes is None or weights is None:
+        raise ValueError(
+            f"{path} is not a reward model file: reward_model.json or weights.pt missing"
+        )
+    try:
+        header = json.loads(header_bytes)
+    except (UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise ValueError(f"{path}: reward_model.json is not JSON: {error}") from None
+    if not isinstance(header, dict) or header.get("format") != FORMAT:
+        raise ValueError(f"{path}: reward_model.json does not declare format {FORMAT!r}")
+    kind = _classes().get(header.get("class"))
+    if kind is None:
+        raise ValueError(f"{path}: unknown reward model class {header.get('class')!r}")
+    observations = SpaceEncoding.from_dict("observation_space", header.get("observation_space"))
+    actions = SpaceEncoding.from_dict("action_space", header.get("action_space"))
+    settings = header.get("settings")
+    if not isinstance(settings, dict):
+        raise ValueError(f"{path}: settings must be a JSON object")
+    try:
+        model = kind(observations.space, actions.space, **settings)
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"{path}: bad settings: {error}") from None
+    _load_tensors(model, weights, path)
+    _load_counters(model, header, arrays, path)
+    return model
+
+
+def _load_tensors(model: RewardModel, weights: bytes, path: Path) -> None:
+    try:
+        tensors = torch.load(io.BytesIO(weights), weights_only=True)
+        network, extra = tensors["network"], tensors["extra"]
+        for name, value in [*network.items(), *extra.items()]:
+            if not torch.is_tensor(value) or not torch.isfinite(value).all():
+                raise ValueError(f"tensor {name} is not a finite tensor")
+        expected = model._extra_state()
+        if set(extra) != set(expected) or any(
+            extra[name].shape != expected[name].shape for name in expected
+        ):
+            raise ValueError("the learned delay's tensors do not match the settings")
+        model.network.load_state_dict(network, strict=True)
+        model._load_extra_state(extra)
+        model.optimizer.load_state_dict(tensors["optimizer"])
+    except (RuntimeError, KeyError, TypeError, ValueError, EOFError, AttributeError) as error:
+        raise ValueError(f"{path}: weights.pt does not fit the model: {error}") from None
+
+
+def _load_counters(model: RewardModel, header: dict[str, Any], arrays: bytes | None, path: Path):
+    counters = header.get("counters")
+    try:
+        n_envs, steps = int(counters["n_envs"]), int(counters["steps_added"])
+        model.gradient_steps_taken = int(counters["gradient_steps_taken"])
+        model._since_round = int(counters["since_round"])
+        model.rng.bit_generator.state = header["rng"]
+    except (KeyError, TypeError, ValueError) as error:
+        raise ValueError(f"{path}: bad counters or generator state: {error}") from None
+    if min(n_envs, steps, model.gradient_steps_taken, model._since_round) < 0:
+        raise ValueError(f"{path}: negative counters {counters}")
+    if (arrays is None) != (n_envs == 0):
+        raise ValueError(f"{path}: history.npz must be there exactly when n_envs > 0")
+    if arrays is None:
+        return
+    try:
+        with np.load(io.BytesIO(arrays), allow_pickle=False) as data:
+            loaded = {name: data[name] for name in data.files}
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as error:
+        raise ValueError(f"{path}: history.npz is not readable: {error}") from None
+    history = TransitionHistory(model.observations, model.actions, n_envs, model.capacity)
+    for name, value in loaded.items():
+        if name not in ("obs", "action", "reward", "episode_end", "undelayed"):
+            raise ValueError(f"{path}: history.npz holds an unknown array {name!r}")
+        empty = getattr(history, name)
+        if value.shape != empty.shape or value.dtype != empty.dtype:
+            raise ValueError(
+                f"{path}: history array {name} must be {empty.dtype} of shape {empty.shape}, "
+                f"got {value.dtype} of shape {value.shape}"
+            )
+    if set(loaded) != {"obs", "action", "reward", "episode_end", "undelayed"}:
+        raise ValueError(f"{path}: history.npz misses arrays")
+    held = history.rows(max(0, steps - model.capacity), steps)
+    model.observations.batch(
+        loaded["obs"][held].reshape(-1, *model.observations.shape), held.size * n_envs
+    )
+    model.actions.batch(
+        loaded["action"][held].reshape(-1, *model.actions.shape), held.size * n_envs
+    )
+    if not np.isfinite(loaded["reward"][held]).all():
+        raise ValueError(f"{path}: history rewards must be finite")
+    _replay(history, loaded, steps)
+    model.history = history
+
+
+def _replay(history: TransitionHistory, loaded: dict[str, np.ndarray], steps: int) -> None:
+    """Fill ``history`` by adding the held steps again, so its episode index is rebuilt."""
+    first = max(0, steps - history.capacity)
+    history.steps_added = first
+    history._episode_first[:] = first - 1 if first > 0 else 0  # an episode cut off: not whole
+    for step in range(first, steps):
+        row = step % history.capacity
+        history.add(
+            loaded["obs"][row],
+            loaded["action"][row],
+            loaded["reward"][row],
+            loaded["episode_end"][row],
+            loaded["undelayed"][row],
+        )

@@ -1,0 +1,107 @@
+"""The stream a reward model learns from: each sub-env's recent transitions, in order.
+
+A :class:`TransitionHistory` keeps the last ``capacity`` steps of ``n_envs`` sub-envs that step
+together (a vector env): per step and sub-env the observation, the action, the reward delivered
+and whether the episode ended there. It also keeps the finished episodes still wholly inside it
+(their sub-env, first step and length, and the sum of their delivered rewards), which the
+episode-sum baselines sample. Steps are counted from the first one added (``steps_added``);
+the history holds steps ``max(0, steps_added − capacity) .. steps_added − 1``.
+
+``undelayed`` holds ``info["undelayed_reward"]`` where a step's ``info`` had it (NaN where not),
+for diagnostics only: nothing a model learns from reads it.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+from delayed_rl._validation import check_int
+from delayed_rl.deep.encoding import SpaceEncoding
+
+__all__ = ["MAX_HISTORY_BYTES", "TransitionHistory"]
+
+MAX_HISTORY_BYTES = 2**34
+"""The most memory a history's arrays may take (16 GiB): a larger ``capacity`` is refused."""
+
+
+class TransitionHistory:
+    """The last ``capacity`` steps of ``n_envs`` sub-envs, oldest overwritten first.
+
+    Args:
+        observations: the observation space's encoding.
+        actions: the action space's encoding.
+        n_envs: how many sub-envs step together.
+        capacity: how many steps (of every sub-env) are kept.
+
+    Attributes:
+        obs, action, reward, episode_end, undelayed: the ring's arrays, indexed
+            ``[step % capacity, env]``.
+        episodes: the finished episodes wholly inside the ring, oldest first, as
+            ``(env, first_step, length, delivered_sum)``.
+        steps_added: how many steps were added.
+    """
+
+    def __init__(
+        self, observations: SpaceEncoding, actions: SpaceEncoding, n_envs: int, capacity: int
+    ):
+        self.n_envs = check_int("n_envs", n_envs, 1)
+        self.capacity = check_int("capacity", capacity, 1)
+        per_step = n_envs * (observations.empty(1).nbytes + actions.empty(1).nbytes + 8 + 1 + 8)
+        if per_step * self.capacity > MAX_HISTORY_BYTES:
+            raise ValueError(
+                f"capacity must keep the history within MAX_HISTORY_BYTES = 2**34 bytes, got "
+                f"{capacity} steps of {n_envs} sub-envs at {per_step // n_envs} bytes a "
+                "transition"
+            )
+        self.observations, self.actions = observations, actions
+        self.obs = observations.empty(self.capacity, n_envs)
+        self.action = actions.empty(self.capacity, n_envs)
+        self.reward = np.zeros((self.capacity, n_envs))
+        self.episode_end = np.zeros((self.capacity, n_envs), dtype=bool)
+        self.undelayed = np.full((self.capacity, n_envs), np.nan)
+        self.episodes: deque[tuple[int, int, int, float]] = deque()
+        self.steps_added = 0
+        self._episode_first = np.zeros(n_envs, dtype=np.int64)
+        self._episode_sum = np.zeros(n_envs)
+
+    @property
+    def oldest(self) -> int:
+        """The first step still held."""
+        return max(0, self.steps_added - self.capacity)
+
+    def add(
+        self,
+        obs: np.ndarray,
+        action: np.ndarray,
+        reward: np.ndarray,
+        episode_end: np.ndarray,
+        undelayed: np.ndarray,
+    ) -> None:
+        """Append one step of every sub-env (arrays checked by the caller, one row a sub-env)."""
+        step = self.steps_added
+        row = step % self.capacity
+        self.obs[row] = obs
+        self.action[row] = action
+        self.reward[row] = reward
+        self.episode_end[row] = episode_end
+        self.undelayed[row] = undelayed
+        self._episode_sum += reward
+        self.steps_added = step + 1
+        for env in np.flatnonzero(episode_end):
+            first = int(self._episode_first[env])
+            self.episodes.append((int(env), first, step + 1 - first, float(self._episode_sum[env])))
+            self._episode_first[env] = step + 1
+            self._episode_sum[env] = 0.0
+        while self.episodes and self.episodes[0][1] < self.oldest:
+            self.episodes.popleft()
+
+    def rows(self, first: int, stop: int) -> np.ndarray:
+        """The ring rows of steps ``first .. stop − 1`` (all held)."""
+        return np.arange(first, stop) % self.capacity
+
+    def episode_ids(self, env: int, first: int, stop: int) -> np.ndarray:
+        """An id per step ``first .. stop − 1`` of sub-env ``env``: equal within an episode."""
+        ends = self.episode_end[self.rows(first, stop), env]
+        return np.concatenate(([0], np.cumsum(ends[:-1])))
