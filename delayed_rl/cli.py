@@ -41,7 +41,7 @@ from delayed_rl.agents.common.python_loop import MAX_TIMESTEPS, MAX_TIMESTEPS_TE
 from delayed_rl.agents.registry import AGENTS as AGENT_NAMES
 from delayed_rl.delays import Poisson
 from delayed_rl.envs import env_ids
-from delayed_rl.experiments import NAMES
+from delayed_rl.experiments import DEFAULT_NAMES, LONG_NAMES, NAMES
 from delayed_rl.experiments.framework.runner import (
     BACKENDS,
     MAX_SEED_TEXT,
@@ -131,9 +131,11 @@ class CommandError(Exception):
 
 
 #: What a command may fail with, reported as one ``error:`` line and exit code 1 (a corrupt file
-#: or a request too large for the machine included: ``zlib.error``, ``MemoryError``, ...).
+#: or a request too large for the machine included: ``zlib.error``, ``MemoryError``, ...; a
+#: missing extra: ``ImportError``).
 FAILURES = (
     CommandError,
+    ImportError,
     OSError,
     ValueError,
     TypeError,
@@ -276,10 +278,12 @@ def _bench(args: argparse.Namespace) -> int:
 
     ``reproduce`` runs every experiment together on one pool of workers
     (:func:`~delayed_rl.experiments.run_experiments`): each prints its report as it finishes.
+    It leaves out the long experiments (:data:`~delayed_rl.experiments.LONG_NAMES`) unless
+    given ``--all``.
     """
     from delayed_rl.experiments import Config, get_experiment, run_experiments
 
-    names = list(NAMES) if args.name == "all" else [args.name]
+    names = [args.name] if args.name != "all" else list(NAMES if args.all else DEFAULT_NAMES)
     config = Config(
         seeds=args.seeds,
         steps=args.steps,
@@ -553,6 +557,11 @@ def _add_reproduce_command(commands: Any) -> None:
     """The ``reproduce`` sub-command's parser."""
     reproduce = commands.add_parser("reproduce", help="run every thesis experiment")
     _add_bench_options(reproduce, "runs")
+    reproduce.add_argument(
+        "--all",
+        action="store_true",
+        help=f"also run the long experiments ({', '.join(LONG_NAMES)}; they need the sb3 extra)",
+    )
     reproduce.set_defaults(run=_bench, name="all")
 
 

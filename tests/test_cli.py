@@ -7,9 +7,11 @@ progress bar here.
 from __future__ import annotations
 
 import re
+import subprocess
 import sys
 import tracemalloc
 import zipfile
+from types import SimpleNamespace
 
 import gymnasium as gym
 import numpy as np
@@ -552,3 +554,48 @@ def test_train_refuses_a_save_path_without_a_file_name(tmp_path, capsys):
     assert exit_info.value.code == 2
     assert "argument --save: must name a model file" in capsys.readouterr().err
     assert not (tmp_path / "agent.npz").exists()
+
+
+class _Stop(Exception):
+    """Raised by a stand-in for ``run_experiments`` once it has seen what it was given."""
+
+
+@pytest.mark.parametrize(
+    ("argv", "has_long"), [(["reproduce"], False), (["reproduce", "--all"], True)]
+)
+def test_reproduce_leaves_the_long_experiments_to_all(monkeypatch, argv, has_long):
+    import delayed_rl.experiments as experiments
+
+    seen = []
+
+    def record(chosen, *args, **kwargs):
+        seen.extend(experiment.name for experiment in chosen)
+        raise _Stop
+
+    monkeypatch.setattr(experiments, "get_experiment", lambda name: SimpleNamespace(name=name))
+    monkeypatch.setattr(experiments, "run_experiments", record)
+    with pytest.raises(_Stop):
+        main(argv)
+    assert set(seen) == set(experiments.NAMES if has_long else experiments.DEFAULT_NAMES)
+    assert ("deep-rl" in seen) is has_long
+
+
+@pytest.mark.cold_cache
+def test_deep_rl_without_torch_is_an_error_naming_the_extra(tmp_path):
+    blocker = (
+        "import sys\n"
+        "class Block:\n"
+        "    def find_spec(self, name, path=None, target=None):\n"
+        "        if name.split('.')[0] in ('torch', 'stable_baselines3'):\n"
+        "            raise ImportError(f'No module named {name!r}')\n"
+        "sys.meta_path.insert(0, Block())\n"
+        "from delayed_rl.cli import main\n"
+        f"sys.exit(main(['bench', 'deep-rl', '--quick', '--out', {str(tmp_path)!r}]))\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", blocker], capture_output=True, text=True, timeout=120
+    )
+    assert done.returncode == 1, done.stderr
+    needs = 'needs torch and stable-baselines3: pip install "delayed-rl[sb3]"'
+    assert f"error: the deep-rl experiment {needs}" in done.stderr
+    assert not any(tmp_path.iterdir())

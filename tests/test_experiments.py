@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 
 from delayed_rl.cli import main
-from delayed_rl.experiments import NAMES, Config, get_experiment, run_experiment
+from delayed_rl.experiments import DEFAULT_NAMES, Config, get_experiment, run_experiment
 from delayed_rl.experiments.framework.runner import VERDICTS, mean_ci95, run_tasks, running_average
 from delayed_rl.experiments.framework.training import greedy_average_reward, grid_env, train
 
 
 @pytest.mark.experiment
-@pytest.mark.parametrize("name", NAMES)
+@pytest.mark.parametrize("name", DEFAULT_NAMES)  # deep-rl's own test: tests/test_experiment_deep_rl
 def test_quick_run_writes_every_file(name, tmp_path):
     experiment, config = get_experiment(name), Config(quick=True, seeds=2)
     summary = run_experiment(experiment, config, tmp_path, False)

@@ -26,9 +26,14 @@ _MODULES = {
     "future-work": "beyond.future_work",
     "linefollow-deconv": "beyond.linefollow_deconv",
     "real-robot": "thesis.real_robot",
+    "deep-rl": "beyond.deep_rl",
 }
 #: The experiments' names, as ``delayed-rl bench NAME`` takes them.
 NAMES = tuple(_MODULES)
+#: Experiments too long for the default ``delayed-rl reproduce`` (``reproduce --all`` runs them).
+LONG_NAMES = ("deep-rl",)
+#: What ``delayed-rl reproduce`` runs: every experiment but :data:`LONG_NAMES`.
+DEFAULT_NAMES = tuple(name for name in NAMES if name not in LONG_NAMES)
 
 
 def get_experiment(name: str) -> Experiment:
@@ -43,6 +48,8 @@ def get_experiment(name: str) -> Experiment:
 
 
 __all__ = [
+    "DEFAULT_NAMES",
+    "LONG_NAMES",
     "NAMES",
     "Config",
     "Experiment",

@@ -18,7 +18,12 @@ side. Results do not depend on the order or the number of workers: every task ca
 seed. With ``progress``, a bar on stderr counts the distinct runs as they finish, in whatever
 order the workers finish them.
 
-Each summary's ``extra`` records what the experiment cost:
+A *resumable* experiment (:attr:`~.runner.Experiment.resumable`) keeps each run's result as it
+finishes, as ``OUT/runs/<hash>.json`` stating the run it holds (written whole or not at all), and
+a later call into the same folder reads those instead of running them: an experiment longer than
+a sitting runs in parts. A kept file that is not a run's result stops the call, naming it.
+
+Each summary's ``extra`` records what the experiment cost (a kept run counts its first time):
 
 - ``run_seconds``: the core-seconds of its runs, as timed in the workers (a run it shares with
   another experiment counts in full in each, a pooled run too: an experiment whose run another
@@ -35,6 +40,7 @@ Tasks that share a run receive the same result object (through their views): an 
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import os
 import sys
@@ -267,15 +273,18 @@ def _run(
         plan.missing = len(set(plan.keys))
     runs = {key: _pooled(pooled) for key, pooled in pooling.items()}
     order = sorted(runs, key=lambda key: -costs[key])  # stable: equal costs keep task order
+    results: dict[str, dict] = {}
+    seconds: dict[str, float] = {}
+    stores = {key: _stores(users[key]) for key in order}
+    order = _resume(order, runs, users, stores, results, seconds)
     if progress:
         names = ", ".join(plan.experiment.name for plan in plans)
         tasks = sum(len(plan.tasks) for plan in plans)
+        kept = f", {len(results)} kept from an earlier run" if results else ""
         print(
-            f"[{names}] {len(order)} runs ({tasks} tasks) on {config.workers} worker(s)...",
+            f"[{names}] {len(order)} runs ({tasks} tasks{kept}) on {config.workers} worker(s)...",
             flush=True,
         )
-    results: dict[str, dict] = {}
-    seconds: dict[str, float] = {}
     summaries: dict[int, Summary] = {}
     unfinished = {key: len(plans_of) for key, plans_of in users.items()}
 
@@ -305,12 +314,79 @@ def _run(
                 counter.tick()
                 key = order[index]
                 results[key], seconds[key] = result, spent
+                _keep_result(stores[key], runs[key], result, spent)
                 for plan in users[key]:
                     plan.missing -= 1
                     if not plan.missing:
                         finish(plan)
                 writer.report(wait=False)
     return [summaries[id(plan)] for plan in plans]
+
+
+def _resume(
+    order: list[str],
+    runs: dict[str, SharedRun],
+    users: dict[str, list[_Plan]],
+    stores: dict[str, list[Path]],
+    results: dict[str, dict],
+    seconds: dict[str, float],
+) -> list[str]:
+    """Fill ``results`` and ``seconds`` with the kept runs; return the keys still to run."""
+    for key in order:
+        kept = _kept_result(stores[key], runs[key])
+        if kept is not None:
+            results[key], seconds[key] = kept
+            for plan in users[key]:
+                plan.missing -= 1
+    return [key for key in order if key not in results]
+
+
+def _stores(plans: list[_Plan]) -> list[Path]:
+    """The folders that keep a run's result: ``OUT/runs`` of each resumable plan that writes."""
+    return [
+        plan.out / "runs" for plan in plans if plan.experiment.resumable and plan.out is not None
+    ]
+
+
+def _kept_path(folder: Path, run: SharedRun) -> tuple[Path, str]:
+    """Where ``run``'s result is kept in ``folder``, and the identity the file must state."""
+    identity = run_key(run)
+    return folder / f"{hashlib.sha256(identity.encode()).hexdigest()[:32]}.json", identity
+
+
+def _kept_result(folders: list[Path], run: SharedRun) -> tuple[dict, float] | None:
+    """``(result, seconds)`` of ``run`` kept in one of ``folders``, else ``None``.
+
+    Raises:
+        ValueError: a kept file is not what :func:`_keep_result` writes for this run (not JSON,
+            another run's, fields missing): it names the file, to be deleted.
+    """
+    for folder in folders:
+        path, identity = _kept_path(folder, run)
+        try:
+            payload = json.loads(path.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            continue
+        except (OSError, UnicodeDecodeError, ValueError) as error:
+            raise ValueError(f"the kept run {path} cannot be read ({error}): delete it") from None
+        ok = isinstance(payload, dict) and payload.get("run") == identity
+        ok = ok and isinstance(payload.get("result"), dict)
+        ok = ok and isinstance(payload.get("seconds"), float) and payload["seconds"] >= 0
+        if not ok:
+            raise ValueError(f"the kept run {path} is not this run's result: delete it")
+        return payload["result"], payload["seconds"]
+    return None
+
+
+def _keep_result(folders: list[Path], run: SharedRun, result: dict, seconds: float) -> None:
+    """Write ``run``'s result into each of ``folders``, whole or not at all (a rename)."""
+    for folder in folders:
+        path, identity = _kept_path(folder, run)
+        folder.mkdir(parents=True, exist_ok=True)
+        payload = {"run": identity, "seconds": float(seconds), "result": result}
+        partial = path.with_suffix(f".{os.getpid()}.part")
+        partial.write_text(json.dumps(payload, default=_json_default), encoding="utf-8")
+        os.replace(partial, path)
 
 
 class _Writer:

@@ -251,6 +251,11 @@ class Experiment:
             every task is its own run, ``run_task(task)``).
         cost: a task's estimated core-seconds, which only orders the runs (longest first, so
             that no long run starts last); ``None``: :func:`default_cost`.
+        resumable: keep each run's result as it finishes, in ``OUT/runs/`` of the experiment's
+            output folder, and read it back instead of running it again when the experiment is
+            run into the same folder (its results must be JSON: dicts, lists, numbers, text).
+            A run is found by its function and task, so a changed setting runs afresh; delete
+            ``OUT/runs/`` to run everything again.
     """
 
     name: str
@@ -263,6 +268,7 @@ class Experiment:
     quick_seeds: int = 2
     shared_run: Callable[[dict], SharedRun | None] | None = None
     cost: Callable[[dict], float] | None = None
+    resumable: bool = False
 
     def run_of(self, task: dict) -> SharedRun:
         """The run behind ``task``: its :attr:`shared_run`, else ``run_task`` on the task itself."""

@@ -1,0 +1,190 @@
+"""One stable-baselines3 run on a delayed-reward env, scored on the undelayed env.
+
+A task names the env (``env_id``, its episode length ``episode_steps``), the algorithm (``SAC``
+or ``PPO``, with SB3's defaults), the sub-envs (``n_envs``), the reward delay (``delay``, a
+:meth:`~delayed_rl.delays.Delay.to_dict` description, flushed at each episode's end), the
+training ``steps``, the ``method`` and the ``seed``. The methods (:data:`METHODS`):
+
+- ``raw``: the algorithm on the delayed rewards as they arrive;
+- ``oracle``: the algorithm on the undelayed env (the delay plays no part);
+- ``rrd``: :class:`~delayed_rl.deep.ReturnDecompositionRewardModel`;
+- ``ircr``: :class:`~delayed_rl.deep.IRCRRewardModel`;
+- ``deconv-known``: :class:`~delayed_rl.deep.DeconvolutionRewardModel` with the delay's pmf;
+- ``deconv-learned``: the same with ``p`` learned on ``0..max_delay`` (the task's
+  ``max_delay``, a bound the user would choose, not the delay).
+
+The reward models have their defaults (a 64×64 MLP, Adam at 1e-3, a gradient step a vector-env
+step after 256 steps) and the run's seed; off-policy algorithms get a
+:class:`~delayed_rl.deep.RelabelingReplayBuffer`, on-policy ones a
+:class:`~delayed_rl.deep.RelabelingRolloutBuffer` with its callback. Torch runs on one thread.
+
+The score is the mean return of ``eval_episodes`` deterministic episodes of the *undelayed* env
+(the same seeds for every method of a seed), read every ``eval_every`` steps and at the end: the
+learning curve. :func:`random_score` scores a uniformly random policy on the same episodes.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from delayed_rl.delays import as_delay
+
+__all__ = ["METHODS", "MODEL_METHODS", "random_score", "require_sb3", "train_and_score"]
+
+METHODS = ("raw", "oracle", "rrd", "ircr", "deconv-known", "deconv-learned")
+"""The methods a task can name (see the module docstring)."""
+MODEL_METHODS = ("rrd", "ircr", "deconv-known", "deconv-learned")
+"""The methods that train a reward model."""
+EVAL_SEED = 1_000_000
+"""Evaluation episode ``i`` of seed ``s`` resets with ``EVAL_SEED + 1000 * s + i``."""
+
+
+def require_sb3() -> None:
+    """Raise an ImportError naming the ``sb3`` extra when torch or stable-baselines3 is missing."""
+    try:
+        import stable_baselines3  # noqa: F401
+        import torch  # noqa: F401
+    except ImportError as error:
+        raise ImportError(
+            "the deep-rl experiment needs torch and stable-baselines3: "
+            'pip install "delayed-rl[sb3]"'
+        ) from error
+
+
+def _env(task: dict, delayed: bool) -> gym.Env:
+    """The task's env, with its reward delay (flushed) unless ``delayed`` is false."""
+    from delayed_rl.wrappers import RewardDelay
+
+    env = gym.make(task["env_id"], max_episode_steps=task["episode_steps"])
+    if delayed:
+        env = RewardDelay(env, as_delay(task["delay"]), on_episode_end="flush")
+    return env
+
+
+def _reward_model(task: dict, env: gym.Env) -> Any:
+    """The reward model of a model method, seeded with the run's seed."""
+    from delayed_rl.deep import (
+        DeconvolutionRewardModel,
+        IRCRRewardModel,
+        ReturnDecompositionRewardModel,
+    )
+
+    spaces, seed = (env.observation_space, env.action_space), task["seed"]
+    method = task["method"]
+    if method == "rrd":
+        return ReturnDecompositionRewardModel(*spaces, seed=seed)
+    if method == "ircr":
+        return IRCRRewardModel(*spaces, seed=seed)
+    delay = as_delay(task["delay"]) if method == "deconv-known" else None
+    max_delay = None if method == "deconv-known" else task["max_delay"]
+    return DeconvolutionRewardModel(*spaces, delay=delay, max_delay=max_delay, seed=seed)
+
+
+def _scores(policy: Any, task: dict) -> float:
+    """The mean return of the evaluation episodes, ``policy(obs)`` acting."""
+    env = _env(task, delayed=False)
+    returns = []
+    for episode in range(task["eval_episodes"]):
+        obs, _ = env.reset(seed=EVAL_SEED + 1000 * task["seed"] + episode)
+        total, done = 0.0, False
+        while not done:
+            obs, reward, terminated, truncated, _ = env.step(policy(obs))
+            total += float(reward)
+            done = terminated or truncated
+        returns.append(total)
+    env.close()
+    return float(np.mean(returns))
+
+
+def random_score(task: dict) -> dict:
+    """``{"score"}``: a uniformly random policy's mean return on the task's evaluation episodes.
+
+    Its actions come from the action space seeded with the task's seed.
+    """
+    space = _env(task, delayed=False).action_space
+    space.seed(task["seed"])
+    return {"score": _scores(lambda _obs: space.sample(), task)}
+
+
+def _greedy(agent: Any) -> Any:
+    """The SB3 agent's deterministic policy, ``obs -> action``."""
+    return lambda obs: agent.predict(obs, deterministic=True)[0]
+
+
+def _curve_callback(task: dict, curve: list) -> Any:
+    """An SB3 callback that appends ``(step, score)`` every ``eval_every`` steps."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class Scores(BaseCallback):
+        """Scores the policy when training passes each ``eval_every`` steps, up to ``steps``.
+
+        (PPO trains in whole rollouts, so it may pass ``steps``: the curve stops there.)
+        """
+
+        def _on_step(self) -> bool:
+            while len(curve) * task["eval_every"] <= min(self.num_timesteps, task["steps"]):
+                curve.append((len(curve) * task["eval_every"], _scores(_greedy(self.model), task)))
+            return True
+
+    return Scores()
+
+
+def train_and_score(task: dict) -> dict:
+    """Train the task's method and score it (see the module docstring).
+
+    Returns:
+        ``{"steps", "scores"}`` (the learning curve, the step 0 score first and the last at
+        ``steps``), ``"score"`` (the last), ``"train_seconds"``, and for a model method the
+        reward model's ``"rmse"`` against the true reward over its last 10 000 steps, its
+        ``"gradient_steps"`` and, for the deconvolution, its ``"mean_delay"``.
+    """
+    require_sb3()
+    import torch
+    from stable_baselines3 import PPO, SAC
+    from stable_baselines3.common.callbacks import CallbackList
+    from stable_baselines3.common.env_util import make_vec_env
+
+    from delayed_rl.deep import RelabelingReplayBuffer, RelabelingRolloutBuffer, RewardModelCallback
+
+    torch.set_num_threads(1)
+    method, seed = task["method"], task["seed"]
+    vec_env = make_vec_env(
+        lambda: _env(task, delayed=method != "oracle"), n_envs=task["n_envs"], seed=seed
+    )
+    algorithm = {"SAC": SAC, "PPO": PPO}[task["algorithm"]]
+    options: dict[str, Any] = {}
+    curve: list[tuple[int, float]] = []
+    callbacks = [_curve_callback(task, curve)]
+    model = None
+    if method in MODEL_METHODS:
+        model = _reward_model(task, vec_env)
+        if algorithm is PPO:
+            options = {"rollout_buffer_class": RelabelingRolloutBuffer}
+            options["rollout_buffer_kwargs"] = {"reward_model": model}
+            callbacks.append(RewardModelCallback())
+        else:
+            options = {"replay_buffer_class": RelabelingReplayBuffer}
+            options["replay_buffer_kwargs"] = {"reward_model": model}
+    agent = algorithm("MlpPolicy", vec_env, seed=seed, device="cpu", **options)
+    started = time.perf_counter()
+    agent.learn(task["steps"], callback=CallbackList(callbacks))
+    seconds = time.perf_counter() - started
+    if curve[-1][0] < task["steps"]:  # the last score at the end of training
+        curve.append((task["steps"], _scores(_greedy(agent), task)))
+    result: dict[str, Any] = {
+        "steps": [step for step, _ in curve],
+        "scores": [score for _, score in curve],
+        "score": curve[-1][1],
+        "train_seconds": seconds,
+    }
+    if model is not None:
+        result["rmse"] = model.rmse()
+        result["gradient_steps"] = model.gradient_steps_taken
+        if method.startswith("deconv"):
+            result["mean_delay"] = model.mean_delay
+    vec_env.close()
+    return result
