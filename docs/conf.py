@@ -65,6 +65,7 @@ nitpick_ignore_regex = [
 #: The API reference's sections: (title, package), each with every module below it.
 API_SECTIONS = [
     ("Agents", "delayed_rl.agents"),
+    ("Deep RL reward models", "delayed_rl.deep"),
     ("Wrappers", "delayed_rl.wrappers"),
     ("Delay distributions", "delayed_rl.delays"),
     ("Environments", "delayed_rl.envs"),
@@ -131,15 +132,21 @@ def _experiment_pages(out: Path) -> None:
     entries = []
     for name, module in _MODULES.items():
         results = ROOT / "benchmarks" / "reproduction" / name
-        shutil.copytree(results, out / name, ignore=shutil.ignore_patterns("*.csv*", "*.json"))
+        if (results / "report.md").exists():
+            ignored = shutil.ignore_patterns("*.csv*", "*.json", "runs")
+            shutil.copytree(results, out / name, ignore=ignored)
+            shown = (
+                f"The committed run (`benchmarks/reproduction/{name}/`):\n\n"
+                f"```{{include}} {name}/report.md\n:relative-images:\n:heading-offset: 2\n```\n"
+            )
+        else:  # a long experiment whose run is still in parts (its kept runs only)
+            shown = f"No committed report yet: `benchmarks/reproduction/{name}/` has none.\n"
         (out / f"{name}.md").write_text(
             f"# {name}\n\n"
             f"`delayed-rl bench {name}` — {{mod}}`delayed_rl.experiments.{module}`.\n\n"
             f"```{{eval-rst}}\n.. automodule:: delayed_rl.experiments.{module}\n"
             f"   :no-members:\n   :no-index:\n```\n\n"
-            f"## Results\n\n"
-            f"The committed run (`benchmarks/reproduction/{name}/`):\n\n"
-            f"```{{include}} {name}/report.md\n:relative-images:\n:heading-offset: 2\n```\n"
+            f"## Results\n\n{shown}"
         )
         entries.append(name)
     toctree = "\n".join(entries)

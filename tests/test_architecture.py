@@ -522,3 +522,12 @@ def test_every_algorithm_has_one_public_name():
         assert names == [cls.__name__]
     for alias in ("MMQ", "DeconvQ"):
         assert not hasattr(agents, alias) and not hasattr(delayed_rl, alias)
+
+
+def test_no_two_modules_define_a_public_class_of_the_same_name():
+    defined: dict[str, list[str]] = {}
+    for path in sorted(Path(delayed_rl.__file__).parent.rglob("*.py")):
+        for node in ast.parse(path.read_text(encoding="utf-8")).body:
+            if isinstance(node, ast.ClassDef) and not node.name.startswith("_"):
+                defined.setdefault(node.name, []).append(path.name)
+    assert {name: where for name, where in defined.items() if len(where) > 1} == {}

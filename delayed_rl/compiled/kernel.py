@@ -30,7 +30,7 @@ from delayed_rl.compiled.state import (
     DelayLine,
     History,
     QCache,
-    RewardModel,
+    RewardEstimates,
     Rule,
     Script,
     StepLog,
@@ -354,7 +354,7 @@ def run_chunk(
         script: transitions to replay (:class:`~delayed_rl.compiled.state.Script`), or ``None``: act in the env.
         start_step: the training step of the chunk's first step (for the ε schedule).
         rng: the run's generator state (:func:`next_uniform`), advanced in place.
-        model: a reward model (:class:`~delayed_rl.compiled.state.RewardModel`; Λ must then be {0}), or ``None``: learn
+        model: a reward model (:class:`~delayed_rl.compiled.state.RewardEstimates`; Λ must then be {0}), or ``None``: learn
             from the delivered rewards.
         arrivals: the oracle's record (:class:`~delayed_rl.compiled.arrivals.Arrivals`, Λ = {0},
             not with a script), or ``None``.
@@ -629,7 +629,7 @@ def replay(
     rewards: np.ndarray,
     learning_rate: float,
     gamma: float,
-    model: RewardModel | None = None,
+    model: RewardEstimates | None = None,
     *,
     reward_kernel: float | None = None,
     delay_trace: float | None = None,

@@ -165,7 +165,7 @@ class CompiledRun:
         eps_initial: float,
         eps_final: float,
         eps_steps: int,
-        reward_model: state.RewardModel | None = None,
+        reward_model: state.RewardEstimates | None = None,
         credit_kernel: np.ndarray | None = None,
         trace_decay: float | None = None,
         trace: np.ndarray | None = None,
@@ -186,7 +186,7 @@ class CompiledRun:
             eps_final: ε from training step ``eps_steps`` on (linear in between).
             eps_steps: the length of the ε ramp (>= 1).
             reward_model: learn from estimated mean rewards (see
-                :class:`~delayed_rl.compiled.state.RewardModel`); ``None``: the delivered rewards.
+                :class:`~delayed_rl.compiled.state.RewardEstimates`); ``None``: the delivered rewards.
             credit_kernel: the reward kernel's weights by distance in steps
                 (:func:`~delayed_rl.compiled.state.credit_kernel`); ``None``: off.
             trace_decay: β of the delay trace (``None``: off; then ``trace`` is not read).
@@ -243,7 +243,7 @@ class CompiledRun:
         delays: np.ndarray,
         steps: int,
         start_step: int,
-        reward_model: state.RewardModel | None,
+        reward_model: state.RewardEstimates | None,
         average: state.TableAverage | None,
     ) -> state.StepLog:
         """Take the chunk's ``steps`` in the compiled loop, with its ``delays``; return their log.

@@ -4,7 +4,7 @@ Each group is a ``NamedTuple`` of numpy arrays and numbers, which numba compiles
 the Q-table and its cache (:class:`QCache`), the learning rule's constants (:class:`Rule`), the
 reward delay (:class:`DelayLine`), the episode's transitions (:class:`History`), the per-step
 record (:class:`StepLog`), scripted transitions (:class:`Script`), deconvolution's reward model
-(:class:`RewardModel`) and MMQ's averaged table (:class:`TableAverage`). This module imports
+(:class:`RewardEstimates`) and MMQ's averaged table (:class:`TableAverage`). This module imports
 no env: the agents build these groups without loading the e-puck's physics.
 """
 
@@ -188,7 +188,7 @@ class Script(NamedTuple):
     acting: np.ndarray = np.zeros(0, np.int64)
 
 
-class RewardModel(NamedTuple):
+class RewardEstimates(NamedTuple):
     """Learn from estimated mean rewards instead of the delivered ones (deconvolution).
 
     Attributes:

@@ -37,7 +37,7 @@ class CompiledTables(NamedTuple):
         v_cell: the flat index into ``q`` of an entry holding that max.
         delay_estimates: Λ, sorted ascending (``int64``).
         reward_model: learn from estimated mean rewards, fed the steps
-            (:class:`~delayed_rl.compiled.state.RewardModel`); ``None``: the delivered rewards.
+            (:class:`~delayed_rl.compiled.state.RewardEstimates`); ``None``: the delivered rewards.
         chunk_limit: the most steps the next chunk may take (``None``: no limit).
         after_chunk: called with each chunk's length once it has run (``None``: nothing).
         credit_kernel: MMQ's reward kernel, a weight per distance ``|λ̂ − λ̂*|`` in steps

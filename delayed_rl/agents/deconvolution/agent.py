@@ -59,7 +59,7 @@ from delayed_rl.agents.deconvolution.regression import (
     statistics_bytes,
 )
 from delayed_rl.agents.expected_credit import credit_weights
-from delayed_rl.compiled.state import RewardModel
+from delayed_rl.compiled.state import RewardEstimates
 from delayed_rl.delays import Delay, Empirical
 from delayed_rl.wrappers.reward_delay import find_reward_delay
 
@@ -339,7 +339,7 @@ class DeconvolutionQLearning(QAgent):
         chunk = _CHUNK if self._regression.layout == "direct" else _HASHED_CHUNK
         until_solve = min(self._solve_after - self._since_solve, chunk)
         self._regression.reserve(until_solve)  # room for what every step may add
-        model = RewardModel(self._reward_model, self._regression.stats)
+        model = RewardEstimates(self._reward_model, self._regression.stats)
         tables = super().compiled_tables()
         return tables._replace(
             reward_model=model, chunk_limit=until_solve, after_chunk=self._after_chunk
