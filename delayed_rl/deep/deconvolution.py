@@ -104,6 +104,12 @@ class DeconvolutionRewardModel(RewardModel):
             self._known_pmf = torch.as_tensor(weights / weights.sum(), dtype=torch.float32)
             self.support = weights.size - 1
         super().__init__(observation_space, action_space, **kwargs)
+        if self.capacity < self.window + self.support:
+            raise ValueError(
+                f"capacity must be at least window + K = {self.window} + {self.support} (a "
+                f"window and the K steps before it), got {self.capacity}: a full history that "
+                "holds less never trains"
+            )
 
     def _make_parameters(self) -> None:
         self.delay_logits = None

@@ -125,9 +125,10 @@ class SpaceEncoding:
             if data["type"] == "Discrete":
                 space = spaces.Discrete(int(data["n"]), start=int(data["start"]))
             elif data["type"] == "Box":
-                low = np.asarray(data["low"], dtype=np.float64)
-                high = np.asarray(data["high"], dtype=np.float64)
-                space = spaces.Box(low, high, dtype=np.dtype(data["dtype"]))
+                dtype = np.dtype(data["dtype"])  # the bounds read in it: no precision warning
+                low = np.asarray(data["low"], dtype=dtype)
+                high = np.asarray(data["high"], dtype=dtype)
+                space = spaces.Box(low, high, dtype=dtype)
             else:
                 raise ValueError(f"unknown space type {data['type']!r}")
         except (KeyError, TypeError, ValueError, OverflowError) as error:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import io
 import json
+import pickle
 import zipfile
 from pathlib import Path
 from typing import Any
@@ -69,7 +70,8 @@ def load_reward_model(path: str | Path) -> RewardModel:
         raise ValueError(f"{path}: reward_model.json is not JSON: {error}") from None
     if not isinstance(header, dict) or header.get("format") != FORMAT:
         raise ValueError(f"{path}: reward_model.json does not declare format {FORMAT!r}")
-    kind = _classes().get(header.get("class"))
+    name = header.get("class")
+    kind = _classes().get(name) if isinstance(name, str) else None
     if kind is None:
         raise ValueError(f"{path}: unknown reward model class {header.get('class')!r}")
     observations = SpaceEncoding.from_dict("observation_space", header.get("observation_space"))
@@ -81,6 +83,9 @@ def load_reward_model(path: str | Path) -> RewardModel:
         model = kind(observations.space, actions.space, **settings)
     except (TypeError, ValueError) as error:
         raise ValueError(f"{path}: bad settings: {error}") from None
+    missing = sorted(set(model.settings()) - set(settings))
+    if missing:
+        raise ValueError(f"{path}: bad settings: {', '.join(missing)} missing")
     _load_tensors(model, weights, path)
     _load_counters(model, header, arrays, path)
     return model
@@ -100,9 +105,41 @@ def _load_tensors(model: RewardModel, weights: bytes, path: Path) -> None:
             raise ValueError("the learned delay's tensors do not match the settings")
         model.network.load_state_dict(network, strict=True)
         model._load_extra_state(extra)
-        model.optimizer.load_state_dict(tensors["optimizer"])
-    except (RuntimeError, KeyError, TypeError, ValueError, EOFError, AttributeError) as error:
+        _load_optimizer(model.optimizer, tensors["optimizer"])
+    except (
+        RuntimeError,
+        KeyError,
+        TypeError,
+        ValueError,
+        EOFError,
+        AttributeError,
+        pickle.UnpicklingError,
+    ) as error:
         raise ValueError(f"{path}: weights.pt does not fit the model: {error}") from None
+
+
+def _load_optimizer(optimizer: torch.optim.Optimizer, state: Any) -> None:
+    """Load Adam's state, checked: the settings' hyperparameters, finite moments of the right shape.
+
+    torch itself checks only how many parameters each group holds.
+    """
+    settings = [
+        {k: v for k, v in group.items() if k != "params"} for group in optimizer.param_groups
+    ]
+    optimizer.load_state_dict(state)
+    loaded = [{k: v for k, v in group.items() if k != "params"} for group in optimizer.param_groups]
+    if loaded != settings:
+        raise ValueError(f"the optimizer's settings {loaded} are not the model's {settings}")
+    for group in optimizer.param_groups:
+        for param in group["params"]:
+            for name, value in optimizer.state.get(param, {}).items():
+                if not torch.is_tensor(value) or not torch.isfinite(value).all():
+                    raise ValueError(f"the optimizer's {name} is not a finite tensor")
+                if value.dim() > 0 and value.shape != param.shape:
+                    raise ValueError(
+                        f"the optimizer's {name} has shape {tuple(value.shape)}, not its "
+                        f"parameter's {tuple(param.shape)}"
+                    )
 
 
 def _load_counters(model: RewardModel, header: dict[str, Any], arrays: bytes | None, path: Path):

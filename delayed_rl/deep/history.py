@@ -38,8 +38,8 @@ class TransitionHistory:
     Attributes:
         obs, action, reward, episode_end, undelayed: the ring's arrays, indexed
             ``[step % capacity, env]``.
-        episodes: the finished episodes wholly inside the ring, oldest first, as
-            ``(env, first_step, length, delivered_sum)``.
+        episodes: the finished episodes wholly inside the ring (from :attr:`first_whole`),
+            in order of first step, as ``(env, first_step, length, delivered_sum)``.
         steps_added: how many steps were added.
     """
 
@@ -89,13 +89,30 @@ class TransitionHistory:
         self.undelayed[row] = undelayed
         self._episode_sum += reward
         self.steps_added = step + 1
+        episodes = self.episodes
         for env in np.flatnonzero(episode_end):
             first = int(self._episode_first[env])
-            self.episodes.append((int(env), first, step + 1 - first, float(self._episode_sum[env])))
+            # kept in order of first step (with several sub-envs an episode can end after one
+            # that began later), so that the episodes cut by the ring are the first ones
+            later = 0
+            while later < len(episodes) and episodes[-1 - later][1] > first:
+                later += 1
+            episode = (int(env), first, step + 1 - first, float(self._episode_sum[env]))
+            episodes.insert(len(episodes) - later, episode)
             self._episode_first[env] = step + 1
             self._episode_sum[env] = 0.0
-        while self.episodes and self.episodes[0][1] < self.oldest:
-            self.episodes.popleft()
+        while episodes and episodes[0][1] < self.first_whole:
+            episodes.popleft()
+
+    @property
+    def first_whole(self) -> int:
+        """The earliest first step of an episode the ring shows whole.
+
+        Once steps were overwritten, an episode that began at :attr:`oldest` is not known to
+        have begun there (the end before it is gone): an episode must begin after it.
+        """
+        oldest = self.oldest
+        return oldest + 1 if oldest > 0 else 0
 
     def rows(self, first: int, stop: int) -> np.ndarray:
         """The ring rows of steps ``first .. stop − 1`` (all held)."""

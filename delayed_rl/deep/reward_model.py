@@ -180,7 +180,6 @@ class RewardModel(ABC):
         count = np.asarray(rewards).size
         if self.history is None:
             check_int("the number of sub-envs (rewards' length)", count, 1)
-            self.history = TransitionHistory(self.observations, self.actions, count, self.capacity)
         elif count != self.history.n_envs:
             raise ValueError(
                 f"rewards must hold one reward for each of the {self.history.n_envs} sub-envs "
@@ -190,19 +189,17 @@ class RewardModel(ABC):
         if not np.all(np.isfinite(reward)):
             raise ValueError(f"rewards must be finite, got {reward}")
         ends = _pair("episode_ends", episode_ends, count).astype(bool)
+        obs = self.observations.batch(observations, count)
+        action = self.actions.batch(actions, count)
         undelayed = np.full(count, np.nan)
         if infos is not None:
             for i, info in enumerate(infos):
                 value = info.get("undelayed_reward") if isinstance(info, dict) else None
                 if isinstance(value, (int, float, np.number)):
                     undelayed[i] = float(value)
-        self.history.add(
-            self.observations.batch(observations, count),
-            self.actions.batch(actions, count),
-            reward,
-            ends,
-            undelayed,
-        )
+        if self.history is None:  # made once the first step is checked (it fixes n_envs)
+            self.history = TransitionHistory(self.observations, self.actions, count, self.capacity)
+        self.history.add(obs, action, reward, ends, undelayed)
         self._since_round += 1
         if self.history.steps_added >= self.learning_starts and (
             self._since_round >= self.train_every

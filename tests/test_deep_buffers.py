@@ -1,0 +1,452 @@
+"""The relabelling buffers and their callback, driven by stable-baselines3's own algorithms.
+
+Off-policy (SAC, DQN): what the model learns from is what the env delivered, sampled rewards are
+the model's ``R̂``, and learning is bit-identical with the diagnostic infos stripped. On-policy
+(PPO): the model learns the env's rewards, not those SB3 adds ``γ·V`` to at truncations, and the
+relabelled rewards keep that bootstrap. With several sub-envs the episodes the model sees are
+each sub-env's own (under ``"flush"``, CartPole's episodes deliver their length). SB3's own
+files (``save_replay_buffer``, ``save``) keep a working model. torch and SB3 are imported in
+the tests' bodies (and a fixture), not at collection.
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from delayed_rl.delays import Poisson
+from delayed_rl.wrappers import RewardDelay
+
+pytestmark = pytest.mark.sb3
+
+DIAGNOSTIC_KEYS = (
+    "undelayed_reward",
+    "reward_delay",
+    "pending_reward",
+    "flushed_reward",
+    "dropped_reward",
+    "reward_arrivals",
+)
+"""What ``RewardDelay`` adds to ``info``."""
+
+
+@pytest.fixture(autouse=True, scope="module")
+def one_thread():
+    """Runs torch on one thread (the machine's other core is busy), and back afterwards."""
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+class StripInfo(gym.Wrapper):
+    """Removes the delay wrapper's diagnostic keys from every ``info``."""
+
+    def reset(self, **kwargs):
+        obs, info = self.env.reset(**kwargs)
+        return obs, {k: v for k, v in info.items() if k not in DIAGNOSTIC_KEYS}
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        info = {k: v for k, v in info.items() if k not in DIAGNOSTIC_KEYS}
+        assert not set(info) & set(DIAGNOSTIC_KEYS)
+        return obs, reward, terminated, truncated, info
+
+
+class Record(gym.Wrapper):
+    """Records what the env delivered: rewards, episode ends, undelayed rewards."""
+
+    def __init__(self, env):
+        super().__init__(env)
+        self.rewards, self.ends, self.undelayed = [], [], []
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self.rewards.append(float(reward))
+        self.ends.append(bool(terminated or truncated))
+        self.undelayed.append(info.get("undelayed_reward"))
+        return obs, reward, terminated, truncated, info
+
+
+def pendulum(steps=50, lam=5.0, strip=False):
+    env = RewardDelay(gym.make("Pendulum-v1", max_episode_steps=steps), Poisson(lam))
+    return Record(StripInfo(env) if strip else env)
+
+
+def cartpole(lam=3.0):
+    return Record(RewardDelay(gym.make("CartPole-v1"), Poisson(lam)))
+
+
+def deconvolution(env, **kwargs):
+    from delayed_rl.deep import DeconvolutionRewardModel
+
+    settings = {
+        "delay": Poisson(3),
+        "max_delay": 10,
+        "hidden_sizes": (8,),
+        "batch_size": 32,
+        "window": 8,
+        "learning_starts": 20,
+        "seed": 0,
+        **kwargs,
+    }
+    return DeconvolutionRewardModel(env.observation_space, env.action_space, **settings)
+
+
+def sac(env, model, **kwargs):
+    from stable_baselines3 import SAC
+
+    from delayed_rl.deep import RelabelingReplayBuffer
+
+    return SAC(
+        "MlpPolicy",
+        env,
+        learning_starts=50,
+        batch_size=32,
+        buffer_size=2000,
+        policy_kwargs={"net_arch": [16]},
+        replay_buffer_class=RelabelingReplayBuffer,
+        replay_buffer_kwargs={"reward_model": model},
+        seed=0,
+        device="cpu",
+        **kwargs,
+    )
+
+
+def params(module):
+    return [p.detach().clone() for p in module.parameters()]
+
+
+def same(a, b):
+    import torch
+
+    return len(a) == len(b) and all(torch.equal(x, y) for x, y in zip(a, b, strict=True))
+
+
+# ---------------------------------------------------------------------- off-policy
+def test_sac_learns_the_same_bits_without_the_diagnostic_infos():
+    from delayed_rl.deep import RewardModelCallback
+
+    runs = []
+    for strip in (False, True):
+        env = pendulum(strip=strip)
+        # the box action space as SAC stores it: squashed to [-1, 1]
+        model = deconvolution(env, delay=None, max_delay=12)
+        agent = sac(env, model)
+        agent.learn(250, callback=RewardModelCallback())
+        runs.append((env, model, agent))
+    (env, model, agent), (stripped_env, stripped_model, stripped_agent) = runs
+    assert model.gradient_steps_taken == stripped_model.gradient_steps_taken > 100
+    assert same(params(model.network), params(stripped_model.network))
+    assert same([model.delay_logits], [stripped_model.delay_logits])
+    assert same(params(agent.policy), params(stripped_agent.policy))
+    assert env.rewards == stripped_env.rewards
+    assert np.isfinite(model.rmse()) and np.isnan(stripped_model.rmse())
+    # what the model learned from is what the env delivered, as the buffer also keeps it
+    delivered = np.float32(env.rewards)
+    np.testing.assert_array_equal(model.history.reward[:250, 0], delivered)
+    np.testing.assert_array_equal(agent.replay_buffer.delivered_rewards[:250, 0], delivered)
+    np.testing.assert_array_equal(model.history.episode_end[:250, 0], env.ends)
+
+
+def test_dqn_samples_are_relabelled_with_the_model():
+    import torch
+    from stable_baselines3 import DQN
+
+    from delayed_rl.deep import RelabelingReplayBuffer
+
+    env = cartpole()
+    model = deconvolution(env)
+    assert model.actions.discrete
+    agent = DQN(
+        "MlpPolicy",
+        env,
+        learning_starts=50,
+        train_freq=4,
+        batch_size=32,
+        buffer_size=1000,
+        policy_kwargs={"net_arch": [8]},
+        replay_buffer_class=RelabelingReplayBuffer,
+        replay_buffer_kwargs={"reward_model": model},
+        seed=0,
+        device="cpu",
+    )
+    agent.learn(300)
+    buffer = agent.replay_buffer
+    assert model.gradient_steps_taken > 200
+    np.testing.assert_array_equal(buffer.delivered_rewards[:300, 0], np.float32(env.rewards))
+    np.testing.assert_array_equal(model.history.reward[:300, 0], np.float32(env.rewards))
+    np.testing.assert_array_equal(model.history.action[:300, 0], buffer.actions[:300, 0])
+    batch = buffer.sample(64)
+    obs, actions = batch.observations.numpy(), batch.actions.numpy()
+    assert actions.dtype.kind == "i" and set(np.unique(actions)) <= {0, 1}
+    predicted = model.predict(obs, actions)
+    sampled = batch.rewards.numpy().ravel()
+    np.testing.assert_allclose(sampled, predicted, rtol=1e-6, atol=1e-6)
+    # the delivered rewards of the same rows are not what was sampled
+    rows = zip(buffer.observations[:300, 0], buffer.delivered_rewards[:300, 0], strict=True)
+    delivered = {tuple(o): r for o, r in rows}
+    assert not np.allclose(sampled, [delivered[tuple(o)] for o in obs])
+    with torch.no_grad():
+        assert torch.isfinite(agent.q_net(batch.observations)).all()
+
+
+# ---------------------------------------------------------------------- on-policy
+def test_ppo_learns_env_rewards_and_keeps_the_truncation_bootstrap():
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    from delayed_rl.deep import RelabelingRolloutBuffer, RewardModelCallback
+
+    class Check(BaseCallback):
+        """At each rollout's end, what SB3 added at truncations, by the unchanged policy."""
+
+        def _on_rollout_start(self):
+            self.steps = []
+
+        def _on_step(self):
+            done, info = bool(self.locals["dones"][0]), self.locals["infos"][0]
+            self.steps.append(
+                (done, info.get("TimeLimit.truncated", False), info.get("terminal_observation"))
+            )
+            return True
+
+        def _on_rollout_end(self):
+            buffer = self.model.rollout_buffer
+            relabelled = self.model.rollout_buffer.reward_model.predict(
+                buffer.observations.reshape(32, -1), buffer.actions.reshape(32, -1)
+            )
+            added = buffer.rewards[:, 0] - relabelled
+            truncations = 0
+            for i, (done, truncated, terminal) in enumerate(self.steps):
+                if done and truncated:
+                    truncations += 1
+                    obs = self.model.policy.obs_to_tensor(terminal)[0]
+                    with torch.no_grad():
+                        value = float(self.model.policy.predict_values(obs)[0, 0])
+                    bootstrap = self.model.gamma * value
+                    assert bootstrap != 0.0
+                    assert buffer.bootstraps[i, 0] == pytest.approx(bootstrap, rel=1e-5, abs=1e-6)
+                    assert added[i] == pytest.approx(bootstrap, rel=1e-4, abs=1e-5)
+                else:
+                    assert buffer.bootstraps[i, 0] == 0.0
+                    assert added[i] == 0.0
+            assert truncations == 3  # episodes of 10 steps in a rollout of 32
+            self.model.checked = getattr(self.model, "checked", 0) + 1
+
+    env = pendulum(steps=10, lam=2.0)
+    model = deconvolution(env, max_delay=6, window=4, learning_starts=16)
+    agent = PPO(
+        "MlpPolicy",
+        env,
+        n_steps=32,
+        batch_size=32,
+        n_epochs=1,
+        policy_kwargs={"net_arch": [8]},
+        rollout_buffer_class=RelabelingRolloutBuffer,
+        rollout_buffer_kwargs={"reward_model": model},
+        seed=0,
+        device="cpu",
+    )
+    agent.learn(96, callback=[RewardModelCallback(), Check()])
+    assert agent.checked == 3
+    assert model.gradient_steps_taken > 0
+    # the model learned from the env's rewards (with the bootstrap, SB3's rewards differ)
+    assert model.history.steps_added == 96 == len(env.rewards)
+    np.testing.assert_array_equal(model.history.reward[:96, 0], np.float32(env.rewards))
+    np.testing.assert_array_equal(model.history.episode_end[:96, 0], env.ends)
+    assert sum(env.ends) == 9
+    buffer = agent.rollout_buffer
+    np.testing.assert_array_equal(buffer.delivered_rewards[:, 0], np.float32(env.rewards[64:]))
+
+
+def test_ppo_without_the_callback_refuses_to_add():
+    from stable_baselines3 import PPO
+
+    from delayed_rl.deep import RelabelingRolloutBuffer
+
+    env = pendulum(steps=10)
+    agent = PPO(
+        "MlpPolicy",
+        env,
+        n_steps=16,
+        batch_size=16,
+        policy_kwargs={"net_arch": [8]},
+        rollout_buffer_class=RelabelingRolloutBuffer,
+        rollout_buffer_kwargs={"reward_model": deconvolution(env)},
+        device="cpu",
+    )
+    with pytest.raises(RuntimeError, match="RewardModelCallback"):
+        agent.learn(16)
+
+
+def test_the_callback_needs_a_relabelling_buffer():
+    from stable_baselines3 import PPO
+
+    from delayed_rl.deep import RewardModelCallback
+
+    agent = PPO("MlpPolicy", pendulum(), n_steps=16, batch_size=16, device="cpu")
+    with pytest.raises(TypeError, match="RelabelingRolloutBuffer or a RelabelingReplayBuffer"):
+        agent.learn(16, callback=RewardModelCallback())
+
+
+@pytest.mark.parametrize("kind", ["RelabelingReplayBuffer", "RelabelingRolloutBuffer"])
+def test_buffers_refuse_what_is_not_a_reward_model(kind):
+    import delayed_rl.deep as deep
+
+    env = pendulum()
+    with pytest.raises(TypeError, match="reward_model must be a delayed_rl.deep reward model"):
+        getattr(deep, kind)(16, env.observation_space, env.action_space, reward_model="model")
+
+
+# ---------------------------------------------------------------------- several sub-envs
+@pytest.mark.parametrize("algorithm", ["PPO", "DQN"])
+def test_each_sub_envs_episodes_are_its_own(algorithm):
+    from stable_baselines3 import DQN, PPO
+    from stable_baselines3.common.callbacks import BaseCallback
+    from stable_baselines3.common.env_util import make_vec_env
+
+    from delayed_rl.deep import (
+        RelabelingReplayBuffer,
+        RelabelingRolloutBuffer,
+        RewardModelCallback,
+    )
+
+    class Dones(BaseCallback):
+        def _init_callback(self):
+            self.dones = []
+
+        def _on_step(self):
+            self.dones.append(np.array(self.locals["dones"], dtype=bool))
+            return True
+
+    n_envs = 3
+    vec = make_vec_env(cartpole, n_envs=n_envs, seed=0)
+    model = deconvolution(vec, learning_starts=10**9)  # the stream only
+    common = {"policy_kwargs": {"net_arch": [8]}, "seed": 0, "device": "cpu"}
+    if algorithm == "PPO":
+        agent = PPO(
+            "MlpPolicy",
+            vec,
+            n_steps=64,
+            batch_size=64,
+            n_epochs=1,
+            rollout_buffer_class=RelabelingRolloutBuffer,
+            rollout_buffer_kwargs={"reward_model": model},
+            **common,
+        )
+    else:
+        agent = DQN(
+            "MlpPolicy",
+            vec,
+            learning_starts=64,
+            buffer_size=1000,
+            replay_buffer_class=RelabelingReplayBuffer,
+            replay_buffer_kwargs={"reward_model": model},
+            **common,
+        )
+    recorder = Dones()
+    agent.learn(64 * n_envs, callback=[RewardModelCallback(), recorder])
+    history = model.history
+    steps = history.steps_added
+    assert history.n_envs == n_envs and steps == 64
+    dones = np.stack(recorder.dones)
+    np.testing.assert_array_equal(history.episode_end[:steps], dones)
+    records = [vec.envs[i].env for i in range(n_envs)]  # Monitor(Record(...))
+    for i, record in enumerate(records):
+        assert isinstance(record, Record)
+        np.testing.assert_array_equal(history.reward[:steps, i], np.float32(record.rewards))
+        np.testing.assert_array_equal(dones[:, i], record.ends)
+    # the finished episodes, by sub-env, from the dones: under "flush" each delivered its return,
+    # CartPole's length (a reward of 1 a step), and so the boundaries are the wrapper's
+    expected = []
+    for i in range(n_envs):
+        first = 0
+        for end in np.flatnonzero(dones[:, i]):
+            expected.append((i, first, int(end) + 1 - first))
+            first = int(end) + 1
+    found = sorted((env, first, length) for env, first, length, _ in history.episodes)
+    assert found == sorted(expected)
+    assert len(found) >= 2 * n_envs
+    for _, _, length, total in history.episodes:
+        assert total == float(length)
+    for i in range(n_envs):
+        ids = history.episode_ids(i, 0, steps)
+        np.testing.assert_array_equal(ids, np.concatenate(([0], np.cumsum(dones[:-1, i]))))
+
+
+# ---------------------------------------------------------------------- SB3's files
+def test_replay_buffer_and_algorithm_files_keep_a_working_model(tmp_path):
+    from stable_baselines3 import SAC
+
+    from delayed_rl.deep import RewardModel, RewardModelCallback
+
+    env = pendulum()
+    model = deconvolution(env, delay=None, max_delay=12)
+    agent = sac(env, model)
+    agent.learn(120, callback=RewardModelCallback())
+    probe_obs = np.random.default_rng(0).uniform(-1, 1, (16, 3)).astype(np.float32)
+    probe_actions = np.linspace(-1, 1, 16, dtype=np.float32)[:, None]
+    expected = model.predict(probe_obs, probe_actions)
+    taken = model.gradient_steps_taken
+
+    agent.save_replay_buffer(tmp_path / "buffer.pkl")
+    fresh = sac(pendulum(), deconvolution(env, delay=None, max_delay=12, seed=9))
+    fresh.load_replay_buffer(tmp_path / "buffer.pkl")
+    loaded = fresh.replay_buffer.reward_model
+    assert isinstance(loaded, RewardModel) and loaded is not model
+    np.testing.assert_array_equal(loaded.predict(probe_obs, probe_actions), expected)
+    assert loaded.history.steps_added == 120
+    np.testing.assert_array_equal(loaded.delay_pmf, model.delay_pmf)
+    fresh.learn(60, reset_num_timesteps=False)
+    assert loaded.gradient_steps_taken == taken + 60
+
+    agent.save(tmp_path / "sac.zip")
+    restored = SAC.load(tmp_path / "sac.zip", env=pendulum(), device="cpu")
+    restored_model = restored.replay_buffer.reward_model
+    assert isinstance(restored_model, RewardModel) and restored_model is not model
+    np.testing.assert_array_equal(restored_model.predict(probe_obs, probe_actions), expected)
+    restored.learn(60, reset_num_timesteps=False, callback=RewardModelCallback())
+    assert restored_model.gradient_steps_taken == taken + 60
+    assert restored_model.history.steps_added == 180
+    batch = restored.replay_buffer.sample(8)
+    np.testing.assert_allclose(
+        batch.rewards.numpy().ravel(),
+        restored_model.predict(batch.observations.numpy(), batch.actions.numpy()),
+        rtol=1e-6,
+        atol=1e-6,
+    )
+
+
+def test_ppo_file_keeps_its_rollout_model(tmp_path):
+    from stable_baselines3 import PPO
+
+    from delayed_rl.deep import RelabelingRolloutBuffer, RewardModelCallback
+
+    env = pendulum(steps=10)
+    model = deconvolution(env, learning_starts=8)
+    agent = PPO(
+        "MlpPolicy",
+        env,
+        n_steps=16,
+        batch_size=16,
+        n_epochs=1,
+        policy_kwargs={"net_arch": [8]},
+        rollout_buffer_class=RelabelingRolloutBuffer,
+        rollout_buffer_kwargs={"reward_model": model},
+        seed=0,
+        device="cpu",
+    )
+    agent.learn(32, callback=RewardModelCallback())
+    agent.save(tmp_path / "ppo.zip")
+    restored = PPO.load(tmp_path / "ppo.zip", env=pendulum(steps=10), device="cpu")
+    restored_model = restored.rollout_buffer.reward_model
+    obs, actions = np.zeros((4, 3), np.float32), np.zeros((4, 1), np.float32)
+    np.testing.assert_array_equal(restored_model.predict(obs, actions), model.predict(obs, actions))
+    taken = restored_model.gradient_steps_taken
+    restored.learn(16, reset_num_timesteps=False, callback=RewardModelCallback())
+    assert restored_model.gradient_steps_taken == taken + 16

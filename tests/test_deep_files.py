@@ -1,0 +1,613 @@
+"""Reward model files, pickles and imports: what round-trips, and what is refused.
+
+A saved model loads with the same predictions and trains on to the same bits as the one kept in
+memory (every class, ``p`` known and learned); a pickle does too. Each check of
+:func:`~delayed_rl.deep.load_reward_model` has a file crafted to fail it, refused with a
+``ValueError`` that says what is wrong (never garbage loaded silently). ``import delayed_rl.deep``
+imports no torch, and without torch a name's first use says to install the ``sb3`` extra.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import pickle
+import subprocess
+import sys
+import textwrap
+import zipfile
+
+import numpy as np
+import pytest
+from gymnasium import spaces
+
+from delayed_rl.delays import Constant, Geometric
+
+pytestmark = pytest.mark.sb3
+
+
+@pytest.fixture(autouse=True, scope="module")
+def one_thread():
+    """Runs torch on one thread (the machine's other core is busy), and back afterwards."""
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+OBS = spaces.Box(-1.0, 1.0, (3,), np.float32)
+ACT = spaces.Discrete(3)
+
+KINDS = {
+    "known": ("DeconvolutionRewardModel", {"delay": Geometric(0.5), "max_delay": 4, "window": 4}),
+    "learned": ("DeconvolutionRewardModel", {"delay": None, "max_delay": 4, "window": 4}),
+    "carry": (
+        "DeconvolutionRewardModel",
+        {"delay": Constant(2), "on_episode_end": "carry", "window": 3},
+    ),
+    "rrd": ("ReturnDecompositionRewardModel", {"subset_size": 4}),
+    "ircr": ("IRCRRewardModel", {}),
+}
+
+
+def build(name="learned", capacity=64, **kwargs):
+    import delayed_rl.deep as deep
+
+    kind, settings = KINDS[name]
+    settings = {
+        "hidden_sizes": (8,),
+        "batch_size": 16,
+        "learning_starts": 10,
+        "capacity": capacity,
+        "seed": 2,
+        **settings,
+        **kwargs,
+    }
+    return getattr(deep, kind)(OBS, ACT, **settings)
+
+
+def steps(count, seed, n_envs=2):
+    """``count`` random steps of ``n_envs`` sub-envs: (obs, actions, rewards, ends, infos)."""
+    rng = np.random.default_rng(seed)
+    for _ in range(count):
+        yield (
+            rng.uniform(-1, 1, (n_envs, 3)).astype(np.float32),
+            rng.integers(0, 3, n_envs),
+            rng.normal(size=n_envs),
+            rng.random(n_envs) < 0.15,
+            [{"undelayed_reward": float(r)} for r in rng.normal(size=n_envs)],
+        )
+
+
+def feed(model, count, seed):
+    for step in steps(count, seed):
+        model.add(*step)
+
+
+PROBE = (np.random.default_rng(1).uniform(-1, 1, (20, 3)).astype(np.float32), np.arange(20) % 3)
+
+
+def assert_same_model(a, b, probe=True):
+    import torch
+
+    assert type(a) is type(b)
+    assert a.settings() == b.settings()
+    for x, y in zip(a.network.parameters(), b.network.parameters(), strict=True):
+        assert torch.equal(x, y)
+    assert a._extra_state().keys() == b._extra_state().keys()
+    for name, value in a._extra_state().items():
+        assert torch.equal(value, b._extra_state()[name])
+    if probe:
+        np.testing.assert_array_equal(a.predict(*PROBE), b.predict(*PROBE))
+    assert a.gradient_steps_taken == b.gradient_steps_taken
+    assert a.history.steps_added == b.history.steps_added
+    assert list(a.history.episodes) == list(b.history.episodes)
+    for name in ("obs", "action", "reward", "episode_end", "undelayed"):
+        np.testing.assert_array_equal(getattr(a.history, name), getattr(b.history, name))
+
+
+# ---------------------------------------------------------------------- round trips
+@pytest.mark.parametrize("name", sorted(KINDS))
+@pytest.mark.parametrize("count", [40, 150])  # the ring (64 steps) not wrapped / wrapped
+def test_a_saved_model_loads_and_trains_on_to_the_same_bits(tmp_path, name, count):
+    from delayed_rl.deep import load_reward_model
+
+    model = build(name)
+    feed(model, count, seed=0)
+    assert model.gradient_steps_taken > 0
+    loaded = load_reward_model(model.save(tmp_path / "model.zip"))
+    assert_same_model(model, loaded)
+    assert np.isclose(loaded.rmse(), model.rmse())
+    feed(model, 60, seed=1)
+    feed(loaded, 60, seed=1)
+    assert_same_model(model, loaded)
+    if name == "learned":
+        assert loaded.mean_delay == model.mean_delay != 2.0  # p moved, the same way
+
+
+def test_the_episode_index_is_rebuilt_at_any_step(tmp_path):
+    from delayed_rl.deep import IRCRRewardModel, load_reward_model
+
+    # a ring of 6 steps, episodes of 1 to 4 steps ending at various offsets of the two sub-envs:
+    # a save at every step meets every position of an episode's start against the oldest step
+    model = IRCRRewardModel(OBS, ACT, hidden_sizes=(4,), gradient_steps=0, capacity=6, seed=0)
+    ends = [[0, 0, 1, 0, 1, 0, 0, 0, 1, 1, 0, 0, 1, 0, 0, 1, 0, 1, 1, 0, 0, 0, 1, 0, 1, 0],
+            [1, 0, 0, 0, 1, 0, 1, 1, 0, 0, 0, 1, 0, 1, 0, 0, 1, 0, 0, 0, 1, 1, 0, 1, 0, 0]]  # fmt: skip
+    for step, end in enumerate(zip(*ends, strict=True)):
+        model.add(np.zeros((2, 3)), [0, 1], [step, -step], list(end))
+        loaded = load_reward_model(model.save(tmp_path / "model.zip"))
+        assert list(loaded.history.episodes) == list(model.history.episodes), step
+        assert np.array_equal(loaded.history._episode_first, model.history._episode_first) or (
+            model.history.oldest > 0
+        )
+        for env in range(2):  # and both go on alike
+            assert loaded.history.episode_ids(env, model.history.oldest, step + 1).tolist() == (
+                model.history.episode_ids(env, model.history.oldest, step + 1).tolist()
+            )
+
+
+@pytest.mark.parametrize("name", sorted(KINDS))
+def test_a_pickled_model_trains_on_to_the_same_bits(name):
+    model = build(name)
+    feed(model, 70, seed=0)
+    copy = pickle.loads(pickle.dumps(model))
+    assert_same_model(model, copy)
+    feed(model, 30, seed=3)
+    feed(copy, 30, seed=3)
+    assert_same_model(model, copy)
+
+
+def test_a_model_without_steps_round_trips(tmp_path):
+    from delayed_rl.deep import load_reward_model
+
+    model = build("known")
+    path = model.save(tmp_path / "fresh.zip")
+    with zipfile.ZipFile(path) as archive:
+        assert sorted(archive.namelist()) == ["reward_model.json", "weights.pt"]
+    loaded = load_reward_model(path)
+    assert loaded.history is None
+    np.testing.assert_array_equal(loaded.predict(*PROBE), model.predict(*PROBE))
+    np.testing.assert_allclose(loaded.delay_pmf, model.delay_pmf)
+    feed(model, 20, seed=0)
+    feed(loaded, 20, seed=0)
+    assert_same_model(model, loaded)
+
+
+def test_a_users_delay_is_saved_as_its_clipped_pmf(tmp_path):
+    from delayed_rl.deep import load_reward_model
+    from delayed_rl.delays import Delay
+
+    class Twos(Delay):
+        """A delay of 2 always, which ``to_dict`` cannot describe."""
+
+        def sample(self, rng, size=None):
+            return self._finish(np.full(() if size is None else size, 2), size)
+
+        def pmf(self, k):
+            return np.where(np.asarray(k) == 2, 1.0, 0.0)
+
+        @property
+        def mean(self):
+            return 2.0
+
+        @property
+        def support_max(self):
+            return 2
+
+    model = build("known", delay=Twos(), max_delay=None)
+    loaded = load_reward_model(model.save(tmp_path / "twos.zip"))
+    assert loaded.settings()["delay"]["type"] == "Empirical"
+    np.testing.assert_array_equal(loaded.delay_pmf, [0.0, 0.0, 1.0])
+
+
+@pytest.mark.filterwarnings("error")
+@pytest.mark.parametrize(
+    ("observation_space", "action_space"),
+    [
+        (spaces.Box(-1.0, 1.0, (2, 3), np.float32), spaces.Box(-2.0, 2.0, (2,), np.float32)),
+        (
+            spaces.Box(np.array([-np.inf, 0.0]), np.array([np.inf, 5.0]), dtype=np.float64),
+            spaces.Discrete(4, start=-1),
+        ),
+        (spaces.Box(0, 255, (4,), np.uint8), spaces.Box(0, 2**62, (1,), np.int64)),
+        (spaces.Discrete(5, start=3), spaces.Discrete(2)),
+    ],
+)
+def test_spaces_round_trip_exactly_and_quietly(tmp_path, observation_space, action_space):
+    from delayed_rl.deep import IRCRRewardModel, load_reward_model
+
+    model = IRCRRewardModel(observation_space, action_space, hidden_sizes=(4,), seed=0)
+    observation_space.seed(0)
+    action_space.seed(0)
+    for end in (False, True, False):
+        model.add(observation_space.sample()[None], action_space.sample()[None], [1.0], [end])
+    loaded = load_reward_model(model.save(tmp_path / "spaces.zip"))
+    assert loaded.observations.space == observation_space
+    assert loaded.actions.space == action_space
+    assert loaded.observations.space.dtype == observation_space.dtype
+    assert_same_model(model, loaded, probe=False)
+
+
+# ---------------------------------------------------------------------- crafted files
+@pytest.fixture(scope="module")
+def saved(tmp_path_factory):
+    """The members of a saved model file (learned ``p``, two sub-envs, a wrapped ring)."""
+    model = build("learned", capacity=32)
+    feed(model, 50, seed=0)
+    path = model.save(tmp_path_factory.mktemp("saved") / "model.zip")
+    with zipfile.ZipFile(path) as archive:
+        return {name: archive.read(name) for name in archive.namelist()}
+
+
+def write(path, members):
+    with zipfile.ZipFile(path, "w") as archive:
+        for name, data in members.items():
+            if data is not None:
+                archive.writestr(name, data)
+    return path
+
+
+def with_header(saved, change):
+    header = json.loads(saved["reward_model.json"])
+    change(header)
+    return {**saved, "reward_model.json": json.dumps(header)}
+
+
+def with_tensors(saved, change):
+    import torch
+
+    tensors = torch.load(io.BytesIO(saved["weights.pt"]), weights_only=True)
+    change(tensors)
+    data = io.BytesIO()
+    torch.save(tensors, data)
+    return {**saved, "weights.pt": data.getvalue()}
+
+
+def with_arrays(saved, change):
+    with np.load(io.BytesIO(saved["history.npz"])) as data:
+        arrays = {name: data[name] for name in data.files}
+    change(arrays)
+    data = io.BytesIO()
+    np.savez(data, **arrays)
+    return {**saved, "history.npz": data.getvalue()}
+
+
+def refused(tmp_path, members, match):
+    from delayed_rl.deep import load_reward_model
+
+    path = write(tmp_path / "crafted.zip", members)
+    with pytest.raises(ValueError, match=match):
+        load_reward_model(path)
+
+
+def test_the_unchanged_members_load(tmp_path, saved):
+    from delayed_rl.deep import load_reward_model
+
+    model = load_reward_model(write(tmp_path / "same.zip", saved))
+    assert model.history.steps_added == 50 and model.history.oldest == 18
+
+
+def test_what_is_not_a_zip_is_refused(tmp_path, saved):
+    from delayed_rl.deep import load_reward_model
+
+    whole = write(tmp_path / "whole.zip", saved).read_bytes()
+    for name, data in [("garbage", b"not a zip at all"), ("truncated", whole[: len(whole) // 2])]:
+        path = tmp_path / name
+        path.write_bytes(data)
+        with pytest.raises(ValueError, match="is not a reward model file"):
+            load_reward_model(path)
+    with pytest.raises(ValueError, match="is not a reward model file"):
+        load_reward_model(tmp_path / "missing.zip")
+    with pytest.raises(ValueError, match="is not a reward model file"):
+        load_reward_model(tmp_path)  # a folder
+
+
+@pytest.mark.parametrize("member", ["reward_model.json", "weights.pt"])
+def test_a_missing_member_is_refused(tmp_path, saved, member):
+    refused(tmp_path, {**saved, member: None}, "reward_model.json or weights.pt missing")
+
+
+def test_a_member_over_the_size_limit_is_refused(tmp_path, saved, monkeypatch):
+    import delayed_rl.deep.files as files
+
+    monkeypatch.setattr(files, "MAX_FILE_BYTES", len(saved["weights.pt"]) - 1)
+    refused(tmp_path, saved, "weights.pt is .* bytes, over MAX_FILE_BYTES")
+
+
+@pytest.mark.parametrize(
+    ("header", "match"),
+    [
+        (b"\xff\xfe not utf-8", "reward_model.json is not JSON"),
+        (b"{not json", "reward_model.json is not JSON"),
+        (b"[1, 2]", "does not declare format"),
+        (b'"delayed-rl reward model 1"', "does not declare format"),
+    ],
+)
+def test_a_header_that_is_not_a_json_object_is_refused(tmp_path, saved, header, match):
+    refused(tmp_path, {**saved, "reward_model.json": header}, match)
+
+
+def _set(*keys, value):
+    def change(header):
+        target = header
+        for key in keys[:-1]:
+            target = target[key]
+        target[keys[-1]] = value
+
+    return change
+
+
+def _drop(*keys):
+    def change(header):
+        target = header
+        for key in keys[:-1]:
+            target = target[key]
+        del target[keys[-1]]
+
+    return change
+
+
+@pytest.mark.parametrize(
+    ("change", "match"),
+    [
+        (_set("format", value="delayed-rl reward model 2"), "does not declare format"),
+        (_drop("format"), "does not declare format"),
+        (_set("class", value="RewardModel"), "unknown reward model class 'RewardModel'"),
+        (_set("class", value="os.system"), "unknown reward model class"),
+        (_set("class", value=["DeconvolutionRewardModel"]), "unknown reward model class"),
+        (_drop("class"), "unknown reward model class None"),
+        (_set("observation_space", value={"type": "Dict"}), "observation_space must describe"),
+        (_set("observation_space", "low", value="x"), "observation_space must describe"),
+        (_set("observation_space", "low", value=[0.0]), "observation_space must describe"),
+        (_set("observation_space", "dtype", value="object"), "observation_space must describe"),
+        (_set("observation_space", "dtype", value="nope"), "observation_space must describe"),
+        (_set("observation_space", value={"type": "Box", "dtype": "float32"}), "must describe"),
+        (_set("observation_space", value="Box"), "observation_space must describe"),
+        (_drop("action_space"), "action_space must describe"),
+        (_set("action_space", "n", value=0), "action_space"),
+        (_set("settings", value=[1]), "settings must be a JSON object"),
+        (_set("settings", "hidden_sizes", value=[0]), r"bad settings: hidden_sizes\[0\]"),
+        (_set("settings", "on_episode_end", value="x"), "bad settings: on_episode_end"),
+        (_set("settings", "learning_rate", value=float("nan")), "bad settings: learning_rate"),
+        (_set("settings", "extra", value=1), "bad settings: .*extra"),
+        (_drop("settings", "learning_rate"), "learning_rate"),
+        (_drop("settings", "seed"), "seed"),
+        (_set("settings", "hidden_sizes", value=[16]), "weights.pt does not fit the model"),
+        (_set("settings", "delay", value={"type": "Constant", "k": 1}), "weights.pt does not fit"),
+        (_drop("counters"), "bad counters"),
+        (_drop("counters", "steps_added"), "bad counters"),
+        (_set("counters", "since_round", value="x"), "bad counters"),
+        (_set("counters", "gradient_steps_taken", value=-1), "negative counters"),
+        (_set("counters", "n_envs", value=3), "history array obs must be"),
+        (_set("counters", "n_envs", value=0), "history.npz must be there exactly when n_envs > 0"),
+        (_set("rng", value={"bit_generator": "MT19937"}), "generator state"),
+        (_drop("rng"), "generator state"),
+    ],
+)
+def test_a_bad_header_is_refused(tmp_path, saved, change, match):
+    refused(tmp_path, with_header(saved, change), match)
+
+
+def _scale_first(factor):
+    def change(tensors):
+        name = next(iter(tensors["network"]))
+        tensors["network"][name] = tensors["network"][name] * factor
+
+    return change
+
+
+def _first_weight_shape(tensors):
+    name = next(iter(tensors["network"]))
+    tensors["network"][name] = tensors["network"][name][:, :-1]
+
+
+def _optimizer_state(key, change):
+    def edit(tensors):
+        state = tensors["optimizer"]["state"]
+        state[0][key] = change(state[0][key])
+
+    return edit
+
+
+def _optimizer_group(key, value):
+    def edit(tensors):
+        tensors["optimizer"]["param_groups"][0][key] = value
+
+    return edit
+
+
+@pytest.mark.parametrize(
+    ("change", "match"),
+    [
+        (_scale_first(float("nan")), "tensor .* is not a finite tensor"),
+        (_scale_first(float("inf")), "tensor .* is not a finite tensor"),
+        (_first_weight_shape, "weights.pt does not fit the model"),
+        (lambda t: t["network"].pop(next(iter(t["network"]))), "weights.pt does not fit"),
+        (
+            lambda t: t["network"].update(extra=t["extra"]["delay_logits"]),
+            "weights.pt does not fit",
+        ),
+        (lambda t: t.pop("extra"), "weights.pt does not fit"),
+        (lambda t: t.pop("optimizer"), "weights.pt does not fit"),
+        (lambda t: t["extra"].clear(), "the learned delay's tensors do not match"),
+        (lambda t: t["extra"].update(delay_logits=t["extra"]["delay_logits"][:-1]), "do not match"),
+        (lambda t: t["extra"].update(delay_logits=t["extra"]["delay_logits"] / 0), "not a finite"),
+        (lambda t: t["extra"].update(delay_logits=[0.0] * 5), "not a finite tensor"),
+        (_optimizer_state("exp_avg", lambda v: v[:1]), "weights.pt does not fit the model"),
+        (_optimizer_state("exp_avg_sq", lambda v: v * float("nan")), "weights.pt does not fit"),
+        (_optimizer_group("lr", float("nan")), "weights.pt does not fit the model"),
+        (_optimizer_group("lr", 5.0), "weights.pt does not fit the model"),
+        (lambda t: t["optimizer"]["param_groups"].pop(), "weights.pt does not fit the model"),
+    ],
+)
+def test_bad_tensors_are_refused(tmp_path, saved, change, match):
+    refused(tmp_path, with_tensors(saved, change), match)
+
+
+@pytest.mark.filterwarnings("ignore:Detected pickle protocol:UserWarning")  # the pickle's own
+def test_weights_that_are_not_tensors_are_refused(tmp_path, saved):
+    import torch
+
+    class Payload:
+        def __reduce__(self):
+            return (os.getcwd, ())
+
+    for data in (b"not a torch file", pickle.dumps({"network": Payload()})):
+        refused(tmp_path, {**saved, "weights.pt": data}, "weights.pt does not fit the model")
+    buffer = io.BytesIO()
+    torch.save([1, 2, 3], buffer)
+    refused(tmp_path, {**saved, "weights.pt": buffer.getvalue()}, "weights.pt does not fit")
+
+
+def _array(name, change):
+    def edit(arrays):
+        arrays[name] = change(arrays[name])
+
+    return edit
+
+
+def _held(value):
+    """Set one held step's entry (step 49, row 49 % 32) of sub-env 0."""
+
+    def change(array):
+        array = array.copy()
+        array[49 % 32, 0] = value
+        return array
+
+    return change
+
+
+@pytest.mark.parametrize(
+    ("change", "match"),
+    [
+        (_array("obs", lambda a: a[:, :1]), "history array obs must be float32 of shape"),
+        (_array("obs", lambda a: a.astype(np.float64)), "history array obs must be float32"),
+        (_array("action", lambda a: a.astype(np.int32)), "history array action must be int64"),
+        (_array("reward", lambda a: a[:-1]), "history array reward must be float64"),
+        (
+            _array("episode_end", lambda a: a.astype(np.int8)),
+            "history array episode_end must be bool",
+        ),
+        (_array("undelayed", lambda a: a.ravel()), "history array undelayed must be"),
+        (lambda a: a.pop("reward"), "history.npz misses arrays"),
+        (lambda a: a.update(extra=np.zeros(3)), "history.npz holds an unknown array 'extra'"),
+        (_array("obs", _held(np.nan)), "observation_space values must be finite"),
+        (_array("action", _held(3)), "action_space values must be in 0..2"),
+        (_array("action", _held(-1)), "action_space values must be in 0..2"),
+        (_array("reward", _held(np.inf)), "history rewards must be finite"),
+    ],
+)
+def test_bad_history_arrays_are_refused(tmp_path, saved, change, match):
+    refused(tmp_path, with_arrays(saved, change), match)
+
+
+def test_unreadable_or_pickled_history_arrays_are_refused(tmp_path, saved):
+    refused(tmp_path, {**saved, "history.npz": b"not an npz"}, "history.npz is not readable")
+    objects = io.BytesIO()
+    np.savez(objects, obs=np.array([{"a": 1}], dtype=object))
+    refused(tmp_path, {**saved, "history.npz": objects.getvalue()}, "history.npz is not readable")
+    refused(tmp_path, {**saved, "history.npz": None}, "history.npz must be there exactly when")
+
+
+def test_a_step_the_ring_no_longer_holds_is_not_checked(tmp_path, saved):
+    from delayed_rl.deep import load_reward_model
+
+    # steps 18..49 are held in a ring of 32 over 50 steps: every row is held, so an empty ring
+    # (a model with fewer steps than its capacity) shows the unheld rows instead
+    model = build("learned", capacity=32)
+    feed(model, 10, seed=0)
+    path = model.save(tmp_path / "short.zip")
+    with zipfile.ZipFile(path) as archive:
+        members = {name: archive.read(name) for name in archive.namelist()}
+    members = with_arrays(
+        members, _array("action", lambda a: np.where(np.arange(32)[:, None, None] >= 10, 7, a))
+    )
+    loaded = load_reward_model(write(tmp_path / "unheld.zip", members))
+    assert loaded.history.steps_added == 10
+    assert np.all(loaded.history.action[10:] == 0)  # the unheld rows are not read
+
+
+# ---------------------------------------------------------------------- imports
+def run_python(code):
+    result = subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(code)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "PYTHONPATH": os.getcwd()},
+    )
+    assert result.returncode == 0, result.stderr
+    return json.loads(result.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.cold_cache
+def test_importing_the_package_imports_no_torch():
+    found = run_python(
+        """
+        import json, sys
+        import delayed_rl.deep as deep
+        before = sorted({m.split(".")[0] for m in sys.modules} & {"torch", "stable_baselines3"})
+        names = dir(deep)
+        try:
+            deep.Nothing
+        except AttributeError as error:
+            missing = str(error)
+        deep.load_reward_model
+        after = sorted({m.split(".")[0] for m in sys.modules} & {"torch", "stable_baselines3"})
+        print(json.dumps({"before": before, "names": names, "missing": missing, "after": after}))
+        """
+    )
+    assert found["before"] == []
+    assert found["names"] == sorted(
+        [
+            "DeconvolutionRewardModel",
+            "IRCRRewardModel",
+            "RelabelingReplayBuffer",
+            "RelabelingRolloutBuffer",
+            "ReturnDecompositionRewardModel",
+            "RewardModel",
+            "RewardModelCallback",
+            "load_reward_model",
+        ]
+    )
+    assert "has no attribute 'Nothing'" in found["missing"]
+    assert "torch" in found["after"]
+
+
+@pytest.mark.cold_cache
+@pytest.mark.parametrize(
+    ("blocked", "name"),
+    [
+        ("torch", "DeconvolutionRewardModel"),
+        ("torch", "load_reward_model"),
+        ("stable_baselines3", "RelabelingReplayBuffer"),  # torch there, stable-baselines3 not
+        ("stable_baselines3", "RewardModelCallback"),
+    ],
+)
+def test_without_torch_a_name_asks_for_the_sb3_extra(blocked, name):
+    found = run_python(
+        f"""
+        import json, sys
+
+        class Block:
+            def find_spec(self, fullname, path=None, target=None):
+                if fullname.split(".")[0] == {blocked!r}:
+                    raise ModuleNotFoundError(f"No module named {{fullname!r}}", name=fullname)
+                return None
+
+        sys.meta_path.insert(0, Block())
+        import delayed_rl.deep as deep
+        try:
+            getattr(deep, {name!r})
+        except ImportError as error:
+            print(json.dumps({{"kind": type(error).__name__, "message": str(error)}}))
+        else:
+            print(json.dumps({{"kind": None}}))
+        """
+    )
+    assert found["kind"] == "ImportError"
+    assert "sb3" in found["message"] and 'pip install "delayed-rl[sb3]"' in found["message"]
+    assert blocked in found["message"] and name in found["message"]

@@ -1,0 +1,608 @@
+"""The reward models of ``delayed_rl.deep``: their losses, learning, anonymity and arguments.
+
+The deconvolution loss is checked against a plain-Python sum over the same windows (drawn from a
+copy of the model's generator) for each episode-end mode and for a learned ``p``; learning is
+checked on a synthetic stream delayed by the real ``RewardDelay`` wrapper, whose reward has a
+standard deviation known in closed form; anonymity is bit-identical weights with and without the
+diagnostic ``infos``. torch is imported in the tests' bodies (and a fixture), not at collection.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium import spaces
+
+from delayed_rl.delays import Constant, Empirical, Poisson
+from delayed_rl.wrappers import RewardDelay
+
+pytestmark = pytest.mark.sb3
+
+DIAGNOSTIC_KEYS = (
+    "undelayed_reward",
+    "reward_delay",
+    "pending_reward",
+    "flushed_reward",
+    "dropped_reward",
+    "reward_arrivals",
+)
+"""What ``RewardDelay`` adds to ``info`` (what an anonymous learner must not need)."""
+
+
+@pytest.fixture(autouse=True, scope="module")
+def one_thread():
+    """Runs torch on one thread (the machine's other core is busy), and back afterwards."""
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+def reward_fn(obs, action):
+    """The synthetic env's reward: ``sin(2·x₀) + x₁·a`` (smooth, mean 0)."""
+    return math.sin(2.0 * float(obs[0])) + float(obs[1]) * float(action[0])
+
+
+# Var[sin(2x)] for x ~ U[-1, 1] is E[sin²(2x)] = 1/2 − sin(4)/8 (its mean is 0); Var[x₁·a] for
+# independent x₁, a ~ U[-1, 1] is 1/3 · 1/3; the two terms are uncorrelated.
+REWARD_STD = math.sqrt(0.5 - math.sin(4.0) / 8.0 + 1.0 / 9.0)
+
+
+class Synthetic(gym.Env):
+    """Uniform random observations in [-1, 1]², ``reward_fn`` rewards, truncated at ``length``."""
+
+    observation_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
+    action_space = spaces.Box(-1.0, 1.0, (1,), np.float32)
+
+    def __init__(self, length=50):
+        self.length = length
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.t = 0
+        self.obs = self.np_random.uniform(-1.0, 1.0, 2).astype(np.float32)
+        return self.obs, {}
+
+    def step(self, action):
+        reward = reward_fn(self.obs, action)
+        self.t += 1
+        self.obs = self.np_random.uniform(-1.0, 1.0, 2).astype(np.float32)
+        return self.obs, reward, False, self.t >= self.length, {}
+
+
+def feed(model, env, steps, seed, strip=False):
+    """Random actions on ``env`` for ``steps`` steps, each added to ``model``.
+
+    ``strip``: pass ``infos=None`` in place of the wrapper's infos.
+    """
+    obs, _ = env.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    for _ in range(steps):
+        action = rng.uniform(-1.0, 1.0, 1).astype(np.float32)
+        next_obs, reward, terminated, truncated, info = env.step(action)
+        model.add(
+            obs[None], action[None], [reward], [terminated or truncated], None if strip else [info]
+        )
+        obs = next_obs
+        if terminated or truncated:
+            obs, _ = env.reset()
+
+
+# ---------------------------------------------------------------------- the loss, summed by hand
+class Stream:
+    """Hand-made episodes of ``n_envs`` sub-envs, added to a model and kept here as lists."""
+
+    def __init__(self, model, observation_space, action_space, n_envs, steps, seed):
+        rng = np.random.default_rng(seed)
+        observation_space.seed(seed)
+        action_space.seed(seed + 1)
+        self.obs, self.action, self.reward, self.end = [], [], [], []
+        for _ in range(steps):
+            obs = np.stack([observation_space.sample() for _ in range(n_envs)])
+            action = np.stack([action_space.sample() for _ in range(n_envs)])
+            reward = rng.normal(size=n_envs)
+            end = rng.random(n_envs) < 0.2  # episodes of 1 step to a dozen or more
+            model.add(obs, action, reward, end)
+            self.obs.append(obs)
+            self.action.append(action)
+            self.reward.append(reward)
+            self.end.append(end)
+
+
+def direct_loss(model, stream, starts, envs, pmf, mode):
+    """The deconvolution loss over the windows at ``starts`` (sub-envs ``envs``), by a plain loop.
+
+    ``y_t`` is predicted as ``Σ_k w_t(k)·R̂(s_{t−k}, a_{t−k})`` with ``w_t(k) = p(k)``, or
+    ``P(D ≥ k)`` at an episode's last step under ``"flush"``; a lag that crosses an episode's start
+    (``"flush"``, ``"drop"``) or reaches before the stream counts 0.
+    """
+    K = pmf.size - 1
+    errors = []
+    for start, env in zip(starts, envs, strict=True):
+        for t in range(int(start), int(start) + model.window):
+            predicted = 0.0
+            for k in range(K + 1):
+                s = t - k
+                if s < 0:
+                    continue
+                assert s >= model.history.oldest, "a window reaches overwritten steps"
+                if mode != "carry" and any(stream.end[j][env] for j in range(s, t)):
+                    continue
+                weight = pmf[k:].sum() if mode == "flush" and stream.end[t][env] else pmf[k]
+                r_hat = model.predict(stream.obs[s][env][None], stream.action[s][env][None])[0]
+                predicted += weight * float(r_hat)
+            errors.append((predicted - stream.reward[t][env]) ** 2)
+    return float(np.mean(errors))
+
+
+def drawn_windows(model):
+    """The windows the next ``loss()`` draws: replayed from a copy of the model's generator."""
+    history = model.history
+    K, length = model.support, model.window
+    rng = copy.deepcopy(model.rng)
+    lowest = history.oldest + K if history.oldest > 0 else 0
+    count = math.ceil(model.batch_size / length)
+    starts = rng.integers(lowest, history.steps_added - length + 1, size=count)
+    envs = rng.integers(0, history.n_envs, size=count)
+    return starts, envs
+
+
+SPACES = {
+    "box-discrete": (spaces.Box(-2.0, 2.0, (2,), np.float32), spaces.Discrete(3)),
+    "discrete-box": (spaces.Discrete(4, start=1), spaces.Box(-1.0, 1.0, (2,), np.float32)),
+}
+
+
+@pytest.mark.parametrize("mode", ["flush", "drop", "carry"])
+@pytest.mark.parametrize("spaces_name", sorted(SPACES))
+@pytest.mark.parametrize("capacity", [1000, 40])  # the ring not wrapped / wrapped
+def test_known_delay_loss_is_the_direct_sum(mode, spaces_name, capacity):
+    from delayed_rl.deep import DeconvolutionRewardModel
+
+    observation_space, action_space = SPACES[spaces_name]
+    delay = Empirical([0.4, 0.3, 0.2, 0.1])
+    model = DeconvolutionRewardModel(
+        observation_space,
+        action_space,
+        delay=delay,
+        max_delay=3,
+        on_episode_end=mode,
+        window=4,
+        hidden_sizes=(8,),
+        batch_size=64,  # 16 windows
+        gradient_steps=0,
+        capacity=capacity,
+        seed=3,
+    )
+    assert model.support == 3
+    np.testing.assert_allclose(model.delay_pmf, [0.4, 0.3, 0.2, 0.1], rtol=1e-6)
+    stream = Stream(model, observation_space, action_space, n_envs=2, steps=100, seed=7)
+    assert (model.history.oldest > 0) == (capacity < 100)
+    starts, envs = drawn_windows(model)
+    expected = direct_loss(model, stream, starts, envs, model.delay_pmf, mode)
+    loss = float(model.loss().detach())
+    assert loss == pytest.approx(expected, rel=1e-5)
+    # the modes differ on this stream (so the weights of each one are what is checked)
+    others = {
+        other: direct_loss(model, stream, starts, envs, model.delay_pmf, other)
+        for other in ("flush", "drop", "carry")
+        if other != mode
+    }
+    for other, value in others.items():
+        assert value != pytest.approx(expected, rel=1e-3), other
+
+
+def test_clipped_poisson_pmf_is_credit_weights():
+    from delayed_rl.deep import DeconvolutionRewardModel
+
+    model = DeconvolutionRewardModel(
+        spaces.Discrete(2), spaces.Discrete(2), delay=Poisson(1.5), max_delay=3, seed=0
+    )
+    pmf = [math.exp(-1.5) * 1.5**k / math.factorial(k) for k in range(3)]
+    expected = [*pmf, 1.0 - sum(pmf)]  # the last lag holds the tail
+    np.testing.assert_allclose(model.delay_pmf, expected, rtol=1e-6)
+    assert model.mean_delay == pytest.approx(float(np.arange(4) @ np.array(expected)), rel=1e-6)
+
+
+def test_learned_delay_starts_uniform_and_its_loss_is_the_direct_sum():
+    import torch
+
+    from delayed_rl.deep import DeconvolutionRewardModel
+
+    observation_space, action_space = SPACES["box-discrete"]
+    model = DeconvolutionRewardModel(
+        observation_space,
+        action_space,
+        delay=None,
+        max_delay=3,
+        window=4,
+        hidden_sizes=(8,),
+        batch_size=32,
+        learning_starts=10**9,
+        delay_learning_rate=0.2,
+        seed=5,
+    )
+    np.testing.assert_array_equal(model.delay_pmf, np.full(4, 0.25))
+    assert model.mean_delay == pytest.approx(1.5)
+    assert model.metrics() == {"mean_delay": pytest.approx(1.5)}
+    stream = Stream(model, observation_space, action_space, n_envs=1, steps=80, seed=11)
+    model.train(20)
+    assert model.gradient_steps_taken == 20
+    pmf = model.delay_pmf
+    assert pmf.sum() == pytest.approx(1.0, abs=1e-6)
+    assert np.all(pmf > 0)
+    assert np.ptp(pmf) > 1e-3, "the learned pmf did not move from uniform"
+    assert model.mean_delay == pytest.approx(float(np.arange(4) @ pmf))
+    np.testing.assert_allclose(
+        pmf, torch.softmax(model.delay_logits.detach(), 0).double().numpy(), rtol=1e-6
+    )
+    starts, envs = drawn_windows(model)
+    expected = direct_loss(model, stream, starts, envs, pmf, "flush")
+    loss = model.loss()
+    assert float(loss.detach()) == pytest.approx(expected, rel=1e-5)
+    loss.backward()  # the gradient reaches p's logits
+    assert model.delay_logits.grad is not None and model.delay_logits.grad.abs().sum() > 0
+
+
+def test_loss_waits_for_a_window_and_the_delay_before_it():
+    from delayed_rl.deep import DeconvolutionRewardModel
+
+    model = DeconvolutionRewardModel(
+        spaces.Discrete(2),
+        spaces.Discrete(2),
+        delay=Constant(2),
+        window=5,
+        gradient_steps=0,
+        capacity=7,  # the least that holds a window and the K = 2 steps before it
+        seed=0,
+    )
+    for step in range(5):
+        if step:
+            assert model.loss() is None  # fewer than a window of steps
+        model.add([0], [1], [1.0], [False])
+    assert model.loss() is not None  # steps 0..4: a window, its lags before the stream masked
+    for _ in range(20):
+        model.add([0], [1], [1.0], [False])
+        # once the ring is full, the one window whose lags are all held: the last 5 steps
+        assert model.loss() is not None
+        if model.history.oldest > 0:
+            starts, _ = drawn_windows(model)
+            assert set(starts.tolist()) == {model.history.steps_added - 5}
+
+
+def test_a_history_too_short_for_a_window_is_refused():
+    from delayed_rl.deep import DeconvolutionRewardModel
+
+    # a full ring of 6 steps never holds a window of 5 and its 2 lags: it would never train
+    with pytest.raises(ValueError, match="capacity"):
+        DeconvolutionRewardModel(
+            spaces.Discrete(2), spaces.Discrete(2), delay=Constant(2), window=5, capacity=6
+        )
+    with pytest.raises(ValueError, match="capacity"):
+        DeconvolutionRewardModel(
+            spaces.Discrete(2), spaces.Discrete(2), max_delay=10, window=64, capacity=73
+        )
+
+
+@pytest.mark.parametrize("capacity", [1000, 20])
+def test_history_keeps_the_episodes_its_ring_shows_whole(capacity):
+    from delayed_rl.deep import IRCRRewardModel
+
+    model = IRCRRewardModel(
+        spaces.Discrete(2), spaces.Discrete(2), gradient_steps=0, capacity=capacity
+    )
+    rng = np.random.default_rng(0)
+    n_envs, finished, first = 3, [], [0, 0, 0]
+    sums = np.zeros(n_envs)
+    # sub-env 0's episodes are long, sub-env 2's short: they end out of the order they began
+    chance = np.array([0.03, 0.2, 0.6])
+    for step in range(200):
+        reward, end = rng.normal(size=n_envs), rng.random(n_envs) < chance
+        model.add(np.zeros(n_envs, int), np.ones(n_envs, int), reward, end)
+        sums += reward
+        for env in np.flatnonzero(end):
+            finished.append((int(env), first[env], step + 1 - first[env], float(sums[env])))
+            first[env], sums[env] = step + 1, 0.0
+        history = model.history
+        # whole: begun after the oldest step held (whose episode may have begun before it)
+        cut = history.oldest + 1 if history.oldest > 0 else 0
+        expected = [e for e in finished if e[1] >= cut]
+        held = list(history.episodes)
+        assert sorted(held) == sorted(expected)
+        assert [e[1] for e in held] == sorted(e[1] for e in held)  # in order of first step
+        for env, begin, length, total in held:
+            rows = history.rows(begin, begin + length)
+            assert history.reward[rows, env].sum() == pytest.approx(total)
+            assert history.episode_end[rows, env].tolist() == [False] * (length - 1) + [True]
+    assert len(finished) > 40 and (capacity > 200 or len(held) < len(finished))
+
+
+# ---------------------------------------------------------------------- learning
+def test_known_delay_learns_the_reward():
+    from delayed_rl.deep import DeconvolutionRewardModel
+
+    env = RewardDelay(Synthetic(), Poisson(3), on_episode_end="flush")
+    model = DeconvolutionRewardModel(
+        env.observation_space,
+        env.action_space,
+        delay=Poisson(3),
+        max_delay=10,
+        hidden_sizes=(16,),
+        batch_size=128,
+        window=16,
+        learning_starts=200,
+        seed=0,
+    )
+    assert math.isnan(model.rmse())
+    feed(model, env, 2000, seed=0)
+    truth = model.history.undelayed[: model.history.steps_added, 0]
+    assert np.isfinite(truth).all()
+    assert np.std(truth) == pytest.approx(REWARD_STD, rel=0.1)  # the closed form holds
+    # a constant predictor's RMSE is the reward's standard deviation
+    assert model.rmse() < 0.5 * REWARD_STD
+    assert model.gradient_steps_taken == 2000 - 200 + 1
+
+
+def test_learned_delay_finds_the_mean():
+    from delayed_rl.deep import DeconvolutionRewardModel
+
+    env = RewardDelay(Synthetic(), Poisson(5), on_episode_end="flush")
+    model = DeconvolutionRewardModel(
+        env.observation_space,
+        env.action_space,
+        delay=None,
+        max_delay=15,
+        hidden_sizes=(16,),
+        batch_size=128,
+        window=16,
+        learning_starts=200,
+        delay_learning_rate=3e-2,
+        seed=1,
+    )
+    assert model.mean_delay == pytest.approx(7.5)  # uniform on 0..15
+    feed(model, env, 3000, seed=1)
+    # The truth is the mean of min(D, 15) for D ~ Poisson(5): 5 less a tail of ~1e-4. The start
+    # is 7.5; a tolerance of 1 step (0.45 of Poisson(5)'s standard deviation, and under half of
+    # the way from the start) fails a model that did not learn p, while the mean of a pmf
+    # learned from 2800 gradient steps on a reward of known scale lands well inside it.
+    assert model.delay_pmf.sum() == pytest.approx(1.0, abs=1e-6)
+    assert abs(model.mean_delay - 5.0) < 1.0
+    assert model.rmse() < 0.5 * REWARD_STD
+
+
+@pytest.mark.parametrize("kind", ["ReturnDecompositionRewardModel", "IRCRRewardModel"])
+def test_episode_sum_baselines_train(kind):
+    import delayed_rl.deep as deep
+
+    env = RewardDelay(Synthetic(length=10), Poisson(3), on_episode_end="flush")
+    model = getattr(deep, kind)(
+        env.observation_space,
+        env.action_space,
+        hidden_sizes=(8,),
+        batch_size=32,
+        learning_starts=0,
+        seed=0,
+    )
+    before = model.predict(np.zeros((1, 2)), np.zeros((1, 1)))
+    model.add(np.zeros((1, 2)), np.zeros((1, 1)), [1.0], [False])
+    assert model.gradient_steps_taken == 0  # no finished episode yet: loss() is None
+    feed(model, env, 300, seed=0)
+    assert model.gradient_steps_taken > 250
+    assert len(model.history.episodes) == 30
+    assert not np.array_equal(before, model.predict(np.zeros((1, 2)), np.zeros((1, 1))))
+
+
+def test_rrd_loss_is_the_episode_sum_regression():
+    from delayed_rl.deep import ReturnDecompositionRewardModel
+
+    model = ReturnDecompositionRewardModel(
+        spaces.Discrete(3), spaces.Discrete(2), subset_size=2, batch_size=2, gradient_steps=0
+    )
+    # one episode of 3 steps whose delivered rewards sum to 6: every subset's mean targets 2
+    for obs, reward, end in [(0, 5.0, False), (1, 0.0, False), (2, 1.0, True)]:
+        model.add([obs], [0], [reward], [end])
+    model.add([0], [1], [100.0], [False])  # an open episode: not used
+    assert list(model.history.episodes) == [(0, 0, 3, 6.0)]
+    rng = copy.deepcopy(model.rng)
+    rng.integers(0, 1, size=1)  # the episode drawn
+    subset = rng.choice(3, size=2, replace=False)
+    expected = (np.mean(model.predict(subset, [0, 0])) - 2.0) ** 2
+    assert float(model.loss().detach()) == pytest.approx(float(expected), rel=1e-5)
+
+
+def test_ircr_targets_are_normalised_returns():
+    from delayed_rl.deep import IRCRRewardModel
+
+    model = IRCRRewardModel(spaces.Discrete(2), spaces.Discrete(2), batch_size=4, gradient_steps=0)
+    model.add([0], [0], [1.0], [True])  # return 1
+    model.add([1], [1], [3.0], [True])  # return 3
+    rng = copy.deepcopy(model.rng)
+    picks = rng.integers(0, 2, size=4)
+    targets = np.where(picks == 0, 0.0, 1.0)  # (G − 1) / (3 − 1)
+    predicted = model.predict(picks, picks)  # each episode is one step: obs = action = index
+    assert float(model.loss().detach()) == pytest.approx(
+        float(np.mean((predicted - targets) ** 2)), rel=1e-5
+    )
+
+
+# ---------------------------------------------------------------------- anonymity
+def test_learning_is_the_same_bits_without_the_infos():
+    import torch
+
+    from delayed_rl.deep import DeconvolutionRewardModel
+
+    models = []
+    for strip in (False, True):
+        env = RewardDelay(Synthetic(length=20), Poisson(3), record_arrivals=True)
+        model = DeconvolutionRewardModel(
+            env.observation_space,
+            env.action_space,
+            delay=None,
+            max_delay=8,
+            hidden_sizes=(8,),
+            batch_size=32,
+            window=8,
+            learning_starts=50,
+            seed=4,
+        )
+        feed(model, env, 300, seed=4, strip=strip)
+        models.append(model)
+    with_infos, without = models
+    assert with_infos.gradient_steps_taken == without.gradient_steps_taken > 0
+    for a, b in zip(with_infos.network.parameters(), without.network.parameters(), strict=True):
+        assert torch.equal(a, b)
+    assert torch.equal(with_infos.delay_logits, without.delay_logits)
+    # the infos did reach the diagnostics
+    assert np.isfinite(with_infos.rmse()) and math.isnan(without.rmse())
+
+
+def test_add_reads_nothing_but_the_undelayed_reward_from_infos():
+    import torch
+
+    from delayed_rl.deep import DeconvolutionRewardModel
+
+    def run(infos_at):
+        model = DeconvolutionRewardModel(
+            spaces.Discrete(3),
+            spaces.Discrete(2),
+            delay=Constant(1),
+            window=4,
+            hidden_sizes=(8,),
+            batch_size=8,
+            learning_starts=8,
+            seed=0,
+        )
+        rng = np.random.default_rng(0)
+        for step in range(40):
+            model.add([step % 3], [step % 2], [rng.normal()], [step % 7 == 6], infos_at(step))
+        return model
+
+    plain = run(lambda step: None)
+
+    def noisy_infos(step):
+        return [
+            {
+                "undelayed_reward": float(step),
+                "reward_delay": step,
+                "pending_reward": 9.0,
+                "reward_arrivals": [(step, 1.0)],
+                "flushed_reward": -3.0,
+            }
+        ]
+
+    noisy = run(noisy_infos)
+    odd = run(lambda step: ["not a dict"])  # anything but a dict is ignored
+    for other in (noisy, odd):
+        for a, b in zip(plain.network.parameters(), other.network.parameters(), strict=True):
+            assert torch.equal(a, b)
+    assert noisy.history.undelayed[39, 0] == 39.0
+    assert np.isnan(odd.history.undelayed).all()
+
+
+# ---------------------------------------------------------------------- arguments
+def make(kind="DeconvolutionRewardModel", observation_space=None, action_space=None, **kwargs):
+    import delayed_rl.deep as deep
+
+    if kind == "DeconvolutionRewardModel":
+        kwargs.setdefault("delay", Constant(1))
+    return getattr(deep, kind)(
+        spaces.Discrete(3) if observation_space is None else observation_space,
+        spaces.Discrete(2) if action_space is None else action_space,
+        **kwargs,
+    )
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "error", "match"),
+    [
+        (
+            {"observation_space": spaces.Dict({"a": spaces.Discrete(2)})},
+            TypeError,
+            "observation_space",
+        ),
+        ({"action_space": spaces.MultiDiscrete([2, 2])}, TypeError, "action_space"),
+        ({"observation_space": "Discrete(3)"}, TypeError, "observation_space"),
+        ({"observation_space": spaces.Box(0, 1, (0,))}, ValueError, "observation_space"),
+        ({"max_delay": -1}, ValueError, "max_delay"),
+        ({"max_delay": 1.5}, TypeError, "max_delay"),
+        ({"max_delay": 5000}, ValueError, "max_delay"),
+        ({"delay": None}, ValueError, "max_delay must be given"),
+        ({"delay": "Poisson"}, TypeError, "delay"),
+        ({"delay": -2.0}, ValueError, "delay"),
+        ({"delay": {"type": "Nope"}}, ValueError, "delay"),
+        ({"delay": Poisson(5000.0)}, ValueError, "delay"),
+        ({"on_episode_end": "x"}, ValueError, "on_episode_end"),
+        ({"on_episode_end": 1}, TypeError, "on_episode_end"),
+        ({"window": 0}, ValueError, "window"),
+        ({"window": 2.0}, TypeError, "window"),
+        ({"delay_learning_rate": 0.0}, ValueError, "delay_learning_rate"),
+        ({"hidden_sizes": (0,)}, ValueError, r"hidden_sizes\[0\]"),
+        ({"hidden_sizes": (8, -1)}, ValueError, r"hidden_sizes\[1\]"),
+        ({"hidden_sizes": (8.0,)}, TypeError, r"hidden_sizes\[0\]"),
+        ({"hidden_sizes": "8"}, TypeError, "hidden_sizes"),
+        ({"hidden_sizes": 8}, TypeError, "hidden_sizes"),
+        ({"learning_rate": 0.0}, ValueError, "learning_rate"),
+        ({"learning_rate": float("nan")}, ValueError, "learning_rate"),
+        ({"learning_rate": "1e-3"}, TypeError, "learning_rate"),
+        ({"batch_size": 0}, ValueError, "batch_size"),
+        ({"learning_starts": -1}, ValueError, "learning_starts"),
+        ({"train_every": 0}, ValueError, "train_every"),
+        ({"gradient_steps": -1}, ValueError, "gradient_steps"),
+        ({"capacity": 0}, ValueError, "capacity"),
+        ({"seed": -1}, ValueError, "seed"),
+        ({"seed": 1.0}, TypeError, "seed"),
+        ({"kind": "ReturnDecompositionRewardModel", "subset_size": 0}, ValueError, "subset_size"),
+        ({"kind": "IRCRRewardModel", "hidden_sizes": [2**17]}, ValueError, r"hidden_sizes\[0\]"),
+        ({"kind": "IRCRRewardModel", "window": 4}, TypeError, "window"),
+    ],
+)
+def test_bad_arguments_are_refused_by_name(kwargs, error, match):
+    with pytest.raises(error, match=match):
+        make(**kwargs)
+
+
+def test_a_history_beyond_the_memory_limit_is_refused_at_the_first_step():
+    model = make(capacity=2**40)  # the history is made when the first step fixes n_envs
+    with pytest.raises(ValueError, match="capacity must keep the history within MAX_HISTORY_BYTES"):
+        model.add([0], [0], [0.0], [False])
+    assert model.history is None
+
+
+def test_bad_steps_and_batches_are_refused_by_name():
+    model = make(observation_space=spaces.Box(-1, 1, (2,)), action_space=spaces.Discrete(2))
+    with pytest.raises(ValueError, match="observation_space values must be 1 of shape"):
+        model.add(np.zeros(3), [0], [0.0], [False])
+    with pytest.raises(ValueError, match="action_space values must be in 0..1"):
+        model.add(np.zeros(2), [2], [0.0], [False])
+    with pytest.raises(ValueError, match="action_space values must be integers"):
+        model.add(np.zeros(2), [0.5], [0.0], [False])
+    with pytest.raises(ValueError, match="observation_space values must be finite"):
+        model.add([np.nan, 0.0], [0], [0.0], [False])
+    with pytest.raises(TypeError, match="observation_space values must be numbers"):
+        model.add(["a", "b"], [0], [0.0], [False])
+    with pytest.raises(ValueError, match="rewards must be finite"):
+        model.add(np.zeros(2), [0], [np.inf], [False])
+    with pytest.raises(TypeError, match="rewards must be numbers"):
+        model.add(np.zeros(2), [0], ["1"], [False])
+    with pytest.raises(ValueError, match="episode_ends must hold 1 values"):
+        model.add(np.zeros(2), [0], [0.0], [False, True])
+    with pytest.raises(ValueError, match="observation_space values must be 2 of shape"):
+        model.add(np.zeros(2), [0, 1], [0.0, 0.0], [False, False])  # 2 rewards, 1 observation
+    # a refused first step fixes nothing: not even the number of sub-envs
+    assert model.history is None
+    model.add(np.zeros(2), [0], [0.0], [False])
+    with pytest.raises(ValueError, match="rewards must hold one reward for each of the 1 sub-envs"):
+        model.add(np.zeros((2, 2)), [0, 1], [0.0, 0.0], [False, False])
+    assert model.history.steps_added == 1
+    with pytest.raises(ValueError, match="observation_space values must be 2 of shape"):
+        model.predict(np.zeros((3, 2)), [0, 1])
+    with pytest.raises(ValueError, match="last"):
+        model.rmse(last=0)
+    with pytest.raises(ValueError, match="gradient_steps"):
+        model.train(-1)
