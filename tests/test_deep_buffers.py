@@ -450,3 +450,48 @@ def test_ppo_file_keeps_its_rollout_model(tmp_path):
     taken = restored_model.gradient_steps_taken
     restored.learn(16, reset_num_timesteps=False, callback=RewardModelCallback())
     assert restored_model.gradient_steps_taken == taken + 16
+
+
+def test_a_buffer_makes_its_reward_model_from_a_mapping_for_its_spaces():
+    from delayed_rl.deep import DeconvolutionRewardModel, RelabelingReplayBuffer
+
+    env = gym.make("Pendulum-v1")
+    spec = {"type": "DeconvolutionRewardModel", "delay": None, "max_delay": 7, "seed": 3}
+    buffer = RelabelingReplayBuffer(100, env.observation_space, env.action_space, reward_model=spec)
+    model = buffer.reward_model
+    assert isinstance(model, DeconvolutionRewardModel)
+    assert (model.max_delay, model.seed, model.delay) == (7, 3, None)
+    assert spec == {"type": "DeconvolutionRewardModel", "delay": None, "max_delay": 7, "seed": 3}
+
+
+@pytest.mark.parametrize(
+    ("spec", "error", "message"),
+    [
+        ([1, 2], TypeError, "reward_model must be a delayed_rl.deep reward model or a mapping"),
+        ({"delay": 3}, TypeError, "reward_model's 'type' must be a class name"),
+        (
+            {"type": "Sequential"},
+            ValueError,
+            "must be one of .*'IRCRRewardModel'.*got 'Sequential'",
+        ),
+        ({"type": "IRCRRewardModel", "hidden_sizes": (0,)}, ValueError, "hidden_sizes"),
+        ({"type": "IRCRRewardModel", "window": 3}, TypeError, "window"),
+    ],
+)
+def test_a_bad_reward_model_mapping_is_refused_naming_what_is_wrong(spec, error, message):
+    from delayed_rl.deep import RelabelingReplayBuffer
+
+    env = gym.make("Pendulum-v1")
+    with pytest.raises(error, match=message):
+        RelabelingReplayBuffer(100, env.observation_space, env.action_space, reward_model=spec)
+
+
+def test_a_reward_model_made_for_other_spaces_is_refused():
+    from delayed_rl.deep import IRCRRewardModel, RelabelingRolloutBuffer
+
+    cartpole, pendulum = gym.make("CartPole-v1"), gym.make("Pendulum-v1")
+    model = IRCRRewardModel(cartpole.observation_space, cartpole.action_space, seed=0)
+    with pytest.raises(ValueError, match="reward_model was made for the observation_space"):
+        RelabelingRolloutBuffer(
+            8, pendulum.observation_space, pendulum.action_space, reward_model=model
+        )

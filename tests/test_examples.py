@@ -73,3 +73,31 @@ def test_the_rl_zoo3_file_wraps_the_env_and_trains(tmp_path):
     subprocess.run(command, check=True, capture_output=True, timeout=300)
     saved = next(tmp_path.glob("ppo/CartPole-v1_*/CartPole-v1/config.yml")).read_text()
     assert "delayed_rl.wrappers.PoissonRewardDelay" in saved
+
+
+@pytest.mark.sb3
+@pytest.mark.parametrize(
+    ("algo", "env_id", "conf", "options"),
+    [
+        ("sac", "Pendulum-v1", "delayed_pendulum_sac.yml", ["-n", "1000"]),
+        (
+            "ppo",
+            "CartPole-v1",
+            "delayed_cartpole_ppo.py",
+            ["-n", "2048", "--hyperparams", "n_steps:64"],
+        ),
+    ],
+)
+def test_the_rl_zoo3_files_train_with_a_reward_model(tmp_path, algo, env_id, conf, options):
+    command = [
+        sys.executable, "-m", "rl_zoo3.train", "--algo", algo, "--env", env_id, "--seed", "0",
+        "--conf-file", str(EXAMPLES / "rl_zoo3" / conf), "--log-folder", str(tmp_path),
+        "--eval-freq", "-1", *options,
+    ]  # fmt: skip
+    done = subprocess.run(command, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "| reward_model/" in done.stdout  # the callback logged the model (SB3 nests keys)
+    steps = [
+        int(line.split("|")[2]) for line in done.stdout.splitlines() if "gradient_steps" in line
+    ]
+    assert steps and steps[-1] > 0  # and it trained inside rl-zoo3's run

@@ -10,7 +10,8 @@ reads when a reward was emitted), and a relabelling buffer hands stable-baseline
   baselines that use only episode sums;
 - :class:`RelabelingReplayBuffer` (SAC, TD3, DQN) and :class:`RelabelingRolloutBuffer` (PPO, A2C,
   with :class:`RewardModelCallback`);
-- :func:`load_reward_model`.
+- :func:`load_reward_model`, and :func:`make_reward_model` (a model from a mapping, as a
+  hyperparameter file gives it).
 
 Everything here needs torch and stable-baselines3 (``pip install "delayed-rl[sb3]"``); they are
 imported when a name is first used, not by ``import delayed_rl.deep``.
@@ -41,6 +42,7 @@ __all__ = [
     "RewardModel",
     "RewardModelCallback",
     "load_reward_model",
+    "make_reward_model",
 ]
 
 _HOMES = {
@@ -52,6 +54,7 @@ _HOMES = {
     "RewardModel": "reward_model",
     "RewardModelCallback": "callbacks",
     "load_reward_model": "files",
+    "make_reward_model": "files",
 }
 
 

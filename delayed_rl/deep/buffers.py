@@ -32,19 +32,10 @@ import numpy as np
 import torch
 from stable_baselines3.common.buffers import ReplayBuffer, RolloutBuffer
 
+from delayed_rl.deep.files import make_reward_model
 from delayed_rl.deep.reward_model import RewardModel
 
 __all__ = ["RelabelingReplayBuffer", "RelabelingRolloutBuffer"]
-
-
-def _check_model(reward_model: Any) -> RewardModel:
-    if not isinstance(reward_model, RewardModel):
-        raise TypeError(
-            "reward_model must be a delayed_rl.deep reward model (DeconvolutionRewardModel, "
-            f"ReturnDecompositionRewardModel, IRCRRewardModel...), got {reward_model!r} "
-            f"({type(reward_model).__name__})"
-        )
-    return reward_model
 
 
 class RelabelingReplayBuffer(ReplayBuffer):
@@ -53,7 +44,11 @@ class RelabelingReplayBuffer(ReplayBuffer):
     Args:
         buffer_size, observation_space, action_space, device, n_envs, optimize_memory_usage,
             handle_timeout_termination: as SB3's ``ReplayBuffer``.
-        reward_model: the model to train and relabel with (its spaces must be the buffer's).
+        reward_model: the model to train and relabel with (its spaces must be the buffer's),
+            or a mapping ``{"type": <class name>, <setting>: <value>, ...}`` that the buffer
+            makes it from, for its spaces (:func:`~delayed_rl.deep.files.make_reward_model`;
+            a hyperparameter file's form). A model made so lives in the buffer: SB3's
+            ``save_replay_buffer`` keeps it, ``model.save`` keeps only the mapping.
 
     Attributes:
         delivered_rewards: the rewards ``add()`` received (``rewards`` holds the last relabelling).
@@ -69,7 +64,7 @@ class RelabelingReplayBuffer(ReplayBuffer):
         optimize_memory_usage: bool = False,
         handle_timeout_termination: bool = True,
         *,
-        reward_model: RewardModel,
+        reward_model: RewardModel | dict[str, Any],
     ):
         super().__init__(
             buffer_size,
@@ -80,7 +75,7 @@ class RelabelingReplayBuffer(ReplayBuffer):
             optimize_memory_usage=optimize_memory_usage,
             handle_timeout_termination=handle_timeout_termination,
         )
-        self.reward_model = _check_model(reward_model)
+        self.reward_model = make_reward_model(reward_model, observation_space, action_space)
         self.delivered_rewards = np.zeros_like(self.rewards)
 
     def add(
@@ -115,7 +110,9 @@ class RelabelingRolloutBuffer(RolloutBuffer):
     Args:
         buffer_size, observation_space, action_space, device, gae_lambda, gamma, n_envs: as SB3's
             ``RolloutBuffer``.
-        reward_model: the model to train and relabel with.
+        reward_model: the model to train and relabel with, or a mapping that the buffer makes
+            it from, as :class:`RelabelingReplayBuffer` takes it (``model.save`` keeps a model
+            given as an object; one made from a mapping starts afresh on load).
 
     Attributes:
         delivered_rewards: per step, the rewards the env delivered (from the callback).
@@ -133,9 +130,9 @@ class RelabelingRolloutBuffer(RolloutBuffer):
         gamma: float = 0.99,
         n_envs: int = 1,
         *,
-        reward_model: RewardModel,
+        reward_model: RewardModel | dict[str, Any],
     ):
-        self.reward_model = _check_model(reward_model)
+        self.reward_model = make_reward_model(reward_model, observation_space, action_space)
         self._env_step: tuple[np.ndarray, np.ndarray, list] | None = None
         super().__init__(
             buffer_size,

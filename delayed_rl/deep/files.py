@@ -24,7 +24,7 @@ from delayed_rl.deep.encoding import SpaceEncoding
 from delayed_rl.deep.history import TransitionHistory
 from delayed_rl.deep.reward_model import FORMAT, MAX_FILE_BYTES, RewardModel
 
-__all__ = ["load_reward_model"]
+__all__ = ["load_reward_model", "make_reward_model"]
 
 
 def _classes() -> dict[str, type[RewardModel]]:
@@ -34,6 +34,45 @@ def _classes() -> dict[str, type[RewardModel]]:
 
     kinds = (DeconvolutionRewardModel, ReturnDecompositionRewardModel, IRCRRewardModel)
     return {kind.__name__: kind for kind in kinds}
+
+
+def make_reward_model(spec: Any, observation_space: Any, action_space: Any) -> RewardModel:
+    """The reward model ``spec`` describes, for these spaces.
+
+    ``spec`` is a reward model (returned as it is, after its spaces are checked), or a mapping
+    ``{"type": <class name>, <setting>: <value>, ...}``: one of the library's reward models
+    (``DeconvolutionRewardModel``, ``ReturnDecompositionRewardModel``, ``IRCRRewardModel``) and
+    its keyword arguments, as a hyperparameter file writes it (rl-zoo3's YAML, say).
+
+    Raises:
+        TypeError: ``spec`` is neither, or ``type`` is not a string; a setting's type (the
+            class's own checks).
+        ValueError: an unknown ``type``; a setting's value (the class's own checks); a model
+            whose spaces are not these.
+    """
+    if isinstance(spec, RewardModel):
+        for name, space, encoding in (
+            ("observation_space", observation_space, spec.observations),
+            ("action_space", action_space, spec.actions),
+        ):
+            if encoding.to_dict() != SpaceEncoding(name, space).to_dict():
+                raise ValueError(
+                    f"reward_model was made for the {name} {encoding.space}, the buffer's is {space}"
+                )
+        return spec
+    if not isinstance(spec, dict):
+        raise TypeError(
+            "reward_model must be a delayed_rl.deep reward model or a mapping {'type': <class "
+            f"name>, <setting>: <value>, ...}}, got {spec!r} ({type(spec).__name__})"
+        )
+    settings = dict(spec)
+    kind = settings.pop("type", None)
+    classes = _classes()
+    if not isinstance(kind, str):
+        raise TypeError(f"reward_model's 'type' must be a class name (a string), got {kind!r}")
+    if kind not in classes:
+        raise ValueError(f"reward_model's 'type' must be one of {sorted(classes)}, got {kind!r}")
+    return classes[kind](observation_space, action_space, **settings)
 
 
 def _member(archive: zipfile.ZipFile, name: str, path: Path) -> bytes | None:
