@@ -56,7 +56,7 @@ nitpick_ignore_regex = [
         r"py:.*",
         r"(NDArray|ArrayLike|SupportsFloat|Callable|Sequence|Mapping|Iterable|Any|Path)(\[.*)?",
     ),
-    (r"py:.*", r"(collections\.abc|typing|pathlib|argparse|numbers|enum)\..*"),
+    (r"py:.*", r"(collections|collections\.abc|typing|pathlib|argparse|numbers|enum)\..*"),
     (r"py:class", r"(optional|callable|type|int|float|str|bool|dict|list|tuple|None)"),
     (r"py:class", r"abc\.ABC"),
     (r"py:class", r"(spaces\..*|VectorEnv|VecEnv|Schedule|Wrapper)"),

@@ -42,8 +42,8 @@ class RelabelingReplayBuffer(ReplayBuffer):
     """SB3's ``ReplayBuffer`` whose sampled rewards are a reward model's ``R̂(s, a)``.
 
     Args:
-        buffer_size, observation_space, action_space, device, n_envs, optimize_memory_usage,
-            handle_timeout_termination: as SB3's ``ReplayBuffer``.
+        buffer_size, observation_space, action_space, device, n_envs: as SB3's ``ReplayBuffer``.
+        optimize_memory_usage, handle_timeout_termination: as SB3's ``ReplayBuffer``.
         reward_model: the model to train and relabel with (its spaces must be the buffer's),
             or a mapping ``{"type": <class name>, <setting>: <value>, ...}`` that the buffer
             makes it from, for its spaces (:func:`~delayed_rl.deep.files.make_reward_model`;
@@ -108,8 +108,8 @@ class RelabelingRolloutBuffer(RolloutBuffer):
     The relabelling happens before returns and advantages are computed.
 
     Args:
-        buffer_size, observation_space, action_space, device, gae_lambda, gamma, n_envs: as SB3's
-            ``RolloutBuffer``.
+        buffer_size, observation_space, action_space, device: as SB3's ``RolloutBuffer``.
+        gae_lambda, gamma, n_envs: as SB3's ``RolloutBuffer``.
         reward_model: the model to train and relabel with, or a mapping that the buffer makes
             it from, as :class:`RelabelingReplayBuffer` takes it (``model.save`` keeps a model
             given as an object; one made from a mapping starts afresh on load).

@@ -148,7 +148,7 @@ class RewardModel(ABC):
 
     @abstractmethod
     def loss(self) -> torch.Tensor | None:
-        """One batch's loss, sampled from the history with :attr:`rng` (``None``: too little data)."""
+        """One batch's loss, sampled from the history with ``rng`` (``None``: too little data)."""
 
     def metrics(self) -> dict[str, float]:
         """What the model logs beside its loss and RMSE (the learned mean delay...)."""
