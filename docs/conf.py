@@ -9,6 +9,7 @@ world's rendered frames.
 
 from __future__ import annotations
 
+import json
 import re
 import shutil
 import sys
@@ -87,6 +88,7 @@ def generate() -> None:
     (out / "api").mkdir()
     _experiment_pages(out / "experiments")
     _report_page(out)
+    _deep_rl_results(out)
     _api_pages(out / "api")
     _grid_frames(out)
 
@@ -158,6 +160,45 @@ def _experiment_pages(out: Path) -> None:
         "figures. {doc}`/_generated/reproduction` explains the differences.\n\n"
         f"```{{toctree}}\n:maxdepth: 1\n\n{toctree}\n```\n"
     )
+
+
+def _deep_rl_results(out: Path, results: Path | None = None) -> None:
+    """``deep_rl_results.md``: the committed ``deep-rl`` run as a table, with its target verdicts.
+
+    Per setting and method: the mean score (10 greedy episodes of the undelayed env), the gain
+    (0 random, 1 the oracle), the reward model's RMSE and the learned mean delay, each mean ±
+    95 % CI over seeds.
+    """
+    results = results or ROOT / "benchmarks" / "reproduction" / "deep-rl" / "summary.json"
+    if not results.exists():
+        (out / "deep_rl_results.md").write_text("No committed run of `deep-rl` yet.\n")
+        return
+    summary = json.loads(results.read_text())
+
+    def cell(row: dict, key: str, digits: int) -> str:
+        if key not in row:
+            return ""
+        return f"{row[key]['mean']:.{digits}f} ± {row[key]['ci95']:.{digits}f}"
+
+    lines = [
+        f"Seeds {summary['config']['base_seed']}–"
+        f"{summary['config']['base_seed'] + summary['config']['seeds'] - 1}.\n",
+        "| setting | method | score | gain | RMSE of R̂ | mean delay |",
+        "|---|---|---|---|---|---|",
+    ]
+    for setting, rows in summary["table"].items():
+        for method, row in rows.items():
+            lines.append(
+                f"| {setting} | {method} | {cell(row, 'score', 1)} | {cell(row, 'gain', 2)} | "
+                f"{cell(row, 'rmse', 2)} | {cell(row, 'mean_delay', 1)} |"
+            )
+    lines += ["", "| target | measured | verdict |", "|---|---|---|"]
+    for claim in summary["claims"]:
+        if claim["thesis"].startswith("target"):
+            measured = f"{claim['mean']:.2f} [{claim['low']:.2f}, {claim['high']:.2f}]"
+            lines.append(f"| {claim['quantity']} ({claim['thesis']}) | {measured} | "
+                         f"{claim['verdict']} |")  # fmt: skip
+    (out / "deep_rl_results.md").write_text("\n".join(lines) + "\n")
 
 
 def _report_page(out: Path) -> None:
