@@ -79,12 +79,12 @@ def test_the_rl_zoo3_file_wraps_the_env_and_trains(tmp_path):
 @pytest.mark.parametrize(
     ("algo", "env_id", "conf", "options"),
     [
-        ("sac", "Pendulum-v1", "delayed_pendulum_sac.yml", ["-n", "1000"]),
+        ("sac", "Pendulum-v1", "delayed_pendulum_sac.yml", ["-n", "400", "--log-interval", "1"]),
         (
             "ppo",
             "CartPole-v1",
             "delayed_cartpole_ppo.py",
-            ["-n", "2048", "--hyperparams", "n_steps:64"],
+            ["-n", "1280", "--hyperparams", "n_steps:64"],
         ),
     ],
 )
