@@ -571,6 +571,7 @@ def test_importing_the_package_imports_no_torch():
             "RewardModel",
             "RewardModelCallback",
             "load_reward_model",
+            "make_reward_model",
         ]
     )
     assert "has no attribute 'Nothing'" in found["missing"]
