@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import gymnasium as gym
 import numpy as np
+import pytest
 
 from delayed_rl.delays import Delay
 
@@ -185,3 +186,17 @@ def scribble(sample) -> None:
     elif isinstance(sample, tuple):
         for value in sample:
             scribble(value)
+
+
+@pytest.fixture(scope="module")
+def torch_on_one_thread():
+    """Runs torch on one thread in a test module, and puts the thread count back afterwards.
+
+    The deep RL tests use it: two runs side by side on a 2-core machine share the cores.
+    """
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)

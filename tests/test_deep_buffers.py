@@ -14,11 +14,12 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
+from support import torch_on_one_thread  # noqa: F401  (the fixture)
 
 from delayed_rl.delays import Poisson
 from delayed_rl.wrappers import RewardDelay
 
-pytestmark = pytest.mark.sb3
+pytestmark = [pytest.mark.sb3, pytest.mark.usefixtures("torch_on_one_thread")]
 
 DIAGNOSTIC_KEYS = (
     "undelayed_reward",
@@ -29,17 +30,6 @@ DIAGNOSTIC_KEYS = (
     "reward_arrivals",
 )
 """What ``RewardDelay`` adds to ``info``."""
-
-
-@pytest.fixture(autouse=True, scope="module")
-def one_thread():
-    """Runs torch on one thread (the machine's other core is busy), and back afterwards."""
-    import torch
-
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
 
 
 class StripInfo(gym.Wrapper):

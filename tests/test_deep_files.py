@@ -21,21 +21,11 @@ import zipfile
 import numpy as np
 import pytest
 from gymnasium import spaces
+from support import torch_on_one_thread  # noqa: F401  (the fixture)
 
 from delayed_rl.delays import Constant, Geometric
 
-pytestmark = pytest.mark.sb3
-
-
-@pytest.fixture(autouse=True, scope="module")
-def one_thread():
-    """Runs torch on one thread (the machine's other core is busy), and back afterwards."""
-    import torch
-
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = [pytest.mark.sb3, pytest.mark.usefixtures("torch_on_one_thread")]
 
 
 OBS = spaces.Box(-1.0, 1.0, (3,), np.float32)

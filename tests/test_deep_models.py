@@ -16,32 +16,12 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium import spaces
+from support import torch_on_one_thread  # noqa: F401  (the fixture)
 
 from delayed_rl.delays import Constant, Empirical, Poisson
 from delayed_rl.wrappers import RewardDelay
 
-pytestmark = pytest.mark.sb3
-
-DIAGNOSTIC_KEYS = (
-    "undelayed_reward",
-    "reward_delay",
-    "pending_reward",
-    "flushed_reward",
-    "dropped_reward",
-    "reward_arrivals",
-)
-"""What ``RewardDelay`` adds to ``info`` (what an anonymous learner must not need)."""
-
-
-@pytest.fixture(autouse=True, scope="module")
-def one_thread():
-    """Runs torch on one thread (the machine's other core is busy), and back afterwards."""
-    import torch
-
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = [pytest.mark.sb3, pytest.mark.usefixtures("torch_on_one_thread")]
 
 
 def reward_fn(obs, action):
