@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 import torch
+from numpy.lib.stride_tricks import sliding_window_view
 
 from delayed_rl._validation import check_choice, check_int, check_real
 from delayed_rl.agents.expected_credit import credit_weights
@@ -120,7 +121,7 @@ class DeconvolutionRewardModel(RewardModel):
         groups: list[dict[str, Any]] = [{"params": list(self.network.parameters())}]
         if self.delay_logits is not None:
             groups.append({"params": [self.delay_logits], "lr": self.delay_learning_rate})
-        return torch.optim.Adam(groups, lr=self.learning_rate)
+        return torch.optim.Adam(groups, lr=self.learning_rate, foreach=True)
 
     def _extra_state(self) -> dict[str, torch.Tensor]:
         return {} if self.delay_logits is None else {"delay_logits": self.delay_logits.detach()}
@@ -185,20 +186,21 @@ class DeconvolutionRewardModel(RewardModel):
         obs = history.obs[rows, columns].reshape(-1, *history.obs.shape[2:])
         action = history.action[rows, columns].reshape(-1, *history.action.shape[2:])
         rewards = self.network(torch.as_tensor(obs), torch.as_tensor(action))
-        rewards = rewards.reshape(count, k + length) * torch.as_tensor(valid)
-        lagged = rewards.unfold(1, k + 1, 1)  # [w, i, j] = R̂ of step i + j: lag K − j of i + K
-        allowed = torch.as_tensor(valid).unfold(1, k + 1, 1)
+        lagged = rewards.reshape(count, k + length).unfold(1, k + 1, 1)
+        # [w, i, j] = R̂ of step i + j of window w: lag K − j of its target i + K
+        allowed = sliding_window_view(valid, k + 1, axis=1)
         if self.on_episode_end != "carry":
             episode = np.concatenate(
                 (np.zeros((count, 1), np.int64), np.cumsum(ends, 1)[:, :-1]), 1
             )
-            episode = torch.as_tensor(episode)
-            allowed = allowed & (episode.unfold(1, k + 1, 1) == episode[:, k:, None])
-        pmf = self._pmf()
-        weights = pmf.flip(0).expand(count, length, k + 1)
+            allowed = allowed & (
+                sliding_window_view(episode, k + 1, axis=1) == episode[:, k:, None]
+            )
+        weights = self._pmf().flip(0)  # [j] = p(K − j)
         if self.on_episode_end == "flush":
-            survival = pmf.flip(0).cumsum(0)  # [j] = P(D >= K − j)
+            survival = weights.cumsum(0)  # [j] = P(D >= K − j)
             weights = torch.where(torch.as_tensor(ends[:, k:, None]), survival, weights)
-        predicted = (lagged * weights * allowed).sum(-1)
+        allowed = torch.as_tensor(np.ascontiguousarray(allowed))
+        predicted = (lagged * (weights * allowed)).sum(-1)
         delivered = torch.as_tensor(history.reward[rows[:, k:], columns], dtype=torch.float32)
         return torch.mean((predicted - delivered) ** 2)

@@ -133,7 +133,7 @@ class RewardModel(ABC):
 
     def _make_optimizer(self) -> torch.optim.Optimizer:
         """Adam over the network's parameters (a subclass adds its own)."""
-        return torch.optim.Adam(self.network.parameters(), lr=self.learning_rate)
+        return torch.optim.Adam(self.network.parameters(), lr=self.learning_rate, foreach=True)
 
     def _extra_state(self) -> dict[str, torch.Tensor]:
         """The subclass's learned tensors, by name (saved beside the network's)."""
