@@ -392,21 +392,20 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
         if clock in due:
             delivered = popped = due.pop(clock)
             pending = self._pending - delivered if due else 0.0  # exact 0 once all is in
-            self._pending = exact_sum(due.values()) if pending - pending else pending
+            if pending - pending:  # a float sum passed float64's range: the exact one
+                try:
+                    pending = exact_sum(due.values())
+                except ValueError:  # what stays pending is beyond float64: the step did not happen
+                    self._take_back(delay, reward, previous, popped, before)
+                    raise
+            self._pending = pending
         else:
             delivered = 0.0
         if terminated or truncated:
             try:
                 delivered = self._settle_episode_end(delivered, info)
             except ValueError:  # the flush passed float64's range: the step did not happen
-                if popped is not None:
-                    due[clock] = popped
-                if reward:
-                    if previous is None:
-                        due.pop(clock + delay)
-                    else:
-                        due[clock + delay] = previous
-                self._undo_step(delay, before)
+                self._take_back(delay, reward, previous, popped, before)
                 raise
             if self._watch is not None:
                 self._watch_see(False, (reward,))
@@ -491,6 +490,29 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
         """
         self._undo_step(delay, self._pending)
         self._checked_reward(reward)
+
+    def _take_back(
+        self,
+        delay: int,
+        reward: float,
+        previous: float | None,
+        popped: float | None,
+        pending: float,
+    ) -> None:
+        """Take back a step refused after it scheduled ``reward`` and delivered ``popped``.
+
+        ``previous`` is what was due when ``reward`` is (``None``: nothing), ``pending`` the
+        pending sum before the step.
+        """
+        clock = self._clock - 1
+        if popped is not None:
+            self._due[clock] = popped
+        if reward:
+            if previous is None:
+                self._due.pop(clock + delay)
+            else:
+                self._due[clock + delay] = previous
+        self._undo_step(delay, pending)
 
     def _undo_step(self, delay: int, pending: float) -> None:
         """Take back a step begun but refused: its delay, the clock, the pending sum."""
