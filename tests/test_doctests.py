@@ -48,6 +48,15 @@ def _examples(name: str) -> list[doctest.DocTest]:
 
 
 MODULES = [name for name in _module_names() if _has_examples(name)]
+TORCH_PACKAGE = "delayed_rl.deep"
+"""Its examples build torch models (the ``sb3`` extra): their cases are ``sb3``-marked."""
+
+
+def _case(name: str):
+    """``name`` as a case of :func:`test_doctests`, marked ``sb3`` when its examples need torch."""
+    if name == TORCH_PACKAGE or name.startswith(f"{TORCH_PACKAGE}."):
+        return pytest.param(name, marks=pytest.mark.sb3)
+    return name
 
 
 def test_the_search_finds_the_examples():
@@ -60,7 +69,7 @@ def test_every_module_imports_and_the_search_misses_no_example():
     assert [name for name in _module_names() if _examples(name)] == MODULES
 
 
-@pytest.mark.parametrize("name", MODULES)
+@pytest.mark.parametrize("name", [_case(name) for name in MODULES])
 def test_doctests(name: str) -> None:
     runner = doctest.DocTestRunner(optionflags=OPTIONS)
     for test in _examples(name):
