@@ -60,14 +60,14 @@ def _models() -> dict[str, Callable[[gym.Env], Any] | None]:
 
     return {
         REFERENCE: None,
-        "deconvolution, p known": lambda env: DeconvolutionRewardModel(
+        SHORT_NAMES["known"]: lambda env: DeconvolutionRewardModel(
             *spaces(env), delay=DELAY, seed=0
         ),
-        "deconvolution, p learned": lambda env: DeconvolutionRewardModel(
+        SHORT_NAMES["learned"]: lambda env: DeconvolutionRewardModel(
             *spaces(env), delay=None, max_delay=60, seed=0
         ),
-        "RRD": lambda env: ReturnDecompositionRewardModel(*spaces(env), seed=0),
-        "IRCR": lambda env: IRCRRewardModel(*spaces(env), seed=0),
+        SHORT_NAMES["rrd"]: lambda env: ReturnDecompositionRewardModel(*spaces(env), seed=0),
+        SHORT_NAMES["ircr"]: lambda env: IRCRRewardModel(*spaces(env), seed=0),
     }
 
 
