@@ -8,8 +8,10 @@ reads when a reward was emitted), and a relabelling buffer hands stable-baseline
   ``p`` explains the delivered rewards; ``p`` known or learned;
 - :class:`ReturnDecompositionRewardModel` (RRD) and :class:`IRCRRewardModel`: delay-agnostic
   baselines that use only episode sums;
-- :class:`RelabelingReplayBuffer` (SAC, TD3, DQN) and :class:`RelabelingRolloutBuffer` (PPO, A2C,
-  with :class:`RewardModelCallback`);
+- :class:`RelabelingReplayBuffer` (SAC, TD3, DQN), :class:`RelabelingRolloutBuffer` (PPO, A2C,
+  with :class:`RewardModelCallback`), and their counterparts for ``Dict`` observations
+  (:class:`RelabelingDictReplayBuffer`, :class:`RelabelingDictRolloutBuffer`) and n-step returns
+  (:class:`RelabelingNStepReplayBuffer`);
 - :func:`load_reward_model`, and :func:`make_reward_model` (a model from a mapping, as a
   hyperparameter file gives it).
 
@@ -36,6 +38,9 @@ from typing import Any
 __all__ = [
     "DeconvolutionRewardModel",
     "IRCRRewardModel",
+    "RelabelingDictReplayBuffer",
+    "RelabelingDictRolloutBuffer",
+    "RelabelingNStepReplayBuffer",
     "RelabelingReplayBuffer",
     "RelabelingRolloutBuffer",
     "ReturnDecompositionRewardModel",
@@ -48,6 +53,9 @@ __all__ = [
 _HOMES = {
     "DeconvolutionRewardModel": "deconvolution",
     "IRCRRewardModel": "ircr",
+    "RelabelingDictReplayBuffer": "buffers",
+    "RelabelingDictRolloutBuffer": "buffers",
+    "RelabelingNStepReplayBuffer": "buffers",
     "RelabelingReplayBuffer": "buffers",
     "RelabelingRolloutBuffer": "buffers",
     "ReturnDecompositionRewardModel": "return_decomposition",

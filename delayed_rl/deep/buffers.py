@@ -1,27 +1,49 @@
-"""SB3 buffers that train a reward model on what they receive and hand the algorithm ``R̂``.
+"""SB3 buffers that keep what they receive for a reward model and hand the algorithm ``R̂``.
 
-Both plug into stable-baselines3 through its own extension points, for any algorithm:
+Each is SB3's own buffer with a reward model beside it, for any algorithm built on SB3's
+``OffPolicyAlgorithm`` or ``OnPolicyAlgorithm`` (SAC, TD3, DQN, PPO, A2C, sb3-contrib's TQC...):
 
-- off-policy (SAC, TD3, DQN): ``replay_buffer_class=RelabelingReplayBuffer,
-  replay_buffer_kwargs={"reward_model": model}``. ``add()`` passes each step to the model (which
-  trains on its schedule); a sampled batch's rewards are ``R̂(s, a)`` of its transitions, by the
-  model as it is when sampled (scaled by a ``VecNormalize``'s reward normalisation, as SB3 scales
-  rewards). The delivered rewards stay in ``delivered_rewards``.
-- on-policy (PPO, A2C): ``rollout_buffer_class=RelabelingRolloutBuffer,
-  rollout_buffer_kwargs={"reward_model": model}``, with
-  :class:`~delayed_rl.deep.callbacks.RewardModelCallback` passed to ``learn(callback=...)``.
-  Before returns and advantages are computed, the rollout's rewards become ``R̂(s, a)``. The model
-  keeps its history from one rollout to the next.
+| SB3's buffer | relabelling counterpart | for |
+|---|---|---|
+| ``ReplayBuffer`` | :class:`RelabelingReplayBuffer` | off-policy, ``Box``/``Discrete``... observations |
+| ``NStepReplayBuffer`` | :class:`RelabelingNStepReplayBuffer` | off-policy n-step returns |
+| ``DictReplayBuffer`` | :class:`RelabelingDictReplayBuffer` | off-policy, ``Dict`` observations |
+| ``RolloutBuffer`` | :class:`RelabelingRolloutBuffer` | on-policy |
+| ``DictRolloutBuffer`` | :class:`RelabelingDictRolloutBuffer` | on-policy, ``Dict`` observations |
 
-**The on-policy bootstrap.** At a truncation, SB3's on-policy loop adds ``γ·V(terminal
-observation)`` to the reward before ``add()``. The model must learn from the env's reward, and
-the relabelled reward must keep that bootstrap. ``add()`` cannot tell the two apart, so the
-callback hands the buffer each step's rewards as the env delivered them (it runs before the
-bootstrap is added); the buffer trains the model on those, keeps ``bootstrap = reward − env
-reward`` per step and relabels with ``R̂ + bootstrap``. Without the callback ``add()`` raises.
+Pass one as ``replay_buffer_class`` / ``rollout_buffer_class`` with
+``{"reward_model": model}`` in its kwargs: a reward model, or a mapping
+``{"type": <class name>, <setting>: <value>, ...}`` the buffer makes it from, for its spaces.
+
+**Off-policy.** ``add()`` stores the transition as SB3 does and hands it to the model, which
+keeps it (no training there). When the algorithm samples a batch (in its ``train()``), the
+model first takes the updates its schedule owes (see :mod:`delayed_rl.deep.reward_model`); then,
+once it is :attr:`~delayed_rl.deep.reward_model.RewardModel.ready`, the batch's rewards are
+``R̂(s, a)`` by the model as it is (scaled by a ``VecNormalize``'s reward normalisation, as SB3
+scales rewards; the n-step buffer sums ``R̂`` over its steps). Before that they are the delivered
+rewards. The model sees what SB3 stores: under ``VecNormalize``, the original observations and
+rewards. ``delivered_rewards`` keeps what ``add()`` received.
+
+**On-policy.** The buffer needs :class:`~delayed_rl.deep.callbacks.RewardModelCallback` in
+``learn(callback=...)``, which hands it at every step what ``add()`` cannot see: the env's own
+rewards (at a truncation SB3 adds ``γ·V(terminal observation)`` before ``add()``), the
+observations and rewards before any ``VecNormalize`` (as the off-policy buffer has them) and the
+actions the env executed (clipped to the action space, where SB3 stores them unclipped). The
+model learns from those; before SB3 computes returns and advantages it takes its owed updates,
+and, once ready, the rollout's rewards become ``R̂`` (normalised as the env's were) plus the
+bootstrap SB3 added. The model keeps its history from one rollout to the next.
+
+**Refused at construction**, naming what is wrong: a ``Dict`` space given to a non-``Dict``
+buffer and the reverse; an off-policy algorithm's ``n_steps > 1`` with a buffer that is not the
+n-step one (SB3 would drop it with a warning), or an n-step buffer whose ``n_steps`` differs
+from the algorithm's; ``Dict`` observations with n-step returns (SB3 has no such buffer);
+``HerReplayBuffer``'s settings (HER recomputes rewards itself from the env's ``compute_reward``,
+which a reward model cannot relabel); a rollout longer than the model's history.
 
 Episode boundaries are the ``dones`` of SB3's vector envs (terminated or truncated; autoreset
-makes the next observation the next episode's), for any number of sub-envs.
+makes the next observation the next episode's), for any number of sub-envs. How a buffer finds
+its algorithm, seeds its model and keeps one live model across SB3's save and load:
+:mod:`delayed_rl.deep.binding`.
 """
 
 from __future__ import annotations
@@ -30,29 +52,60 @@ from typing import Any
 
 import numpy as np
 import torch
-from stable_baselines3.common.buffers import ReplayBuffer, RolloutBuffer
+from gymnasium import spaces
+from stable_baselines3.common.buffers import (
+    DictReplayBuffer,
+    DictRolloutBuffer,
+    NStepReplayBuffer,
+    ReplayBuffer,
+    RolloutBuffer,
+)
 
+from delayed_rl._validation import check_int, check_probability
+from delayed_rl.deep.binding import adopt, bind, calling_algorithm
 from delayed_rl.deep.files import make_reward_model
 from delayed_rl.deep.reward_model import RewardModel
 
-__all__ = ["RelabelingReplayBuffer", "RelabelingRolloutBuffer"]
+__all__ = [
+    "RelabelingDictReplayBuffer",
+    "RelabelingDictRolloutBuffer",
+    "RelabelingNStepReplayBuffer",
+    "RelabelingReplayBuffer",
+    "RelabelingRolloutBuffer",
+]
+
+HER_SETTINGS = frozenset({"env", "n_sampled_goal", "goal_selection_strategy", "copy_info_dict"})
+"""``HerReplayBuffer``'s own keyword arguments."""
 
 
-class RelabelingReplayBuffer(ReplayBuffer):
-    """SB3's ``ReplayBuffer`` whose sampled rewards are a reward model's ``R̂(s, a)``.
+def _refuse_unknown(cls: type, settings: dict[str, Any]) -> None:
+    """Refuse keyword arguments a relabelling buffer does not take, HER's by name."""
+    if not settings:
+        return
+    if HER_SETTINGS & set(settings):
+        raise TypeError(
+            f"{cls.__name__} does not take HerReplayBuffer's settings "
+            f"{sorted(HER_SETTINGS & set(settings))}: HER recomputes rewards itself from the env's "
+            "compute_reward, which a reward model cannot relabel; use HerReplayBuffer without a "
+            "reward model"
+        )
+    raise TypeError(f"{cls.__name__} got unexpected keyword arguments {sorted(settings)}")
 
-    Args:
-        buffer_size, observation_space, action_space, device, n_envs: as SB3's ``ReplayBuffer``.
-        optimize_memory_usage, handle_timeout_termination: as SB3's ``ReplayBuffer``.
-        reward_model: the model to train and relabel with (its spaces must be the buffer's),
-            or a mapping ``{"type": <class name>, <setting>: <value>, ...}`` that the buffer
-            makes it from, for its spaces (:func:`~delayed_rl.deep.files.make_reward_model`;
-            a hyperparameter file's form). A model made so lives in the buffer: SB3's
-            ``save_replay_buffer`` keeps it, ``model.save`` keeps only the mapping.
 
-    Attributes:
-        delivered_rewards: the rewards ``add()`` received (``rewards`` holds the last relabelling).
-    """
+def _check_dict_space(buffer: Any, observation_space: Any) -> None:
+    """Refuse a ``Dict`` space in a non-``Dict`` buffer and the reverse, naming the counterpart."""
+    if isinstance(observation_space, spaces.Dict) != buffer.takes_dict:
+        wanted = "a Dict" if buffer.takes_dict else "a non-Dict"
+        raise TypeError(
+            f"{type(buffer).__name__} takes {wanted} observation_space, got "
+            f"{observation_space!r}: use {buffer.counterpart}"
+        )
+
+
+class _RelabelingOffPolicy:
+    """What the off-policy relabelling buffers share (a mixin before SB3's buffer class)."""
+
+    takes_dict = False
 
     def __init__(
         self,
@@ -65,7 +118,12 @@ class RelabelingReplayBuffer(ReplayBuffer):
         handle_timeout_termination: bool = True,
         *,
         reward_model: RewardModel | dict[str, Any],
+        **settings: Any,
     ):
+        own = {key: settings.pop(key) for key in ("n_steps", "gamma") if key in settings}
+        _refuse_unknown(type(self), settings)
+        _check_dict_space(self, observation_space)
+        model = make_reward_model(reward_model, observation_space, action_space)
         super().__init__(
             buffer_size,
             observation_space,
@@ -74,51 +132,155 @@ class RelabelingReplayBuffer(ReplayBuffer):
             n_envs=n_envs,
             optimize_memory_usage=optimize_memory_usage,
             handle_timeout_termination=handle_timeout_termination,
+            **self._own_settings(own),
         )
-        self.reward_model = make_reward_model(reward_model, observation_space, action_space)
+        self.reward_model = model
         self.delivered_rewards = np.zeros_like(self.rewards)
+        self.undelayed_rewards = np.full_like(self.rewards, np.nan)
+        self.watched = False
+        algorithm = calling_algorithm("_setup_model")
+        if algorithm is not None:
+            self._check_algorithm(algorithm)
+            bind(self, algorithm)
 
-    def add(
-        self,
-        obs: np.ndarray,
-        next_obs: np.ndarray,
-        action: np.ndarray,
-        reward: np.ndarray,
-        done: np.ndarray,
-        infos: list[dict[str, Any]],
-    ) -> None:
-        """Store the transition as SB3 does, and pass it to the reward model."""
+    def _own_settings(self, settings: dict[str, Any]) -> dict[str, Any]:
+        """The settings this class's SB3 parent takes beside the common ones (n-step's)."""
+        if settings:
+            raise TypeError(
+                f"{type(self).__name__} takes no {' or '.join(sorted(settings))}: for n-step "
+                "returns use RelabelingNStepReplayBuffer (replay_buffer_kwargs n_steps, gamma)"
+            )
+        return {}
+
+    def _check_algorithm(self, algorithm: Any) -> None:
+        from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
+
+        n_steps = getattr(algorithm, "n_steps", 1)
+        if isinstance(algorithm, OffPolicyAlgorithm) and n_steps > 1:
+            raise ValueError(
+                f"{type(algorithm).__name__}(n_steps={n_steps}) with {type(self).__name__}: SB3 "
+                "ignores n_steps with a custom replay buffer; for n-step returns on R̂ use "
+                "replay_buffer_class=RelabelingNStepReplayBuffer with replay_buffer_kwargs "
+                f"n_steps={n_steps} and gamma (Box or Discrete observations), or n_steps=1"
+            )
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        algorithm = calling_algorithm("load_replay_buffer")
+        if algorithm is not None:
+            adopt(self, algorithm)
+
+    def add(self, obs, next_obs, action, reward, done, infos) -> None:  # noqa: D417
+        """Store the transition as SB3 does, and hand it to the reward model."""
         self.delivered_rewards[self.pos] = np.asarray(reward).reshape(self.n_envs)
+        self.undelayed_rewards[self.pos] = [
+            info.get("undelayed_reward", np.nan) if isinstance(info, dict) else np.nan
+            for info in infos
+        ]
         self.reward_model.add(obs, action, reward, done, infos)
         super().add(obs, next_obs, action, reward, done, infos)
 
+    def sample(self, batch_size: int, env: Any = None) -> Any:
+        """SB3's sample, after the reward model takes the updates its schedule owes."""
+        self.reward_model.train_on_schedule()
+        return super().sample(batch_size, env=env)
+
+    def _rows_read(self, batch_inds: np.ndarray) -> np.ndarray:
+        """The rows a batch's rewards are read from."""
+        return np.unique(batch_inds)
+
     def _get_samples(self, batch_inds: np.ndarray, env: Any = None) -> Any:
-        """SB3's samples, their rewards ``R̂`` of the rows drawn (every sub-env's)."""
-        rows = np.unique(batch_inds)
-        obs = self.observations[rows].reshape(-1, *self.obs_shape)
-        actions = self.actions[rows].reshape(-1, self.action_dim)
-        relabelled = self.reward_model.predict(obs, actions)
-        self.rewards[rows] = relabelled.reshape(rows.size, self.n_envs)
+        """SB3's samples, their rewards ``R̂`` of the rows read (every sub-env's) once ready."""
+        model = self.reward_model
+        if model.ready:
+            rows = self._rows_read(batch_inds)
+            obs = model.observations.flat(model.observations.take(self.observations, rows))
+            actions = self.actions[rows].reshape(-1, *model.actions.shape)
+            relabelled = model.predict(obs, actions)
+            self.rewards[rows] = relabelled.reshape(rows.size, self.n_envs)
+            if self.watched:
+                model.watch(relabelled, self.undelayed_rewards[rows].ravel())
         return super()._get_samples(batch_inds, env)
 
 
-class RelabelingRolloutBuffer(RolloutBuffer):
-    """SB3's ``RolloutBuffer`` whose rewards become ``R̂(s, a)`` (plus any bootstrap).
-
-    The relabelling happens before returns and advantages are computed.
+class RelabelingReplayBuffer(_RelabelingOffPolicy, ReplayBuffer):
+    """SB3's ``ReplayBuffer`` whose sampled rewards are a reward model's ``R̂(s, a)``.
 
     Args:
-        buffer_size, observation_space, action_space, device: as SB3's ``RolloutBuffer``.
-        gae_lambda, gamma, n_envs: as SB3's ``RolloutBuffer``.
-        reward_model: the model to train and relabel with, or a mapping that the buffer makes
-            it from, as :class:`RelabelingReplayBuffer` takes it (``model.save`` keeps a model
-            given as an object; one made from a mapping starts afresh on load).
+        buffer_size, observation_space, action_space, device, n_envs: as SB3's ``ReplayBuffer``.
+        optimize_memory_usage, handle_timeout_termination: as SB3's ``ReplayBuffer``.
+        reward_model: the model to train and relabel with (its spaces must be the buffer's),
+            or a mapping ``{"type": <class name>, <setting>: <value>, ...}`` that the buffer
+            makes it from, for its spaces (:func:`~delayed_rl.deep.files.make_reward_model`;
+            a hyperparameter file's form).
 
     Attributes:
-        delivered_rewards: per step, the rewards the env delivered (from the callback).
-        bootstraps: per step, what SB3 added to them (``γ·V(terminal observation)`` at a
-            truncation, else 0).
+        reward_model: the model.
+        delivered_rewards: the rewards ``add()`` received (``rewards`` holds the last relabelling).
+        undelayed_rewards: ``info["undelayed_reward"]`` of each stored step (NaN where absent),
+            for the diagnostics only.
+        watched: whether relabelled batches go to the model's diagnostics (set by
+            :class:`~delayed_rl.deep.callbacks.RewardModelCallback`).
+
+    Raises:
+        TypeError, ValueError: see the module docstring.
     """
+
+    counterpart = "RelabelingDictReplayBuffer"
+
+
+class RelabelingDictReplayBuffer(_RelabelingOffPolicy, DictReplayBuffer):
+    """SB3's ``DictReplayBuffer`` whose sampled rewards are ``R̂(s, a)``, for ``MultiInputPolicy``.
+
+    Takes what :class:`RelabelingReplayBuffer` takes, for a ``Dict`` observation space (n-step
+    returns are refused, as SB3 has no ``Dict`` n-step buffer).
+    """
+
+    takes_dict = True
+    counterpart = "RelabelingReplayBuffer"
+
+    def _check_algorithm(self, algorithm: Any) -> None:
+        n_steps = getattr(algorithm, "n_steps", 1)
+        if n_steps > 1:
+            raise ValueError(
+                f"{type(algorithm).__name__}(n_steps={n_steps}) with Dict observations: n-step "
+                "returns are not supported for Dict observation spaces (SB3 has no Dict n-step "
+                "buffer); use n_steps=1"
+            )
+
+
+class RelabelingNStepReplayBuffer(_RelabelingOffPolicy, NStepReplayBuffer):
+    """SB3's ``NStepReplayBuffer`` whose n-step sums add up ``R̂`` of each step.
+
+    Takes what :class:`RelabelingReplayBuffer` takes, and SB3's ``n_steps`` (default 3) and
+    ``gamma`` (default 0.99). With an algorithm built with ``n_steps > 1`` they must agree.
+    """
+
+    counterpart = "RelabelingDictReplayBuffer (without n-step returns)"
+
+    def _own_settings(self, settings: dict[str, Any]) -> dict[str, Any]:
+        return {
+            "n_steps": check_int("n_steps", settings.get("n_steps", 3), 1, 2**20),
+            "gamma": check_probability("gamma", settings.get("gamma", 0.99)),
+        }
+
+    def _check_algorithm(self, algorithm: Any) -> None:
+        n_steps = getattr(algorithm, "n_steps", 1)
+        if n_steps > 1 and n_steps != self.n_steps:
+            raise ValueError(
+                f"replay_buffer_kwargs n_steps={self.n_steps} differs from "
+                f"{type(algorithm).__name__}(n_steps={n_steps}): give one value"
+            )
+
+    def _rows_read(self, batch_inds: np.ndarray) -> np.ndarray:
+        steps = np.arange(self.n_steps)
+        return np.unique((batch_inds[:, None] + steps) % self.buffer_size)
+
+
+class _RelabelingOnPolicy:
+    """What the on-policy relabelling buffers share (a mixin before SB3's buffer class)."""
+
+    takes_dict = False
 
     def __init__(
         self,
@@ -131,9 +293,20 @@ class RelabelingRolloutBuffer(RolloutBuffer):
         n_envs: int = 1,
         *,
         reward_model: RewardModel | dict[str, Any],
+        **settings: Any,
     ):
-        self.reward_model = make_reward_model(reward_model, observation_space, action_space)
-        self._env_step: tuple[np.ndarray, np.ndarray, list] | None = None
+        _refuse_unknown(type(self), settings)
+        _check_dict_space(self, observation_space)
+        model = make_reward_model(reward_model, observation_space, action_space)
+        if model.capacity < buffer_size:
+            raise ValueError(
+                f"reward_model's capacity ({model.capacity} steps) must hold a rollout of "
+                f"{buffer_size} steps (the algorithm's n_steps): the rollout is relabelled "
+                "from the model's history"
+            )
+        self.reward_model = model
+        self.vec_normalize = None
+        self._env_step: tuple | None = None
         super().__init__(
             buffer_size,
             observation_space,
@@ -143,6 +316,10 @@ class RelabelingRolloutBuffer(RolloutBuffer):
             gamma=gamma,
             n_envs=n_envs,
         )
+        self.watched = False
+        algorithm = calling_algorithm("_setup_model")
+        if algorithm is not None:
+            bind(self, algorithm)
 
     def reset(self) -> None:
         """SB3's reset, and the per-step records emptied."""
@@ -150,39 +327,119 @@ class RelabelingRolloutBuffer(RolloutBuffer):
         self.delivered_rewards = np.zeros((self.buffer_size, self.n_envs), dtype=np.float32)
         self.bootstraps = np.zeros((self.buffer_size, self.n_envs), dtype=np.float32)
 
-    def receive_env_step(self, rewards: np.ndarray, dones: np.ndarray, infos: list) -> None:
-        """Take the step's env rewards, ``dones`` and ``infos``, before SB3 adds a bootstrap.
+    def receive_env_step(
+        self,
+        observations: Any,
+        actions: Any,
+        rewards: Any,
+        env_rewards: Any,
+        dones: Any,
+        infos: list,
+    ) -> None:
+        """Take what the env did at this step, before SB3 adds a bootstrap and stores it.
 
         :class:`~delayed_rl.deep.callbacks.RewardModelCallback` calls it at every step.
+
+        Args:
+            observations: the observations the actions were chosen at, before any
+                ``VecNormalize``.
+            actions: the actions the env executed (clipped to the action space).
+            rewards: the rewards as the algorithm received them (normalised under
+                ``VecNormalize``), before any bootstrap.
+            env_rewards: the rewards the env delivered, before any ``VecNormalize``.
+            dones: the sub-envs' episode ends.
+            infos: the step's ``infos``.
         """
-        self._env_step = (np.array(rewards, dtype=np.float32), np.array(dones, dtype=bool), infos)
+        self._env_step = (
+            observations,
+            np.array(actions),
+            np.array(rewards, dtype=np.float32),
+            np.array(env_rewards, dtype=np.float64),
+            np.array(dones, dtype=bool),
+            infos,
+        )
 
     def add(self, obs, action, reward, episode_start, value, log_prob) -> None:  # noqa: D417
-        """Store the step as SB3 does; train the model on the env's reward, keep the bootstrap.
+        """Store the step as SB3 does; hand the model what the env did; keep the bootstrap.
 
         Raises:
-            RuntimeError: the callback did not hand over this step's env rewards.
+            RuntimeError: the callback did not hand over this step.
         """
         if self._env_step is None:
             raise RuntimeError(
-                "RelabelingRolloutBuffer needs delayed_rl.deep.RewardModelCallback in "
+                f"{type(self).__name__} needs delayed_rl.deep.RewardModelCallback in "
                 "learn(callback=...): SB3's on-policy loop adds gamma * V(terminal observation) to "
                 "the reward of a truncated step before add(), and only the callback sees the "
-                "env's own reward"
+                "env's own reward, observations and executed actions"
             )
-        delivered, dones, infos = self._env_step
+        observations, actions, delivered, env_rewards, dones, infos = self._env_step
         self._env_step = None
         self.delivered_rewards[self.pos] = delivered.reshape(self.n_envs)
         reward = np.asarray(reward, dtype=np.float32).reshape(self.n_envs)
         self.bootstraps[self.pos] = reward - self.delivered_rewards[self.pos]
-        self.reward_model.add(obs, action, delivered, dones, infos)
+        self.reward_model.add(observations, actions, env_rewards, dones, infos)
         super().add(obs, action, reward, episode_start, value, log_prob)
 
     def compute_returns_and_advantage(self, last_values: torch.Tensor, dones: np.ndarray) -> None:
-        """Relabel the rollout's rewards with ``R̂ + bootstrap``, then SB3's computation."""
+        """Train the model as owed; once ready, relabel with ``R̂ + bootstrap``; then SB3's."""
+        model = self.reward_model
+        model.train_on_schedule()
         steps = self.buffer_size if self.full else self.pos
-        obs = self.observations[:steps].reshape(-1, *self.obs_shape)
-        actions = self.actions[:steps].reshape(-1, self.action_dim)
-        relabelled = self.reward_model.predict(obs, actions).reshape(steps, self.n_envs)
-        self.rewards[:steps] = relabelled + self.bootstraps[:steps]
+        if model.ready and steps:
+            history = model.history
+            rows = history.rows(history.steps_added - steps, history.steps_added)[:, None]
+            envs = np.arange(self.n_envs)[None, :]
+            relabelled = model.reward_tensor(
+                history.observations_at(rows, envs), history.actions_at(rows, envs)
+            ).numpy()
+            if self.watched:
+                model.watch(relabelled, history.undelayed[rows, envs].ravel())
+            scaled = relabelled.reshape(steps, self.n_envs)
+            if self.vec_normalize is not None:
+                scaled = self.vec_normalize.normalize_reward(scaled)
+            self.rewards[:steps] = scaled + self.bootstraps[:steps]
         super().compute_returns_and_advantage(last_values, dones)
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = dict(self.__dict__)
+        state["vec_normalize"] = None
+        return state
+
+
+class RelabelingRolloutBuffer(_RelabelingOnPolicy, RolloutBuffer):
+    """SB3's ``RolloutBuffer`` whose rewards become ``R̂(s, a)`` (plus any bootstrap).
+
+    The relabelling happens before returns and advantages are computed; it needs
+    :class:`~delayed_rl.deep.callbacks.RewardModelCallback` (see the module docstring).
+
+    Args:
+        buffer_size, observation_space, action_space, device: as SB3's ``RolloutBuffer``.
+        gae_lambda, gamma, n_envs: as SB3's ``RolloutBuffer``.
+        reward_model: the model to train and relabel with, or a mapping that the buffer makes
+            it from, as :class:`RelabelingReplayBuffer` takes it.
+
+    Attributes:
+        reward_model: the model.
+        delivered_rewards: per step, the rewards as the algorithm received them, before any
+            bootstrap (from the callback).
+        bootstraps: per step, what SB3 added to them (``γ·V(terminal observation)`` at a
+            truncation, else 0).
+        vec_normalize: the algorithm's ``VecNormalize`` (set by the callback), whose reward
+            normalisation the relabelled rewards get.
+        watched: whether relabelled rollouts go to the model's diagnostics.
+
+    Raises:
+        TypeError, ValueError: see the module docstring.
+    """
+
+    counterpart = "RelabelingDictRolloutBuffer"
+
+
+class RelabelingDictRolloutBuffer(_RelabelingOnPolicy, DictRolloutBuffer):
+    """SB3's ``DictRolloutBuffer`` whose rewards become ``R̂(s, a)``, for ``MultiInputPolicy``.
+
+    Takes what :class:`RelabelingRolloutBuffer` takes, for a ``Dict`` observation space.
+    """
+
+    takes_dict = True
+    counterpart = "RelabelingRolloutBuffer"

@@ -1,51 +1,94 @@
-"""The SB3 callback of the relabelling buffers: env rewards for on-policy, logs for both."""
+"""The SB3 callback of the relabelling buffers: what the env did for on-policy, logs for both."""
 
 from __future__ import annotations
 
+import copy
+
+from stable_baselines3.common.buffers import RolloutBuffer
 from stable_baselines3.common.callbacks import BaseCallback
 
-from delayed_rl.deep.buffers import RelabelingReplayBuffer, RelabelingRolloutBuffer
+from delayed_rl.deep.buffers import _RelabelingOffPolicy, _RelabelingOnPolicy
 
 __all__ = ["RewardModelCallback"]
 
 
 class RewardModelCallback(BaseCallback):
-    """Hands the on-policy buffer each step's env rewards, and logs the reward model.
+    """Hands the on-policy buffer each step of the env, and logs the reward model.
 
-    The rewards go to a :class:`~delayed_rl.deep.buffers.RelabelingRolloutBuffer` at every step;
-    the reward model's metrics go to SB3's logger at each rollout's end.
+    Pass it to ``learn(callback=...)``. The on-policy buffers need it: at every step it hands
+    them the env's own rewards, the observations and rewards before any ``VecNormalize`` and the
+    executed (clipped) actions (see :mod:`delayed_rl.deep.buffers`). With the off-policy buffers
+    it only watches and logs.
 
-    Pass it to ``learn(callback=...)``: the on-policy buffer needs it (see
-    :mod:`delayed_rl.deep.buffers`); with the off-policy buffer it only logs. The keys are
-    ``reward_model/loss`` (the mean since the last log), ``reward_model/rmse`` (against
-    ``info["undelayed_reward"]``, when the infos have it), ``reward_model/mean_delay`` (the
-    deconvolution model's) and ``reward_model/gradient_steps``.
+    While it runs, the buffer hands the model each relabelled batch for its diagnostics, a few
+    sums a batch (:meth:`~delayed_rl.deep.reward_model.RewardModel.watch`), and at each
+    rollout's end the callback writes to SB3's logger ``reward_model/loss`` (the mean since the
+    last write), ``reward_model/rmse`` and ``reward_model/correlation`` (of ``R̂`` against
+    ``info["undelayed_reward"]``, when the infos have it, over the last block of
+    :data:`~delayed_rl.deep.reward_model.DIAGNOSTIC_PAIRS` relabelled rewards),
+    ``reward_model/mean_delay`` (the deconvolution model's) and ``reward_model/updates``.
+    ``benchmarks/deep_reward_model_cost.py`` measures what watching costs a SAC step.
 
     Raises:
-        TypeError: at the start of training, when the algorithm has no relabelling buffer.
+        TypeError: at the start of training, when the algorithm has no relabelling buffer
+            (with ``HerReplayBuffer``, saying why it cannot have one).
     """
 
     def _buffer(self):
         buffer = getattr(self.model, "rollout_buffer", None) or getattr(
             self.model, "replay_buffer", None
         )
-        if not isinstance(buffer, (RelabelingRolloutBuffer, RelabelingReplayBuffer)):
+        if isinstance(buffer, (_RelabelingOnPolicy, _RelabelingOffPolicy)):
+            return buffer
+        if type(buffer).__name__ == "HerReplayBuffer":
             raise TypeError(
-                "RewardModelCallback needs an algorithm with a RelabelingRolloutBuffer or a "
-                f"RelabelingReplayBuffer, got a {type(buffer).__name__}"
+                "RewardModelCallback cannot watch a HerReplayBuffer: HER recomputes rewards "
+                "itself from the env's compute_reward, which a reward model cannot relabel"
             )
-        return buffer
+        raise TypeError(
+            "RewardModelCallback needs an algorithm with a relabelling buffer "
+            "(delayed_rl.deep.RelabelingReplayBuffer, RelabelingRolloutBuffer or their Dict and "
+            f"n-step counterparts), got a {type(buffer).__name__}"
+        )
 
     def _on_training_start(self) -> None:
-        self._buffer()
+        buffer = self._buffer()
+        buffer.watched = True
+        self._normalizer = self.model.get_vec_normalize_env()
+        if isinstance(buffer, RolloutBuffer):
+            buffer.vec_normalize = self._normalizer
+            self._observations = self._original_observations()
+
+    def _original_observations(self):
+        """The observations the next actions are chosen at, before any ``VecNormalize``."""
+        if self._normalizer is not None:
+            return copy.deepcopy(self._normalizer.get_original_obs())
+        return copy.deepcopy(self.model._last_obs)
+
+    def _original_observations_after(self, new_obs):
+        """The observations after this step (autoreset's next episode's), before normalising."""
+        if self._normalizer is not None:
+            return copy.deepcopy(self._normalizer.get_original_obs())
+        return copy.deepcopy(new_obs)
 
     def _on_step(self) -> bool:
         buffer = self._buffer()
-        if isinstance(buffer, RelabelingRolloutBuffer):
+        if isinstance(buffer, RolloutBuffer):
+            rewards = self.locals["rewards"]
+            original = rewards if self._normalizer is None else self._normalizer.get_original_reward()
             buffer.receive_env_step(
-                self.locals["rewards"], self.locals["dones"], self.locals["infos"]
+                self._observations,
+                self.locals["clipped_actions"],
+                rewards,
+                original,
+                self.locals["dones"],
+                self.locals["infos"],
             )
+            self._observations = self._original_observations_after(self.locals["new_obs"])
         return True
 
     def _on_rollout_end(self) -> None:
         self._buffer().reward_model.record(self.logger)
+
+    def _on_training_end(self) -> None:
+        self._buffer().watched = False

@@ -29,6 +29,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 
 from delayed_rl._validation import check_choice, check_int, check_real
 from delayed_rl.agents.expected_credit import credit_weights
+from delayed_rl.deep.network import as_tensors
 from delayed_rl.deep.reward_model import RewardModel
 from delayed_rl.delays import Delay, Empirical, as_delay
 from delayed_rl.wrappers import EPISODE_END_MODES
@@ -43,8 +44,8 @@ class DeconvolutionRewardModel(RewardModel):
     """``R̂(s, a)`` learned by deconvolving the delivered rewards, with ``p`` known or learned.
 
     Args:
-        observation_space: the env's observation space (``Box`` or ``Discrete``).
-        action_space: its action space (``Box`` or ``Discrete``).
+        observation_space: the env's observation space (any the base class takes).
+        action_space: its action space (likewise).
         delay: the delay distribution (a :class:`~delayed_rl.delays.Delay`, a number read as a
             Poisson mean, or a ``to_dict()`` description), or ``None`` to learn it.
         max_delay: ``K``, the longest delay modelled: required with ``delay=None``; with a known
@@ -160,8 +161,11 @@ class DeconvolutionRewardModel(RewardModel):
         return float(np.arange(pmf.size) @ pmf)
 
     def metrics(self) -> dict[str, float]:
-        """The learned (or known) mean delay."""
-        return {"mean_delay": self.mean_delay}
+        """The learned (or known) mean delay (computed once after each update)."""
+        computed = getattr(self, "_mean_delay_at", None)
+        if computed is None or computed[0] != self.updates_taken:
+            self._mean_delay_at = (self.updates_taken, self.mean_delay)
+        return {"mean_delay": self._mean_delay_at[1]}
 
     # ------------------------------------------------------------------ the loss
     def loss(self) -> torch.Tensor | None:
@@ -183,9 +187,9 @@ class DeconvolutionRewardModel(RewardModel):
         rows = steps % history.capacity
         columns = envs[:, None]
         ends = history.episode_end[rows, columns] & valid
-        obs = history.obs[rows, columns].reshape(-1, *history.obs.shape[2:])
-        action = history.action[rows, columns].reshape(-1, *history.action.shape[2:])
-        rewards = self.network(torch.as_tensor(obs), torch.as_tensor(action))
+        obs = history.observations_at(rows, columns)
+        action = history.actions_at(rows, columns)
+        rewards = self.network(as_tensors(obs), as_tensors(action))
         lagged = rewards.reshape(count, k + length).unfold(1, k + 1, 1)
         # [w, i, j] = R̂ of step i + j of window w: lag K − j of its target i + K
         allowed = sliding_window_view(valid, k + 1, axis=1)

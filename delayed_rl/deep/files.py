@@ -10,6 +10,7 @@ history's shapes, dtypes and values (actions and observations inside their space
 
 from __future__ import annotations
 
+import inspect
 import io
 import json
 import pickle
@@ -22,7 +23,7 @@ import torch
 
 from delayed_rl.deep.encoding import SpaceEncoding
 from delayed_rl.deep.history import TransitionHistory
-from delayed_rl.deep.reward_model import FORMAT, MAX_FILE_BYTES, RewardModel
+from delayed_rl.deep.reward_model import FORMAT, HISTORY_ARRAYS, MAX_FILE_BYTES, RewardModel
 
 __all__ = ["load_reward_model", "make_reward_model"]
 
@@ -42,7 +43,9 @@ def make_reward_model(spec: Any, observation_space: Any, action_space: Any) -> R
     ``spec`` is a reward model (returned as it is, after its spaces are checked), or a mapping
     ``{"type": <class name>, <setting>: <value>, ...}``: one of the library's reward models
     (``DeconvolutionRewardModel``, ``ReturnDecompositionRewardModel``, ``IRCRRewardModel``) and
-    its keyword arguments, as a hyperparameter file writes it (rl-zoo3's YAML, say).
+    its keyword arguments, as a hyperparameter file writes it (rl-zoo3's YAML, say). A model
+    made from a mapping without a ``seed`` takes one from the algorithm whose buffer makes it
+    (:mod:`delayed_rl.deep.binding`).
 
     Raises:
         TypeError: ``spec`` is neither, or ``type`` is not a string; a setting's type (the
@@ -57,7 +60,9 @@ def make_reward_model(spec: Any, observation_space: Any, action_space: Any) -> R
         ):
             if encoding.to_dict() != SpaceEncoding(name, space).to_dict():
                 raise ValueError(
-                    f"reward_model was made for the {name} {encoding.space}, the buffer's is {space}"
+                    f"reward_model was made for the {name} {encoding.space}, the buffer's is "
+                    f"{space} (SB3 moves an image's channels first: make the model for the "
+                    "algorithm's spaces, agent.observation_space, or give a mapping)"
                 )
         return spec
     if not isinstance(spec, dict):
@@ -72,7 +77,20 @@ def make_reward_model(spec: Any, observation_space: Any, action_space: Any) -> R
         raise TypeError(f"reward_model's 'type' must be a class name (a string), got {kind!r}")
     if kind not in classes:
         raise ValueError(f"reward_model's 'type' must be one of {sorted(classes)}, got {kind!r}")
+    unknown = sorted(set(settings) - set(_setting_names(classes[kind])))
+    if unknown:
+        raise ValueError(
+            f"reward_model's settings {unknown} are not {kind}'s: it takes "
+            f"{sorted(_setting_names(classes[kind]))}"
+        )
     return classes[kind](observation_space, action_space, **settings)
+
+
+def _setting_names(kind: type[RewardModel]) -> tuple[str, ...]:
+    """The keyword settings ``kind`` takes (its own, then every reward model's)."""
+    parameters = inspect.signature(RewardModel.__init__).parameters
+    common = tuple(name for name, p in parameters.items() if p.kind is p.KEYWORD_ONLY)
+    return (*kind.own_settings, *common)
 
 
 def _member(archive: zipfile.ZipFile, name: str, path: Path) -> bytes | None:
@@ -185,15 +203,15 @@ def _load_counters(model: RewardModel, header: dict[str, Any], arrays: bytes | N
     counters = header.get("counters")
     try:
         n_envs, steps = int(counters["n_envs"]), int(counters["steps_added"])
-        model.gradient_steps_taken = int(counters["gradient_steps_taken"])
-        model._since_round = int(counters["since_round"])
+        model.updates_taken = int(counters["updates_taken"])
         model.rng.bit_generator.state = header["rng"]
     except (KeyError, TypeError, ValueError) as error:
         raise ValueError(f"{path}: bad counters or generator state: {error}") from None
-    if min(n_envs, steps, model.gradient_steps_taken, model._since_round) < 0:
+    if min(n_envs, steps, model.updates_taken) < 0:
         raise ValueError(f"{path}: negative counters {counters}")
     if (arrays is None) != (n_envs == 0):
         raise ValueError(f"{path}: history.npz must be there exactly when n_envs > 0")
+    model.takes_algorithm_seed = False
     if arrays is None:
         return
     try:
@@ -202,31 +220,44 @@ def _load_counters(model: RewardModel, header: dict[str, Any], arrays: bytes | N
     except (ValueError, OSError, EOFError, zipfile.BadZipFile) as error:
         raise ValueError(f"{path}: history.npz is not readable: {error}") from None
     history = TransitionHistory(model.observations, model.actions, n_envs, model.capacity)
-    for name, value in loaded.items():
-        if name not in ("obs", "action", "reward", "episode_end", "undelayed"):
-            raise ValueError(f"{path}: history.npz holds an unknown array {name!r}")
-        empty = getattr(history, name)
+    expected = {
+        **model.observations.arrays(history.obs, "obs"),
+        **model.actions.arrays(history.action, "action"),
+        **{name: getattr(history, name) for name in HISTORY_ARRAYS},
+    }
+    unknown = sorted(set(loaded) - set(expected))
+    if unknown:
+        raise ValueError(f"{path}: history.npz holds unknown arrays {unknown}")
+    missing = sorted(set(expected) - set(loaded))
+    if missing:
+        raise ValueError(f"{path}: history.npz misses arrays {missing}")
+    for name, empty in expected.items():
+        value = loaded[name]
         if value.shape != empty.shape or value.dtype != empty.dtype:
             raise ValueError(
                 f"{path}: history array {name} must be {empty.dtype} of shape {empty.shape}, "
                 f"got {value.dtype} of shape {value.shape}"
             )
-    if set(loaded) != {"obs", "action", "reward", "episode_end", "undelayed"}:
-        raise ValueError(f"{path}: history.npz misses arrays")
+    obs = model.observations.from_arrays(loaded, "obs")
+    action = model.actions.from_arrays(loaded, "action")
     held = history.rows(max(0, steps - model.capacity), steps)
-    model.observations.batch(
-        loaded["obs"][held].reshape(-1, *model.observations.shape), held.size * n_envs
-    )
-    model.actions.batch(
-        loaded["action"][held].reshape(-1, *model.actions.shape), held.size * n_envs
-    )
+    count = held.size * n_envs
+    model.observations.batch(model.observations.flat(model.observations.take(obs, held)), count)
+    model.actions.batch(model.actions.flat(model.actions.take(action, held)), count)
     if not np.isfinite(loaded["reward"][held]).all():
         raise ValueError(f"{path}: history rewards must be finite")
-    _replay(history, loaded, steps)
+    _replay(history, model, obs, action, loaded, steps)
     model.history = history
 
 
-def _replay(history: TransitionHistory, loaded: dict[str, np.ndarray], steps: int) -> None:
+def _replay(
+    history: TransitionHistory,
+    model: RewardModel,
+    obs: Any,
+    action: Any,
+    loaded: dict[str, np.ndarray],
+    steps: int,
+) -> None:
     """Fill ``history`` by adding the held steps again, so its episode index is rebuilt."""
     first = max(0, steps - history.capacity)
     history.steps_added = first
@@ -234,8 +265,8 @@ def _replay(history: TransitionHistory, loaded: dict[str, np.ndarray], steps: in
     for step in range(first, steps):
         row = step % history.capacity
         history.add(
-            loaded["obs"][row],
-            loaded["action"][row],
+            model.observations.take(obs, row),
+            model.actions.take(action, row),
             loaded["reward"][row],
             loaded["episode_end"][row],
             loaded["undelayed"][row],

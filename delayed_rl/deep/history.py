@@ -14,6 +14,7 @@ for diagnostics only: nothing a model learns from reads it.
 from __future__ import annotations
 
 from collections import deque
+from typing import Any
 
 import numpy as np
 
@@ -37,7 +38,8 @@ class TransitionHistory:
 
     Attributes:
         obs, action, reward, episode_end, undelayed: the ring's arrays, indexed
-            ``[step % capacity, env]``.
+            ``[step % capacity, env]`` (``obs`` and ``action`` are dicts of arrays for a ``Dict``
+            space: read them with :meth:`observations_at` and :meth:`actions_at`).
         episodes: the finished episodes wholly inside the ring (from :attr:`first_whole`),
             in order of first step, as ``(env, first_step, length, delivered_sum)``.
         steps_added: how many steps were added.
@@ -48,7 +50,7 @@ class TransitionHistory:
     ):
         self.n_envs = check_int("n_envs", n_envs, 1)
         self.capacity = check_int("capacity", capacity, 1)
-        per_step = n_envs * (observations.empty(1).nbytes + actions.empty(1).nbytes + 8 + 1 + 8)
+        per_step = n_envs * (observations.value_bytes + actions.value_bytes + 8 + 1 + 8)
         if per_step * self.capacity > MAX_HISTORY_BYTES:
             raise ValueError(
                 f"capacity must keep the history within MAX_HISTORY_BYTES = 2**34 bytes, got "
@@ -82,8 +84,8 @@ class TransitionHistory:
         """Append one step of every sub-env (arrays checked by the caller, one row a sub-env)."""
         step = self.steps_added
         row = step % self.capacity
-        self.obs[row] = obs
-        self.action[row] = action
+        self.observations.put(self.obs, row, obs)
+        self.actions.put(self.action, row, action)
         self.reward[row] = reward
         self.episode_end[row] = episode_end
         self.undelayed[row] = undelayed
@@ -117,6 +119,14 @@ class TransitionHistory:
     def rows(self, first: int, stop: int) -> np.ndarray:
         """The ring rows of steps ``first .. stop − 1`` (all held)."""
         return np.arange(first, stop) % self.capacity
+
+    def observations_at(self, rows: np.ndarray, envs: np.ndarray) -> Any:
+        """The stored observations at ``[rows, envs]``, flattened to one batch."""
+        return self.observations.flat(self.observations.take(self.obs, (rows, envs)))
+
+    def actions_at(self, rows: np.ndarray, envs: np.ndarray) -> Any:
+        """The stored actions at ``[rows, envs]``, flattened to one batch."""
+        return self.actions.flat(self.actions.take(self.action, (rows, envs)))
 
     def episode_ids(self, env: int, first: int, stop: int) -> np.ndarray:
         """An id per step ``first .. stop − 1`` of sub-env ``env``: equal within an episode."""

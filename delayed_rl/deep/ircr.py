@@ -18,6 +18,7 @@ import numpy as np
 import torch
 
 from delayed_rl.deep.return_decomposition import sample_episodes
+from delayed_rl.deep.network import as_tensors
 from delayed_rl.deep.reward_model import RewardModel
 
 __all__ = ["IRCRRewardModel"]
@@ -27,8 +28,8 @@ class IRCRRewardModel(RewardModel):
     """IRCR: ``R̂(s, a)`` regressed on the normalised return of the episode holding each step.
 
     Args:
-        observation_space: the env's observation space (``Box`` or ``Discrete``).
-        action_space: its action space (``Box`` or ``Discrete``).
+        observation_space: the env's observation space (any the base class takes).
+        action_space: its action space (likewise).
         **kwargs: the :class:`~delayed_rl.deep.reward_model.RewardModel` settings; a batch is
             ``batch_size`` steps, each from an episode drawn uniformly among the finished ones.
 
@@ -52,6 +53,7 @@ class IRCRRewardModel(RewardModel):
             np.ones(len(episodes)) if scale == 0 or math.isnan(scale) else (total - low) / scale
         )
         rewards = self.network(
-            torch.as_tensor(history.obs[rows, env]), torch.as_tensor(history.action[rows, env])
+            as_tensors(history.observations_at(rows, env)),
+            as_tensors(history.actions_at(rows, env)),
         )
         return torch.mean((rewards - torch.as_tensor(target, dtype=torch.float32)) ** 2)

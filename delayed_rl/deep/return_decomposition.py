@@ -17,6 +17,7 @@ import numpy as np
 import torch
 
 from delayed_rl._validation import check_int
+from delayed_rl.deep.network import as_tensors
 from delayed_rl.deep.reward_model import RewardModel
 
 __all__ = ["ReturnDecompositionRewardModel", "sample_episodes"]
@@ -38,8 +39,8 @@ class ReturnDecompositionRewardModel(RewardModel):
     """RRD: ``mean_{i ∈ I} R̂(s_i, a_i) ≈ G / T`` for random subsets ``I`` of episodes.
 
     Args:
-        observation_space: the env's observation space (``Box`` or ``Discrete``).
-        action_space: its action space (``Box`` or ``Discrete``).
+        observation_space: the env's observation space (any the base class takes).
+        action_space: its action space (likewise).
         subset_size: the steps drawn (without replacement) from each episode of a batch
             (all of a shorter episode's); a batch is ``ceil(batch_size / subset_size)`` episodes.
         **kwargs: the :class:`~delayed_rl.deep.reward_model.RewardModel` settings.
@@ -70,7 +71,8 @@ class ReturnDecompositionRewardModel(RewardModel):
         rows, envs = np.concatenate(rows), np.concatenate(envs)
         group = torch.as_tensor(np.concatenate(groups))
         rewards = self.network(
-            torch.as_tensor(history.obs[rows, envs]), torch.as_tensor(history.action[rows, envs])
+            as_tensors(history.observations_at(rows, envs)),
+            as_tensors(history.actions_at(rows, envs)),
         )
         sums = torch.zeros(len(episodes)).index_add(0, group, rewards)
         sizes = torch.zeros(len(episodes)).index_add(0, group, torch.ones_like(rewards))

@@ -1,25 +1,46 @@
-"""What every reward model shares: its network, its history, when it trains, files and logs.
+"""What every reward model shares: its network, its history, its schedule, files and diagnostics.
 
 A reward model learns ``R̂(s, a)`` from the rewards an env *delivered*, and nothing else: it is
 anonymous. :meth:`RewardModel.add` takes one step of every sub-env (observations, actions,
-delivered rewards, episode ends and, optionally, the step's ``infos``), keeps it in a
-:class:`~delayed_rl.deep.history.TransitionHistory` and trains the network on its schedule;
-:meth:`RewardModel.predict` gives ``R̂`` for a batch. Each subclass states its loss
-(:meth:`RewardModel.loss`). The ``infos`` serve diagnostics only (the RMSE of ``R̂`` against
-``info["undelayed_reward"]`` where present): learning is the same to the bit without them.
+delivered rewards, episode ends and, optionally, the step's ``infos``) and keeps it in a
+:class:`~delayed_rl.deep.history.TransitionHistory`; it does not train. :meth:`RewardModel.predict`
+gives ``R̂`` for a batch. Each subclass states its loss (:meth:`RewardModel.loss`). The
+``infos`` serve diagnostics only (``info["undelayed_reward"]`` where present): learning is the
+same to the bit without them.
 
-**Schedule.** Counted in calls of :meth:`~RewardModel.add` (steps of the vector env, as SB3's
-``train_freq`` counts): once ``learning_starts`` steps are in, every ``train_every`` steps the
-model takes ``gradient_steps`` Adam steps. Its randomness (initial weights, the batches it
-samples) comes from its own ``seed``: it draws nothing from numpy's or torch's global generators,
-so adding a reward model leaves the algorithm's own random draws unchanged.
+**Schedule.** The model trains when the algorithm trains: the relabelling buffers call
+:meth:`~RewardModel.train_on_schedule` when SB3 samples a batch (off-policy) or before it
+computes a rollout's advantages (on-policy), never from ``add()``. The schedule has two
+settings, named so as not to be mistaken for the algorithm's ``learning_starts`` and
+``gradient_steps``:
+
+- ``updates_per_step``: Adam updates owed for each step added (a vector-env step: every
+  sub-env's transition); owed updates are taken at the next :meth:`train_on_schedule`;
+- ``warmup_updates``: updates taken on top, at once, the first time the loss can be computed
+  (the deconvolution needs a window of steps; RRD and IRCR a finished episode). The model is
+  :attr:`~RewardModel.ready` once it has taken them, and only then does a buffer relabel with
+  ``R̂``. Until then the algorithm learns from the delivered rewards, the stream the model
+  itself learns from (SB3 gives a buffer no way to hold a gradient step back, and an untrained
+  ``R̂`` is noise, where the delivered rewards at least sum to the returns).
+
+**Seeds.** A model's randomness (initial weights, the batches it samples) comes from its own
+``seed``: it draws nothing from numpy's or torch's global generators, so adding a reward model
+leaves the algorithm's own random draws unchanged. A model made with ``seed=None`` draws fresh
+entropy, unless a relabelling buffer of a seeded algorithm takes it before its first step: then
+it takes the seed :func:`~delayed_rl.deep.seeding.reward_model_seed` derives from the
+algorithm's (and is initialised again from it).
+
+**Diagnostics.** While a :class:`~delayed_rl.deep.callbacks.RewardModelCallback` watches, the
+buffers hand :meth:`~RewardModel.watch` each relabelled batch beside its undelayed rewards
+(where ``info`` had them): the RMSE and correlation logged are over the last block of
+:data:`DIAGNOSTIC_PAIRS` such pairs, at the cost of a few sums a batch.
 
 **Files.** :meth:`~RewardModel.save` writes a zip of JSON (the class, its settings, spaces and
 counters), tensors (read back with ``torch.load(weights_only=True)``) and ``.npz`` arrays (read
-without pickle); :func:`~delayed_rl.deep.files.load_reward_model` checks every part before use. A reward model also
-pickles, which is how SB3's ``save_replay_buffer`` and ``model.save`` (through the buffer's
-kwargs) keep it. Results are the same bits on one machine; torch's CPU kernels differ between
-CPUs, so across machines runs agree in distribution, not bit for bit.
+without pickle); :func:`~delayed_rl.deep.files.load_reward_model` checks every part before use.
+A reward model also pickles, which is how SB3's ``save_replay_buffer`` and ``model.save``
+(through the buffer's kwargs) keep it. Results are the same bits on one machine; torch's CPU
+kernels differ between CPUs, so across machines runs agree in distribution, not bit for bit.
 """
 
 from __future__ import annotations
@@ -40,17 +61,21 @@ from delayed_rl._validation import check_int, check_real
 from delayed_rl._version import __version__
 from delayed_rl.deep.encoding import SpaceEncoding
 from delayed_rl.deep.history import TransitionHistory
-from delayed_rl.deep.network import RewardNetwork, check_hidden_sizes
+from delayed_rl.deep.network import RewardNetwork, as_tensors, check_hidden_sizes
 
-__all__ = ["FORMAT", "RewardModel"]
+__all__ = ["DIAGNOSTIC_PAIRS", "FORMAT", "RewardModel"]
 
-FORMAT = "delayed-rl reward model 1"
+FORMAT = "delayed-rl reward model 2"
 """The ``format`` a reward model file declares."""
 
 MAX_FILE_BYTES = 2**34
 """The largest member of a reward model file that is read."""
 
-_ARRAYS = ("obs", "action", "reward", "episode_end", "undelayed")
+DIAGNOSTIC_PAIRS = 4096
+"""The relabelled rewards a logged RMSE and correlation are computed over (at least)."""
+
+HISTORY_ARRAYS = ("reward", "episode_end", "undelayed")
+"""The history's arrays a file holds beside its observations and actions."""
 
 
 def _pair(name: str, value: Any, count: int) -> np.ndarray:
@@ -63,29 +88,55 @@ def _pair(name: str, value: Any, count: int) -> np.ndarray:
     return array.reshape(count)
 
 
+def _count(encoding: SpaceEncoding, values: Any) -> int:
+    """How many values of the space ``values`` holds (read off its first key for a ``Dict``).
+
+    Raises:
+        TypeError: a ``Dict`` space's values that are not a dict.
+        ValueError: a ``Dict`` space's values without its first key.
+    """
+    if encoding.parts is not None:
+        key = next(iter(encoding.parts))
+        if not isinstance(values, dict):
+            raise TypeError(
+                f"{encoding.name} values must be a dict with keys {list(encoding.parts)}, got "
+                f"{type(values).__name__}"
+            )
+        if key not in values:
+            raise ValueError(f"{encoding.name} values must have the key {key!r}")
+        return _count(encoding.parts[key], values[key])
+    return np.asarray(values).size // int(np.prod(encoding.shape, dtype=np.int64))
+
+
 class RewardModel(ABC):
     """A learned ``R̂(s, a)``, fitted to the delivered rewards by a subclass's :meth:`loss`.
 
     Args:
-        observation_space: the env's observation space (``Box`` or ``Discrete``).
-        action_space: its action space (``Box`` or ``Discrete``), as the algorithm stores actions
-            (SAC and TD3 store them squashed to [-1, 1]: a buffer trains and queries the model
-            with what it stores).
+        observation_space: the env's observation space (``Box``, ``Discrete``,
+            ``MultiDiscrete``, ``MultiBinary`` or a ``Dict`` of those; see
+            :mod:`delayed_rl.deep.network` for how each is read).
+        action_space: its action space, likewise, as the algorithm stores actions (SAC and TD3
+            store them squashed to [-1, 1]: a buffer trains and queries the model with what it
+            stores; the on-policy buffer, with the actions the env executed).
         hidden_sizes: the MLP's hidden layers.
         learning_rate: Adam's step size.
-        batch_size: how many targets a gradient step fits (a subclass says what a target is).
-        learning_starts: steps added before the first gradient step.
-        train_every: steps between training rounds.
-        gradient_steps: gradient steps a round.
+        batch_size: how many targets an update fits (a subclass says what a target is).
+        updates_per_step: Adam updates owed for each step added (see the module docstring).
+        warmup_updates: updates owed on top of those, taken at once when the loss first can be
+            computed; the model is :attr:`ready` after them.
         capacity: steps of every sub-env the history keeps (its memory: ``capacity`` · n_envs
             transitions).
-        seed: seeds the initial weights and the batches (``None``: fresh entropy).
+        seed: seeds the initial weights and the batches (``None``: fresh entropy, or the seed a
+            seeded algorithm's buffer derives for it; see the module docstring).
 
     Attributes:
         network: the :class:`~delayed_rl.deep.network.RewardNetwork`.
         history: the :class:`~delayed_rl.deep.history.TransitionHistory` (made at the first
             :meth:`add`, which fixes the number of sub-envs).
-        gradient_steps_taken: how many gradient steps it took.
+        updates_taken: how many Adam updates it took.
+        seed: the seed its randomness came from.
+        takes_algorithm_seed: whether a seeded algorithm's buffer will seed it (it was made
+            with ``seed=None`` and has seen no step).
     """
 
     #: The settings a subclass adds, in its constructor's order (saved in files).
@@ -99,9 +150,8 @@ class RewardModel(ABC):
         hidden_sizes: Sequence[int] = (64, 64),
         learning_rate: float = 1e-3,
         batch_size: int = 256,
-        learning_starts: int = 256,
-        train_every: int = 1,
-        gradient_steps: int = 1,
+        updates_per_step: float = 1.0,
+        warmup_updates: int = 1000,
         capacity: int = 100_000,
         seed: int | None = None,
     ):
@@ -110,22 +160,40 @@ class RewardModel(ABC):
         self.hidden_sizes = check_hidden_sizes(hidden_sizes)
         self.learning_rate = check_real("learning_rate", learning_rate, 0.0, 1e6, low_open=True)
         self.batch_size = check_int("batch_size", batch_size, 1, 2**20)
-        self.learning_starts = check_int("learning_starts", learning_starts, 0)
-        self.train_every = check_int("train_every", train_every, 1)
-        self.gradient_steps = check_int("gradient_steps", gradient_steps, 0, 2**20)
+        self.updates_per_step = check_real("updates_per_step", updates_per_step, 0.0, 2**20)
+        self.warmup_updates = check_int("warmup_updates", warmup_updates, 1, 2**31)
         self.capacity = check_int("capacity", capacity, 1)
-        seed = check_int("seed", seed, 0, optional=True)
-        self.seed = int(np.random.SeedSequence().entropy % 2**63) if seed is None else seed
-        self.rng = np.random.default_rng(self.seed)
+        seed = check_int("seed", seed, 0, 2**63 - 1, optional=True)
+        self.takes_algorithm_seed = seed is None
+        self.history: TransitionHistory | None = None
+        self.updates_taken = 0
+        self._losses: list[float] = []
+        self._watched = np.zeros(7)  # pairs, sum e², sum x, sum y, sum x², sum y², sum xy
+        self._diagnostics: dict[str, float] = {}
+        self._initialise(int(np.random.SeedSequence().entropy % 2**63) if seed is None else seed)
+
+    def _initialise(self, seed: int) -> None:
+        """Make the generator, the network, the subclass's parameters and Adam from ``seed``."""
+        self.seed = seed
+        self.rng = np.random.default_rng(seed)
         with torch.random.fork_rng(devices=[]):
-            torch.manual_seed(self.seed)
+            torch.manual_seed(seed)
             self.network = RewardNetwork(self.observations, self.actions, self.hidden_sizes)
             self._make_parameters()
         self.optimizer = self._make_optimizer()
-        self.history: TransitionHistory | None = None
-        self.gradient_steps_taken = 0
-        self._since_round = 0
-        self._losses: list[float] = []
+
+    def reseed(self, seed: int) -> None:
+        """Start afresh from ``seed``: weights, parameters, Adam and generator (before any step).
+
+        Raises:
+            TypeError, ValueError: ``seed`` is not an integer in ``0..2**63 − 1``.
+            RuntimeError: the model has seen a step.
+        """
+        seed = check_int("seed", seed, 0, 2**63 - 1)
+        if self.history is not None:
+            raise RuntimeError("a reward model that has seen a step cannot be seeded again")
+        self._initialise(seed)
+        self.takes_algorithm_seed = False
 
     # ------------------------------------------------------------------ what a subclass adds
     def _make_parameters(self) -> None:  # noqa: B027 (a hook: most models add nothing)
@@ -151,7 +219,7 @@ class RewardModel(ABC):
         """One batch's loss, sampled from the history with ``rng`` (``None``: too little data)."""
 
     def metrics(self) -> dict[str, float]:
-        """What the model logs beside its loss and RMSE (the learned mean delay...)."""
+        """What the model logs beside its loss and diagnostics (the learned mean delay...)."""
         return {}
 
     # ------------------------------------------------------------------ the stream
@@ -163,10 +231,11 @@ class RewardModel(ABC):
         episode_ends: Any,
         infos: Sequence[dict] | None = None,
     ) -> None:
-        """Take one step of every sub-env, then train if the schedule says so.
+        """Keep one step of every sub-env (it trains only when asked: :meth:`train_on_schedule`).
 
         Args:
-            observations: one observation a sub-env, as the algorithm stores them.
+            observations: one observation a sub-env, as the algorithm stores them (a dict of
+                arrays for a ``Dict`` space).
             actions: the actions taken, likewise.
             rewards: the rewards the env delivered at this step.
             episode_ends: whether each sub-env's episode ended at this step (terminated or
@@ -199,33 +268,54 @@ class RewardModel(ABC):
                     undelayed[i] = float(value)
         if self.history is None:  # made once the first step is checked (it fixes n_envs)
             self.history = TransitionHistory(self.observations, self.actions, count, self.capacity)
+            self.takes_algorithm_seed = False
         self.history.add(obs, action, reward, ends, undelayed)
-        self._since_round += 1
-        if self.history.steps_added >= self.learning_starts and (
-            self._since_round >= self.train_every
-        ):
-            self._since_round = 0
-            self.train(self.gradient_steps)
 
-    def train(self, gradient_steps: int) -> None:
-        """Take up to ``gradient_steps`` Adam steps on batches from the history."""
-        for _ in range(check_int("gradient_steps", gradient_steps, 0)):
+    @property
+    def updates_due(self) -> int:
+        """The updates the schedule asks for by now (the warm-up's included)."""
+        steps = 0 if self.history is None else self.history.steps_added
+        return math.floor(steps * self.updates_per_step) + self.warmup_updates if steps else 0
+
+    @property
+    def ready(self) -> bool:
+        """Whether the warm-up is done: a buffer relabels with ``R̂`` only then."""
+        return self.updates_taken >= self.warmup_updates
+
+    def train_on_schedule(self) -> int:
+        """Take the updates the schedule owes (none while the loss cannot be computed).
+
+        Returns:
+            The number of updates taken.
+        """
+        return self.train(max(0, self.updates_due - self.updates_taken))
+
+    def train(self, updates: int) -> int:
+        """Take up to ``updates`` Adam updates on batches from the history.
+
+        Returns:
+            The number taken (fewer when the loss cannot be computed yet).
+        """
+        taken = 0
+        for _ in range(check_int("updates", updates, 0)):
             if self.history is None:
-                return
+                break
             loss = self.loss()
             if loss is None:
-                return
+                break
             self.optimizer.zero_grad(set_to_none=True)
             loss.backward()
             self.optimizer.step()
-            self.gradient_steps_taken += 1
+            self.updates_taken += 1
+            taken += 1
             self._losses.append(float(loss.detach()))
+        return taken
 
     # ------------------------------------------------------------------ predictions
-    def reward_tensor(self, observations: np.ndarray, actions: np.ndarray) -> torch.Tensor:
-        """``R̂`` of stored values (arrays as the history keeps them), without gradients."""
+    def reward_tensor(self, observations: Any, actions: Any) -> torch.Tensor:
+        """``R̂`` of stored values (as the history keeps them, flattened), without gradients."""
         with torch.no_grad():
-            return self.network(torch.as_tensor(observations), torch.as_tensor(actions))
+            return self.network(as_tensors(observations), as_tensors(actions))
 
     def predict(self, observations: Any, actions: Any) -> np.ndarray:
         """``R̂(s, a)`` for a batch: ``float32``, one value a pair.
@@ -234,15 +324,17 @@ class RewardModel(ABC):
             TypeError, ValueError: the batches do not hold values of the spaces, or differ in
                 length.
         """
-        count = np.asarray(actions).size // int(np.prod(self.actions.shape))
+        count = _count(self.actions, actions)
         obs = self.observations.batch(observations, count)
         action = self.actions.batch(actions, count)
         return self.reward_tensor(obs, action).numpy().astype(np.float32)
 
+    # ------------------------------------------------------------------ diagnostics
     def rmse(self, last: int = 10_000) -> float:
         """The RMSE of ``R̂`` against ``info["undelayed_reward"]`` over the last ``last`` steps.
 
-        A diagnostic, over the steps whose info had the key (NaN when none had).
+        A diagnostic for the end of a run (it evaluates ``R̂`` on up to ``last`` · n_envs
+        steps), over the steps whose info had the key (NaN when none had).
         """
         history = self.history
         if history is None:
@@ -253,24 +345,49 @@ class RewardModel(ABC):
         held = np.isfinite(truth)
         if not held.any():
             return math.nan
-        obs, action = history.obs[rows][held], history.action[rows][held]
+        envs = np.broadcast_to(np.arange(history.n_envs), truth.shape)
+        row_index = np.broadcast_to(rows[:, None], truth.shape)
+        obs = history.observations_at(row_index[held], envs[held])
+        action = history.actions_at(row_index[held], envs[held])
         error = self.reward_tensor(obs, action).numpy().astype(np.float64) - truth[held]
         return float(np.sqrt(np.mean(error**2)))
 
+    def watch(self, predicted: np.ndarray, undelayed: np.ndarray) -> None:
+        """Add relabelled rewards and their undelayed rewards (NaN: unknown) to the diagnostics."""
+        held = np.isfinite(undelayed)
+        if not held.any():
+            return
+        x = np.asarray(predicted, dtype=np.float64)[held]
+        y = np.asarray(undelayed, dtype=np.float64)[held]
+        sums = self._watched
+        sums += (x.size, (x - y) @ (x - y), x.sum(), y.sum(), x @ x, y @ y, x @ y)
+        if sums[0] >= DIAGNOSTIC_PAIRS:
+            count, squared, sx, sy, sxx, syy, sxy = sums
+            self._diagnostics = {"rmse": math.sqrt(squared / count)}
+            spread = (count * sxx - sx * sx) * (count * syy - sy * sy)
+            if spread > 0:
+                self._diagnostics["correlation"] = (count * sxy - sx * sy) / math.sqrt(spread)
+            sums[:] = 0.0
+
+    def diagnostics(self) -> dict[str, float]:
+        """The RMSE and correlation of ``R̂`` with the undelayed reward over the last full block.
+
+        Empty until :data:`DIAGNOSTIC_PAIRS` watched pairs had an undelayed reward; no
+        ``correlation`` when either side was constant.
+        """
+        return dict(self._diagnostics)
+
     def record(self, logger: Any, prefix: str = "reward_model") -> None:
-        """Write the loss (mean since the last call), the RMSE and :meth:`metrics` to ``logger``.
+        """Write the loss (mean since the last call), diagnostics and :meth:`metrics` to ``logger``.
 
         ``logger`` is SB3's, or anything with ``record(key, value)``.
         """
         if self._losses:
-            logger.record(f"{prefix}/loss", float(np.mean(self._losses)))
+            logger.record(f"{prefix}/loss", sum(self._losses) / len(self._losses))
             self._losses.clear()
-        rmse = self.rmse()
-        if not math.isnan(rmse):
-            logger.record(f"{prefix}/rmse", rmse)
-        for key, value in self.metrics().items():
+        for key, value in (*self._diagnostics.items(), *self.metrics().items()):
             logger.record(f"{prefix}/{key}", value)
-        logger.record(f"{prefix}/gradient_steps", self.gradient_steps_taken)
+        logger.record(f"{prefix}/updates", self.updates_taken)
 
     # ------------------------------------------------------------------ files
     def settings(self) -> dict[str, Any]:
@@ -279,9 +396,8 @@ class RewardModel(ABC):
             "hidden_sizes": list(self.hidden_sizes),
             "learning_rate": self.learning_rate,
             "batch_size": self.batch_size,
-            "learning_starts": self.learning_starts,
-            "train_every": self.train_every,
-            "gradient_steps": self.gradient_steps,
+            "updates_per_step": self.updates_per_step,
+            "warmup_updates": self.warmup_updates,
             "capacity": self.capacity,
             "seed": self.seed,
             **self._settings(),
@@ -306,8 +422,7 @@ class RewardModel(ABC):
             "settings": self.settings(),
             "rng": self.rng.bit_generator.state,
             "counters": {
-                "gradient_steps_taken": self.gradient_steps_taken,
-                "since_round": self._since_round,
+                "updates_taken": self.updates_taken,
                 "steps_added": 0 if self.history is None else self.history.steps_added,
                 "n_envs": 0 if self.history is None else self.history.n_envs,
             },
@@ -316,9 +431,15 @@ class RewardModel(ABC):
             archive.writestr("reward_model.json", json.dumps(header))
             archive.writestr("weights.pt", weights.getvalue())
             if self.history is not None:
-                arrays = io.BytesIO()
-                np.savez(arrays, **{name: getattr(self.history, name) for name in _ARRAYS})
-                archive.writestr("history.npz", arrays.getvalue())
+                history = self.history
+                arrays = {
+                    **self.observations.arrays(history.obs, "obs"),
+                    **self.actions.arrays(history.action, "action"),
+                    **{name: getattr(history, name) for name in HISTORY_ARRAYS},
+                }
+                buffer = io.BytesIO()
+                np.savez(buffer, **arrays)
+                archive.writestr("history.npz", buffer.getvalue())
         return path
 
     def __getstate__(self) -> dict[str, Any]:

@@ -140,7 +140,7 @@ def train_and_score(task: dict) -> dict:
         ``{"steps", "scores"}`` (the learning curve, the step 0 score first and the last at
         ``steps``), ``"score"`` (the last), ``"train_seconds"``, and for a model method the
         reward model's ``"rmse"`` against the true reward over its last 10 000 steps, its
-        ``"gradient_steps"`` and, for the deconvolution, its ``"mean_delay"``.
+        ``"updates"`` and, for the deconvolution, its ``"mean_delay"``.
     """
     require_sb3()
     import torch
@@ -183,7 +183,7 @@ def train_and_score(task: dict) -> dict:
     }
     if model is not None:
         result["rmse"] = model.rmse()
-        result["gradient_steps"] = model.gradient_steps_taken
+        result["updates"] = model.updates_taken
         if method.startswith("deconv"):
             result["mean_delay"] = model.mean_delay
     vec_env.close()
