@@ -79,7 +79,7 @@ def deconvolution(env, **kwargs):
         "hidden_sizes": (8,),
         "batch_size": 32,
         "window": 8,
-        "learning_starts": 20,
+        "warmup_updates": 20,
         "seed": 0,
         **kwargs,
     }
@@ -129,7 +129,7 @@ def test_sac_learns_the_same_bits_without_the_diagnostic_infos():
         agent.learn(250, callback=RewardModelCallback())
         runs.append((env, model, agent))
     (env, model, agent), (stripped_env, stripped_model, stripped_agent) = runs
-    assert model.gradient_steps_taken == stripped_model.gradient_steps_taken > 100
+    assert model.updates_taken == stripped_model.updates_taken > 100
     assert same(params(model.network), params(stripped_model.network))
     assert same([model.delay_logits], [stripped_model.delay_logits])
     assert same(params(agent.policy), params(stripped_agent.policy))
@@ -150,7 +150,7 @@ def test_dqn_samples_are_relabelled_with_the_model():
 
     env = cartpole()
     model = deconvolution(env)
-    assert model.actions.discrete
+    assert isinstance(model.actions.space, gym.spaces.Discrete)
     agent = DQN(
         "MlpPolicy",
         env,
@@ -166,7 +166,7 @@ def test_dqn_samples_are_relabelled_with_the_model():
     )
     agent.learn(300)
     buffer = agent.replay_buffer
-    assert model.gradient_steps_taken > 200
+    assert model.updates_taken > 200
     np.testing.assert_array_equal(buffer.delivered_rewards[:300, 0], np.float32(env.rewards))
     np.testing.assert_array_equal(model.history.reward[:300, 0], np.float32(env.rewards))
     np.testing.assert_array_equal(model.history.action[:300, 0], buffer.actions[:300, 0])
@@ -207,9 +207,13 @@ def test_ppo_learns_env_rewards_and_keeps_the_truncation_bootstrap():
 
         def _on_rollout_end(self):
             buffer = self.model.rollout_buffer
-            relabelled = self.model.rollout_buffer.reward_model.predict(
-                buffer.observations.reshape(32, -1), buffer.actions.reshape(32, -1)
+            history = buffer.reward_model.history
+            rows = history.rows(history.steps_added - 32, history.steps_added)
+            # R̂ of what the env saw and did: the actions as executed, clipped to [-2, 2]
+            np.testing.assert_array_equal(
+                history.action[rows, 0], np.clip(buffer.actions[:, 0], -2.0, 2.0)
             )
+            relabelled = buffer.reward_model.predict(history.obs[rows, 0], history.action[rows, 0])
             added = buffer.rewards[:, 0] - relabelled
             truncations = 0
             for i, (done, truncated, terminal) in enumerate(self.steps):
@@ -229,7 +233,7 @@ def test_ppo_learns_env_rewards_and_keeps_the_truncation_bootstrap():
             self.model.checked = getattr(self.model, "checked", 0) + 1
 
     env = pendulum(steps=10, lam=2.0)
-    model = deconvolution(env, max_delay=6, window=4, learning_starts=16)
+    model = deconvolution(env, max_delay=6, window=4, warmup_updates=16)
     agent = PPO(
         "MlpPolicy",
         env,
@@ -244,7 +248,7 @@ def test_ppo_learns_env_rewards_and_keeps_the_truncation_bootstrap():
     )
     agent.learn(96, callback=[RewardModelCallback(), Check()])
     assert agent.checked == 3
-    assert model.gradient_steps_taken > 0
+    assert model.updates_taken > 0
     # the model learned from the env's rewards (with the bootstrap, SB3's rewards differ)
     assert model.history.steps_added == 96 == len(env.rewards)
     np.testing.assert_array_equal(model.history.reward[:96, 0], np.float32(env.rewards))
@@ -280,7 +284,7 @@ def test_the_callback_needs_a_relabelling_buffer():
     from delayed_rl.deep import RewardModelCallback
 
     agent = PPO("MlpPolicy", pendulum(), n_steps=16, batch_size=16, device="cpu")
-    with pytest.raises(TypeError, match="RelabelingRolloutBuffer or a RelabelingReplayBuffer"):
+    with pytest.raises(TypeError, match="needs an algorithm with a relabelling buffer"):
         agent.learn(16, callback=RewardModelCallback())
 
 
@@ -316,7 +320,7 @@ def test_each_sub_envs_episodes_are_its_own(algorithm):
 
     n_envs = 3
     vec = make_vec_env(cartpole, n_envs=n_envs, seed=0)
-    model = deconvolution(vec, learning_starts=10**9)  # the stream only
+    model = deconvolution(vec, updates_per_step=0, warmup_updates=0)  # the stream only
     common = {"policy_kwargs": {"net_arch": [8]}, "seed": 0, "device": "cpu"}
     if algorithm == "PPO":
         agent = PPO(
@@ -382,7 +386,7 @@ def test_replay_buffer_and_algorithm_files_keep_a_working_model(tmp_path):
     probe_obs = np.random.default_rng(0).uniform(-1, 1, (16, 3)).astype(np.float32)
     probe_actions = np.linspace(-1, 1, 16, dtype=np.float32)[:, None]
     expected = model.predict(probe_obs, probe_actions)
-    taken = model.gradient_steps_taken
+    taken = model.updates_taken
 
     agent.save_replay_buffer(tmp_path / "buffer.pkl")
     fresh = sac(pendulum(), deconvolution(env, delay=None, max_delay=12, seed=9))
@@ -393,7 +397,7 @@ def test_replay_buffer_and_algorithm_files_keep_a_working_model(tmp_path):
     assert loaded.history.steps_added == 120
     np.testing.assert_array_equal(loaded.delay_pmf, model.delay_pmf)
     fresh.learn(60, reset_num_timesteps=False)
-    assert loaded.gradient_steps_taken == taken + 60
+    assert loaded.updates_taken == taken + 60
 
     agent.save(tmp_path / "sac.zip")
     restored = SAC.load(tmp_path / "sac.zip", env=pendulum(), device="cpu")
@@ -401,7 +405,7 @@ def test_replay_buffer_and_algorithm_files_keep_a_working_model(tmp_path):
     assert isinstance(restored_model, RewardModel) and restored_model is not model
     np.testing.assert_array_equal(restored_model.predict(probe_obs, probe_actions), expected)
     restored.learn(60, reset_num_timesteps=False, callback=RewardModelCallback())
-    assert restored_model.gradient_steps_taken == taken + 60
+    assert restored_model.updates_taken == taken + 60
     assert restored_model.history.steps_added == 180
     batch = restored.replay_buffer.sample(8)
     np.testing.assert_allclose(
@@ -418,7 +422,7 @@ def test_ppo_file_keeps_its_rollout_model(tmp_path):
     from delayed_rl.deep import RelabelingRolloutBuffer, RewardModelCallback
 
     env = pendulum(steps=10)
-    model = deconvolution(env, learning_starts=8)
+    model = deconvolution(env, warmup_updates=8)
     agent = PPO(
         "MlpPolicy",
         env,
@@ -437,9 +441,9 @@ def test_ppo_file_keeps_its_rollout_model(tmp_path):
     restored_model = restored.rollout_buffer.reward_model
     obs, actions = np.zeros((4, 3), np.float32), np.zeros((4, 1), np.float32)
     np.testing.assert_array_equal(restored_model.predict(obs, actions), model.predict(obs, actions))
-    taken = restored_model.gradient_steps_taken
+    taken = restored_model.updates_taken
     restored.learn(16, reset_num_timesteps=False, callback=RewardModelCallback())
-    assert restored_model.gradient_steps_taken == taken + 16
+    assert restored_model.updates_taken == taken + 16
 
 
 def test_a_buffer_makes_its_reward_model_from_a_mapping_for_its_spaces():

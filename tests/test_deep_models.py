@@ -1,10 +1,17 @@
-"""The reward models of ``delayed_rl.deep``: their losses, learning, anonymity and arguments.
+"""The reward models of ``delayed_rl.deep``: losses, schedule, seeds, learning, diagnostics, arguments.
 
 The deconvolution loss is checked against a plain-Python sum over the same windows (drawn from a
-copy of the model's generator) for each episode-end mode and for a learned ``p``; learning is
-checked on a synthetic stream delayed by the real ``RewardDelay`` wrapper, whose reward has a
-standard deviation known in closed form; anonymity is bit-identical weights with and without the
-diagnostic ``infos``. torch is imported in the tests' bodies (and a fixture), not at collection.
+copy of the model's generator) for each episode-end mode and for a learned ``p``. The schedule:
+``add()`` never trains (the weights and the generator stay the same bits), ``train_on_schedule``
+takes ``floor(steps · updates_per_step) + warmup_updates`` updates in all, the warm-up at once
+when the loss first can be computed (a window for the deconvolution, a finished episode for RRD
+and IRCR). Seeds: equal seeds give equal bits, ``reseed`` is a model made with that seed, and no
+global generator is drawn from. Learning is checked on a synthetic stream delayed by the real
+``RewardDelay`` wrapper, whose reward has a standard deviation known in closed form, trained on
+the schedule after every step as an algorithm's buffer does; anonymity is bit-identical weights
+with and without the diagnostic ``infos``. The watched diagnostics (RMSE, correlation) are
+checked against numpy's over the same pairs. torch is imported in the tests' bodies (and a
+fixture), not at collection.
 """
 
 from __future__ import annotations
@@ -57,9 +64,10 @@ class Synthetic(gym.Env):
 
 
 def feed(model, env, steps, seed, strip=False):
-    """Random actions on ``env`` for ``steps`` steps, each added to ``model``.
+    """Random actions on ``env`` for ``steps`` steps, each added to ``model``, which then trains.
 
-    ``strip``: pass ``infos=None`` in place of the wrapper's infos.
+    The model takes the updates its schedule owes after each step (``train_on_schedule``), as a
+    relabelling buffer has it do. ``strip``: pass ``infos=None`` in place of the wrapper's infos.
     """
     obs, _ = env.reset(seed=seed)
     rng = np.random.default_rng(seed)
@@ -69,6 +77,7 @@ def feed(model, env, steps, seed, strip=False):
         model.add(
             obs[None], action[None], [reward], [terminated or truncated], None if strip else [info]
         )
+        model.train_on_schedule()
         obs = next_obs
         if terminated or truncated:
             obs, _ = env.reset()
@@ -156,7 +165,6 @@ def test_known_delay_loss_is_the_direct_sum(mode, spaces_name, capacity):
         window=4,
         hidden_sizes=(8,),
         batch_size=64,  # 16 windows
-        gradient_steps=0,
         capacity=capacity,
         seed=3,
     )
@@ -204,7 +212,6 @@ def test_learned_delay_starts_uniform_and_its_loss_is_the_direct_sum():
         window=4,
         hidden_sizes=(8,),
         batch_size=32,
-        learning_starts=10**9,
         delay_learning_rate=0.2,
         seed=5,
     )
@@ -212,8 +219,8 @@ def test_learned_delay_starts_uniform_and_its_loss_is_the_direct_sum():
     assert model.mean_delay == pytest.approx(1.5)
     assert model.metrics() == {"mean_delay": pytest.approx(1.5)}
     stream = Stream(model, observation_space, action_space, n_envs=1, steps=80, seed=11)
-    model.train(20)
-    assert model.gradient_steps_taken == 20
+    assert model.train(20) == 20
+    assert model.updates_taken == 20
     pmf = model.delay_pmf
     assert pmf.sum() == pytest.approx(1.0, abs=1e-6)
     assert np.all(pmf > 0)
@@ -238,7 +245,6 @@ def test_loss_waits_for_a_window_and_the_delay_before_it():
         spaces.Discrete(2),
         delay=Constant(2),
         window=5,
-        gradient_steps=0,
         capacity=7,  # the least that holds a window and the K = 2 steps before it
         seed=0,
     )
@@ -274,9 +280,7 @@ def test_a_history_too_short_for_a_window_is_refused():
 def test_history_keeps_the_episodes_its_ring_shows_whole(capacity):
     from delayed_rl.deep import IRCRRewardModel
 
-    model = IRCRRewardModel(
-        spaces.Discrete(2), spaces.Discrete(2), gradient_steps=0, capacity=capacity
-    )
+    model = IRCRRewardModel(spaces.Discrete(2), spaces.Discrete(2), capacity=capacity)
     rng = np.random.default_rng(0)
     n_envs, finished, first = 3, [], [0, 0, 0]
     sums = np.zeros(n_envs)
@@ -316,7 +320,10 @@ def test_known_delay_learns_the_reward():
         hidden_sizes=(16,),
         batch_size=128,
         window=16,
-        learning_starts=200,
+        # one update a step from the first window on, as the old schedule's one a step from
+        # step 200 (the warm-up is not what this test is about)
+        updates_per_step=1.0,
+        warmup_updates=1,
         seed=0,
     )
     assert math.isnan(model.rmse())
@@ -326,7 +333,7 @@ def test_known_delay_learns_the_reward():
     assert np.std(truth) == pytest.approx(REWARD_STD, rel=0.1)  # the closed form holds
     # a constant predictor's RMSE is the reward's standard deviation
     assert model.rmse() < 0.5 * REWARD_STD
-    assert model.gradient_steps_taken == 2000 - 200 + 1
+    assert model.updates_taken == model.updates_due == 2000 + 1
 
 
 def test_learned_delay_finds_the_mean():
@@ -341,7 +348,8 @@ def test_learned_delay_finds_the_mean():
         hidden_sizes=(16,),
         batch_size=128,
         window=16,
-        learning_starts=200,
+        updates_per_step=1.0,  # as in test_known_delay_learns_the_reward
+        warmup_updates=1,
         delay_learning_rate=3e-2,
         seed=1,
     )
@@ -350,7 +358,7 @@ def test_learned_delay_finds_the_mean():
     # The truth is the mean of min(D, 15) for D ~ Poisson(5): 5 less a tail of ~1e-4. The start
     # is 7.5; a tolerance of 1 step (0.45 of Poisson(5)'s standard deviation, and under half of
     # the way from the start) fails a model that did not learn p, while the mean of a pmf
-    # learned from 2800 gradient steps on a reward of known scale lands well inside it.
+    # learned from 3000 updates on a reward of known scale lands well inside it.
     assert model.delay_pmf.sum() == pytest.approx(1.0, abs=1e-6)
     assert abs(model.mean_delay - 5.0) < 1.0
     assert model.rmse() < 0.5 * REWARD_STD
@@ -366,14 +374,17 @@ def test_episode_sum_baselines_train(kind):
         env.action_space,
         hidden_sizes=(8,),
         batch_size=32,
-        learning_starts=0,
+        updates_per_step=1.0,
+        warmup_updates=1,
         seed=0,
     )
     before = model.predict(np.zeros((1, 2)), np.zeros((1, 1)))
     model.add(np.zeros((1, 2)), np.zeros((1, 1)), [1.0], [False])
-    assert model.gradient_steps_taken == 0  # no finished episode yet: loss() is None
+    assert model.updates_due == 2
+    assert model.train_on_schedule() == 0  # no finished episode yet: loss() is None
+    assert model.updates_taken == 0
     feed(model, env, 300, seed=0)
-    assert model.gradient_steps_taken > 250
+    assert model.updates_taken == model.updates_due == 301 + 1
     assert len(model.history.episodes) == 30
     assert not np.array_equal(before, model.predict(np.zeros((1, 2)), np.zeros((1, 1))))
 
@@ -382,7 +393,7 @@ def test_rrd_loss_is_the_episode_sum_regression():
     from delayed_rl.deep import ReturnDecompositionRewardModel
 
     model = ReturnDecompositionRewardModel(
-        spaces.Discrete(3), spaces.Discrete(2), subset_size=2, batch_size=2, gradient_steps=0
+        spaces.Discrete(3), spaces.Discrete(2), subset_size=2, batch_size=2
     )
     # one episode of 3 steps whose delivered rewards sum to 6: every subset's mean targets 2
     for obs, reward, end in [(0, 5.0, False), (1, 0.0, False), (2, 1.0, True)]:
@@ -399,7 +410,7 @@ def test_rrd_loss_is_the_episode_sum_regression():
 def test_ircr_targets_are_normalised_returns():
     from delayed_rl.deep import IRCRRewardModel
 
-    model = IRCRRewardModel(spaces.Discrete(2), spaces.Discrete(2), batch_size=4, gradient_steps=0)
+    model = IRCRRewardModel(spaces.Discrete(2), spaces.Discrete(2), batch_size=4)
     model.add([0], [0], [1.0], [True])  # return 1
     model.add([1], [1], [3.0], [True])  # return 3
     rng = copy.deepcopy(model.rng)
@@ -428,13 +439,13 @@ def test_learning_is_the_same_bits_without_the_infos():
             hidden_sizes=(8,),
             batch_size=32,
             window=8,
-            learning_starts=50,
+            warmup_updates=50,
             seed=4,
         )
         feed(model, env, 300, seed=4, strip=strip)
         models.append(model)
     with_infos, without = models
-    assert with_infos.gradient_steps_taken == without.gradient_steps_taken > 0
+    assert with_infos.updates_taken == without.updates_taken == 300 + 50
     for a, b in zip(with_infos.network.parameters(), without.network.parameters(), strict=True):
         assert torch.equal(a, b)
     assert torch.equal(with_infos.delay_logits, without.delay_logits)
@@ -455,12 +466,14 @@ def test_add_reads_nothing_but_the_undelayed_reward_from_infos():
             window=4,
             hidden_sizes=(8,),
             batch_size=8,
-            learning_starts=8,
+            warmup_updates=8,
             seed=0,
         )
         rng = np.random.default_rng(0)
         for step in range(40):
             model.add([step % 3], [step % 2], [rng.normal()], [step % 7 == 6], infos_at(step))
+            model.train_on_schedule()
+        assert model.updates_taken == 40 + 8
         return model
 
     plain = run(lambda step: None)
@@ -502,13 +515,20 @@ def make(kind="DeconvolutionRewardModel", observation_space=None, action_space=N
     ("kwargs", "error", "match"),
     [
         (
-            {"observation_space": spaces.Dict({"a": spaces.Discrete(2)})},
+            {"observation_space": spaces.Dict({"a": spaces.Dict({"b": spaces.Discrete(2)})})},
             TypeError,
-            "observation_space",
+            "observation_space must be .* a nested Dict at key 'a'",
         ),
-        ({"action_space": spaces.MultiDiscrete([2, 2])}, TypeError, "action_space"),
+        ({"action_space": spaces.Tuple([spaces.Discrete(2)])}, TypeError, r"action_space.*Tuple"),
         ({"observation_space": "Discrete(3)"}, TypeError, "observation_space"),
         ({"observation_space": spaces.Box(0, 1, (0,))}, ValueError, "observation_space"),
+        ({"observation_space": spaces.Discrete(2**20 + 1)}, ValueError, "MAX_FEATURES"),
+        ({"observation_space": spaces.Dict({})}, ValueError, "observation_space must have"),
+        (
+            {"observation_space": spaces.Dict({"a": spaces.Box(0, 1, (0,))})},
+            ValueError,
+            r"observation_space\['a'\]",
+        ),
         ({"max_delay": -1}, ValueError, "max_delay"),
         ({"max_delay": 1.5}, TypeError, "max_delay"),
         ({"max_delay": 5000}, ValueError, "max_delay"),
@@ -531,11 +551,19 @@ def make(kind="DeconvolutionRewardModel", observation_space=None, action_space=N
         ({"learning_rate": float("nan")}, ValueError, "learning_rate"),
         ({"learning_rate": "1e-3"}, TypeError, "learning_rate"),
         ({"batch_size": 0}, ValueError, "batch_size"),
-        ({"learning_starts": -1}, ValueError, "learning_starts"),
-        ({"train_every": 0}, ValueError, "train_every"),
-        ({"gradient_steps": -1}, ValueError, "gradient_steps"),
+        ({"updates_per_step": -0.5}, ValueError, "updates_per_step"),
+        ({"updates_per_step": float("nan")}, ValueError, "updates_per_step"),
+        ({"updates_per_step": 2.0**21}, ValueError, "updates_per_step"),
+        ({"updates_per_step": "1"}, TypeError, "updates_per_step"),
+        ({"warmup_updates": -1}, ValueError, "warmup_updates"),
+        ({"warmup_updates": 10.0}, TypeError, "warmup_updates"),
+        # the old schedule's settings are gone (not silently ignored)
+        ({"learning_starts": 10}, TypeError, "learning_starts"),
+        ({"train_every": 1}, TypeError, "train_every"),
+        ({"gradient_steps": 1}, TypeError, "gradient_steps"),
         ({"capacity": 0}, ValueError, "capacity"),
         ({"seed": -1}, ValueError, "seed"),
+        ({"seed": 2**63}, ValueError, "seed"),
         ({"seed": 1.0}, TypeError, "seed"),
         ({"kind": "ReturnDecompositionRewardModel", "subset_size": 0}, ValueError, "subset_size"),
         ({"kind": "IRCRRewardModel", "hidden_sizes": [2**17]}, ValueError, r"hidden_sizes\[0\]"),
@@ -584,5 +612,7 @@ def test_bad_steps_and_batches_are_refused_by_name():
         model.predict(np.zeros((3, 2)), [0, 1])
     with pytest.raises(ValueError, match="last"):
         model.rmse(last=0)
-    with pytest.raises(ValueError, match="gradient_steps"):
+    with pytest.raises(ValueError, match="updates"):
         model.train(-1)
+    with pytest.raises(TypeError, match="updates"):
+        model.train(1.0)

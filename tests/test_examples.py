@@ -97,7 +97,32 @@ def test_the_rl_zoo3_files_train_with_a_reward_model(tmp_path, algo, env_id, con
     done = subprocess.run(command, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-3000:]
     assert "| reward_model/" in done.stdout  # the callback logged the model (SB3 nests keys)
-    steps = [
-        int(line.split("|")[2]) for line in done.stdout.splitlines() if "gradient_steps" in line
-    ]
+    rows = [line.split("|") for line in done.stdout.splitlines() if line.count("|") == 3]
+    steps = [int(row[2]) for row in rows if row[1].strip() == "updates"]
     assert steps and steps[-1] > 0  # and it trained inside rl-zoo3's run
+
+
+@pytest.mark.sb3
+@pytest.mark.cold_cache
+def test_rl_zoo3_seed_makes_a_reward_model_run_repeatable(tmp_path):
+    """``--seed`` seeds the mapping's model through the algorithm: two runs, the same bits."""
+    import torch
+    from stable_baselines3 import SAC
+
+    def train(folder):
+        command = [
+            sys.executable, "-m", "rl_zoo3.train", "--algo", "sac", "--env", "Pendulum-v1",
+            "--seed", "3", "--conf-file", str(EXAMPLES / "rl_zoo3" / "delayed_pendulum_sac.yml"),
+            "--log-folder", str(folder), "--eval-freq", "-1", "-n", "300",
+        ]  # fmt: skip
+        done = subprocess.run(command, capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stderr[-3000:]
+        agent = SAC.load(next(folder.rglob("Pendulum-v1.zip")), device="cpu")
+        return agent.policy.state_dict(), agent.replay_buffer_kwargs["reward_model"]
+
+    (policy, model), (again, model_again) = train(tmp_path / "a"), train(tmp_path / "b")
+    assert model.ready and model.updates_taken == model_again.updates_taken
+    assert model.seed == model_again.seed
+    assert all(torch.equal(policy[name], again[name]) for name in policy)
+    weights, weights_again = model.network.state_dict(), model_again.network.state_dict()
+    assert all(torch.equal(weights[name], weights_again[name]) for name in weights)

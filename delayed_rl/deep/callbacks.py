@@ -75,7 +75,9 @@ class RewardModelCallback(BaseCallback):
         buffer = self._buffer()
         if isinstance(buffer, RolloutBuffer):
             rewards = self.locals["rewards"]
-            original = rewards if self._normalizer is None else self._normalizer.get_original_reward()
+            original = (
+                rewards if self._normalizer is None else self._normalizer.get_original_reward()
+            )
             buffer.receive_env_step(
                 self._observations,
                 self.locals["clipped_actions"],

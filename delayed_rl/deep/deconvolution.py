@@ -184,7 +184,9 @@ class DeconvolutionRewardModel(RewardModel):
         envs = self.rng.integers(0, history.n_envs, size=count)
         steps = starts[:, None] + np.arange(-k, length)  # (windows, K + window)
         valid = steps >= 0
-        rows = steps % history.capacity
+        # a lag before the stream reads step 0 (masked below): the ring's unfilled rows hold
+        # zeros, which are outside a space that starts above 0 (a one-hot could not take them)
+        rows = np.where(valid, steps, 0) % history.capacity
         columns = envs[:, None]
         ends = history.episode_end[rows, columns] & valid
         obs = history.observations_at(rows, columns)

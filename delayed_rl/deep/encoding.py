@@ -289,5 +289,9 @@ def _space_from_dict(data: Any) -> spaces.Space:
             raise ValueError("a Dict needs lists 'keys' and 'spaces' of one length")
         if not all(isinstance(key, str) for key in keys) or len(set(keys)) != len(keys):
             raise ValueError(f"a Dict's keys must be distinct strings, got {keys!r}")
-        return spaces.Dict(OrderedDict((key, _space_from_dict(part)) for key, part in zip(keys, parts)))
+        return spaces.Dict(
+            OrderedDict(
+                (key, _space_from_dict(part)) for key, part in zip(keys, parts, strict=True)
+            )
+        )
     raise ValueError(f"unknown space type {kind!r}")

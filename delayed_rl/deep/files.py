@@ -48,8 +48,8 @@ def make_reward_model(spec: Any, observation_space: Any, action_space: Any) -> R
     (:mod:`delayed_rl.deep.binding`).
 
     Raises:
-        TypeError: ``spec`` is neither, or ``type`` is not a string; a setting's type (the
-            class's own checks).
+        TypeError: ``spec`` is neither, or ``type`` is not a string; a setting the class does not
+            take; a setting's type (the class's own checks).
         ValueError: an unknown ``type``; a setting's value (the class's own checks); a model
             whose spaces are not these.
     """
@@ -79,7 +79,7 @@ def make_reward_model(spec: Any, observation_space: Any, action_space: Any) -> R
         raise ValueError(f"reward_model's 'type' must be one of {sorted(classes)}, got {kind!r}")
     unknown = sorted(set(settings) - set(_setting_names(classes[kind])))
     if unknown:
-        raise ValueError(
+        raise TypeError(
             f"reward_model's settings {unknown} are not {kind}'s: it takes "
             f"{sorted(_setting_names(classes[kind]))}"
         )

@@ -17,8 +17,8 @@ import math
 import numpy as np
 import torch
 
-from delayed_rl.deep.return_decomposition import sample_episodes
 from delayed_rl.deep.network import as_tensors
+from delayed_rl.deep.return_decomposition import sample_episodes
 from delayed_rl.deep.reward_model import RewardModel
 
 __all__ = ["IRCRRewardModel"]

@@ -123,7 +123,8 @@ class RewardModel(ABC):
         batch_size: how many targets an update fits (a subclass says what a target is).
         updates_per_step: Adam updates owed for each step added (see the module docstring).
         warmup_updates: updates owed on top of those, taken at once when the loss first can be
-            computed; the model is :attr:`ready` after them.
+            computed; the model is :attr:`ready` after them (and after at least one update:
+            with ``updates_per_step=0`` and ``warmup_updates=0`` it only keeps the stream).
         capacity: steps of every sub-env the history keeps (its memory: ``capacity`` · n_envs
             transitions).
         seed: seeds the initial weights and the batches (``None``: fresh entropy, or the seed a
@@ -161,7 +162,7 @@ class RewardModel(ABC):
         self.learning_rate = check_real("learning_rate", learning_rate, 0.0, 1e6, low_open=True)
         self.batch_size = check_int("batch_size", batch_size, 1, 2**20)
         self.updates_per_step = check_real("updates_per_step", updates_per_step, 0.0, 2**20)
-        self.warmup_updates = check_int("warmup_updates", warmup_updates, 1, 2**31)
+        self.warmup_updates = check_int("warmup_updates", warmup_updates, 0, 2**31)
         self.capacity = check_int("capacity", capacity, 1)
         seed = check_int("seed", seed, 0, 2**63 - 1, optional=True)
         self.takes_algorithm_seed = seed is None
@@ -279,8 +280,8 @@ class RewardModel(ABC):
 
     @property
     def ready(self) -> bool:
-        """Whether the warm-up is done: a buffer relabels with ``R̂`` only then."""
-        return self.updates_taken >= self.warmup_updates
+        """Whether the warm-up is done (and at least one update taken): a buffer relabels only then."""
+        return self.updates_taken >= max(1, self.warmup_updates)
 
     def train_on_schedule(self) -> int:
         """Take the updates the schedule owes (none while the loss cannot be computed).

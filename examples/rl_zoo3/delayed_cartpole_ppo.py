@@ -8,7 +8,8 @@ root::
       --conf-file examples/rl_zoo3/delayed_cartpole_ppo.py
 
 The buffer builds the ``reward_model`` mapping's model for the env's spaces;
-``RewardModelCallback`` hands it the env's own rewards (see ``delayed_rl.deep.buffers``).
+``RewardModelCallback`` hands it the env's own rewards (see ``delayed_rl.deep.buffers``). The
+model takes its seed from the algorithm's (rl-zoo3's ``--seed``).
 """
 
 from delayed_rl.deep import RelabelingRolloutBuffer
@@ -21,7 +22,7 @@ hyperparams = {
         "policy": "MlpPolicy",
         "rollout_buffer_class": RelabelingRolloutBuffer,
         "rollout_buffer_kwargs": {
-            "reward_model": {"type": "DeconvolutionRewardModel", "delay": 20, "seed": 0}
+            "reward_model": {"type": "DeconvolutionRewardModel", "delay": 20}
         },
         "callback": "delayed_rl.deep.RewardModelCallback",
     }
