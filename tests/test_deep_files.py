@@ -1,10 +1,14 @@
-"""Reward model files, pickles and imports: what round-trips, and what is refused.
+"""Reward model files, pickles, mappings and imports: what round-trips, and what is refused.
 
-A saved model loads with the same predictions and trains on to the same bits as the one kept in
-memory (every class, ``p`` known and learned); a pickle does too. Each check of
-:func:`~delayed_rl.deep.load_reward_model` has a file crafted to fail it, refused with a
-``ValueError`` that says what is wrong (never garbage loaded silently). ``import delayed_rl.deep``
-imports no torch, and without torch a name's first use says to install the ``sb3`` extra.
+A saved model loads with the same predictions, counters, generator and history, owes the same
+updates, and trains on to the same bits as the one kept in memory (every class, ``p`` known and
+learned, and every kind of space: ``Dict`` observations of a ``Box``, a ``Discrete`` and a
+``MultiBinary``, ``MultiDiscrete`` actions, a small image read flat and one read by the CNN); a
+pickle does too. Each check of :func:`~delayed_rl.deep.load_reward_model` has a file crafted to
+fail it, refused with a ``ValueError`` that says what is wrong (never garbage loaded silently).
+:func:`~delayed_rl.deep.make_reward_model` refuses a setting the class does not take, by name.
+``import delayed_rl.deep`` imports no torch, and without torch a name's first use says to
+install the ``sb3`` extra.
 """
 
 from __future__ import annotations
@@ -13,10 +17,12 @@ import io
 import json
 import os
 import pickle
+import re
 import subprocess
 import sys
 import textwrap
 import zipfile
+from collections import OrderedDict
 
 import numpy as np
 import pytest
@@ -43,20 +49,20 @@ KINDS = {
 }
 
 
-def build(name="learned", capacity=64, **kwargs):
+def build(name="learned", capacity=64, observation_space=OBS, action_space=ACT, **kwargs):
     import delayed_rl.deep as deep
 
     kind, settings = KINDS[name]
     settings = {
         "hidden_sizes": (8,),
         "batch_size": 16,
-        "learning_starts": 10,
+        "warmup_updates": 5,
         "capacity": capacity,
         "seed": 2,
         **settings,
         **kwargs,
     }
-    return getattr(deep, kind)(OBS, ACT, **settings)
+    return getattr(deep, kind)(observation_space, action_space, **settings)
 
 
 def steps(count, seed, n_envs=2):
@@ -72,31 +78,60 @@ def steps(count, seed, n_envs=2):
         )
 
 
-def feed(model, count, seed):
+def feed(model, count, seed, train=True):
+    """Add ``count`` steps, taking the updates the schedule owes after each (``train``)."""
     for step in steps(count, seed):
         model.add(*step)
+        if train:
+            model.train_on_schedule()
 
 
 PROBE = (np.random.default_rng(1).uniform(-1, 1, (20, 3)).astype(np.float32), np.arange(20) % 3)
 
 
-def assert_same_model(a, b, probe=True):
+def assert_same_model(a, b, probe=PROBE):
+    """``a`` and ``b`` hold the same bits: weights, Adam, generator, counters and history."""
     import torch
 
     assert type(a) is type(b)
     assert a.settings() == b.settings()
+    assert a.observations.to_dict() == b.observations.to_dict()
+    assert a.actions.to_dict() == b.actions.to_dict()
     for x, y in zip(a.network.parameters(), b.network.parameters(), strict=True):
         assert torch.equal(x, y)
     assert a._extra_state().keys() == b._extra_state().keys()
     for name, value in a._extra_state().items():
         assert torch.equal(value, b._extra_state()[name])
-    if probe:
-        np.testing.assert_array_equal(a.predict(*PROBE), b.predict(*PROBE))
-    assert a.gradient_steps_taken == b.gradient_steps_taken
+    adam_a, adam_b = a.optimizer.state_dict(), b.optimizer.state_dict()
+    assert adam_a["param_groups"] == adam_b["param_groups"]
+    assert adam_a["state"].keys() == adam_b["state"].keys()
+    for index, state in adam_a["state"].items():
+        for name, value in state.items():
+            assert torch.equal(value, adam_b["state"][index][name])
+    assert a.rng.bit_generator.state == b.rng.bit_generator.state
+    if probe is not None:
+        np.testing.assert_array_equal(a.predict(*probe), b.predict(*probe))
+    assert a.updates_taken == b.updates_taken
+    assert a.updates_due == b.updates_due
+    assert a.ready == b.ready
     assert a.history.steps_added == b.history.steps_added
+    assert a.history.n_envs == b.history.n_envs
     assert list(a.history.episodes) == list(b.history.episodes)
-    for name in ("obs", "action", "reward", "episode_end", "undelayed"):
-        np.testing.assert_array_equal(getattr(a.history, name), getattr(b.history, name))
+    arrays_a, arrays_b = history_arrays(a), history_arrays(b)
+    assert arrays_a.keys() == arrays_b.keys()
+    for name, value in arrays_a.items():
+        assert value.dtype == arrays_b[name].dtype, name
+        np.testing.assert_array_equal(value, arrays_b[name], err_msg=name)
+
+
+def history_arrays(model):
+    """The history's arrays by their file names (``obs.0``, ``obs.1``... for a ``Dict``)."""
+    history = model.history
+    return {
+        **model.observations.arrays(history.obs, "obs"),
+        **model.actions.arrays(history.action, "action"),
+        **{name: getattr(history, name) for name in ("reward", "episode_end", "undelayed")},
+    }
 
 
 # ---------------------------------------------------------------------- round trips
@@ -107,10 +142,14 @@ def test_a_saved_model_loads_and_trains_on_to_the_same_bits(tmp_path, name, coun
 
     model = build(name)
     feed(model, count, seed=0)
-    assert model.gradient_steps_taken > 0
+    assert model.updates_taken == count + 5 and model.ready
+    feed(model, 3, seed=5, train=False)  # saved with updates owed
     loaded = load_reward_model(model.save(tmp_path / "model.zip"))
+    assert not loaded.takes_algorithm_seed
     assert_same_model(model, loaded)
     assert np.isclose(loaded.rmse(), model.rmse())
+    assert loaded.train_on_schedule() == model.train_on_schedule() == 3
+    assert_same_model(model, loaded)
     feed(model, 60, seed=1)
     feed(loaded, 60, seed=1)
     assert_same_model(model, loaded)
@@ -123,7 +162,7 @@ def test_the_episode_index_is_rebuilt_at_any_step(tmp_path):
 
     # a ring of 6 steps, episodes of 1 to 4 steps ending at various offsets of the two sub-envs:
     # a save at every step meets every position of an episode's start against the oldest step
-    model = IRCRRewardModel(OBS, ACT, hidden_sizes=(4,), gradient_steps=0, capacity=6, seed=0)
+    model = IRCRRewardModel(OBS, ACT, hidden_sizes=(4,), capacity=6, seed=0)
     ends = [[0, 0, 1, 0, 1, 0, 0, 0, 1, 1, 0, 0, 1, 0, 0, 1, 0, 1, 1, 0, 0, 0, 1, 0, 1, 0],
             [1, 0, 0, 0, 1, 0, 1, 1, 0, 0, 0, 1, 0, 1, 0, 0, 1, 0, 0, 0, 1, 1, 0, 1, 0, 0]]  # fmt: skip
     for step, end in enumerate(zip(*ends, strict=True)):
@@ -143,8 +182,10 @@ def test_the_episode_index_is_rebuilt_at_any_step(tmp_path):
 def test_a_pickled_model_trains_on_to_the_same_bits(name):
     model = build(name)
     feed(model, 70, seed=0)
+    feed(model, 2, seed=4, train=False)  # pickled with updates owed
     copy = pickle.loads(pickle.dumps(model))
     assert_same_model(model, copy)
+    assert copy.train_on_schedule() == model.train_on_schedule() == 2
     feed(model, 30, seed=3)
     feed(copy, 30, seed=3)
     assert_same_model(model, copy)
@@ -159,10 +200,26 @@ def test_a_model_without_steps_round_trips(tmp_path):
         assert sorted(archive.namelist()) == ["reward_model.json", "weights.pt"]
     loaded = load_reward_model(path)
     assert loaded.history is None
+    assert loaded.updates_taken == loaded.updates_due == 0
     np.testing.assert_array_equal(loaded.predict(*PROBE), model.predict(*PROBE))
     np.testing.assert_allclose(loaded.delay_pmf, model.delay_pmf)
     feed(model, 20, seed=0)
     feed(loaded, 20, seed=0)
+    assert model.updates_taken == 20 + 5
+    assert_same_model(model, loaded)
+
+
+def test_an_unseeded_model_saves_the_seed_it_drew(tmp_path):
+    from delayed_rl.deep import load_reward_model
+
+    model = build("rrd", seed=None)
+    assert model.takes_algorithm_seed
+    loaded = load_reward_model(model.save(tmp_path / "unseeded.zip"))
+    # the file holds the seed drawn: the loaded model is that model, not one to seed again
+    assert loaded.seed == model.seed and not loaded.takes_algorithm_seed
+    np.testing.assert_array_equal(loaded.predict(*PROBE), model.predict(*PROBE))
+    feed(model, 30, seed=0)
+    feed(loaded, 30, seed=0)
     assert_same_model(model, loaded)
 
 
@@ -218,7 +275,130 @@ def test_spaces_round_trip_exactly_and_quietly(tmp_path, observation_space, acti
     assert loaded.observations.space == observation_space
     assert loaded.actions.space == action_space
     assert loaded.observations.space.dtype == observation_space.dtype
-    assert_same_model(model, loaded, probe=False)
+    assert_same_model(model, loaded, probe=None)
+
+
+# Dict observations (in an order that is not sorted), integer spaces that do not start at 0,
+# images read flat (under 36 pixels a side) and by SB3's NatureCNN
+DICT_OBS = spaces.Dict(
+    OrderedDict(
+        [
+            ("position", spaces.Box(-1.0, 1.0, (2,), np.float32)),
+            ("room", spaces.Discrete(4, start=-1)),
+            ("bits", spaces.MultiBinary([2, 3])),
+        ]
+    )
+)
+MULTI_ACT = spaces.MultiDiscrete([[3, 2], [2, 4]], start=[[1, 0], [-1, 2]])
+SPACE_PAIRS = {
+    "dict-multidiscrete": (DICT_OBS, MULTI_ACT),
+    "small-image": (spaces.Box(0, 255, (8, 8, 3), np.uint8), spaces.Box(-1.0, 1.0, (2,))),
+    "cnn-image": (spaces.Box(0, 255, (36, 36, 1), np.uint8), spaces.MultiBinary(2)),
+}
+STORED = {  # the history arrays a file holds, and their dtypes
+    "dict-multidiscrete": {"obs.0": np.float32, "obs.1": np.int64, "obs.2": np.int8, "action": np.int64},
+    "small-image": {"obs": np.uint8, "action": np.float32},
+    "cnn-image": {"obs": np.uint8, "action": np.int8},
+}
+
+
+def stack(space, values):
+    """One value a sub-env, as a batch (a dict of batches for a ``Dict``)."""
+    if isinstance(space, spaces.Dict):
+        return {key: np.stack([value[key] for value in values]) for key in space.spaces}
+    return np.stack(values)
+
+
+def space_steps(observation_space, action_space, count, seed, n_envs=2):
+    """Like ``steps``, with values sampled from the spaces."""
+    observation_space.seed(seed)
+    action_space.seed(seed + 1)
+    rng = np.random.default_rng(seed)
+    for _ in range(count):
+        yield (
+            stack(observation_space, [observation_space.sample() for _ in range(n_envs)]),
+            stack(action_space, [action_space.sample() for _ in range(n_envs)]),
+            rng.normal(size=n_envs),
+            rng.random(n_envs) < 0.15,
+            [{"undelayed_reward": float(r)} for r in rng.normal(size=n_envs)],
+        )
+
+
+def feed_spaces(model, count, seed, train=True):
+    for step in space_steps(model.observations.space, model.actions.space, count, seed):
+        model.add(*step)
+        if train:
+            model.train_on_schedule()
+
+
+@pytest.mark.parametrize("name", ["learned", "rrd"])
+@pytest.mark.parametrize("pair", sorted(SPACE_PAIRS))
+def test_every_space_round_trips_and_trains_on_to_the_same_bits(tmp_path, name, pair):
+    from delayed_rl.deep import load_reward_model
+
+    observation_space, action_space = SPACE_PAIRS[pair]
+    model = build(
+        name,
+        capacity=24,
+        observation_space=observation_space,
+        action_space=action_space,
+        batch_size=8,
+        warmup_updates=3,
+    )
+    assert (model.network.observation_features.cnn is not None) == (pair == "cnn-image")
+    feed_spaces(model, 30, seed=0)  # the ring wraps
+    assert model.ready
+    feed_spaces(model, 2, seed=5, train=False)  # saved with updates owed
+    path = model.save(tmp_path / f"{pair}.zip")
+    with zipfile.ZipFile(path) as archive, np.load(io.BytesIO(archive.read("history.npz"))) as data:
+        stored = {name: data[name].dtype for name in data.files}
+    expected = {**STORED[pair], "reward": np.float64, "episode_end": bool, "undelayed": np.float64}
+    assert stored == {name: np.dtype(dtype) for name, dtype in expected.items()}
+    loaded = load_reward_model(path)
+    assert loaded.observations.space == observation_space
+    assert list(loaded.observations.to_dict().get("keys", [])) == list(
+        getattr(observation_space, "spaces", {})
+    )  # a Dict's key order is kept (not sorted)
+    assert loaded.actions.space == action_space
+    obs, action, *_ = next(space_steps(observation_space, action_space, 1, seed=9))
+    assert_same_model(model, loaded, probe=(obs, action))
+    assert loaded.train_on_schedule() == model.train_on_schedule() == 2
+    feed_spaces(model, 12, seed=1)
+    feed_spaces(loaded, 12, seed=1)
+    assert_same_model(model, loaded, probe=(obs, action))
+
+
+# ---------------------------------------------------------------------- mappings
+def test_a_mapping_makes_its_model_and_refuses_settings_the_class_does_not_take():
+    from delayed_rl.deep import ReturnDecompositionRewardModel, make_reward_model
+
+    spec = {"type": "ReturnDecompositionRewardModel", "subset_size": 4, "warmup_updates": 3}
+    model = make_reward_model(spec, OBS, ACT)
+    assert isinstance(model, ReturnDecompositionRewardModel)
+    assert model.subset_size == 4 and model.warmup_updates == 3
+    assert model.takes_algorithm_seed  # no seed: the algorithm's buffer gives it one
+    seeded = make_reward_model({**spec, "seed": 9}, OBS, ACT)
+    assert seeded.seed == 9 and not seeded.takes_algorithm_seed
+    assert spec == {"type": "ReturnDecompositionRewardModel", "subset_size": 4, "warmup_updates": 3}
+    assert make_reward_model(seeded, OBS, ACT) is seeded
+    with pytest.raises(ValueError, match="reward_model was made for the observation_space"):
+        make_reward_model(seeded, spaces.Box(-1.0, 1.0, (4,), np.float32), ACT)
+    for kind, unknown in [
+        ("ReturnDecompositionRewardModel", ["gradient_steps", "learning_starts"]),  # the old ones
+        ("DeconvolutionRewardModel", ["subset_size"]),  # another class's
+        ("IRCRRewardModel", ["window"]),
+    ]:
+        settings = dict.fromkeys(unknown, 1)
+        # (a TypeError, as for a keyword the constructor does not take)
+        match = re.escape(f"settings {unknown!r} are not {kind}'s: it takes")
+        with pytest.raises(TypeError, match=match) as error:
+            make_reward_model({"type": kind, **settings, "seed": 0}, OBS, ACT)
+        message = str(error.value)
+        allowed = message.split("it takes")[1]
+        for name in ("hidden_sizes", "updates_per_step", "warmup_updates", "seed", "capacity"):
+            assert repr(name) in allowed
+        for name in unknown:
+            assert repr(name) not in allowed
 
 
 # ---------------------------------------------------------------------- crafted files

@@ -145,6 +145,11 @@ def drawn_windows(model):
 SPACES = {
     "box-discrete": (spaces.Box(-2.0, 2.0, (2,), np.float32), spaces.Discrete(3)),
     "discrete-box": (spaces.Discrete(4, start=1), spaces.Box(-1.0, 1.0, (2,), np.float32)),
+    # integer spaces that start above 0 (the ring's unfilled rows hold zeros, outside them)
+    "multidiscrete-multibinary": (
+        spaces.MultiDiscrete([3, 2], start=[1, 2]),
+        spaces.MultiBinary(3),
+    ),
 }
 
 
@@ -260,6 +265,27 @@ def test_loss_waits_for_a_window_and_the_delay_before_it():
         if model.history.oldest > 0:
             starts, _ = drawn_windows(model)
             assert set(starts.tolist()) == {model.history.steps_added - 5}
+
+
+def test_lags_before_the_stream_are_masked_in_spaces_that_start_above_zero():
+    from delayed_rl.deep import DeconvolutionRewardModel
+
+    # the first window begins at step 0, so its K = 2 lags reach before the stream: they count
+    # 0, and must not read the ring's unfilled rows (zeros, which Discrete(3, start=5) and the
+    # MultiDiscrete do not hold: a one-hot of them fails)
+    for observation_space, action_space in [
+        (spaces.Discrete(3, start=5), spaces.Discrete(2)),
+        (spaces.Box(-1.0, 1.0, (2,), np.float32), spaces.MultiDiscrete([2, 2], start=[3, -4])),
+    ]:
+        model = DeconvolutionRewardModel(
+            observation_space, action_space, delay=Constant(2), window=4, batch_size=8, seed=0
+        )
+        stream = Stream(model, observation_space, action_space, n_envs=1, steps=4, seed=0)
+        starts, envs = drawn_windows(model)
+        assert set(starts.tolist()) == {0}
+        expected = direct_loss(model, stream, starts, envs, model.delay_pmf, "flush")
+        assert float(model.loss().detach()) == pytest.approx(expected, rel=1e-5)
+        assert model.train(3) == 3
 
 
 def test_a_history_too_short_for_a_window_is_refused():
@@ -496,6 +522,333 @@ def test_add_reads_nothing_but_the_undelayed_reward_from_infos():
             assert torch.equal(a, b)
     assert noisy.history.undelayed[39, 0] == 39.0
     assert np.isnan(odd.history.undelayed).all()
+
+
+# ---------------------------------------------------------------------- the schedule
+def snapshot(model):
+    """Copies of everything a model learns or draws from: weights, extras, Adam, generator."""
+    return {
+        "network": copy.deepcopy(model.network.state_dict()),
+        "extra": copy.deepcopy(model._extra_state()),
+        "optimizer": copy.deepcopy(model.optimizer.state_dict()),
+        "rng": copy.deepcopy(model.rng.bit_generator.state),
+    }
+
+
+def assert_same_bits(a, b):
+    """Two snapshots (or models) hold the same bits."""
+    import torch
+
+    a = a if isinstance(a, dict) else snapshot(a)
+    b = b if isinstance(b, dict) else snapshot(b)
+    assert a["rng"] == b["rng"]
+    for part in ("network", "extra"):
+        assert a[part].keys() == b[part].keys()
+        for name in a[part]:
+            assert torch.equal(a[part][name], b[part][name]), name
+    assert a["optimizer"]["param_groups"] == b["optimizer"]["param_groups"]
+    assert a["optimizer"]["state"].keys() == b["optimizer"]["state"].keys()
+    for index, state in a["optimizer"]["state"].items():
+        for name, value in state.items():
+            assert torch.equal(value, b["optimizer"]["state"][index][name]), (index, name)
+
+
+def changed(before, model):
+    """Whether any weight differs from the snapshot's."""
+    import torch
+
+    now = model.network.state_dict()
+    return any(not torch.equal(before["network"][name], now[name]) for name in now)
+
+
+def random_steps(count, seed, n_envs=1, end_chance=0.2):
+    """``count`` steps on ``Discrete(3)`` × ``Discrete(2)`` (``make``'s spaces)."""
+    rng = np.random.default_rng(seed)
+    for _ in range(count):
+        yield (
+            rng.integers(0, 3, n_envs),
+            rng.integers(0, 2, n_envs),
+            rng.normal(size=n_envs),
+            rng.random(n_envs) < end_chance,
+        )
+
+
+@pytest.mark.parametrize(
+    ("kind", "kwargs"),
+    [
+        ("DeconvolutionRewardModel", {"delay": None, "max_delay": 3, "window": 4}),
+        ("ReturnDecompositionRewardModel", {"subset_size": 4}),
+        ("IRCRRewardModel", {}),
+    ],
+)
+def test_add_alone_never_trains(kind, kwargs):
+    model = make(kind, hidden_sizes=(8,), batch_size=8, warmup_updates=3, seed=0, **kwargs)
+    before = snapshot(model)
+    assert model.updates_due == 0 and not model.ready
+    for step in random_steps(60, seed=0, n_envs=2):
+        model.add(*step)
+    assert model.loss() is not None  # it could have trained: a window and finished episodes
+    model.rng.bit_generator.state = before["rng"]  # loss() drew a batch; add() draws nothing
+    assert_same_bits(before, model)
+    assert model.updates_taken == 0 and not model.ready
+    assert model.updates_due == 60 + 3
+    assert model.train_on_schedule() == 63
+    assert model.updates_taken == 63 and model.ready
+    assert changed(before, model)
+    assert model.train_on_schedule() == 0  # nothing more is owed
+
+
+@pytest.mark.parametrize("updates_per_step", [0.0, 0.37, 1.0, 2.5])
+def test_updates_due_is_the_steps_times_the_rate_plus_the_warmup(updates_per_step):
+    model = make(
+        "IRCRRewardModel",
+        hidden_sizes=(4,),
+        batch_size=4,
+        updates_per_step=updates_per_step,
+        warmup_updates=5,
+        seed=0,
+    )
+    assert model.train_on_schedule() == 0  # no step: nothing owed, nothing to train on
+    assert model.train(3) == 0
+    model.add([0], [0], [1.0], [True])  # a finished episode: the loss can be computed
+    for added in range(1, 40):
+        due = math.floor(added * updates_per_step) + 5
+        assert model.updates_due == due
+        owed = due - model.updates_taken
+        assert model.train_on_schedule() == owed
+        assert model.updates_taken == due
+        model.add([added % 3], [added % 2], [1.0], [added % 4 == 0])
+    # train(n) takes n more, beyond the schedule: then nothing is owed until it catches up
+    assert model.train(7) == 7
+    taken = model.updates_taken
+    for _ in range(3):
+        model.add([0], [0], [1.0], [False])
+    assert model.train_on_schedule() == max(0, model.updates_due - taken)
+    assert model.updates_taken == max(taken, model.updates_due)
+
+
+@pytest.mark.parametrize("kind", ["ReturnDecompositionRewardModel", "IRCRRewardModel"])
+def test_the_warmup_is_taken_at_once_when_the_first_episode_ends(kind):
+    model = make(kind, hidden_sizes=(4,), batch_size=4, warmup_updates=7, seed=0)
+    for step in range(5):  # an open episode: the loss cannot be computed yet
+        model.add([step % 3], [0], [1.0], [False])
+        assert model.updates_due == step + 1 + 7
+        assert model.train_on_schedule() == 0
+        assert model.train(2) == 0
+        assert model.updates_taken == 0 and not model.ready
+    before = snapshot(model)
+    model.add([0], [1], [2.0], [True])  # the first episode ends
+    assert not changed(before, model)
+    assert model.train_on_schedule() == 6 + 7  # the warm-up and the owed ones, at once
+    assert model.ready and changed(before, model)
+    model.add([1], [1], [0.0], [False])
+    assert model.train_on_schedule() == 1
+
+
+def test_the_deconvolution_warmup_waits_for_a_window():
+    model = make(delay=Constant(2), window=4, hidden_sizes=(4,), batch_size=4, warmup_updates=9)
+    for step in range(3):
+        model.add([0], [step % 2], [1.0], [False])
+        assert model.train_on_schedule() == 0 and not model.ready
+    model.add([0], [1], [1.0], [False])  # steps 0..3: a window (its lags before the stream)
+    assert model.train_on_schedule() == 4 + 9
+    assert model.ready
+
+
+def test_ready_once_the_warmup_updates_are_taken():
+    model = make("IRCRRewardModel", hidden_sizes=(4,), batch_size=4, warmup_updates=5, seed=0)
+    model.add([0], [0], [1.0], [True])
+    assert model.train(4) == 4 and not model.ready
+    assert model.train(1) == 1 and model.ready
+    assert model.train_on_schedule() == 1  # 1 step + 5 warm-up owed, 5 taken
+
+
+def test_without_a_warmup_ready_needs_one_update():
+    model = make(
+        "IRCRRewardModel", hidden_sizes=(4,), batch_size=4, warmup_updates=0, updates_per_step=0.5
+    )
+    assert model.updates_due == 0 and not model.ready
+    model.add([0], [0], [1.0], [True])
+    assert model.updates_due == 0 and model.train_on_schedule() == 0 and not model.ready
+    model.add([1], [0], [1.0], [True])
+    assert model.updates_due == 1 and model.train_on_schedule() == 1 and model.ready
+
+
+# ---------------------------------------------------------------------- seeds
+KINDS = [
+    ("DeconvolutionRewardModel", {"delay": None, "max_delay": 3, "window": 4}),
+    ("DeconvolutionRewardModel", {"delay": Constant(1), "window": 4}),
+    ("ReturnDecompositionRewardModel", {"subset_size": 4}),
+    ("IRCRRewardModel", {}),
+]
+SMALL = {"hidden_sizes": (8,), "batch_size": 8, "warmup_updates": 4}
+
+
+def train_on(model, count=30, seed=0):
+    """Add ``count`` steps of two sub-envs, training on the schedule after each."""
+    for step in random_steps(count, seed, n_envs=2):
+        model.add(*step)
+        model.train_on_schedule()
+    assert model.ready
+
+
+@pytest.mark.parametrize(("kind", "kwargs"), KINDS)
+def test_equal_seeds_give_equal_bits_and_other_seeds_other_weights(kind, kwargs):
+    a, b = (make(kind, seed=123, **SMALL, **kwargs) for _ in range(2))
+    other = make(kind, seed=124, **SMALL, **kwargs)
+    assert a.seed == b.seed == 123 and a.settings()["seed"] == 123
+    assert not a.takes_algorithm_seed
+    assert_same_bits(a, b)
+    assert changed(snapshot(a), other)
+    train_on(a)
+    train_on(b)
+    assert a.updates_taken == b.updates_taken > 0
+    assert_same_bits(a, b)
+    np.testing.assert_array_equal(a.predict([0, 1, 2], [1, 0, 1]), b.predict([0, 1, 2], [1, 0, 1]))
+
+
+@pytest.mark.parametrize(("kind", "kwargs"), KINDS)
+def test_reseed_is_a_model_made_with_that_seed(kind, kwargs):
+    model = make(kind, seed=None, **SMALL, **kwargs)
+    assert model.takes_algorithm_seed
+    assert 0 <= model.seed < 2**63
+    model.reseed(2**63 - 1)
+    assert not model.takes_algorithm_seed and model.seed == 2**63 - 1
+    assert model.settings()["seed"] == 2**63 - 1
+    seeded = make(kind, seed=2**63 - 1, **SMALL, **kwargs)
+    assert_same_bits(model, seeded)
+    train_on(model)
+    train_on(seeded)
+    assert_same_bits(model, seeded)
+    with pytest.raises(RuntimeError, match="seen a step"):
+        model.reseed(1)
+
+
+def test_unseeded_models_draw_fresh_entropy_until_their_first_step():
+    a, b = make(seed=None), make(seed=None)
+    assert a.takes_algorithm_seed and b.takes_algorithm_seed
+    assert a.seed != b.seed  # 2**-63 of a chance to be equal
+    assert changed(snapshot(a), b)
+    a.add([0], [0], [0.0], [False])  # its first step: no algorithm can seed it any more
+    assert not a.takes_algorithm_seed
+    with pytest.raises(RuntimeError, match="seen a step"):
+        a.reseed(0)
+    for bad, error in [(-1, ValueError), (2**63, ValueError), (1.0, TypeError), (None, TypeError)]:
+        with pytest.raises(error, match="seed"):
+            b.reseed(bad)
+    assert b.takes_algorithm_seed  # a refused seed changes nothing
+
+
+def test_models_draw_nothing_from_the_global_generators():
+    import torch
+
+    torch.manual_seed(0)
+    np.random.seed(0)
+    torch_state, numpy_state = torch.get_rng_state(), np.random.get_state()
+    for kind, kwargs in KINDS:
+        for seed in (None, 5):
+            model = make(kind, seed=seed, **SMALL, **kwargs)
+            if seed is None:
+                model.reseed(6)
+            train_on(model)
+            model.predict([0, 1], [1, 1])
+    assert torch.equal(torch.get_rng_state(), torch_state)
+    after = np.random.get_state()
+    assert after[0] == numpy_state[0] and np.array_equal(after[1], numpy_state[1])
+    assert after[2:] == numpy_state[2:]
+
+
+# ---------------------------------------------------------------------- diagnostics
+def test_watch_reports_rmse_and_correlation_over_each_block():
+    from delayed_rl.deep.reward_model import DIAGNOSTIC_PAIRS
+
+    model = make(seed=0)
+    rng = np.random.default_rng(42)
+    batch = 1000  # 5 batches make the first block of >= DIAGNOSTIC_PAIRS pairs with a truth
+    kept_x, kept_y = [], []
+
+    def watch_one():
+        predicted = rng.normal(0.3, 1.2, batch).astype(np.float32)
+        undelayed = 0.6 * predicted + rng.normal(-0.1, 0.8, batch)
+        undelayed[rng.random(batch) < 0.1] = np.nan  # steps whose info had no truth
+        model.watch(predicted, undelayed)
+        held = np.isfinite(undelayed)
+        kept_x.append(predicted[held].astype(np.float64))
+        kept_y.append(undelayed[held])
+
+    def by_hand():
+        x, y = np.concatenate(kept_x), np.concatenate(kept_y)
+        kept_x.clear()
+        kept_y.clear()
+        return x.size, math.sqrt(np.mean((x - y) ** 2)), np.corrcoef(x, y)[0, 1]
+
+    for _ in range(4):  # 3600 pairs with a truth: nothing yet
+        watch_one()
+        assert model.diagnostics() == {}
+    model.watch(np.ones(500), np.full(500, np.nan))  # no truth: ignored
+    assert sum(x.size for x in kept_x) < DIAGNOSTIC_PAIRS
+    watch_one()
+    count, rmse, correlation = by_hand()
+    assert count >= DIAGNOSTIC_PAIRS
+    assert model.diagnostics() == {
+        "rmse": pytest.approx(rmse, rel=1e-9),
+        "correlation": pytest.approx(correlation, rel=1e-9),
+    }
+    first = model.diagnostics()
+    for _ in range(4):  # the next block: the last full block's values meanwhile
+        watch_one()
+        assert model.diagnostics() == first
+    watch_one()
+    count, rmse, correlation = by_hand()
+    assert count >= DIAGNOSTIC_PAIRS
+    assert model.diagnostics()["rmse"] == pytest.approx(rmse, rel=1e-9)
+    assert model.diagnostics()["correlation"] == pytest.approx(correlation, rel=1e-9)
+    assert model.diagnostics()["rmse"] != pytest.approx(first["rmse"], rel=1e-6)
+
+
+def test_watch_leaves_out_the_correlation_of_a_constant_side():
+    from delayed_rl.deep.reward_model import DIAGNOSTIC_PAIRS
+
+    model = make(seed=0)
+    truth = np.random.default_rng(0).normal(size=DIAGNOSTIC_PAIRS)
+    model.watch(np.full(DIAGNOSTIC_PAIRS, 0.5, np.float32), truth)  # an untrained R̂: constant
+    assert model.diagnostics() == {"rmse": pytest.approx(math.sqrt(np.mean((0.5 - truth) ** 2)))}
+    model.watch(truth.astype(np.float32), np.full(DIAGNOSTIC_PAIRS, 2.0))  # a constant truth
+    assert set(model.diagnostics()) == {"rmse"}
+
+
+class Logger:
+    """Keeps what ``record`` writes, as SB3's logger would."""
+
+    def __init__(self):
+        self.values = {}
+
+    def record(self, key, value):
+        self.values[key] = value
+
+
+def test_record_writes_the_loss_diagnostics_metrics_and_updates():
+    from delayed_rl.deep.reward_model import DIAGNOSTIC_PAIRS
+
+    model = make(delay=None, max_delay=3, window=4, **{**SMALL, "warmup_updates": 2}, seed=0)
+    logger = Logger()
+    model.record(logger)
+    assert logger.values == {"reward_model/mean_delay": 1.5, "reward_model/updates": 0}
+    train_on(model, count=10)
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=DIAGNOSTIC_PAIRS)
+    model.watch(x, x + rng.normal(size=DIAGNOSTIC_PAIRS))
+    logger = Logger()
+    model.record(logger, prefix="rm")
+    assert set(logger.values) == {"rm/loss", "rm/rmse", "rm/correlation", "rm/mean_delay", "rm/updates"}
+    assert logger.values["rm/updates"] == model.updates_taken == 10 + 2
+    assert math.isfinite(logger.values["rm/loss"]) and logger.values["rm/loss"] >= 0
+    assert logger.values["rm/mean_delay"] == pytest.approx(model.mean_delay)
+    assert logger.values["rm/rmse"] == model.diagnostics()["rmse"]
+    logger = Logger()
+    model.record(logger)  # no update since: no loss
+    assert "reward_model/loss" not in logger.values
+    assert logger.values["reward_model/updates"] == 12
 
 
 # ---------------------------------------------------------------------- arguments

@@ -77,7 +77,7 @@ def kwargs_attribute(buffer: Any) -> str:
 
 
 def bind(buffer: Any, algorithm: Any) -> None:
-    """Seed ``buffer``'s model from ``algorithm`` where it takes that seed; make it the kwargs' model."""
+    """Seed ``buffer``'s model from ``algorithm`` where it takes that seed; put it in the kwargs."""
     model = buffer.reward_model
     if model.takes_algorithm_seed and algorithm.seed is not None:
         model.reseed(reward_model_seed(algorithm.seed))
@@ -99,9 +99,9 @@ def adopt(buffer: Any, algorithm: Any) -> None:
         for name in ("observations", "actions"):
             if getattr(held, name).to_dict() != getattr(loaded, name).to_dict():
                 raise ValueError(
-                    f"the loaded buffer's reward model was made for the {getattr(loaded, name).name}"
-                    f" {getattr(loaded, name).space}, the algorithm's for "
-                    f"{getattr(held, name).space}"
+                    f"the loaded buffer's reward model was made for the "
+                    f"{getattr(loaded, name).name} {getattr(loaded, name).space}, the "
+                    f"algorithm's for {getattr(held, name).space}"
                 )
         held.__dict__.clear()
         held.__dict__.update(loaded.__dict__)

@@ -3,13 +3,13 @@
 Each is SB3's own buffer with a reward model beside it, for any algorithm built on SB3's
 ``OffPolicyAlgorithm`` or ``OnPolicyAlgorithm`` (SAC, TD3, DQN, PPO, A2C, sb3-contrib's TQC...):
 
-| SB3's buffer | relabelling counterpart | for |
-|---|---|---|
-| ``ReplayBuffer`` | :class:`RelabelingReplayBuffer` | off-policy, ``Box``/``Discrete``... observations |
-| ``NStepReplayBuffer`` | :class:`RelabelingNStepReplayBuffer` | off-policy n-step returns |
-| ``DictReplayBuffer`` | :class:`RelabelingDictReplayBuffer` | off-policy, ``Dict`` observations |
-| ``RolloutBuffer`` | :class:`RelabelingRolloutBuffer` | on-policy |
-| ``DictRolloutBuffer`` | :class:`RelabelingDictRolloutBuffer` | on-policy, ``Dict`` observations |
+- :class:`RelabelingReplayBuffer`, the counterpart of SB3's ``ReplayBuffer`` (off-policy);
+- :class:`RelabelingNStepReplayBuffer`, of ``NStepReplayBuffer`` (off-policy n-step returns);
+- :class:`RelabelingDictReplayBuffer`, of ``DictReplayBuffer`` (off-policy, ``Dict``
+  observations);
+- :class:`RelabelingRolloutBuffer`, of ``RolloutBuffer`` (on-policy);
+- :class:`RelabelingDictRolloutBuffer`, of ``DictRolloutBuffer`` (on-policy, ``Dict``
+  observations).
 
 Pass one as ``replay_buffer_class`` / ``rollout_buffer_class`` with
 ``{"reward_model": model}`` in its kwargs: a reward model, or a mapping

@@ -186,7 +186,7 @@ class SpaceEncoding:
 
     # ------------------------------------------------------------------ storing
     def empty(self, *leading: int) -> Any:
-        """A zeroed store for values: shape ``(*leading, *shape)`` (a dict of them for a ``Dict``)."""
+        """A zeroed store: shape ``(*leading, *shape)`` (a dict of them for a ``Dict``)."""
         if self.parts is not None:
             return {key: part.empty(*leading) for key, part in self.parts.items()}
         return np.zeros((*leading, *self.shape), dtype=self.dtype)

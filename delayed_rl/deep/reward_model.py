@@ -280,7 +280,7 @@ class RewardModel(ABC):
 
     @property
     def ready(self) -> bool:
-        """Whether the warm-up is done (and at least one update taken): a buffer relabels only then."""
+        """Whether the warm-up is done (and one update at least taken): buffers relabel only then."""
         return self.updates_taken >= max(1, self.warmup_updates)
 
     def train_on_schedule(self) -> int:

@@ -13,8 +13,9 @@ training ``steps``, the ``method`` and the ``seed``. The methods (:data:`METHODS
 - ``deconv-learned``: the same with ``p`` learned on ``0..max_delay`` (the task's
   ``max_delay``, a bound the user would choose, not the delay).
 
-The reward models have their defaults (a 64×64 MLP, Adam at 1e-3, a gradient step a vector-env
-step after 256 steps) and the run's seed; off-policy algorithms get a
+The reward models have their defaults (a 64×64 MLP, Adam at 1e-3, an update a vector-env step
+and a warm-up of 1000 updates before they relabel, trained when the algorithm trains) and the
+run's seed; off-policy algorithms get a
 :class:`~delayed_rl.deep.RelabelingReplayBuffer`, on-policy ones a
 :class:`~delayed_rl.deep.RelabelingRolloutBuffer` with its callback. Torch runs on one thread.
 
