@@ -124,7 +124,8 @@ def main() -> None:
     print(f"| watching, in all | {_spread(total, 1e3, 4)} |")
     verdict = "met" if max(shares) <= TARGET else "MISSED"
     print(
-        f"\nwatching / SAC step: {_spread(shares, 100, 2)} % (target ≤ 5 % in every repeat: {verdict})"
+        f"\nwatching / SAC step: {_spread(shares, 100, 2)} % "
+        f"(target ≤ 5 % in every repeat: {verdict})"
     )
 
 
