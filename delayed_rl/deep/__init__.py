@@ -1,4 +1,4 @@
-"""Deep RL under delayed rewards: reward models learned from the delayed stream, for SB3.
+"""Deep RL under delays: reward models for SB3, and SAC for late observations and actions.
 
 A reward model learns ``R̂(s, a)`` from the rewards an env delivered (anonymously: it never
 reads when a reward was emitted), and a relabelling buffer hands stable-baselines3's algorithms
@@ -12,6 +12,8 @@ reads when a reward was emitted), and a relabelling buffer hands stable-baseline
   with :class:`RewardModelCallback`), and their counterparts for ``Dict`` observations
   (:class:`RelabelingDictReplayBuffer`, :class:`RelabelingDictRolloutBuffer`) and n-step returns
   (:class:`RelabelingNStepReplayBuffer`);
+- :class:`HindsightSAC`: SAC for late observations and actions, its critic learning on
+  observations once they have arrived (on :class:`~delayed_rl.wrappers.DelayAwareObservation`);
 - :func:`load_reward_model`, and :func:`make_reward_model` (a model from a mapping, as a
   hyperparameter file gives it).
 
@@ -37,6 +39,7 @@ from typing import Any
 
 __all__ = [
     "DeconvolutionRewardModel",
+    "HindsightSAC",
     "IRCRRewardModel",
     "RelabelingDictReplayBuffer",
     "RelabelingDictRolloutBuffer",
@@ -52,6 +55,7 @@ __all__ = [
 
 _HOMES = {
     "DeconvolutionRewardModel": "deconvolution",
+    "HindsightSAC": "hindsight",
     "IRCRRewardModel": "ircr",
     "RelabelingDictReplayBuffer": "buffers",
     "RelabelingDictRolloutBuffer": "buffers",
