@@ -296,7 +296,12 @@ SPACE_PAIRS = {
     "cnn-image": (spaces.Box(0, 255, (36, 36, 1), np.uint8), spaces.MultiBinary(2)),
 }
 STORED = {  # the history arrays a file holds, and their dtypes
-    "dict-multidiscrete": {"obs.0": np.float32, "obs.1": np.int64, "obs.2": np.int8, "action": np.int64},
+    "dict-multidiscrete": {
+        "obs.0": np.float32,
+        "obs.1": np.int64,
+        "obs.2": np.int8,
+        "action": np.int64,
+    },
     "small-image": {"obs": np.uint8, "action": np.float32},
     "cnn-image": {"obs": np.uint8, "action": np.int8},
 }
@@ -523,7 +528,8 @@ def _drop(*keys):
 @pytest.mark.parametrize(
     ("change", "match"),
     [
-        (_set("format", value="delayed-rl reward model 2"), "does not declare format"),
+        (_set("format", value="delayed-rl reward model 1"), "does not declare format"),
+        (_set("format", value="delayed-rl reward model 3"), "does not declare format"),
         (_drop("format"), "does not declare format"),
         (_set("class", value="RewardModel"), "unknown reward model class 'RewardModel'"),
         (_set("class", value="os.system"), "unknown reward model class"),
@@ -549,8 +555,10 @@ def _drop(*keys):
         (_set("settings", "delay", value={"type": "Constant", "k": 1}), "weights.pt does not fit"),
         (_drop("counters"), "bad counters"),
         (_drop("counters", "steps_added"), "bad counters"),
-        (_set("counters", "since_round", value="x"), "bad counters"),
-        (_set("counters", "gradient_steps_taken", value=-1), "negative counters"),
+        (_drop("counters", "updates_taken"), "bad counters"),
+        (_set("counters", "updates_taken", value="x"), "bad counters"),
+        (_set("counters", "updates_taken", value=-1), "negative counters"),
+        (_set("counters", "steps_added", value=-1), "negative counters"),
         (_set("counters", "n_envs", value=3), "history array obs must be"),
         (_set("counters", "n_envs", value=0), "history.npz must be there exactly when n_envs > 0"),
         (_set("rng", value={"bit_generator": "MT19937"}), "generator state"),
@@ -663,7 +671,8 @@ def _held(value):
         ),
         (_array("undelayed", lambda a: a.ravel()), "history array undelayed must be"),
         (lambda a: a.pop("reward"), "history.npz misses arrays"),
-        (lambda a: a.update(extra=np.zeros(3)), "history.npz holds an unknown array 'extra'"),
+        (lambda a: a.update(extra=np.zeros(3)), r"history.npz holds unknown arrays \['extra'\]"),
+        (lambda a: a.update({"obs.0": a["obs"]}), r"unknown arrays \['obs.0'\]"),
         (_array("obs", _held(np.nan)), "observation_space values must be finite"),
         (_array("action", _held(3)), "action_space values must be in 0..2"),
         (_array("action", _held(-1)), "action_space values must be in 0..2"),
@@ -672,6 +681,80 @@ def _held(value):
 )
 def test_bad_history_arrays_are_refused(tmp_path, saved, change, match):
     refused(tmp_path, with_arrays(saved, change), match)
+
+
+@pytest.fixture(scope="module")
+def saved_dict(tmp_path_factory):
+    """The members of a saved model of ``Dict`` observations and ``MultiDiscrete`` actions."""
+    model = build("learned", capacity=16, observation_space=DICT_OBS, action_space=MULTI_ACT)
+    feed_spaces(model, 30, seed=0)  # steps 14..29 held: every row
+    path = model.save(tmp_path_factory.mktemp("saved_dict") / "model.zip")
+    with zipfile.ZipFile(path) as archive:
+        return {name: archive.read(name) for name in archive.namelist()}
+
+
+def _held_entry(value, row=29 % 16):
+    """Set the first entry of one held step of sub-env 0."""
+
+    def change(array):
+        array = array.copy()
+        array[(row, 0, *([0] * (array.ndim - 2)))] = value
+        return array
+
+    return change
+
+
+NESTED = '{"type": "Dict", "keys": ["x"], "spaces": [{"type": "Discrete", "n": 2, "start": 0}]}'
+
+
+def test_the_unchanged_dict_members_load(tmp_path, saved_dict):
+    from delayed_rl.deep import load_reward_model
+
+    model = load_reward_model(write(tmp_path / "same.zip", saved_dict))
+    assert list(model.history.obs) == ["position", "room", "bits"]
+    assert model.history.steps_added == 30 and model.history.oldest == 14
+
+
+@pytest.mark.parametrize(
+    ("change", "match"),
+    [
+        (lambda a: a.pop("obs.1"), r"history.npz misses arrays \['obs.1'\]"),
+        (lambda a: a.update({"obs.3": a["obs.0"]}), r"unknown arrays \['obs.3'\]"),
+        (lambda a: a.update(obs=a.pop("obs.0")), r"unknown arrays \['obs'\]"),
+        (_array("obs.0", lambda a: a.astype(np.float64)), "history array obs.0 must be float32"),
+        (_array("obs.2", lambda a: a[..., :2]), "history array obs.2 must be int8 of shape"),
+        (
+            _array("obs.0", _held_entry(np.nan)),
+            r"observation_space\['position'\] values must be fin",
+        ),
+        (_array("obs.1", _held_entry(3)), r"observation_space\['room'\] values must be in -1..2"),
+        (_array("obs.1", _held_entry(-2)), r"observation_space\['room'\] values must be in"),
+        (_array("obs.2", _held_entry(2)), r"observation_space\['bits'\] values must be in 0..1"),
+        (_array("obs.2", _held_entry(-1)), r"observation_space\['bits'\] values must be in 0..1"),
+        (_array("action", _held_entry(4)), "action_space values must be in"),
+        (_array("action", _held_entry(0)), "action_space values must be in"),  # starts at 1
+    ],
+)
+def test_bad_dict_history_arrays_are_refused(tmp_path, saved_dict, change, match):
+    refused(tmp_path, with_arrays(saved_dict, change), match)
+
+
+@pytest.mark.parametrize(
+    ("change", "match"),
+    [
+        (_set("observation_space", "keys", value=["position", "room"]), "must describe"),
+        (_set("observation_space", "keys", value=["a", "a", "b"]), "distinct strings"),
+        (_set("observation_space", "keys", value=[1, 2, 3]), "distinct strings"),
+        (_set("observation_space", "spaces", 1, "type", value="Tuple"), "unknown space type"),
+        (_set("observation_space", "spaces", 0, value=json.loads(NESTED)), "a nested Dict"),
+        (_set("observation_space", "spaces", value=[]), "must describe"),
+        (_set("observation_space", value={"type": "Dict", "keys": [], "spaces": []}), "one key"),
+        (_set("action_space", "start", value=[1, 0]), "action_space must describe"),
+        (_set("action_space", "nvec", value=[[3, 0], [2, 4]]), "action_space must describe"),
+    ],
+)
+def test_a_bad_dict_header_is_refused(tmp_path, saved_dict, change, match):
+    refused(tmp_path, with_header(saved_dict, change), match)
 
 
 def test_unreadable_or_pickled_history_arrays_are_refused(tmp_path, saved):
@@ -734,7 +817,11 @@ def test_importing_the_package_imports_no_torch():
     assert found["names"] == sorted(
         [
             "DeconvolutionRewardModel",
+            "HindsightSAC",
             "IRCRRewardModel",
+            "RelabelingDictReplayBuffer",
+            "RelabelingDictRolloutBuffer",
+            "RelabelingNStepReplayBuffer",
             "RelabelingReplayBuffer",
             "RelabelingRolloutBuffer",
             "ReturnDecompositionRewardModel",

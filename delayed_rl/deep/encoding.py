@@ -81,7 +81,7 @@ class SpaceEncoding:
         n_features: a leaf's feature count (one-hots counted), or the sum over a ``Dict``'s keys.
 
     Raises:
-        TypeError: a space of another kind.
+        TypeError: a space of another kind; a ``Dict`` with a key that is not a string.
         ValueError: a space with no features, or more than :data:`MAX_FEATURES`.
     """
 
@@ -92,6 +92,12 @@ class SpaceEncoding:
         if isinstance(space, spaces.Dict):
             if not space.spaces:
                 raise ValueError(f"{name} must have at least one key, got {space!r}")
+            for key in space.spaces:
+                if not isinstance(key, str):  # as SB3's extractors; a file holds string keys
+                    raise TypeError(
+                        f"{name} must have string keys (as SB3's Dict observations), got the key "
+                        f"{key!r} ({type(key).__name__}) in {space!r}"
+                    )
             self.parts = {
                 key: SpaceEncoding(f"{name}[{key!r}]", part) for key, part in space.spaces.items()
             }
@@ -180,8 +186,8 @@ class SpaceEncoding:
 
     def _bounds_text(self) -> str:
         low, high = self.integer_bounds()
-        if low.size == 1 and high.size == 1:
-            return f"{int(low)}..{int(high)}"
+        if np.all(low == low.flat[0]) and np.all(high == high.flat[0]):  # an image's: 0..255
+            return f"{int(low.flat[0])}..{int(high.flat[0])}"
         return f"{low.tolist()}..{high.tolist()} (per entry)"
 
     # ------------------------------------------------------------------ storing

@@ -186,6 +186,7 @@ class _Episode:
     def receive(self, made: int, observation: Any) -> None:
         self.received.setdefault(int(made), np.array(observation))
 
+
 class HindsightSAC(SAC):
     """SAC with its actor on the delay-aware view and its critic on observations in hindsight.
 
@@ -329,5 +330,3 @@ class HindsightSAC(SAC):
             discount,
         )
         self.transitions_stored += 1
-
-

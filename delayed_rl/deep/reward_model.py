@@ -169,7 +169,7 @@ class RewardModel(ABC):
         self.history: TransitionHistory | None = None
         self.updates_taken = 0
         self._losses: list[float] = []
-        self._watched = np.zeros(7)  # pairs, sum e², sum x, sum y, sum x², sum y², sum xy
+        self._watched: list[tuple[np.ndarray, np.ndarray]] = []  # the block being filled
         self._diagnostics: dict[str, float] = {}
         self._initialise(int(np.random.SeedSequence().entropy % 2**63) if seed is None else seed)
 
@@ -354,21 +354,29 @@ class RewardModel(ABC):
         return float(np.sqrt(np.mean(error**2)))
 
     def watch(self, predicted: np.ndarray, undelayed: np.ndarray) -> None:
-        """Add relabelled rewards and their undelayed rewards (NaN: unknown) to the diagnostics."""
+        """Add relabelled rewards and their undelayed rewards (NaN: unknown) to the diagnostics.
+
+        Pairs are kept until a block holds :data:`DIAGNOSTIC_PAIRS`; the block's RMSE and
+        correlation (computed on centred values, in float64) then replace the last ones.
+        """
         held = np.isfinite(undelayed)
         if not held.any():
             return
-        x = np.asarray(predicted, dtype=np.float64)[held]
-        y = np.asarray(undelayed, dtype=np.float64)[held]
-        sums = self._watched
-        sums += (x.size, (x - y) @ (x - y), x.sum(), y.sum(), x @ x, y @ y, x @ y)
-        if sums[0] >= DIAGNOSTIC_PAIRS:
-            count, squared, sx, sy, sxx, syy, sxy = sums
-            self._diagnostics = {"rmse": math.sqrt(squared / count)}
-            spread = (count * sxx - sx * sx) * (count * syy - sy * sy)
-            if spread > 0:
-                self._diagnostics["correlation"] = (count * sxy - sx * sy) / math.sqrt(spread)
-            sums[:] = 0.0
+        block = self._watched
+        block.append(
+            (np.asarray(predicted, np.float64)[held], np.asarray(undelayed, np.float64)[held])
+        )
+        if sum(x.size for x, _ in block) < DIAGNOSTIC_PAIRS:
+            return
+        x = np.concatenate([x for x, _ in block])
+        y = np.concatenate([y for _, y in block])
+        block.clear()
+        error = x - y
+        self._diagnostics = {"rmse": float(np.sqrt(np.mean(error * error)))}
+        if np.ptp(x) > 0 and np.ptp(y) > 0:  # a constant side has no correlation
+            dx, dy = x - np.mean(x), y - np.mean(y)
+            spread = np.sqrt(np.sum(dx * dx) * np.sum(dy * dy))
+            self._diagnostics["correlation"] = float(np.clip(np.sum(dx * dy) / spread, -1, 1))
 
     def diagnostics(self) -> dict[str, float]:
         """The RMSE and correlation of ``R̂`` with the undelayed reward over the last full block.
@@ -445,5 +453,5 @@ class RewardModel(ABC):
 
     def __getstate__(self) -> dict[str, Any]:
         state = dict(self.__dict__)
-        state["_losses"] = []
+        state["_losses"], state["_watched"] = [], []
         return state

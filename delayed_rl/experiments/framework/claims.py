@@ -132,6 +132,30 @@ def band_claim(
     return range_claim(quantity, thesis, stats, low, high, criterion, note)
 
 
+def seed_rule_claim(
+    quantity: str, thesis: str, values: Sequence[float], threshold: float, at_least: int
+) -> Claim:
+    """A target stated as a rule on the seeds: ``values ≥ threshold`` on ``at_least`` of them.
+
+    The verdict is the rule itself, on these seeds (agrees or differs, never inconclusive); the
+    row also carries the Wilson 95 % interval of the share, which says how little a handful of
+    seeds tells about the rate (5 of 5 is compatible with a rate near 0.5).
+
+    >>> seed_rule_claim("gain ≥ 0.9", "4 of 5", [0.95, 0.92, 0.99, 0.5, 0.91], 0.9, 4).verdict
+    'agrees'
+    """
+    k, n = sum(value >= threshold for value in values), len(values)
+    low, high = wilson_interval(k, n)
+    verdict = AGREES if n and k >= at_least else DIFFERS
+    criterion = (
+        f"agrees if at least {at_least} of the {n} seeds reach {_fmt(threshold)} (a rule on "
+        "these seeds; the interval is the share's Wilson 95 % interval, for the rate)"
+    )
+    note = f"{k} of {n} seeds; values " + ", ".join(f"{value:.2f}" for value in values)
+    share = k / n if n else math.nan
+    return Claim(quantity, thesis, share, (high - low) / 2, n, verdict, criterion, note, low, high)
+
+
 def direction_claim(
     quantity: str,
     thesis: str,
