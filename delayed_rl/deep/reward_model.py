@@ -27,7 +27,7 @@ settings, named so as not to be mistaken for the algorithm's ``learning_starts``
 ``seed``: it draws nothing from numpy's or torch's global generators, so adding a reward model
 leaves the algorithm's own random draws unchanged. A model made with ``seed=None`` draws fresh
 entropy, unless a relabelling buffer of a seeded algorithm takes it before its first step: then
-it takes the seed :func:`~delayed_rl.deep.seeding.reward_model_seed` derives from the
+it takes the seed :func:`~delayed_rl.deep.binding.reward_model_seed` derives from the
 algorithm's (and is initialised again from it).
 
 **Diagnostics.** While a :class:`~delayed_rl.deep.callbacks.RewardModelCallback` watches, the
