@@ -7,8 +7,12 @@ given (:func:`~delayed_rl.wrappers.wrap_delays`), innermost first:
 1. ``action_delay``: :class:`~delayed_rl.wrappers.ActionDelay` (the env executes actions sent
    earlier);
 2. ``observation_delay``: :class:`~delayed_rl.wrappers.ObservationDelay` (the agent sees older
-   observations);
-3. ``reward_delay``: :class:`~delayed_rl.wrappers.PoissonRewardDelay` for a number (the Poisson
+   observations), under the arrival rule ``observation_arrival`` (``"stale"``, the default, or
+   ``"network"``);
+3. ``delay_aware=True``: :class:`~delayed_rl.wrappers.DelayAwareObservation` (the agent observes
+   the newest observation received, its age and the last ``action_history`` actions sent),
+   outside the delays it reads;
+4. ``reward_delay``: :class:`~delayed_rl.wrappers.PoissonRewardDelay` for a number (the Poisson
    mean λ) or :class:`~delayed_rl.wrappers.RewardDelay` for a distribution — outermost, so its
    ``info["undelayed_reward"]`` and episode-end handling see the whole step.
 
@@ -88,6 +92,9 @@ class DelayableEntryPoint:
         reward_delay: Any = None,
         observation_delay: Any = None,
         action_delay: Any = None,
+        observation_arrival: str = "stale",
+        delay_aware: bool = False,
+        action_history: int | None = None,
         **kwargs: Any,
     ) -> gym.Env:
         """Build the env from ``kwargs``, wrapped for each delay that is not None.
@@ -98,13 +105,17 @@ class DelayableEntryPoint:
                 (``RewardDelay``).
             observation_delay: ``None``, or a delay as above (``ObservationDelay``).
             action_delay: ``None``, or a delay as above (``ActionDelay``).
+            observation_arrival: the observation delay's arrival rule, ``"stale"`` or
+                ``"network"`` (``ObservationDelay``'s ``arrival``).
+            delay_aware: wrap a ``DelayAwareObservation`` around the delays.
+            action_history: its ``action_history`` (only with ``delay_aware=True``).
             **kwargs: the env class's own arguments.
 
         Raises:
-            TypeError: a delay is neither a number, a ``Delay`` nor a dict (or the env refuses
-                the type of one of its arguments).
-            ValueError: a delay is not a valid Poisson mean or describes no distribution (or
-                the env refuses the value of one of its arguments).
+            TypeError, ValueError: a delay is neither a number, a ``Delay`` nor a dict, or is
+                not a valid Poisson mean or describes no distribution; another argument is
+                refused by :func:`~delayed_rl.wrappers.wrap_delays` (or the env refuses one of
+                its arguments). The message names the argument.
         """
         if self.preset is not None:
             kwargs = {**_load(self.preset), **kwargs}
@@ -116,6 +127,9 @@ class DelayableEntryPoint:
             action_delay=action_delay,
             observation_delay=observation_delay,
             reward_delay=reward_delay,
+            observation_arrival=observation_arrival,
+            delay_aware=delay_aware,
+            action_history=action_history,
         )
 
     def __repr__(self) -> str:

@@ -1,10 +1,15 @@
 """Wrappers that delay rewards, observations and actions by random numbers of steps.
 
 - :class:`RewardDelay`, :class:`PoissonRewardDelay`: one env, the library's core;
-- :class:`ObservationDelay`: the same idea for observations (the thesis's delayed P-controller);
+- :class:`ObservationDelay`: the same idea for observations (the thesis's stale sensor, or
+  rlrd's network where every observation travels on its own: ``arrival=``);
 - :class:`ActionDelay`: for actions (the env executes an action sent steps earlier), with its
   ``gymnasium.vector`` twin :class:`VectorActionDelay`;
-- :func:`wrap_delays`: all three on one env, in the order ``gym.make(id, ...)`` stacks them;
+- :class:`DelayAwareObservation`: what the agent can know under those delays (the newest
+  observation received, its age, the actions sent since), and
+  :class:`DiscreteDelayAwareObservation`, the same as one ``Discrete`` index for tabular agents;
+- :func:`wrap_delays`: all three (and the delay-aware view) on one env, in the order
+  ``gym.make(id, ...)`` stacks them;
 - :class:`DiscreteObservation`: observations of several discrete parts (``Blackjack-v1``'s
   ``Tuple``) as one ``Discrete`` index, for the tabular agents;
 - :class:`VectorRewardDelay`: the twin for ``gymnasium.vector`` envs;
@@ -13,6 +18,7 @@
 """
 
 from delayed_rl.wrappers.action_delay import ActionDelay, VectorActionDelay
+from delayed_rl.wrappers.delay_aware import DelayAwareObservation, DiscreteDelayAwareObservation
 from delayed_rl.wrappers.discrete_observation import DiscreteObservation
 from delayed_rl.wrappers.observation_delay import ObservationDelay
 from delayed_rl.wrappers.reward_delay import (
@@ -27,6 +33,8 @@ from delayed_rl.wrappers.vector import VectorRewardDelay
 __all__ = [
     "EPISODE_END_MODES",
     "ActionDelay",
+    "DelayAwareObservation",
+    "DiscreteDelayAwareObservation",
     "DiscreteObservation",
     "ObservationDelay",
     "PoissonRewardDelay",

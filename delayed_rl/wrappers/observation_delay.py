@@ -1,86 +1,230 @@
-"""Observation delay: the agent sees an observation from a random number of steps ago."""
+"""Observation delay: the agent sees an observation made a random number of steps ago.
+
+:class:`ObservationDelay` is the wrapper. It follows one of two arrival rules, each stated once in
+its own class: :class:`StaleArrival` (the thesis's stale sensor) and :class:`NetworkArrival`
+(every observation travels on its own, as in rlrd: Bouteiller et al., ICLR 2021).
+"""
 
 from __future__ import annotations
 
+import heapq
 from collections import deque
 from typing import Any
 
 import gymnasium as gym
 
 from delayed_rl._delay_line import delay_bound
+from delayed_rl._validation import check_choice
 from delayed_rl.delays import MAX_DELAY, Delay, as_delay, delay_spec
 from delayed_rl.wrappers._samples import copy_sample
 from delayed_rl.wrappers._spec import JsonSpecMixin, json_safe
 from delayed_rl.wrappers.reward_delay import DelaySampler, check_max_delay
 
+__all__ = ["ARRIVAL_RULES", "NetworkArrival", "ObservationDelay", "StaleArrival"]
+
+ARRIVAL_RULES = ("stale", "network")
+"""The values of :class:`ObservationDelay`'s ``arrival`` argument."""
+
+Arrivals = list[tuple[int, Any]]
+"""``(index, observation)`` pairs received at one step, in the order of their indices."""
+
+
+class StaleArrival:
+    """The stale sensor: step ``t`` receives one observation, ``o_{t+1−d_t}``.
+
+    Observations are numbered from the reset observation ``o_0``; step ``t`` (counted from 0)
+    makes ``o_{t+1}``. The index ``t+1−d_t`` is clipped to the episode's start (``o_0``) and to the
+    last ``history`` observations (the oldest of them). An observation no delay points at is never
+    received; one that several delays point at is received several times, and the one received
+    may be older than one received before.
+
+    Only the observations made so far are kept (a ``deque`` of at most ``history``), so a long
+    delay bound costs no memory until the steps are taken. The rule keeps the very objects it is
+    given and returns them (:class:`ObservationDelay` hands out copies).
+
+    Args:
+        history: how many of the last observations to keep (at least 1).
+    """
+
+    def __init__(self, history: int):
+        self._observations: deque = deque(maxlen=history)
+        self.made = 0
+
+    def reset(self, first: Any) -> None:
+        """Start an episode: ``first`` is ``o_0``, received at once."""
+        self._observations.clear()
+        self._observations.append(first)
+        self.made = 0
+
+    def receive(self, observation: Any, delay: int) -> tuple[int, Any, Arrivals]:
+        """Make ``observation`` (the next index) with ``delay``; return what this step shows.
+
+        Returns:
+            The age of the observation shown (``d_t`` clipped: the steps since it was made), the
+            observation shown, and the observations received at this step (the one shown).
+        """
+        self._observations.append(observation)
+        self.made += 1
+        age = min(delay, len(self._observations) - 1)
+        shown = self._observations[-1 - age]
+        return age, shown, [(self.made - age, shown)]
+
+
+class NetworkArrival:
+    """The network: every observation ``o_i`` (``i ≥ 1``) arrives by itself at step index ``i + d_i``.
+
+    Observations are numbered from the reset observation ``o_0``, which arrives at once; step
+    ``t`` (counted from 0) makes ``o_{t+1}`` with its own delay ``d_{t+1}``, and receives every
+    observation with ``i + d_i = t + 1`` (none, one or several, in the order of ``i``). What it
+    shows is the newest observation (largest ``i``) arrived so far: an older observation that
+    arrives after a newer one is received but does not replace it.
+
+    Only the observations in transit are kept (a heap by arrival index), with the newest arrived,
+    so memory follows what is in flight, not the delay's bound. The rule keeps the very objects it
+    is given and returns them (:class:`ObservationDelay` hands out copies).
+    """
+
+    def __init__(self):
+        self.reset(None)
+
+    def reset(self, first: Any) -> None:
+        """Start an episode: ``first`` is ``o_0``, received at once; nothing in transit."""
+        self._in_transit: list[tuple[int, int, Any]] = []  # (arrival index, index, observation)
+        self.made = 0
+        self.newest, self.newest_index = first, 0
+
+    @property
+    def in_transit(self) -> int:
+        """How many observations made have not arrived yet."""
+        return len(self._in_transit)
+
+    def receive(self, observation: Any, delay: int) -> tuple[int, Any, Arrivals]:
+        """Make ``observation`` (the next index) with ``delay``; return what this step shows.
+
+        Returns:
+            The age of the observation shown (the steps since the newest arrived was made), the
+            observation shown, and the observations received at this step, in the order of
+            their indices.
+        """
+        self.made = made = self.made + 1
+        if delay == 0 and not self._in_transit:  # the common undelayed case, no heap
+            self.newest, self.newest_index = observation, made
+            return 0, observation, [(made, observation)]
+        heapq.heappush(self._in_transit, (made + delay, made, observation))  # (arrival, i) unique
+        arrived = []
+        while self._in_transit and self._in_transit[0][0] <= made:
+            _, index, arriving = heapq.heappop(self._in_transit)
+            arrived.append((index, arriving))
+        arrived.sort(key=lambda pair: pair[0])
+        if arrived and arrived[-1][0] > self.newest_index:
+            self.newest_index, self.newest = arrived[-1]
+        return made - self.newest_index, self.newest, arrived
+
 
 class ObservationDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
-    """Shows, at step ``t``, the observation of step ``t − d_t`` with ``d_t`` drawn from ``delay``.
+    """Shows, at step ``t``, an observation made ``d`` steps earlier, ``d`` drawn from ``delay``.
 
-    Observations are numbered from the reset observation ``o_0``; the observation returned by
-    step ``t`` (counted from 0) is ``o_{t+1}`` undelayed and ``o_{max(0, t+1−d_t)}`` here: a delay
-    reaching back past the episode's start shows the episode's first observation. The reset
-    observation itself is never delayed. This is the thesis's delayed-sensing baseline
-    (section 5.2.3: the P-controller fed camera readings λ = 90 steps old on average).
+    Observations are numbered from the reset observation ``o_0``; step ``t`` (counted from 0)
+    makes ``o_{t+1}``, which it would return undelayed. The reset observation itself is never
+    delayed. Two arrival rules (``arrival``) say which observation step ``t`` returns:
 
-    Rewards, termination and ``info`` are the inner env's, plus ``info["observation_delay"]``, the
-    delay actually applied (``d_t`` clipped to the episode's start and to the history kept).
+    - ``"stale"`` (the default; :class:`StaleArrival`): the stale sensor. Step ``t`` draws
+      ``d_t`` and returns ``o_{max(0, t+1−d_t)}``: a delay reaching back past the episode's start
+      shows the episode's first observation. Some observations are never seen; one can be seen
+      again, or after a newer one. This is the thesis's delayed-sensing baseline (section 5.2.3:
+      the P-controller fed camera readings λ = 90 steps old on average).
+    - ``"network"`` (:class:`NetworkArrival`): rlrd's rule (Bouteiller et al., ICLR 2021). Every
+      observation ``o_i`` (``i ≥ 1``) draws its own delay ``d_i`` when it is made and arrives at
+      index ``i + d_i``: by step ``t`` if ``i + d_i ≤ t + 1``. Step ``t`` returns the newest
+      observation (largest ``i``) arrived so far; an older one that arrives after a newer one
+      does not replace it. A constant delay ``k`` gives the same observations under both rules.
 
-    The wrapper keeps the last ``history`` observations: ``max_delay + 1`` when ``max_delay`` is
-    set, otherwise enough for all but a negligible tail of the distribution (mean + 10·√mean + 20
-    steps for an unbounded one). A delay reaching further back than that is applied as the oldest
-    observation kept, and ``info["observation_delay"]`` says so. Seeded by ``reset(seed=...)`` from
-    the same independent delay stream as :class:`~delayed_rl.wrappers.RewardDelay`.
+    Both rules draw one delay a step from the same stream, so the same seed gives the same delays.
 
-    The same observation can be shown at several steps (a delay reaching back past the episode's
-    start, or two delays pointing at one step), so array observations are handed out as copies:
-    modifying one changes neither the history nor any other observation returned, as
+    Rewards, termination and ``info`` are the inner env's, plus:
+
+    - ``info["observation_delay"]``: the age of the observation returned, the steps since it was
+      made (``t + 1 − i`` for ``o_i``; under ``"stale"``, ``d_t`` clipped to the episode's start
+      and to the history kept), 0 at ``reset()``;
+    - ``info["arrived_observations"]``: a tuple of the ``(i, o_i)`` received at this step, in the
+      order of ``i``: under ``"stale"`` the one returned; under ``"network"`` every one arriving
+      now (possibly none), those older than the one returned included. ``((0, o_0),)`` at
+      ``reset()``. Learners that use every observation received, not only the newest, read it.
+
+    Under ``"stale"`` the wrapper keeps the last ``history`` observations: ``max_delay + 1`` when
+    ``max_delay`` is set, otherwise enough for all but a negligible tail of the distribution
+    (mean + 10·√mean + 20 steps for an unbounded one). A delay reaching further back than that is
+    applied as the oldest observation kept, and ``info["observation_delay"]`` says so; the history
+    is a ``deque`` holding only the observations made, so a long delay bound costs no memory until
+    the steps are taken. Under ``"network"`` the wrapper keeps only the observations in transit
+    and the newest arrived, and no delay is clipped but by ``max_delay``. Seeded by
+    ``reset(seed=...)`` from the same independent delay stream as
+    :class:`~delayed_rl.wrappers.RewardDelay`; observations still in transit when an episode ends
+    are discarded by the next ``reset()``.
+
+    The same observation can be handed out at several steps (returned again, or in
+    ``arrived_observations``), so array observations are handed out as copies, every time and
+    everywhere (:func:`~delayed_rl.wrappers._samples.copy_sample`): modifying one changes neither
+    what the wrapper keeps nor any other observation returned or reported, as
     ``gymnasium.utils.env_checker.check_env`` requires. (Integer observations need no copy.)
-    The history is kept in a ``deque`` that holds only the observations seen, so a long delay
-    bound costs no memory until the steps are taken.
 
     Args:
         env: the env whose observations to delay.
         delay: a :class:`~delayed_rl.delays.Delay`, its ``to_dict()`` description, or a number
             read as a Poisson mean.
         max_delay: clip delays to at most this many steps (``None``: unbounded).
+        arrival: the arrival rule, ``"stale"`` or ``"network"`` (see above).
 
     Raises:
-        TypeError: ``delay`` is neither a ``Delay`` nor a number, or ``max_delay`` is not an
-            integer.
-        ValueError: ``delay`` is a number that is not a valid Poisson mean, or ``max_delay`` is
-            negative.
+        TypeError: ``delay`` is neither a ``Delay`` nor a number, ``max_delay`` is not an
+            integer, or ``arrival`` is not a string.
+        ValueError: ``delay`` is a number that is not a valid Poisson mean, ``max_delay`` is
+            negative, or ``arrival`` is not one of :data:`ARRIVAL_RULES`.
+
+    Example:
+        >>> from delayed_rl.delays import Constant
+        >>> env = ObservationDelay(gym.make("CartPole-v1"), Constant(2), arrival="network")
+        >>> _ = env.reset(seed=0)
+        >>> [[i for i, _ in env.step(0)[-1]["arrived_observations"]] for _ in range(4)]
+        [[], [], [1], [2]]
     """
 
-    def __init__(self, env: gym.Env, delay: Delay | float, max_delay: int | None = None):
+    def __init__(
+        self,
+        env: gym.Env,
+        delay: Delay | float,
+        max_delay: int | None = None,
+        arrival: str = "stale",
+    ):
         gym.utils.RecordConstructorArgs.__init__(
-            self, delay=delay_spec(delay), max_delay=json_safe(max_delay)
+            self, delay=delay_spec(delay), max_delay=json_safe(max_delay), arrival=arrival
         )
         gym.Wrapper.__init__(self, env)
         self.delay = as_delay(delay)
         self.max_delay = check_max_delay(max_delay)
+        self.arrival = check_choice("arrival", arrival, ARRIVAL_RULES)
         self._sampler = DelaySampler(self.delay, self.max_delay)
         self.history = min(delay_bound(self.delay, self.max_delay), MAX_DELAY - 1) + 1
-        self._observations: deque = deque(maxlen=self.history)
+        self._rule = StaleArrival(self.history) if arrival == "stale" else NetworkArrival()
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        """Reset the env and the history; ``seed`` also reseeds the delay generator.
+        """Reset the env and the observations kept; ``seed`` also reseeds the delay generator.
 
         The reset observation is returned undelayed (a copy, if it is an array), with
-        ``info["observation_delay"] = 0``.
+        ``info["observation_delay"] = 0`` and ``info["arrived_observations"] = ((0, o_0),)``.
         """
         obs, info = self.env.reset(seed=seed, options=options)
         if seed is not None:
             self._sampler.seed(seed)
-        self._observations.clear()
-        self._observations.append(obs)
+        self._rule.reset(obs)
         info["observation_delay"] = 0
+        info["arrived_observations"] = ((0, copy_sample(obs)),)
         return copy_sample(obs), info
 
     def step(self, action):
         """Step the env; return an older observation (see the class docstring) with its reward."""
         obs, reward, terminated, truncated, info = self.env.step(action)
-        self._observations.append(obs)
-        applied = min(self._sampler(), len(self._observations) - 1)
-        info["observation_delay"] = applied
-        return copy_sample(self._observations[-1 - applied]), reward, terminated, truncated, info
+        age, shown, arrived = self._rule.receive(obs, self._sampler())
+        info["observation_delay"] = age
+        info["arrived_observations"] = tuple((i, copy_sample(o)) for i, o in arrived)
+        return copy_sample(shown), reward, terminated, truncated, info

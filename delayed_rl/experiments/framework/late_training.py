@@ -1,0 +1,130 @@
+"""One SAC run under observation and action delays, scored in the env it acts in.
+
+A task names the env (``env_id``, its episode length ``episode_steps``), the delays
+(``observation_delay`` and ``action_delay``, :meth:`~delayed_rl.delays.Delay.to_dict`
+descriptions, bounded), how observations arrive (``arrival``: ``"stale"`` or ``"network"``, see
+:class:`~delayed_rl.wrappers.ObservationDelay`), the training ``steps``, the ``method`` and the
+``seed``. The stack is ``ActionDelay`` inside ``ObservationDelay``. The methods
+(:data:`METHODS`), each SB3's SAC with its defaults on one thread:
+
+- ``oracle``: on the undelayed env;
+- ``naive``: on the delayed stack as it is (the newest observation the stale sensor shows);
+- ``augmented``: on the delay-aware view (:class:`~delayed_rl.wrappers.DelayAwareObservation`),
+  flattened, with ``MlpPolicy``;
+- ``hindsight``: :class:`~delayed_rl.deep.HindsightSAC` on the view.
+
+The score is the mean return of ``eval_episodes`` deterministic episodes of the env the method
+acts in (delays included; the oracle's is undelayed), reset with seeds fixed per seed and
+episode, read every ``eval_every`` steps and at the end: the learning curve.
+:func:`random_score` scores a uniformly random policy on the undelayed env.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from delayed_rl.delays import as_delay
+
+__all__ = ["METHODS", "random_score", "train_and_score"]
+
+METHODS = ("oracle", "naive", "augmented", "hindsight")
+"""The methods a task can name (see the module docstring)."""
+EVAL_SEED = 2_000_000
+"""Evaluation episode ``i`` of seed ``s`` resets with ``EVAL_SEED + 1000 * s + i``."""
+
+
+def make_env(task: dict, method: str) -> gym.Env:
+    """The env ``method`` acts in (see the module docstring)."""
+    from gymnasium.wrappers import FlattenObservation
+
+    from delayed_rl.wrappers import ActionDelay, DelayAwareObservation, ObservationDelay
+
+    env = gym.make(task["env_id"], max_episode_steps=task["episode_steps"])
+    if method in ("oracle", "random"):
+        return env
+    env = ActionDelay(env, as_delay(task["action_delay"]))
+    env = ObservationDelay(env, as_delay(task["observation_delay"]), arrival=task["arrival"])
+    if method == "naive":
+        return env
+    env = DelayAwareObservation(env)
+    return FlattenObservation(env) if method == "augmented" else env
+
+
+def _score(policy: Any, env: gym.Env, task: dict) -> float:
+    """The mean return of the evaluation episodes of ``env``, ``policy(obs)`` acting."""
+    returns = []
+    for episode in range(task["eval_episodes"]):
+        obs, _ = env.reset(seed=EVAL_SEED + 1000 * task["seed"] + episode)
+        total, done = 0.0, False
+        while not done:
+            obs, reward, terminated, truncated, _ = env.step(policy(obs))
+            total += float(reward)
+            done = terminated or truncated
+        returns.append(total)
+    return float(np.mean(returns))
+
+
+def random_score(task: dict) -> dict:
+    """``{"score"}``: a uniformly random policy's mean return on the undelayed env."""
+    env = make_env(task, "random")
+    env.action_space.seed(task["seed"])
+    return {"score": _score(lambda _obs: env.action_space.sample(), env, task)}
+
+
+def train_and_score(task: dict) -> dict:
+    """Train the task's method and score it along the way (see the module docstring).
+
+    Returns:
+        ``{"steps", "scores"}`` (the learning curve, from step 0 to ``steps``), ``"score"`` (the
+        last), ``"train_seconds"``, and for ``hindsight`` the transitions it stored and dropped.
+    """
+    import torch
+    from stable_baselines3 import SAC
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    from delayed_rl.deep import HindsightSAC
+
+    torch.set_num_threads(1)
+    method, seed = task["method"], task["seed"]
+    env, evaluation = make_env(task, method), make_env(task, method)
+    algorithm, policy = (
+        (HindsightSAC, "MultiInputPolicy")
+        if method == "hindsight"
+        else (
+            SAC,
+            "MlpPolicy",
+        )
+    )
+    agent = algorithm(policy, env, seed=seed, device="cpu")
+    curve: list[tuple[int, float]] = []
+
+    def greedy(obs: Any) -> Any:
+        return agent.predict(obs, deterministic=True)[0]
+
+    class Scores(BaseCallback):
+        """Scores the policy each time training passes ``eval_every`` steps."""
+
+        def _on_step(self) -> bool:
+            while len(curve) * task["eval_every"] <= min(self.num_timesteps, task["steps"]):
+                curve.append((len(curve) * task["eval_every"], _score(greedy, evaluation, task)))
+            return True
+
+    started = time.perf_counter()
+    agent.learn(task["steps"], callback=Scores())
+    seconds = time.perf_counter() - started
+    if curve[-1][0] < task["steps"]:
+        curve.append((task["steps"], _score(greedy, evaluation, task)))
+    result: dict[str, Any] = {
+        "steps": [step for step, _ in curve],
+        "scores": [score for _, score in curve],
+        "score": curve[-1][1],
+        "train_seconds": seconds,
+    }
+    if method == "hindsight":
+        result["transitions_stored"] = agent.transitions_stored
+        result["transitions_dropped"] = agent.transitions_dropped
+    return result

@@ -1,0 +1,389 @@
+"""The delay-aware observation: what the agent can know at step ``t``, and nothing more.
+
+Under observation and action delays the newest observation is not the state, and the actions
+still on their way will change it. The classic remedy (the augmented state of the constant-delay
+MDP; rlrd's RTRL and DCAC, Bouteiller et al., ICLR 2021) observes the newest observation received,
+its age and the actions sent since it was made. :class:`DelayAwareObservation` builds that view
+over a stack of the library's delay wrappers; :class:`DiscreteDelayAwareObservation` numbers it
+with one ``Discrete`` index, for the tabular agents.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from delayed_rl._validation import check_int
+from delayed_rl.wrappers._samples import as_action, copy_sample
+from delayed_rl.wrappers._spec import JsonSpecMixin, json_safe
+from delayed_rl.wrappers.action_delay import ActionDelay, neutral_action
+from delayed_rl.wrappers.discrete_observation import DiscreteObservation
+from delayed_rl.wrappers.observation_delay import ObservationDelay
+
+__all__ = [
+    "MAX_ACTION_HISTORY",
+    "MAX_DISCRETE_STATES",
+    "DelayAwareObservation",
+    "DiscreteDelayAwareObservation",
+]
+
+MAX_ACTION_HISTORY = 2**16
+"""The most actions :class:`DelayAwareObservation` keeps (its ``K``): a bound beyond it is refused
+rather than allocated (a delay of ``Uniform(0, 10**9)`` would ask for 10⁹ actions a step)."""
+
+MAX_DISCRETE_STATES = 2**24
+"""The most states :class:`DiscreteDelayAwareObservation` numbers (16 777 216): a Q-table of that
+many states and a few actions already takes hundreds of megabytes."""
+
+VIEW_KEYS = ("actions", "age", "observation")
+"""The keys of the view's ``Dict`` (Gymnasium orders a ``Dict``'s keys alphabetically)."""
+
+
+def _the_wrapper(env: gym.Env, cls: type) -> Any:
+    """The one ``cls`` among ``env``'s wrappers (walking ``.env`` down), or ``None``.
+
+    Raises:
+        ValueError: the stack holds more than one.
+    """
+    found = []
+    while isinstance(env, gym.Wrapper):
+        if isinstance(env, cls):
+            found.append(env)
+        env = env.env
+    if len(found) > 1:
+        raise ValueError(
+            f"env must hold at most one {cls.__name__} for DelayAwareObservation to read its "
+            f"delays, got {len(found)}: {found!r}"
+        )
+    return found[0] if found else None
+
+
+def _bound(wrapper: ObservationDelay | ActionDelay | None) -> int | None:
+    """The longest delay ``wrapper`` applies: 0 without one, ``None`` if unbounded.
+
+    The smaller of its ``max_delay`` and its distribution's ``support_max``, whichever are set.
+    """
+    if wrapper is None:
+        return 0
+    bounds = [b for b in (wrapper.max_delay, wrapper.delay.support_max) if b is not None]
+    return min(bounds) if bounds else None
+
+
+def _history_space(space: gym.Space, k: int) -> spaces.Space:
+    """The space of ``k`` actions of ``space``, stacked along a new first axis.
+
+    Raises:
+        TypeError: ``space`` is not ``Discrete``, ``Box``, ``MultiDiscrete`` or ``MultiBinary``.
+    """
+    if isinstance(space, spaces.Discrete):
+        return spaces.MultiDiscrete(np.full(k, space.n), start=np.full(k, space.start))
+    if isinstance(space, spaces.Box):
+        low, high = (np.repeat(bound[np.newaxis], k, axis=0) for bound in (space.low, space.high))
+        return spaces.Box(low, high, dtype=space.dtype)
+    if isinstance(space, spaces.MultiDiscrete):
+        nvec, start = (np.repeat(a[np.newaxis], k, axis=0) for a in (space.nvec, space.start))
+        return spaces.MultiDiscrete(nvec, start=start, dtype=space.dtype)
+    if isinstance(space, spaces.MultiBinary):
+        return spaces.MultiBinary([k, *space.shape])
+    raise TypeError(
+        "DelayAwareObservation needs an env whose action_space is Discrete, Box, MultiDiscrete "
+        f"or MultiBinary (to stack the actions sent), got {space!r}"
+    )
+
+
+class DelayAwareObservation(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """Observe what the agent can know: the newest observation received, its age, the actions sent.
+
+    ``env`` is a stack holding an :class:`~delayed_rl.wrappers.ObservationDelay`, an
+    :class:`~delayed_rl.wrappers.ActionDelay`, both or neither (found by walking ``.env`` down the
+    wrappers; at most one of each). The view is built only from what the stack reports to the
+    agent: the observations it returns with their ``info["observation_delay"]``, and the actions
+    given to this wrapper's ``step``; never from the undelayed state. Observations are numbered
+    from the reset observation ``o_0``; step ``t`` (counted from 0) makes ``o_{t+1}``. The
+    observation is a ``Dict``:
+
+    - ``"observation"``: the newest observation received so far, by the step it was made at: the
+      one returned at step ``t`` was made at ``i = t + 1 − info["observation_delay"]``, and it
+      replaces the view's only if ``i`` is larger (under the ``"stale"`` rule an older one can be
+      shown after a newer one; it changes nothing). Without an ``ObservationDelay``, ``o_{t+1}``.
+      Its space is ``env``'s observation space.
+    - ``"age"``: the steps since that observation was made, ``t + 1 − i`` (0 at ``reset()``), in
+      ``Discrete(D + 1)``: ``D`` is the observation delay's bound (0 without an
+      ``ObservationDelay``). For an unbounded observation delay ``D`` is ``action_history``, and
+      an older age is reported as ``D`` with ``info["age_clipped"] = True``.
+    - ``"actions"``: the last ``K`` actions sent (given to this wrapper's ``step``), newest first:
+      row 0 is the previous action, row ``j`` the one sent ``j + 1`` steps ago. Rows before the
+      episode's first action hold the ``ActionDelay``'s ``initial_action`` (without one, the
+      action space's :func:`~delayed_rl.wrappers.action_delay.neutral_action`), which is what
+      the env executes until the first action arrives. For a ``Discrete(n, start)`` action space
+      the rows form a ``MultiDiscrete([n] * K, start=[start] * K)``; for a ``Box``,
+      ``MultiDiscrete`` or ``MultiBinary`` one, a space of the same kind and shape
+      ``(K, *action_shape)`` with the bounds (``nvec``, ``start``) repeated on each row.
+
+    ``K`` is the observation delay's bound plus the action delay's bound, each the smaller of the
+    wrapper's ``max_delay`` and its distribution's ``support_max`` (0 without the wrapper): the
+    actions that can have changed the state since the observation was made. At least 1: the
+    previous action is always observed (so an undelayed stack observes ``(o_{t+1}, 0, a_t)``, and
+    the ``actions`` key is never empty). An unbounded delay (a ``Poisson`` or ``Geometric`` without
+    ``max_delay``) has no such bound: give ``action_history``.
+
+    ``info`` is the inner env's, plus ``info["received_observations"]``: a tuple of the
+    ``(i, o_i)`` pairs received at this step (the stack's ``info["arrived_observations"]``; without
+    an ``ObservationDelay``, ``((t + 1, o_{t+1}),)``, and ``((0, o_0),)`` at ``reset()``), so that a
+    learner can use every observation received, not only the newest; and ``info["age_clipped"]``
+    (see ``"age"``; always ``False`` for a bounded observation delay).
+
+    Everything handed out is a copy (:func:`~delayed_rl.wrappers._samples.copy_sample`): the
+    view's entries, the received observations. Each action is checked against the action space
+    before the stack is stepped with it. The wrapper draws nothing: ``reset(seed=...)`` seeds the
+    stack, whose delays then repeat. It records ``action_history`` in the env spec, so
+    ``gym.make(env.spec)`` rebuilds it.
+
+    For an MLP policy, ``gymnasium.wrappers.FlattenObservation`` turns the view into one ``Box``
+    (one-hot ``Discrete`` and ``MultiDiscrete`` entries); stable-baselines3's ``MultiInputPolicy``
+    takes the ``Dict`` as it is. For vector envs, wrap each sub-env: ``gym.make_vec(id, ...,
+    delay_aware=True)`` for a ``delayed_rl/`` id, ``gym.make_vec(id, wrappers=[...])`` or
+    ``SyncVectorEnv`` of wrapped envs otherwise, and stable-baselines3's ``make_vec_env(id,
+    wrapper_class=wrap_delays, wrapper_kwargs={..., "delay_aware": True})``. (A
+    :class:`~delayed_rl.wrappers.VectorActionDelay` around the vector env is invisible to the
+    sub-envs' views: put an ``ActionDelay`` in each sub-env instead.) Wrap outside the delays and
+    inside a reward delay, as :func:`~delayed_rl.wrappers.wrap_delays` does: wrappers between the
+    ``ObservationDelay`` and the view must not change observations or drop ``info`` entries.
+
+    Args:
+        env: the stack to observe.
+        action_history: ``K``, the number of actions observed, when given (an integer in
+            ``1..MAX_ACTION_HISTORY``), and ``D``, the ages' bound, for an unbounded observation
+            delay; ``None``: from the delays' bounds (see above).
+
+    Raises:
+        TypeError: ``action_history`` is not an integer, or the action space is not
+            ``Discrete``, ``Box``, ``MultiDiscrete`` or ``MultiBinary``.
+        ValueError: ``action_history`` is outside ``1..MAX_ACTION_HISTORY``; it is ``None`` and a
+            delay is unbounded, or the bounds add up to more than :data:`MAX_ACTION_HISTORY`;
+            the stack holds two ``ObservationDelay`` (or ``ActionDelay``) wrappers.
+
+    Example:
+        >>> import gymnasium as gym
+        >>> from delayed_rl.delays import Constant, Uniform
+        >>> from delayed_rl.wrappers import wrap_delays
+        >>> stack = wrap_delays(
+        ...     gym.make("CartPole-v1"),
+        ...     observation_delay=Constant(2),
+        ...     observation_arrival="network",
+        ...     action_delay=Uniform(0, 1),
+        ... )
+        >>> env = DelayAwareObservation(stack)
+        >>> env.observation_space["age"], env.observation_space["actions"]
+        (Discrete(3), MultiDiscrete([2 2 2]))
+        >>> view, info = env.reset(seed=0)
+        >>> view, reward, terminated, truncated, info = env.step(1)
+        >>> int(view["age"]), view["actions"].tolist(), info["received_observations"]
+        (1, [1, 0, 0], ())
+    """
+
+    def __init__(self, env: gym.Env, action_history: int | None = None):
+        gym.utils.RecordConstructorArgs.__init__(self, action_history=json_safe(action_history))
+        gym.Wrapper.__init__(self, env)
+        action_history = check_int(
+            "action_history", action_history, 1, MAX_ACTION_HISTORY, optional=True
+        )
+        self._observation_delay = _the_wrapper(env, ObservationDelay)
+        self._action_delay = _the_wrapper(env, ActionDelay)
+        observation_bound = _bound(self._observation_delay)
+        action_bound = _bound(self._action_delay)
+        if action_history is None:
+            action_history = self._bounded_history(observation_bound, action_bound)
+        self.action_history = action_history
+        self.max_age = action_history if observation_bound is None else observation_bound
+        initial = (
+            neutral_action(env.action_space)
+            if self._action_delay is None
+            else self._action_delay.initial_action
+        )
+        actions_space = _history_space(env.action_space, action_history)  # checks the space
+        self.initial_action = as_action(env.action_space, initial, "initial_action")
+        self.observation_space = spaces.Dict(
+            {
+                "observation": env.observation_space,
+                "age": spaces.Discrete(self.max_age + 1),
+                "actions": actions_space,
+            }
+        )
+        self._actions = np.empty(actions_space.shape, dtype=actions_space.dtype)
+        self._newest: Any = None
+        self._newest_index = 0
+        self._step = 0
+
+    def _bounded_history(self, observation_bound: int | None, action_bound: int | None) -> int:
+        """``K`` from the delays' bounds: their sum, at least 1.
+
+        Raises:
+            ValueError: a delay is unbounded, or the sum is above :data:`MAX_ACTION_HISTORY`.
+        """
+        bounds = ((self._observation_delay, observation_bound), (self._action_delay, action_bound))
+        for wrapper, bound in bounds:
+            if bound is None:
+                raise ValueError(
+                    f"DelayAwareObservation needs action_history (an integer >= 1) for the "
+                    f"{type(wrapper).__name__} of unbounded delay {wrapper.delay!r} (no "
+                    "max_delay): the number of actions to observe cannot be read from it"
+                )
+        total = max(observation_bound + action_bound, 1)
+        if total > MAX_ACTION_HISTORY:
+            raise ValueError(
+                f"DelayAwareObservation would observe {total} actions (the observation delay's "
+                f"bound {observation_bound} plus the action delay's {action_bound}), more than "
+                f"MAX_ACTION_HISTORY = {MAX_ACTION_HISTORY}: give action_history, or max_delay "
+                "to the delay wrappers"
+            )
+        return total
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        """Reset the stack (``seed`` seeds it) and the view: ``o_0``, age 0, the initial actions."""
+        obs, info = self.env.reset(seed=seed, options=options)
+        self._step = 0
+        self._newest, self._newest_index = copy_sample(obs), 0
+        self._actions[...] = self.initial_action
+        self._report(info, obs, age=0)
+        return self._view(0), info
+
+    def step(self, action):
+        """Send ``action`` through the stack; observe the view (see the class docstring).
+
+        Raises:
+            ValueError: ``action`` is not in the action space.
+        """
+        sent = as_action(self.action_space, action, "action")
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self._step += 1
+        self._actions[1:] = self._actions[:-1]
+        self._actions[0] = sent
+        shown_age = 0 if self._observation_delay is None else info["observation_delay"]
+        made = self._step - shown_age
+        if made > self._newest_index:
+            self._newest, self._newest_index = copy_sample(obs), made
+        age = self._step - self._newest_index
+        self._report(info, obs, age)
+        return self._view(min(age, self.max_age)), reward, terminated, truncated, info
+
+    def _report(self, info: dict[str, Any], obs: Any, age: int) -> None:
+        """Add ``received_observations`` and ``age_clipped`` to this step's ``info``."""
+        if self._observation_delay is None:
+            info["received_observations"] = ((self._step, copy_sample(obs)),)
+        else:
+            info["received_observations"] = copy_sample(info["arrived_observations"])
+        info["age_clipped"] = age > self.max_age
+
+    def _view(self, age: int) -> dict[str, Any]:
+        """The view's ``Dict`` sample: copies of the newest observation and the actions."""
+        return {
+            "actions": self._actions.copy(),
+            "age": np.int64(age),
+            "observation": copy_sample(self._newest),
+        }
+
+
+class DiscreteDelayAwareObservation(JsonSpecMixin, DiscreteObservation):
+    """Observe a :class:`DelayAwareObservation`'s view as one ``Discrete`` index, for tabular agents.
+
+    ``env``'s observation is the view's ``Dict`` (a :class:`DelayAwareObservation`, possibly
+    below other wrappers that leave observations alone: a reward delay, a time limit) over a
+    ``Discrete(n)`` observation space and a ``Discrete(m)`` action space (or ``MultiDiscrete`` or
+    ``MultiBinary``, read entry by entry). Every combination of the view's parts gets an index,
+    numbered as :class:`~delayed_rl.wrappers.DiscreteObservation` numbers the parts
+    ``(observation, age, action_1, ..., action_K)``, in that order (the observation most
+    significant, the oldest action least). That takes
+
+        ``n · (D + 1) · m^K``
+
+    states (``D`` the age bound, ``K`` the actions observed; ``m^K`` is the product of the
+    actions' sizes for a ``MultiDiscrete``, ``2^(K · entries)`` for a ``MultiBinary``), which
+    must be at most :data:`MAX_DISCRETE_STATES` = 2**24. :meth:`decode` maps an index back to the
+    view's ``Dict``.
+
+    Args:
+        env: an env whose observation is a :class:`DelayAwareObservation`'s view.
+
+    Raises:
+        TypeError: ``env``'s observation space is not such a view, of a ``Discrete`` observation
+            and ``MultiDiscrete`` or ``MultiBinary`` actions.
+        ValueError: the view has more than :data:`MAX_DISCRETE_STATES` combinations (the message
+            gives the count).
+
+    Example:
+        >>> import gymnasium as gym
+        >>> from delayed_rl.delays import Constant
+        >>> from delayed_rl.wrappers import wrap_delays
+        >>> stack = wrap_delays(
+        ...     gym.make("FrozenLake-v1"), observation_delay=Constant(1), delay_aware=True
+        ... )
+        >>> env = DiscreteDelayAwareObservation(stack)
+        >>> env.observation_space  # 16 observations, ages 0..1, 4 actions for each of K = 1
+        Discrete(128)
+        >>> index, _ = env.reset(seed=0)
+        >>> env.decode(env.step(2)[0])["actions"].tolist()
+        [2]
+    """
+
+    def __init__(self, env: gym.Env):
+        gym.utils.RecordConstructorArgs.__init__(self)
+        gym.ObservationWrapper.__init__(self, env)
+        view = env.observation_space
+        if (
+            not isinstance(view, spaces.Dict)
+            or tuple(view.spaces) != VIEW_KEYS
+            or not isinstance(view["observation"], spaces.Discrete)
+            or not isinstance(view["actions"], spaces.MultiDiscrete | spaces.MultiBinary)
+        ):
+            raise TypeError(
+                "DiscreteDelayAwareObservation needs an env whose observation_space is a "
+                "DelayAwareObservation's Dict of a Discrete observation and MultiDiscrete or "
+                f"MultiBinary actions, got {view!r}"
+            )
+        self._actions_space = actions = view["actions"]
+        if isinstance(actions, spaces.MultiDiscrete):
+            action_sizes, action_starts = (
+                actions.nvec.ravel().tolist(),
+                actions.start.ravel().tolist(),
+            )
+        else:  # MultiBinary: 0 or 1 in every entry
+            action_sizes, action_starts = (
+                [2] * math.prod(actions.shape),
+                [0] * math.prod(actions.shape),
+            )
+        self.sizes = [int(view["observation"].n), int(view["age"].n), *action_sizes]
+        self.starts = [int(view["observation"].start), int(view["age"].start), *action_starts]
+        states = math.prod(self.sizes)
+        if states > MAX_DISCRETE_STATES:
+            raise ValueError(
+                f"DiscreteDelayAwareObservation would number {states} states (n · (D + 1) · m^K "
+                f"for {view!r}), more than MAX_DISCRETE_STATES = {MAX_DISCRETE_STATES}: observe "
+                "fewer actions (action_history) or bound the delays more tightly"
+            )
+        self.strides = [math.prod(self.sizes[i + 1 :]) for i in range(len(self.sizes))]
+        self.observation_space = spaces.Discrete(states)
+
+    def observation(self, observation: dict[str, Any]) -> int:
+        """The index of the view ``observation`` (see the class docstring)."""
+        parts = [observation["observation"], observation["age"], *np.ravel(observation["actions"])]
+        return super().observation(parts)
+
+    def decode(self, index: Any) -> dict[str, Any]:
+        """The view numbered ``index`` (the inverse of :meth:`observation`).
+
+        Raises:
+            TypeError: ``index`` is not an integer.
+            ValueError: it is outside ``0 .. observation_space.n − 1``.
+        """
+        observation, age, *actions = super().decode(index)
+        space = self._actions_space
+        return {
+            "actions": np.array(actions, dtype=space.dtype).reshape(space.shape),
+            "age": np.int64(age),
+            "observation": np.int64(observation),
+        }
