@@ -43,7 +43,6 @@ an interrupted run resumes. It needs the ``sb3`` extra.
 from __future__ import annotations
 
 import math
-from collections import defaultdict
 from typing import Any
 
 import numpy as np
@@ -57,6 +56,8 @@ from delayed_rl.experiments.framework.deep_training import (
     require_sb3,
     train_and_score,
 )
+from delayed_rl.experiments.framework.gain_settings import gains as setting_gains
+from delayed_rl.experiments.framework.gain_settings import group_results, setting_tasks
 from delayed_rl.experiments.framework.runner import (
     AGREES,
     DIFFERS,
@@ -111,20 +112,7 @@ def tasks(config: Config) -> list[dict]:
         ImportError: torch or stable-baselines3 is missing (the ``sb3`` extra).
     """
     require_sb3()
-    chosen = QUICK if config.quick else {name: None for name in SETTINGS}
-    out = []
-    for name, quick in chosen.items():
-        setting = dict(SETTINGS[name])
-        if quick is not None:
-            setting["steps"], setting["eval_every"] = quick
-        if config.steps is not None:
-            setting["steps"] = config.steps
-            setting["eval_every"] = max(1, config.steps // 10)
-        for i in range(config.seeds):
-            for method in (*METHODS, "random"):
-                seed = config.base_seed + i
-                out.append({"setting": name, "method": method, "seed": seed, **setting})
-    return out
+    return setting_tasks(config, SETTINGS, QUICK, (*METHODS, "random"))
 
 
 def shared_run(task: dict) -> SharedRun:
@@ -156,21 +144,6 @@ def cost(task: dict) -> float:
         return 1.0
     per_step = 0.02 if task["algorithm"] == "SAC" else 0.0015
     return per_step * task["steps"]
-
-
-def _gains(
-    by_method: dict[str, dict[int, dict]],
-) -> tuple[dict[str, dict[int, float]], float, float]:
-    """Each method's gain per seed, with the random and oracle mean scores."""
-    low = rules.mean_ci_n([r["score"] for r in by_method["random"].values()])[0]
-    high = rules.mean_ci_n([r["score"] for r in by_method["oracle"].values()])[0]
-    span = high - low
-    gains = {
-        method: {seed: (r["score"] - low) / span if span else math.nan for seed, r in runs.items()}
-        for method, runs in by_method.items()
-        if method != "random"
-    }
-    return gains, low, high
 
 
 def _within_gain_claim(setting: str, method: str, gains: dict[int, float]) -> Claim:
@@ -270,12 +243,10 @@ def _table_row(method: str, runs: dict[int, dict], gains: dict[int, float]) -> d
 
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
     """The claims, reference rows of every gain, the table and a learning-curve figure a setting."""
-    grouped: dict[str, dict[str, dict[int, dict]]] = defaultdict(lambda: defaultdict(dict))
-    for task, result in zip(task_list, results, strict=True):
-        grouped[task["setting"]][task["method"]][task["seed"]] = result
+    grouped = group_results(task_list, results)
     claims, curves, figures, table = [], [], {}, {}
     for setting, by_method in grouped.items():
-        gains, low, high = _gains(by_method)
+        gains, low, high = setting_gains(by_method)
         claims += _setting_claims(setting, gains)
         for method in METHODS:
             stats = rules.mean_ci_n(list(gains[method].values()))

@@ -31,7 +31,6 @@ the ``sb3`` extra.
 from __future__ import annotations
 
 import math
-from collections import defaultdict
 from typing import Any
 
 import numpy as np
@@ -40,6 +39,8 @@ from delayed_rl.delays import Uniform
 from delayed_rl.experiments.framework import claims as rules
 from delayed_rl.experiments.framework import plotting
 from delayed_rl.experiments.framework.deep_training import require_sb3
+from delayed_rl.experiments.framework.gain_settings import gains as setting_gains
+from delayed_rl.experiments.framework.gain_settings import group_results, setting_tasks
 from delayed_rl.experiments.framework.late_training import (
     METHODS,
     random_score,
@@ -100,21 +101,7 @@ def tasks(config: Config) -> list[dict]:
         ImportError: torch or stable-baselines3 is missing (the ``sb3`` extra).
     """
     require_sb3()
-    chosen = QUICK if config.quick else {name: None for name in SETTINGS}
-    out = []
-    for name, quick in chosen.items():
-        setting = dict(SETTINGS[name])
-        if quick is not None:
-            setting["steps"], setting["eval_every"] = quick
-        if config.steps is not None:
-            setting["steps"] = config.steps
-            setting["eval_every"] = max(1, config.steps // 10)
-        for i in range(config.seeds):
-            for method in (*METHODS, "random"):
-                out.append(
-                    {"setting": name, "method": method, "seed": config.base_seed + i, **setting}
-                )
-    return out
+    return setting_tasks(config, SETTINGS, QUICK, (*METHODS, "random"))
 
 
 def shared_run(task: dict) -> SharedRun:
@@ -141,19 +128,6 @@ def run_task(task: dict) -> dict:
 def cost(task: dict) -> float:
     """Estimated core-seconds: SAC about 10 ms a step (for scheduling only)."""
     return 1.0 if task["method"] == "random" else 0.01 * task["steps"]
-
-
-def _gains(by_method: dict[str, dict[int, dict]]) -> tuple[dict, float, float]:
-    """Each method's gain per seed, with the random and oracle mean scores."""
-    low = rules.mean_ci_n([r["score"] for r in by_method["random"].values()])[0]
-    high = rules.mean_ci_n([r["score"] for r in by_method["oracle"].values()])[0]
-    span = high - low
-    gains = {
-        method: {seed: (r["score"] - low) / span if span else math.nan for seed, r in runs.items()}
-        for method, runs in by_method.items()
-        if method != "random"
-    }
-    return gains, low, high
 
 
 def _setting_claims(setting: str, gains: dict) -> list[rules.Claim]:
@@ -190,12 +164,10 @@ def _setting_claims(setting: str, gains: dict) -> list[rules.Claim]:
 
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
     """The claims, reference rows of every gain, the table and a learning-curve figure a setting."""
-    grouped: dict[str, dict[str, dict[int, dict]]] = defaultdict(lambda: defaultdict(dict))
-    for task, result in zip(task_list, results, strict=True):
-        grouped[task["setting"]][task["method"]][task["seed"]] = result
+    grouped = group_results(task_list, results)
     claims, curves, figures, table = [], [], {}, {}
     for setting, by_method in grouped.items():
-        gains, low, high = _gains(by_method)
+        gains, low, high = setting_gains(by_method)
         claims += _setting_claims(setting, gains)
         groups = {}
         table[setting] = {}

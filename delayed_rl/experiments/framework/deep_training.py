@@ -34,7 +34,14 @@ import numpy as np
 
 from delayed_rl.delays import as_delay
 
-__all__ = ["METHODS", "MODEL_METHODS", "random_score", "require_sb3", "train_and_score"]
+__all__ = [
+    "METHODS",
+    "MODEL_METHODS",
+    "mean_return",
+    "random_score",
+    "require_sb3",
+    "train_and_score",
+]
 
 METHODS = ("raw", "oracle", "rrd", "ircr", "deconv-known", "deconv-learned")
 """The methods a task can name (see the module docstring)."""
@@ -85,20 +92,27 @@ def _reward_model(task: dict, env: gym.Env) -> Any:
     return DeconvolutionRewardModel(*spaces, delay=delay, max_delay=max_delay, seed=seed)
 
 
-def _scores(policy: Any, task: dict) -> float:
-    """The mean return of the evaluation episodes, ``policy(obs)`` acting."""
-    env = _env(task, delayed=False)
+def mean_return(policy: Any, env: gym.Env, seeds: Any) -> float:
+    """The mean return of one deterministic episode of ``env`` per reset seed, ``policy(obs)`` acting."""
     returns = []
-    for episode in range(task["eval_episodes"]):
-        obs, _ = env.reset(seed=EVAL_SEED + 1000 * task["seed"] + episode)
+    for seed in seeds:
+        obs, _ = env.reset(seed=seed)
         total, done = 0.0, False
         while not done:
             obs, reward, terminated, truncated, _ = env.step(policy(obs))
             total += float(reward)
             done = terminated or truncated
         returns.append(total)
-    env.close()
     return float(np.mean(returns))
+
+
+def _scores(policy: Any, task: dict) -> float:
+    """The mean return of the evaluation episodes, ``policy(obs)`` acting."""
+    env = _env(task, delayed=False)
+    seeds = [EVAL_SEED + 1000 * task["seed"] + i for i in range(task["eval_episodes"])]
+    score = mean_return(policy, env, seeds)
+    env.close()
+    return score
 
 
 def random_score(task: dict) -> dict:

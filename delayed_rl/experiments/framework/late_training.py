@@ -25,9 +25,9 @@ import time
 from typing import Any
 
 import gymnasium as gym
-import numpy as np
 
 from delayed_rl.delays import as_delay
+from delayed_rl.experiments.framework.deep_training import mean_return
 
 __all__ = ["METHODS", "random_score", "train_and_score"]
 
@@ -56,16 +56,8 @@ def make_env(task: dict, method: str) -> gym.Env:
 
 def _score(policy: Any, env: gym.Env, task: dict) -> float:
     """The mean return of the evaluation episodes of ``env``, ``policy(obs)`` acting."""
-    returns = []
-    for episode in range(task["eval_episodes"]):
-        obs, _ = env.reset(seed=EVAL_SEED + 1000 * task["seed"] + episode)
-        total, done = 0.0, False
-        while not done:
-            obs, reward, terminated, truncated, _ = env.step(policy(obs))
-            total += float(reward)
-            done = terminated or truncated
-        returns.append(total)
-    return float(np.mean(returns))
+    seeds = [EVAL_SEED + 1000 * task["seed"] + i for i in range(task["eval_episodes"])]
+    return mean_return(policy, env, seeds)
 
 
 def random_score(task: dict) -> dict:

@@ -1,0 +1,68 @@
+"""What the experiments that score methods between a random policy and an oracle share.
+
+A *setting* is a dict of run fields; each (setting, method, seed) is a task. A method's *gain*
+in a setting is ``(score − random) / (oracle − random)``, with the mean scores of the random
+policy (method ``"random"``) and of the oracle (method ``"oracle"``) over the setting's seeds:
+0 is the random policy's level, 1 the oracle's.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import defaultdict
+from typing import Any
+
+from delayed_rl.experiments.framework import claims as rules
+from delayed_rl.experiments.framework.runner import Config
+
+__all__ = ["gains", "group_results", "setting_tasks"]
+
+
+def setting_tasks(
+    config: Config,
+    settings: dict[str, dict[str, Any]],
+    quick: dict[str, tuple[int, int]],
+    methods: tuple[str, ...],
+) -> list[dict]:
+    """Every (setting, method, seed) as a task, in that order of loops.
+
+    ``config.quick`` keeps only the settings of ``quick``, with its ``(steps, eval_every)``;
+    ``config.steps`` sets the steps of every run (evaluated ten times along the way).
+    """
+    chosen = quick if config.quick else {name: None for name in settings}
+    out = []
+    for name, scaled in chosen.items():
+        setting = dict(settings[name])
+        if scaled is not None:
+            setting["steps"], setting["eval_every"] = scaled
+        if config.steps is not None:
+            setting["steps"] = config.steps
+            setting["eval_every"] = max(1, config.steps // 10)
+        for i in range(config.seeds):
+            for method in methods:
+                seed = config.base_seed + i
+                out.append({"setting": name, "method": method, "seed": seed, **setting})
+    return out
+
+
+def group_results(task_list: list[dict], results: list[dict]) -> dict[str, dict[str, dict]]:
+    """``{setting: {method: {seed: result}}}``."""
+    grouped: dict[str, dict[str, dict[int, dict]]] = defaultdict(lambda: defaultdict(dict))
+    for task, result in zip(task_list, results, strict=True):
+        grouped[task["setting"]][task["method"]][task["seed"]] = result
+    return grouped
+
+
+def gains(
+    by_method: dict[str, dict[int, dict]],
+) -> tuple[dict[str, dict[int, float]], float, float]:
+    """Each method's gain per seed (the random policy's left out), and the random and oracle means."""
+    low = rules.mean_ci_n([r["score"] for r in by_method["random"].values()])[0]
+    high = rules.mean_ci_n([r["score"] for r in by_method["oracle"].values()])[0]
+    span = high - low
+    out = {
+        method: {seed: (r["score"] - low) / span if span else math.nan for seed, r in runs.items()}
+        for method, runs in by_method.items()
+        if method != "random"
+    }
+    return out, low, high
