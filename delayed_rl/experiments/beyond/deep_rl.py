@@ -56,8 +56,7 @@ from delayed_rl.experiments.framework.deep_training import (
     require_sb3,
     train_and_score,
 )
-from delayed_rl.experiments.framework.gain_settings import gains as setting_gains
-from delayed_rl.experiments.framework.gain_settings import group_results, setting_tasks
+from delayed_rl.experiments.framework.gain_settings import gain_tasks, group_results, method_gains
 from delayed_rl.experiments.framework.runner import (
     AGREES,
     DIFFERS,
@@ -112,7 +111,7 @@ def tasks(config: Config) -> list[dict]:
         ImportError: torch or stable-baselines3 is missing (the ``sb3`` extra).
     """
     require_sb3()
-    return setting_tasks(config, SETTINGS, QUICK, (*METHODS, "random"))
+    return gain_tasks(config, SETTINGS, QUICK, (*METHODS, "random"))
 
 
 def shared_run(task: dict) -> SharedRun:
@@ -246,7 +245,7 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
     grouped = group_results(task_list, results)
     claims, curves, figures, table = [], [], {}, {}
     for setting, by_method in grouped.items():
-        gains, low, high = setting_gains(by_method)
+        gains, low, high = method_gains(by_method)
         claims += _setting_claims(setting, gains)
         for method in METHODS:
             stats = rules.mean_ci_n(list(gains[method].values()))

@@ -39,8 +39,7 @@ from delayed_rl.delays import Uniform
 from delayed_rl.experiments.framework import claims as rules
 from delayed_rl.experiments.framework import plotting
 from delayed_rl.experiments.framework.deep_training import require_sb3
-from delayed_rl.experiments.framework.gain_settings import gains as setting_gains
-from delayed_rl.experiments.framework.gain_settings import group_results, setting_tasks
+from delayed_rl.experiments.framework.gain_settings import gain_tasks, group_results, method_gains
 from delayed_rl.experiments.framework.late_training import (
     METHODS,
     random_score,
@@ -101,7 +100,7 @@ def tasks(config: Config) -> list[dict]:
         ImportError: torch or stable-baselines3 is missing (the ``sb3`` extra).
     """
     require_sb3()
-    return setting_tasks(config, SETTINGS, QUICK, (*METHODS, "random"))
+    return gain_tasks(config, SETTINGS, QUICK, (*METHODS, "random"))
 
 
 def shared_run(task: dict) -> SharedRun:
@@ -167,7 +166,7 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
     grouped = group_results(task_list, results)
     claims, curves, figures, table = [], [], {}, {}
     for setting, by_method in grouped.items():
-        gains, low, high = setting_gains(by_method)
+        gains, low, high = method_gains(by_method)
         claims += _setting_claims(setting, gains)
         groups = {}
         table[setting] = {}

@@ -15,10 +15,10 @@ from typing import Any
 from delayed_rl.experiments.framework import claims as rules
 from delayed_rl.experiments.framework.runner import Config
 
-__all__ = ["gains", "group_results", "setting_tasks"]
+__all__ = ["gain_tasks", "group_results", "method_gains"]
 
 
-def setting_tasks(
+def gain_tasks(
     config: Config,
     settings: dict[str, dict[str, Any]],
     quick: dict[str, tuple[int, int]],
@@ -53,7 +53,7 @@ def group_results(task_list: list[dict], results: list[dict]) -> dict[str, dict[
     return grouped
 
 
-def gains(
+def method_gains(
     by_method: dict[str, dict[int, dict]],
 ) -> tuple[dict[str, dict[int, float]], float, float]:
     """Each method's gain per seed (the random policy's left out), and the random and oracle means."""
