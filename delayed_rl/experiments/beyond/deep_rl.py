@@ -45,24 +45,25 @@ from __future__ import annotations
 import math
 from typing import Any
 
-import numpy as np
-
 from delayed_rl.delays import Constant, Poisson
 from delayed_rl.experiments.framework import claims as rules
-from delayed_rl.experiments.framework import plotting
 from delayed_rl.experiments.framework.deep_training import (
     METHODS,
     random_score,
     require_sb3,
     train_and_score,
 )
-from delayed_rl.experiments.framework.gain_settings import gain_tasks, group_results, method_gains
+from delayed_rl.experiments.framework.gain_settings import (
+    gain_tasks,
+    group_results,
+    learning_curves,
+    method_gains,
+)
 from delayed_rl.experiments.framework.runner import (
     AGREES,
     DIFFERS,
     Claim,
     Config,
-    Curve,
     Experiment,
     SharedRun,
     Summary,
@@ -251,22 +252,11 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
             stats = rules.mean_ci_n(list(gains[method].values()))
             claims.append(rules.reference_row(f"{setting}: {LABELS[method]} gain", stats))
         table[setting] = {m: _table_row(m, runs, gains) for m, runs in by_method.items()}
-        groups = {}
-        for method in METHODS:
-            runs = by_method[method]
-            groups[LABELS[method]] = [(r["steps"], r["scores"]) for r in runs.values()]
-            for seed, r in runs.items():
-                steps, values = np.asarray(r["steps"]), np.asarray(r["scores"])
-                curves.append(Curve(f"{setting}/{method}", seed, steps, values, "score"))
-        figures[f"curves_{setting}"] = plotting.figure(
-            plotting.learning_curves,
-            groups=groups,
-            title=f"{setting}: mean return of 10 greedy episodes of the undelayed env",
-            ylabel="return",
-            thesis=[(low, "random policy")],
-            ylim=None,
-            xlabel="training step",
+        labels = {method: LABELS[method] for method in METHODS}
+        runs_curves, figures[f"curves_{setting}"] = learning_curves(
+            setting, by_method, labels, low, "the undelayed env"
         )
+        curves += runs_curves
     return Summary(claims, curves, figures, {"table": table, "settings": SETTINGS})
 
 

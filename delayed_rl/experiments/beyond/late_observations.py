@@ -33,13 +33,15 @@ from __future__ import annotations
 import math
 from typing import Any
 
-import numpy as np
-
 from delayed_rl.delays import Uniform
 from delayed_rl.experiments.framework import claims as rules
-from delayed_rl.experiments.framework import plotting
 from delayed_rl.experiments.framework.deep_training import require_sb3
-from delayed_rl.experiments.framework.gain_settings import gain_tasks, group_results, method_gains
+from delayed_rl.experiments.framework.gain_settings import (
+    gain_tasks,
+    group_results,
+    learning_curves,
+    method_gains,
+)
 from delayed_rl.experiments.framework.late_training import (
     METHODS,
     random_score,
@@ -47,7 +49,6 @@ from delayed_rl.experiments.framework.late_training import (
 )
 from delayed_rl.experiments.framework.runner import (
     Config,
-    Curve,
     Experiment,
     SharedRun,
     Summary,
@@ -168,7 +169,6 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
     for setting, by_method in grouped.items():
         gains, low, high = method_gains(by_method)
         claims += _setting_claims(setting, gains)
-        groups = {}
         table[setting] = {}
         for method in METHODS:
             values = list(gains[method].values())
@@ -184,20 +184,11 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
                 "gains": values,
                 "scores": scores,
             }
-            groups[LABELS[method]] = [(r["steps"], r["scores"]) for r in runs.values()]
-            for seed, r in runs.items():
-                steps, values_ = np.asarray(r["steps"]), np.asarray(r["scores"])
-                curves.append(Curve(f"{setting}/{method}", seed, steps, values_, "score"))
         table[setting]["random"] = {"score": low}
-        figures[f"curves_{setting}"] = plotting.figure(
-            plotting.learning_curves,
-            groups=groups,
-            title=f"{setting}: mean return of 10 greedy episodes of the env each method acts in",
-            ylabel="return",
-            thesis=[(low, "random policy")],
-            ylim=None,
-            xlabel="training step",
+        runs_curves, figures[f"curves_{setting}"] = learning_curves(
+            setting, by_method, LABELS, low, "the env each method acts in"
         )
+        curves += runs_curves
     return Summary(claims, curves, figures, {"table": table, "settings": SETTINGS})
 
 

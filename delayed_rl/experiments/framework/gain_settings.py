@@ -12,10 +12,13 @@ import math
 from collections import defaultdict
 from typing import Any
 
-from delayed_rl.experiments.framework import claims as rules
-from delayed_rl.experiments.framework.runner import Config
+import numpy as np
 
-__all__ = ["gain_tasks", "group_results", "method_gains"]
+from delayed_rl.experiments.framework import claims as rules
+from delayed_rl.experiments.framework import plotting
+from delayed_rl.experiments.framework.runner import Config, Curve
+
+__all__ = ["gain_tasks", "group_results", "learning_curves", "method_gains"]
 
 
 def gain_tasks(
@@ -66,3 +69,38 @@ def method_gains(
         if method != "random"
     }
     return out, low, high
+
+
+def learning_curves(
+    setting: str,
+    by_method: dict[str, dict[int, dict]],
+    labels: dict[str, str],
+    random_mean: float,
+    scored_in: str,
+) -> tuple[list[Curve], Any]:
+    """Each run's learning curve, and the setting's figure of them, method by method.
+
+    Args:
+        setting: the setting's name.
+        by_method: its results, ``{method: {seed: {"steps", "scores", ...}}}``.
+        labels: the methods to draw, by name, with their labels (in drawing order).
+        random_mean: the random policy's mean score, drawn as a line.
+        scored_in: the env the scores come from, for the title (``"the undelayed env"``).
+    """
+    curves, groups = [], {}
+    for method, label in labels.items():
+        runs = by_method[method]
+        groups[label] = [(r["steps"], r["scores"]) for r in runs.values()]
+        for seed, r in runs.items():
+            steps, values = np.asarray(r["steps"]), np.asarray(r["scores"])
+            curves.append(Curve(f"{setting}/{method}", seed, steps, values, "score"))
+    figure = plotting.figure(
+        plotting.learning_curves,
+        groups=groups,
+        title=f"{setting}: mean return of 10 greedy episodes of {scored_in}",
+        ylabel="return",
+        thesis=[(random_mean, "random policy")],
+        ylim=None,
+        xlabel="training step",
+    )
+    return curves, figure

@@ -1,0 +1,56 @@
+"""``delayed-rl bench late-observations``: its tasks, shared runs, claims and files, tiny and quick."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+from delayed_rl.experiments import LONG_NAMES, Config, get_experiment, run_experiment
+from delayed_rl.experiments.beyond import late_observations
+from delayed_rl.experiments.framework.late_training import METHODS, make_env
+from delayed_rl.experiments.framework.pool import pool_key
+from delayed_rl.experiments.framework.runner import VERDICTS
+
+pytestmark = pytest.mark.sb3
+
+
+def test_the_full_run_has_every_setting_method_and_seed_and_shares_the_oracle():
+    experiment = get_experiment("late-observations")
+    assert "late-observations" in LONG_NAMES  # reproduce --all, not the default reproduce
+    tasks = experiment.tasks(Config(seeds=5))
+    assert len(tasks) == len(late_observations.SETTINGS) * (len(METHODS) + 1) * 5
+    oracles = [t for t in tasks if t["method"] == "oracle" and t["seed"] == 0]
+    assert len({pool_key(experiment.run_of(t)) for t in oracles}) == 1  # both settings' oracle
+    delayed = [t for t in tasks if t["method"] == "hindsight" and t["seed"] == 0]
+    assert len({pool_key(experiment.run_of(t)) for t in delayed}) == 2
+    assert all(t["steps"] == 20_000 for t in tasks if t["method"] != "random")
+
+
+def test_each_method_acts_in_its_own_env():
+    task = late_observations.SETTINGS["pendulum-large"]
+    assert make_env(task, "oracle").observation_space.shape == (3,)
+    assert make_env(task, "naive").observation_space.shape == (3,)
+    view = make_env(task, "hindsight").observation_space
+    assert view["age"].n == 7 and view["actions"].shape == (10, 1)  # D = 6, K = 6 + 4
+    assert make_env(task, "augmented").observation_space.shape == (3 + 7 + 10,)
+
+
+@pytest.mark.experiment
+def test_a_tiny_quick_run_scores_every_method_and_resumes(tmp_path):
+    config = Config(quick=True, seeds=2, steps=150, workers=2)
+    summary = run_experiment(get_experiment("late-observations"), config, tmp_path, False)
+    assert summary.extra["runs"] == 2 * (len(METHODS) + 1)
+    table = summary.extra["table"]["pendulum-small"]
+    assert table["oracle"]["gain"]["mean"] == pytest.approx(1.0)  # the gain's scale
+    assert set(table) == {*METHODS, "random"}
+    payload = json.loads((tmp_path / "summary.json").read_text())
+    for claim in payload["claims"]:
+        assert claim["verdict"] in VERDICTS and claim["criterion"]
+        assert math.isfinite(claim["mean"]) or claim["verdict"] == "inconclusive"
+    targets = [c for c in summary.claims if c.thesis.startswith("target")]
+    assert len(targets) == 1 and targets[0].low is not None  # the seeds' rule, with its interval
+    assert (tmp_path / "curves_pendulum-small.png").exists()
+    again = run_experiment(get_experiment("late-observations"), config, tmp_path, False)
+    assert [c.mean for c in again.claims] == [c.mean for c in summary.claims]
