@@ -61,8 +61,9 @@ def make_reward_model(spec: Any, observation_space: Any, action_space: Any) -> R
             if encoding.to_dict() != SpaceEncoding(name, space).to_dict():
                 raise ValueError(
                     f"reward_model was made for the {name} {encoding.space}, the buffer's is "
-                    f"{space} (SB3 moves an image's channels first: make the model for the "
-                    "algorithm's spaces, agent.observation_space, or give a mapping)"
+                    f"{space} (SB3 moves an image's channels first: make the model for "
+                    "VecTransposeImage.transpose_space(env.observation_space), from "
+                    "stable_baselines3.common.vec_env, or give a mapping)"
                 )
         return spec
     if not isinstance(spec, dict):
