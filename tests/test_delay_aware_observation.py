@@ -647,3 +647,17 @@ def test_stable_baselines3_takes_the_view() -> None:
     )  # fmt: skip
     assert flat.observation_space.shape == (2 * 4 + 3 + 9,)  # K = 2 actions, ages 0..2
     PPO("MlpPolicy", flat, n_steps=16, batch_size=16, n_epochs=1, seed=0).learn(32)
+
+
+def test_a_numpy_action_history_is_written_to_the_spec_as_an_int():
+    import delayed_rl  # noqa: F401  (registers the ids)
+
+    env = gym.make(
+        "delayed_rl/GridWorld-5x5-v0",
+        observation_delay=Constant(1),
+        delay_aware=True,
+        action_history=np.int64(3),
+    )
+    spec = gym.envs.registration.EnvSpec.from_json(env.spec.to_json())
+    assert spec.kwargs["action_history"] == 3 and type(spec.kwargs["action_history"]) is int
+    assert gym.make(spec).observation_space == env.observation_space

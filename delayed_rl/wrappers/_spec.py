@@ -64,8 +64,9 @@ def describe_delays(spec: Any) -> None:
     ``EnvSpec.to_json`` cannot write; it is recorded as its ``to_dict()`` description, which the
     library's entry points read back. A number is recorded as a Python ``int`` or ``float``
     (``reward_delay=np.float32(2.0)`` as ``2.0``) and a description's numpy numbers likewise
-    (:func:`json_safe`): the same delay, in a form JSON keeps. Every delay wrapper's ``spec``
-    calls this, so the outermost one's spec is JSON-able.
+    (:func:`json_safe`): the same delay, in a form JSON keeps; so is a numpy ``action_history``
+    (the delay-aware view's). Every delay wrapper's ``spec`` calls this, so the outermost one's
+    spec is JSON-able.
     """
     from delayed_rl.delays import Delay, delay_spec
 
@@ -75,7 +76,12 @@ def describe_delays(spec: Any) -> None:
         for key in DELAY_KWARGS
         if isinstance(kwargs.get(key), Delay | np.generic | Mapping)
     }
-    if not objects:
+    numbers = {
+        key: json_safe(kwargs[key])
+        for key in ("action_history",)
+        if isinstance(kwargs.get(key), np.generic)
+    }
+    if not objects and not numbers:
         return
     entry = spec.entry_point
     try:  # a "module:attribute" string names the entry point (its module is loaded already)
@@ -84,4 +90,4 @@ def describe_delays(spec: Any) -> None:
         return
     if getattr(entry, "reads_delay_descriptions", False):  # a DelayableEntryPoint
         described = {key: json_safe(delay_spec(value)) for key, value in objects.items()}
-        spec.kwargs = {**kwargs, **described}
+        spec.kwargs = {**kwargs, **described, **numbers}
