@@ -194,9 +194,10 @@ class _RelabelingOffPolicy:
         model = self.reward_model
         if model.ready:
             rows = self._rows_read(batch_inds)
+            # SB3 stores what add() handed the model, which checked it: no second check here
             obs = model.observations.flat(model.observations.take(self.observations, rows))
             actions = self.actions[rows].reshape(-1, *model.actions.shape)
-            relabelled = model.predict(obs, actions)
+            relabelled = model.reward_tensor(obs, actions).numpy()
             self.rewards[rows] = relabelled.reshape(rows.size, self.n_envs)
             if self.watched:
                 model.watch(relabelled, self.undelayed_rewards[rows].ravel())

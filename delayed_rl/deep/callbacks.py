@@ -57,19 +57,16 @@ class RewardModelCallback(BaseCallback):
         self._normalizer = self.model.get_vec_normalize_env()
         if isinstance(buffer, RolloutBuffer):
             buffer.vec_normalize = self._normalizer
-            self._observations = self._original_observations()
+            self._observations = self._original_observations(self.model._last_obs)
 
-    def _original_observations(self):
-        """The observations the next actions are chosen at, before any ``VecNormalize``."""
+    def _original_observations(self, observations):
+        """A copy of ``observations`` before any ``VecNormalize`` (its own copy when there is one).
+
+        ``observations`` are the latest the env returned (after autoreset, the next episode's).
+        """
         if self._normalizer is not None:
             return copy.deepcopy(self._normalizer.get_original_obs())
-        return copy.deepcopy(self.model._last_obs)
-
-    def _original_observations_after(self, new_obs):
-        """The observations after this step (autoreset's next episode's), before normalising."""
-        if self._normalizer is not None:
-            return copy.deepcopy(self._normalizer.get_original_obs())
-        return copy.deepcopy(new_obs)
+        return copy.deepcopy(observations)
 
     def _on_step(self) -> bool:
         buffer = self._buffer()
@@ -86,7 +83,7 @@ class RewardModelCallback(BaseCallback):
                 self.locals["dones"],
                 self.locals["infos"],
             )
-            self._observations = self._original_observations_after(self.locals["new_obs"])
+            self._observations = self._original_observations(self.locals["new_obs"])
         return True
 
     def _on_rollout_end(self) -> None:

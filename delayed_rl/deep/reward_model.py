@@ -168,7 +168,7 @@ class RewardModel(ABC):
         self.takes_algorithm_seed = seed is None
         self.history: TransitionHistory | None = None
         self.updates_taken = 0
-        self._losses: list[float] = []
+        self._loss_sum, self._loss_count = 0.0, 0  # since the last record()
         self._watched: list[tuple[np.ndarray, np.ndarray]] = []  # the block being filled
         self._diagnostics: dict[str, float] = {}
         self._initialise(int(np.random.SeedSequence().entropy % 2**63) if seed is None else seed)
@@ -309,7 +309,8 @@ class RewardModel(ABC):
             self.optimizer.step()
             self.updates_taken += 1
             taken += 1
-            self._losses.append(float(loss.detach()))
+            self._loss_sum += float(loss.detach())
+            self._loss_count += 1
         return taken
 
     # ------------------------------------------------------------------ predictions
@@ -391,9 +392,9 @@ class RewardModel(ABC):
 
         ``logger`` is SB3's, or anything with ``record(key, value)``.
         """
-        if self._losses:
-            logger.record(f"{prefix}/loss", sum(self._losses) / len(self._losses))
-            self._losses.clear()
+        if self._loss_count:
+            logger.record(f"{prefix}/loss", self._loss_sum / self._loss_count)
+            self._loss_sum, self._loss_count = 0.0, 0
         for key, value in (*self._diagnostics.items(), *self.metrics().items()):
             logger.record(f"{prefix}/{key}", value)
         logger.record(f"{prefix}/updates", self.updates_taken)
@@ -453,5 +454,5 @@ class RewardModel(ABC):
 
     def __getstate__(self) -> dict[str, Any]:
         state = dict(self.__dict__)
-        state["_losses"], state["_watched"] = [], []
+        state["_loss_sum"], state["_loss_count"], state["_watched"] = 0.0, 0, []
         return state

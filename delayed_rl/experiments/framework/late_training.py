@@ -83,14 +83,10 @@ def train_and_score(task: dict) -> dict:
     torch.set_num_threads(1)
     method, seed = task["method"], task["seed"]
     env, evaluation = make_env(task, method), make_env(task, method)
-    algorithm, policy = (
-        (HindsightSAC, "MultiInputPolicy")
-        if method == "hindsight"
-        else (
-            SAC,
-            "MlpPolicy",
-        )
-    )
+    if method == "hindsight":
+        algorithm, policy = HindsightSAC, "MultiInputPolicy"
+    else:
+        algorithm, policy = SAC, "MlpPolicy"
     agent = algorithm(policy, env, seed=seed, device="cpu")
     curve: list[tuple[int, float]] = []
 
