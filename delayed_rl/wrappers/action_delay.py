@@ -9,7 +9,6 @@ rule itself.
 
 from __future__ import annotations
 
-import heapq
 from typing import Any
 
 import gymnasium as gym
@@ -19,6 +18,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import concatenate, create_empty_array, iterate
 
 from delayed_rl.delays import Delay, as_delay, delay_spec
+from delayed_rl.wrappers._in_transit import InTransit
 from delayed_rl.wrappers._samples import as_action, copy_sample
 from delayed_rl.wrappers._spec import JsonSpecMixin, json_safe
 from delayed_rl.wrappers.reward_delay import DelaySampler, check_max_delay
@@ -100,7 +100,7 @@ class ActionLine:
 
     def reset(self) -> None:
         """Start an episode: nothing in transit, the initial action in force."""
-        self._in_transit: list[tuple[int, int, Any]] = []  # (arrival step, sent step, action)
+        self._in_transit = InTransit()
         self._step = 0
         self.executed: Any = self.initial_action
         self.executed_step = -1  # the step that sent it (-1: the initial action)
@@ -120,11 +120,10 @@ class ActionLine:
         if delay == 0 and not self._in_transit:  # the common undelayed case, no heap
             self.executed, self.executed_step = action, step
             return action
-        heapq.heappush(self._in_transit, (step + delay, step, action))  # (arrival, sent) unique
-        while self._in_transit and self._in_transit[0][0] <= step:
-            _, sent, arrived = heapq.heappop(self._in_transit)
-            if sent > self.executed_step:
-                self.executed, self.executed_step = arrived, sent
+        self._in_transit.send(step, action, delay)
+        arrived = self._in_transit.arrived(step)
+        if arrived and arrived[-1][0] > self.executed_step:  # the latest sent of them
+            self.executed_step, self.executed = arrived[-1]
         return self.executed
 
 

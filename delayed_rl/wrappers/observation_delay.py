@@ -7,7 +7,6 @@ its own class: :class:`StaleArrival` (the thesis's stale sensor) and :class:`Net
 
 from __future__ import annotations
 
-import heapq
 from collections import deque
 from typing import Any
 
@@ -16,6 +15,7 @@ import gymnasium as gym
 from delayed_rl._delay_line import delay_bound
 from delayed_rl._validation import check_choice
 from delayed_rl.delays import MAX_DELAY, Delay, as_delay, delay_spec
+from delayed_rl.wrappers._in_transit import InTransit
 from delayed_rl.wrappers._samples import copy_sample
 from delayed_rl.wrappers._spec import JsonSpecMixin, json_safe
 from delayed_rl.wrappers.reward_delay import DelaySampler, check_max_delay
@@ -89,7 +89,7 @@ class NetworkArrival:
 
     def reset(self, first: Any) -> None:
         """Start an episode: ``first`` is ``o_0``, received at once; nothing in transit."""
-        self._in_transit: list[tuple[int, int, Any]] = []  # (arrival index, index, observation)
+        self._in_transit = InTransit()
         self.made = 0
         self.newest, self.newest_index = first, 0
 
@@ -110,12 +110,8 @@ class NetworkArrival:
         if delay == 0 and not self._in_transit:  # the common undelayed case, no heap
             self.newest, self.newest_index = observation, made
             return 0, observation, [(made, observation)]
-        heapq.heappush(self._in_transit, (made + delay, made, observation))  # (arrival, i) unique
-        arrived = []
-        while self._in_transit and self._in_transit[0][0] <= made:
-            _, index, arriving = heapq.heappop(self._in_transit)
-            arrived.append((index, arriving))
-        arrived.sort(key=lambda pair: pair[0])
+        self._in_transit.send(made, observation, delay)
+        arrived = self._in_transit.arrived(made)
         if arrived and arrived[-1][0] > self.newest_index:
             self.newest_index, self.newest = arrived[-1]
         return made - self.newest_index, self.newest, arrived
