@@ -25,24 +25,27 @@ def gain_tasks(
     config: Config,
     settings: dict[str, dict[str, Any]],
     quick: dict[str, tuple[int, int]],
-    methods: tuple[str, ...],
+    methods: tuple[str, ...] | dict[str, tuple[str, ...]],
 ) -> list[dict]:
     """Every (setting, method, seed) as a task, in that order of loops.
 
-    ``config.quick`` keeps only the settings of ``quick``, with its ``(steps, eval_every)``;
+    ``methods`` holds every setting's methods, or maps each setting to its own. A setting's
+    ``"seeds"`` entry, where present, caps its seeds (a costly setting run on fewer); it is not a
+    task field. ``config.quick`` keeps only the settings of ``quick``, with its ``(steps, eval_every)``;
     ``config.steps`` sets the steps of every run (evaluated ten times along the way).
     """
     chosen = quick if config.quick else {name: None for name in settings}
     out = []
     for name, scaled in chosen.items():
         setting = dict(settings[name])
+        seeds = min(config.seeds, setting.pop("seeds", config.seeds))
         if scaled is not None:
             setting["steps"], setting["eval_every"] = scaled
         if config.steps is not None:
             setting["steps"] = config.steps
             setting["eval_every"] = max(1, config.steps // 10)
-        for i in range(config.seeds):
-            for method in methods:
+        for i in range(seeds):
+            for method in methods[name] if isinstance(methods, dict) else methods:
                 seed = config.base_seed + i
                 out.append({"setting": name, "method": method, "seed": seed, **setting})
     return out

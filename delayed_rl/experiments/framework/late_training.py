@@ -1,11 +1,13 @@
 """One SAC run under observation and action delays, scored in the env it acts in.
 
-A task names the env (``env_id``, its episode length ``episode_steps``), the delays
-(``observation_delay`` and ``action_delay``, :meth:`~delayed_rl.delays.Delay.to_dict`
-descriptions, bounded), how observations arrive (``arrival``: ``"stale"`` or ``"network"``, see
+A task names the env (``env_id``, its episode length ``episode_steps`` and, optionally, its
+``env_kwargs``), the delays (``observation_delay`` and ``action_delay``,
+:meth:`~delayed_rl.delays.Delay.to_dict` descriptions; ``action_delay`` may be ``None``, for
+none), how observations arrive (``arrival``: ``"stale"`` or ``"network"``, see
 :class:`~delayed_rl.wrappers.ObservationDelay`), the training ``steps``, the ``method`` and the
-``seed``. The stack is ``ActionDelay`` inside ``ObservationDelay``. The methods
-(:data:`METHODS`), each SB3's SAC with its defaults on one thread:
+``seed``. An unbounded observation delay needs ``observation_max_delay``, the wrapper's clip,
+which also bounds the view. The stack is ``ActionDelay`` inside ``ObservationDelay``. The
+methods (:data:`METHODS`), each SB3's SAC with its defaults on one thread:
 
 - ``oracle``: on the undelayed env;
 - ``naive``: on the delayed stack as it is (the newest observation the stale sensor shows);
@@ -16,7 +18,11 @@ descriptions, bounded), how observations arrive (``arrival``: ``"stale"`` or ``"
 The score is the mean return of ``eval_episodes`` deterministic episodes of the env the method
 acts in (delays included; the oracle's is undelayed), reset with seeds fixed per seed and
 episode, read every ``eval_every`` steps and at the end: the learning curve.
-:func:`random_score` scores a uniformly random policy on the undelayed env.
+:func:`random_score` scores a uniformly random policy on the undelayed env, and
+:func:`controller_score` the thesis's proportional line follower
+(:class:`~delayed_rl.agents.ProportionalController`, e-puck envs only) on the undelayed env
+(method ``"p-undelayed"``) or on naive SAC's delayed stack (``"p-delayed"``, the thesis's
+baseline fed the same delayed observations as the learners).
 """
 
 from __future__ import annotations
@@ -25,14 +31,17 @@ import time
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 
 from delayed_rl.delays import as_delay
 from delayed_rl.experiments.framework.deep_training import mean_return
 
-__all__ = ["METHODS", "random_score", "train_and_score"]
+__all__ = ["CONTROLLERS", "METHODS", "controller_score", "random_score", "train_and_score"]
 
 METHODS = ("oracle", "naive", "augmented", "hindsight")
-"""The methods a task can name (see the module docstring)."""
+"""The learners a task can name (see the module docstring)."""
+CONTROLLERS = ("p-undelayed", "p-delayed")
+"""The fixed controllers a task can name (:func:`controller_score`)."""
 EVAL_SEED = 2_000_000
 """Evaluation episode ``i`` of seed ``s`` resets with ``EVAL_SEED + 1000 * s + i``."""
 
@@ -43,11 +52,19 @@ def make_env(task: dict, method: str) -> gym.Env:
 
     from delayed_rl.wrappers import ActionDelay, DelayAwareObservation, ObservationDelay
 
-    env = gym.make(task["env_id"], max_episode_steps=task["episode_steps"])
+    env = gym.make(
+        task["env_id"], max_episode_steps=task["episode_steps"], **task.get("env_kwargs", {})
+    )
     if method in ("oracle", "random"):
         return env
-    env = ActionDelay(env, as_delay(task["action_delay"]))
-    env = ObservationDelay(env, as_delay(task["observation_delay"]), arrival=task["arrival"])
+    if task["action_delay"] is not None:
+        env = ActionDelay(env, as_delay(task["action_delay"]))
+    env = ObservationDelay(
+        env,
+        as_delay(task["observation_delay"]),
+        max_delay=task.get("observation_max_delay"),
+        arrival=task["arrival"],
+    )
     if method == "naive":
         return env
     env = DelayAwareObservation(env)
@@ -65,6 +82,31 @@ def random_score(task: dict) -> dict:
     env = make_env(task, "random")
     env.action_space.seed(task["seed"])
     return {"score": _score(lambda _obs: env.action_space.sample(), env, task)}
+
+
+def controller_score(task: dict) -> dict:
+    """``{"score"}``: the proportional line follower's mean return (see the module docstring).
+
+    Each evaluation episode starts with no last command (the controller's state), as
+    :meth:`~delayed_rl.agents.ProportionalController.predict` does at an episode start.
+    """
+    from delayed_rl.agents import ProportionalController
+
+    env = make_env(task, "naive" if task["method"] == "p-delayed" else "oracle")
+    controller = ProportionalController(env)
+
+    def episode_policy() -> Any:
+        state = None
+
+        def act(obs: Any) -> Any:
+            nonlocal state
+            action, state = controller.predict(obs, state)
+            return action
+
+        return act
+
+    seeds = [EVAL_SEED + 1000 * task["seed"] + i for i in range(task["eval_episodes"])]
+    return {"score": float(np.mean([mean_return(episode_policy(), env, [s]) for s in seeds]))}
 
 
 def train_and_score(task: dict) -> dict:
