@@ -466,10 +466,10 @@ def test_a_buffer_makes_its_reward_model_from_a_mapping_for_its_spaces():
         (
             {"type": "Sequential"},
             ValueError,
-            "must be one of .*'IRCRRewardModel'.*got 'Sequential'",
+            "must be one of .*'ReturnRegressionRewardModel'.*got 'Sequential'",
         ),
-        ({"type": "IRCRRewardModel", "hidden_sizes": (0,)}, ValueError, "hidden_sizes"),
-        ({"type": "IRCRRewardModel", "window": 3}, TypeError, "window"),
+        ({"type": "ReturnRegressionRewardModel", "hidden_sizes": (0,)}, ValueError, "hidden_sizes"),
+        ({"type": "ReturnRegressionRewardModel", "window": 3}, TypeError, "window"),
     ],
 )
 def test_a_bad_reward_model_mapping_is_refused_naming_what_is_wrong(spec, error, message):
@@ -481,10 +481,10 @@ def test_a_bad_reward_model_mapping_is_refused_naming_what_is_wrong(spec, error,
 
 
 def test_a_reward_model_made_for_other_spaces_is_refused():
-    from delayed_rl.deep import IRCRRewardModel, RelabelingRolloutBuffer
+    from delayed_rl.deep import RelabelingRolloutBuffer, ReturnRegressionRewardModel
 
     cartpole, pendulum = gym.make("CartPole-v1"), gym.make("Pendulum-v1")
-    model = IRCRRewardModel(cartpole.observation_space, cartpole.action_space, seed=0)
+    model = ReturnRegressionRewardModel(cartpole.observation_space, cartpole.action_space, seed=0)
     with pytest.raises(ValueError, match="reward_model was made for the observation_space"):
         RelabelingRolloutBuffer(
             8, pendulum.observation_space, pendulum.action_space, reward_model=model

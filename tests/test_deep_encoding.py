@@ -281,10 +281,10 @@ def test_a_small_image_is_read_flat_and_a_non_image_box_is_not_scaled():
 
 
 def test_the_history_reads_dict_values_at_rows_and_sub_envs():
-    from delayed_rl.deep import IRCRRewardModel
+    from delayed_rl.deep import ReturnRegressionRewardModel
 
     space = spaces.Dict({"a": spaces.Discrete(4), "b": spaces.Box(-1.0, 1.0, (2,), np.float32)})
-    model = IRCRRewardModel(space, spaces.MultiDiscrete([3, 2]), capacity=5, seed=0)
+    model = ReturnRegressionRewardModel(space, spaces.MultiDiscrete([3, 2]), capacity=5, seed=0)
     space.seed(0)
     added = []
     for step in range(8):  # the ring of 5 wraps
@@ -321,13 +321,13 @@ UNSUPPORTED = [  # a space, and what the message says of it
 @pytest.mark.parametrize(("space", "said"), UNSUPPORTED)
 @pytest.mark.parametrize("argument", ["observation_space", "action_space"])
 def test_a_space_sb3_does_not_take_is_refused_by_name(space, said, argument):
-    from delayed_rl.deep import IRCRRewardModel, make_reward_model
+    from delayed_rl.deep import ReturnRegressionRewardModel, make_reward_model
 
     given_spaces = {"observation_space": spaces.Discrete(2), "action_space": spaces.Discrete(2)}
     given_spaces[argument] = space
     for make in (
-        lambda: IRCRRewardModel(**given_spaces, seed=0),
-        lambda: make_reward_model({"type": "IRCRRewardModel"}, *given_spaces.values()),
+        lambda: ReturnRegressionRewardModel(**given_spaces, seed=0),
+        lambda: make_reward_model({"type": "ReturnRegressionRewardModel"}, *given_spaces.values()),
     ):
         with pytest.raises(TypeError) as error:
             make()
@@ -337,11 +337,11 @@ def test_a_space_sb3_does_not_take_is_refused_by_name(space, said, argument):
 
 
 def test_a_dict_with_a_key_that_is_not_a_string_is_refused():
-    from delayed_rl.deep import IRCRRewardModel
+    from delayed_rl.deep import ReturnRegressionRewardModel
 
     space = spaces.Dict(OrderedDict([("a", spaces.Discrete(2)), (1, spaces.Discrete(2))]))
     with pytest.raises(TypeError, match=r"observation_space must have string keys.* 1 \(int\)"):
-        IRCRRewardModel(space, spaces.Discrete(2))
+        ReturnRegressionRewardModel(space, spaces.Discrete(2))
 
 
 @pytest.mark.parametrize(
@@ -371,13 +371,13 @@ def test_a_dict_with_a_key_that_is_not_a_string_is_refused():
 def test_values_outside_the_space_are_refused_before_anything_is_stored(
     space, bad, match, argument
 ):
-    from delayed_rl.deep import IRCRRewardModel
+    from delayed_rl.deep import ReturnRegressionRewardModel
 
     other = spaces.Discrete(2)
     model = (
-        IRCRRewardModel(space, other, seed=0)
+        ReturnRegressionRewardModel(space, other, seed=0)
         if argument == "observation_space"
-        else IRCRRewardModel(other, space, seed=0)
+        else ReturnRegressionRewardModel(other, space, seed=0)
     )
     space.seed(0)
     good = np.asarray(space.sample())[None]
@@ -397,10 +397,10 @@ def test_values_outside_the_space_are_refused_before_anything_is_stored(
 
 
 def test_dict_values_must_be_a_dict_with_the_spaces_keys():
-    from delayed_rl.deep import IRCRRewardModel
+    from delayed_rl.deep import ReturnRegressionRewardModel
 
     space = spaces.Dict({"a": spaces.Discrete(2), "b": spaces.MultiBinary(2)})
-    model = IRCRRewardModel(space, spaces.Discrete(2), seed=0)
+    model = ReturnRegressionRewardModel(space, spaces.Discrete(2), seed=0)
     good = {"a": [1], "b": [[0, 1]]}
     for bad, error, match in [
         ([1, 0, 1], TypeError, r"observation_space values must be a dict with keys \['a', 'b'\]"),

@@ -45,7 +45,7 @@ KINDS = {
         {"delay": Constant(2), "on_episode_end": "carry", "window": 3},
     ),
     "rrd": ("ReturnDecompositionRewardModel", {"subset_size": 4}),
-    "ircr": ("IRCRRewardModel", {}),
+    "ircr": ("ReturnRegressionRewardModel", {}),
 }
 
 
@@ -158,11 +158,11 @@ def test_a_saved_model_loads_and_trains_on_to_the_same_bits(tmp_path, name, coun
 
 
 def test_the_episode_index_is_rebuilt_at_any_step(tmp_path):
-    from delayed_rl.deep import IRCRRewardModel, load_reward_model
+    from delayed_rl.deep import ReturnRegressionRewardModel, load_reward_model
 
     # a ring of 6 steps, episodes of 1 to 4 steps ending at various offsets of the two sub-envs:
     # a save at every step meets every position of an episode's start against the oldest step
-    model = IRCRRewardModel(OBS, ACT, hidden_sizes=(4,), capacity=6, seed=0)
+    model = ReturnRegressionRewardModel(OBS, ACT, hidden_sizes=(4,), capacity=6, seed=0)
     ends = [[0, 0, 1, 0, 1, 0, 0, 0, 1, 1, 0, 0, 1, 0, 0, 1, 0, 1, 1, 0, 0, 0, 1, 0, 1, 0],
             [1, 0, 0, 0, 1, 0, 1, 1, 0, 0, 0, 1, 0, 1, 0, 0, 1, 0, 0, 0, 1, 1, 0, 1, 0, 0]]  # fmt: skip
     for step, end in enumerate(zip(*ends, strict=True)):
@@ -264,9 +264,9 @@ def test_a_users_delay_is_saved_as_its_clipped_pmf(tmp_path):
     ],
 )
 def test_spaces_round_trip_exactly_and_quietly(tmp_path, observation_space, action_space):
-    from delayed_rl.deep import IRCRRewardModel, load_reward_model
+    from delayed_rl.deep import ReturnRegressionRewardModel, load_reward_model
 
-    model = IRCRRewardModel(observation_space, action_space, hidden_sizes=(4,), seed=0)
+    model = ReturnRegressionRewardModel(observation_space, action_space, hidden_sizes=(4,), seed=0)
     observation_space.seed(0)
     action_space.seed(0)
     for end in (False, True, False):
@@ -391,7 +391,7 @@ def test_a_mapping_makes_its_model_and_refuses_settings_the_class_does_not_take(
     for kind, unknown in [
         ("ReturnDecompositionRewardModel", ["gradient_steps", "learning_starts"]),  # the old ones
         ("DeconvolutionRewardModel", ["subset_size"]),  # another class's
-        ("IRCRRewardModel", ["window"]),
+        ("ReturnRegressionRewardModel", ["window"]),
     ]:
         settings = dict.fromkeys(unknown, 1)
         # (a TypeError, as for a keyword the constructor does not take)
@@ -818,13 +818,14 @@ def test_importing_the_package_imports_no_torch():
         [
             "DeconvolutionRewardModel",
             "HindsightSAC",
-            "IRCRRewardModel",
+            "IRCRReplayBuffer",
             "RelabelingDictReplayBuffer",
             "RelabelingDictRolloutBuffer",
             "RelabelingNStepReplayBuffer",
             "RelabelingReplayBuffer",
             "RelabelingRolloutBuffer",
             "ReturnDecompositionRewardModel",
+            "ReturnRegressionRewardModel",
             "RewardModel",
             "RewardModelCallback",
             "load_reward_model",

@@ -304,9 +304,9 @@ def test_a_history_too_short_for_a_window_is_refused():
 
 @pytest.mark.parametrize("capacity", [1000, 20])
 def test_history_keeps_the_episodes_its_ring_shows_whole(capacity):
-    from delayed_rl.deep import IRCRRewardModel
+    from delayed_rl.deep import ReturnRegressionRewardModel
 
-    model = IRCRRewardModel(spaces.Discrete(2), spaces.Discrete(2), capacity=capacity)
+    model = ReturnRegressionRewardModel(spaces.Discrete(2), spaces.Discrete(2), capacity=capacity)
     rng = np.random.default_rng(0)
     n_envs, finished, first = 3, [], [0, 0, 0]
     sums = np.zeros(n_envs)
@@ -390,7 +390,7 @@ def test_learned_delay_finds_the_mean():
     assert model.rmse() < 0.5 * REWARD_STD
 
 
-@pytest.mark.parametrize("kind", ["ReturnDecompositionRewardModel", "IRCRRewardModel"])
+@pytest.mark.parametrize("kind", ["ReturnDecompositionRewardModel", "ReturnRegressionRewardModel"])
 def test_episode_sum_baselines_train(kind):
     import delayed_rl.deep as deep
 
@@ -427,16 +427,16 @@ def test_rrd_loss_is_the_episode_sum_regression():
     model.add([0], [1], [100.0], [False])  # an open episode: not used
     assert list(model.history.episodes) == [(0, 0, 3, 6.0)]
     rng = copy.deepcopy(model.rng)
-    rng.integers(0, 1, size=1)  # the episode drawn
+    rng.integers(0, 3, size=1)  # the episode drawn (a step of the only episode's 3)
     subset = rng.choice(3, size=2, replace=False)
     expected = (np.mean(model.predict(subset, [0, 0])) - 2.0) ** 2
     assert float(model.loss().detach()) == pytest.approx(float(expected), rel=1e-5)
 
 
-def test_ircr_targets_are_normalised_returns():
-    from delayed_rl.deep import IRCRRewardModel
+def test_return_regression_targets_are_normalised_returns():
+    from delayed_rl.deep import ReturnRegressionRewardModel
 
-    model = IRCRRewardModel(spaces.Discrete(2), spaces.Discrete(2), batch_size=4)
+    model = ReturnRegressionRewardModel(spaces.Discrete(2), spaces.Discrete(2), batch_size=4)
     model.add([0], [0], [1.0], [True])  # return 1
     model.add([1], [1], [3.0], [True])  # return 3
     rng = copy.deepcopy(model.rng)
@@ -578,7 +578,7 @@ def random_steps(count, seed, n_envs=1, end_chance=0.2):
     [
         ("DeconvolutionRewardModel", {"delay": None, "max_delay": 3, "window": 4}),
         ("ReturnDecompositionRewardModel", {"subset_size": 4}),
-        ("IRCRRewardModel", {}),
+        ("ReturnRegressionRewardModel", {}),
     ],
 )
 def test_add_alone_never_trains(kind, kwargs):
@@ -601,7 +601,7 @@ def test_add_alone_never_trains(kind, kwargs):
 @pytest.mark.parametrize("updates_per_step", [0.0, 0.37, 1.0, 2.5])
 def test_updates_due_is_the_steps_times_the_rate_plus_the_warmup(updates_per_step):
     model = make(
-        "IRCRRewardModel",
+        "ReturnRegressionRewardModel",
         hidden_sizes=(4,),
         batch_size=4,
         updates_per_step=updates_per_step,
@@ -627,7 +627,7 @@ def test_updates_due_is_the_steps_times_the_rate_plus_the_warmup(updates_per_ste
     assert model.updates_taken == max(taken, model.updates_due)
 
 
-@pytest.mark.parametrize("kind", ["ReturnDecompositionRewardModel", "IRCRRewardModel"])
+@pytest.mark.parametrize("kind", ["ReturnDecompositionRewardModel", "ReturnRegressionRewardModel"])
 def test_the_warmup_is_taken_at_once_when_the_first_episode_ends(kind):
     model = make(kind, hidden_sizes=(4,), batch_size=4, warmup_updates=7, seed=0)
     for step in range(5):  # an open episode: the loss cannot be computed yet
@@ -656,7 +656,9 @@ def test_the_deconvolution_warmup_waits_for_a_window():
 
 
 def test_ready_once_the_warmup_updates_are_taken():
-    model = make("IRCRRewardModel", hidden_sizes=(4,), batch_size=4, warmup_updates=5, seed=0)
+    model = make(
+        "ReturnRegressionRewardModel", hidden_sizes=(4,), batch_size=4, warmup_updates=5, seed=0
+    )
     model.add([0], [0], [1.0], [True])
     assert model.train(4) == 4 and not model.ready
     assert model.train(1) == 1 and model.ready
@@ -665,7 +667,11 @@ def test_ready_once_the_warmup_updates_are_taken():
 
 def test_without_a_warmup_ready_needs_one_update():
     model = make(
-        "IRCRRewardModel", hidden_sizes=(4,), batch_size=4, warmup_updates=0, updates_per_step=0.5
+        "ReturnRegressionRewardModel",
+        hidden_sizes=(4,),
+        batch_size=4,
+        warmup_updates=0,
+        updates_per_step=0.5,
     )
     assert model.updates_due == 0 and not model.ready
     model.add([0], [0], [1.0], [True])
@@ -679,7 +685,7 @@ KINDS = [
     ("DeconvolutionRewardModel", {"delay": None, "max_delay": 3, "window": 4}),
     ("DeconvolutionRewardModel", {"delay": Constant(1), "window": 4}),
     ("ReturnDecompositionRewardModel", {"subset_size": 4}),
-    ("IRCRRewardModel", {}),
+    ("ReturnRegressionRewardModel", {}),
 ]
 SMALL = {"hidden_sizes": (8,), "batch_size": 8, "warmup_updates": 4}
 
@@ -928,8 +934,12 @@ def make(kind="DeconvolutionRewardModel", observation_space=None, action_space=N
         ({"seed": 2**63}, ValueError, "seed"),
         ({"seed": 1.0}, TypeError, "seed"),
         ({"kind": "ReturnDecompositionRewardModel", "subset_size": 0}, ValueError, "subset_size"),
-        ({"kind": "IRCRRewardModel", "hidden_sizes": [2**17]}, ValueError, r"hidden_sizes\[0\]"),
-        ({"kind": "IRCRRewardModel", "window": 4}, TypeError, "window"),
+        (
+            {"kind": "ReturnRegressionRewardModel", "hidden_sizes": [2**17]},
+            ValueError,
+            r"hidden_sizes\[0\]",
+        ),
+        ({"kind": "ReturnRegressionRewardModel", "window": 4}, TypeError, "window"),
     ],
 )
 def test_bad_arguments_are_refused_by_name(kwargs, error, match):

@@ -20,7 +20,14 @@ pytestmark = pytest.mark.sb3
 def test_the_full_run_has_every_setting_method_and_seed_and_shares_the_oracle():
     experiment = get_experiment("deep-rl")
     tasks = experiment.tasks(Config(seeds=5))
-    assert len(tasks) == len(deep_rl.SETTINGS) * (len(METHODS) + 1) * 5
+    methods = deep_rl.SETTING_METHODS
+    assert len(tasks) == sum(len(methods[name]) for name in deep_rl.SETTINGS) * 5
+    assert "ircr" not in methods["cartpole-poisson20"]  # off-policy only
+    assert all(
+        set(methods[name]) == {*METHODS, "random"}
+        for name in deep_rl.SETTINGS
+        if "pendulum" in name
+    )
     keys = {pool_key(experiment.run_of(task)): task for task in tasks}
     oracles = [t for t in tasks if t["method"] == "oracle" and t["seed"] == 0]
     shared = {pool_key(experiment.run_of(t)) for t in oracles}
@@ -28,19 +35,21 @@ def test_the_full_run_has_every_setting_method_and_seed_and_shares_the_oracle():
     assert len(oracles) == 5 and len(shared) == 3
     delayed = [t for t in tasks if t["method"] == "raw" and t["seed"] == 0]
     assert len({pool_key(experiment.run_of(t)) for t in delayed}) == len(deep_rl.SETTINGS)
-    assert len(keys) == 5 * (len(deep_rl.SETTINGS) * len(METHODS) - 2 + 3)  # random: per env
+    trained = sum(len(methods[name]) - 1 for name in deep_rl.SETTINGS)  # all but random
+    assert len(keys) == 5 * (trained - 2 + 3)  # random: per env
 
 
 @pytest.mark.experiment
 def test_a_tiny_quick_run_scores_every_method_and_resumes(tmp_path):
     config = Config(quick=True, seeds=2, steps=300, workers=2)
     summary = run_experiment(get_experiment("deep-rl"), config, tmp_path, False)
-    assert summary.extra["runs"] == 2 * len(deep_rl.QUICK) * (len(METHODS) + 1)
+    methods = deep_rl.SETTING_METHODS
+    assert summary.extra["runs"] == 2 * sum(len(methods[name]) for name in deep_rl.QUICK)
     assert len(list((tmp_path / "runs").glob("*.json"))) == summary.extra["runs"]
     table = summary.extra["table"]
     assert set(table) == set(deep_rl.QUICK)
-    for rows in table.values():
-        assert set(rows) == {*METHODS, "random"}
+    for name, rows in table.items():
+        assert set(rows) == set(methods[name])
         assert rows["oracle"]["gain"]["mean"] == pytest.approx(1.0)  # the gain's scale
         for method in MODEL_METHODS:
             assert np.isfinite(rows[method]["rmse"]["values"]).all()

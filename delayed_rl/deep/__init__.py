@@ -6,8 +6,10 @@ reads when a reward was emitted), and a relabelling buffer hands stable-baseline
 
 - :class:`DeconvolutionRewardModel`: ``R̂`` fitted so that its convolution with the delay's pmf
   ``p`` explains the delivered rewards; ``p`` known or learned;
-- :class:`ReturnDecompositionRewardModel` (RRD) and :class:`IRCRRewardModel`: delay-agnostic
-  baselines that use only episode sums;
+- :class:`ReturnDecompositionRewardModel` (RRD) and :class:`ReturnRegressionRewardModel`
+  (IRCR's target, learned): delay-agnostic baselines that use only episode sums;
+- :class:`IRCRReplayBuffer`: IRCR as its authors wrote it, guidance rewards from episode
+  returns with no network, half of each batch from the best episodes (SAC, TD3, DQN);
 - :class:`RelabelingReplayBuffer` (SAC, TD3, DQN), :class:`RelabelingRolloutBuffer` (PPO, A2C,
   with :class:`RewardModelCallback`), and their counterparts for ``Dict`` observations
   (:class:`RelabelingDictReplayBuffer`, :class:`RelabelingDictRolloutBuffer`) and n-step returns
@@ -40,13 +42,14 @@ from typing import Any
 __all__ = [
     "DeconvolutionRewardModel",
     "HindsightSAC",
-    "IRCRRewardModel",
+    "IRCRReplayBuffer",
     "RelabelingDictReplayBuffer",
     "RelabelingDictRolloutBuffer",
     "RelabelingNStepReplayBuffer",
     "RelabelingReplayBuffer",
     "RelabelingRolloutBuffer",
     "ReturnDecompositionRewardModel",
+    "ReturnRegressionRewardModel",
     "RewardModel",
     "RewardModelCallback",
     "load_reward_model",
@@ -56,13 +59,14 @@ __all__ = [
 _HOMES = {
     "DeconvolutionRewardModel": "deconvolution",
     "HindsightSAC": "hindsight",
-    "IRCRRewardModel": "ircr",
+    "IRCRReplayBuffer": "ircr",
     "RelabelingDictReplayBuffer": "buffers",
     "RelabelingDictRolloutBuffer": "buffers",
     "RelabelingNStepReplayBuffer": "buffers",
     "RelabelingReplayBuffer": "buffers",
     "RelabelingRolloutBuffer": "buffers",
     "ReturnDecompositionRewardModel": "return_decomposition",
+    "ReturnRegressionRewardModel": "return_regression",
     "RewardModel": "reward_model",
     "RewardModelCallback": "callbacks",
     "load_reward_model": "files",

@@ -30,10 +30,10 @@ __all__ = ["load_reward_model", "make_reward_model"]
 
 def _classes() -> dict[str, type[RewardModel]]:
     from delayed_rl.deep.deconvolution import DeconvolutionRewardModel
-    from delayed_rl.deep.ircr import IRCRRewardModel
     from delayed_rl.deep.return_decomposition import ReturnDecompositionRewardModel
+    from delayed_rl.deep.return_regression import ReturnRegressionRewardModel
 
-    kinds = (DeconvolutionRewardModel, ReturnDecompositionRewardModel, IRCRRewardModel)
+    kinds = (DeconvolutionRewardModel, ReturnDecompositionRewardModel, ReturnRegressionRewardModel)
     return {kind.__name__: kind for kind in kinds}
 
 
@@ -42,7 +42,7 @@ def make_reward_model(spec: Any, observation_space: Any, action_space: Any) -> R
 
     ``spec`` is a reward model (returned as it is, after its spaces are checked), or a mapping
     ``{"type": <class name>, <setting>: <value>, ...}``: one of the library's reward models
-    (``DeconvolutionRewardModel``, ``ReturnDecompositionRewardModel``, ``IRCRRewardModel``) and
+    (``DeconvolutionRewardModel``, ``ReturnDecompositionRewardModel``, ``ReturnRegressionRewardModel``) and
     its keyword arguments, as a hyperparameter file writes it (rl-zoo3's YAML, say). A model
     made from a mapping without a ``seed`` takes one from the algorithm whose buffer makes it
     (:mod:`delayed_rl.deep.binding`).

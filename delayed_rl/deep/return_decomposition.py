@@ -6,6 +6,10 @@ regresses the per-step share ``G / T`` on the mean of ``R̂`` over ``I``. It nee
 the delay, but it uses only the sums: it cannot tell which steps earned a reward beyond what
 the episodes' sums reveal. Only finished episodes wholly in the history are used; under
 ``"carry"`` or ``"drop"`` episode sums are not the returns, and RRD learns the wrong scale.
+
+The defaults are the authors' (Stilwell-Git/Randomized-Return-Decomposition, MuJoCo):
+:data:`PAPER_SETTINGS`. Where this model still differs from their code, the class docstring
+says so.
 """
 
 from __future__ import annotations
@@ -15,66 +19,168 @@ from typing import Any
 
 import numpy as np
 import torch
+from torch import nn
 
-from delayed_rl._validation import check_int
+from delayed_rl._validation import check_choice, check_int
 from delayed_rl.deep.network import as_tensors
 from delayed_rl.deep.reward_model import RewardModel
 
-__all__ = ["ReturnDecompositionRewardModel", "sample_episodes"]
+__all__ = [
+    "EPISODE_DRAWS",
+    "INITIALISATIONS",
+    "PAPER_SETTINGS",
+    "ReturnDecompositionRewardModel",
+    "sample_episodes",
+]
+
+EPISODE_DRAWS = ("length", "uniform")
+"""The values of ``episode_draw``: in proportion to the episodes' lengths, or uniformly."""
+INITIALISATIONS = ("xavier", "pytorch")
+"""The values of ``initialisation``: Glorot-uniform weights and zero biases, or PyTorch's."""
+PAPER_SETTINGS = {
+    "hidden_sizes": (256, 256),
+    "learning_rate": 3e-4,
+    "batch_size": 256,
+    "subset_size": 64,
+    "episode_draw": "length",
+    "initialisation": "xavier",
+    "unbiased": False,
+}
+"""The authors' settings for MuJoCo (their ``rrd_args``: a 256×256 ReLU MLP with TensorFlow's
+Xavier initialiser, Adam at 3e-4, 256 steps a batch as 4 subsets of 64, episodes drawn in
+proportion to their lengths, the biased loss unless ``--rrd_bias_correction``): the defaults."""
 
 
-def sample_episodes(model: RewardModel, count: int) -> list[tuple[int, int, int, float]] | None:
-    """``count`` finished episodes of ``model``'s history, drawn uniformly with replacement.
+def sample_episodes(
+    model: RewardModel, count: int, draw: str = "uniform"
+) -> list[tuple[int, int, int, float]] | None:
+    """``count`` finished episodes of ``model``'s history, drawn with replacement.
 
-    ``None`` when no episode has finished yet.
+    ``draw="uniform"`` gives each episode the same chance; ``"length"`` a chance in proportion
+    to its length (a uniformly drawn step's episode, as the authors' buffer draws). ``None``
+    when no episode has finished yet.
     """
     episodes = model.history.episodes
     if not episodes:
         return None
-    picks = model.rng.integers(0, len(episodes), size=count)
+    if draw == "uniform":
+        picks = model.rng.integers(0, len(episodes), size=count)
+    else:
+        ends = np.cumsum([length for _, _, length, _ in episodes])
+        picks = np.searchsorted(ends, model.rng.integers(0, ends[-1], size=count), side="right")
     return [episodes[i] for i in picks]
 
 
 class ReturnDecompositionRewardModel(RewardModel):
     """RRD: ``mean_{i ∈ I} R̂(s_i, a_i) ≈ G / T`` for random subsets ``I`` of episodes.
 
+    A batch is ``ceil(batch_size / subset_size)`` finished episodes (drawn as ``episode_draw``
+    says); from each of ``T`` steps, ``n = subset_size`` steps are drawn, without replacement
+    when ``n ≤ T`` and with replacement otherwise (as the authors draw). The loss is the mean
+    over the batch's episodes of ``(mean_I R̂ − G / T)²`` (the *biased* loss: the squared error
+    of a subset's mean also holds its sampling variance). With ``unbiased=True`` each episode's
+    term loses that variance's estimate, ``(1 − n / T) · s² / n`` with ``s²`` the sample variance
+    (``n − 1`` in the denominator) of ``R̂`` over ``I`` (the authors' bias correction; the factor
+    is 1 when ``n > T`` and 0 for a one-step episode, as theirs).
+
+    Where it still differs from the authors' code: their network also reads ``s − s′`` beside
+    ``(s, a)`` (velocity-like features for MuJoCo); this one reads ``(s, a)``. Their reward
+    network trains once per critic update and their SAC starts after 10k steps; here the model
+    follows the :class:`~delayed_rl.deep.reward_model.RewardModel` schedule
+    (``updates_per_step``, ``warmup_updates``) and the algorithm its own ``learning_starts``.
+
     Args:
         observation_space: the env's observation space (any the base class takes).
         action_space: its action space (likewise).
-        subset_size: the steps drawn (without replacement) from each episode of a batch
-            (all of a shorter episode's); a batch is ``ceil(batch_size / subset_size)`` episodes.
-        **kwargs: the :class:`~delayed_rl.deep.reward_model.RewardModel` settings.
+        subset_size: ``n``, the steps drawn from each episode of a batch (an integer in
+            ``1..2**16``; ``unbiased`` needs at least 2).
+        episode_draw: ``"length"`` (the authors') or ``"uniform"``.
+        initialisation: ``"xavier"`` (the authors': Glorot-uniform weights, zero biases) or
+            ``"pytorch"`` (PyTorch's default).
+        unbiased: subtract the subsets' variance estimate from the loss (see above).
+        **kwargs: the :class:`~delayed_rl.deep.reward_model.RewardModel` settings; their
+            defaults here are :data:`PAPER_SETTINGS`' (a 256×256 MLP, Adam at 3e-4, 256 steps a
+            batch).
+
+    Raises:
+        TypeError: an argument of the wrong type.
+        ValueError: ``subset_size`` out of range, or 1 with ``unbiased``; an unknown
+            ``episode_draw`` or ``initialisation``.
     """
 
-    own_settings = ("subset_size",)
+    own_settings = ("subset_size", "episode_draw", "initialisation", "unbiased")
 
     def __init__(
-        self, observation_space: Any, action_space: Any, *, subset_size: int = 64, **kwargs
+        self,
+        observation_space: Any,
+        action_space: Any,
+        *,
+        subset_size: int = PAPER_SETTINGS["subset_size"],
+        episode_draw: str = PAPER_SETTINGS["episode_draw"],
+        initialisation: str = PAPER_SETTINGS["initialisation"],
+        unbiased: bool = PAPER_SETTINGS["unbiased"],
+        hidden_sizes: Any = PAPER_SETTINGS["hidden_sizes"],
+        learning_rate: float = PAPER_SETTINGS["learning_rate"],
+        batch_size: int = PAPER_SETTINGS["batch_size"],
+        **kwargs: Any,
     ):
         self.subset_size = check_int("subset_size", subset_size, 1, 2**16)
-        super().__init__(observation_space, action_space, **kwargs)
+        self.episode_draw = check_choice("episode_draw", episode_draw, EPISODE_DRAWS)
+        self.initialisation = check_choice("initialisation", initialisation, INITIALISATIONS)
+        if not isinstance(unbiased, bool):
+            raise TypeError(f"unbiased must be a bool, got {unbiased!r}")
+        if unbiased and self.subset_size < 2:
+            raise ValueError(
+                f"subset_size must be at least 2 with unbiased=True (a subset's variance needs "
+                f"two steps), got {subset_size}"
+            )
+        self.unbiased = unbiased
+        super().__init__(
+            observation_space,
+            action_space,
+            hidden_sizes=hidden_sizes,
+            learning_rate=learning_rate,
+            batch_size=batch_size,
+            **kwargs,
+        )
+
+    def _make_parameters(self) -> None:
+        """Re-initialise the network's linear layers as ``initialisation`` says."""
+        if self.initialisation == "xavier":
+            for layer in self.network.modules():
+                if isinstance(layer, nn.Linear):
+                    nn.init.xavier_uniform_(layer.weight)
+                    nn.init.zeros_(layer.bias)
+
+    def subset_steps(self, length: int) -> np.ndarray:
+        """The steps (offsets in an episode of ``length``) one subset draws, with ``rng``."""
+        n = self.subset_size
+        return self.rng.choice(length, size=n, replace=n > length)
+
+    @staticmethod
+    def variance_factor(n: int, length: int) -> float:
+        """The unbiased loss's ``1 − n / T`` (1 when ``n > T``, 0 for ``T = 1``), as the authors'."""
+        if length <= 1:
+            return 0.0
+        return 1.0 - n / length if n <= length else 1.0
 
     def loss(self) -> torch.Tensor | None:
-        """The mean over a batch's episodes of ``(mean_I R̂ − G / T)²``."""
+        """The mean over a batch's episodes of ``(mean_I R̂ − G / T)²`` (minus the variance term)."""
         history = self.history
-        episodes = sample_episodes(self, math.ceil(self.batch_size / self.subset_size))
+        count = math.ceil(self.batch_size / self.subset_size)
+        episodes = sample_episodes(self, count, self.episode_draw)
         if episodes is None:
             return None
-        rows, envs, groups, targets = [], [], [], []
-        for group, (env, first, length, total) in enumerate(episodes):
-            size = min(self.subset_size, length)
-            steps = first + self.rng.choice(length, size=size, replace=False)
-            rows.append(steps % history.capacity)
-            envs.append(np.full(size, env))
-            groups.append(np.full(size, group))
-            targets.append(total / length)
-        rows, envs = np.concatenate(rows), np.concatenate(envs)
-        group = torch.as_tensor(np.concatenate(groups))
+        n = self.subset_size
+        steps = np.stack([first + self.subset_steps(length) for _, first, length, _ in episodes])
+        envs = np.repeat([env for env, *_ in episodes], n)
         rewards = self.network(
-            as_tensors(history.observations_at(rows, envs)),
-            as_tensors(history.actions_at(rows, envs)),
-        )
-        sums = torch.zeros(len(episodes)).index_add(0, group, rewards)
-        sizes = torch.zeros(len(episodes)).index_add(0, group, torch.ones_like(rewards))
-        target = torch.as_tensor(targets, dtype=torch.float32)
-        return torch.mean((sums / sizes - target) ** 2)
+            as_tensors(history.observations_at(steps.ravel() % history.capacity, envs)),
+            as_tensors(history.actions_at(steps.ravel() % history.capacity, envs)),
+        ).reshape(len(episodes), n)
+        target = torch.as_tensor([total / length for *_, length, total in episodes])
+        loss = torch.mean((rewards.mean(1) - target.float()) ** 2)
+        if not self.unbiased:
+            return loss
+        factors = torch.as_tensor([self.variance_factor(n, e[2]) for e in episodes])
+        return loss - torch.mean(rewards.var(1, unbiased=True) * factors.float() / n)

@@ -87,6 +87,11 @@ SETTINGS: dict[str, dict[str, Any]] = {
                            "episode_steps": 500, "delay": Poisson(20).to_dict(),
                            "max_delay": 60, "steps": 100_000, "eval_every": 10_000},
 }  # fmt: skip
+#: Each setting's methods: IRCR's batches replay the best episodes, so it is off-policy only.
+SETTING_METHODS = {
+    name: tuple(m for m in (*METHODS, "random") if m != "ircr" or setting["algorithm"] == "SAC")
+    for name, setting in SETTINGS.items()
+}
 QUICK = {"pendulum-poisson20": (1000, 500), "cartpole-poisson20": (8192, 4096)}
 """The quick run's settings: their (steps, eval_every)."""
 EVAL_EPISODES = 10
@@ -99,6 +104,7 @@ LABELS = {
     "oracle": "oracle (undelayed)",
     "rrd": "RRD",
     "ircr": "IRCR",
+    "return-regression": "return regression",
     "deconv-known": "deconvolution, p known",
     "deconv-learned": "deconvolution, p learned",
 }
@@ -112,7 +118,7 @@ def tasks(config: Config) -> list[dict]:
         ImportError: torch or stable-baselines3 is missing (the ``sb3`` extra).
     """
     require_sb3()
-    return gain_tasks(config, SETTINGS, QUICK, (*METHODS, "random"))
+    return gain_tasks(config, SETTINGS, QUICK, SETTING_METHODS)
 
 
 def shared_run(task: dict) -> SharedRun:
@@ -248,11 +254,12 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
     for setting, by_method in grouped.items():
         gains, low, high = method_gains(by_method)
         claims += _setting_claims(setting, gains)
-        for method in METHODS:
+        methods = [method for method in METHODS if method in by_method]
+        for method in methods:
             stats = rules.mean_ci_n(list(gains[method].values()))
             claims.append(rules.reference_row(f"{setting}: {LABELS[method]} gain", stats))
         table[setting] = {m: _table_row(m, runs, gains) for m, runs in by_method.items()}
-        labels = {method: LABELS[method] for method in METHODS}
+        labels = {method: LABELS[method] for method in methods}
         runs_curves, figures[f"curves_{setting}"] = learning_curves(
             setting, by_method, labels, low, "the undelayed env"
         )

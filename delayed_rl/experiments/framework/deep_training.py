@@ -7,17 +7,30 @@ training ``steps``, the ``method`` and the ``seed``. The methods (:data:`METHODS
 
 - ``raw``: the algorithm on the delayed rewards as they arrive;
 - ``oracle``: the algorithm on the undelayed env (the delay plays no part);
-- ``rrd``: :class:`~delayed_rl.deep.ReturnDecompositionRewardModel`;
-- ``ircr``: :class:`~delayed_rl.deep.IRCRRewardModel`;
+- ``rrd``: :class:`~delayed_rl.deep.ReturnDecompositionRewardModel` with the authors'
+  settings (its defaults);
+- ``ircr``: :class:`~delayed_rl.deep.IRCRReplayBuffer`, IRCR as its authors wrote it (off-policy
+  only: half of its batches replay the best episodes);
+- ``return-regression``: :class:`~delayed_rl.deep.ReturnRegressionRewardModel`, IRCR's target
+  learned by a network;
 - ``deconv-known``: :class:`~delayed_rl.deep.DeconvolutionRewardModel` with the delay's pmf;
 - ``deconv-learned``: the same with ``p`` learned on ``0..max_delay`` (the task's
   ``max_delay``, a bound the user would choose, not the delay).
 
-The reward models have their defaults (a 64×64 MLP, Adam at 1e-3, an update a vector-env step
-and a warm-up of 1000 updates before they relabel, trained when the algorithm trains) and the
-run's seed; off-policy algorithms get a
-:class:`~delayed_rl.deep.RelabelingReplayBuffer`, on-policy ones a
+The reward models have their defaults (an update a vector-env step and a warm-up of 1000
+updates before they relabel, trained when the algorithm trains) and the run's seed; off-policy
+algorithms get a :class:`~delayed_rl.deep.RelabelingReplayBuffer`, on-policy ones a
 :class:`~delayed_rl.deep.RelabelingRolloutBuffer` with its callback. Torch runs on one thread.
+
+**One warm-up for every method.** An off-policy algorithm takes its first update after
+:data:`WARMUP_EPISODES` episodes of steps (``learning_starts``), whatever the method, raw and
+oracle included: by then every reward model can be fitted (RRD and the return regression need a
+finished episode, IRCR two distinct returns, as its authors' two exploration episodes), and at
+the first update each model takes the updates its schedule owes for those steps plus its
+warm-up, so the algorithm never learns from an untrained ``R̂`` nor from the raw rewards
+first. (SB3's default, 100 steps, gave the deconvolution a head start over the episode-sum
+baselines, which could only start after an episode.) On-policy algorithms learn from the first
+rollout, which holds many episodes; the models warm up before it is relabelled.
 
 The score is the mean return of ``eval_episodes`` deterministic episodes of the *undelayed* env
 (the same seeds for every method of a seed), read every ``eval_every`` steps and at the end: the
@@ -43,10 +56,12 @@ __all__ = [
     "train_and_score",
 ]
 
-METHODS = ("raw", "oracle", "rrd", "ircr", "deconv-known", "deconv-learned")
+METHODS = ("raw", "oracle", "rrd", "ircr", "return-regression", "deconv-known", "deconv-learned")
 """The methods a task can name (see the module docstring)."""
-MODEL_METHODS = ("rrd", "ircr", "deconv-known", "deconv-learned")
+MODEL_METHODS = ("rrd", "return-regression", "deconv-known", "deconv-learned")
 """The methods that train a reward model."""
+WARMUP_EPISODES = 2
+"""Episodes of steps before an off-policy algorithm's first update, for every method."""
 EVAL_SEED = 1_000_000
 """Evaluation episode ``i`` of seed ``s`` resets with ``EVAL_SEED + 1000 * s + i``."""
 
@@ -77,16 +92,16 @@ def _reward_model(task: dict, env: gym.Env) -> Any:
     """The reward model of a model method, seeded with the run's seed."""
     from delayed_rl.deep import (
         DeconvolutionRewardModel,
-        IRCRRewardModel,
         ReturnDecompositionRewardModel,
+        ReturnRegressionRewardModel,
     )
 
     spaces, seed = (env.observation_space, env.action_space), task["seed"]
     method = task["method"]
     if method == "rrd":
         return ReturnDecompositionRewardModel(*spaces, seed=seed)
-    if method == "ircr":
-        return IRCRRewardModel(*spaces, seed=seed)
+    if method == "return-regression":
+        return ReturnRegressionRewardModel(*spaces, seed=seed)
     delay = as_delay(task["delay"]) if method == "deconv-known" else None
     max_delay = None if method == "deconv-known" else task["max_delay"]
     return DeconvolutionRewardModel(*spaces, delay=delay, max_delay=max_delay, seed=seed)
@@ -163,7 +178,12 @@ def train_and_score(task: dict) -> dict:
     from stable_baselines3.common.callbacks import CallbackList
     from stable_baselines3.common.env_util import make_vec_env
 
-    from delayed_rl.deep import RelabelingReplayBuffer, RelabelingRolloutBuffer, RewardModelCallback
+    from delayed_rl.deep import (
+        IRCRReplayBuffer,
+        RelabelingReplayBuffer,
+        RelabelingRolloutBuffer,
+        RewardModelCallback,
+    )
 
     torch.set_num_threads(1)
     method, seed = task["method"], task["seed"]
@@ -175,6 +195,12 @@ def train_and_score(task: dict) -> dict:
     curve: list[tuple[int, float]] = []
     callbacks = [_curve_callback(task, curve)]
     model = None
+    if algorithm is not PPO:
+        options["learning_starts"] = WARMUP_EPISODES * task["episode_steps"]
+    if method == "ircr":
+        if algorithm is PPO:
+            raise ValueError("method 'ircr' needs an off-policy algorithm (SAC), got PPO")
+        options["replay_buffer_class"] = IRCRReplayBuffer
     if method in MODEL_METHODS:
         model = _reward_model(task, vec_env)
         if algorithm is PPO:
@@ -182,7 +208,7 @@ def train_and_score(task: dict) -> dict:
             options["rollout_buffer_kwargs"] = {"reward_model": model}
             callbacks.append(RewardModelCallback())
         else:
-            options = {"replay_buffer_class": RelabelingReplayBuffer}
+            options["replay_buffer_class"] = RelabelingReplayBuffer
             options["replay_buffer_kwargs"] = {"reward_model": model}
     agent = algorithm("MlpPolicy", vec_env, seed=seed, device="cpu", **options)
     started = time.perf_counter()
