@@ -2,12 +2,14 @@
 
 - :class:`RewardDelay`, :class:`PoissonRewardDelay`: one env, the library's core;
 - :class:`ObservationDelay`: the same idea for observations (the thesis's stale sensor, or
-  rlrd's network where every observation travels on its own: ``arrival=``);
+  rlrd's network where every observation travels on its own: ``arrival=``), with its
+  ``gymnasium.vector`` twin :class:`VectorObservationDelay`;
 - :class:`ActionDelay`: for actions (the env executes an action sent steps earlier), with its
   ``gymnasium.vector`` twin :class:`VectorActionDelay`;
 - :class:`DelayAwareObservation`: what the agent can know under those delays (the newest
-  observation received, its age, the actions sent since), and
-  :class:`DiscreteDelayAwareObservation`, the same as one ``Discrete`` index for tabular agents;
+  observation received, its age, the actions sent since), with its ``gymnasium.vector`` twin
+  :class:`VectorDelayAwareObservation`, and :class:`DiscreteDelayAwareObservation`, the same as
+  one ``Discrete`` index for tabular agents;
 - :func:`wrap_delays`: all three (and the delay-aware view) on one env, in the order
   ``gym.make(id, ...)`` stacks them;
 - :class:`DiscreteObservation`: observations of several discrete parts (``Blackjack-v1``'s
@@ -18,9 +20,13 @@
 """
 
 from delayed_rl.wrappers.action_delay import ActionDelay, VectorActionDelay
-from delayed_rl.wrappers.delay_aware import DelayAwareObservation, DiscreteDelayAwareObservation
+from delayed_rl.wrappers.delay_aware import (
+    DelayAwareObservation,
+    DiscreteDelayAwareObservation,
+    VectorDelayAwareObservation,
+)
 from delayed_rl.wrappers.discrete_observation import DiscreteObservation
-from delayed_rl.wrappers.observation_delay import ObservationDelay
+from delayed_rl.wrappers.observation_delay import ObservationDelay, VectorObservationDelay
 from delayed_rl.wrappers.reward_delay import (
     EPISODE_END_MODES,
     PoissonRewardDelay,
@@ -40,6 +46,8 @@ __all__ = [
     "PoissonRewardDelay",
     "RewardDelay",
     "VectorActionDelay",
+    "VectorDelayAwareObservation",
+    "VectorObservationDelay",
     "VectorRewardDelay",
     "wrap_delays",
     "wrap_reward_delay",

@@ -16,8 +16,9 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+from gymnasium.vector.utils import concatenate, create_empty_array
 
-__all__ = ["as_action", "copy_sample"]
+__all__ = ["as_action", "batch_of_copies", "copy_sample"]
 
 
 def copy_sample(sample: Any) -> Any:
@@ -47,6 +48,17 @@ def copy_sample(sample: Any) -> Any:
     if isinstance(sample, list):
         return [copy_sample(value) for value in sample]
     return sample
+
+
+def batch_of_copies(space: gym.Space, samples: list[Any]) -> Any:
+    """One ``gymnasium.vector`` batch of ``samples`` of ``space`` (one per sub-env), sharing nothing.
+
+    The batch is new (``gymnasium.vector.utils.create_empty_array`` filled by ``concatenate``),
+    built from copies of the samples (:func:`copy_sample`), so it shares nothing with them even
+    for a space whose batch holds the samples themselves (``Text``, ``Graph``, ``Sequence``).
+    """
+    copies = [copy_sample(sample) for sample in samples]
+    return concatenate(space, copies, create_empty_array(space, len(copies)))
 
 
 def as_action(space: gym.Space, value: Any, name: str) -> Any:

@@ -24,7 +24,7 @@ from delayed_rl.wrappers._spec import JsonSpecMixin, json_safe
 from delayed_rl.wrappers.reward_delay import DelaySampler, check_max_delay
 from delayed_rl.wrappers.vector import autoreset_mode, reset_mask, sub_env_seeds
 
-__all__ = ["ActionDelay", "ActionLine", "VectorActionDelay", "neutral_action"]
+__all__ = ["ActionDelay", "ActionLine", "VectorActionDelay", "neutral_action", "unbatch_actions"]
 
 
 def neutral_action(space: gym.Space) -> Any:
@@ -55,6 +55,33 @@ def neutral_action(space: gym.Space) -> Any:
         f"initial_action must be given for an action space of type {type(space).__name__} "
         f"({space}): there is no neutral action to default to"
     )
+
+
+def unbatch_actions(env: VectorEnv, actions: Any) -> list[Any]:
+    """The sub-envs' actions in the batch ``actions`` of ``env`` (``gymnasium.vector.utils.iterate``).
+
+    ``actions`` is a batch of ``env.action_space``: an array with one row per sub-env, and for a
+    ``Dict`` (``Tuple``) action space a dict (tuple) of such batches. The actions are not checked
+    against the single action space (the caller names each ``actions[i]`` when it checks them).
+
+    Raises:
+        TypeError: ``actions`` is not a batch of the action space's form.
+        ValueError: it does not hold one action per sub-env.
+    """
+    allowed = (
+        f"a batch of {env.num_envs} actions of {env.single_action_space} (one per sub-env; "
+        "a dict or tuple of batches for a Dict or Tuple space)"
+    )
+    try:
+        given = list(iterate(env.action_space, actions))
+    except (TypeError, KeyError, IndexError, ValueError) as error:
+        kind = TypeError if isinstance(error, TypeError) else ValueError
+        raise kind(
+            f"actions must be {allowed}, got {actions!r} ({type(actions).__name__}): {error}"
+        ) from None
+    if len(given) != env.num_envs:
+        raise ValueError(f"actions must be {allowed}, got {len(given)}: {actions!r}")
+    return given
 
 
 def _check_action(space: gym.Space, action: Any, name: str) -> Any:
@@ -306,7 +333,7 @@ class VectorActionDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
                 in the single action space (the message names ``actions[i]``).
         """
         space = self.single_action_space
-        given = self._unbatch(actions)
+        given = unbatch_actions(self, actions)
         executed = list(given)  # the reset step's sub-envs ignore the action given
         sent_steps = np.full(self.num_envs, -1, dtype=np.int64)
         delays = np.zeros(self.num_envs, dtype=np.int64)
@@ -334,28 +361,6 @@ class VectorActionDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
         ):
             info[key], info["_" + key] = values, sending.copy()
         return obs, rewards, terminated, truncated, info
-
-    def _unbatch(self, actions: Any) -> list[Any]:
-        """The sub-envs' actions in the batch ``actions`` (``gymnasium.vector.utils.iterate``).
-
-        Raises:
-            TypeError: ``actions`` is not a batch of the action space's form.
-            ValueError: it does not hold one action per sub-env.
-        """
-        allowed = (
-            f"a batch of {self.num_envs} actions of {self.single_action_space} (one per sub-env; "
-            "a dict or tuple of batches for a Dict or Tuple space)"
-        )
-        try:
-            given = list(iterate(self.action_space, actions))
-        except (TypeError, KeyError, IndexError, ValueError) as error:
-            kind = TypeError if isinstance(error, TypeError) else ValueError
-            raise kind(
-                f"actions must be {allowed}, got {actions!r} ({type(actions).__name__}): {error}"
-            ) from None
-        if len(given) != self.num_envs:
-            raise ValueError(f"actions must be {allowed}, got {len(given)}: {actions!r}")
-        return given
 
     def _batch(self, actions: list[Any]) -> Any:
         """One batch (new arrays) of the sub-envs' ``actions`` (``gymnasium.vector.utils``).

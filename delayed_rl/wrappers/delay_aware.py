@@ -4,8 +4,10 @@ Under observation and action delays the newest observation is not the state, and
 still on their way will change it. The classic remedy (the augmented state of the constant-delay
 MDP; rlrd's RTRL and DCAC, Bouteiller et al., ICLR 2021) observes the newest observation received,
 its age and the actions sent since it was made. :class:`DelayAwareObservation` builds that view
-over a stack of the library's delay wrappers; :class:`DiscreteDelayAwareObservation` numbers it
-with one ``Discrete`` index, for the tabular agents.
+over a stack of the library's delay wrappers, and :class:`VectorDelayAwareObservation`, its
+``gymnasium.vector`` twin, over a stack of their vector twins; both follow :class:`ViewState`,
+the rule itself. :class:`DiscreteDelayAwareObservation` numbers the view with one ``Discrete``
+index, for the tabular agents.
 """
 
 from __future__ import annotations
@@ -16,19 +18,29 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space, concatenate, create_empty_array, iterate
 
 from delayed_rl._validation import check_int
 from delayed_rl.wrappers._samples import as_action, copy_sample
 from delayed_rl.wrappers._spec import JsonSpecMixin, json_safe
-from delayed_rl.wrappers.action_delay import ActionDelay, neutral_action
+from delayed_rl.wrappers.action_delay import (
+    ActionDelay,
+    VectorActionDelay,
+    neutral_action,
+    unbatch_actions,
+)
 from delayed_rl.wrappers.discrete_observation import DiscreteObservation
-from delayed_rl.wrappers.observation_delay import ObservationDelay
+from delayed_rl.wrappers.observation_delay import ObservationDelay, VectorObservationDelay
+from delayed_rl.wrappers.vector import autoreset_mode, reset_mask
 
 __all__ = [
     "MAX_ACTION_HISTORY",
     "MAX_DISCRETE_STATES",
     "DelayAwareObservation",
     "DiscreteDelayAwareObservation",
+    "VectorDelayAwareObservation",
+    "ViewState",
 ]
 
 MAX_ACTION_HISTORY = 2**16
@@ -43,29 +55,34 @@ VIEW_KEYS = ("actions", "age", "observation")
 """The keys of the view's ``Dict`` (Gymnasium orders a ``Dict``'s keys alphabetically)."""
 
 
-def _the_wrapper(env: gym.Env, cls: type) -> Any:
+def _the_wrapper(env: gym.Env | VectorEnv, cls: type, owner: str) -> Any:
     """The one ``cls`` among ``env``'s wrappers (walking ``.env`` down), or ``None``.
+
+    ``env`` is an env (its ``gym.Wrapper`` layers are walked) or a vector env (its
+    ``gym.vector.VectorWrapper`` layers); ``owner`` names the view, for the message.
 
     Raises:
         ValueError: the stack holds more than one.
     """
+    layer = gym.vector.VectorWrapper if isinstance(env, VectorEnv) else gym.Wrapper
     found = []
-    while isinstance(env, gym.Wrapper):
+    while isinstance(env, layer):
         if isinstance(env, cls):
             found.append(env)
         env = env.env
     if len(found) > 1:
         raise ValueError(
-            f"env must hold at most one {cls.__name__} for DelayAwareObservation to read its "
-            f"delays, got {len(found)}: {found!r}"
+            f"env must hold at most one {cls.__name__} for {owner} to read its delays, "
+            f"got {len(found)}: {found!r}"
         )
     return found[0] if found else None
 
 
-def _bound(wrapper: ObservationDelay | ActionDelay | None) -> int | None:
+def _bound(wrapper: Any) -> int | None:
     """The longest delay ``wrapper`` applies: 0 without one, ``None`` if unbounded.
 
-    The smaller of its ``max_delay`` and its distribution's ``support_max``, whichever are set.
+    ``wrapper`` is an observation or action delay, of one env or a vector env. The bound is the
+    smaller of its ``max_delay`` and its distribution's ``support_max``, whichever are set.
     """
     if wrapper is None:
         return 0
@@ -73,7 +90,7 @@ def _bound(wrapper: ObservationDelay | ActionDelay | None) -> int | None:
     return min(bounds) if bounds else None
 
 
-def _history_space(space: gym.Space, k: int) -> spaces.Space:
+def _history_space(space: gym.Space, k: int, owner: str) -> spaces.Space:
     """The space of ``k`` actions of ``space``, stacked along a new first axis.
 
     Raises:
@@ -90,9 +107,160 @@ def _history_space(space: gym.Space, k: int) -> spaces.Space:
     if isinstance(space, spaces.MultiBinary):
         return spaces.MultiBinary([k, *space.shape])
     raise TypeError(
-        "DelayAwareObservation needs an env whose action_space is Discrete, Box, MultiDiscrete "
+        f"{owner} needs an env whose action_space is Discrete, Box, MultiDiscrete "
         f"or MultiBinary (to stack the actions sent), got {space!r}"
     )
+
+
+def _bounded_history(
+    observation_delay: Any,
+    action_delay: Any,
+    observation_bound: int | None,
+    action_bound: int | None,
+    owner: str,
+) -> int:
+    """``K`` from the delays' bounds: their sum, at least 1 (``owner`` names the view).
+
+    Raises:
+        ValueError: a delay is unbounded, or the sum is above :data:`MAX_ACTION_HISTORY`.
+    """
+    for wrapper, bound in ((observation_delay, observation_bound), (action_delay, action_bound)):
+        if bound is None:
+            raise ValueError(
+                f"{owner} needs action_history (an integer >= 1) for the "
+                f"{type(wrapper).__name__} of unbounded delay {wrapper.delay!r} (no "
+                "max_delay): the number of actions to observe cannot be read from it"
+            )
+    total = max(observation_bound + action_bound, 1)
+    if total > MAX_ACTION_HISTORY:
+        raise ValueError(
+            f"{owner} would observe {total} actions (the observation delay's "
+            f"bound {observation_bound} plus the action delay's {action_bound}), more than "
+            f"MAX_ACTION_HISTORY = {MAX_ACTION_HISTORY}: give action_history, or max_delay "
+            "to the delay wrappers"
+        )
+    return total
+
+
+def _view_settings(
+    observation_space: gym.Space,
+    action_space: gym.Space,
+    observation_delay: Any,
+    action_delay: Any,
+    action_history: int | None,
+    owner: str,
+) -> tuple[int, int, Any, spaces.Dict]:
+    """``K``, ``D``, the initial action and the view's ``Dict`` space, for one env of a stack.
+
+    ``observation_space`` and ``action_space`` are one env's (a vector env's single spaces);
+    ``observation_delay`` and ``action_delay`` the stack's delay wrappers (``None``: none);
+    ``action_history`` the checked argument; ``owner`` names the view, for the messages.
+    :class:`DelayAwareObservation` says how each is chosen; its vector twin reads them here too.
+
+    Raises:
+        TypeError, ValueError: as :class:`DelayAwareObservation`.
+    """
+    observation_bound = _bound(observation_delay)
+    action_bound = _bound(action_delay)
+    if action_history is None:
+        action_history = _bounded_history(
+            observation_delay, action_delay, observation_bound, action_bound, owner
+        )
+    max_age = action_history if observation_bound is None else observation_bound
+    initial = neutral_action(action_space) if action_delay is None else action_delay.initial_action
+    actions_space = _history_space(action_space, action_history, owner)  # checks the space
+    view_space = spaces.Dict(
+        {
+            "observation": observation_space,
+            "age": spaces.Discrete(max_age + 1),
+            "actions": actions_space,
+        }
+    )
+    return action_history, max_age, as_action(action_space, initial, "initial_action"), view_space
+
+
+class ViewState:
+    """One env's delay-aware view, step by step: the rule of :class:`DelayAwareObservation`.
+
+    It keeps the last ``K`` actions sent (newest first), the newest observation received with the
+    index ``i`` of the step that made it, and the episode's step count, and builds the view from
+    what the stack reports: each step's observation with its age, and the observations received.
+    :class:`DelayAwareObservation` holds one; :class:`VectorDelayAwareObservation` one per sub-env.
+
+    What it is given is copied where it keeps it (the newest observation, the actions written into
+    its rows), and what it hands out is new: :meth:`view` copies, and the ``info`` entries that
+    :meth:`reset` and :meth:`step` return are built from copies.
+
+    Args:
+        actions_space: the space of the ``actions`` rows (the view's ``"actions"`` space).
+        initial_action: what the rows hold before the episode's first action is sent.
+        max_age: ``D``, the ages' bound: an older age is shown as ``D``, and reported clipped.
+    """
+
+    def __init__(self, actions_space: spaces.Space, initial_action: Any, max_age: int):
+        self.initial_action = initial_action
+        self.max_age = max_age
+        self.actions = np.empty(actions_space.shape, dtype=actions_space.dtype)
+        self.actions[...] = initial_action
+        self.newest: Any = None
+        self.newest_index = 0
+        self.steps = 0
+        self.age = 0
+
+    def reset(self, first: Any, arrived: Any = None) -> dict[str, Any]:
+        """Start an episode at ``first`` (``o_0``, age 0), the rows all the initial action.
+
+        Args:
+            first: the episode's first observation.
+            arrived: the stack's ``info["arrived_observations"]``; ``None`` without an
+                observation delay.
+
+        Returns:
+            The ``info`` entries ``received_observations`` and ``age_clipped``.
+        """
+        self.steps = 0
+        self.newest, self.newest_index = copy_sample(first), 0
+        self.actions[...] = self.initial_action
+        self.age = 0
+        return self._report(first, arrived)
+
+    def step(self, sent: Any, obs: Any, shown_age: int, arrived: Any = None) -> dict[str, Any]:
+        """Record the action ``sent`` and the stack's observation ``obs`` of age ``shown_age``.
+
+        ``obs`` was made at ``i = t + 1 − shown_age`` (``t`` this step, counted from 0), and it
+        becomes the newest observation only if ``i`` is larger than the newest's.
+
+        Args:
+            sent: the action sent at this step, in the action space's form.
+            obs: the observation the stack returned.
+            shown_age: its ``info["observation_delay"]`` (0 without an observation delay).
+            arrived: the stack's ``info["arrived_observations"]``; ``None`` without an
+                observation delay.
+
+        Returns:
+            The ``info`` entries ``received_observations`` and ``age_clipped``.
+        """
+        self.steps += 1
+        self.actions[1:] = self.actions[:-1]
+        self.actions[0] = sent
+        made = self.steps - shown_age
+        if made > self.newest_index:
+            self.newest, self.newest_index = copy_sample(obs), made
+        self.age = self.steps - self.newest_index
+        return self._report(obs, arrived)
+
+    def view(self) -> dict[str, Any]:
+        """The view's ``Dict`` sample: copies of the rows and of the newest observation."""
+        return {
+            "actions": self.actions.copy(),
+            "age": np.int64(min(self.age, self.max_age)),
+            "observation": copy_sample(self.newest),
+        }
+
+    def _report(self, obs: Any, arrived: Any) -> dict[str, Any]:
+        """This step's ``received_observations`` (copies) and ``age_clipped``."""
+        received = ((self.steps, copy_sample(obs)),) if arrived is None else copy_sample(arrived)
+        return {"received_observations": received, "age_clipped": self.age > self.max_age}
 
 
 class DelayAwareObservation(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
@@ -145,12 +313,15 @@ class DelayAwareObservation(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstruc
 
     For an MLP policy, ``gymnasium.wrappers.FlattenObservation`` turns the view into one ``Box``
     (one-hot ``Discrete`` and ``MultiDiscrete`` entries); stable-baselines3's ``MultiInputPolicy``
-    takes the ``Dict`` as it is. For vector envs, wrap each sub-env: ``gym.make_vec(id, ...,
-    delay_aware=True)`` for a ``delayed_rl/`` id, ``gym.make_vec(id, wrappers=[...])`` or
+    takes the ``Dict`` as it is. For vector envs, either wrap each sub-env (``gym.make_vec(id,
+    ..., delay_aware=True)`` for a ``delayed_rl/`` id, ``gym.make_vec(id, wrappers=[...])`` or
     ``SyncVectorEnv`` of wrapped envs otherwise, and stable-baselines3's ``make_vec_env(id,
-    wrapper_class=wrap_delays, wrapper_kwargs={..., "delay_aware": True})``. (A
-    :class:`~delayed_rl.wrappers.VectorActionDelay` around the vector env is invisible to the
-    sub-envs' views: put an ``ActionDelay`` in each sub-env instead.) Wrap outside the delays and
+    wrapper_class=wrap_delays, wrapper_kwargs={..., "delay_aware": True})``), or wrap the vector
+    env with the twins: :class:`VectorDelayAwareObservation` over a
+    :class:`~delayed_rl.wrappers.VectorObservationDelay` and a
+    :class:`~delayed_rl.wrappers.VectorActionDelay` gives each sub-env the same view. (Each
+    view reads only the delay wrappers of its own kind: a ``VectorActionDelay`` around the vector
+    env is invisible to the sub-envs' views.) Wrap outside the delays and
     inside a reward delay, as :func:`~delayed_rl.wrappers.wrap_delays` does: wrappers between the
     ``ObservationDelay`` and the view must not change observations or drop ``info`` entries.
 
@@ -192,65 +363,28 @@ class DelayAwareObservation(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstruc
         action_history = check_int(
             "action_history", action_history, 1, MAX_ACTION_HISTORY, optional=True
         )
-        self._observation_delay = _the_wrapper(env, ObservationDelay)
-        self._action_delay = _the_wrapper(env, ActionDelay)
-        observation_bound = _bound(self._observation_delay)
-        action_bound = _bound(self._action_delay)
-        if action_history is None:
-            action_history = self._bounded_history(observation_bound, action_bound)
-        self.action_history = action_history
-        self.max_age = action_history if observation_bound is None else observation_bound
-        initial = (
-            neutral_action(env.action_space)
-            if self._action_delay is None
-            else self._action_delay.initial_action
-        )
-        actions_space = _history_space(env.action_space, action_history)  # checks the space
-        self.initial_action = as_action(env.action_space, initial, "initial_action")
-        self.observation_space = spaces.Dict(
-            {
-                "observation": env.observation_space,
-                "age": spaces.Discrete(self.max_age + 1),
-                "actions": actions_space,
-            }
-        )
-        self._actions = np.empty(actions_space.shape, dtype=actions_space.dtype)
-        self._newest: Any = None
-        self._newest_index = 0
-        self._step = 0
-
-    def _bounded_history(self, observation_bound: int | None, action_bound: int | None) -> int:
-        """``K`` from the delays' bounds: their sum, at least 1.
-
-        Raises:
-            ValueError: a delay is unbounded, or the sum is above :data:`MAX_ACTION_HISTORY`.
-        """
-        bounds = ((self._observation_delay, observation_bound), (self._action_delay, action_bound))
-        for wrapper, bound in bounds:
-            if bound is None:
-                raise ValueError(
-                    f"DelayAwareObservation needs action_history (an integer >= 1) for the "
-                    f"{type(wrapper).__name__} of unbounded delay {wrapper.delay!r} (no "
-                    "max_delay): the number of actions to observe cannot be read from it"
-                )
-        total = max(observation_bound + action_bound, 1)
-        if total > MAX_ACTION_HISTORY:
-            raise ValueError(
-                f"DelayAwareObservation would observe {total} actions (the observation delay's "
-                f"bound {observation_bound} plus the action delay's {action_bound}), more than "
-                f"MAX_ACTION_HISTORY = {MAX_ACTION_HISTORY}: give action_history, or max_delay "
-                "to the delay wrappers"
+        owner = type(self).__name__
+        self._observation_delay = _the_wrapper(env, ObservationDelay, owner)
+        self._action_delay = _the_wrapper(env, ActionDelay, owner)
+        self.action_history, self.max_age, self.initial_action, self.observation_space = (
+            _view_settings(
+                env.observation_space,
+                env.action_space,
+                self._observation_delay,
+                self._action_delay,
+                action_history,
+                owner,
             )
-        return total
+        )
+        self._state = ViewState(
+            self.observation_space["actions"], self.initial_action, self.max_age
+        )
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Reset the stack (``seed`` seeds it) and the view: ``o_0``, age 0, the initial actions."""
         obs, info = self.env.reset(seed=seed, options=options)
-        self._step = 0
-        self._newest, self._newest_index = copy_sample(obs), 0
-        self._actions[...] = self.initial_action
-        self._report(info, obs, age=0)
-        return self._view(0), info
+        info.update(self._state.reset(obs, self._delayed(info)[1]))
+        return self._state.view(), info
 
     def step(self, action):
         """Send ``action`` through the stack; observe the view (see the class docstring).
@@ -260,32 +394,226 @@ class DelayAwareObservation(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstruc
         """
         sent = as_action(self.action_space, action, "action")
         obs, reward, terminated, truncated, info = self.env.step(action)
-        self._step += 1
-        self._actions[1:] = self._actions[:-1]
-        self._actions[0] = sent
-        shown_age = 0 if self._observation_delay is None else info["observation_delay"]
-        made = self._step - shown_age
-        if made > self._newest_index:
-            self._newest, self._newest_index = copy_sample(obs), made
-        age = self._step - self._newest_index
-        self._report(info, obs, age)
-        return self._view(min(age, self.max_age)), reward, terminated, truncated, info
+        info.update(self._state.step(sent, obs, *self._delayed(info)))
+        return self._state.view(), reward, terminated, truncated, info
 
-    def _report(self, info: dict[str, Any], obs: Any, age: int) -> None:
-        """Add ``received_observations`` and ``age_clipped`` to this step's ``info``."""
+    def _delayed(self, info: dict[str, Any]) -> tuple[int, Any]:
+        """The observation's age and the observations arrived, from the stack's ``info``.
+
+        ``(0, None)`` without an ``ObservationDelay``.
+        """
         if self._observation_delay is None:
-            info["received_observations"] = ((self._step, copy_sample(obs)),)
-        else:
-            info["received_observations"] = copy_sample(info["arrived_observations"])
-        info["age_clipped"] = age > self.max_age
+            return 0, None
+        return info["observation_delay"], info["arrived_observations"]
 
-    def _view(self, age: int) -> dict[str, Any]:
-        """The view's ``Dict`` sample: copies of the newest observation and the actions."""
+
+class VectorDelayAwareObservation(gym.vector.VectorWrapper, gym.utils.RecordConstructorArgs):
+    """Observe, for each sub-env of a vector stack, the view of :class:`DelayAwareObservation`.
+
+    ``env`` is a vector stack holding a :class:`~delayed_rl.wrappers.VectorObservationDelay`, a
+    :class:`~delayed_rl.wrappers.VectorActionDelay`, both or neither (found by walking ``.env``
+    down the ``gym.vector.VectorWrapper`` layers; at most one of each). Each sub-env has its own
+    :class:`ViewState`, fed what the stack reports for it (its row of the observations,
+    ``info["observation_delay"]`` and ``info["arrived_observations"]``) and its action given to
+    this wrapper's ``step``, so sub-env ``i`` observes exactly the view of a
+    :class:`DelayAwareObservation` over the same sub-env under an ``ObservationDelay`` and an
+    ``ActionDelay`` of the same arguments, reset with the seed the stack gives sub-env ``i``.
+    ``K`` (``action_history``) and ``D`` (``max_age``) are read from the delays' bounds as
+    :class:`DelayAwareObservation` reads them, and the rows before an episode's first action hold
+    the ``VectorActionDelay``'s ``initial_action`` (without one, the neutral action).
+
+    ``single_observation_space`` is :class:`DelayAwareObservation`'s ``Dict``;
+    ``observation_space`` is its batch (``gymnasium.vector.utils.batch_space``: a ``Dict`` of
+    batches), and the views are batched with ``gymnasium.vector.utils.concatenate`` into new
+    arrays. A sub-env's view restarts with its episode, as the stack's delays do:
+
+    - ``NEXT_STEP`` (the default autoreset mode): at the reset step that follows an episode's end
+      (the action given for it is neither checked nor recorded: the sub-env ignores it), with the
+      new episode's ``o_0``;
+    - ``SAME_STEP``: the ending step is recorded in the ending episode's view, which
+      ``info["final_obs"]`` holds for that sub-env (built from the observation the stack reports
+      there, the delayed one under a ``VectorObservationDelay``); that step's
+      ``received_observations`` and ``age_clipped`` are in ``info["final_info"]``, and the view
+      returned is the new episode's, at ``o_0``;
+    - ``DISABLED``: when ``reset(options={"reset_mask": ...})`` resets the sub-env; the others
+      keep their views.
+
+    ``info`` holds, with Gymnasium's ``_key`` masks (set for the sub-envs stepped or reset),
+    ``received_observations`` (an object array: each sub-env's tuple of the ``(i, o_i)`` received
+    at this step, as :class:`DelayAwareObservation` reports it) and ``age_clipped`` (a ``bool``
+    array). Everything handed out is a copy, as :class:`DelayAwareObservation`'s. Each sub-env's
+    action is checked against the single action space before the stack is stepped. The wrapper
+    draws nothing: ``reset(seed=...)`` seeds the stack.
+
+    Wrap outside the delays: wrappers between them and the view must not change observations or
+    drop ``info`` entries. The view reads only vector delay wrappers: a stack whose sub-envs hold
+    an ``ObservationDelay`` or an ``ActionDelay`` of their own (seen by their ``info`` entries,
+    ``observation_delay`` at ``reset()`` and ``executed_action`` at ``step()``) is refused; wrap
+    each of those sub-envs with :class:`DelayAwareObservation` instead.
+
+    Args:
+        env: the vector stack to observe.
+        action_history: as :class:`DelayAwareObservation`'s.
+
+    Raises:
+        TypeError, ValueError: as :class:`DelayAwareObservation` (the stack holding two
+            ``VectorObservationDelay`` or ``VectorActionDelay`` wrappers), and ``ValueError`` for
+            an env whose ``metadata["autoreset_mode"]`` is not a
+            ``gymnasium.vector.AutoresetMode``.
+
+    Example:
+        >>> import gymnasium as gym
+        >>> from delayed_rl.delays import Constant, Uniform
+        >>> from delayed_rl.wrappers import VectorActionDelay, VectorObservationDelay
+        >>> envs = gym.make_vec("CartPole-v1", num_envs=2, vectorization_mode="sync")
+        >>> envs = VectorObservationDelay(VectorActionDelay(envs, Uniform(0, 1)), Constant(2))
+        >>> envs = VectorDelayAwareObservation(envs)
+        >>> envs.single_observation_space["age"], envs.single_observation_space["actions"]
+        (Discrete(3), MultiDiscrete([2 2 2]))
+        >>> views, info = envs.reset(seed=0)
+        >>> views, rewards, terminated, truncated, info = envs.step(np.array([1, 0]))
+        >>> views["age"].tolist(), views["actions"].tolist()
+        ([1, 1], [[1, 0, 0], [0, 0, 0]])
+    """
+
+    def __init__(self, env: VectorEnv, action_history: int | None = None):
+        gym.utils.RecordConstructorArgs.__init__(self, action_history=json_safe(action_history))
+        gym.vector.VectorWrapper.__init__(self, env)
+        action_history = check_int(
+            "action_history", action_history, 1, MAX_ACTION_HISTORY, optional=True
+        )
+        owner = type(self).__name__
+        self._observation_delay = _the_wrapper(env, VectorObservationDelay, owner)
+        self._action_delay = _the_wrapper(env, VectorActionDelay, owner)
+        self.action_history, self.max_age, self.initial_action, self.single_observation_space = (
+            _view_settings(
+                env.single_observation_space,
+                env.single_action_space,
+                self._observation_delay,
+                self._action_delay,
+                action_history,
+                owner,
+            )
+        )
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.autoreset_mode = autoreset_mode(env)
+        actions_space = self.single_observation_space["actions"]
+        self.states = [
+            ViewState(actions_space, copy_sample(self.initial_action), self.max_age)
+            for _ in range(self.num_envs)
+        ]
+        self._resetting = np.zeros(self.num_envs, dtype=bool)
+
+    def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
+        """Reset the stack (``seed`` seeds it) and the views: ``o_0``, age 0, the initial actions.
+
+        All sub-envs' views are reset, or those in ``options["reset_mask"]``.
+        """
+        envs = reset_mask(options, self.num_envs)
+        obs, info = self.env.reset(seed=seed, options=options)
+        self._check_visible(info, "observation_delay")
+        rows = list(iterate(self.env.observation_space, obs))
+        entries = self._entries()
+        for i in np.flatnonzero(envs).tolist():
+            self._put(entries, i, self.states[i].reset(rows[i], self._delayed(info, i)[1]))
+        self._resetting[envs] = False
+        self._report(info, entries, envs)
+        return self._views(), info
+
+    def step(self, actions):
+        """Send each sub-env's action through the stack; observe the views (see the class docstring).
+
+        Raises:
+            TypeError: ``actions`` is not a batch of the action space's form.
+            ValueError: it does not hold one action per sub-env, or a sub-env's action is not
+                in the single action space (the message names ``actions[i]``).
+        """
+        space = self.single_action_space
+        given = unbatch_actions(self, actions)
+        sent = [
+            None if self._resetting[i] else as_action(space, given[i], f"actions[{i}]")
+            for i in range(self.num_envs)
+        ]
+        obs, rewards, terminated, truncated, info = self.env.step(actions)
+        self._check_visible(info, "executed_action")
+        rows = list(iterate(self.env.observation_space, obs))
+        ended = np.asarray(terminated) | np.asarray(truncated)
+        same_step = self.autoreset_mode == AutoresetMode.SAME_STEP
+        entries, final_entries = self._entries(), self._entries()
+        final_obs = info["final_obs"].copy() if same_step and ended.any() else None
+        for i, state in enumerate(self.states):
+            if self._resetting[i]:  # NEXT_STEP's reset step: the new episode's o_0
+                self._put(entries, i, state.reset(rows[i], self._delayed(info, i)[1]))
+            elif same_step and ended[i]:  # the last step, then the next episode's o_0
+                last = info["final_obs"][i]
+                self._put(
+                    final_entries,
+                    i,
+                    state.step(sent[i], last, *self._delayed(info["final_info"], i)),
+                )
+                final_obs[i] = state.view()
+                self._put(entries, i, state.reset(rows[i], self._delayed(info, i)[1]))
+            else:
+                self._put(entries, i, state.step(sent[i], rows[i], *self._delayed(info, i)))
+        if self.autoreset_mode == AutoresetMode.NEXT_STEP:
+            self._resetting = ended & ~self._resetting
+        if final_obs is not None:
+            info["final_obs"] = final_obs
+            self._report(info.setdefault("final_info", {}), final_entries, ended)
+            info["_final_info"] = np.asarray(info.get("_final_info", ended)) | ended
+        self._report(info, entries, np.ones(self.num_envs, dtype=bool))
+        return self._views(), rewards, terminated, truncated, info
+
+    def _delayed(self, info: dict[str, Any], i: int) -> tuple[int, Any]:
+        """Sub-env ``i``'s observation age and observations arrived, from the stack's ``info``.
+
+        ``(0, None)`` without a ``VectorObservationDelay``.
+        """
+        if self._observation_delay is None:
+            return 0, None
+        return int(info["observation_delay"][i]), info["arrived_observations"][i]
+
+    def _check_visible(self, info: dict[str, Any], key: str) -> None:
+        """Refuse a stack whose sub-envs delay by themselves (``info[key]`` and no vector twin).
+
+        Raises:
+            ValueError: ``info`` holds ``key`` (``"observation_delay"`` or
+                ``"executed_action"``) but the stack holds no vector wrapper that reports it.
+        """
+        kind = "ObservationDelay" if key == "observation_delay" else "ActionDelay"
+        wrapper = self._observation_delay if key == "observation_delay" else self._action_delay
+        if wrapper is None and key in info:
+            raise ValueError(
+                f"env reports info[{key!r}] but holds no Vector{kind}: its sub-envs hold an "
+                f"{kind}, which {type(self).__name__} cannot read (it reads the vector "
+                f"wrappers only); wrap the vector env with Vector{kind} instead, or each "
+                "sub-env with DelayAwareObservation"
+            )
+
+    def _entries(self) -> dict[str, np.ndarray]:
+        """Empty ``received_observations`` and ``age_clipped`` arrays, one entry per sub-env."""
         return {
-            "actions": self._actions.copy(),
-            "age": np.int64(age),
-            "observation": copy_sample(self._newest),
+            "received_observations": np.full(self.num_envs, None, dtype=object),
+            "age_clipped": np.zeros(self.num_envs, dtype=bool),
         }
+
+    @staticmethod
+    def _put(entries: dict[str, np.ndarray], i: int, values: dict[str, Any]) -> None:
+        """Write one sub-env's ``info`` entries (a :class:`ViewState`'s) at index ``i``."""
+        for key, value in values.items():
+            entries[key][i] = value
+
+    @staticmethod
+    def _report(info: dict[str, Any], entries: dict[str, np.ndarray], mask: np.ndarray) -> None:
+        """Store ``entries`` in ``info``, each with its Gymnasium ``_key`` mask."""
+        for key, values in entries.items():
+            info[key], info["_" + key] = values, mask.copy()
+
+    def _views(self) -> dict[str, Any]:
+        """The batch of the sub-envs' views (new arrays, from the views' copies)."""
+        space = self.single_observation_space
+        views = [state.view() for state in self.states]
+        return concatenate(space, views, create_empty_array(space, self.num_envs))
 
 
 class DiscreteDelayAwareObservation(JsonSpecMixin, DiscreteObservation):
