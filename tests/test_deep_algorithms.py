@@ -585,7 +585,9 @@ def test_before_the_warm_up_batches_carry_the_delivered_rewards_then_r_hat():
     batch = buffer.sample(32)
     np.testing.assert_allclose(
         batch.rewards.numpy().ravel(),
-        model.predict(batch.observations.numpy(), batch.actions.numpy()),
+        model.predict(
+            batch.observations.numpy(), batch.actions.numpy(), batch.next_observations.numpy()
+        ),
         rtol=1e-6,
         atol=1e-6,
     )

@@ -66,7 +66,7 @@ def build(name="learned", capacity=64, observation_space=OBS, action_space=ACT, 
 
 
 def steps(count, seed, n_envs=2):
-    """``count`` random steps of ``n_envs`` sub-envs: (obs, actions, rewards, ends, infos)."""
+    """``count`` random steps of ``n_envs`` sub-envs: (obs, actions, rewards, ends, infos, next obs)."""
     rng = np.random.default_rng(seed)
     for _ in range(count):
         yield (
@@ -75,6 +75,7 @@ def steps(count, seed, n_envs=2):
             rng.normal(size=n_envs),
             rng.random(n_envs) < 0.15,
             [{"undelayed_reward": float(r)} for r in rng.normal(size=n_envs)],
+            rng.uniform(-1, 1, (n_envs, 3)).astype(np.float32),
         )
 
 
@@ -86,7 +87,13 @@ def feed(model, count, seed, train=True):
             model.train_on_schedule()
 
 
-PROBE = (np.random.default_rng(1).uniform(-1, 1, (20, 3)).astype(np.float32), np.arange(20) % 3)
+_PROBE_RNG = np.random.default_rng(1)
+PROBE = (
+    _PROBE_RNG.uniform(-1, 1, (20, 3)).astype(np.float32),
+    np.arange(20) % 3,
+    _PROBE_RNG.uniform(-1, 1, (20, 3)).astype(np.float32),
+)
+"""Observations, actions and next observations that models are compared on."""
 
 
 def assert_same_model(a, b, probe=PROBE):

@@ -75,7 +75,12 @@ def feed(model, env, steps, seed, strip=False):
         action = rng.uniform(-1.0, 1.0, 1).astype(np.float32)
         next_obs, reward, terminated, truncated, info = env.step(action)
         model.add(
-            obs[None], action[None], [reward], [terminated or truncated], None if strip else [info]
+            obs[None],
+            action[None],
+            [reward],
+            [terminated or truncated],
+            None if strip else [info],
+            next_observations=next_obs[None],
         )
         model.train_on_schedule()
         obs = next_obs
@@ -404,15 +409,16 @@ def test_episode_sum_baselines_train(kind):
         warmup_updates=1,
         seed=0,
     )
-    before = model.predict(np.zeros((1, 2)), np.zeros((1, 1)))
-    model.add(np.zeros((1, 2)), np.zeros((1, 1)), [1.0], [False])
+    probe = (np.zeros((1, 2)), np.zeros((1, 1)), np.ones((1, 2)))  # s, a and s′
+    before = model.predict(*probe)
+    model.add(*probe[:2], [1.0], [False], next_observations=probe[2])
     assert model.updates_due == 2
     assert model.train_on_schedule() == 0  # no finished episode yet: loss() is None
     assert model.updates_taken == 0
     feed(model, env, 300, seed=0)
     assert model.updates_taken == model.updates_due == 301 + 1
     assert len(model.history.episodes) == 30
-    assert not np.array_equal(before, model.predict(np.zeros((1, 2)), np.zeros((1, 1))))
+    assert not np.array_equal(before, model.predict(*probe))
 
 
 def test_rrd_loss_is_the_episode_sum_regression():

@@ -126,10 +126,14 @@ def test_the_paper_settings_make_a_model_from_a_mapping():
     from delayed_rl.deep import make_reward_model
     from delayed_rl.deep.return_decomposition import PAPER_SETTINGS
 
+    box = spaces.Box(-1, 1, (3,))
     model = make_reward_model(
-        {"type": "ReturnDecompositionRewardModel", **PAPER_SETTINGS, "unbiased": True}, OBS, ACT
+        {"type": "ReturnDecompositionRewardModel", **PAPER_SETTINGS, "unbiased": True}, box, box
     )
     assert model.unbiased and model.hidden_sizes == tuple(PAPER_SETTINGS["hidden_sizes"])
+    assert model.reads_next_observation
+    with pytest.raises(ValueError, match="state_change=True needs a Box"):
+        make_reward_model({"type": "ReturnDecompositionRewardModel", **PAPER_SETTINGS}, OBS, ACT)
 
 
 def test_a_saved_model_keeps_its_settings(tmp_path):
@@ -156,3 +160,54 @@ def test_a_saved_model_keeps_its_settings(tmp_path):
 def test_bad_settings_are_refused_by_name(settings, error, match):
     with pytest.raises(error, match=match):
         _model(**settings)
+
+
+def test_the_network_reads_the_state_its_action_and_the_change():
+    import torch
+
+    from delayed_rl.deep import ReturnDecompositionRewardModel
+
+    box = spaces.Box(-5, 5, (2,))
+    model = ReturnDecompositionRewardModel(box, spaces.Box(-1, 1, (1,)), hidden_sizes=(), seed=0)
+    (layer,) = [m for m in model.network.modules() if isinstance(m, torch.nn.Linear)]
+    weights = [1.0, 10.0, 100.0, 1000.0, 10_000.0]  # s₁, s₂, a, (s − s′)₁, (s − s′)₂
+    with torch.no_grad():
+        layer.weight.copy_(torch.tensor([weights]))
+        layer.bias.fill_(0.5)
+    s, a, s_next = np.array([[1.0, 2.0]]), np.array([[3.0]]), np.array([[0.5, 4.0]])
+    expected = 1.0 + 20.0 + 300.0 + 1000.0 * 0.5 + 10_000.0 * (2.0 - 4.0) + 0.5
+    assert model.predict(s, a, s_next)[0] == pytest.approx(expected)
+    with pytest.raises(ValueError, match="next_observations"):
+        model.predict(s, a)
+    plain = ReturnDecompositionRewardModel(box, box, state_change=False, seed=0)
+    assert not plain.reads_next_observation and plain.predict(s, s).shape == (1,)
+
+
+def test_the_on_policy_history_keeps_each_steps_next_observation():
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.env_util import make_vec_env
+
+    from delayed_rl.deep import RelabelingRolloutBuffer, RewardModelCallback
+
+    model_spec = {"type": "ReturnDecompositionRewardModel", "hidden_sizes": (8,), "seed": 0}
+    env = make_vec_env("Pendulum-v1", n_envs=2, seed=0, env_kwargs={"max_episode_steps": 10})
+    agent = PPO(
+        "MlpPolicy",
+        env,
+        n_steps=16,
+        batch_size=16,
+        n_epochs=1,
+        rollout_buffer_class=RelabelingRolloutBuffer,
+        rollout_buffer_kwargs={"reward_model": model_spec},
+        seed=0,
+    )
+    agent.learn(32, callback=RewardModelCallback())
+    history = agent.rollout_buffer.reward_model.history
+    steps = history.steps_added
+    assert steps == 16  # 32 steps: 16 of each of the two sub-envs
+    obs, following, ends = history.obs[:steps], history.next_obs[:steps], history.episode_end
+    inside = ~ends[: steps - 1]  # within an episode, s′ is the next step's s
+    np.testing.assert_array_equal(following[: steps - 1][inside], obs[1:steps][inside])
+    ended = ends[: steps - 1]  # at an episode's end s′ is its terminal observation, not o_0
+    assert ended.sum() == 2
+    assert not np.isclose(following[: steps - 1][ended], obs[1:steps][ended]).all(axis=-1).any()

@@ -177,7 +177,7 @@ class _RelabelingOffPolicy:
             info.get("undelayed_reward", np.nan) if isinstance(info, dict) else np.nan
             for info in infos
         ]
-        self.reward_model.add(obs, action, reward, done, infos)
+        self.reward_model.add(obs, action, reward, done, infos, next_observations=next_obs)
         super().add(obs, next_obs, action, reward, done, infos)
 
     def sample(self, batch_size: int, env: Any = None) -> Any:
@@ -195,9 +195,18 @@ class _RelabelingOffPolicy:
         if model.ready:
             rows = self._rows_read(batch_inds)
             # SB3 stores what add() handed the model, which checked it: no second check here
-            obs = model.observations.flat(model.observations.take(self.observations, rows))
+            encoding = model.observations
+            obs = encoding.flat(encoding.take(self.observations, rows))
             actions = self.actions[rows].reshape(-1, *model.actions.shape)
-            relabelled = model.reward_tensor(obs, actions).numpy()
+            inputs = [obs, actions]
+            if model.reads_next_observation:  # a Box: SB3 keeps next observations as arrays
+                following = (
+                    self.observations[(rows + 1) % self.buffer_size]
+                    if self.optimize_memory_usage
+                    else self.next_observations[rows]
+                )
+                inputs.append(encoding.flat(following))
+            relabelled = model.reward_tensor(*inputs).numpy()
             self.rewards[rows] = relabelled.reshape(rows.size, self.n_envs)
             if self.watched:
                 model.watch(relabelled, self.undelayed_rewards[rows].ravel())
@@ -336,6 +345,7 @@ class _RelabelingOnPolicy:
         env_rewards: Any,
         dones: Any,
         infos: list,
+        next_observations: Any = None,
     ) -> None:
         """Take what the env did at this step, before SB3 adds a bootstrap and stores it.
 
@@ -350,6 +360,9 @@ class _RelabelingOnPolicy:
             env_rewards: the rewards the env delivered, before any ``VecNormalize``.
             dones: the sub-envs' episode ends.
             infos: the step's ``infos``.
+            next_observations: the observations the step led to (the terminal one where an
+                episode ended), before any ``VecNormalize``: for a model that
+                :attr:`~delayed_rl.deep.reward_model.RewardModel.reads_next_observation`.
         """
         self._env_step = (
             observations,
@@ -358,6 +371,7 @@ class _RelabelingOnPolicy:
             np.array(env_rewards, dtype=np.float64),
             np.array(dones, dtype=bool),
             infos,
+            next_observations,
         )
 
     def add(self, obs, action, reward, episode_start, value, log_prob) -> None:  # noqa: D417
@@ -373,12 +387,14 @@ class _RelabelingOnPolicy:
                 "the reward of a truncated step before add(), and only the callback sees the "
                 "env's own reward, observations and executed actions"
             )
-        observations, actions, delivered, env_rewards, dones, infos = self._env_step
+        observations, actions, delivered, env_rewards, dones, infos, following = self._env_step
         self._env_step = None
         self.delivered_rewards[self.pos] = delivered.reshape(self.n_envs)
         reward = np.asarray(reward, dtype=np.float32).reshape(self.n_envs)
         self.bootstraps[self.pos] = reward - self.delivered_rewards[self.pos]
-        self.reward_model.add(observations, actions, env_rewards, dones, infos)
+        self.reward_model.add(
+            observations, actions, env_rewards, dones, infos, next_observations=following
+        )
         super().add(obs, action, reward, episode_start, value, log_prob)
 
     def compute_returns_and_advantage(self, last_values: torch.Tensor, dones: np.ndarray) -> None:
@@ -390,9 +406,8 @@ class _RelabelingOnPolicy:
             history = model.history
             rows = history.rows(history.steps_added - steps, history.steps_added)[:, None]
             envs = np.arange(self.n_envs)[None, :]
-            relabelled = model.reward_tensor(
-                history.observations_at(rows, envs), history.actions_at(rows, envs)
-            ).numpy()
+            with torch.no_grad():
+                relabelled = model.network(*model.inputs_at(rows, envs)).numpy()
             if self.watched:
                 model.watch(relabelled, history.undelayed[rows, envs].ravel())
             scaled = relabelled.reshape(steps, self.n_envs)

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import copy
+from typing import Any
 
+import numpy as np
 from stable_baselines3.common.buffers import RolloutBuffer
 from stable_baselines3.common.callbacks import BaseCallback
 
@@ -68,6 +70,23 @@ class RewardModelCallback(BaseCallback):
             return copy.deepcopy(self._normalizer.get_original_obs())
         return copy.deepcopy(observations)
 
+    def _terminal_observations(self, following: Any, dones: Any, infos: list) -> Any:
+        """``following`` with each ended episode's terminal observation in its sub-env's row.
+
+        Under ``VecNormalize`` the infos hold it normalised: it is un-normalised (exact up to
+        rounding, unless ``VecNormalize`` clipped it). Box observations (the only ones a model
+        reading ``s′`` takes).
+        """
+        following = np.array(following, copy=True)
+        for env in np.flatnonzero(dones):
+            terminal = infos[env].get("terminal_observation")
+            if terminal is None:
+                continue
+            if self._normalizer is not None:
+                terminal = self._normalizer.unnormalize_obs(terminal)
+            following[env] = terminal
+        return following
+
     def _on_step(self) -> bool:
         buffer = self._buffer()
         if isinstance(buffer, RolloutBuffer):
@@ -75,15 +94,20 @@ class RewardModelCallback(BaseCallback):
             original = (
                 rewards if self._normalizer is None else self._normalizer.get_original_reward()
             )
+            dones, infos = self.locals["dones"], self.locals["infos"]
+            following = self._original_observations(self.locals["new_obs"])
             buffer.receive_env_step(
                 self._observations,
                 self.locals["clipped_actions"],
                 rewards,
                 original,
-                self.locals["dones"],
-                self.locals["infos"],
+                dones,
+                infos,
+                self._terminal_observations(following, dones, infos)
+                if buffer.reward_model.reads_next_observation
+                else None,
             )
-            self._observations = self._original_observations(self.locals["new_obs"])
+            self._observations = following
         return True
 
     def _on_rollout_end(self) -> None:

@@ -220,9 +220,20 @@ def _load_counters(model: RewardModel, header: dict[str, Any], arrays: bytes | N
             loaded = {name: data[name] for name in data.files}
     except (ValueError, OSError, EOFError, zipfile.BadZipFile) as error:
         raise ValueError(f"{path}: history.npz is not readable: {error}") from None
-    history = TransitionHistory(model.observations, model.actions, n_envs, model.capacity)
+    history = TransitionHistory(
+        model.observations,
+        model.actions,
+        n_envs,
+        model.capacity,
+        keep_next=model.reads_next_observation,
+    )
     expected = {
         **model.observations.arrays(history.obs, "obs"),
+        **(
+            {}
+            if history.next_obs is None
+            else model.observations.arrays(history.next_obs, "next_obs")
+        ),
         **model.actions.arrays(history.action, "action"),
         **{name: getattr(history, name) for name in HISTORY_ARRAYS},
     }
@@ -241,25 +252,35 @@ def _load_counters(model: RewardModel, header: dict[str, Any], arrays: bytes | N
             )
     obs = model.observations.from_arrays(loaded, "obs")
     action = model.actions.from_arrays(loaded, "action")
+    next_obs = (
+        model.observations.from_arrays(loaded, "next_obs") if history.next_obs is not None else None
+    )
     held = history.rows(max(0, steps - model.capacity), steps)
     count = held.size * n_envs
     model.observations.batch(model.observations.flat(model.observations.take(obs, held)), count)
+    if next_obs is not None:
+        model.observations.batch(
+            model.observations.flat(model.observations.take(next_obs, held)), count
+        )
     model.actions.batch(model.actions.flat(model.actions.take(action, held)), count)
     if not np.isfinite(loaded["reward"][held]).all():
         raise ValueError(f"{path}: history rewards must be finite")
-    _replay(history, model, obs, action, loaded, steps)
+    _replay(history, model, (obs, action, next_obs), loaded, steps)
     model.history = history
 
 
 def _replay(
     history: TransitionHistory,
     model: RewardModel,
-    obs: Any,
-    action: Any,
+    stores: tuple[Any, Any, Any],
     loaded: dict[str, np.ndarray],
     steps: int,
 ) -> None:
-    """Fill ``history`` by adding the held steps again, so its episode index is rebuilt."""
+    """Fill ``history`` by adding the held steps again, so its episode index is rebuilt.
+
+    ``stores`` are the loaded observations, actions and next observations (or ``None``).
+    """
+    obs, action, next_obs = stores
     first = max(0, steps - history.capacity)
     history.steps_added = first
     history._episode_first[:] = first - 1 if first > 0 else 0  # an episode cut off: not whole
@@ -271,4 +292,5 @@ def _replay(
             loaded["reward"][row],
             loaded["episode_end"][row],
             loaded["undelayed"][row],
+            None if next_obs is None else model.observations.take(next_obs, row),
         )

@@ -7,6 +7,9 @@ and whether the episode ended there. It also keeps the finished episodes still w
 episode-sum baselines sample. Steps are counted from the first one added (``steps_added``);
 the history holds steps ``max(0, steps_added − capacity) .. steps_added − 1``.
 
+With ``keep_next`` it also keeps each step's next observation (``next_obs``: the one the step
+led to, the terminal one at an episode's end), for models that read ``s′``.
+
 ``undelayed`` holds ``info["undelayed_reward"]`` where a step's ``info`` had it (NaN where not),
 for diagnostics only: nothing a model learns from reads it.
 """
@@ -35,22 +38,30 @@ class TransitionHistory:
         actions: the action space's encoding.
         n_envs: how many sub-envs step together.
         capacity: how many steps (of every sub-env) are kept.
+        keep_next: also keep each step's next observation.
 
     Attributes:
         obs, action, reward, episode_end, undelayed: the ring's arrays, indexed
             ``[step % capacity, env]`` (``obs`` and ``action`` are dicts of arrays for a ``Dict``
             space: read them with :meth:`observations_at` and :meth:`actions_at`).
+        next_obs: the next observations, likewise (``None`` without ``keep_next``).
         episodes: the finished episodes wholly inside the ring (from :attr:`first_whole`),
             in order of first step, as ``(env, first_step, length, delivered_sum)``.
         steps_added: how many steps were added.
     """
 
     def __init__(
-        self, observations: SpaceEncoding, actions: SpaceEncoding, n_envs: int, capacity: int
+        self,
+        observations: SpaceEncoding,
+        actions: SpaceEncoding,
+        n_envs: int,
+        capacity: int,
+        keep_next: bool = False,
     ):
         self.n_envs = check_int("n_envs", n_envs, 1)
         self.capacity = check_int("capacity", capacity, 1)
-        per_step = n_envs * (observations.value_bytes + actions.value_bytes + 8 + 1 + 8)
+        obs_bytes = observations.value_bytes * (2 if keep_next else 1)
+        per_step = n_envs * (obs_bytes + actions.value_bytes + 8 + 1 + 8)
         if per_step * self.capacity > MAX_HISTORY_BYTES:
             raise ValueError(
                 f"capacity must keep the history within MAX_HISTORY_BYTES = 2**34 bytes, got "
@@ -59,6 +70,7 @@ class TransitionHistory:
             )
         self.observations, self.actions = observations, actions
         self.obs = observations.empty(self.capacity, n_envs)
+        self.next_obs = observations.empty(self.capacity, n_envs) if keep_next else None
         self.action = actions.empty(self.capacity, n_envs)
         self.reward = np.zeros((self.capacity, n_envs))
         self.episode_end = np.zeros((self.capacity, n_envs), dtype=bool)
@@ -80,11 +92,17 @@ class TransitionHistory:
         reward: np.ndarray,
         episode_end: np.ndarray,
         undelayed: np.ndarray,
+        next_obs: np.ndarray | None = None,
     ) -> None:
-        """Append one step of every sub-env (arrays checked by the caller, one row a sub-env)."""
+        """Append one step of every sub-env (arrays checked by the caller, one row a sub-env).
+
+        ``next_obs`` is kept when the history keeps next observations (and ignored otherwise).
+        """
         step = self.steps_added
         row = step % self.capacity
         self.observations.put(self.obs, row, obs)
+        if self.next_obs is not None:
+            self.observations.put(self.next_obs, row, next_obs)
         self.actions.put(self.action, row, action)
         self.reward[row] = reward
         self.episode_end[row] = episode_end
@@ -123,6 +141,10 @@ class TransitionHistory:
     def observations_at(self, rows: np.ndarray, envs: np.ndarray) -> Any:
         """The stored observations at ``[rows, envs]``, flattened to one batch."""
         return self.observations.flat(self.observations.take(self.obs, (rows, envs)))
+
+    def next_observations_at(self, rows: np.ndarray, envs: np.ndarray) -> Any:
+        """The stored next observations at ``[rows, envs]``, flattened to one batch."""
+        return self.observations.flat(self.observations.take(self.next_obs, (rows, envs)))
 
     def actions_at(self, rows: np.ndarray, envs: np.ndarray) -> Any:
         """The stored actions at ``[rows, envs]``, flattened to one batch."""

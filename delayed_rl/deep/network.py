@@ -148,30 +148,46 @@ class SpaceFeatures(nn.Module):
 class RewardNetwork(nn.Module):
     """``R̂(s, a)``: the features of ``s`` and ``a``, concatenated, through an MLP.
 
+    With ``state_change`` it reads ``(s, a, s − s′)`` instead (RRD's authors' input), the change
+    of the observation's features over the step (meaningful for a ``Box`` of measurements).
+
     Args:
         observations: the observation space's encoding.
         actions: the action space's encoding.
         hidden_sizes: the hidden layers' widths.
+        state_change: also read ``s − s′``.
     """
 
     def __init__(
-        self, observations: SpaceEncoding, actions: SpaceEncoding, hidden_sizes: Sequence[int]
+        self,
+        observations: SpaceEncoding,
+        actions: SpaceEncoding,
+        hidden_sizes: Sequence[int],
+        state_change: bool = False,
     ):
         super().__init__()
         self.observation_features = SpaceFeatures(observations)
         self.action_features = SpaceFeatures(actions)
+        self.state_change = state_change
         layers: list[nn.Module] = []
-        width = self.observation_features.n_out + self.action_features.n_out
+        width = self.observation_features.n_out * (2 if state_change else 1)
+        width += self.action_features.n_out
         for size in hidden_sizes:
             layers += [nn.Linear(width, size), nn.ReLU()]
             width = size
         layers.append(nn.Linear(width, 1))
         self.layers = nn.Sequential(*layers)
 
-    def forward(self, obs, action) -> torch.Tensor:
-        """The rewards of a batch of stored observations and actions (tensors): shape ``(n,)``."""
-        features = torch.cat((self.observation_features(obs), self.action_features(action)), 1)
-        return self.layers(features).squeeze(1)
+    def forward(self, obs, action, next_obs=None) -> torch.Tensor:
+        """The rewards of a batch of stored observations and actions (tensors): shape ``(n,)``.
+
+        ``next_obs`` (the next observations) is read with ``state_change`` only.
+        """
+        observed = self.observation_features(obs)
+        parts = [observed, self.action_features(action)]
+        if self.state_change:
+            parts.append(observed - self.observation_features(next_obs))
+        return self.layers(torch.cat(parts, 1)).squeeze(1)
 
 
 def as_tensors(values):

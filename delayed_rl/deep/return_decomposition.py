@@ -19,10 +19,11 @@ from typing import Any
 
 import numpy as np
 import torch
+from gymnasium import spaces
 from torch import nn
 
 from delayed_rl._validation import check_choice, check_int
-from delayed_rl.deep.network import as_tensors
+from delayed_rl.deep.encoding import is_image
 from delayed_rl.deep.reward_model import RewardModel
 
 __all__ = [
@@ -45,10 +46,13 @@ PAPER_SETTINGS = {
     "episode_draw": "length",
     "initialisation": "xavier",
     "unbiased": False,
+    "state_change": True,
 }
-"""The authors' settings for MuJoCo (their ``rrd_args``: a 256×256 ReLU MLP with TensorFlow's
-Xavier initialiser, Adam at 3e-4, 256 steps a batch as 4 subsets of 64, episodes drawn in
-proportion to their lengths, the biased loss unless ``--rrd_bias_correction``): the defaults."""
+"""The authors' settings for MuJoCo (their ``rrd_args`` and ``mlp_rrd``: a 256×256 ReLU MLP on
+``(s, a, s − s′)`` with TensorFlow's Xavier initialiser, Adam at 3e-4, 256 steps a batch as 4
+subsets of 64, episodes drawn in proportion to their lengths, the biased loss unless
+``--rrd_bias_correction``): the defaults (``state_change`` where the observations are a ``Box``
+of measurements)."""
 
 
 def sample_episodes(
@@ -71,6 +75,26 @@ def sample_episodes(
     return [episodes[i] for i in picks]
 
 
+def _state_change(state_change: bool | None, observation_space: Any) -> bool:
+    """``state_change`` resolved for ``observation_space`` (see the class docstring).
+
+    Raises:
+        TypeError: it is neither a bool nor None.
+        ValueError: it is True for observations that are not a ``Box`` of measurements.
+    """
+    measured = isinstance(observation_space, spaces.Box) and not is_image(observation_space)
+    if state_change is None:
+        return measured
+    if not isinstance(state_change, bool):
+        raise TypeError(f"state_change must be a bool or None, got {state_change!r}")
+    if state_change and not measured:
+        raise ValueError(
+            "state_change=True needs a Box observation space that is not an image (s − s′ of "
+            f"measurements), got {observation_space!r}"
+        )
+    return state_change
+
+
 class ReturnDecompositionRewardModel(RewardModel):
     """RRD: ``mean_{i ∈ I} R̂(s_i, a_i) ≈ G / T`` for random subsets ``I`` of episodes.
 
@@ -83,11 +107,16 @@ class ReturnDecompositionRewardModel(RewardModel):
     (``n − 1`` in the denominator) of ``R̂`` over ``I`` (the authors' bias correction; the factor
     is 1 when ``n > T`` and 0 for a one-step episode, as theirs).
 
-    Where it still differs from the authors' code: their network also reads ``s − s′`` beside
-    ``(s, a)`` (velocity-like features for MuJoCo); this one reads ``(s, a)``. Their reward
-    network trains once per critic update and their SAC starts after 10k steps; here the model
-    follows the :class:`~delayed_rl.deep.reward_model.RewardModel` schedule
-    (``updates_per_step``, ``warmup_updates``) and the algorithm its own ``learning_starts``.
+    With ``state_change`` the network reads ``(s, a, s − s′)``, as the authors' does (the change
+    over the step carries velocity-like information that MuJoCo's rewards depend on); the
+    buffers hand the model each step's next observation (the terminal one at an episode's end).
+    It needs a ``Box`` observation space that is not an image (the authors' image network, a
+    CNN over ``s`` and ``s − s′`` stacked, is not reproduced here).
+
+    Where it still differs from the authors' code: their reward network trains once per critic
+    update and their SAC starts after 10k steps; here the model follows the
+    :class:`~delayed_rl.deep.reward_model.RewardModel` schedule (``updates_per_step``,
+    ``warmup_updates``) and the algorithm its own ``learning_starts``.
 
     Args:
         observation_space: the env's observation space (any the base class takes).
@@ -98,6 +127,8 @@ class ReturnDecompositionRewardModel(RewardModel):
         initialisation: ``"xavier"`` (the authors': Glorot-uniform weights, zero biases) or
             ``"pytorch"`` (PyTorch's default).
         unbiased: subtract the subsets' variance estimate from the loss (see above).
+        state_change: read ``s − s′`` beside ``(s, a)``; ``None`` (default): for a ``Box``
+            observation space that is not an image (the authors' input), not for the others.
         **kwargs: the :class:`~delayed_rl.deep.reward_model.RewardModel` settings; their
             defaults here are :data:`PAPER_SETTINGS`' (a 256×256 MLP, Adam at 3e-4, 256 steps a
             batch).
@@ -105,10 +136,11 @@ class ReturnDecompositionRewardModel(RewardModel):
     Raises:
         TypeError: an argument of the wrong type.
         ValueError: ``subset_size`` out of range, or 1 with ``unbiased``; an unknown
-            ``episode_draw`` or ``initialisation``.
+            ``episode_draw`` or ``initialisation``; ``state_change=True`` for observations that
+            are not a ``Box`` of measurements.
     """
 
-    own_settings = ("subset_size", "episode_draw", "initialisation", "unbiased")
+    own_settings = ("subset_size", "episode_draw", "initialisation", "unbiased", "state_change")
 
     def __init__(
         self,
@@ -119,6 +151,7 @@ class ReturnDecompositionRewardModel(RewardModel):
         episode_draw: str = PAPER_SETTINGS["episode_draw"],
         initialisation: str = PAPER_SETTINGS["initialisation"],
         unbiased: bool = PAPER_SETTINGS["unbiased"],
+        state_change: bool | None = None,
         hidden_sizes: Any = PAPER_SETTINGS["hidden_sizes"],
         learning_rate: float = PAPER_SETTINGS["learning_rate"],
         batch_size: int = PAPER_SETTINGS["batch_size"],
@@ -135,6 +168,7 @@ class ReturnDecompositionRewardModel(RewardModel):
                 f"two steps), got {subset_size}"
             )
         self.unbiased = unbiased
+        self.state_change = _state_change(state_change, observation_space)
         super().__init__(
             observation_space,
             action_space,
@@ -143,6 +177,11 @@ class ReturnDecompositionRewardModel(RewardModel):
             batch_size=batch_size,
             **kwargs,
         )
+
+    @property
+    def reads_next_observation(self) -> bool:
+        """Whether the network reads ``s − s′`` (``state_change``)."""
+        return self.state_change
 
     def _make_parameters(self) -> None:
         """Re-initialise the network's linear layers as ``initialisation`` says."""
@@ -174,10 +213,8 @@ class ReturnDecompositionRewardModel(RewardModel):
         n = self.subset_size
         steps = np.stack([first + self.subset_steps(length) for _, first, length, _ in episodes])
         envs = np.repeat([env for env, *_ in episodes], n)
-        rewards = self.network(
-            as_tensors(history.observations_at(steps.ravel() % history.capacity, envs)),
-            as_tensors(history.actions_at(steps.ravel() % history.capacity, envs)),
-        ).reshape(len(episodes), n)
+        rows = steps.ravel() % history.capacity
+        rewards = self.network(*self.inputs_at(rows, envs)).reshape(len(episodes), n)
         target = torch.as_tensor([total / length for *_, length, total in episodes])
         loss = torch.mean((rewards.mean(1) - target.float()) ** 2)
         if not self.unbiased:

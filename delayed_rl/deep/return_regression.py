@@ -16,7 +16,6 @@ import math
 import numpy as np
 import torch
 
-from delayed_rl.deep.network import as_tensors
 from delayed_rl.deep.return_decomposition import sample_episodes
 from delayed_rl.deep.reward_model import RewardModel
 
@@ -51,8 +50,5 @@ class ReturnRegressionRewardModel(RewardModel):
         target = (
             np.ones(len(episodes)) if scale == 0 or math.isnan(scale) else (total - low) / scale
         )
-        rewards = self.network(
-            as_tensors(history.observations_at(rows, env)),
-            as_tensors(history.actions_at(rows, env)),
-        )
+        rewards = self.network(*self.inputs_at(rows, env))
         return torch.mean((rewards - torch.as_tensor(target, dtype=torch.float32)) ** 2)

@@ -179,7 +179,12 @@ class RewardModel(ABC):
         self.rng = np.random.default_rng(seed)
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(seed)
-            self.network = RewardNetwork(self.observations, self.actions, self.hidden_sizes)
+            self.network = RewardNetwork(
+                self.observations,
+                self.actions,
+                self.hidden_sizes,
+                state_change=self.reads_next_observation,
+            )
             self._make_parameters()
         self.optimizer = self._make_optimizer()
 
@@ -215,6 +220,11 @@ class RewardModel(ABC):
         """The subclass's own constructor arguments, JSON-able (see :attr:`own_settings`)."""
         return {name: getattr(self, name) for name in self.own_settings}
 
+    @property
+    def reads_next_observation(self) -> bool:
+        """Whether ``R̂`` also reads the next observation ``s′`` (RRD's ``state_change``)."""
+        return False
+
     @abstractmethod
     def loss(self) -> torch.Tensor | None:
         """One batch's loss, sampled from the history with ``rng`` (``None``: too little data)."""
@@ -231,6 +241,7 @@ class RewardModel(ABC):
         rewards: Any,
         episode_ends: Any,
         infos: Sequence[dict] | None = None,
+        next_observations: Any = None,
     ) -> None:
         """Keep one step of every sub-env (it trains only when asked: :meth:`train_on_schedule`).
 
@@ -242,6 +253,9 @@ class RewardModel(ABC):
             episode_ends: whether each sub-env's episode ended at this step (terminated or
                 truncated; the observation after it is the next episode's).
             infos: the step's ``infos``, read only for the diagnostic ``undelayed_reward``.
+            next_observations: the observations each sub-env's step led to (at an episode's
+                end, its terminal observation), needed by a model that
+                :attr:`reads_next_observation` and ignored by the others.
 
         Raises:
             TypeError, ValueError: an argument that does not hold one value a sub-env of the
@@ -260,6 +274,14 @@ class RewardModel(ABC):
             raise ValueError(f"rewards must be finite, got {reward}")
         ends = _pair("episode_ends", episode_ends, count).astype(bool)
         obs = self.observations.batch(observations, count)
+        next_obs = None
+        if self.reads_next_observation:
+            if next_observations is None:
+                raise ValueError(
+                    f"{type(self).__name__} reads the next observation (state_change=True): "
+                    "add() needs next_observations, got None"
+                )
+            next_obs = self.observations.batch(next_observations, count)
         action = self.actions.batch(actions, count)
         undelayed = np.full(count, np.nan)
         if infos is not None:
@@ -268,9 +290,15 @@ class RewardModel(ABC):
                 if isinstance(value, (int, float, np.number)):
                     undelayed[i] = float(value)
         if self.history is None:  # made once the first step is checked (it fixes n_envs)
-            self.history = TransitionHistory(self.observations, self.actions, count, self.capacity)
+            self.history = TransitionHistory(
+                self.observations,
+                self.actions,
+                count,
+                self.capacity,
+                keep_next=self.reads_next_observation,
+            )
             self.takes_algorithm_seed = False
-        self.history.add(obs, action, reward, ends, undelayed)
+        self.history.add(obs, action, reward, ends, undelayed, next_obs)
 
     @property
     def updates_due(self) -> int:
@@ -314,22 +342,45 @@ class RewardModel(ABC):
         return taken
 
     # ------------------------------------------------------------------ predictions
-    def reward_tensor(self, observations: Any, actions: Any) -> torch.Tensor:
-        """``R̂`` of stored values (as the history keeps them, flattened), without gradients."""
-        with torch.no_grad():
-            return self.network(as_tensors(observations), as_tensors(actions))
+    def inputs_at(self, rows: np.ndarray, envs: np.ndarray) -> list[Any]:
+        """The network's inputs for the history's steps at ``[rows, envs]``, as tensors."""
+        history = self.history
+        inputs = [history.observations_at(rows, envs), history.actions_at(rows, envs)]
+        if self.reads_next_observation:
+            inputs.append(history.next_observations_at(rows, envs))
+        return [as_tensors(values) for values in inputs]
 
-    def predict(self, observations: Any, actions: Any) -> np.ndarray:
-        """``R̂(s, a)`` for a batch: ``float32``, one value a pair.
+    def reward_tensor(
+        self, observations: Any, actions: Any, next_observations: Any = None
+    ) -> torch.Tensor:
+        """``R̂`` of stored values (as the history keeps them, flattened), without gradients.
+
+        ``next_observations`` is read by a model that :attr:`reads_next_observation` only.
+        """
+        inputs = [as_tensors(observations), as_tensors(actions)]
+        if self.reads_next_observation:
+            inputs.append(as_tensors(next_observations))
+        with torch.no_grad():
+            return self.network(*inputs)
+
+    def predict(self, observations: Any, actions: Any, next_observations: Any = None) -> np.ndarray:
+        """``R̂(s, a)`` (or ``R̂(s, a, s′)``) for a batch: ``float32``, one value a pair.
 
         Raises:
             TypeError, ValueError: the batches do not hold values of the spaces, or differ in
-                length.
+                length; ``next_observations`` is missing for a model that
+                :attr:`reads_next_observation`.
         """
         count = _count(self.actions, actions)
-        obs = self.observations.batch(observations, count)
-        action = self.actions.batch(actions, count)
-        return self.reward_tensor(obs, action).numpy().astype(np.float32)
+        inputs = [self.observations.batch(observations, count), self.actions.batch(actions, count)]
+        if self.reads_next_observation:
+            if next_observations is None:
+                raise ValueError(
+                    f"{type(self).__name__} reads the next observation (state_change=True): "
+                    "predict() needs next_observations, got None"
+                )
+            inputs.append(self.observations.batch(next_observations, count))
+        return self.reward_tensor(*inputs).numpy().astype(np.float32)
 
     # ------------------------------------------------------------------ diagnostics
     def rmse(self, last: int = 10_000) -> float:
@@ -349,9 +400,9 @@ class RewardModel(ABC):
             return math.nan
         envs = np.broadcast_to(np.arange(history.n_envs), truth.shape)
         row_index = np.broadcast_to(rows[:, None], truth.shape)
-        obs = history.observations_at(row_index[held], envs[held])
-        action = history.actions_at(row_index[held], envs[held])
-        error = self.reward_tensor(obs, action).numpy().astype(np.float64) - truth[held]
+        with torch.no_grad():
+            predicted = self.network(*self.inputs_at(row_index[held], envs[held]))
+        error = predicted.numpy().astype(np.float64) - truth[held]
         return float(np.sqrt(np.mean(error**2)))
 
     def watch(self, predicted: np.ndarray, undelayed: np.ndarray) -> None:
@@ -444,6 +495,11 @@ class RewardModel(ABC):
                 history = self.history
                 arrays = {
                     **self.observations.arrays(history.obs, "obs"),
+                    **(
+                        {}
+                        if history.next_obs is None
+                        else self.observations.arrays(history.next_obs, "next_obs")
+                    ),
                     **self.actions.arrays(history.action, "action"),
                     **{name: getattr(history, name) for name in HISTORY_ARRAYS},
                 }
