@@ -826,6 +826,7 @@ def test_importing_the_package_imports_no_torch():
             "DeconvolutionRewardModel",
             "HindsightSAC",
             "IRCRReplayBuffer",
+            "REWARD_MODELS",
             "RelabelingDictReplayBuffer",
             "RelabelingDictRolloutBuffer",
             "RelabelingNStepReplayBuffer",

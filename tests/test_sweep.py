@@ -491,6 +491,92 @@ def test_sb3_algorithms_run_by_name(tmp_path):
     assert numbers(tmp_path / "a") == numbers(tmp_path / "b")
 
 
+# ---------------------------------------------------------------------------------- reward models
+#: SAC with the deconvolution (delay known) against raw SAC, and PPO with RRD, in seconds.
+REWARD_MODEL_SWEEP = {
+    "agents": [
+        {"name": "sb3:SAC", "kwargs": {"learning_starts": 60, "batch_size": 16}},
+        {
+            "name": "sb3:SAC",
+            "kwargs": {"learning_starts": 60, "batch_size": 16},
+            "reward_model": {
+                "type": "DeconvolutionRewardModel",
+                "delay": "$delay",
+                "hidden_sizes": [8],
+                "warmup_updates": 5,
+            },
+        },
+        {
+            "name": "sb3:PPO",
+            "kwargs": {"n_steps": 64, "batch_size": 32, "n_epochs": 1},
+            "reward_model": {"type": "ReturnDecompositionRewardModel", "hidden_sizes": [8]},
+        },
+    ],
+    "envs": [{"id": "Pendulum-v1", "kwargs": {"max_episode_steps": 40}}],
+    "delays": [3],
+    "seeds": 1,
+    "steps": 128,
+    "eval_episodes": 1,
+}
+
+
+def test_a_reward_model_is_checked_and_named_in_the_labels():
+    sweep = parse_sweep(REWARD_MODEL_SWEEP)
+    runs = sweep.runs()
+    assert [r["agent"] for r in runs] == [
+        "sb3:SAC",
+        "sb3:SAC+DeconvolutionRewardModel",
+        "sb3:PPO+ReturnDecompositionRewardModel",
+    ]
+    assert "reward_model" not in runs[0]["config"]["agent"]  # a plain run keeps its run_id
+    assert runs[1]["config"]["agent"]["reward_model"]["delay"] == "$delay"
+    assert len({r["run_id"] for r in runs}) == 3
+
+
+@pytest.mark.parametrize(
+    ("model", "error", "match"),
+    [
+        ({"type": "Deconvolution"}, ValueError, "did you mean 'DeconvolutionRewardModel'"),
+        ({"delay": 3}, ValueError, r"agents\[0\].reward_model must name the model's class"),
+        ({"type": "DeconvolutionRewardModel", "seed": 1}, ValueError, "must not set 'seed'"),
+        ({"type": "DeconvolutionRewardModel", "delay": "$lag"}, ValueError, "placeholders"),
+        ("DeconvolutionRewardModel", TypeError, r"agents\[0\].reward_model"),
+    ],
+)
+def test_a_bad_reward_model_is_refused_by_field(model, error, match):
+    data = {**REWARD_MODEL_SWEEP, "agents": [{"name": "sb3:SAC", "reward_model": model}]}
+    with pytest.raises(error, match=match):
+        parse_sweep(data)
+
+
+def test_a_reward_model_is_for_sb3_agents_only():
+    data = tiny(agents=[{"name": "q", "reward_model": {"type": "DeconvolutionRewardModel"}}])
+    with pytest.raises(ValueError, match=r"agents\[0\].reward_model is for stable-baselines3"):
+        parse_sweep(data)
+
+
+@pytest.mark.sb3
+def test_a_sweep_with_reward_models_runs_and_repeats(tmp_path):
+    from delayed_rl.sweep import check_sweep
+
+    sweep = parse_sweep(REWARD_MODEL_SWEEP)
+    run_sweep(sweep, tmp_path / "a")
+    rows = read_rows(tmp_path / "a")
+    assert [row["agent"] for row in rows] == [r["agent"] for r in sweep.runs()]
+    assert all(math.isfinite(float(row["eval_reward"])) for row in rows)
+    run_sweep(sweep, tmp_path / "b")
+    assert numbers(tmp_path / "a") == numbers(tmp_path / "b")
+    # a setting the class does not take fails before any run, naming the agent
+    bad = copy.deepcopy(REWARD_MODEL_SWEEP)
+    bad["agents"][1]["reward_model"]["windw"] = 3
+    with pytest.raises(TypeError, match="sb3:SAC.*windw"):
+        check_sweep(parse_sweep(bad))
+    taken = copy.deepcopy(REWARD_MODEL_SWEEP)
+    taken["agents"][1]["kwargs"]["replay_buffer_kwargs"] = {}
+    with pytest.raises(ValueError, match="must not set replay_buffer_kwargs"):
+        check_sweep(parse_sweep(taken))
+
+
 # ---------------------------------------------------------------------------------- the CLI
 @pytest.mark.experiment
 def test_the_cli_runs_a_sweep_file_and_resumes_it(tmp_path, capsys, joblib_table):
@@ -575,6 +661,24 @@ def test_ray_gives_the_same_table(tmp_path, joblib_table):
     finally:
         ray.shutdown()
     assert numbers(tmp_path) == joblib_table
+
+
+@pytest.mark.distributed
+@pytest.mark.sb3
+def test_ray_runs_a_sweep_with_reward_models_as_joblib_does(tmp_path):
+    import ray
+
+    sweep = parse_sweep(REWARD_MODEL_SWEEP)
+    run_sweep(sweep, tmp_path / "joblib")
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        run_sweep(sweep, tmp_path / "ray", backend="ray")
+    finally:
+        ray.shutdown()
+    assert numbers(tmp_path / "ray") == numbers(tmp_path / "joblib")
+    assert {row["agent"] for row in read_rows(tmp_path / "ray")} >= {
+        "sb3:SAC+DeconvolutionRewardModel"
+    }
 
 
 @pytest.mark.distributed

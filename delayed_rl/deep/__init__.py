@@ -40,6 +40,7 @@ import importlib
 from typing import Any
 
 __all__ = [
+    "REWARD_MODELS",
     "DeconvolutionRewardModel",
     "HindsightSAC",
     "IRCRReplayBuffer",
@@ -55,6 +56,13 @@ __all__ = [
     "load_reward_model",
     "make_reward_model",
 ]
+
+REWARD_MODELS = (
+    "DeconvolutionRewardModel",
+    "ReturnDecompositionRewardModel",
+    "ReturnRegressionRewardModel",
+)
+"""The reward model classes a mapping's ``type`` names (known without importing torch)."""
 
 _HOMES = {
     "DeconvolutionRewardModel": "deconvolution",

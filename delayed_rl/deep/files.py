@@ -29,12 +29,10 @@ __all__ = ["load_reward_model", "make_reward_model"]
 
 
 def _classes() -> dict[str, type[RewardModel]]:
-    from delayed_rl.deep.deconvolution import DeconvolutionRewardModel
-    from delayed_rl.deep.return_decomposition import ReturnDecompositionRewardModel
-    from delayed_rl.deep.return_regression import ReturnRegressionRewardModel
+    """The reward model classes, by name (:data:`~delayed_rl.deep.REWARD_MODELS`)."""
+    import delayed_rl.deep as deep
 
-    kinds = (DeconvolutionRewardModel, ReturnDecompositionRewardModel, ReturnRegressionRewardModel)
-    return {kind.__name__: kind for kind in kinds}
+    return {name: getattr(deep, name) for name in deep.REWARD_MODELS}
 
 
 def make_reward_model(spec: Any, observation_space: Any, action_space: Any) -> RewardModel:

@@ -19,6 +19,7 @@ import gymnasium as gym
 from delayed_rl.agents.registry import ARRIVAL_AGENTS, agent_class
 from delayed_rl.delays import Delay, as_delay
 from delayed_rl.sweep.schema import (
+    SB3_ON_POLICY,
     SB3_PREFIX,
     Evaluation,
     Sweep,
@@ -85,13 +86,47 @@ def _sb3_class(name: str) -> type:
 
 
 def make_model(config: Mapping[str, Any], env: gym.Env) -> Any:
-    """The run's agent on ``env``, seeded with the run's seed, its placeholders resolved."""
+    """The run's agent on ``env``, seeded with the run's seed, its placeholders resolved.
+
+    An SB3 agent with a ``reward_model`` gets the relabelling buffer of its kind
+    (:func:`relabeling_buffer`), whose model the algorithm's seed seeds.
+    """
     name = config["agent"]["name"]
     kwargs = resolve_placeholders(config["agent"]["kwargs"], reward_delay(config))
     if name.startswith(SB3_PREFIX):
         kwargs = {"policy": "MlpPolicy", **kwargs}
+        reward_model = config["agent"].get("reward_model")
+        if reward_model is not None:
+            model = resolve_placeholders(reward_model, reward_delay(config))
+            kwargs.update(relabeling_buffer(name, env.observation_space, model, kwargs))
         return _sb3_class(name)(env=env, seed=config["seed"], **kwargs)
     return agent_class(name)(env, seed=config["seed"], **kwargs)
+
+
+def relabeling_buffer(
+    name: str, observation_space: Any, model: dict[str, Any], kwargs: Mapping[str, Any]
+) -> dict[str, Any]:
+    """The SB3 arguments that give algorithm ``name`` a relabelling buffer with ``model``.
+
+    On-policy algorithms (:data:`~delayed_rl.sweep.schema.SB3_ON_POLICY`) get a rollout
+    buffer, the others a replay buffer; each the ``Dict`` kind for a ``Dict`` observation space.
+
+    Raises:
+        ValueError: ``kwargs`` already choose the buffer.
+    """
+    on_policy = name.removeprefix(SB3_PREFIX) in SB3_ON_POLICY
+    kind = "rollout" if on_policy else "replay"
+    for key in (f"{kind}_buffer_class", f"{kind}_buffer_kwargs"):
+        if key in kwargs:
+            raise ValueError(
+                f"an agent with a reward_model must not set {key}: the reward model brings its "
+                "own buffer"
+            )
+    from delayed_rl import deep
+
+    prefix = "RelabelingDict" if isinstance(observation_space, gym.spaces.Dict) else "Relabeling"
+    buffer = getattr(deep, f"{prefix}{'Rollout' if on_policy else 'Replay'}Buffer")
+    return {f"{kind}_buffer_class": buffer, f"{kind}_buffer_kwargs": {"reward_model": model}}
 
 
 def check_sweep(sweep: Sweep) -> None:
@@ -164,7 +199,12 @@ def train(config: Mapping[str, Any]) -> tuple[Any, float]:
     if config["agent"]["name"].startswith(SB3_PREFIX):
         tally = UndelayedRewardTally(make_env(config))
         model = make_model(config, tally)
-        model.learn(total_timesteps=config["steps"])
+        callback = None
+        if "reward_model" in config["agent"]:
+            from delayed_rl.deep import RewardModelCallback
+
+            callback = RewardModelCallback()
+        model.learn(total_timesteps=config["steps"], callback=callback)
         return model, tally.mean
     model = make_model(config, make_env(config))
     model.learn(config["steps"], log_interval=None)

@@ -31,6 +31,8 @@ from delayed_rl.experiments.framework.runner import MAX_SEEDS, MAX_SEEDS_TEXT
 
 #: The stable-baselines3 algorithms a sweep runs, as ``sb3:NAME``.
 SB3_ALGORITHMS = ("A2C", "DDPG", "DQN", "PPO", "SAC", "TD3")
+#: Those of them that learn from rollouts (a reward model relabels their rollout buffer).
+SB3_ON_POLICY = ("A2C", "PPO")
 SB3_PREFIX = "sb3:"
 #: What a delay entry may delay, in the order :func:`~delayed_rl.wrappers.wrap_delays` stacks.
 DELAY_KINDS = ("action", "observation", "reward")
@@ -56,7 +58,7 @@ MAX_RUNS = 100_000
 _HERE = "delayed_rl.sweep.schema"
 
 _TOP_KEYS = ("name", "agents", "envs", "delays", "seeds", "steps", "eval_episodes", "eval_steps")
-_AGENT_KEYS = ("name", "label", "kwargs", "steps", "envs")
+_AGENT_KEYS = ("name", "label", "kwargs", "reward_model", "steps", "envs")
 _ENV_KEYS = ("id", "label", "kwargs", "steps", "eval_episodes", "eval_steps")
 _DELAY_KEYS = (*DELAY_KINDS, "label")
 _ENV_DELAY_KWARGS = ("action_delay", "observation_delay", "reward_delay")
@@ -80,6 +82,7 @@ class SweepAgent:
     kwargs: dict[str, Any]
     steps: int | None = None
     envs: tuple[str, ...] | None = None
+    reward_model: dict[str, Any] | None = None
 
 
 @dataclass(frozen=True)
@@ -136,7 +139,12 @@ class Sweep:
         steps = next(s for s in (agent.steps, env.steps, self.steps) if s is not None)
         evaluation = env.evaluation or self.evaluation
         config = {
-            "agent": {"name": agent.name, "kwargs": agent.kwargs},
+            "agent": {
+                "name": agent.name,
+                "kwargs": agent.kwargs,
+                # only when given: the runs of a sweep without one keep their run_id
+                **({} if agent.reward_model is None else {"reward_model": agent.reward_model}),
+            },
             "env": {"id": env.id, "kwargs": env.kwargs},
             "delays": delay.delays,
             "seed": seed,
@@ -325,6 +333,7 @@ def _parse_agent(where: str, entry: Any) -> SweepAgent:
     why = "the sweep makes the env and seeds every run from 'seeds'"
     kwargs = _kwargs(f"{where}.kwargs", entry.get("kwargs", {}), ("env", "seed"), why)
     _check_agent_kwargs(f"{where}.kwargs", name, kwargs)
+    reward_model = _reward_model(f"{where}.reward_model", name, entry.get("reward_model"))
     envs = entry.get("envs")
     if envs is not None:
         if not isinstance(envs, list):
@@ -334,13 +343,43 @@ def _parse_agent(where: str, entry: Any) -> SweepAgent:
         if not envs:
             raise ValueError(f"{where}.envs must be a non-empty list of env labels, got []")
         envs = tuple(_text(f"{where}.envs[{i}]", label) for i, label in enumerate(envs))
+    default_label = name if reward_model is None else f"{name}+{reward_model['type']}"
     return SweepAgent(
         name=name,
-        label=_text(f"{where}.label", entry.get("label", name)),
+        label=_text(f"{where}.label", entry.get("label", default_label)),
         kwargs=kwargs,
         steps=_steps(f"{where}.steps", entry.get("steps"), optional=True),
         envs=envs,
+        reward_model=reward_model,
     )
+
+
+def _reward_model(where: str, name: str, value: Any) -> dict[str, Any] | None:
+    """An SB3 agent's ``reward_model`` mapping, checked as far as it can be without torch.
+
+    Its settings are checked when :func:`~delayed_rl.sweep.runs.check_sweep` builds the agent.
+    """
+    from delayed_rl.deep import REWARD_MODELS
+
+    if value is None:
+        return None
+    if not name.startswith(SB3_PREFIX):
+        raise ValueError(
+            f"{where} is for stable-baselines3 agents (sb3:...): the library's agent {name!r} "
+            "learns from the delayed rewards itself"
+        )
+    model = dict(_plain(where, _mapping(where, value, "a mapping with 'type'")))
+    if "type" not in model:
+        raise ValueError(f"{where} must name the model's class in 'type', one of {REWARD_MODELS}")
+    kind = _text(f"{where}.type", model["type"])
+    if kind not in REWARD_MODELS:
+        close = difflib.get_close_matches(kind, REWARD_MODELS, n=1)
+        hint = f"; did you mean {close[0]!r}?" if close else ""
+        raise ValueError(f"{where}.type must be one of {REWARD_MODELS}, got {kind!r}{hint}")
+    if "seed" in model:
+        raise ValueError(f"{where} must not set 'seed': the run's seed seeds the model")
+    _check_agent_kwargs(where, name, {k: v for k, v in model.items() if k != "type"})
+    return model
 
 
 def env_id_hint(env_id: str) -> str | None:
