@@ -19,24 +19,32 @@ pytestmark = pytest.mark.sb3
 
 def test_the_full_run_has_every_setting_method_and_seed_and_shares_the_oracle():
     experiment = get_experiment("deep-rl")
-    tasks = experiment.tasks(Config(seeds=5))
-    methods = deep_rl.SETTING_METHODS
-    assert len(tasks) == sum(len(methods[name]) for name in deep_rl.SETTINGS) * 5
+    tasks = experiment.tasks(Config(seeds=experiment.default_seeds))
+    methods, settings = deep_rl.SETTING_METHODS, deep_rl.SETTINGS
+    seeds = {name: setting["seeds"] for name, setting in settings.items()}
+    assert seeds["pendulum1000-poisson20"] >= 10 and min(seeds.values()) >= 5
+    assert len(tasks) == sum(len(methods[name]) * seeds[name] for name in settings)
     assert "ircr" not in methods["cartpole-poisson20"]  # off-policy only
-    assert all(
-        set(methods[name]) == {*METHODS, "random"}
-        for name in deep_rl.SETTINGS
-        if "pendulum" in name
-    )
+    assert set(methods["pendulum1000-upright"]) == {*METHODS, "random"}
+    assert "return-regression" not in methods["pendulum-poisson5"]
+    sac = [t for t in tasks if t["algorithm"] == "SAC" and t["method"] != "random"]
+    assert all(experiment.run_of(t).task["warmup_episodes"] == 2 for t in sac)
     keys = {pool_key(experiment.run_of(task)): task for task in tasks}
     oracles = [t for t in tasks if t["method"] == "oracle" and t["seed"] == 0]
     shared = {pool_key(experiment.run_of(t)) for t in oracles}
-    # the three 200-step Pendulum settings share one oracle run; 1000 steps and CartPole do not
-    assert len(oracles) == 5 and len(shared) == 3
+    # the three 200-step Pendulum settings share one oracle run; the others do not
+    assert len(oracles) == len(settings) and len(shared) == len(settings) - 2
     delayed = [t for t in tasks if t["method"] == "raw" and t["seed"] == 0]
-    assert len({pool_key(experiment.run_of(t)) for t in delayed}) == len(deep_rl.SETTINGS)
-    trained = sum(len(methods[name]) - 1 for name in deep_rl.SETTINGS)  # all but random
-    assert len(keys) == 5 * (trained - 2 + 3)  # random: per env
+    assert len({pool_key(experiment.run_of(t)) for t in delayed}) == len(settings)
+    trained = sum((len(methods[name]) - 1) * seeds[name] for name in settings)  # but random
+    # the 200-step settings share an oracle (5 seeds); random: one per env, reward and seed
+    randoms = {
+        (s["env_id"], s["episode_steps"], s.get("reward")): s["seeds"] for s in settings.values()
+    }
+    assert len(keys) == trained - 2 * 5 + sum(randoms.values())
+    assert {len(experiment.tasks(Config(seeds=2))) // 2} == {
+        sum(len(methods[name]) for name in settings)
+    }  # --seeds caps every setting
 
 
 @pytest.mark.experiment
@@ -51,7 +59,7 @@ def test_a_tiny_quick_run_scores_every_method_and_resumes(tmp_path):
     for name, rows in table.items():
         assert set(rows) == set(methods[name])
         assert rows["oracle"]["gain"]["mean"] == pytest.approx(1.0)  # the gain's scale
-        for method in MODEL_METHODS:
+        for method in (m for m in MODEL_METHODS if m in rows):
             assert np.isfinite(rows[method]["rmse"]["values"]).all()
             assert rows[method]["rmse"]["mean"] > 0
         for method in ("deconv-known", "deconv-learned"):

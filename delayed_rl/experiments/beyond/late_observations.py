@@ -8,7 +8,7 @@ The settings (:data:`SETTINGS`), observations arriving by the stale-sensor rule
 - ``pendulum-large``: U{0..6} and U{1..4} (K = 10), 20k steps;
 - ``pendulum-small-50k`` and ``pendulum-large-50k``: the same for 50k steps, with the oracle,
   augmented SAC and HindsightSAC only (the follow-up where a 20k target is missed);
-- ``epuck``: the e-puck line follower (:class:`~delayed_rl.envs.EPuckLineFollowEnv`: pixels,
+- ``epuck``: the e-puck line follower (:class:`~delayed_rl.envs.linefollow.env.EPuckLineFollowEnv`: pixels,
   continuous wheel speeds, put back on the track after 50 line-less steps, 1000-step episodes)
   under the thesis's Poisson(90) observation delay (clipped at 150 steps, which bounds the view:
   K = 150; the clip moves less than 10⁻⁸ of the draws) and no action delay, 20k steps. The

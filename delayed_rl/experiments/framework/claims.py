@@ -37,6 +37,7 @@ from delayed_rl.experiments.framework.runner import (
     REFERENCE,
     Claim,
     mean_ci95,
+    t975,
 )
 
 #: The standard normal 0.975 quantile, of the Wilson interval.
@@ -322,6 +323,45 @@ def paired(
     if how == "difference":
         return [float(ours[s] - theirs[s]) for s in seeds]
     return [float(ours[s] / theirs[s]) if theirs[s] != 0 else math.nan for s in seeds]
+
+
+def seeds_to_resolve(
+    values: Sequence[float], reference: float = 0.0, limit: int = 1000
+) -> int | None:
+    """The seeds a 95 % CI of the mean would need to exclude ``reference``, at these values' spread.
+
+    The smallest ``n`` with ``t(n − 1) · sd / √n < |mean − reference|``, ``mean`` and ``sd`` (the
+    sample's, ``n − 1`` in the denominator) those of ``values``: a power estimate from a pilot
+    (the chance of resolving at that ``n`` is about one half, as the mean may come out on either
+    side). ``None`` with fewer than two values, a zero spread, a mean at ``reference``, or
+    more than ``limit`` seeds.
+
+    >>> seeds_to_resolve([0.1, 0.5, 0.3, 0.2, 0.4])
+    4
+    """
+    array = np.asarray(values, dtype=float)
+    if array.size < 2:
+        return None
+    gap, sd = abs(float(array.mean()) - reference), float(array.std(ddof=1))
+    if gap == 0 or sd == 0 or not math.isfinite(gap + sd):
+        return None
+    for n in range(2, limit + 1):
+        if t975(n - 1) * sd / math.sqrt(n) < gap:
+            return n
+    return None
+
+
+def identical_note(values: Sequence[float]) -> str:
+    """Why a row's interval has zero width, when it has: every seed gave the same value.
+
+    Empty unless there are at least two values and they are all equal.
+
+    >>> identical_note([500.0, 500.0, 500.0])
+    'zero width: all 3 seeds gave exactly 500'
+    """
+    if len(values) < 2 or any(value != values[0] for value in values):
+        return ""
+    return f"zero width: all {len(values)} seeds gave exactly {values[0]:.6g}"
 
 
 def reference_row(

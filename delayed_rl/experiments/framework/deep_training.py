@@ -1,9 +1,11 @@
 """One stable-baselines3 run on a delayed-reward env, scored on the undelayed env.
 
-A task names the env (``env_id``, its episode length ``episode_steps``), the algorithm (``SAC``
-or ``PPO``, with SB3's defaults), the sub-envs (``n_envs``), the reward delay (``delay``, a
+A task names the env (``env_id``, its episode length ``episode_steps`` and, optionally, a
+``reward`` of :data:`REWARDS` in place of the env's), the algorithm (``SAC`` or ``PPO``, with
+SB3's defaults), the sub-envs (``n_envs``), the reward delay (``delay``, a
 :meth:`~delayed_rl.delays.Delay.to_dict` description, flushed at each episode's end), the
-training ``steps``, the ``method`` and the ``seed``. The methods (:data:`METHODS`):
+off-policy warm-up (``warmup_episodes``, see below), the training ``steps``, the ``method`` and
+the ``seed``. The methods (:data:`METHODS`):
 
 - ``raw``: the algorithm on the delayed rewards as they arrive;
 - ``oracle``: the algorithm on the undelayed env (the delay plays no part);
@@ -23,8 +25,8 @@ algorithms get a :class:`~delayed_rl.deep.RelabelingReplayBuffer`, on-policy one
 :class:`~delayed_rl.deep.RelabelingRolloutBuffer` with its callback. Torch runs on one thread.
 
 **One warm-up for every method.** An off-policy algorithm takes its first update after
-:data:`WARMUP_EPISODES` episodes of steps (``learning_starts``), whatever the method, raw and
-oracle included: by then every reward model can be fitted (RRD and the return regression need a
+``warmup_episodes`` episodes of steps (``learning_starts``; SB3's default, 100 steps, without
+it), whatever the method, raw and oracle included. With :data:`WARMUP_EPISODES`, two, by then every reward model can be fitted (RRD and the return regression need a
 finished episode, IRCR two distinct returns, as its authors' two exploration episodes), and at
 the first update each model takes the updates its schedule owes for those steps plus its
 warm-up, so the algorithm never learns from an untrained ``R̂`` nor from the raw rewards
@@ -62,6 +64,22 @@ MODEL_METHODS = ("rrd", "return-regression", "deconv-known", "deconv-learned")
 """The methods that train a reward model."""
 WARMUP_EPISODES = 2
 """Episodes of steps before an off-policy algorithm's first update, for every method."""
+UPRIGHT_COS = 0.9
+"""The ``"upright"`` reward's region: ``cos θ ≥ 0.9``, within about 26° of upright."""
+REWARDS = ("upright",)
+"""The rewards a task can put in place of the env's: ``"upright"``, Pendulum's 1 at each step
+in the region :data:`UPRIGHT_COS` and 0 elsewhere."""
+
+
+class UprightReward(gym.Wrapper):
+    """Pendulum-v1's reward replaced by 1 where ``cos θ ≥`` :data:`UPRIGHT_COS` (upright), else 0."""
+
+    def step(self, action: Any) -> Any:
+        """Step the env; the reward is whether the pendulum ends the step upright."""
+        obs, _, terminated, truncated, info = self.env.step(action)
+        return obs, float(obs[0] >= UPRIGHT_COS), terminated, truncated, info
+
+
 EVAL_SEED = 1_000_000
 """Evaluation episode ``i`` of seed ``s`` resets with ``EVAL_SEED + 1000 * s + i``."""
 
@@ -83,6 +101,8 @@ def _env(task: dict, delayed: bool) -> gym.Env:
     from delayed_rl.wrappers import RewardDelay
 
     env = gym.make(task["env_id"], max_episode_steps=task["episode_steps"])
+    if task.get("reward") == "upright":
+        env = UprightReward(env)
     if delayed:
         env = RewardDelay(env, as_delay(task["delay"]), on_episode_end="flush")
     return env
@@ -195,8 +215,8 @@ def train_and_score(task: dict) -> dict:
     curve: list[tuple[int, float]] = []
     callbacks = [_curve_callback(task, curve)]
     model = None
-    if algorithm is not PPO:
-        options["learning_starts"] = WARMUP_EPISODES * task["episode_steps"]
+    if "warmup_episodes" in task:
+        options["learning_starts"] = task["warmup_episodes"] * task["episode_steps"]
     if method == "ircr":
         if algorithm is PPO:
             raise ValueError("method 'ircr' needs an off-policy algorithm (SAC), got PPO")

@@ -30,8 +30,9 @@ def gain_tasks(
     """Every (setting, method, seed) as a task, in that order of loops.
 
     ``methods`` holds every setting's methods, or maps each setting to its own. A setting's
-    ``"seeds"`` entry, where present, caps its seeds (a costly setting run on fewer); it is not a
-    task field. ``config.quick`` keeps only the settings of ``quick``, with its ``(steps, eval_every)``;
+    ``"seeds"`` entry, where present, is its own number of seeds, capped by ``config.seeds``
+    (the experiment's default is the largest, so ``--seeds`` lowers them all); it is not a task
+    field. ``config.quick`` keeps only the settings of ``quick``, with its ``(steps, eval_every)``;
     ``config.steps`` sets the steps of every run (evaluated ten times along the way).
     """
     chosen = quick if config.quick else {name: None for name in settings}

@@ -300,13 +300,16 @@ def mean_ci95(values: Sequence[float]) -> tuple[float, float]:
         return math.nan, math.nan
     if n == 1:
         return float(values[0]), 0.0
-    df = n - 1
+    return float(values.mean()), float(t975(n - 1) * values.std(ddof=1) / math.sqrt(n))
+
+
+def t975(df: int) -> float:
+    """Student's t 0.975 quantile with ``df`` (≥ 1) degrees of freedom."""
     if df <= len(_T975):
-        t = _T975[df - 1]
-    else:  # Cornish–Fisher expansion of the normal quantile, accurate to 1e-3 beyond 30 df
-        z = 1.959964
-        t = z + (z**3 + z) / (4 * df) + (5 * z**5 + 16 * z**3 + 3 * z) / (96 * df**2)
-    return float(values.mean()), float(t * values.std(ddof=1) / math.sqrt(n))
+        return _T975[df - 1]
+    # Cornish–Fisher expansion of the normal quantile, accurate to 1e-3 beyond 30 df
+    z = 1.959964
+    return z + (z**3 + z) / (4 * df) + (5 * z**5 + 16 * z**3 + 3 * z) / (96 * df**2)
 
 
 def running_average(rewards: np.ndarray, points: int = 200) -> tuple[np.ndarray, np.ndarray]:
