@@ -32,6 +32,10 @@ class InTransit:
         """Send ``item`` at ``step`` (each step sends once); it arrives at ``step + delay``."""
         heapq.heappush(self._heap, (step + delay, step, item))  # (arrival, sent) unique
 
+    def remaining(self) -> list[tuple[int, Any]]:
+        """The items that have not arrived yet, by sent step (they stay in transit)."""
+        return sorted(((sent, item) for _, sent, item in self._heap), key=lambda pair: pair[0])
+
     def arrived(self, step: int) -> list[tuple[int, Any]]:
         """The items that have arrived by ``step`` and were not yet taken, by sent step."""
         out = []

@@ -137,6 +137,13 @@ class ActionLine:
         """How many sent actions have not arrived yet."""
         return len(self._in_transit)
 
+    def remaining(self) -> list[tuple[int, Any]]:
+        """The actions sent that have not arrived yet, as ``(sent step, action)`` by sent step.
+
+        They stay in transit (the line's own objects: copy them before handing them out).
+        """
+        return self._in_transit.remaining()
+
     def send(self, action: Any, delay: int) -> Any:
         """Send this step's ``action`` with ``delay`` steps of transit; return the one executed.
 

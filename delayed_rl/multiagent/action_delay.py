@@ -1,0 +1,172 @@
+"""Action delays per agent for PettingZoo's ``ParallelEnv``: :class:`ParallelActionDelay`."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from gymnasium import spaces
+from pettingzoo import ParallelEnv
+
+from delayed_rl.delays import Delay
+from delayed_rl.multiagent._agents import delay_record, per_agent_actions, per_agent_delays
+from delayed_rl.multiagent._base import ParallelDelayWrapper
+from delayed_rl.wrappers._samples import as_action, copy_sample
+from delayed_rl.wrappers._spec import json_safe
+from delayed_rl.wrappers.action_delay import ActionLine, _check_action, neutral_action
+from delayed_rl.wrappers.reward_delay import DelaySampler, check_max_delay
+
+__all__ = ["ParallelActionDelay"]
+
+
+def _initial_action(space: spaces.Space, value: Any, name: str) -> Any:
+    """``value`` as an agent's initial action (``None``: the space's neutral action)."""
+    if value is None:
+        try:
+            value = neutral_action(space)
+        except ValueError as error:  # names initial_action; say which agent's
+            raise ValueError(f"{error} ({name})") from None
+    return as_action(space, value, name)
+
+
+class ParallelActionDelay(ParallelDelayWrapper):
+    """Delays every agent's actions independently, with the rule of :class:`~delayed_rl.wrappers.ActionDelay`.
+
+    Each agent has its own :class:`~delayed_rl.wrappers.action_delay.ActionLine` and delay
+    stream: the action it sends at its step ``t`` arrives at its step ``t + d_t``, and the env
+    executes, at each step, the latest-sent action of the agent that has arrived, or its
+    ``initial_action`` before its first one arrives. An agent's steps are those at which
+    ``actions`` names it (an agent left out of ``actions`` sends nothing, and the env is given
+    no action for it); the line restarts, empty, at ``reset()`` and when the agent leaves, so an
+    agent that joins in the middle of an episode starts with nothing in transit.
+
+    **Actions in transit when an agent leaves.** At the step an agent terminates or is
+    truncated, the actions it sent that have not arrived are discarded and reported in its last
+    ``info``: ``info[agent]["discarded_actions"]``, a tuple of the ``(sent step, action)``
+    pairs (copies), by sent step, empty if none. A ``reset()`` discards the actions in transit
+    of the agents still live, reported likewise in the reset ``infos`` (for the agents there
+    whose line held any).
+
+    Every action sent is checked against its agent's action space and copied where it comes in
+    and where it leaves, as :class:`~delayed_rl.wrappers.ActionDelay` does. ``info[agent]``
+    holds :class:`~delayed_rl.wrappers.ActionDelay`'s entries for every agent that sent an
+    action: ``executed_action`` (a copy of the action the env executed), ``executed_action_step``
+    (the agent's step that sent it, ``-1`` for its initial action) and ``action_delay``
+    (``d_t``). The ``infos`` returned are new dicts (the env's own are not modified).
+
+    ``reset(seed=s)`` seeds agent ``i`` (its position in ``possible_agents``) with
+    :func:`~delayed_rl.multiagent.agent_seed` ``(s, i)``, so that it executes exactly the
+    actions of an :class:`~delayed_rl.wrappers.ActionDelay` reset with that seed.
+
+    Args:
+        env: a ``pettingzoo.ParallelEnv`` with ``possible_agents``.
+        delay: a :class:`~delayed_rl.delays.Delay`, its ``to_dict()`` description, or a number
+            read as a Poisson mean, for every agent; or a mapping from every agent of
+            ``possible_agents`` to one of those.
+        initial_action: what an agent executes until its first action arrives: one action for
+            every agent, or a mapping from every agent to its own; ``None`` (or a ``None``
+            entry): the agent's neutral action
+            (:func:`~delayed_rl.wrappers.action_delay.neutral_action`). A mapping is read as
+            one entry per agent when a key is an agent's name or no agent has a ``Dict`` action
+            space; otherwise as one ``Dict`` action for every agent.
+        max_delay: clip delays to at most this many steps (``None``: unbounded).
+
+    Raises:
+        TypeError, ValueError: for an invalid argument, as :class:`~delayed_rl.wrappers.ActionDelay`
+            (the message names it: ``delay['agent']`` or ``initial_action['agent']`` for an
+            entry of a mapping, which must name every agent and no other).
+        ValueError: at a step, an action not in its agent's space (the message names
+            ``actions['agent']``), or an agent not in ``possible_agents``.
+
+    Attributes:
+        delays: each agent's distribution.
+        initial_actions: each agent's initial action.
+        lines: each agent's line.
+
+    Example:
+        >>> from pettingzoo.classic import rps_v2
+        >>> from delayed_rl.delays import Constant
+        >>> env = ParallelActionDelay(rps_v2.parallel_env(), Constant(1), initial_action=2)
+        >>> _ = env.reset(seed=0)
+        >>> [int(env.step({"player_0": a, "player_1": 0})[-1]["player_0"]["executed_action"])
+        ...  for a in (1, 0, 0)]
+        [2, 1, 0]
+    """
+
+    def __init__(
+        self,
+        env: ParallelEnv,
+        delay: Delay | float | dict[Any, Any],
+        initial_action: Any = None,
+        max_delay: int | None = None,
+    ):
+        agents = getattr(env, "possible_agents", None) or ()
+        super().__init__(
+            env,
+            {
+                "delay": delay_record(delay, agents),
+                "initial_action": json_safe(initial_action),
+                "max_delay": json_safe(max_delay),
+            },
+        )
+        self.delays = per_agent_delays(delay, self.agent_order)
+        self.max_delay = check_max_delay(max_delay)
+        self.initial_actions = per_agent_actions(
+            initial_action, self.agent_order, self.env.action_space, _initial_action
+        )
+        self.lines = {
+            agent: ActionLine(copy_sample(action)) for agent, action in self.initial_actions.items()
+        }
+        self._samplers = {
+            agent: DelaySampler(self.delays[agent], self.max_delay) for agent in self.agent_order
+        }
+
+    def reset(self, seed: int | None = None, options: dict[str, Any] | None = None):
+        """Reset the env and every agent's line; ``seed`` also reseeds every agent's delays.
+
+        Raises:
+            TypeError, ValueError: ``seed`` is neither ``None`` nor an integer ``>= 0``.
+        """
+        seeds = self.agent_seeds(seed)
+        obs, infos = self.env.reset(seed=seed, options=options)
+        infos = self.own_infos(infos)
+        if seeds is not None:
+            for agent, agent_seed in zip(self.agent_order, seeds, strict=True):
+                self._samplers[agent].seed(agent_seed)
+        for agent, line in self.lines.items():
+            if line.in_transit and agent in infos:
+                infos[agent]["discarded_actions"] = self._discarded(line)
+            line.reset()
+        return obs, infos
+
+    def step(self, actions: dict[Any, Any]):
+        """Send each agent's action; step the env with the actions executed now.
+
+        Raises:
+            ValueError: an action is not in its agent's action space, or ``actions`` names an
+                agent not in ``possible_agents``.
+        """
+        sent = {}
+        for agent, action in actions.items():
+            self.position(agent, "actions")
+            action = _check_action(self.env.action_space(agent), action, f"actions[{agent!r}]")
+            delay = self._samplers[agent]()
+            sent[agent] = (self.lines[agent].send(action, delay), delay)
+        executed = {agent: copy_sample(action) for agent, (action, _) in sent.items()}
+        obs, rewards, terminated, truncated, infos = self.env.step(executed)
+        infos = self.own_infos(infos)
+        for agent, (action, delay) in sent.items():
+            info = infos.setdefault(agent, {})
+            info["executed_action"] = copy_sample(action)
+            info["executed_action_step"] = self.lines[agent].executed_step
+            info["action_delay"] = delay
+        for agent in {**terminated, **truncated}:
+            if (terminated.get(agent) or truncated.get(agent)) and agent in self.lines:
+                line = self.lines[agent]
+                infos.setdefault(agent, {})["discarded_actions"] = self._discarded(line)
+                line.reset()
+        return obs, rewards, terminated, truncated, infos
+
+    @staticmethod
+    def _discarded(line: ActionLine) -> tuple[tuple[int, Any], ...]:
+        """Copies of the ``(sent step, action)`` pairs in transit on ``line``, by sent step."""
+        return tuple((step, copy_sample(action)) for step, action in line.remaining())

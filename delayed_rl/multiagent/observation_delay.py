@@ -1,0 +1,172 @@
+"""Observation delays per agent for PettingZoo's ``ParallelEnv``: :class:`ParallelObservationDelay`."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from pettingzoo import ParallelEnv
+
+from delayed_rl._validation import check_choice
+from delayed_rl.delays import Delay
+from delayed_rl.multiagent._agents import delay_record, per_agent_delays
+from delayed_rl.multiagent._base import ParallelDelayWrapper
+from delayed_rl.wrappers._samples import copy_sample
+from delayed_rl.wrappers._spec import json_safe
+from delayed_rl.wrappers.observation_delay import ARRIVAL_RULES, _new_rule, _settings
+from delayed_rl.wrappers.reward_delay import DelaySampler, check_max_delay
+
+__all__ = ["ParallelObservationDelay"]
+
+
+class ParallelObservationDelay(ParallelDelayWrapper):
+    """Delays every agent's observations independently, with the rule of :class:`~delayed_rl.wrappers.ObservationDelay`.
+
+    Each agent has its own arrival rule (``arrival``:
+    :class:`~delayed_rl.wrappers.observation_delay.StaleArrival` or
+    :class:`~delayed_rl.wrappers.observation_delay.NetworkArrival`, the classes
+    :class:`~delayed_rl.wrappers.ObservationDelay` uses), its own delay stream and its own
+    observation space (any: ``Box`` images, ``Dict``, ``Discrete``...). An agent's observations
+    are numbered from its first, ``o_0``, shown undelayed: at ``reset()``, or at the step it
+    joins the episode; each later step that gives it an observation makes the next one, and
+    shows the one its rule says. Under ``"stale"`` the rule keeps the agent's last
+    ``histories[agent]`` observations (what its delay can reach, as
+    :class:`~delayed_rl.wrappers.ObservationDelay` chooses it), under ``"network"`` only those in
+    transit; an agent's observations are let go when it leaves (terminates or is truncated:
+    the observation of its last step is delayed like the others) and at ``reset()``.
+
+    ``info[agent]`` holds :class:`~delayed_rl.wrappers.ObservationDelay`'s entries:
+    ``observation_delay`` (the age of the observation shown, 0 for an ``o_0``) and
+    ``arrived_observations`` (the ``(i, o_i)`` received at this step). The ``infos`` returned are
+    new dicts (the env's own are not modified).
+
+    Observations are copied as :class:`~delayed_rl.wrappers.ObservationDelay` copies them, and
+    where they come in too (a PettingZoo env may hand out views of its own state, which it
+    changes at the next step): the rules keep copies, and every observation returned or reported
+    is another copy, so modifying one changes nothing the wrapper keeps or returns later.
+
+    ``reset(seed=s)`` seeds agent ``i`` (its position in ``possible_agents``) with
+    :func:`~delayed_rl.multiagent.agent_seed` ``(s, i)``, so that it shows exactly the
+    observations of an :class:`~delayed_rl.wrappers.ObservationDelay` reset with that seed.
+
+    Args:
+        env: a ``pettingzoo.ParallelEnv`` with ``possible_agents``.
+        delay: a :class:`~delayed_rl.delays.Delay`, its ``to_dict()`` description, or a number
+            read as a Poisson mean, for every agent; or a mapping from every agent of
+            ``possible_agents`` to one of those.
+        max_delay: clip delays to at most this many steps (``None``: unbounded).
+        arrival: the arrival rule, ``"stale"`` or ``"network"``
+            (see :class:`~delayed_rl.wrappers.ObservationDelay`).
+
+    Raises:
+        TypeError, ValueError: for an invalid argument, as :class:`~delayed_rl.wrappers.ObservationDelay`
+            (the message names it: ``delay['agent']`` for an entry of a mapping, which must
+            name every agent and no other); ``ValueError`` at a step where the env names an
+            agent not in ``possible_agents``.
+
+    Attributes:
+        delays: each agent's distribution.
+        histories: how many observations each agent's ``"stale"`` rule keeps.
+        rules: each agent's arrival rule.
+
+    Example:
+        >>> from pettingzoo.classic import rps_v2
+        >>> from delayed_rl.delays import Constant
+        >>> env = ParallelObservationDelay(rps_v2.parallel_env(), Constant(1))
+        >>> _ = env.reset(seed=0)
+        >>> obs, _, _, _, infos = env.step({"player_0": 1, "player_1": 0})
+        >>> int(obs["player_0"]), infos["player_0"]["observation_delay"]  # still o_0 (none)
+        (3, 1)
+        >>> int(env.step({"player_0": 2, "player_1": 2})[0]["player_0"])  # o_1: rock
+        0
+    """
+
+    def __init__(
+        self,
+        env: ParallelEnv,
+        delay: Delay | float | dict[Any, Any],
+        max_delay: int | None = None,
+        arrival: str = "stale",
+    ):
+        agents = getattr(env, "possible_agents", None) or ()
+        super().__init__(
+            env,
+            {
+                "delay": delay_record(delay, agents),
+                "max_delay": json_safe(max_delay),
+                "arrival": arrival,
+            },
+        )
+        delays = per_agent_delays(delay, self.agent_order)
+        self.max_delay = check_max_delay(max_delay)
+        self.arrival = check_choice("arrival", arrival, ARRIVAL_RULES)
+        self.delays: dict[Any, Delay] = {}
+        self.histories: dict[Any, int] = {}
+        for agent in self.agent_order:
+            _, _, _, self.histories[agent] = _settings(delays[agent], max_delay, arrival)
+            self.delays[agent] = delays[agent]
+        self.rules = {
+            agent: _new_rule(self.arrival, self.histories[agent]) for agent in self.agent_order
+        }
+        self._samplers = {
+            agent: DelaySampler(self.delays[agent], self.max_delay) for agent in self.agent_order
+        }
+        self._live: set[Any] = set()  # the agents whose rule is in an episode
+
+    def reset(self, seed: int | None = None, options: dict[str, Any] | None = None):
+        """Reset the env and every agent's rule; ``seed`` also reseeds every agent's delays.
+
+        Each agent's first observation is returned undelayed (a copy), with
+        ``info[agent]["observation_delay"] = 0`` and
+        ``info[agent]["arrived_observations"] = ((0, o_0),)``.
+
+        Raises:
+            TypeError, ValueError: ``seed`` is neither ``None`` nor an integer ``>= 0``.
+        """
+        seeds = self.agent_seeds(seed)
+        obs, infos = self.env.reset(seed=seed, options=options)
+        infos = self.own_infos(infos)
+        if seeds is not None:
+            for agent, agent_seed in zip(self.agent_order, seeds, strict=True):
+                self._samplers[agent].seed(agent_seed)
+        for agent in self._live:
+            self.rules[agent].reset(None)  # lets the last episode's observations go
+        self._live.clear()
+        shown = {}
+        for agent, first in obs.items():
+            self.position(agent, "the env's observations")
+            shown[agent] = self._start(agent, first, infos)
+        return shown, infos
+
+    def step(self, actions: dict[Any, Any]):
+        """Step the env; show each agent an older observation (see the class docstring)."""
+        obs, rewards, terminated, truncated, infos = self.env.step(actions)
+        infos = self.own_infos(infos)
+        shown = {}
+        for agent, made in obs.items():
+            if agent not in self._live:  # joins the episode: its o_0
+                self.position(agent, "the env's observations")
+                shown[agent] = self._start(agent, made, infos)
+                continue
+            age, seen, arrived = self.rules[agent].receive(
+                copy_sample(made), self._samplers[agent]()
+            )
+            info = infos.setdefault(agent, {})
+            info["observation_delay"] = age
+            info["arrived_observations"] = tuple((i, copy_sample(o)) for i, o in arrived)
+            shown[agent] = copy_sample(seen)
+        for ends in (terminated, truncated):
+            for agent, ended in ends.items():
+                if ended and agent in self._live:
+                    self._live.discard(agent)
+                    self.rules[agent].reset(None)  # lets its observations go
+        return shown, rewards, terminated, truncated, infos
+
+    def _start(self, agent: Any, first: Any, infos: dict[Any, dict[str, Any]]) -> Any:
+        """Start ``agent``'s rule at ``first`` (its ``o_0``); report it and return a copy."""
+        first = copy_sample(first)
+        self.rules[agent].reset(first)
+        self._live.add(agent)
+        info = infos.setdefault(agent, {})
+        info["observation_delay"] = 0
+        info["arrived_observations"] = ((0, copy_sample(first)),)
+        return copy_sample(first)
