@@ -8,11 +8,27 @@ single-agent wrappers that the multi-agent ones must match step by step.
 from __future__ import annotations
 
 import functools
+import importlib
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
+
+
+def pettingzoo_env(env_id: str, kind: str = "parallel", **kwargs):
+    """A PettingZoo env by its registry id (``"sisl/pursuit-v5"``), its ``kind`` ``"parallel"`` or ``"aec"``.
+
+    PettingZoo 1.27 makes it from its registry (``pettingzoo.make``; importing the env's module
+    is deprecated there), the versions before from its module (``pettingzoo.sisl.pursuit_v5``).
+    """
+    import pettingzoo
+
+    if hasattr(pettingzoo, "make"):
+        return pettingzoo.make(kind, env_id, **kwargs)
+    family, name = env_id.split("/")
+    module = importlib.import_module(f"pettingzoo.{family}.{name.replace('-', '_')}")
+    return module.parallel_env(**kwargs) if kind == "parallel" else module.env(**kwargs)
 
 
 def scripted_reward(agent_index: int, episode: int, step: int) -> float:

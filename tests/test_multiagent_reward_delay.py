@@ -7,7 +7,14 @@ import warnings
 
 import numpy as np
 import pytest
-from multiagent_envs import AgentReplay, ScriptedParallelEnv, policy, record, scripted_reward
+from multiagent_envs import (
+    AgentReplay,
+    ScriptedParallelEnv,
+    pettingzoo_env,
+    policy,
+    record,
+    scripted_reward,
+)
 
 from delayed_rl.delays import Constant, Poisson, Uniform
 from delayed_rl.multiagent import ParallelRewardDelay, agent_seed
@@ -238,10 +245,11 @@ def test_an_agents_stream_is_the_single_wrappers_for_its_seed_whatever_the_other
 
 def test_the_envs_own_randomness_is_unaffected():
     """The wrapped env's observations (its own noise, pursuit's evaders) are the unwrapped env's."""
-    from pettingzoo.sisl import pursuit_v5
 
     def make_pursuit():
-        return pursuit_v5.parallel_env(max_cycles=30, x_size=8, y_size=8, n_evaders=3, n_pursuers=3)
+        return pettingzoo_env(
+            "sisl/pursuit-v5", max_cycles=30, x_size=8, y_size=8, n_evaders=3, n_pursuers=3
+        )
 
     for make in (lambda: ScriptedParallelEnv(ENDS, JOINS, fresh=True), make_pursuit):
         plain, wrapped = make(), ParallelRewardDelay(make(), Poisson(5))

@@ -145,10 +145,13 @@ class ParallelActionDelay(ParallelDelayWrapper):
             ValueError: an action is not in its agent's action space, or ``actions`` names an
                 agent not in ``possible_agents``.
         """
-        sent = {}
+        checked = {}  # every action checked before any is sent: a refused step sends nothing
         for agent, action in actions.items():
             self.position(agent, "actions")
-            action = _check_action(self.env.action_space(agent), action, f"actions[{agent!r}]")
+            space = self.env.action_space(agent)
+            checked[agent] = _check_action(space, action, f"actions[{agent!r}]")
+        sent = {}
+        for agent, action in checked.items():
             delay = self._samplers[agent]()
             sent[agent] = (self.lines[agent].send(action, delay), delay)
         executed = {agent: copy_sample(action) for agent, (action, _) in sent.items()}
