@@ -143,7 +143,7 @@ LAYERS = [
             "delayed_rl._portable_math",
         ),
     ),
-    ("wrappers and envs", ("delayed_rl.wrappers", "delayed_rl.envs")),
+    ("wrappers and envs", ("delayed_rl.wrappers", "delayed_rl.multiagent", "delayed_rl.envs")),
     ("the compiled path", ("delayed_rl.compiled",)),
     ("agents", ("delayed_rl.agents", "delayed_rl.deep")),
     ("experiments and sweeps", ("delayed_rl.experiments", "delayed_rl.sweep")),
@@ -310,7 +310,16 @@ def test_the_experiment_check_sees_every_form_of_import():
     ]
 
 
-HEAVY = ("pymunk", "torch", "matplotlib", "ray", "dask", "stable_baselines3")
+HEAVY = (
+    "pymunk",
+    "torch",
+    "matplotlib",
+    "ray",
+    "dask",
+    "stable_baselines3",
+    "pettingzoo",
+    "supersuit",
+)
 
 
 def _modules_after(statement: str) -> set[str]:
@@ -325,6 +334,7 @@ def _modules_after(statement: str) -> set[str]:
     [
         "delayed_rl",
         "delayed_rl.wrappers",
+        "delayed_rl.multiagent",
         "delayed_rl.agents",
         "delayed_rl.compiled",
         "delayed_rl.envs",

@@ -36,10 +36,10 @@ PettingZoo is imported when a wrapper is first used (``import delayed_rl.multiag
 import it); install it with the ``multiagent`` extra, ``pip install "delayed-rl[multiagent]"``.
 
 Example:
-    >>> from pettingzoo.classic import rps_v2
+    >>> from pettingzoo.classic.rps.rps import parallel_env  # rock-paper-scissors
     >>> from delayed_rl.delays import Constant
     >>> from delayed_rl.multiagent import ParallelRewardDelay
-    >>> env = ParallelRewardDelay(rps_v2.parallel_env(), {"player_0": 0, "player_1": Constant(1)})
+    >>> env = ParallelRewardDelay(parallel_env(), {"player_0": 0, "player_1": Constant(1)})
     >>> _ = env.reset(seed=0)
     >>> rewards = env.step({"player_0": 1, "player_1": 0})[1]  # paper beats rock
     >>> rewards, env.step({"player_0": 0, "player_1": 0})[1]

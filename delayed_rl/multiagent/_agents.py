@@ -120,7 +120,7 @@ def per_agent_actions(
     initial_action: Any,
     agents: Sequence[Any],
     action_space: Callable[[Any], spaces.Space],
-    read: Callable[[spaces.Space, Any, str], Any],
+    read: Callable[[Any, spaces.Space, Any, str], Any],
 ) -> dict[Any, Any]:
     """Each agent's initial action from a wrapper's ``initial_action`` argument.
 
@@ -132,8 +132,8 @@ def per_agent_actions(
         initial_action: the argument.
         agents: the env's ``possible_agents``.
         action_space: the env's ``action_space`` method.
-        read: ``read(space, value, name)`` checks ``value`` (``None`` included) and returns the
-            agent's initial action (``name`` is ``"initial_action"`` or
+        read: ``read(agent, space, value, name)`` checks ``value`` (``None`` included) and
+            returns the agent's initial action (``name`` is ``"initial_action"`` or
             ``"initial_action['agent']"``).
 
     Raises:
@@ -147,7 +147,10 @@ def per_agent_actions(
     if per_agent:
         given = _entries("initial_action", initial_action, agents)
         return {
-            agent: read(action_space(agent), given[agent], f"initial_action[{agent!r}]")
+            agent: read(agent, action_space(agent), given[agent], f"initial_action[{agent!r}]")
             for agent in agents
         }
-    return {agent: read(action_space(agent), initial_action, "initial_action") for agent in agents}
+    return {
+        agent: read(agent, action_space(agent), initial_action, "initial_action")
+        for agent in agents
+    }

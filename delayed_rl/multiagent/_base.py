@@ -61,8 +61,9 @@ class ParallelDelayWrapper(BaseParallelWrapper, gym.utils.RecordConstructorArgs)
 
     def __init__(self, env: ParallelEnv, record: dict[str, Any]):
         agents = check_parallel_env(env)
-        BaseParallelWrapper.__init__(self, env)
+        # first: the first call records (BaseParallelWrapper's own super().__init__() is another)
         gym.utils.RecordConstructorArgs.__init__(self, **record)
+        BaseParallelWrapper.__init__(self, env)
         self.agent_order = agents
         self.agent_index = {agent: i for i, agent in enumerate(agents)}
 

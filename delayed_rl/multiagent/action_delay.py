@@ -18,13 +18,18 @@ from delayed_rl.wrappers.reward_delay import DelaySampler, check_max_delay
 __all__ = ["ParallelActionDelay"]
 
 
-def _initial_action(space: spaces.Space, value: Any, name: str) -> Any:
-    """``value`` as an agent's initial action (``None``: the space's neutral action)."""
+def _initial_action(agent: Any, space: spaces.Space, value: Any, name: str) -> Any:
+    """``value`` as ``agent``'s initial action (``None``: the space's neutral action).
+
+    Raises:
+        ValueError: ``value`` is not in ``space``, or is ``None`` for a space without a neutral
+            action (the message names the agent).
+    """
     if value is None:
         try:
             value = neutral_action(space)
-        except ValueError as error:  # names initial_action; say which agent's
-            raise ValueError(f"{error} ({name})") from None
+        except ValueError as error:  # names initial_action; say whose
+            raise ValueError(f"{error} (agent {agent!r})") from None
     return as_action(space, value, name)
 
 
@@ -83,9 +88,9 @@ class ParallelActionDelay(ParallelDelayWrapper):
         lines: each agent's line.
 
     Example:
-        >>> from pettingzoo.classic import rps_v2
+        >>> from pettingzoo.classic.rps.rps import parallel_env  # rock-paper-scissors
         >>> from delayed_rl.delays import Constant
-        >>> env = ParallelActionDelay(rps_v2.parallel_env(), Constant(1), initial_action=2)
+        >>> env = ParallelActionDelay(parallel_env(), Constant(1), initial_action=2)
         >>> _ = env.reset(seed=0)
         >>> [int(env.step({"player_0": a, "player_1": 0})[-1]["player_0"]["executed_action"])
         ...  for a in (1, 0, 0)]

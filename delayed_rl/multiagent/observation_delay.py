@@ -69,9 +69,9 @@ class ParallelObservationDelay(ParallelDelayWrapper):
         rules: each agent's arrival rule.
 
     Example:
-        >>> from pettingzoo.classic import rps_v2
+        >>> from pettingzoo.classic.rps.rps import parallel_env  # rock-paper-scissors
         >>> from delayed_rl.delays import Constant
-        >>> env = ParallelObservationDelay(rps_v2.parallel_env(), Constant(1))
+        >>> env = ParallelObservationDelay(parallel_env(), Constant(1))
         >>> _ = env.reset(seed=0)
         >>> obs, _, _, _, infos = env.step({"player_0": 1, "player_1": 0})
         >>> int(obs["player_0"]), infos["player_0"]["observation_delay"]  # still o_0 (none)

@@ -80,9 +80,9 @@ class ParallelRewardDelay(ParallelDelayWrapper):
             in ``possible_agents``, or where sums pass float64's range.
 
     Example:
-        >>> from pettingzoo.classic import rps_v2
+        >>> from pettingzoo.classic.rps.rps import parallel_env  # rock-paper-scissors
         >>> from delayed_rl.delays import Constant
-        >>> env = ParallelRewardDelay(rps_v2.parallel_env(max_cycles=2), Constant(5))
+        >>> env = ParallelRewardDelay(parallel_env(max_cycles=2), Constant(5))
         >>> _ = env.reset(seed=0)
         >>> env.step({"player_0": 1, "player_1": 0})[1]  # paper beats rock, 5 steps late
         {'player_0': 0.0, 'player_1': 0.0}
