@@ -51,7 +51,8 @@ nitpicky = True
 nitpick_ignore_regex = [
     (
         r"py:.*",
-        r"(np|numpy|gym|gymnasium|torch|stable_baselines3|pymunk|numba|joblib|ray|dask)(\..*)?",
+        r"(np|numpy|gym|gymnasium|torch|stable_baselines3|pymunk|numba|joblib|ray|dask"
+        r"|pettingzoo|supersuit)(\..*)?",
     ),
     (
         r"py:.*",
@@ -60,7 +61,7 @@ nitpick_ignore_regex = [
     (r"py:.*", r"(collections|collections\.abc|typing|pathlib|argparse|numbers|enum)\..*"),
     (r"py:class", r"(optional|callable|type|int|float|str|bool|dict|list|tuple|None)"),
     (r"py:class", r"abc\.ABC"),
-    (r"py:class", r"(spaces\..*|VectorEnv|VecEnv|Schedule|Wrapper)"),
+    (r"py:class", r"(spaces\..*|VectorEnv|VecEnv|ParallelEnv|Schedule|Wrapper)"),
 ]
 
 #: The API reference's sections: (title, package), each with every module below it.
@@ -68,6 +69,7 @@ API_SECTIONS = [
     ("Agents", "delayed_rl.agents"),
     ("Deep RL reward models", "delayed_rl.deep"),
     ("Wrappers", "delayed_rl.wrappers"),
+    ("Multi-agent wrappers (PettingZoo)", "delayed_rl.multiagent"),
     ("Delay distributions", "delayed_rl.delays"),
     ("Environments", "delayed_rl.envs"),
     ("The compiled path", "delayed_rl.compiled"),

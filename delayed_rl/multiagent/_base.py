@@ -57,6 +57,7 @@ class ParallelDelayWrapper(BaseParallelWrapper, gym.utils.RecordConstructorArgs)
 
     Attributes:
         agent_order: ``env.possible_agents``, as a tuple.
+        agent_index: each agent's position in it.
     """
 
     def __init__(self, env: ParallelEnv, record: dict[str, Any]):

@@ -79,6 +79,9 @@ class ParallelRewardDelay(ParallelDelayWrapper):
         ValueError: at a step where the env gives a NaN or infinite reward, names an agent not
             in ``possible_agents``, or where sums pass float64's range.
 
+    Attributes:
+        delays: each agent's distribution.
+
     Example:
         >>> from pettingzoo.classic.rps.rps import parallel_env  # rock-paper-scissors
         >>> from delayed_rl.delays import Constant
