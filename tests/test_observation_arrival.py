@@ -66,7 +66,7 @@ def run(env: gym.Env, steps: int, seed: int | None = 0) -> list[tuple]:
 )
 def test_every_observation_arrives_at_its_index_plus_its_delay(delay, max_delay) -> None:
     seed, steps = 5, 300
-    delays = delay.sample(delay_rng(seed), 1024)  # the wrapper's stream for this seed
+    delays = delay.sample(delay_rng(seed, "observation"), 1024)  # the wrapper's stream
     if max_delay is not None:
         delays = np.minimum(delays, max_delay)
     env = ObservationDelay(Counter(), delay, max_delay=max_delay, arrival="network")
@@ -199,3 +199,17 @@ def test_a_bad_arrival_rule_is_refused_naming_the_argument(arrival, exc) -> None
         ObservationDelay(Counter(), 2, arrival=arrival)
     with pytest.raises(exc, match=r"^observation_arrival must be one of"):
         gym.make("delayed_rl/GridWorld-3x3-v0", observation_delay=2, observation_arrival=arrival)
+
+
+def test_a_stacks_observation_and_action_delays_are_independent():
+    from delayed_rl.wrappers import ActionDelay
+
+    # the same distribution on both signals, one seed for the stack: two streams, not one
+    delay, steps = Uniform(0, 3), 1000
+    env = ObservationDelay(ActionDelay(gym.make("Pendulum-v1"), delay), delay)
+    env.reset(seed=1)
+    acted = [env.step(np.zeros(1, dtype=np.float32))[-1]["action_delay"] for _ in range(steps)]
+    assert acted == delay.sample(delay_rng(1, "action"), steps).tolist()
+    observed = delay.sample(delay_rng(1, "observation"), steps)
+    # independent streams: their correlation is within 4 standard errors of 0
+    assert abs(np.corrcoef(np.asarray(acted), observed)[0, 1]) < 4 / np.sqrt(steps)

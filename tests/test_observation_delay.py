@@ -39,7 +39,7 @@ class CounterEnv(gym.Env):
 @pytest.mark.parametrize("lam", [0.5, 3, 13.7])
 def test_observation_is_the_delayed_one(lam: float) -> None:
     seed = 17
-    raw = Poisson(lam).sample(delay_rng(seed), 1024)  # the wrapper's stream for this seed
+    raw = Poisson(lam).sample(delay_rng(seed, "observation"), 1024)  # the wrapper's stream
     env = ObservationDelay(CounterEnv(episode_length=400), lam)
     obs, info = env.reset(seed=seed)
     assert obs == 0 and info["observation_delay"] == 0

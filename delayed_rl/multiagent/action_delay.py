@@ -122,7 +122,8 @@ class ParallelActionDelay(ParallelDelayWrapper):
             agent: ActionLine(copy_sample(action)) for agent, action in self.initial_actions.items()
         }
         self._samplers = {
-            agent: DelaySampler(self.delays[agent], self.max_delay) for agent in self.agent_order
+            agent: DelaySampler(self.delays[agent], self.max_delay, "action")
+            for agent in self.agent_order
         }
 
     def reset(self, seed: int | None = None, options: dict[str, Any] | None = None):

@@ -108,7 +108,8 @@ class ParallelObservationDelay(ParallelDelayWrapper):
             agent: _new_rule(self.arrival, self.histories[agent]) for agent in self.agent_order
         }
         self._samplers = {
-            agent: DelaySampler(self.delays[agent], self.max_delay) for agent in self.agent_order
+            agent: DelaySampler(self.delays[agent], self.max_delay, "observation")
+            for agent in self.agent_order
         }
         self._live: set[Any] = set()  # the agents whose rule is in an episode
 

@@ -232,7 +232,7 @@ class ActionDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
         if initial_action is None:
             initial_action = neutral_action(env.action_space)
         self.initial_action = as_action(env.action_space, initial_action, "initial_action")
-        self._sampler = DelaySampler(self.delay, self.max_delay)
+        self._sampler = DelaySampler(self.delay, self.max_delay, "action")
         self.line = ActionLine(copy_sample(self.initial_action))
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -310,7 +310,9 @@ class VectorActionDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
         self.initial_action = as_action(space, initial_action, "initial_action")
         self.autoreset_mode = autoreset_mode(env)
         self.lines = [ActionLine(copy_sample(self.initial_action)) for _ in range(self.num_envs)]
-        self._samplers = [DelaySampler(self.delay, self.max_delay) for _ in range(self.num_envs)]
+        self._samplers = [
+            DelaySampler(self.delay, self.max_delay, "action") for _ in range(self.num_envs)
+        ]
         self._resetting = np.zeros(self.num_envs, dtype=bool)
 
     def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):

@@ -231,7 +231,7 @@ class ObservationDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorAr
         self.delay, self.max_delay, self.arrival, self.history = _settings(
             delay, max_delay, arrival
         )
-        self._sampler = DelaySampler(self.delay, self.max_delay)
+        self._sampler = DelaySampler(self.delay, self.max_delay, "observation")
         self._rule = _new_rule(self.arrival, self.history)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -332,7 +332,9 @@ class VectorObservationDelay(gym.vector.VectorWrapper, gym.utils.RecordConstruct
         )
         self.autoreset_mode = autoreset_mode(env)
         self.rules = [_new_rule(self.arrival, self.history) for _ in range(self.num_envs)]
-        self._samplers = [DelaySampler(self.delay, self.max_delay) for _ in range(self.num_envs)]
+        self._samplers = [
+            DelaySampler(self.delay, self.max_delay, "observation") for _ in range(self.num_envs)
+        ]
         self._shown: list[Any] = [None] * self.num_envs  # what each sub-env shows now
         self._resetting = np.zeros(self.num_envs, dtype=bool)
 

@@ -27,6 +27,7 @@ __all__ = [
     "RewardDelay",
     "check_episode_end",
     "check_max_delay",
+    "DELAY_STREAMS",
     "delay_rng",
     "wrap_reward_delay",
 ]
@@ -34,18 +35,25 @@ __all__ = [
 #: The values of ``on_episode_end``: what happens to pending rewards when an episode ends.
 EPISODE_END_MODES = ("flush", "drop", "carry")
 _BLOCK = 1024  # delays drawn per call to the generator
-_DELAY_STREAM = 0x5DE1A7  # spawn key separating the delay stream from the env's own stream
+DELAY_STREAMS = {"reward": 0x5DE1A7, "observation": 0x0B5DE1, "action": 0xAC7DE1}
+"""The spawn key of each delayed signal's stream: apart from the env's own generator and from
+each other, so that a stack reset with one seed draws its reward, observation and action delays
+independently."""
 
 
-def delay_rng(seed: int | None) -> np.random.Generator:
-    """The delay generator for ``seed``: independent of the env's ``np_random`` for that seed.
+def delay_rng(seed: int | None, signal: str = "reward") -> np.random.Generator:
+    """The generator of ``signal``'s delays for ``seed``.
+
+    Independent of the env's ``np_random`` for that seed and of the other signals' streams
+    (:data:`DELAY_STREAMS`).
 
     Raises:
         TypeError: ``seed`` is neither ``None`` nor an integer.
         ValueError: ``seed`` is negative.
     """
     seed = check_int("seed", seed, 0, optional=True)
-    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(_DELAY_STREAM,)))
+    key = DELAY_STREAMS[signal]
+    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(key,)))
 
 
 def check_max_delay(max_delay: Any) -> int | None:
@@ -79,17 +87,20 @@ class DelaySampler:
     Args:
         delay: the distribution.
         max_delay: clip every delay to at most this many steps (``None``: no clipping).
+        signal: what it delays, ``"reward"``, ``"observation"`` or ``"action"``: its stream
+            (:func:`delay_rng`).
     """
 
-    def __init__(self, delay: Delay, max_delay: int | None):
+    def __init__(self, delay: Delay, max_delay: int | None, signal: str = "reward"):
         self.delay = delay
         self.max_delay = max_delay
+        self.signal = signal
         self.block: list[int] = []
         self.seed(None)
 
     def seed(self, seed: int | None) -> None:
         """Restart the delay stream from ``seed`` and discard delays drawn ahead."""
-        self.rng = delay_rng(seed)
+        self.rng = delay_rng(seed, self.signal)
         self.block.clear()
 
     def refill(self) -> list[int]:
