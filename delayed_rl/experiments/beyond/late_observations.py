@@ -257,8 +257,13 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
             }
         table[setting]["random"] = {"score": low}
         learners = {m: label for m, label in LABELS.items() if m in by_method and m in METHODS}
+        controllers = tuple(
+            (table[setting][method]["score"]["mean"], f"{LABELS[method]}: mean")
+            for method in CONTROLLERS
+            if method in by_method
+        )
         runs_curves, figures[f"curves_{setting}"] = learning_curves(
-            setting, by_method, learners, low, "the env each method acts in"
+            setting, by_method, learners, low, "the env each method acts in", controllers
         )
         curves += runs_curves
     return Summary(claims, curves, figures, {"table": table, "settings": SETTINGS})

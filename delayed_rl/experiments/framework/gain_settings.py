@@ -81,6 +81,7 @@ def learning_curves(
     labels: dict[str, str],
     random_mean: float,
     scored_in: str,
+    references: tuple[tuple[float, str], ...] = (),
 ) -> tuple[list[Curve], Any]:
     """Each run's learning curve, and the setting's figure of them, method by method.
 
@@ -90,6 +91,7 @@ def learning_curves(
         labels: the methods to draw, by name, with their labels (in drawing order).
         random_mean: the random policy's mean score, drawn as a line.
         scored_in: the env the scores come from, for the title (``"the undelayed env"``).
+        references: other ``(score, label)`` levels to draw as lines (fixed controllers).
     """
     curves, groups = [], {}
     for method, label in labels.items():
@@ -104,6 +106,7 @@ def learning_curves(
         title=f"{setting}: mean return of 10 greedy episodes of {scored_in}",
         ylabel="return",
         thesis=[(random_mean, "random policy")],
+        levels=references,
         ylim=None,
         xlabel="training step",
     )

@@ -153,6 +153,7 @@ def learning_curves(
     xlabel: str = "time step",
     thesis_ratios: Sequence[tuple[str, float, str, str]] = (),
     settle: float = 0.05,
+    levels: Sequence[tuple[float, str]] = (),
 ) -> None:
     """Mean curve with a 95 % band per group, the thesis's values dashed.
 
@@ -170,6 +171,8 @@ def learning_curves(
             accumulated error as 0.4 × Q's).
         settle: with ``ylim="robust"``, the leading fraction of the steps that does not set
             the curves' settled range (:func:`robust_ylim`'s ``skip``).
+        levels: other levels, each ``(value, label)`` (a fixed controller's score), drawn as
+            dotted lines in colours of their own.
     """
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(9.5, 4.4))
@@ -191,13 +194,18 @@ def learning_curves(
             ax.fill_between(steps, mean - half, mean + half, alpha=0.18, color=line.get_color())
             drawn += [(steps, mean - half), (steps, mean + half)]
     _thesis_lines(ax, thesis, colours)
+    for (value, label), colour in zip(
+        levels, ("tab:purple", "tab:brown", "tab:gray"), strict=False
+    ):
+        ax.axhline(value, color=colour, linestyle=":", linewidth=1.6, label=label)
     for base, factor, label, group in thesis_ratios:
         steps, mean = means[base]
         colour = colours.get(group, "black")
         ax.plot(steps, factor * mean, color=colour, linestyle="--", linewidth=1.3, label=label)
         drawn.append((steps, factor * mean))
     if ylim == "robust":
-        ylim = robust_ylim(drawn, include=[line[0] for line in thesis], skip=settle)
+        include = [line[0] for line in thesis] + [value for value, _ in levels]
+        ylim = robust_ylim(drawn, include=include, skip=settle)
     if ylim is not None:
         ax.set_ylim(*ylim)
     outside_legend(ax)
