@@ -109,7 +109,7 @@ def joblib_table(tmp_path_factory) -> list[dict[str, str]]:
         (
             lambda d: d.update(agents=[{"name": "q", "kwarg": {}}]),
             ValueError,
-            "agents[0] has the unknown key 'kwarg'; allowed: name, label, kwargs, steps, envs; "
+            "agents[0] has the unknown key 'kwarg'; allowed: name, label, kwargs, reward_model, steps, envs; "
             "did you mean 'kwargs'?",
         ),
         (
