@@ -20,12 +20,30 @@ def test_the_full_run_has_every_setting_method_and_seed_and_shares_the_oracle():
     experiment = get_experiment("late-observations")
     assert "late-observations" in LONG_NAMES  # reproduce --all, not the default reproduce
     tasks = experiment.tasks(Config(seeds=5))
-    assert len(tasks) == len(late_observations.SETTINGS) * (len(METHODS) + 1) * 5
+    settings, methods = late_observations.SETTINGS, late_observations.SETTING_METHODS
+    seeds = {name: min(5, setting.get("seeds", 5)) for name, setting in settings.items()}
+    assert len(tasks) == sum(len(methods[name]) * seeds[name] for name in settings)
+    assert seeds["epuck"] >= 3 and set(methods["epuck"]) >= {*METHODS, "p-delayed"}
     oracles = [t for t in tasks if t["method"] == "oracle" and t["seed"] == 0]
-    assert len({pool_key(experiment.run_of(t)) for t in oracles}) == 1  # both settings' oracle
+    keys = {t["setting"]: pool_key(experiment.run_of(t)) for t in oracles}
+    # one oracle for the 20k Pendulum settings, one for the 50k ones, one for the e-puck
+    assert keys["pendulum-small"] == keys["pendulum-large"] != keys["pendulum-small-50k"]
+    assert keys["pendulum-small-50k"] == keys["pendulum-large-50k"] != keys["epuck"]
     delayed = [t for t in tasks if t["method"] == "hindsight" and t["seed"] == 0]
-    assert len({pool_key(experiment.run_of(t)) for t in delayed}) == 2
-    assert all(t["steps"] == 20_000 for t in tasks if t["method"] != "random")
+    assert len({pool_key(experiment.run_of(t)) for t in delayed}) == len(settings)
+    assert {t["steps"] for t in tasks if t["method"] != "random"} == {20_000, 50_000}
+
+
+def test_the_p_controller_is_scored_on_the_learners_delayed_observations():
+    from delayed_rl.experiments.framework.late_training import controller_score
+
+    task = {**late_observations.SETTINGS["epuck"], "seed": 0, "eval_episodes": 1}
+    task["episode_steps"] = 300
+    undelayed = controller_score({**task, "method": "p-undelayed"})["score"]
+    delayed = controller_score({**task, "method": "p-delayed"})["score"]
+    assert undelayed > 0.5 * 300 > delayed  # the delay costs the controller the line
+    view = make_env(task, "hindsight").observation_space
+    assert view["actions"].shape == (150, 2) and view["age"].n == 151  # K = D = the clip
 
 
 def test_each_method_acts_in_its_own_env():
