@@ -203,7 +203,7 @@ class CooperativeGridWorldEnv(ParallelEnv):
         )
 
     def state(self) -> int:
-        """The joint position, ``s_0 · size² + s_1`` (in :attr:`state_space`)."""
+        """The joint position, ``s_0 · size² + s_1`` (in ``state_space``)."""
         return self.positions["agent_0"] * self.n_states + self.positions["agent_1"]
 
     def render(self) -> str | None:
