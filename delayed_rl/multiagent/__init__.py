@@ -14,6 +14,10 @@ twins (:class:`~delayed_rl.wrappers.VectorRewardDelay`, ...) do to every sub-env
   (:class:`~delayed_rl.wrappers.action_delay.ActionLine`), one line per agent; the actions an
   agent still has in transit when it leaves are discarded and reported in its last ``info``.
 
+The package also has a small env to learn on: :class:`CooperativeGridWorldEnv`, the thesis's
+grid world walked by two agents who are paid +10 only together (``docs/multiagent.md`` wires
+independent tabular learners to it through ``predict`` and ``update``).
+
 ``delay`` is one distribution for every agent (a :class:`~delayed_rl.delays.Delay`, its
 ``to_dict()`` description, or a number read as a Poisson mean) or a mapping from agent name to
 one; ``initial_action`` may be per agent too. Each agent draws its delays from its own
@@ -51,9 +55,16 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-__all__ = ["ParallelActionDelay", "ParallelObservationDelay", "ParallelRewardDelay", "agent_seed"]
+__all__ = [
+    "CooperativeGridWorldEnv",
+    "ParallelActionDelay",
+    "ParallelObservationDelay",
+    "ParallelRewardDelay",
+    "agent_seed",
+]
 
 _HOMES = {
+    "CooperativeGridWorldEnv": "gridworld",
     "ParallelActionDelay": "action_delay",
     "ParallelObservationDelay": "observation_delay",
     "ParallelRewardDelay": "reward_delay",

@@ -1,0 +1,433 @@
+"""``multiagent-gridworld`` (beyond the thesis): independent learners, a shared delayed reward.
+
+The game is :class:`~delayed_rl.multiagent.CooperativeGridWorldEnv`: the thesis's 5×5 grid
+world walked by two agents, who are paid +10 (both of them, the same reward) only when both
+stand on the reward cell, then warp home; a wall costs the team −1. Each agent sees its own
+cell (``Discrete(25)``); episodes are 100 steps (optimum: 11 loops of 9 steps, 1.1 a step).
+Each agent's rewards are delayed by its own Poisson(λ) draws
+(:class:`~delayed_rl.multiagent.ParallelRewardDelay`, flushed at the episode's end), λ = 5
+and λ = 10, and each agent is an independent tabular learner — one agent object per PettingZoo
+agent, stepping the wrapped env through ``predict`` (ε-greedy) and ``update`` — with the
+thesis's hyper-parameters (α = 0.1, γ = 0.9, constant ε = 0.1, ``q_init`` = 25):
+
+- ``Q``: Q-learning on the delayed reward as it arrives;
+- ``DeconvQ known``: :class:`~delayed_rl.agents.DeconvolutionQLearning` given Poisson(λ)
+  (modelled on at most :data:`LAMBDA_MAX` = 50 lags);
+- ``DeconvQ learned``: the same learning the delay on 0..50;
+- ``Q undelayed``: Q-learning without any delay, the oracle (one run per seed, shared by both
+  delays: :func:`shared_run`).
+
+150k steps a run, 5 seeds: 40 tasks, 35 runs. ``--quick``: λ = 10 only, 10k steps, 2 seeds. Runs are kept
+as they finish, so an interrupted run resumes.
+
+The score: the mean (undelayed) reward per step of the greedy joint policy (each learner's
+``predict(obs, deterministic=True)``) over an evaluation episode of the undelayed game from
+the start; the game and the greedy policies are deterministic, so one episode is every
+episode. It is taken :data:`CHECKPOINTS` times a run (the learning curves); a run's score is
+the last. A joint policy is *optimal* when it scores at least :data:`OPTIMAL_FRACTION` of the
+optimum. The training curve is the running mean of the undelayed shared reward.
+
+The claims, fixed before the runs, per delay, with verdicts computed by
+:mod:`~delayed_rl.experiments.framework.claims`' rules:
+
+- DeconvQ known minus Q score, and DeconvQ learned minus Q, paired by seed: above 0;
+- DeconvQ known, and DeconvQ learned: optimal on at least 80 % of the seeds (4 of 5, a rule
+  on these seeds, the share's Wilson interval beside it);
+- Q minus Q undelayed score, paired by seed: below 0 (the delay costs Q-learning);
+- DeconvQ learned's mean delay (both agents' estimates averaged, per seed): λ ± 10 %;
+
+and once, the setting's check: Q undelayed optimal on at least 80 % of the seeds. Every
+learner's score also has a reference row. It needs the ``multiagent`` extra (PettingZoo).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from delayed_rl._validation import check_choice
+from delayed_rl.agents import DeconvolutionQLearning, QLearning, TabularAgent
+from delayed_rl.delays import Poisson
+from delayed_rl.experiments.framework import plotting
+from delayed_rl.experiments.framework.claims import (
+    direction_claim,
+    mean_ci_n,
+    paired,
+    reference_row,
+    seed_rule_claim,
+)
+from delayed_rl.experiments.framework.delay_estimates import mean_delay_claim
+from delayed_rl.experiments.framework.runner import (
+    Claim,
+    Config,
+    Curve,
+    Experiment,
+    SharedRun,
+    Summary,
+    running_average,
+    seed_tasks,
+)
+from delayed_rl.experiments.framework.training import thesis_hyperparameters
+
+#: The learners, in the tables' order.
+AGENTS = ("Q", "DeconvQ known", "DeconvQ learned", "Q undelayed")
+SIZE, EPISODE_STEPS = 5, 100
+#: The mean delays λ of the full run, and of ``--quick``.
+LAMS, QUICK_LAM = (5, 10), 10
+STEPS, QUICK_STEPS = 150_000, 10_000
+CHECKPOINTS = 30
+"""Greedy evaluations a run: the learning curve's points, every ``steps // CHECKPOINTS``."""
+LAMBDA_MAX = 50
+"""The longest delay DeconvQ models (``max_delay``), as in ``anonymous-delay``."""
+OPTIMAL_FRACTION = 0.95
+"""A joint policy is optimal when its score is at least this share of the optimum."""
+SEED_SHARE = 0.8
+"""The claims' seed rule: optimal on at least this share of the seeds (4 of 5)."""
+LEARNER_STREAM = 0x1EA52
+"""The spawn key of the learners' seeds (:func:`learner_seed`)."""
+
+
+def require_pettingzoo() -> None:
+    """Raise an ImportError naming the ``multiagent`` extra when PettingZoo is missing."""
+    try:
+        import pettingzoo  # noqa: F401
+    except ImportError as error:
+        raise ImportError(
+            'the multiagent-gridworld experiment needs PettingZoo: pip install "delayed-rl[multiagent]"'
+        ) from error
+
+
+def tasks(config: Config) -> list[dict]:
+    """Per delay λ of :data:`LAMS` (``--quick``: :data:`QUICK_LAM`), seed and learner, one task.
+
+    Raises:
+        ImportError: PettingZoo is missing (the ``multiagent`` extra).
+    """
+    require_pettingzoo()
+    steps = config.steps or (QUICK_STEPS if config.quick else STEPS)
+    lams = (QUICK_LAM,) if config.quick else LAMS
+    fields = {"size": SIZE, "episode_steps": EPISODE_STEPS, "steps": steps}
+    return [task for lam in lams for task in seed_tasks(config, AGENTS, lam=lam, **fields)]
+
+
+def shared_run(task: dict) -> SharedRun:
+    """The run behind a task: Q undelayed's has no λ, so both delays share it."""
+    check_choice("agent", task["agent"], AGENTS)
+    if task["agent"] == "Q undelayed":
+        return SharedRun(train_and_score, {k: v for k, v in task.items() if k != "lam"})
+    return SharedRun(train_and_score, task)
+
+
+def run_task(task: dict) -> dict:
+    """A task's result, run on its own (:func:`shared_run`)."""
+    return shared_run(task).alone()
+
+
+#: Rough cost of one joint step (µs, both learners and the env), for scheduling only.
+STEP_MICROSECONDS = {"Q undelayed": 40.0, "Q": 90.0, "DeconvQ known": 110.0}
+
+
+def cost(task: dict) -> float:
+    """A task's estimated core-seconds (its steps at :data:`STEP_MICROSECONDS`, else 140 µs)."""
+    return 1e-6 * task["steps"] * STEP_MICROSECONDS.get(task["agent"], 140.0)
+
+
+class AgentSpaces(gym.Env):
+    """A stand-in env that only carries one PettingZoo agent's spaces, to build a learner on.
+
+    The tabular agents read their spaces from the env they are given; a learner driven by
+    ``predict`` and ``update`` never steps it (``learn()`` would fail: it has no ``step``).
+    """
+
+    def __init__(self, env: Any, agent: Any):
+        self.observation_space = env.observation_space(agent)
+        self.action_space = env.action_space(agent)
+
+
+def learner_seed(seed: int, index: int) -> int:
+    """The seed of agent ``index``'s learner in the run of ``seed`` (63 bits of a SeedSequence)."""
+    state = np.random.SeedSequence(seed, spawn_key=(LEARNER_STREAM, index)).generate_state(
+        1, np.uint64
+    )
+    return int(state[0] >> np.uint64(1))
+
+
+def make_game(task: dict) -> Any:
+    """The task's game, with each agent's Poisson(λ) reward delay (flushed) unless undelayed."""
+    from delayed_rl.multiagent import CooperativeGridWorldEnv, ParallelRewardDelay
+
+    env = CooperativeGridWorldEnv(task["size"], max_steps=task["episode_steps"])
+    if task["agent"] == "Q undelayed":
+        return env
+    return ParallelRewardDelay(env, Poisson(task["lam"]), on_episode_end="flush")
+
+
+def make_learner(task: dict, env: gym.Env, seed: int) -> TabularAgent:
+    """One independent learner of ``task["agent"]``'s kind, on ``env``'s spaces."""
+    hyperparameters = thesis_hyperparameters(seed)
+    if task["agent"] in ("Q", "Q undelayed"):
+        return QLearning(env, **hyperparameters)
+    known = Poisson(task["lam"]) if task["agent"] == "DeconvQ known" else None
+    return DeconvolutionQLearning(
+        env, delay=known, max_delay=LAMBDA_MAX, on_episode_end="flush", **hyperparameters
+    )
+
+
+def greedy_score(learners: dict[Any, TabularAgent], size: int, episode_steps: int) -> float:
+    """The greedy joint policy's mean reward per step over an undelayed episode from the start."""
+    from delayed_rl.multiagent import CooperativeGridWorldEnv
+
+    env = CooperativeGridWorldEnv(size, max_steps=episode_steps)
+    cells = np.arange(env.n_states)
+    policy = {a: learner.predict(cells, deterministic=True)[0] for a, learner in learners.items()}
+    observations, _ = env.reset(seed=0)
+    total = 0.0
+    while env.agents:
+        actions = {agent: int(policy[agent][observations[agent]]) for agent in env.agents}
+        observations, rewards, *_ = env.step(actions)
+        total += rewards[env.possible_agents[0]]  # shared: every agent's is the same
+    return total / episode_steps
+
+
+def train_and_score(task: dict) -> dict:
+    """Train one independent learner per agent on the task's game; score the greedy policy.
+
+    Returns:
+        ``steps`` and ``greedy`` (the checkpoints and the greedy score at each), ``score`` (the
+        last), ``curve_steps`` and ``curve`` (the running mean of the undelayed shared reward),
+        ``average`` (its mean over the run) and, for DeconvQ learned, ``mean_delay`` (the
+        agents' mean) and ``estimates`` (each agent's ``delay_pmf``); JSON-ready lists.
+    """
+    env = make_game(task)
+    learners = {
+        agent: make_learner(task, AgentSpaces(env, agent), learner_seed(task["seed"], i))
+        for i, agent in enumerate(env.possible_agents)
+    }
+    steps, every = task["steps"], max(1, task["steps"] // CHECKPOINTS)
+    undelayed = np.empty(steps)
+    checkpoints, scores = [], []
+    observations, _ = env.reset(seed=task["seed"])
+    for step in range(steps):
+        actions = {agent: learners[agent].predict(observations[agent])[0] for agent in env.agents}
+        following, rewards, terminated, truncated, infos = env.step(actions)
+        for agent, action in actions.items():
+            learners[agent].update(
+                observations[agent],
+                action,
+                rewards[agent],
+                following[agent],
+                terminated[agent],
+                truncated[agent],
+            )
+        first = env.possible_agents[0]
+        undelayed[step] = infos[first].get("undelayed_reward", rewards[first])
+        observations = following if env.agents else env.reset()[0]
+        if (step + 1) % every == 0 or step + 1 == steps:
+            checkpoints.append(step + 1)
+            scores.append(greedy_score(learners, task["size"], task["episode_steps"]))
+    curve_steps, curve = running_average(undelayed)
+    result = {
+        "steps": checkpoints,
+        "greedy": scores,
+        "score": scores[-1],
+        "curve_steps": curve_steps.tolist(),
+        "curve": curve.tolist(),
+        "average": float(undelayed.mean()),
+    }
+    if task["agent"] == "DeconvQ learned":
+        result["mean_delay"] = float(np.mean([agent.mean_delay for agent in learners.values()]))
+        result["estimates"] = [agent.delay_pmf.tolist() for agent in learners.values()]
+    return result
+
+
+def optimum(size: int = SIZE, episode_steps: int = EPISODE_STEPS) -> float:
+    """The best score: +10 every ``2(size − 1) + 1`` steps of the episode, per step."""
+    return 10.0 * (episode_steps // (2 * (size - 1) + 1)) / episode_steps
+
+
+def setting_label(lam: float) -> str:
+    """A delay setting's name in the tables and figures: ``"Poisson(10)"``."""
+    return f"Poisson({lam:g})"
+
+
+def _group(task_list: list[dict], results: list[dict]) -> dict[float, dict[str, dict]]:
+    """``{λ: {agent: {seed: result}}}``, in the order of ``task_list``."""
+    groups: dict[float, dict[str, dict]] = {}
+    for task, result in zip(task_list, results, strict=True):
+        by_agent = groups.setdefault(task["lam"], {})
+        by_agent.setdefault(task["agent"], {})[task["seed"]] = result
+    return groups
+
+
+def _scores(runs: dict[int, dict]) -> dict[int, float]:
+    return {seed: float(result["score"]) for seed, result in runs.items()}
+
+
+def _optimal_claim(quantity: str, thesis: str, runs: dict[int, dict]) -> Claim:
+    """The seeds whose final greedy policy is optimal, against :data:`SEED_SHARE` of them."""
+    values = [score / optimum() for score in _scores(runs).values()]
+    at_least = math.ceil(SEED_SHARE * len(values))
+    return seed_rule_claim(quantity, thesis, values, OPTIMAL_FRACTION, at_least)
+
+
+def _setting_claims(lam: float, by_agent: dict[str, dict]) -> list[Claim]:
+    """The claims of one delay (see the module docstring), then every learner's score."""
+    label = setting_label(lam)
+    scores = {agent: _scores(runs) for agent, runs in by_agent.items()}
+    claims = []
+    for name in ("DeconvQ known", "DeconvQ learned"):
+        claims.append(
+            direction_claim(
+                f"{label}: {name} minus Q score",
+                f"extension: {name} above Q",
+                mean_ci_n(paired(scores[name], scores["Q"])),
+                "above",
+                note="paired by seed",
+            )
+        )
+        claims.append(
+            _optimal_claim(
+                f"{label}: {name}, score / optimum (seeds ≥ {OPTIMAL_FRACTION:g})",
+                f"extension: optimal on ≥ {SEED_SHARE * 100:g} % of the seeds",
+                by_agent[name],
+            )
+        )
+    claims.append(
+        direction_claim(
+            f"{label}: Q minus Q undelayed score",
+            "extension: the delay costs Q-learning (below 0)",
+            mean_ci_n(paired(scores["Q"], scores["Q undelayed"])),
+            "below",
+            note="paired by seed",
+        )
+    )
+    delays = [r["mean_delay"] for r in by_agent["DeconvQ learned"].values()]
+    claims.append(mean_delay_claim(f"{label}: DeconvQ learned mean delay", mean_ci_n(delays), lam))
+    claims += [
+        reference_row(f"{label}: {agent} score", mean_ci_n(list(scores[agent].values())))
+        for agent in AGENTS
+        if agent in scores
+    ]
+    return claims
+
+
+def _mean_ci(values: list[float]) -> dict[str, float]:
+    mean, ci, _ = mean_ci_n(values)
+    return {"mean": mean, "ci95": ci}
+
+
+def _table(groups: dict[float, dict[str, dict]]) -> dict:
+    """``summary.json``'s table: per delay and learner, the scores and training rewards."""
+    table: dict[str, dict] = {}
+    for lam, by_agent in groups.items():
+        rows = table.setdefault(setting_label(lam), {})
+        for agent, runs in by_agent.items():
+            seeds = sorted(runs)
+            scores = [runs[seed]["score"] for seed in seeds]
+            rows[agent] = {
+                "seeds": seeds,
+                "scores": scores,
+                "score": _mean_ci(scores),
+                "average_reward": _mean_ci([runs[seed]["average"] for seed in seeds]),
+                "optimal_seeds": sum(score >= OPTIMAL_FRACTION * optimum() for score in scores),
+            }
+            if agent == "DeconvQ learned":
+                rows[agent]["mean_delay"] = [runs[seed]["mean_delay"] for seed in seeds]
+    return table
+
+
+def _curves(groups: dict[float, dict[str, dict]]) -> list[Curve]:
+    """Every run's greedy-score and training curves, for ``curves.csv``."""
+    curves = []
+    for lam, by_agent in groups.items():
+        for agent, runs in by_agent.items():
+            condition = f"{setting_label(lam)} | {agent}"
+            for seed, r in runs.items():
+                curves.append(
+                    Curve(
+                        condition,
+                        seed,
+                        np.asarray(r["steps"]),
+                        np.asarray(r["greedy"]),
+                        "greedy_score",
+                    )
+                )
+                curves.append(
+                    Curve(condition, seed, np.asarray(r["curve_steps"]), np.asarray(r["curve"]))
+                )
+    return curves
+
+
+def _figures(groups: dict[float, dict[str, dict]]) -> dict:
+    """Per delay: the greedy scores' learning curves, and DeconvQ learned's delay estimates."""
+    figures = {}
+    for lam, by_agent in groups.items():
+        label = setting_label(lam)
+        title = f"two independent learners, {SIZE}×{SIZE} cooperative grid world, {label} delays"
+        curves = {
+            agent: [(np.asarray(r["steps"]), np.asarray(r["greedy"])) for r in runs.values()]
+            for agent, runs in by_agent.items()
+        }
+        figures[f"greedy_score_poisson{lam:g}"] = plotting.figure(
+            plotting.learning_curves,
+            curves,
+            f"{title}: greedy joint policy",
+            "greedy score (reward per step)",
+            levels=[(optimum(), f"optimum {optimum():.2f}")],
+        )
+        learned = by_agent.get("DeconvQ learned", {})
+        pmfs = [np.mean(np.asarray(r["estimates"]), axis=0) for r in learned.values()]
+        estimates = [(np.arange(pmf.size), pmf) for pmf in pmfs]  # per seed, the agents' mean
+        if estimates:
+            figures[f"delay_estimate_poisson{lam:g}"] = plotting.figure(
+                plotting.estimate_plot,
+                {"DeconvQ learned pmf (the two agents' mean)": estimates},
+                np.asarray(Poisson(lam).pmf(np.arange(LAMBDA_MAX + 1))),
+                f"{title}: DeconvQ learned's delay estimate",
+            )
+    return figures
+
+
+def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
+    """The claims of the module docstring, the table (``extra["table"]``) and the figures."""
+    groups = _group(task_list, results)
+    undelayed = next(iter(groups.values()))["Q undelayed"]
+    claims = [
+        _optimal_claim(
+            f"Q undelayed, score / optimum (seeds ≥ {OPTIMAL_FRACTION:g})",
+            f"the setting's check: optimal on ≥ {SEED_SHARE * 100:g} % of the seeds",
+            undelayed,
+        )
+    ]
+    claims += [
+        claim for lam, by_agent in groups.items() for claim in _setting_claims(lam, by_agent)
+    ]
+    extra = {
+        "table": _table(groups),
+        "optimum": optimum(),
+        "rules": {"optimal_fraction": OPTIMAL_FRACTION, "seed_share": SEED_SHARE},
+    }
+    return Summary(claims, _curves(groups), _figures(groups), extra)
+
+
+EXPERIMENT = Experiment(
+    name="multiagent-gridworld",
+    thesis="beyond the thesis (multi-agent, shared delayed reward)",
+    description="Two independent tabular learners (one per PettingZoo agent, through predict and "
+    "update) on a cooperative two-agent 5×5 grid world (the thesis's world, +10 to both only when "
+    "both stand on the reward cell; each sees its own cell; 100-step episodes) under each agent's "
+    "Poisson(λ) reward delays, λ = 5 and 10, flushed at the episode's end: Q-learning, "
+    "deconvolution Q-learning (delay known, or learned on 0..50) and undelayed Q-learning, 150k "
+    "steps a run; α = 0.1, γ = 0.9, ε = 0.1, q_init = 25. Scored by the greedy joint policy's "
+    "reward per step over an undelayed episode (optimum 1.1), paired by seed.",
+    tasks=tasks,
+    run_task=run_task,
+    summarize=summarize,
+    default_seeds=5,
+    shared_run=shared_run,
+    cost=cost,
+    resumable=True,
+)
