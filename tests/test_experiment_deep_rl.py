@@ -49,10 +49,10 @@ def test_the_full_run_has_every_setting_method_and_seed_and_shares_the_oracle():
 
 @pytest.mark.experiment
 def test_a_tiny_quick_run_scores_every_method_and_resumes(tmp_path):
-    config = Config(quick=True, seeds=2, steps=300, workers=2)
+    config = Config(quick=True, seeds=1, steps=300, workers=2)
     summary = run_experiment(get_experiment("deep-rl"), config, tmp_path, False)
     methods = deep_rl.SETTING_METHODS
-    assert summary.extra["runs"] == 2 * sum(len(methods[name]) for name in deep_rl.QUICK)
+    assert summary.extra["runs"] == sum(len(methods[name]) for name in deep_rl.QUICK)
     assert len(list((tmp_path / "runs").glob("*.json"))) == summary.extra["runs"]
     table = summary.extra["table"]
     assert set(table) == set(deep_rl.QUICK)
@@ -65,7 +65,7 @@ def test_a_tiny_quick_run_scores_every_method_and_resumes(tmp_path):
         for method in ("deconv-known", "deconv-learned"):
             assert all(0 <= d <= 60 for d in rows[method]["mean_delay"]["values"])
         known = rows["deconv-known"]["mean_delay"]["values"]
-        assert known == pytest.approx([20.0, 20.0], abs=1e-3)  # Poisson(20)'s mean, clipped at 60
+        assert known == pytest.approx([20.0], abs=1e-3)  # Poisson(20)'s mean, clipped at 60
     payload = json.loads((tmp_path / "summary.json").read_text())
     for claim in payload["claims"]:
         assert claim["verdict"] in VERDICTS and claim["criterion"]
@@ -73,7 +73,7 @@ def test_a_tiny_quick_run_scores_every_method_and_resumes(tmp_path):
     targets = [c for c in summary.claims if c.thesis.startswith("target")]
     assert len(targets) == 5  # Pendulum Poisson(20): three, CartPole: two
     curves = [c for c in summary.curves if c.condition == "pendulum-poisson20/raw"]
-    assert [c.steps[0] for c in curves] == [0, 0] and [c.steps[-1] for c in curves] == [300, 300]
+    assert [c.steps[0] for c in curves] == [0] and [c.steps[-1] for c in curves] == [300]
     assert sorted(p.name for p in tmp_path.glob("*.png")) == [
         f"curves_{setting}.png" for setting in sorted(deep_rl.QUICK)
     ]
