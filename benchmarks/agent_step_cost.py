@@ -27,13 +27,11 @@ Targets:
 from __future__ import annotations
 
 import argparse
-import gc
 import random
-import time
 from collections.abc import Callable
 
 import gymnasium as gym
-import numpy as np
+from interleaved import Repeat, fastest, interleave, median_ratio, seconds_per_step, shown, spread
 
 import delayed_rl  # noqa: F401  (registers the env ids)
 from delayed_rl.agents import DEFAULTS, MultipleModelQLearning, QLearning
@@ -100,19 +98,6 @@ class MinimalQLearning:
         self.s = s
 
 
-def seconds_per_step(run: Callable[[int], object], steps: int) -> float:
-    """Seconds per step of ``run(steps)``, garbage collector off."""
-    collecting = gc.isenabled()
-    gc.disable()
-    try:
-        start = time.perf_counter()
-        run(steps)
-        return (time.perf_counter() - start) / steps
-    finally:
-        if collecting:
-            gc.enable()
-
-
 def learners(compiled: bool) -> dict[str, Callable[[int], object]]:
     """``name: run(steps)`` of every configuration (and, on the Python path, of the floor)."""
     runs: dict[str, Callable[[int], object]] = {}
@@ -128,7 +113,7 @@ def learners(compiled: bool) -> dict[str, Callable[[int], object]]:
 
 def measure_repeats(
     steps: int, repeats: int, compiled: bool = False, rounds: int = 1
-) -> list[dict[str, list[float]]]:
+) -> list[Repeat]:
     """Seconds per step of each configuration in each round, one dict per repeat.
 
     Every run is warmed up first (:data:`WARM_UP` steps: past the history-limited start and the
@@ -139,50 +124,23 @@ def measure_repeats(
     runs = learners(compiled)
     for run in runs.values():
         run(WARM_UP)
-    result = []
-    for _ in range(repeats):
-        timings: dict[str, list[float]] = {name: [] for name in runs}
-        for _ in range(rounds):
-            for name, run in runs.items():
-                timings[name].append(seconds_per_step(run, steps))
-        result.append(timings)
-    return result
-
-
-def fastest(per_repeat: list[dict[str, list[float]]]) -> list[dict[str, float]]:
-    """Per repeat, each configuration's fastest round (the least disturbed by other processes)."""
-    return [{name: min(times) for name, times in repeat.items()} for repeat in per_repeat]
-
-
-def ratio_to_floor(repeat: dict[str, list[float]], name: str) -> float:
-    """``name``'s cost over the floor's within a repeat: the median over its rounds.
-
-    Each round's two timings are back to back, so a slow spell of the machine scales both.
-    """
-    return float(np.median([t / f for t, f in zip(repeat[name], repeat[FLOOR], strict=True)]))
+    timed = {
+        name: lambda run=run: seconds_per_step(lambda: run(steps), steps)
+        for name, run in runs.items()
+    }
+    return interleave(timed, repeats, rounds)
 
 
 def measure(steps: int, repeats: int, compiled: bool = False) -> dict[str, float]:
     """Fastest seconds per step of each configuration (the floor left out), on one path."""
-    best = fastest(measure_repeats(steps, repeats, compiled))
+    best = [fastest(r) for r in measure_repeats(steps, repeats, compiled)]
     return {name: min(r[name] for r in best) for name in configurations()}
 
 
-def spread(values: list[float]) -> tuple[float, float, float]:
-    """``(min, median, max)`` of ``values``."""
-    low, median, high = np.percentile(values, [0, 50, 100])
-    return float(low), float(median), float(high)
-
-
-def shown(values: tuple[float, float, float], digits: int = 2) -> str:
-    """``min–median–max`` with ``digits`` decimals."""
-    return "–".join(f"{value:.{digits}f}" for value in values)
-
-
-def floor_summary(per_repeat: list[dict[str, list[float]]]) -> str:
+def floor_summary(per_repeat: list[Repeat]) -> str:
     """Q-learning's ``learn()`` against the floor, within each repeat (min–median–max)."""
-    ratios = [ratio_to_floor(r, "9x9, |Λ|=1") for r in per_repeat]
-    floor = spread([r[FLOOR] * 1e6 for r in fastest(per_repeat)])
+    ratios = [median_ratio(r, "9x9, |Λ|=1", FLOOR) for r in per_repeat]
+    floor = spread([fastest(r)[FLOOR] * 1e6 for r in per_repeat])
     verdict = _verdict(max(ratios), 2)
     return (
         f"learn() of Q-learning / minimal loop = {shown(spread(ratios))} (min–median–max of "
@@ -199,13 +157,13 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=5, help="interleaved repeats")
     args = parser.parse_args()
     per_repeat = measure_repeats(args.steps, args.repeats, rounds=args.rounds)
-    best = fastest(per_repeat)
+    best = [fastest(r) for r in per_repeat]
 
     print(f"learn(compiled=False) cost per step, µs (min–median–max of {args.repeats} repeats)")
     print(f"{'configuration':<18} {'µs/step':>20} {'vs minimal loop':>18}")
     for name in per_repeat[0]:
         cost = spread([r[name] * 1e6 for r in best])
-        ratio = spread([ratio_to_floor(r, name) for r in per_repeat])
+        ratio = spread([median_ratio(r, name, FLOOR) for r in per_repeat])
         print(f"{name:<18} {shown(cost):>20} {shown(ratio):>18}")
     scaling = [r["9x9, |Λ|=151"] / r["9x9, |Λ|=1"] for r in best]
     world = [r["30x30, |Λ|=51"] / r["9x9, |Λ|=51"] for r in best]

@@ -27,15 +27,14 @@ from __future__ import annotations
 
 import argparse
 import functools
-import gc
 import importlib
-import time
 import warnings
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 from gymnasium import spaces
+from interleaved import Repeat, interleave, median_ratio, seconds_per_step, shown, spread
 from pettingzoo import ParallelEnv
 from pettingzoo.utils import BaseParallelWrapper
 
@@ -121,21 +120,17 @@ def time_steps(env: ParallelEnv, actions: list[dict[str, Any]]) -> float:
         warnings.simplefilter("ignore", UserWarning)  # the last timing's rewards, left pending
         env.reset(seed=0)
     step, reset = env.step, env.reset
-    collecting = gc.isenabled()
-    gc.disable()
-    try:
-        start = time.perf_counter()
+
+    def run() -> None:
         for action in actions:
             step(action)
             if not env.agents:
                 reset()
-        return (time.perf_counter() - start) / len(actions)
-    finally:
-        if collecting:
-            gc.enable()
+
+    return seconds_per_step(run, len(actions))
 
 
-def measure(env: str, steps: int, repeats: int, rounds: int) -> list[dict[str, list[float]]]:
+def measure(env: str, steps: int, repeats: int, rounds: int) -> list[Repeat]:
     """Seconds per step of each stack in each round, one dict per repeat."""
     stacks = make_stacks(ENVS[env])
     probe = ENVS[env]()
@@ -146,41 +141,19 @@ def measure(env: str, steps: int, repeats: int, rounds: int) -> list[dict[str, l
     ]
     for stack in stacks.values():  # warm-up
         time_steps(stack, actions)
-    result = []
-    for _ in range(repeats):
-        timings: dict[str, list[float]] = {name: [] for name in stacks}
-        for _ in range(rounds):
-            for name, stack in stacks.items():
-                timings[name].append(time_steps(stack, actions))
-        result.append(timings)
-    return result
+    timed = {name: lambda stack=stack: time_steps(stack, actions) for name, stack in stacks.items()}
+    return interleave(timed, repeats, rounds)
 
 
-def spread(values: list[float]) -> tuple[float, float, float]:
-    """``(min, median, max)`` of ``values``."""
-    low, median, high = np.percentile(values, [0, 50, 100])
-    return float(low), float(median), float(high)
-
-
-def repeat_ratio(repeat: dict[str, list[float]], name: str) -> float:
-    """A repeat's cost ratio of stack ``name`` to the floor: the median over its rounds."""
-    return float(np.median([t / f for t, f in zip(repeat[name], repeat[FLOOR], strict=True)]))
-
-
-def _shown(values: tuple[float, float, float], digits: int) -> str:
-    """``min–median–max`` with ``digits`` decimals."""
-    return "–".join(f"{value:.{digits}f}" for value in values)
-
-
-def report(env: str, repeats: list[dict[str, list[float]]]) -> str:
+def report(env: str, repeats: list[Repeat]) -> str:
     """The table of costs and ratios, and the verdict against :data:`TARGET` (pursuit)."""
     lines = [f"{'stack':<36}{'µs/step':>26}{'ratio to ' + FLOOR:>26}"]
     worst = 0.0
     for name in repeats[0]:
         cost = spread([min(r[name]) * 1e6 for r in repeats])
-        ratios = [repeat_ratio(r, name) for r in repeats]
+        ratios = [median_ratio(r, name, FLOOR) for r in repeats]
         worst = max(worst, max(ratios)) if name != FLOOR else worst
-        lines.append(f"{name:<36}{_shown(cost, 1):>26}{_shown(spread(ratios), 3):>26}")
+        lines.append(f"{name:<36}{shown(cost, 1):>26}{shown(spread(ratios), 3):>26}")
     lines.append(f"(min–median–max over {len(repeats)} repeats)\n")
     verdict = "ok" if worst <= TARGET else "MISSED"
     scope = "" if env == "pursuit" else " (stated on pursuit; for information here)"

@@ -40,6 +40,7 @@ import epuck_speed
 import gymnasium as gym
 import numpy as np
 import wrapper_overhead
+from interleaved import fastest, one_repeat, shown, spread
 
 import delayed_rl
 
@@ -118,18 +119,9 @@ def reproduce_seconds(out: Path) -> tuple[float, float, list[str]]:
     return seconds, warm_up, rows
 
 
-def interleaved(runs: dict[str, Callable[[], float]], repeats: int) -> dict[str, list[float]]:
-    """Each of ``runs`` (returning seconds per step) ``repeats`` times, interleaved."""
-    times: dict[str, list[float]] = {name: [] for name in runs}
-    for _ in range(repeats):
-        for name, run in runs.items():
-            times[name].append(run())
-    return times
-
-
 def spread_text(values: Sequence[float], scale: float = 1e6, digits: int = 2) -> str:
     """``min–median–max`` of ``values`` times ``scale``."""
-    return agent_step_cost.shown(agent_step_cost.spread([v * scale for v in values]), digits)
+    return shown(spread([v * scale for v in values]), digits)
 
 
 def toy_text_runs(steps: int) -> dict[str, Callable[[], float]]:
@@ -295,7 +287,7 @@ def main() -> None:
     )
 
     per_repeat = agent_step_cost.measure_repeats(10_000 // scale, 3, rounds=3)
-    best = agent_step_cost.fastest(per_repeat)
+    best = [fastest(r) for r in per_repeat]
     python = {name: min(r[name] for r in best) for name in agent_step_cost.configurations()}
     compiled = agent_step_cost.measure(300_000 // scale, 3, compiled=True)
     lines += markdown_table(
@@ -325,7 +317,7 @@ def main() -> None:
         "",
     ]
     repeats = 5
-    toy = interleaved(toy_text_runs(200_000 // scale), repeats)
+    toy = one_repeat(toy_text_runs(200_000 // scale), repeats)
     lines += markdown_table(
         "gym.make('Taxi-v4') (TimeLimit 200) with Poisson(5) reward delays: Q-learning, "
         f"µs/step, min–median–max of {repeats} interleaved repeats",
@@ -339,7 +331,7 @@ def main() -> None:
             for name, values in toy.items()
         ],
     )
-    compiled = interleaved(compiled_agent_runs(300_000 // scale), 3)
+    compiled = one_repeat(compiled_agent_runs(300_000 // scale), 3)
     lines += markdown_table(
         "Every agent on the compiled path (GridWorld-9x9, Poisson(13), µs/step, 3 interleaved repeats)",
         ["agent", "µs/step", "ratio to Q-learning (median)"],
@@ -352,7 +344,7 @@ def main() -> None:
             for name, values in compiled.items()
         ],
     )
-    epuck = interleaved(epuck_runs(10_000 // scale), repeats)
+    epuck = one_repeat(epuck_runs(10_000 // scale), repeats)
     lines += markdown_table(
         f"The e-puck (µs/step, min–median–max of {repeats} interleaved repeats)",
         ["run", "µs/step", "steps/s (median)"],

@@ -22,11 +22,10 @@ beside the floor (the bare env's cost) measured in the same run; a first round w
 from __future__ import annotations
 
 import argparse
-import gc
-import time
 
 import gymnasium as gym
 import numpy as np
+from interleaved import Repeat, fastest, interleave, seconds_per_step, shown, spread
 
 from delayed_rl.envs.gridworld import GridWorldEnv
 from delayed_rl.wrappers import PoissonRewardDelay
@@ -50,21 +49,17 @@ def time_steps(env: gym.Env, actions: list[int]) -> float:
     """Seconds per step over ``actions``, resetting at episode ends (garbage collector off)."""
     env.reset(seed=0)
     step, reset = env.step, env.reset
-    collecting = gc.isenabled()
-    gc.disable()
-    try:
-        start = time.perf_counter()
+
+    def run() -> None:
         for action in actions:
             _, _, terminated, truncated, _ = step(action)
             if terminated or truncated:
                 reset()
-        return (time.perf_counter() - start) / len(actions)
-    finally:
-        if collecting:
-            gc.enable()
+
+    return seconds_per_step(run, len(actions))
 
 
-def measure(steps: int, repeats: int, rounds: int = 15) -> list[dict[str, list[float]]]:
+def measure(steps: int, repeats: int, rounds: int = 15) -> list[Repeat]:
     """Seconds per step of each stack in each round, one dict per repeat.
 
     A round times the three stacks once each, back to back (garbage collector off).
@@ -73,14 +68,8 @@ def measure(steps: int, repeats: int, rounds: int = 15) -> list[dict[str, list[f
     stacks = make_stacks()
     for env in stacks.values():  # warm-up
         time_steps(env, actions)
-    result = []
-    for _ in range(repeats):
-        timings: dict[str, list[float]] = {name: [] for name in stacks}
-        for _ in range(rounds):
-            for name, env in stacks.items():
-                timings[name].append(time_steps(env, actions))
-        result.append(timings)
-    return result
+    timed = {name: lambda env=env: time_steps(env, actions) for name, env in stacks.items()}
+    return interleave(timed, repeats, rounds)
 
 
 def overhead_ratio(cost: dict[str, float]) -> float:
@@ -89,7 +78,7 @@ def overhead_ratio(cost: dict[str, float]) -> float:
     return (cost["PoissonRewardDelay(13)"] - bare) / (cost["RecordEpisodeStatistics"] - bare)
 
 
-def repeat_ratio(repeat: dict[str, list[float]]) -> float:
+def repeat_ratio(repeat: Repeat) -> float:
     """A repeat's overhead ratio: the median over its rounds of each round's ratio."""
     rounds = len(next(iter(repeat.values())))
     ratios = [
@@ -98,18 +87,7 @@ def repeat_ratio(repeat: dict[str, list[float]]) -> float:
     return float(np.median(ratios))
 
 
-def fastest(repeat: dict[str, list[float]]) -> dict[str, float]:
-    """Each stack's fastest round of a repeat (the least disturbed by other processes)."""
-    return {name: min(times) for name, times in repeat.items()}
-
-
-def spread(values: list[float]) -> tuple[float, float, float]:
-    """``(min, median, max)`` of ``values``."""
-    low, median, high = np.percentile(values, [0, 50, 100])
-    return float(low), float(median), float(high)
-
-
-def cost_rows(repeats: list[dict[str, list[float]]]) -> list[tuple[str, str, str]]:
+def cost_rows(repeats: list[Repeat]) -> list[tuple[str, str, str]]:
     """Per stack: its name, its µs/step and its overhead over the bare env, each min–median–max.
 
     A repeat's figure is its fastest round's.
@@ -119,25 +97,20 @@ def cost_rows(repeats: list[dict[str, list[float]]]) -> list[tuple[str, str, str
     for name in best[0]:
         cost = [r[name] * 1e6 for r in best]
         overhead = [(r[name] - r["bare"]) * 1e6 for r in best]
-        rows.append((name, _shown(spread(cost), 3), _shown(spread(overhead), 3)))
+        rows.append((name, shown(spread(cost), 3), shown(spread(overhead), 3)))
     return rows
 
 
-def summary(repeats: list[dict[str, list[float]]]) -> str:
+def summary(repeats: list[Repeat]) -> str:
     """One line: the overhead ratio within each repeat (min–median–max) beside the floor."""
     ratios = [repeat_ratio(r) for r in repeats]
     floor = spread([fastest(r)["bare"] * 1e6 for r in repeats])
     verdict = "ok" if max(ratios) <= TARGET else "MISSED"
     return (
-        f"Overhead ratio PoissonRewardDelay / RecordEpisodeStatistics: {_shown(spread(ratios), 2)} "
+        f"Overhead ratio PoissonRewardDelay / RecordEpisodeStatistics: {shown(spread(ratios), 2)} "
         f"(min–median–max of {len(ratios)} repeats; target ≤ {TARGET} in every repeat: "
-        f"{verdict}); floor, the bare env: {_shown(floor, 3)} µs/step"
+        f"{verdict}); floor, the bare env: {shown(floor, 3)} µs/step"
     )
-
-
-def _shown(values: tuple[float, float, float], digits: int) -> str:
-    """``min–median–max`` with ``digits`` decimals."""
-    return "–".join(f"{value:.{digits}f}" for value in values)
 
 
 def main() -> None:

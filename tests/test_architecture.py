@@ -141,6 +141,7 @@ LAYERS = [
             "delayed_rl._delay_line",
             "delayed_rl._numba",
             "delayed_rl._portable_math",
+            "delayed_rl._lazy",
         ),
     ),
     ("wrappers and envs", ("delayed_rl.wrappers", "delayed_rl.multiagent", "delayed_rl.envs")),

@@ -36,8 +36,7 @@ Example:
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from delayed_rl._lazy import lazy_attributes
 
 __all__ = [
     "REWARD_MODELS",
@@ -82,21 +81,15 @@ _HOMES = {
 }
 
 
-def __getattr__(name: str) -> Any:
-    if name not in _HOMES:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    try:
-        module = importlib.import_module(f"{__name__}.{_HOMES[name]}")
-    except ImportError as error:
-        if error.name and error.name.split(".")[0] in ("torch", "stable_baselines3"):
-            raise ImportError(
-                f"delayed_rl.deep.{name} needs torch and stable-baselines3, which are not "
-                f"installed ({error.name} is missing): install the sb3 extra, "
-                '`pip install "delayed-rl[sb3]"` (torch first, for its CPU build: '
-                "`pip install torch --index-url https://download.pytorch.org/whl/cpu`)"
-            ) from error
-        raise
-    return getattr(module, name)
+__getattr__ = lazy_attributes(
+    __name__,
+    _HOMES,
+    ("torch", "stable_baselines3"),
+    "torch and stable-baselines3",
+    "sb3",
+    '`pip install "delayed-rl[sb3]"` (torch first, for its CPU build: '
+    "`pip install torch --index-url https://download.pytorch.org/whl/cpu`)",
+)
 
 
 def __dir__() -> list[str]:

@@ -52,8 +52,7 @@ Example:
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from delayed_rl._lazy import lazy_attributes
 
 __all__ = [
     "CooperativeGridWorldEnv",
@@ -72,21 +71,14 @@ _HOMES = {
 }
 
 
-def __getattr__(name: str) -> Any:
-    """The names of :data:`__all__`, imported from their modules on first use."""
-    if name not in _HOMES:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    try:
-        module = importlib.import_module(f"{__name__}.{_HOMES[name]}")
-    except ImportError as error:
-        if error.name and error.name.split(".")[0] == "pettingzoo":
-            raise ImportError(
-                f"delayed_rl.multiagent.{name} needs PettingZoo, which is not installed "
-                f"({error.name} is missing): install the multiagent extra, "
-                '`pip install "delayed-rl[multiagent]"`'
-            ) from error
-        raise
-    return getattr(module, name)
+__getattr__ = lazy_attributes(
+    __name__,
+    _HOMES,
+    ("pettingzoo",),
+    "PettingZoo",
+    "multiagent",
+    '`pip install "delayed-rl[multiagent]"`',
+)
 
 
 def __dir__() -> list[str]:

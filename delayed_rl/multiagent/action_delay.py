@@ -8,12 +8,11 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
 from delayed_rl.delays import Delay
-from delayed_rl.multiagent._agents import delay_record, per_agent_actions, per_agent_delays
+from delayed_rl.multiagent._agents import per_agent_actions
 from delayed_rl.multiagent._base import ParallelDelayWrapper
 from delayed_rl.wrappers._samples import as_action, copy_sample
 from delayed_rl.wrappers._spec import json_safe
 from delayed_rl.wrappers.action_delay import ActionLine, _check_action, neutral_action
-from delayed_rl.wrappers.reward_delay import DelaySampler, check_max_delay
 
 __all__ = ["ParallelActionDelay"]
 
@@ -104,27 +103,14 @@ class ParallelActionDelay(ParallelDelayWrapper):
         initial_action: Any = None,
         max_delay: int | None = None,
     ):
-        agents = getattr(env, "possible_agents", None) or ()
-        super().__init__(
-            env,
-            {
-                "delay": delay_record(delay, agents),
-                "initial_action": json_safe(initial_action),
-                "max_delay": json_safe(max_delay),
-            },
-        )
-        self.delays = per_agent_delays(delay, self.agent_order)
-        self.max_delay = check_max_delay(max_delay)
+        super().__init__(env, delay, max_delay, {"initial_action": json_safe(initial_action)})
         self.initial_actions = per_agent_actions(
             initial_action, self.agent_order, self.env.action_space, _initial_action
         )
         self.lines = {
             agent: ActionLine(copy_sample(action)) for agent, action in self.initial_actions.items()
         }
-        self._samplers = {
-            agent: DelaySampler(self.delays[agent], self.max_delay, "action")
-            for agent in self.agent_order
-        }
+        self._samplers = self.delay_samplers("action")
 
     def reset(self, seed: int | None = None, options: dict[str, Any] | None = None):
         """Reset the env and every agent's line; ``seed`` also reseeds every agent's delays.
@@ -132,12 +118,8 @@ class ParallelActionDelay(ParallelDelayWrapper):
         Raises:
             TypeError, ValueError: ``seed`` is neither ``None`` nor an integer ``>= 0``.
         """
-        seeds = self.agent_seeds(seed)
-        obs, infos = self.env.reset(seed=seed, options=options)
-        infos = self.own_infos(infos)
-        if seeds is not None:
-            for agent, agent_seed in zip(self.agent_order, seeds, strict=True):
-                self._samplers[agent].seed(agent_seed)
+        obs, infos, seeds = self.reset_env(seed, options)
+        self.seed_samplers(self._samplers, seeds)
         for agent, line in self.lines.items():
             if line.in_transit and agent in infos:
                 infos[agent]["discarded_actions"] = self._discarded(line)

@@ -8,12 +8,9 @@ from pettingzoo import ParallelEnv
 
 from delayed_rl._validation import check_choice
 from delayed_rl.delays import Delay
-from delayed_rl.multiagent._agents import delay_record, per_agent_delays
 from delayed_rl.multiagent._base import ParallelDelayWrapper
 from delayed_rl.wrappers._samples import copy_sample
-from delayed_rl.wrappers._spec import json_safe
 from delayed_rl.wrappers.observation_delay import ARRIVAL_RULES, _new_rule, _settings
-from delayed_rl.wrappers.reward_delay import DelaySampler, check_max_delay
 
 __all__ = ["ParallelObservationDelay"]
 
@@ -87,30 +84,16 @@ class ParallelObservationDelay(ParallelDelayWrapper):
         max_delay: int | None = None,
         arrival: str = "stale",
     ):
-        agents = getattr(env, "possible_agents", None) or ()
-        super().__init__(
-            env,
-            {
-                "delay": delay_record(delay, agents),
-                "max_delay": json_safe(max_delay),
-                "arrival": arrival,
-            },
-        )
-        delays = per_agent_delays(delay, self.agent_order)
-        self.max_delay = check_max_delay(max_delay)
+        super().__init__(env, delay, max_delay, {"arrival": arrival})
         self.arrival = check_choice("arrival", arrival, ARRIVAL_RULES)
-        self.delays: dict[Any, Delay] = {}
-        self.histories: dict[Any, int] = {}
-        for agent in self.agent_order:
-            _, _, _, self.histories[agent] = _settings(delays[agent], max_delay, arrival)
-            self.delays[agent] = delays[agent]
+        self.histories: dict[Any, int] = {
+            agent: _settings(self.delays[agent], max_delay, arrival)[3]
+            for agent in self.agent_order
+        }
         self.rules = {
             agent: _new_rule(self.arrival, self.histories[agent]) for agent in self.agent_order
         }
-        self._samplers = {
-            agent: DelaySampler(self.delays[agent], self.max_delay, "observation")
-            for agent in self.agent_order
-        }
+        self._samplers = self.delay_samplers("observation")
         self._live: set[Any] = set()  # the agents whose rule is in an episode
 
     def reset(self, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -123,12 +106,8 @@ class ParallelObservationDelay(ParallelDelayWrapper):
         Raises:
             TypeError, ValueError: ``seed`` is neither ``None`` nor an integer ``>= 0``.
         """
-        seeds = self.agent_seeds(seed)
-        obs, infos = self.env.reset(seed=seed, options=options)
-        infos = self.own_infos(infos)
-        if seeds is not None:
-            for agent, agent_seed in zip(self.agent_order, seeds, strict=True):
-                self._samplers[agent].seed(agent_seed)
+        obs, infos, seeds = self.reset_env(seed, options)
+        self.seed_samplers(self._samplers, seeds)
         for agent in self._live:
             self.rules[agent].reset(None)  # lets the last episode's observations go
         self._live.clear()

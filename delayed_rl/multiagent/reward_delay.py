@@ -10,11 +10,9 @@ from pettingzoo import ParallelEnv
 
 from delayed_rl._validation import check_reward
 from delayed_rl.delays import Delay
-from delayed_rl.multiagent._agents import delay_record, per_agent_delays
 from delayed_rl.multiagent._base import ParallelDelayWrapper
-from delayed_rl.wrappers._spec import json_safe
 from delayed_rl.wrappers.buffers import RewardBuffers
-from delayed_rl.wrappers.reward_delay import check_episode_end, check_max_delay, flush_watch
+from delayed_rl.wrappers.reward_delay import check_episode_end, flush_watch
 
 __all__ = ["ParallelRewardDelay"]
 
@@ -101,17 +99,7 @@ class ParallelRewardDelay(ParallelDelayWrapper):
         max_delay: int | None = None,
         on_episode_end: str = "flush",
     ):
-        agents = getattr(env, "possible_agents", None) or ()
-        super().__init__(
-            env,
-            {
-                "delay": delay_record(delay, agents),
-                "max_delay": json_safe(max_delay),
-                "on_episode_end": on_episode_end,
-            },
-        )
-        self.delays = per_agent_delays(delay, self.agent_order)
-        self.max_delay = check_max_delay(max_delay)
+        super().__init__(env, delay, max_delay, {"on_episode_end": on_episode_end})
         self.on_episode_end = check_episode_end(on_episode_end)
         rows: dict[Delay, list[int]] = {}
         for i, agent in enumerate(self.agent_order):
@@ -145,9 +133,7 @@ class ParallelRewardDelay(ParallelDelayWrapper):
         Raises:
             TypeError, ValueError: ``seed`` is neither ``None`` nor an integer ``>= 0``.
         """
-        seeds = self.agent_seeds(seed)
-        obs, infos = self.env.reset(seed=seed, options=options)
-        infos = self.own_infos(infos)
+        obs, infos, seeds = self.reset_env(seed, options)
         if seeds is not None:
             for rows, buffers in self._groups:
                 buffers.seed([seeds[i] for i in rows.tolist()])

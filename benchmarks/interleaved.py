@@ -1,0 +1,88 @@
+"""Interleaved timings: the measuring and the min–median–max figures the speed benchmarks share.
+
+A *repeat* is ``rounds`` rounds; a round times every run once, back to back, with the garbage
+collector off (as ``timeit`` does). A repeat's cost of a run is its fastest round (the one least
+disturbed by other processes); a ratio of two runs within a repeat is the median over its
+rounds of each round's ratio, whose two timings were taken back to back and so were slowed
+alike by a slow spell of the machine. Figures are min–median–max over the repeats.
+"""
+
+from __future__ import annotations
+
+import gc
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+
+import numpy as np
+
+Repeat = dict[str, list[float]]
+"""One repeat's timings: each run's seconds per step in each round."""
+
+
+@contextmanager
+def collector_off() -> Iterator[None]:
+    """Turn the garbage collector off for the block (back on after it, if it was on)."""
+    collecting = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if collecting:
+            gc.enable()
+
+
+def seconds_per_step(run: Callable[[], object], steps: int) -> float:
+    """Seconds per step of ``run()``, which takes ``steps`` steps (garbage collector off)."""
+    with collector_off():
+        start = time.perf_counter()
+        run()
+        return (time.perf_counter() - start) / steps
+
+
+def interleave(timed: dict[str, Callable[[], float]], repeats: int, rounds: int) -> list[Repeat]:
+    """Time every run of ``timed`` once per round, ``rounds`` rounds per repeat.
+
+    Args:
+        timed: ``name: time()``, where ``time()`` returns the seconds per step of one timing
+            (warmed up beforehand by the caller).
+        repeats: how many repeats.
+        rounds: rounds per repeat.
+
+    Returns:
+        One :data:`Repeat` per repeat.
+    """
+    result = []
+    for _ in range(repeats):
+        timings: Repeat = {name: [] for name in timed}
+        for _ in range(rounds):
+            for name, time_one in timed.items():
+                timings[name].append(time_one())
+        result.append(timings)
+    return result
+
+
+def fastest(repeat: Repeat) -> dict[str, float]:
+    """Each run's fastest round of a repeat (the least disturbed by other processes)."""
+    return {name: min(times) for name, times in repeat.items()}
+
+
+def median_ratio(repeat: Repeat, name: str, floor: str) -> float:
+    """``name``'s cost over ``floor``'s within a repeat: the median over its rounds."""
+    return float(np.median([t / f for t, f in zip(repeat[name], repeat[floor], strict=True)]))
+
+
+def spread(values: list[float]) -> tuple[float, float, float]:
+    """``(min, median, max)`` of ``values``."""
+    low, median, high = np.percentile(values, [0, 50, 100])
+    return float(low), float(median), float(high)
+
+
+def shown(values: tuple[float, float, float], digits: int = 2) -> str:
+    """``min–median–max`` with ``digits`` decimals."""
+    return "–".join(f"{value:.{digits}f}" for value in values)
+
+
+def one_repeat(timed: dict[str, Callable[[], float]], rounds: int) -> Repeat:
+    """A single repeat of ``rounds`` rounds (:func:`interleave`), for figures over rounds."""
+    return interleave(timed, 1, rounds)[0]
