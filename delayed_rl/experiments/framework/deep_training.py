@@ -42,6 +42,7 @@ learning curve. :func:`random_score` scores a uniformly random policy on the sam
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -53,6 +54,7 @@ __all__ = [
     "METHODS",
     "MODEL_METHODS",
     "mean_return",
+    "learn_and_score",
     "random_score",
     "require_sb3",
     "train_and_score",
@@ -160,27 +162,54 @@ def random_score(task: dict) -> dict:
     return {"score": _scores(lambda _obs: space.sample(), task)}
 
 
-def _greedy(agent: Any) -> Any:
-    """The SB3 agent's deterministic policy, ``obs -> action``."""
-    return lambda obs: agent.predict(obs, deterministic=True)[0]
+def learn_and_score(
+    agent: Any,
+    task: dict,
+    score: Callable[[Callable[[Any], Any]], float],
+    callbacks: Sequence[Any] = (),
+) -> dict:
+    """Train an SB3 ``agent`` for ``task["steps"]`` steps, scoring it along the way.
 
+    ``score(policy)`` scores the greedy policy (``obs -> action``) at step 0, each time training
+    passes ``task["eval_every"]`` steps, and at the end. (PPO trains in whole rollouts, so it may
+    pass ``steps``: the curve stops there.)
 
-def _curve_callback(task: dict, curve: list) -> Any:
-    """An SB3 callback that appends ``(step, score)`` every ``eval_every`` steps."""
-    from stable_baselines3.common.callbacks import BaseCallback
+    Args:
+        agent: the SB3 algorithm.
+        task: the run's fields (``steps``, ``eval_every``).
+        score: the scorer of a policy.
+        callbacks: SB3 callbacks to run after the scoring one.
+
+    Returns:
+        ``{"steps", "scores"}`` (the learning curve, the step 0 score first and the last at
+        ``steps``), ``"score"`` (the last) and ``"train_seconds"``.
+    """
+    from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+
+    curve: list[tuple[int, float]] = []
+
+    def greedy(obs: Any) -> Any:
+        return agent.predict(obs, deterministic=True)[0]
 
     class Scores(BaseCallback):
-        """Scores the policy when training passes each ``eval_every`` steps, up to ``steps``.
-
-        (PPO trains in whole rollouts, so it may pass ``steps``: the curve stops there.)
-        """
+        """Scores the policy when training passes each ``eval_every`` steps, up to ``steps``."""
 
         def _on_step(self) -> bool:
             while len(curve) * task["eval_every"] <= min(self.num_timesteps, task["steps"]):
-                curve.append((len(curve) * task["eval_every"], _scores(_greedy(self.model), task)))
+                curve.append((len(curve) * task["eval_every"], score(greedy)))
             return True
 
-    return Scores()
+    started = time.perf_counter()
+    agent.learn(task["steps"], callback=CallbackList([Scores(), *callbacks]))
+    seconds = time.perf_counter() - started
+    if curve[-1][0] < task["steps"]:  # the last score at the end of training
+        curve.append((task["steps"], score(greedy)))
+    return {
+        "steps": [step for step, _ in curve],
+        "scores": [value for _, value in curve],
+        "score": curve[-1][1],
+        "train_seconds": seconds,
+    }
 
 
 def train_and_score(task: dict) -> dict:
@@ -195,7 +224,6 @@ def train_and_score(task: dict) -> dict:
     require_sb3()
     import torch
     from stable_baselines3 import PPO, SAC
-    from stable_baselines3.common.callbacks import CallbackList
     from stable_baselines3.common.env_util import make_vec_env
 
     from delayed_rl.deep import (
@@ -212,8 +240,7 @@ def train_and_score(task: dict) -> dict:
     )
     algorithm = {"SAC": SAC, "PPO": PPO}[task["algorithm"]]
     options: dict[str, Any] = {}
-    curve: list[tuple[int, float]] = []
-    callbacks = [_curve_callback(task, curve)]
+    callbacks = []
     model = None
     if "warmup_episodes" in task:
         options["learning_starts"] = task["warmup_episodes"] * task["episode_steps"]
@@ -231,17 +258,7 @@ def train_and_score(task: dict) -> dict:
             options["replay_buffer_class"] = RelabelingReplayBuffer
             options["replay_buffer_kwargs"] = {"reward_model": model}
     agent = algorithm("MlpPolicy", vec_env, seed=seed, device="cpu", **options)
-    started = time.perf_counter()
-    agent.learn(task["steps"], callback=CallbackList(callbacks))
-    seconds = time.perf_counter() - started
-    if curve[-1][0] < task["steps"]:  # the last score at the end of training
-        curve.append((task["steps"], _scores(_greedy(agent), task)))
-    result: dict[str, Any] = {
-        "steps": [step for step, _ in curve],
-        "scores": [score for _, score in curve],
-        "score": curve[-1][1],
-        "train_seconds": seconds,
-    }
+    result = learn_and_score(agent, task, lambda policy: _scores(policy, task), callbacks)
     if model is not None:
         result["rmse"] = model.rmse()
         result["updates"] = model.updates_taken

@@ -27,14 +27,13 @@ baseline fed the same delayed observations as the learners).
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
 from delayed_rl.delays import as_delay
-from delayed_rl.experiments.framework.deep_training import mean_return
+from delayed_rl.experiments.framework.deep_training import learn_and_score, mean_return
 
 __all__ = ["CONTROLLERS", "METHODS", "controller_score", "random_score", "train_and_score"]
 
@@ -118,7 +117,6 @@ def train_and_score(task: dict) -> dict:
     """
     import torch
     from stable_baselines3 import SAC
-    from stable_baselines3.common.callbacks import BaseCallback
 
     from delayed_rl.deep import HindsightSAC
 
@@ -130,30 +128,7 @@ def train_and_score(task: dict) -> dict:
     else:
         algorithm, policy = SAC, "MlpPolicy"
     agent = algorithm(policy, env, seed=seed, device="cpu")
-    curve: list[tuple[int, float]] = []
-
-    def greedy(obs: Any) -> Any:
-        return agent.predict(obs, deterministic=True)[0]
-
-    class Scores(BaseCallback):
-        """Scores the policy each time training passes ``eval_every`` steps."""
-
-        def _on_step(self) -> bool:
-            while len(curve) * task["eval_every"] <= min(self.num_timesteps, task["steps"]):
-                curve.append((len(curve) * task["eval_every"], _score(greedy, evaluation, task)))
-            return True
-
-    started = time.perf_counter()
-    agent.learn(task["steps"], callback=Scores())
-    seconds = time.perf_counter() - started
-    if curve[-1][0] < task["steps"]:
-        curve.append((task["steps"], _score(greedy, evaluation, task)))
-    result: dict[str, Any] = {
-        "steps": [step for step, _ in curve],
-        "scores": [score for _, score in curve],
-        "score": curve[-1][1],
-        "train_seconds": seconds,
-    }
+    result = learn_and_score(agent, task, lambda policy: _score(policy, evaluation, task))
     if method == "hindsight":
         result["transitions_stored"] = agent.transitions_stored
         result["transitions_dropped"] = agent.transitions_dropped
