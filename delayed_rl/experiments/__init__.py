@@ -29,11 +29,12 @@ _MODULES = {
     "deep-rl": "beyond.deep_rl",
     "late-observations": "beyond.late_observations",
     "multiagent-gridworld": "beyond.multiagent_gridworld",
+    "multiagent-pursuit": "beyond.multiagent_pursuit",
 }
 #: The experiments' names, as ``delayed-rl bench NAME`` takes them.
 NAMES = tuple(_MODULES)
 #: Experiments too long for the default ``delayed-rl reproduce`` (``reproduce --all`` runs them).
-LONG_NAMES = ("deep-rl", "late-observations", "multiagent-gridworld")
+LONG_NAMES = ("deep-rl", "late-observations", "multiagent-gridworld", "multiagent-pursuit")
 #: What ``delayed-rl reproduce`` runs: every experiment but :data:`LONG_NAMES`.
 DEFAULT_NAMES = tuple(name for name in NAMES if name not in LONG_NAMES)
 

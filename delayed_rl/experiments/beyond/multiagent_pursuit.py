@@ -1,0 +1,213 @@
+"""``multiagent-pursuit`` (beyond the thesis): PPO with parameter sharing under delayed team rewards.
+
+The game is SISL's ``pursuit_v5`` made small enough to learn in minutes on a CPU: 4 pursuers
+and 6 evaders on an 8×8 grid, 200-step episodes, an evader caught when 2 pursuers tag it, and
+the team's reward shared by every pursuer (PettingZoo's default ``shared_reward``): +5 a catch
+and −0.1 a step. Each pursuer's rewards are delayed by its own Poisson(30) draws
+(:class:`~delayed_rl.multiagent.ParallelRewardDelay`, flushed at the episode's end).
+
+One SB3 PPO policy acts for every pursuer (parameter sharing, through SuperSuit's vector
+conversion: :mod:`~delayed_rl.experiments.framework.multiagent_training`), with SB3's defaults
+but for rollouts of 512 steps a pursuer (2048 a rollout, SB3's default for one env) and
+minibatches of 256, 300k pursuer-steps a run. The methods:
+
+- ``oracle``: on the undelayed rewards;
+- ``raw``: on the delayed rewards as they arrive;
+- ``deconv-known``: on ``R̂(s, a)`` of :class:`~delayed_rl.deep.DeconvolutionRewardModel`
+  given Poisson(30), through :class:`~delayed_rl.deep.RelabelingRolloutBuffer` (the
+  rollout-buffer route, on the stacked sub-envs: every pursuer's delivered rewards one stream);
+- ``deconv-learned``: the same learning the delay on 0..90;
+
+and a random policy. 5 seeds. A score is the mean per-pursuer return of 10 greedy episodes of
+the undelayed game; its *gain* is ``(score − random) / (oracle − random)``.
+
+The claims, fixed before the runs:
+
+- deconvolution (known delay) − raw PPO, score, paired by seed: above 0;
+- deconvolution (learned delay) − raw PPO, the same;
+- raw PPO − oracle, score, paired by seed: below 0 (the delay costs PPO);
+- the learned mean delay, averaged over the seeds: 30 ± 10 %;
+
+and a reference row of every method's gain. ``--quick``: 4000 steps, 2 seeds. Runs are kept as
+they finish, so an interrupted run resumes. It needs the ``sb3`` and ``multiagent`` extras.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from delayed_rl.delays import Poisson
+from delayed_rl.experiments.framework import claims as rules
+from delayed_rl.experiments.framework.deep_training import require_sb3
+from delayed_rl.experiments.framework.delay_estimates import mean_delay_claim
+from delayed_rl.experiments.framework.gain_settings import (
+    gain_tasks,
+    group_results,
+    learning_curves,
+    method_gains,
+)
+from delayed_rl.experiments.framework.multiagent_training import (
+    METHODS,
+    random_score,
+    train_and_score,
+)
+from delayed_rl.experiments.framework.runner import Config, Experiment, SharedRun, Summary
+
+LAMBDA = 30
+#: The setting's run fields (see the module docstring).
+SETTINGS: dict[str, dict[str, Any]] = {
+    f"pursuit-poisson{LAMBDA}": {
+        "env": "pursuit",
+        "env_kwargs": {
+            "max_cycles": 200,
+            "x_size": 8,
+            "y_size": 8,
+            "n_pursuers": 4,
+            "n_evaders": 6,
+            "surround": False,
+            "n_catch": 2,
+        },
+        "delay": Poisson(LAMBDA).to_dict(),
+        "max_delay": 3 * LAMBDA,
+        "ppo": {"n_steps": 512, "batch_size": 256},
+        "steps": 300_000,
+        "eval_every": 30_000,
+    }
+}
+QUICK = {f"pursuit-poisson{LAMBDA}": (4000, 2000)}
+"""The quick run's settings: their (steps, eval_every)."""
+EVAL_EPISODES = 10
+RANDOM_EPISODES = 100
+"""Episodes that score the random policy (its mean is the gain's zero)."""
+LABELS = {
+    "oracle": "PPO undelayed (oracle)",
+    "raw": "PPO on delayed rewards",
+    "deconv-known": "PPO + deconvolution (known delay)",
+    "deconv-learned": "PPO + deconvolution (learned delay)",
+}
+_RUN_FIELDS = ("env", "env_kwargs", "ppo", "steps", "eval_every", "seed")
+
+
+def require_extras() -> None:
+    """Raise an ImportError naming the extra when stable-baselines3 or PettingZoo is missing."""
+    require_sb3()
+    try:
+        import pettingzoo  # noqa: F401
+        import supersuit  # noqa: F401
+    except ImportError as error:
+        raise ImportError(
+            "the multiagent-pursuit experiment needs PettingZoo and SuperSuit: "
+            'pip install "delayed-rl[multiagent]"'
+        ) from error
+
+
+def tasks(config: Config) -> list[dict]:
+    """Every (setting, method, seed), and a ``random`` task per (setting, seed).
+
+    Raises:
+        ImportError: an extra is missing (``sb3`` or ``multiagent``).
+    """
+    require_extras()
+    return gain_tasks(config, SETTINGS, QUICK, (*METHODS, "random"))
+
+
+def shared_run(task: dict) -> SharedRun:
+    """The run behind a task: the oracle's and the random policy's do not depend on the delay."""
+    fields = {key: task[key] for key in ("env", "env_kwargs", "seed")}
+    if task["method"] == "random":
+        return SharedRun(random_score, {**fields, "eval_episodes": RANDOM_EPISODES})
+    run = {key: task[key] for key in _RUN_FIELDS}
+    run.update(method=task["method"], eval_episodes=EVAL_EPISODES)
+    if task["method"] != "oracle":
+        run["delay"] = task["delay"]
+    if task["method"] == "deconv-learned":
+        run["max_delay"] = task["max_delay"]
+    return SharedRun(train_and_score, run)
+
+
+def run_task(task: dict) -> dict:
+    """A task's result, run on its own (:func:`shared_run`)."""
+    return shared_run(task).alone()
+
+
+def cost(task: dict) -> float:
+    """Estimated core-seconds: about 0.6 ms a pursuer-step (for scheduling only)."""
+    return 1.0 if task["method"] == "random" else 6e-4 * task["steps"]
+
+
+def _setting_claims(setting: str, scores: dict, by_method: dict) -> list[rules.Claim]:
+    """The claims of ``setting`` (see the module docstring)."""
+    claims = [
+        rules.direction_claim(
+            f"{setting}: {LABELS[method]} − {LABELS['raw']}, score",
+            "target: above 0 (paired by seed)",
+            rules.mean_ci_n(rules.paired(scores[method], scores["raw"])),
+            "above",
+        )
+        for method in ("deconv-known", "deconv-learned")
+    ]
+    claims.append(
+        rules.direction_claim(
+            f"{setting}: {LABELS['raw']} − {LABELS['oracle']}, score",
+            "check: below 0 (paired by seed: the delay costs PPO)",
+            rules.mean_ci_n(rules.paired(scores["raw"], scores["oracle"])),
+            "below",
+        )
+    )
+    delays = [r["mean_delay"] for r in by_method["deconv-learned"].values()]
+    claims.append(
+        mean_delay_claim(
+            f"{setting}: deconvolution's learned mean delay", rules.mean_ci_n(delays), LAMBDA
+        )
+    )
+    return claims
+
+
+def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
+    """The claims, a reference row of every gain, the table and the learning curves."""
+    grouped = group_results(task_list, results)
+    claims, curves, figures, table = [], [], {}, {}
+    for setting, by_method in grouped.items():
+        gains, low, _ = method_gains(by_method)
+        scores = {
+            m: {seed: r["score"] for seed, r in runs.items()} for m, runs in by_method.items()
+        }
+        claims += _setting_claims(setting, scores, by_method)
+        table[setting] = {"random": {"score": low}}
+        for method in METHODS:
+            values = list(gains[method].values())
+            claims.append(
+                rules.reference_row(f"{setting}: {LABELS[method]} gain", rules.mean_ci_n(values))
+            )
+            row: dict[str, Any] = {
+                "seeds": sorted(scores[method]),
+                "scores": list(scores[method].values()),
+                "gains": values,
+            }
+            for key in ("rmse", "mean_delay"):
+                if method.startswith("deconv"):
+                    row[key] = [r[key] for r in by_method[method].values()]
+            table[setting][method] = row
+        runs_curves, figures[f"curves_{setting}"] = learning_curves(
+            setting, by_method, LABELS, low, "the undelayed game (per pursuer)"
+        )
+        curves += runs_curves
+    return Summary(claims, curves, figures, {"table": table, "settings": SETTINGS})
+
+
+EXPERIMENT = Experiment(
+    name="multiagent-pursuit",
+    thesis="beyond the thesis (multi-agent delayed rewards, deep)",
+    description="SB3's PPO with parameter sharing (SuperSuit) on SISL's pursuit (4 pursuers, "
+    "6 evaders, 8×8, shared team reward) under Poisson(30) reward delays per pursuer: the "
+    "undelayed oracle, PPO on the delayed rewards, and PPO on deconvolution's R̂ (delay known "
+    "or learned), 5 seeds, 300k pursuer-steps; scores of 10 greedy episodes of the undelayed "
+    "game, gains against a random policy and the oracle.",
+    tasks=tasks,
+    run_task=run_task,
+    summarize=summarize,
+    default_seeds=5,
+    shared_run=shared_run,
+    cost=cost,
+    resumable=True,
+)
