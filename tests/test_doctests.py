@@ -48,13 +48,13 @@ def _examples(name: str) -> list[doctest.DocTest]:
 
 
 MODULES = [name for name in _module_names() if _has_examples(name)]
-TORCH_PACKAGE = "delayed_rl.deep"
-"""Its examples build torch models (the ``sb3`` extra): their cases are ``sb3``-marked."""
+TORCH_PACKAGES = ("delayed_rl.deep", "delayed_rl.multiagent.sb3")
+"""Their examples import torch (the ``sb3`` extra): their cases are ``sb3``-marked."""
 
 
 def _case(name: str):
     """``name`` as a case of :func:`test_doctests`, marked ``sb3`` when its examples need torch."""
-    if name == TORCH_PACKAGE or name.startswith(f"{TORCH_PACKAGE}."):
+    if any(name == package or name.startswith(f"{package}.") for package in TORCH_PACKAGES):
         return pytest.param(name, marks=pytest.mark.sb3)
     return name
 

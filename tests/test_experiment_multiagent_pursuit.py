@@ -15,6 +15,7 @@ from delayed_rl.experiments.beyond import multiagent_pursuit as pursuit
 from delayed_rl.experiments.framework import multiagent_training as training
 from delayed_rl.experiments.framework.pool import pool_key
 from delayed_rl.experiments.framework.runner import VERDICTS
+from delayed_rl.multiagent import sb3_vec_env
 
 SETTING = f"pursuit-poisson{pursuit.LAMBDA}"
 
@@ -62,7 +63,7 @@ def test_every_agent_is_a_sub_env_and_a_seed_fixes_the_env_and_the_delays():
     assert type(training.make_env(_tiny("oracle"), delayed=False)).__name__ != "ParallelRewardDelay"
 
     def rollout(seed: int) -> tuple[np.ndarray, list]:
-        venv = training.vec_env(training.make_env(_tiny("raw"), delayed=True))
+        venv = sb3_vec_env(training.make_env(_tiny("raw"), delayed=True))
         assert venv.num_envs == 4  # one sub-env a pursuer
         venv.seed(seed)
         first = venv.reset()

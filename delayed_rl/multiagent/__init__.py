@@ -60,6 +60,7 @@ __all__ = [
     "ParallelObservationDelay",
     "ParallelRewardDelay",
     "agent_seed",
+    "sb3_vec_env",
 ]
 
 _HOMES = {
@@ -68,6 +69,7 @@ _HOMES = {
     "ParallelObservationDelay": "observation_delay",
     "ParallelRewardDelay": "reward_delay",
     "agent_seed": "_agents",
+    "sb3_vec_env": "sb3",
 }
 
 

@@ -10,9 +10,8 @@ and the ``seed``.
 of one vector env, and ``concat_vec_envs_v1`` hands it to stable-baselines3: one PPO policy
 acts for every agent, on each agent's own observation, and learns from every agent's steps.
 ``steps`` counts agent-steps, as SB3 counts sub-env steps (an env step of 4 agents is 4).
-SuperSuit's SB3 adapter has no ``seed()``; :func:`vec_env` adds one, which seeds the next
-reset (``reset(seed=s)`` of the env, and so of every agent's delays), as SB3's own vector envs
-do.
+The conversion is :func:`~delayed_rl.multiagent.sb3_vec_env`, whose ``seed()`` seeds the next
+reset (SuperSuit's own adapter has none).
 
 The methods (:data:`METHODS`):
 
@@ -42,7 +41,7 @@ import numpy as np
 from delayed_rl.delays import as_delay
 from delayed_rl.experiments.framework.deep_training import learn_and_score
 
-__all__ = ["ENVS", "METHODS", "random_score", "train_and_score", "vec_env"]
+__all__ = ["ENVS", "METHODS", "make_env", "random_score", "train_and_score"]
 
 METHODS = ("oracle", "raw", "deconv-known", "deconv-learned")
 """The methods a task can name (see the module docstring)."""
@@ -71,33 +70,6 @@ def make_env(task: dict, delayed: bool) -> Any:
     if delayed:
         env = ParallelRewardDelay(env, as_delay(task["delay"]), on_episode_end="flush")
     return env
-
-
-def vec_env(env: Any) -> Any:
-    """``env``'s agents as the sub-envs of one stable-baselines3 ``VecEnv`` (see the docstring).
-
-    Its ``seed(s)`` seeds the next ``reset()``: the env's ``reset(seed=s)``; later resets (SuperSuit
-    resets the env when every agent is done) continue the env's own generators unseeded.
-    """
-    import supersuit
-    from supersuit.vector.sb3_vector_wrapper import SB3VecEnvWrapper
-
-    class SeededVecEnv(SB3VecEnvWrapper):
-        """SuperSuit's SB3 adapter with a ``seed()``: the seed of the next ``reset()``."""
-
-        next_seed: int | None = None
-
-        def seed(self, seed: int | None = None) -> list[int | None]:
-            self.next_seed = seed
-            return [seed] * self.num_envs
-
-        def reset(self, seed: int | None = None, options: dict | None = None) -> np.ndarray:
-            seed, self.next_seed = (self.next_seed if seed is None else seed), None
-            observations, self.reset_infos = self.venv.reset(seed=seed, options=options)
-            return observations
-
-    agents = supersuit.pettingzoo_env_to_vec_env_v1(env)
-    return SeededVecEnv(supersuit.concat_vec_envs_v1(agents, 1, num_cpus=0))
 
 
 def _score(policy: Callable[[np.ndarray], Any], task: dict) -> float:
@@ -151,10 +123,11 @@ def train_and_score(task: dict) -> dict:
         RelabelingRolloutBuffer,
         RewardModelCallback,
     )
+    from delayed_rl.multiagent import sb3_vec_env
 
     torch.set_num_threads(1)
     method, seed = task["method"], task["seed"]
-    env = vec_env(make_env(task, delayed=method != "oracle"))
+    env = sb3_vec_env(make_env(task, delayed=method != "oracle"))
     options: dict[str, Any] = dict(task["ppo"])
     callbacks, model = [], None
     if method.startswith("deconv"):
