@@ -29,7 +29,7 @@ import gymnasium as gym
 import numpy as np
 
 from delayed_rl.agents import DeconvolutionQLearning, QLearning, TabularAgent
-from delayed_rl.experiments.framework.runner import mean_ci95
+from delayed_rl.parallel.intervals import mean_ci95
 from delayed_rl.wrappers import PoissonRewardDelay
 
 DEFAULT_ENVS = ("Taxi-v4:1000000", "CliffWalking-v1:500000", "FrozenLake-v1:200000")

@@ -42,13 +42,8 @@ from delayed_rl.agents.registry import AGENTS as AGENT_NAMES
 from delayed_rl.delays import Poisson
 from delayed_rl.envs import env_ids
 from delayed_rl.experiments import DEFAULT_NAMES, LONG_NAMES, NAMES
-from delayed_rl.experiments.framework.runner import (
-    BACKENDS,
-    MAX_SEED_TEXT,
-    MAX_SEEDS,
-    MAX_SEEDS_TEXT,
-    check_workers,
-)
+from delayed_rl.experiments.framework.experiment import MAX_SEED_TEXT
+from delayed_rl.parallel.pools import BACKENDS, MAX_SEEDS, MAX_SEEDS_TEXT, check_workers
 from delayed_rl.sweep.runs import EpisodeTooLong, greedy_rollout
 from delayed_rl.sweep.schema import (
     MAX_EVAL_EPISODES,
@@ -305,7 +300,7 @@ def _bench(args: argparse.Namespace) -> int:
     experiments = [get_experiment(name) for name in names]
     summaries = run_experiments(experiments, config, out, _bench_progress(args), report)
     if args.name == "all":
-        from delayed_rl.experiments.framework.runner import write_index
+        from delayed_rl.experiments.framework.report import write_index
 
         ran = list(zip(experiments, summaries, strict=True))
         index = write_index(out, ran, time.perf_counter() - started)
@@ -322,7 +317,7 @@ def _bench_progress(args: argparse.Namespace) -> bool:
     """
     if args.progress is not None:
         return args.progress
-    from delayed_rl.experiments.framework.runner import tqdm_installed
+    from delayed_rl.parallel.progress import tqdm_installed
 
     return sys.stderr.isatty() and tqdm_installed()
 

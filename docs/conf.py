@@ -73,6 +73,8 @@ API_SECTIONS = [
     ("Delay distributions", "delayed_rl.delays"),
     ("Environments", "delayed_rl.envs"),
     ("The compiled path", "delayed_rl.compiled"),
+    ("Parallel runs", "delayed_rl.parallel"),
+    ("Figures", "delayed_rl.figures"),
     ("Experiments", "delayed_rl.experiments"),
     ("Sweeps", "delayed_rl.sweep"),
     ("The command line", "delayed_rl.cli"),

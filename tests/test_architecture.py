@@ -147,6 +147,7 @@ LAYERS = [
     ("wrappers and envs", ("delayed_rl.wrappers", "delayed_rl.multiagent", "delayed_rl.envs")),
     ("the compiled path", ("delayed_rl.compiled",)),
     ("agents", ("delayed_rl.agents", "delayed_rl.deep")),
+    ("parallel runs and figures", ("delayed_rl.parallel", "delayed_rl.figures")),
     ("experiments and sweeps", ("delayed_rl.experiments", "delayed_rl.sweep")),
     ("the command line", ("delayed_rl.cli",)),
 ]
@@ -542,3 +543,16 @@ def test_no_two_modules_define_a_public_class_of_the_same_name():
             if isinstance(node, ast.ClassDef) and not node.name.startswith("_"):
                 defined.setdefault(node.name, []).append(path.name)
     assert {name: where for name, where in defined.items() if len(where) > 1} == {}
+
+
+def test_the_sweeps_import_nothing_from_the_experiments():
+    graph = with_parents(import_graph())
+    sweep = {m for m in graph if m == "delayed_rl.sweep" or m.startswith("delayed_rl.sweep.")}
+    assert len(sweep) >= 4
+    found = [
+        f"{m} imports {o}"
+        for m in sorted(sweep)
+        for o in sorted(graph[m])
+        if o == "delayed_rl.experiments" or o.startswith("delayed_rl.experiments.")
+    ]
+    assert found == []

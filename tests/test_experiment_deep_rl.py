@@ -11,8 +11,8 @@ import pytest
 from delayed_rl.experiments import Config, get_experiment, run_experiment
 from delayed_rl.experiments.beyond import deep_rl
 from delayed_rl.experiments.framework.deep_training import METHODS, MODEL_METHODS
+from delayed_rl.experiments.framework.experiment import VERDICTS
 from delayed_rl.experiments.framework.pool import pool_key
-from delayed_rl.experiments.framework.runner import VERDICTS
 
 pytestmark = pytest.mark.sb3
 

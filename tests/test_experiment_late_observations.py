@@ -9,9 +9,9 @@ import pytest
 
 from delayed_rl.experiments import LONG_NAMES, Config, get_experiment, run_experiment
 from delayed_rl.experiments.beyond import late_observations
+from delayed_rl.experiments.framework.experiment import VERDICTS
 from delayed_rl.experiments.framework.late_training import METHODS, make_env
 from delayed_rl.experiments.framework.pool import pool_key
-from delayed_rl.experiments.framework.runner import VERDICTS
 
 pytestmark = pytest.mark.sb3
 

@@ -12,8 +12,8 @@ from delayed_rl.agents import DeconvolutionQLearning, QLearning
 from delayed_rl.delays import Poisson
 from delayed_rl.experiments import LONG_NAMES, Config, get_experiment, run_experiment
 from delayed_rl.experiments.beyond import multiagent_gridworld as game
+from delayed_rl.experiments.framework.experiment import VERDICTS
 from delayed_rl.experiments.framework.pool import pool_key
-from delayed_rl.experiments.framework.runner import VERDICTS
 
 
 def test_the_full_run_has_both_delays_every_learner_and_five_seeds_sharing_the_oracle():

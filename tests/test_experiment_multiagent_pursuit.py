@@ -13,8 +13,8 @@ from delayed_rl.delays import Poisson
 from delayed_rl.experiments import LONG_NAMES, Config, get_experiment, run_experiment
 from delayed_rl.experiments.beyond import multiagent_pursuit as pursuit
 from delayed_rl.experiments.framework import multiagent_training as training
+from delayed_rl.experiments.framework.experiment import VERDICTS
 from delayed_rl.experiments.framework.pool import pool_key
-from delayed_rl.experiments.framework.runner import VERDICTS
 from delayed_rl.multiagent import sb3_vec_env
 
 SETTING = f"pursuit-poisson{pursuit.LAMBDA}"

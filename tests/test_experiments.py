@@ -1,4 +1,4 @@
-"""The experiment runner and ``delayed-rl bench``: every experiment end to end in --quick mode."""
+"""The experiments and ``delayed-rl bench``: every experiment end to end in --quick mode."""
 
 from __future__ import annotations
 
@@ -10,8 +10,10 @@ import pytest
 
 from delayed_rl.cli import main
 from delayed_rl.experiments import DEFAULT_NAMES, Config, get_experiment, run_experiment
-from delayed_rl.experiments.framework.runner import VERDICTS, mean_ci95, run_tasks, running_average
+from delayed_rl.experiments.framework.experiment import VERDICTS, running_average
 from delayed_rl.experiments.framework.training import greedy_average_reward, grid_env, train
+from delayed_rl.parallel.intervals import mean_ci95
+from delayed_rl.parallel.pools import run_tasks
 
 
 @pytest.mark.experiment
@@ -320,7 +322,8 @@ def _action(env, state: int, target: int) -> int:
 
 
 def test_reproduce_writes_an_index_of_every_experiment(tmp_path):
-    from delayed_rl.experiments.framework.runner import Claim, Summary, write_index
+    from delayed_rl.experiments.framework.experiment import Claim, Summary
+    from delayed_rl.experiments.framework.report import write_index
 
     def claims(*verdicts):
         return [Claim("q", "t", 0.0, 0.1, 5, verdict) for verdict in verdicts]

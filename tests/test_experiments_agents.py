@@ -16,7 +16,7 @@ from delayed_rl.experiments.beyond import linefollow_deconv as lfd
 from delayed_rl.experiments.framework import delay_settings as settings
 from delayed_rl.experiments.framework import setting_summaries as summaries
 from delayed_rl.experiments.framework import snapshot_runs as snapshots
-from delayed_rl.experiments.framework.runner import VERDICTS
+from delayed_rl.experiments.framework.experiment import VERDICTS
 from delayed_rl.experiments.framework.training import greedy_average_reward
 
 UP, RIGHT, DOWN, LEFT = 0, 1, 2, 3

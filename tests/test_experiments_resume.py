@@ -7,7 +7,7 @@ import json
 import pytest
 
 from delayed_rl.experiments import LONG_NAMES, NAMES, Config, run_experiment, run_experiments
-from delayed_rl.experiments.framework.runner import Claim, Experiment, Summary, seed_tasks
+from delayed_rl.experiments.framework.experiment import Claim, Experiment, Summary, seed_tasks
 
 CALLS: list[dict] = []
 

@@ -220,7 +220,7 @@ def plan(**changes) -> dict:
         ({"eval_episodes": 10**7}, r"^eval_episodes must be at most MAX_EVAL_EPISODES = 10\*\*6"),
         (
             {"seeds": 10**6},
-            r"^seeds must be at most MAX_SEEDS = 10,000 \(delayed_rl.experiments.framework.runner\)",
+            r"^seeds must be at most MAX_SEEDS = 10,000 \(delayed_rl.parallel.pools\)",
         ),
         ({"seeds": 10**30}, r"^seeds must be at most MAX_SEEDS"),
         ({"seeds": [0, 2**40]}, r"^seeds\[1\] must be at most MAX_SWEEP_SEED = 2\*\*32 - 1"),

@@ -7,7 +7,7 @@ import pytest
 
 from delayed_rl.experiments import get_experiment
 from delayed_rl.experiments.framework import plotting
-from delayed_rl.experiments.framework.runner import Config
+from delayed_rl.experiments.framework.experiment import Config
 
 
 @pytest.fixture

@@ -11,8 +11,8 @@ from delayed_rl.experiments import Config, get_experiment, run_experiment, run_e
 from delayed_rl.experiments.beyond import future_work as fw
 from delayed_rl.experiments.framework import delay_settings as settings
 from delayed_rl.experiments.framework import snapshot_runs as snapshots
+from delayed_rl.experiments.framework.experiment import Experiment, SharedRun, Summary
 from delayed_rl.experiments.framework.pool import pool_key, run_key
-from delayed_rl.experiments.framework.runner import Experiment, SharedRun, Summary
 
 CALLS: list[dict] = []
 

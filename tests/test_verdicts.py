@@ -27,14 +27,8 @@ from delayed_rl.experiments.framework.claims import (
     trend_claim,
     wilson_interval,
 )
-from delayed_rl.experiments.framework.runner import (
-    VERDICTS,
-    Claim,
-    Config,
-    Experiment,
-    Summary,
-    write_outputs,
-)
+from delayed_rl.experiments.framework.experiment import VERDICTS, Claim, Config, Experiment, Summary
+from delayed_rl.experiments.framework.report import write_outputs
 from delayed_rl.experiments.thesis import (
     controllers,
     delay_sweep,

@@ -1,6 +1,6 @@
 """The experiments, one module each: the thesis's (:mod:`.thesis`) and beyond it (:mod:`.beyond`).
 
-Each module defines its ``EXPERIMENT`` on the framework (:mod:`.framework`: the runner, the pool,
+Each module defines its ``EXPERIMENT`` on the framework (:mod:`.framework`: the experiment type, the pool,
 the claims' rules, the figures and the pieces several experiments share); no experiment module
 imports another. :func:`get_experiment` imports the one asked for.
 """
@@ -10,8 +10,8 @@ from __future__ import annotations
 import importlib
 
 from delayed_rl._validation import check_choice
+from delayed_rl.experiments.framework.experiment import Config, Experiment, Summary
 from delayed_rl.experiments.framework.pool import run_experiment, run_experiments
-from delayed_rl.experiments.framework.runner import Config, Experiment, Summary
 
 #: Each experiment's module, below this package, by the name ``delayed-rl bench NAME`` takes.
 _MODULES = {

@@ -21,7 +21,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from delayed_rl.experiments.framework.runner import RunProgress, iter_tasks
+from delayed_rl.parallel.pools import iter_tasks
+from delayed_rl.parallel.progress import RunProgress
 from delayed_rl.sweep.reading import read_sweep_file
 from delayed_rl.sweep.results import (
     EXTRA_COLUMNS,
@@ -186,8 +187,8 @@ def run_sweep(
             every core of the cluster with ``ray`` and ``dask``).
         backend: ``"loky"`` (joblib's process pool), ``"ray"`` or ``"dask"``.
         address: an existing Ray or Dask cluster to run on (``None``: a local one); see
-            :func:`~delayed_rl.experiments.framework.runner.iter_tasks`.
-        progress: show the progress on stderr (:class:`~delayed_rl.experiments.framework.runner.RunProgress`:
+            :func:`~delayed_rl.parallel.pools.iter_tasks`.
+        progress: show the progress on stderr (:class:`~delayed_rl.parallel.progress.RunProgress`:
             tqdm's bar, else a count line per run).
 
     Returns:

@@ -20,7 +20,7 @@ from typing import Any
 
 from delayed_rl.agents.common.hyperparameters import MAX_ABS_VALUE
 from delayed_rl.agents.common.python_loop import MAX_TIMESTEPS
-from delayed_rl.experiments.framework.runner import mean_ci95
+from delayed_rl.parallel.intervals import mean_ci95
 from delayed_rl.sweep.schema import MAX_SWEEP_SEED, Sweep
 
 #: The columns of ``results.csv`` that every sweep writes, in this order.
@@ -357,9 +357,9 @@ def plot_env(path: Path, env: str, rows: Sequence[Mapping[str, Any]]) -> None:
         env: the env's label (the title).
         rows: the env's rows of :func:`summarize`.
     """
-    from delayed_rl.experiments.framework import plotting
+    from delayed_rl import figures
 
-    plt = plotting._pyplot()
+    plt = figures.pyplot()
     delays = list(dict.fromkeys(row["delay"] for row in rows))
     agents = list(dict.fromkeys(row["agent"] for row in rows))
     width = min(0.8 / len(agents), 0.2)
@@ -369,15 +369,15 @@ def plot_env(path: Path, env: str, rows: Sequence[Mapping[str, Any]]) -> None:
         x = [delays.index(row["delay"]) + (i - (len(agents) - 1) / 2) * width for row in mine]
         means = [row["eval_reward_mean"] for row in mine]
         cis = [row["eval_reward_ci95"] for row in mine]
-        label = plotting.band_label(agent, min(row["seeds"] for row in mine))
+        label = figures.band_label(agent, min(row["seeds"] for row in mine))
         ax.errorbar(x, means, yerr=cis, marker="o", linestyle="none", capsize=4, label=label)
     ax.set_xticks(range(len(delays)), [textwrap.fill(delay, 18) for delay in delays])
     ax.set_xlim(-0.6, len(delays) - 0.4)
     ax.margins(y=0.15)
-    plotting.outside_legend(ax)
+    figures.outside_legend(ax)
     unit = rows[0]["eval_unit"]
     title = f"{env}: greedy evaluation reward by delay"
-    plotting._finish(fig, ax, path, title, "delay", f"undelayed reward per {unit}")
+    figures.finish(fig, ax, path, title, "delay", f"undelayed reward per {unit}")
 
 
 def draw_figures(out: Path, summary: Sequence[Mapping[str, Any]]) -> dict[str, str]:

@@ -3,7 +3,7 @@
 :func:`~delayed_rl.sweep.reading.read_sweep_file` reads a YAML or JSON file;
 :func:`parse_sweep` checks what it holds, field by field, and returns the plan, a :class:`Sweep`,
 whose :meth:`Sweep.runs` lists the runs. Every size a file sets is bounded by a stated limit
-(``learn()``'s ``MAX_TIMESTEPS``, :data:`MAX_EVAL_STEPS`, :data:`MAX_EVAL_EPISODES`, :data:`~delayed_rl.experiments.framework.runner.MAX_SEEDS`,
+(``learn()``'s ``MAX_TIMESTEPS``, :data:`MAX_EVAL_STEPS`, :data:`MAX_EVAL_EPISODES`, :data:`~delayed_rl.parallel.pools.MAX_SEEDS`,
 :data:`MAX_SWEEP_SEED`, :data:`MAX_RUNS`), checked before anything is built or run.
 :mod:`delayed_rl.sweep` documents the format.
 """
@@ -27,7 +27,7 @@ from delayed_rl.agents.common.hyperparameters import check_limit
 from delayed_rl.agents.common.python_loop import MAX_TIMESTEPS, MAX_TIMESTEPS_TEXT
 from delayed_rl.agents.registry import AGENTS, agent_class
 from delayed_rl.delays import as_delay
-from delayed_rl.experiments.framework.runner import MAX_SEEDS, MAX_SEEDS_TEXT
+from delayed_rl.parallel.pools import MAX_SEEDS, MAX_SEEDS_TEXT
 
 #: The stable-baselines3 algorithms a sweep runs, as ``sb3:NAME``.
 SB3_ALGORITHMS = ("A2C", "DDPG", "DQN", "PPO", "SAC", "TD3")

@@ -76,7 +76,7 @@ from delayed_rl.experiments.framework.delay_settings import (
     setting_label,
     setting_tasks,
 )
-from delayed_rl.experiments.framework.runner import (
+from delayed_rl.experiments.framework.experiment import (
     Claim,
     Config,
     Experiment,

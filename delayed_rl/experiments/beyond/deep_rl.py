@@ -47,7 +47,7 @@ Every (setting, method) also has a reference row of its gain (a zero-width one s
 seeds gave the same value). ``summary.json``'s ``table`` holds the scores, gains, the curves'
 means, the reward models' RMSE against the true reward and the learned mean delays.
 ``--quick``: ``pendulum-poisson20`` for 1000 steps and ``cartpole-poisson20`` for one PPO rollout
-(8192 steps), 2 seeds. Runs are kept as they finish (:attr:`~.runner.Experiment.resumable`), so
+(8192 steps), 2 seeds. Runs are kept as they finish (:attr:`~.experiment.Experiment.resumable`), so
 an interrupted run resumes. It needs the ``sb3`` extra.
 """
 
@@ -65,18 +65,18 @@ from delayed_rl.experiments.framework.deep_training import (
     require_sb3,
     train_and_score,
 )
-from delayed_rl.experiments.framework.gain_settings import (
-    gain_tasks,
-    group_results,
-    learning_curves,
-    method_gains,
-)
-from delayed_rl.experiments.framework.runner import (
+from delayed_rl.experiments.framework.experiment import (
     Claim,
     Config,
     Experiment,
     SharedRun,
     Summary,
+)
+from delayed_rl.experiments.framework.gain_settings import (
+    gain_tasks,
+    group_results,
+    learning_curves,
+    method_gains,
 )
 
 

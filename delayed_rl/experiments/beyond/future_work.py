@@ -50,7 +50,13 @@ from typing import Any
 
 from delayed_rl._validation import check_choice
 from delayed_rl.experiments.framework import delay_settings, setting_summaries, snapshot_runs
-from delayed_rl.experiments.framework.runner import Claim, Config, Experiment, SharedRun, Summary
+from delayed_rl.experiments.framework.experiment import (
+    Claim,
+    Config,
+    Experiment,
+    SharedRun,
+    Summary,
+)
 from delayed_rl.experiments.framework.training import thesis_hyperparameters
 
 THESIS = "MMQ (thesis)"

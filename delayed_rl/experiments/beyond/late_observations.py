@@ -47,6 +47,7 @@ from typing import Any
 from delayed_rl.delays import Poisson, Uniform
 from delayed_rl.experiments.framework import claims as rules
 from delayed_rl.experiments.framework.deep_training import require_sb3
+from delayed_rl.experiments.framework.experiment import Config, Experiment, SharedRun, Summary
 from delayed_rl.experiments.framework.gain_settings import (
     gain_tasks,
     group_results,
@@ -59,12 +60,6 @@ from delayed_rl.experiments.framework.late_training import (
     controller_score,
     random_score,
     train_and_score,
-)
-from delayed_rl.experiments.framework.runner import (
-    Config,
-    Experiment,
-    SharedRun,
-    Summary,
 )
 
 

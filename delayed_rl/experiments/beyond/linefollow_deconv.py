@@ -52,6 +52,14 @@ from delayed_rl.experiments.framework.claims import (
     reference_row,
 )
 from delayed_rl.experiments.framework.delay_estimates import ESTIMATE_LABELS, mean_delay_claim
+from delayed_rl.experiments.framework.experiment import (
+    Config,
+    Curve,
+    Experiment,
+    SharedRun,
+    Summary,
+    seed_tasks,
+)
 from delayed_rl.experiments.framework.line_claims import (
     error_ratio_claim,
     reward_claims,
@@ -64,14 +72,6 @@ from delayed_rl.experiments.framework.line_following import (
     line_statistics,
     logged_run,
     training_cost,
-)
-from delayed_rl.experiments.framework.runner import (
-    Config,
-    Curve,
-    Experiment,
-    SharedRun,
-    Summary,
-    seed_tasks,
 )
 
 #: The learners compared.

@@ -60,7 +60,7 @@ from delayed_rl.experiments.framework.claims import (
     seed_rule_claim,
 )
 from delayed_rl.experiments.framework.delay_estimates import mean_delay_claim
-from delayed_rl.experiments.framework.runner import (
+from delayed_rl.experiments.framework.experiment import (
     Claim,
     Config,
     Curve,

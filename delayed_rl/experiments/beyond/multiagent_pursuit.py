@@ -40,6 +40,7 @@ from delayed_rl.delays import Poisson
 from delayed_rl.experiments.framework import claims as rules
 from delayed_rl.experiments.framework.deep_training import require_sb3
 from delayed_rl.experiments.framework.delay_estimates import mean_delay_claim
+from delayed_rl.experiments.framework.experiment import Config, Experiment, SharedRun, Summary
 from delayed_rl.experiments.framework.gain_settings import (
     gain_tasks,
     group_results,
@@ -51,7 +52,6 @@ from delayed_rl.experiments.framework.multiagent_training import (
     random_score,
     train_and_score,
 )
-from delayed_rl.experiments.framework.runner import Config, Experiment, SharedRun, Summary
 
 LAMBDA = 30
 #: The setting's run fields (see the module docstring).

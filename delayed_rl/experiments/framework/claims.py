@@ -16,7 +16,7 @@ the row's ``criterion``:
 - :func:`trend_claim`: a trend: :func:`direction_claim` on the least-squares slope fitted per
   seed (:func:`per_seed_slopes`), its CI over the seeds;
 - :func:`reference_row`: a number shown for context with no thesis value to test (verdict
-  ``reference``, see :mod:`.runner`).
+  ``reference``, see :mod:`.experiment`).
 
 An interval that is NaN (no data, or a quantity that could not be formed) is ``inconclusive``.
 Differences and ratios of two conditions are formed per seed first (:func:`paired`), so their CI
@@ -30,15 +30,14 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from delayed_rl.experiments.framework.runner import (
+from delayed_rl.experiments.framework.experiment import (
     AGREES,
     DIFFERS,
     INCONCLUSIVE,
     REFERENCE,
     Claim,
-    mean_ci95,
-    t975,
 )
+from delayed_rl.parallel.intervals import mean_ci95, t975
 
 #: The standard normal 0.975 quantile, of the Wilson interval.
 _Z975 = 1.959964

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from delayed_rl.experiments.framework.claims import band_claim
-from delayed_rl.experiments.framework.runner import Claim
+from delayed_rl.experiments.framework.experiment import Claim
 
 #: The band of the mean-delay claims: the true mean ± this share of it.
 DELAY_TOLERANCE = 0.10

@@ -24,7 +24,7 @@ import numpy as np
 
 from delayed_rl._validation import check_choice, check_int
 from delayed_rl.delays import Delay, Empirical, Geometric, Poisson
-from delayed_rl.experiments.framework.runner import Config
+from delayed_rl.experiments.framework.experiment import Config
 from delayed_rl.experiments.framework.snapshot_runs import measure, warm_up
 from delayed_rl.experiments.framework.training import thesis_hyperparameters
 

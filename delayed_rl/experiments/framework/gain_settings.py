@@ -16,7 +16,7 @@ import numpy as np
 
 from delayed_rl.experiments.framework import claims as rules
 from delayed_rl.experiments.framework import plotting
-from delayed_rl.experiments.framework.runner import Config, Curve
+from delayed_rl.experiments.framework.experiment import Config, Curve
 
 __all__ = ["gain_tasks", "group_results", "learning_curves", "method_gains"]
 

@@ -11,7 +11,7 @@ The figures draw the same values dashed (:func:`thesis_reward_lines`,
 from __future__ import annotations
 
 from delayed_rl.experiments.framework.claims import band_claim
-from delayed_rl.experiments.framework.runner import Claim
+from delayed_rl.experiments.framework.experiment import Claim
 
 #: The band of the average-reward claims (and of MMQ − Q): the thesis's value ± this.
 REWARD_TOLERANCE = 0.2

@@ -30,8 +30,9 @@ import numpy as np
 
 from delayed_rl._validation import check_choice
 from delayed_rl.experiments.framework.delay_estimates import delay_estimate
-from delayed_rl.experiments.framework.runner import SharedRun, mean_ci95, running_average
+from delayed_rl.experiments.framework.experiment import SharedRun, running_average
 from delayed_rl.experiments.framework.training import thesis_hyperparameters
+from delayed_rl.parallel.intervals import mean_ci95
 
 ENV_ID = "delayed_rl/EPuckLineFollow-v0"
 #: The stand-in robot of ``real-robot`` (:mod:`delayed_rl.experiments.thesis.real_robot`).
@@ -125,7 +126,7 @@ def pooled_training(
     """The :func:`training_run` of ``agent`` and ``seed`` read at ``readouts``, as a pooled run.
 
     Every experiment's readouts of one learner and seed pool into one run
-    (:class:`~.runner.SharedRun`'s ``pooled``); ``view`` makes the task's result of its own
+    (:class:`~.experiment.SharedRun`'s ``pooled``); ``view`` makes the task's result of its own
     readouts' results.
     """
     return SharedRun(training_run, training_task(agent, seed, *readouts), view, "readouts")
@@ -141,7 +142,7 @@ def training_run(task: dict) -> dict:
 
     ``linefollow`` and ``linefollow-deconv`` (150k steps), ``controllers`` (300k) and
     ``real-robot`` (500k) train the same learners — :func:`make_agent` on :func:`line_env`, one
-    seed each — so their tasks pool their readouts (:class:`~.runner.SharedRun`'s ``pooled``):
+    seed each — so their tasks pool their readouts (:class:`~.experiment.SharedRun`'s ``pooled``):
     run together, each (learner, seed) trains once, to the last readout's steps, instead of
     once per experiment. The training runs in pieces that end at each readout's steps
     (``learn(..., reset_num_timesteps=False)``, which trains exactly as one call does), so every

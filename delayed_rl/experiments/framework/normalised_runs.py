@@ -15,7 +15,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from delayed_rl.experiments.framework.claims import mean_ci_n
-from delayed_rl.experiments.framework.runner import Config, Curve, running_average
+from delayed_rl.experiments.framework.experiment import Config, Curve, running_average
 from delayed_rl.experiments.framework.training import grid_env, train
 
 

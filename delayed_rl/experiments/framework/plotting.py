@@ -19,15 +19,15 @@ from typing import Any
 
 import numpy as np
 
-#: The legend text of a 95 % band or error bar over ``n`` seeds.
-BAND = "95 % CI over {n} seeds"
+from delayed_rl.figures import BAND, band_label, finish, outside_legend, pyplot
+
 #: How a thesis value is drawn: ``(value, label)``, or ``(value, label, group)`` to take the
 #: colour of that group's curve (e.g. ``(0.55, "thesis MMQ ≈ 0.55", "MMQ")``).
 ThesisLine = tuple
 
 
 def figure(draw: Callable[..., None], *args: Any, **kwargs: Any) -> Callable[[Path], None]:
-    """A figure of a :class:`~delayed_rl.experiments.framework.runner.Summary`: ``draw`` once given a path.
+    """A figure of a :class:`~delayed_rl.experiments.framework.experiment.Summary`: ``draw`` once given a path.
 
     Args:
         draw: one of this module's functions, e.g. :func:`learning_curves`.
@@ -38,42 +38,6 @@ def figure(draw: Callable[..., None], *args: Any, **kwargs: Any) -> Callable[[Pa
         ``path -> draw(path, *args, **kwargs)``.
     """
     return lambda path: draw(path, *args, **kwargs)
-
-
-def band_label(label: str, n: int) -> str:
-    """A curve's legend label naming its band: ``"MMQ: mean, 95 % CI over 5 seeds"``.
-
-    >>> band_label("MMQ", 5), band_label("Q", 1)
-    ('MMQ: mean, 95 % CI over 5 seeds', 'Q (1 seed)')
-    """
-    return f"{label}: mean, {BAND.format(n=n)}" if n > 1 else f"{label} (1 seed)"
-
-
-def _pyplot():
-    """``matplotlib.pyplot`` on the non-interactive Agg backend (figures go to files only)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def outside_legend(ax: Any, fontsize: float = 8) -> None:
-    """The legend of ``ax`` to the right of its axes (it never covers the data)."""
-    if ax.get_legend_handles_labels()[0]:
-        ax.legend(fontsize=fontsize, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0)
-
-
-def _finish(fig: Any, ax: Any, path: Path, title: str, xlabel: str, ylabel: str) -> None:
-    """Label and grid ``ax``, title ``fig`` (over the legend too), save it to ``path``, close it."""
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel(ylabel)
-    fig.suptitle(title, fontsize=10)
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    _pyplot().close(fig)
 
 
 def robust_ylim(
@@ -174,7 +138,7 @@ def learning_curves(
         levels: other levels, each ``(value, label)`` (a fixed controller's score), drawn as
             dotted lines in colours of their own.
     """
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(9.5, 4.4))
     means = {}
     colours, drawn = {}, []
@@ -209,7 +173,7 @@ def learning_curves(
     if ylim is not None:
         ax.set_ylim(*ylim)
     outside_legend(ax)
-    _finish(fig, ax, path, title, xlabel, ylabel)
+    finish(fig, ax, path, title, xlabel, ylabel)
 
 
 def band_plot(
@@ -233,7 +197,7 @@ def band_plot(
             line when there is one, else matplotlib's).
         reference: ``(y, label)`` of a horizontal dashed line, e.g. the optimum.
     """
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(9.5, 4.5))
     for label, runs in groups.items():
         x = runs[0][0]
@@ -253,7 +217,7 @@ def band_plot(
     if ylim is not None:
         ax.set_ylim(*ylim)
     outside_legend(ax)
-    _finish(fig, ax, path, title, xlabel, ylabel)
+    finish(fig, ax, path, title, xlabel, ylabel)
 
 
 def estimate_plot(
@@ -274,7 +238,7 @@ def estimate_plot(
         true_pmf: the true delay pmf on ``0, 1, ..., len − 1``.
         title: the title.
     """
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(9.5, 4.5))
     ax.bar(np.arange(true_pmf.size), true_pmf, color="0.8", width=1.0, label="true pmf")
     top = float(true_pmf.max())
@@ -295,7 +259,7 @@ def estimate_plot(
     ax.set_xlim(-1, true_pmf.size)
     ax.set_ylim(0, 1.1 * top)
     outside_legend(ax)
-    _finish(fig, ax, path, title, "delay (steps)", "probability (pmf) or share of steps")
+    finish(fig, ax, path, title, "delay (steps)", "probability (pmf) or share of steps")
 
 
 def errorbar_curve(
@@ -327,7 +291,7 @@ def errorbar_curve(
         label: the legend label of the measured curve.
         xticklabels: labels of the ticks at ``x`` (``None``: matplotlib's numbers).
     """
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(9, 4.4))
     text = f"{label}: mean, {BAND.format(n=n)}" if n else label
     ax.errorbar(x, mean, yerr=ci, marker="o", capsize=3, label=text)
@@ -352,7 +316,7 @@ def errorbar_curve(
     if xticklabels is not None:
         ax.set_xticks(list(x), list(xticklabels))
     outside_legend(ax)
-    _finish(fig, ax, path, title, xlabel, ylabel)
+    finish(fig, ax, path, title, xlabel, ylabel)
 
 
 def value_bars(
@@ -371,7 +335,7 @@ def value_bars(
         ylabel: the y-axis label.
         thesis: ``{label: (value, legend label)}`` for the groups the thesis gives a value.
     """
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(8.5, 4.4))
     names = list(stats)
     positions = np.arange(len(names))
@@ -399,7 +363,7 @@ def value_bars(
     pad = 0.08 * (high - low) if high > low else 0.1
     ax.set_ylim(low - pad, high + pad)  # a thesis value at 0 stays visible above the axis
     outside_legend(ax)
-    _finish(fig, ax, path, title, "", ylabel)
+    finish(fig, ax, path, title, "", ylabel)
 
 
 def _colourbar(fig: Any, image: Any, axes: Any, label: str) -> Any:
@@ -432,7 +396,7 @@ def grid_heatmap(
         vmax: the top of the colour scale (``None``: the largest value of every panel).
         columns: panels per row (``None``: all in one row).
     """
-    plt = _pyplot()
+    plt = pyplot()
     columns = columns or len(grids)
     rows = -(-len(grids) // columns)
     fig, axes = plt.subplots(
@@ -500,7 +464,7 @@ def value_tables(
             measured value as ``"thesis 49.50"``.
         decimals: the decimals printed.
     """
-    plt = _pyplot()
+    plt = pyplot()
     n = len(tables)
     fig, axes = plt.subplots(1, n, figsize=(3.3 * n + 1.3, 4.3), layout="constrained")
     axes = np.atleast_1d(axes)

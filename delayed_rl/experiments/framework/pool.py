@@ -1,14 +1,14 @@
 """Running experiments: each run once, on one pool of workers, the most costly first.
 
 :func:`run_experiments` (what ``delayed-rl reproduce`` calls) gathers the runs behind every task
-of the experiments it is given (:meth:`~.runner.Experiment.run_of`) and runs each *distinct* run
-once: a :class:`~.runner.SharedRun` that several tasks need, of one experiment or of several, is
+of the experiments it is given (:meth:`~.experiment.Experiment.run_of`) and runs each *distinct* run
+once: a :class:`~.experiment.SharedRun` that several tasks need, of one experiment or of several, is
 run once and its result handed to each of them (through its ``view``). Two runs are the same
 when they call the same function with the same task (compared in canonical JSON); runs that
 *pool* a list of their task (``SharedRun.pooled``, e.g. the steps at which a training run is
 read) are one run when their tasks differ only in that list, run on the union of its items.
 
-All runs go to one pool, ordered by their estimated cost (:attr:`~.runner.Experiment.cost`),
+All runs go to one pool, ordered by their estimated cost (:attr:`~.experiment.Experiment.cost`),
 longest first, so the workers are never left idle behind one experiment's slowest run before the
 next experiment starts, and the last runs to start are short ones. Each experiment is
 summarized as soon as its last run is in, while the workers go on with the other experiments'
@@ -18,7 +18,7 @@ side. Results do not depend on the order or the number of workers: every task ca
 seed. With ``progress``, a bar on stderr counts the distinct runs as they finish, in whatever
 order the workers finish them.
 
-A *resumable* experiment (:attr:`~.runner.Experiment.resumable`) keeps each run's result as it
+A *resumable* experiment (:attr:`~.experiment.Experiment.resumable`) keeps each run's result as it
 finishes, as ``OUT/runs/<hash>.json`` stating the run it holds (written whole or not at all), and
 a later call into the same folder reads those instead of running them: an experiment longer than
 a sitting runs in parts. A kept file that is not a run's result stops the call, naming it.
@@ -51,16 +51,10 @@ from pathlib import Path
 from typing import Any
 
 from delayed_rl._validation import check_bool
-from delayed_rl.experiments.framework.runner import (
-    Config,
-    Experiment,
-    RunProgress,
-    SharedRun,
-    Summary,
-    _json_default,
-    iter_tasks,
-    write_outputs,
-)
+from delayed_rl.experiments.framework.experiment import Config, Experiment, SharedRun, Summary
+from delayed_rl.experiments.framework.report import _json_default, write_outputs
+from delayed_rl.parallel.pools import iter_tasks
+from delayed_rl.parallel.progress import RunProgress
 
 
 def run_key(run: SharedRun) -> str:
@@ -190,7 +184,7 @@ def run_experiment(
         out: the output folder (``None``: write nothing, return the summary only).
         progress: report the progress: print a line saying how many runs start on how many
             workers, then count the runs on stderr as they finish
-            (:class:`~delayed_rl.experiments.framework.runner.RunProgress`: tqdm's bar, else a line per
+            (:class:`~delayed_rl.parallel.progress.RunProgress`: tqdm's bar, else a line per
             run).
 
     Returns:

@@ -31,7 +31,7 @@ from delayed_rl.experiments.framework.claims import (
 )
 from delayed_rl.experiments.framework.delay_estimates import ESTIMATE_LABELS
 from delayed_rl.experiments.framework.delay_settings import LAMBDA_MAX, make_delay
-from delayed_rl.experiments.framework.runner import Claim, Curve
+from delayed_rl.experiments.framework.experiment import Claim, Curve
 from delayed_rl.experiments.framework.snapshot_runs import LOOP_FRACTION, optimal_average
 
 #: The claims' rules: a share of seeds optimal, and the share of second-half snapshots that are.

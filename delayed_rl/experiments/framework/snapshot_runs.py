@@ -28,7 +28,7 @@ import numpy as np
 from delayed_rl._validation import check_bool, check_int
 from delayed_rl.agents.common.q_table import greedy_actions
 from delayed_rl.experiments.framework.delay_estimates import delay_estimate
-from delayed_rl.experiments.framework.runner import running_average
+from delayed_rl.experiments.framework.experiment import running_average
 from delayed_rl.experiments.framework.training import grid_env
 
 LOOP_FRACTION = 0.95

@@ -31,6 +31,13 @@ import numpy as np
 
 from delayed_rl.experiments.framework import plotting
 from delayed_rl.experiments.framework.claims import band_claim, direction_claim, mean_ci_n, paired
+from delayed_rl.experiments.framework.experiment import (
+    Config,
+    Curve,
+    Experiment,
+    SharedRun,
+    Summary,
+)
 from delayed_rl.experiments.framework.line_following import (
     LAM,
     LAMBDA_MAX,
@@ -40,13 +47,6 @@ from delayed_rl.experiments.framework.line_following import (
     pooled_training,
     run_metrics,
     training_cost,
-)
-from delayed_rl.experiments.framework.runner import (
-    Config,
-    Curve,
-    Experiment,
-    SharedRun,
-    Summary,
 )
 
 RUN_STEPS = 1700

@@ -12,6 +12,7 @@ from delayed_rl.experiments.framework.claims import (
     reference_row,
     trend_claim,
 )
+from delayed_rl.experiments.framework.experiment import Config, Experiment, Summary
 from delayed_rl.experiments.framework.normalised_runs import (
     curves_and_means,
     grid_task,
@@ -19,7 +20,6 @@ from delayed_rl.experiments.framework.normalised_runs import (
     learning_curve_groups,
     normalised,
 )
-from delayed_rl.experiments.framework.runner import Config, Experiment, Summary
 
 LAMS = (1, 2, 5, 10, 20, 50)
 QUICK_LAMS = (2, 10, 50)

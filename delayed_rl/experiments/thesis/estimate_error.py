@@ -6,13 +6,13 @@ import numpy as np
 
 from delayed_rl.experiments.framework import plotting
 from delayed_rl.experiments.framework.claims import band_claim, direction_claim, mean_ci_n, paired
+from delayed_rl.experiments.framework.experiment import Config, Experiment, Summary
 from delayed_rl.experiments.framework.normalised_runs import (
     curves_and_means,
     grid_task,
     grid_tasks,
     normalised,
 )
-from delayed_rl.experiments.framework.runner import Config, Experiment, Summary
 
 LAM = 17
 #: The thesis's peak of Fig. 5.6: 60 % of the undelayed reward, at i = 0.

@@ -31,6 +31,14 @@ from __future__ import annotations
 
 from delayed_rl.experiments.framework import plotting
 from delayed_rl.experiments.framework.claims import band_claim, direction_claim, mean_ci_n
+from delayed_rl.experiments.framework.experiment import (
+    Config,
+    Curve,
+    Experiment,
+    SharedRun,
+    Summary,
+    seed_tasks,
+)
 from delayed_rl.experiments.framework.line_claims import (
     REWARD_TOLERANCE,
     error_ratio_claim,
@@ -47,14 +55,6 @@ from delayed_rl.experiments.framework.line_following import (
     line_statistics,
     logged_run,
     training_cost,
-)
-from delayed_rl.experiments.framework.runner import (
-    Config,
-    Curve,
-    Experiment,
-    SharedRun,
-    Summary,
-    seed_tasks,
 )
 from delayed_rl.experiments.framework.training import ALPHA, EPSILON, GAMMA
 

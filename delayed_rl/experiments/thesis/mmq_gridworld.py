@@ -44,7 +44,7 @@ from delayed_rl.experiments.framework.claims import (
     range_claim,
     reference_row,
 )
-from delayed_rl.experiments.framework.runner import (
+from delayed_rl.experiments.framework.experiment import (
     Claim,
     Config,
     Curve,

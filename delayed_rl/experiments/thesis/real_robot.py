@@ -65,6 +65,7 @@ from typing import Any
 
 import numpy as np
 
+from delayed_rl import figures
 from delayed_rl._validation import check_choice
 from delayed_rl.experiments.framework import plotting
 from delayed_rl.experiments.framework.claims import (
@@ -75,6 +76,15 @@ from delayed_rl.experiments.framework.claims import (
     range_claim,
     reference_row,
 )
+from delayed_rl.experiments.framework.experiment import (
+    Claim,
+    Config,
+    Curve,
+    Experiment,
+    SharedRun,
+    Summary,
+    seed_tasks,
+)
 from delayed_rl.experiments.framework.line_claims import REWARD_TOLERANCE
 from delayed_rl.experiments.framework.line_following import (
     LAM,
@@ -83,15 +93,6 @@ from delayed_rl.experiments.framework.line_following import (
     UNSEEN_ERROR,
     pooled_training,
     training_cost,
-)
-from delayed_rl.experiments.framework.runner import (
-    Claim,
-    Config,
-    Curve,
-    Experiment,
-    SharedRun,
-    Summary,
-    seed_tasks,
 )
 
 #: The learners compared.
@@ -407,7 +408,7 @@ def thesis_panels(path: Any, panels: list, title: str, ylabel: str, lines: str) 
         lines: ``"level"``: a thesis line is a horizontal line at ``value``; ``"ratio"``: it
             is MMQ's mean curve of the panel times ``value`` (the thesis gives error ratios).
     """
-    plt = plotting._pyplot()
+    plt = figures.pyplot()
     columns = 2
     rows = (len(panels) + columns - 1) // columns
     fig, axes = plt.subplots(
@@ -425,7 +426,7 @@ def thesis_panels(path: Any, panels: list, title: str, ylabel: str, lines: str) 
                 ax.fill_between(
                     steps, means[agent][1] - half, means[agent][1] + half, color=colour, alpha=0.2
                 )
-            label = plotting.band_label(agent, len(agent_runs))
+            label = figures.band_label(agent, len(agent_runs))
             ax.plot(steps, means[agent][1], color=colour, label=label)
         for agent, value, label in thesis:
             if lines == "level":

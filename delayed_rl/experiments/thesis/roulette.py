@@ -17,7 +17,7 @@ import numpy as np
 
 from delayed_rl.experiments.framework import plotting
 from delayed_rl.experiments.framework.claims import band_claim
-from delayed_rl.experiments.framework.runner import Config, Curve, Experiment, Summary
+from delayed_rl.experiments.framework.experiment import Config, Curve, Experiment, Summary
 
 EVEN, THIRTEEN = 0, 1
 ROUNDING = 0.005

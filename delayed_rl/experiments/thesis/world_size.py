@@ -10,6 +10,7 @@ from delayed_rl.experiments.framework.claims import (
     paired,
     range_claim,
 )
+from delayed_rl.experiments.framework.experiment import Config, Experiment, Summary
 from delayed_rl.experiments.framework.normalised_runs import (
     curves_and_means,
     grid_task,
@@ -17,7 +18,6 @@ from delayed_rl.experiments.framework.normalised_runs import (
     learning_curve_groups,
     normalised,
 )
-from delayed_rl.experiments.framework.runner import Config, Experiment, Summary
 
 SIZES = (3, 5, 9)
 LAMS = (5, 50, 150)

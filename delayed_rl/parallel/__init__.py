@@ -1,0 +1,30 @@
+"""Many independent runs at once, for the experiments and the sweeps alike.
+
+- :mod:`.pools`: worker pools (joblib's ``loky`` processes, Ray, Dask), results as tasks finish;
+- :mod:`.progress`: the runs' progress on the terminal;
+- :mod:`.intervals`: means with their 95 % intervals.
+"""
+
+from delayed_rl.parallel.intervals import mean_ci95, t975
+from delayed_rl.parallel.pools import (
+    BACKENDS,
+    MAX_SEEDS,
+    MAX_WORKERS,
+    check_workers,
+    iter_tasks,
+    run_tasks,
+)
+from delayed_rl.parallel.progress import RunProgress, tqdm_installed
+
+__all__ = [
+    "BACKENDS",
+    "MAX_SEEDS",
+    "MAX_WORKERS",
+    "RunProgress",
+    "check_workers",
+    "iter_tasks",
+    "mean_ci95",
+    "run_tasks",
+    "t975",
+    "tqdm_installed",
+]
