@@ -19,14 +19,10 @@
   (imported from its own module so that stable-baselines3 and torch load only when used).
 """
 
-from delayed_rl.wrappers.action_delay import ActionDelay, VectorActionDelay
-from delayed_rl.wrappers.delay_aware import (
-    DelayAwareObservation,
-    DiscreteDelayAwareObservation,
-    VectorDelayAwareObservation,
-)
+from delayed_rl.wrappers.action_delay import ActionDelay
+from delayed_rl.wrappers.delay_aware import DelayAwareObservation, DiscreteDelayAwareObservation
 from delayed_rl.wrappers.discrete_observation import DiscreteObservation
-from delayed_rl.wrappers.observation_delay import ObservationDelay, VectorObservationDelay
+from delayed_rl.wrappers.observation_delay import ObservationDelay
 from delayed_rl.wrappers.reward_delay import (
     EPISODE_END_MODES,
     PoissonRewardDelay,
@@ -34,7 +30,12 @@ from delayed_rl.wrappers.reward_delay import (
     wrap_reward_delay,
 )
 from delayed_rl.wrappers.stack import wrap_delays
-from delayed_rl.wrappers.vector import VectorRewardDelay
+from delayed_rl.wrappers.vector import (
+    VectorActionDelay,
+    VectorDelayAwareObservation,
+    VectorObservationDelay,
+    VectorRewardDelay,
+)
 
 __all__ = [
     "EPISODE_END_MODES",

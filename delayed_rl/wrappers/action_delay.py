@@ -14,17 +14,18 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from gymnasium.vector import AutoresetMode, VectorEnv
-from gymnasium.vector.utils import concatenate, create_empty_array, iterate
 
 from delayed_rl.delays import Delay, as_delay, delay_spec
 from delayed_rl.wrappers._in_transit import InTransit
 from delayed_rl.wrappers._samples import as_action, copy_sample
 from delayed_rl.wrappers._spec import JsonSpecMixin, json_safe
 from delayed_rl.wrappers.reward_delay import DelaySampler, check_max_delay
-from delayed_rl.wrappers.vector import autoreset_mode, reset_mask, sub_env_seeds
 
-__all__ = ["ActionDelay", "ActionLine", "VectorActionDelay", "neutral_action", "unbatch_actions"]
+__all__ = [
+    "ActionDelay",
+    "ActionLine",
+    "neutral_action",
+]
 
 
 def neutral_action(space: gym.Space) -> Any:
@@ -55,33 +56,6 @@ def neutral_action(space: gym.Space) -> Any:
         f"initial_action must be given for an action space of type {type(space).__name__} "
         f"({space}): there is no neutral action to default to"
     )
-
-
-def unbatch_actions(env: VectorEnv, actions: Any) -> list[Any]:
-    """The sub-envs' actions in the batch ``actions`` of ``env`` (``gymnasium.vector.utils.iterate``).
-
-    ``actions`` is a batch of ``env.action_space``: an array with one row per sub-env, and for a
-    ``Dict`` (``Tuple``) action space a dict (tuple) of such batches. The actions are not checked
-    against the single action space (the caller names each ``actions[i]`` when it checks them).
-
-    Raises:
-        TypeError: ``actions`` is not a batch of the action space's form.
-        ValueError: it does not hold one action per sub-env.
-    """
-    allowed = (
-        f"a batch of {env.num_envs} actions of {env.single_action_space} (one per sub-env; "
-        "a dict or tuple of batches for a Dict or Tuple space)"
-    )
-    try:
-        given = list(iterate(env.action_space, actions))
-    except (TypeError, KeyError, IndexError, ValueError) as error:
-        kind = TypeError if isinstance(error, TypeError) else ValueError
-        raise kind(
-            f"actions must be {allowed}, got {actions!r} ({type(actions).__name__}): {error}"
-        ) from None
-    if len(given) != env.num_envs:
-        raise ValueError(f"actions must be {allowed}, got {len(given)}: {actions!r}")
-    return given
 
 
 def _check_action(space: gym.Space, action: Any, name: str) -> Any:
@@ -253,137 +227,3 @@ class ActionDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
         info["executed_action_step"] = self.line.executed_step
         info["action_delay"] = delay
         return obs, reward, terminated, truncated, info
-
-
-class VectorActionDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArgs):
-    """Delays each sub-env's actions independently, with the rule of :class:`ActionDelay`.
-
-    Every sub-env has its own :class:`ActionLine` and delay stream (seeded as
-    :class:`~delayed_rl.wrappers.VectorRewardDelay` seeds them: ``reset(seed=s)`` gives sub-env
-    ``i`` the seed ``s + i``, so it executes exactly the actions an :class:`ActionDelay` reset
-    with ``seed=s + i`` would). A sub-env's line restarts with its episode: under the
-    ``NEXT_STEP`` autoreset mode at the reset step that follows an episode's end (the action
-    given for that step is not sent: the sub-env ignores it), under ``SAME_STEP`` right after
-    the ending step, under ``DISABLED`` when ``reset(options={"reset_mask": ...})`` resets it.
-
-    ``info`` holds, with Gymnasium's ``_key`` masks, ``executed_action`` (the batch of actions
-    executed), ``executed_action_step`` and ``action_delay`` (for the sub-envs that sent an
-    action at this step).
-
-    Actions are batched as in ``gymnasium.vector``: an array with one row per sub-env, and for
-    a ``Dict`` (``Tuple``) action space a dict (tuple) of such batches, nested as the space is;
-    ``info["executed_action"]`` is a batch of the same form. They are copied as
-    :class:`ActionDelay` copies them: the batch given to the inner env and the one reported are
-    new objects built from copies of what the lines keep.
-
-    Args:
-        env: a Gymnasium ``VectorEnv``.
-        delay: a :class:`~delayed_rl.delays.Delay`, its ``to_dict()`` description, or a number
-            read as a Poisson mean.
-        initial_action: one sub-env's initial action (``None``: the neutral action of its
-            action space, :func:`neutral_action`).
-        max_delay: clip delays to at most this many steps (``None``: unbounded).
-
-    Raises:
-        TypeError, ValueError: as :class:`ActionDelay`, and for an unknown autoreset mode.
-    """
-
-    def __init__(
-        self,
-        env: VectorEnv,
-        delay: Delay | float,
-        initial_action: Any = None,
-        max_delay: int | None = None,
-    ):
-        gym.utils.RecordConstructorArgs.__init__(
-            self,
-            delay=delay_spec(delay),
-            initial_action=json_safe(initial_action),
-            max_delay=json_safe(max_delay),
-        )
-        gym.vector.VectorWrapper.__init__(self, env)
-        self.delay = as_delay(delay)
-        self.max_delay = check_max_delay(max_delay)
-        space = env.single_action_space
-        if initial_action is None:
-            initial_action = neutral_action(space)
-        self.initial_action = as_action(space, initial_action, "initial_action")
-        self.autoreset_mode = autoreset_mode(env)
-        self.lines = [ActionLine(copy_sample(self.initial_action)) for _ in range(self.num_envs)]
-        self._samplers = [
-            DelaySampler(self.delay, self.max_delay, "action") for _ in range(self.num_envs)
-        ]
-        self._resetting = np.zeros(self.num_envs, dtype=bool)
-
-    def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
-        """Reset all sub-envs, or those in ``options["reset_mask"]``, and their lines.
-
-        Raises:
-            TypeError, ValueError: ``seed`` is not ``None``, an integer ``>= 0`` or a list of
-                ``num_envs`` of them (or ``None``).
-        """
-        seeds = sub_env_seeds(seed, self.num_envs)
-        envs = reset_mask(options, self.num_envs)
-        obs, info = self.env.reset(seed=seed, options=options)
-        for i in np.flatnonzero(envs):
-            if seeds[i] is not None:
-                self._samplers[i].seed(seeds[i])
-            self.lines[i].reset()
-        self._resetting[envs] = False
-        return obs, info
-
-    def step(self, actions):
-        """Send each sub-env's action; step them with the actions executed now.
-
-        Raises:
-            TypeError: ``actions`` is not a batch of the action space's form (see the class
-                docstring).
-            ValueError: it does not hold one action per sub-env, or a sub-env's action is not
-                in the single action space (the message names ``actions[i]``).
-        """
-        space = self.single_action_space
-        given = unbatch_actions(self, actions)
-        executed = list(given)  # the reset step's sub-envs ignore the action given
-        sent_steps = np.full(self.num_envs, -1, dtype=np.int64)
-        delays = np.zeros(self.num_envs, dtype=np.int64)
-        sending = ~self._resetting
-        for i in np.flatnonzero(sending).tolist():
-            action = _check_action(space, given[i], f"actions[{i}]")
-            delays[i] = self._samplers[i]()
-            executed[i] = self.lines[i].send(action, int(delays[i]))
-            sent_steps[i] = self.lines[i].executed_step
-        batch = self._batch(executed)  # new arrays: the lines' actions are not handed out
-        report = copy_sample(batch)  # another: the inner env may edit its batch in place
-        obs, rewards, terminated, truncated, info = self.env.step(batch)
-        ended = np.asarray(terminated) | np.asarray(truncated)
-        if self.autoreset_mode == AutoresetMode.NEXT_STEP:
-            self._resetting = ended & sending
-            for i in np.flatnonzero(~sending):  # this was the reset step: a new episode
-                self.lines[i].reset()
-        elif self.autoreset_mode == AutoresetMode.SAME_STEP:
-            for i in np.flatnonzero(ended):
-                self.lines[i].reset()
-        for key, values in (
-            ("executed_action", report),
-            ("executed_action_step", sent_steps),
-            ("action_delay", delays),
-        ):
-            info[key], info["_" + key] = values, sending.copy()
-        return obs, rewards, terminated, truncated, info
-
-    def _batch(self, actions: list[Any]) -> Any:
-        """One batch (new arrays) of the sub-envs' ``actions`` (``gymnasium.vector.utils``).
-
-        Raises:
-            ValueError: the actions do not stack into a batch of the action space (an action
-                given for a sub-env at its reset step, which is not checked, of the wrong
-                shape).
-        """
-        space = self.single_action_space
-        try:
-            return concatenate(space, actions, create_empty_array(space, self.num_envs))
-        except (TypeError, ValueError) as error:
-            raise ValueError(
-                f"actions must be a batch of {self.num_envs} actions of {space}, got actions "
-                f"that do not stack into one ({error}): {actions!r}"
-            ) from None

@@ -15,7 +15,7 @@ from delayed_rl._validation import check_int
 from delayed_rl.delays import Delay, as_delay
 from delayed_rl.wrappers.buffers import RewardBuffers
 from delayed_rl.wrappers.reward_delay import check_episode_end, check_max_delay, flush_watch
-from delayed_rl.wrappers.vector import checked_rewards
+from delayed_rl.wrappers.vector._sub_envs import checked_rewards
 
 
 class VecRewardDelay(VecEnvWrapper):

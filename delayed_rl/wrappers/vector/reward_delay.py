@@ -2,92 +2,21 @@
 
 from __future__ import annotations
 
-import numbers
-from collections.abc import Sequence
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 
-from delayed_rl._validation import check_int, check_rewards
 from delayed_rl.delays import Delay, as_delay, delay_spec
 from delayed_rl.wrappers.buffers import RewardBuffers
 from delayed_rl.wrappers.reward_delay import check_episode_end, check_max_delay, flush_watch
-
-
-def sub_env_seeds(seed: Any, num_envs: int) -> list[int | None]:
-    """The seed of each sub-env for ``reset(seed=seed)``, as Gymnasium's vector envs read it.
-
-    ``None`` leaves every sub-env unseeded; an int ``s`` seeds sub-env ``i`` with ``s + i`` (as
-    ``SyncVectorEnv`` and ``AsyncVectorEnv`` do); a sequence gives each sub-env its entry
-    (``None`` entries: unseeded).
-
-    Raises:
-        TypeError: ``seed`` is neither ``None``, an integer nor a sequence, or an entry is
-            neither ``None`` nor an integer.
-        ValueError: ``seed`` or an entry is negative, or the sequence's length is not
-            ``num_envs``.
-    """
-    if seed is None:
-        return [None] * num_envs
-    if isinstance(seed, numbers.Integral) and not isinstance(seed, (bool, np.bool_)):
-        first = check_int("seed", seed, 0)
-        return [first + i for i in range(num_envs)]
-    if isinstance(seed, (str, bytes)) or not isinstance(seed, (Sequence, np.ndarray)):
-        raise TypeError(
-            f"seed must be None, an integer >= 0 or a list of {num_envs} of them, "
-            f"got {seed!r} ({type(seed).__name__})"
-        )
-    if len(seed) != num_envs:
-        raise ValueError(
-            f"seed must be a list of one seed per sub-env ({num_envs}), got {len(seed)}: {seed!r}"
-        )
-    return [check_int(f"seed[{i}]", entry, 0, optional=True) for i, entry in enumerate(seed)]
-
-
-def autoreset_mode(env: VectorEnv) -> AutoresetMode:
-    """The autoreset mode of ``env`` (its ``metadata["autoreset_mode"]``, else ``NEXT_STEP``).
-
-    Raises:
-        ValueError: the metadata names no ``gymnasium.vector.AutoresetMode``.
-    """
-    mode = env.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP)
-    try:
-        return AutoresetMode(mode)
-    except ValueError:
-        raise ValueError(
-            f"unsupported autoreset_mode {mode!r}; supported: {list(AutoresetMode)}"
-        ) from None
-
-
-def reset_mask(options: dict[str, Any] | None, num_envs: int) -> np.ndarray:
-    """Which sub-envs a ``reset(options=options)`` resets: ``options["reset_mask"]``, else all.
-
-    Read it before calling the vector env's ``reset``: ``SyncVectorEnv.reset`` pops it.
-    """
-    if options and "reset_mask" in options:
-        return np.array(options["reset_mask"], dtype=bool)
-    return np.ones(num_envs, dtype=bool)
-
-
-def checked_rewards(rewards: Any, num_envs: int, wrapper: str) -> np.ndarray:
-    """A vector env's ``rewards`` as float64, checked (:func:`~delayed_rl._validation.check_rewards`).
-
-    Infinite and NaN rewards pass (the buffers refuse them with their own message).
-
-    Raises:
-        TypeError: ``rewards`` is not a batch of real scalars (the message names ``rewards[i]``,
-            its value and what is allowed).
-        ValueError: it does not hold ``num_envs`` rewards, or an entry is an integer beyond
-            float64's range.
-    """
-    try:
-        return check_rewards("rewards", rewards, num_envs)
-    except (TypeError, ValueError) as error:
-        raise type(error)(
-            f"{error}; the inner vector env returned them, and {wrapper} refuses to buffer them"
-        ) from None
+from delayed_rl.wrappers.vector._sub_envs import (
+    autoreset_mode,
+    checked_rewards,
+    reset_mask,
+    sub_env_seeds,
+)
 
 
 def _with_mask(info: dict[str, Any], key: str, values: np.ndarray, mask: np.ndarray) -> None:
@@ -97,7 +26,7 @@ def _with_mask(info: dict[str, Any], key: str, values: np.ndarray, mask: np.ndar
 
 
 class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArgs):
-    """Delays each sub-env's rewards independently, with the semantics of :class:`RewardDelay`.
+    """Delays each sub-env's rewards independently, with the semantics of :class:`~delayed_rl.wrappers.RewardDelay`.
 
     Every sub-env has its own buffer and clock; ``on_episode_end`` applies per sub-env when its
     episode ends. All three autoreset modes of ``gymnasium.vector`` are supported:
@@ -109,15 +38,15 @@ class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
       pending rewards follow ``on_episode_end`` at that step;
     - ``DISABLED``: sub-envs are reset by ``reset(options={"reset_mask": mask})``; a masked sub-env
       whose episode had not ended loses its pending rewards under ``"flush"``/``"drop"`` (reported
-      as ``info["dropped_reward"]``), as in :class:`RewardDelay`.
+      as ``info["dropped_reward"]``), as in :class:`~delayed_rl.wrappers.RewardDelay`.
 
-    Under ``"flush"`` the wrapper watches for the flush trap as :class:`RewardDelay` does
+    Under ``"flush"`` the wrapper watches for the flush trap as :class:`~delayed_rl.wrappers.RewardDelay` does
     (:class:`~delayed_rl.wrappers.reward_delay.FlushWatch`), over all its sub-envs together: their
     episodes with a reward count towards one total, their steps towards one step cap, and it
     warns at most once.
 
     The inner env's rewards must be one real scalar per sub-env (an array, list or tuple of
-    ``num_envs`` ints or floats, as :class:`RewardDelay` accepts them one by one): anything else
+    ``num_envs`` ints or floats, as :class:`~delayed_rl.wrappers.RewardDelay` accepts them one by one): anything else
     raises ``TypeError`` (``ValueError`` for the wrong count), naming ``rewards[i]`` and its value.
 
     ``info`` holds arrays (with Gymnasium's ``_key`` masks): ``undelayed_reward``, ``reward_delay``,
