@@ -316,9 +316,9 @@ def test_pending_sum_beyond_float64_is_a_clear_error_not_inf(on_episode_end) -> 
 
 
 def test_huge_rewards_whose_sum_fits_are_exact_in_the_vector_buffers() -> None:
-    from delayed_rl.wrappers.buffers import RewardBuffers
+    from delayed_rl.wrappers.pending_rewards import PendingRewards
 
-    buffers = RewardBuffers(1, Constant(20), None)
+    buffers = PendingRewards(1, Constant(20), None)
     for reward in (1e308, 1.0, -1e308, 1e308):
         delivered, _, _ = buffers.step(np.array([reward]), [True], [False], "flush")
         assert delivered[0] == 0.0 and np.isfinite(buffers.pending).all()

@@ -4,7 +4,7 @@ Each wrapper applies its single-agent namesake's rule to every agent on its own,
 twins (:class:`~delayed_rl.wrappers.VectorRewardDelay`, ...) do to every sub-env:
 
 - :class:`ParallelRewardDelay`: :class:`~delayed_rl.wrappers.RewardDelay`'s rule (pending
-  rewards in :class:`~delayed_rl.wrappers.buffers.RewardBuffers`), ``on_episode_end`` applied
+  rewards in :class:`~delayed_rl.wrappers.pending_rewards.PendingRewards`), ``on_episode_end`` applied
   to each agent when it terminates or is truncated, whether or not the others go on;
 - :class:`ParallelObservationDelay`: :class:`~delayed_rl.wrappers.ObservationDelay`'s two
   arrival rules (:class:`~delayed_rl.wrappers.observation_delay.StaleArrival`,

@@ -11,7 +11,7 @@ from pettingzoo import ParallelEnv
 from delayed_rl._validation import check_reward
 from delayed_rl.delays import Delay
 from delayed_rl.multiagent._base import ParallelDelayWrapper
-from delayed_rl.wrappers.buffers import RewardBuffers
+from delayed_rl.wrappers.pending_rewards import PendingRewards
 from delayed_rl.wrappers.reward_delay import check_episode_end, flush_watch
 
 __all__ = ["ParallelRewardDelay"]
@@ -25,7 +25,7 @@ class ParallelRewardDelay(ParallelDelayWrapper):
     Each agent has its own pending rewards, clock and delay stream: the reward ``r_t`` it is
     given at its step ``t`` is delivered to it at its step ``t + d_t``, summed with the others
     due then (:class:`~delayed_rl.wrappers.RewardDelay` states the rule; the agents' pending
-    rewards are kept in :class:`~delayed_rl.wrappers.buffers.RewardBuffers`, one row per agent,
+    rewards are kept in :class:`~delayed_rl.wrappers.pending_rewards.PendingRewards`, one row per agent,
     as :class:`~delayed_rl.wrappers.VectorRewardDelay` keeps its sub-envs'). An agent's clock
     advances at the steps whose ``rewards`` name it, the step it joins at included (a reward
     given then is delayed like any other).
@@ -105,7 +105,7 @@ class ParallelRewardDelay(ParallelDelayWrapper):
         for i, agent in enumerate(self.agent_order):
             rows.setdefault(self.delays[agent], []).append(i)
         self._groups = [
-            (np.array(members), RewardBuffers(len(members), delay, self.max_delay))
+            (np.array(members), PendingRewards(len(members), delay, self.max_delay))
             for delay, members in rows.items()
         ]
         watches = (flush_watch(self.on_episode_end, d, self.max_delay, 3) for d in rows)
@@ -120,8 +120,8 @@ class ParallelRewardDelay(ParallelDelayWrapper):
 
     def _pending(self) -> np.ndarray:
         pending = np.zeros(len(self.agent_order))
-        for rows, buffers in self._groups:
-            pending[rows] = buffers.pending
+        for rows, queue in self._groups:
+            pending[rows] = queue.pending
         return pending
 
     def reset(self, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -135,13 +135,13 @@ class ParallelRewardDelay(ParallelDelayWrapper):
         """
         obs, infos, seeds = self.reset_env(seed, options)
         if seeds is not None:
-            for rows, buffers in self._groups:
-                buffers.seed([seeds[i] for i in rows.tolist()])
+            for rows, queue in self._groups:
+                queue.seed([seeds[i] for i in rows.tolist()])
         cut_short = self._in_episode
         if self.on_episode_end != "carry" and cut_short.any():
             lost = np.zeros(len(self.agent_order))
-            for rows, buffers in self._groups:
-                lost[rows] = buffers.clear(cut_short[rows])
+            for rows, queue in self._groups:
+                lost[rows] = queue.clear(cut_short[rows])
             for i in np.flatnonzero(cut_short).tolist():
                 agent = self.agent_order[i]
                 if agent in infos:
@@ -174,7 +174,7 @@ class ParallelRewardDelay(ParallelDelayWrapper):
         emitted, active, ended = self._read(rewards, terminated, truncated)
         delivered, delays, settled = self._advance(emitted, active, ended)
         if self._watch is not None and self._watch.see_envs(
-            sum(int(buffers.clock.sum()) for _, buffers in self._groups), emitted, ended
+            sum(int(queue.clock.sum()) for _, queue in self._groups), emitted, ended
         ):
             self._watch = None
         self._in_episode = (self._in_episode | active) & ~ended
@@ -212,7 +212,7 @@ class ParallelRewardDelay(ParallelDelayWrapper):
             if reward - reward:  # inf or NaN
                 raise ValueError(
                     f"the env gave agent {agent!r} a non-finite reward ({reward!r}); "
-                    "ParallelRewardDelay refuses to buffer it"
+                    "ParallelRewardDelay refuses to delay it"
                 )
             emitted[i] = reward
             active[i] = True
@@ -232,14 +232,14 @@ class ParallelRewardDelay(ParallelDelayWrapper):
         except (TypeError, ValueError) as error:
             raise type(error)(
                 f"{error}; the env gave it to agent {agent!r}, and ParallelRewardDelay refuses "
-                "to buffer it"
+                "to delay it"
             ) from None
         return value
 
     def _advance(
         self, emitted: np.ndarray, active: np.ndarray, ended: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """One step of every agent's buffer: what each receives, its delay, what it settled.
+        """One step of every agent's rewards in transit: what each receives, its delay, what it settled.
 
         Returns:
             ``(delivered, delays, settled)``, by agent position; ``settled`` is what an agent
@@ -252,8 +252,8 @@ class ParallelRewardDelay(ParallelDelayWrapper):
             )
             return delivered, delays, np.zeros(count) if settled is None else settled
         delivered, delays, settled = np.zeros(count), np.zeros(count, dtype=np.int64), None
-        for rows, buffers in self._groups:
-            got, drawn, amounts = buffers.step(
+        for rows, queue in self._groups:
+            got, drawn, amounts = queue.step(
                 emitted[rows], active[rows], ended[rows], self.on_episode_end
             )
             delivered[rows], delays[rows] = got, drawn

@@ -3,7 +3,7 @@
 :class:`ReferenceRewardDelay` is the one statement of what every reward-delay implementation
 of the library does, for reading and for tests. Three implementations follow it, each tuned for
 its use: :class:`~delayed_rl.wrappers.RewardDelay` (one env, a schedule of sums),
-:class:`~delayed_rl.wrappers.buffers.RewardBuffers` (shared by
+:class:`~delayed_rl.wrappers.pending_rewards.PendingRewards` (shared by
 :class:`~delayed_rl.wrappers.VectorRewardDelay` and stable-baselines3's
 :class:`~delayed_rl.wrappers.sb3.VecRewardDelay`: one ring per sub-env) and the compiled
 training loop's ring (:mod:`delayed_rl.compiled.kernel`, which inlines it in its step loop).

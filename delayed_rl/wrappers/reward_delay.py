@@ -546,12 +546,12 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
         except (TypeError, ValueError) as error:
             raise type(error)(
                 f"{error}; the inner env returned it at episode step "
-                f"{self._clock - self._episode_start}, and RewardDelay refuses to buffer it"
+                f"{self._clock - self._episode_start}, and RewardDelay refuses to delay it"
             ) from None
         if not math.isfinite(reward):
             raise ValueError(
                 f"the inner env returned a non-finite reward ({reward!r}) at episode step "
-                f"{self._clock - self._episode_start}; RewardDelay refuses to buffer it"
+                f"{self._clock - self._episode_start}; RewardDelay refuses to delay it"
             )
         return reward
 

@@ -13,7 +13,7 @@ from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
 from delayed_rl._validation import check_int
 from delayed_rl.delays import Delay, as_delay
-from delayed_rl.wrappers.buffers import RewardBuffers
+from delayed_rl.wrappers.pending_rewards import PendingRewards
 from delayed_rl.wrappers.reward_delay import check_episode_end, check_max_delay, flush_watch
 from delayed_rl.wrappers.vector._sub_envs import checked_rewards
 
@@ -52,7 +52,7 @@ class VecRewardDelay(VecEnvWrapper):
     floating dtype (float32 for SB3's ``DummyVecEnv`` and ``SubprocVecEnv``, whose reward buffers
     are float32: the point where SB3 itself casts), never less than float32. Sums beyond float64's
     range raise ``ValueError``; the rings that hold pending rewards grow with the delays drawn
-    (see :data:`~delayed_rl.wrappers.buffers.MAX_RING_ENTRIES`).
+    (see :data:`~delayed_rl.wrappers.pending_rewards.MAX_RING_ENTRIES`).
 
     Args:
         venv: the SB3 ``VecEnv`` to wrap.
@@ -81,12 +81,12 @@ class VecRewardDelay(VecEnvWrapper):
         self.delay = as_delay(delay)
         self.max_delay = check_max_delay(max_delay)
         self.on_episode_end = check_episode_end(on_episode_end)
-        self.buffers = RewardBuffers(self.num_envs, self.delay, self.max_delay)
+        self.rewards_in_transit = PendingRewards(self.num_envs, self.delay, self.max_delay)
         # (called as VecEnv.step -> step_wait -> FlushWatch.see_envs -> see)
         self._watch = flush_watch(self.on_episode_end, self.delay, self.max_delay, stacklevel=4)
         seed = check_int("seed", seed, 0, optional=True)
         if seed is not None:
-            self.buffers.seed(self._seeds_from(seed))
+            self.rewards_in_transit.seed(self._seeds_from(seed))
         self._pending_seeds: list[int] | None = None
         self._started = False  # True from the first reset: the sub-envs are in episodes
         self._all = np.ones(self.num_envs, dtype=bool)
@@ -115,11 +115,11 @@ class VecRewardDelay(VecEnvWrapper):
         """
         obs = self.venv.reset()
         if self._pending_seeds is not None:
-            self.buffers.seed(self._pending_seeds)
+            self.rewards_in_transit.seed(self._pending_seeds)
             self._pending_seeds = None
         infos = [dict(info) for info in self.venv.reset_infos]
         if self.on_episode_end != "carry":
-            dropped = self.buffers.clear(self._all)
+            dropped = self.rewards_in_transit.clear(self._all)
             if self._started:
                 for info, lost in zip(infos, dropped, strict=True):
                     info["dropped_reward"] = float(lost)
@@ -133,7 +133,7 @@ class VecRewardDelay(VecEnvWrapper):
                         "have them flushed",
                         stacklevel=2,
                     )
-        for info, pending in zip(infos, self.buffers.pending, strict=True):
+        for info, pending in zip(infos, self.rewards_in_transit.pending, strict=True):
             info["pending_reward"] = float(pending)
         self.reset_infos = infos
         self._started = True
@@ -144,14 +144,14 @@ class VecRewardDelay(VecEnvWrapper):
         obs, raw, dones, infos = self.venv.step_wait()
         rewards = checked_rewards(raw, self.num_envs, type(self).__name__)
         ended = np.asarray(dones, dtype=bool)
-        delivered, delays, amounts = self.buffers.step(
+        delivered, delays, amounts = self.rewards_in_transit.step(
             rewards, self._all, ended, self.on_episode_end
         )
         if self._watch is not None and self._watch.see_envs(
-            int(self.buffers.clock.sum()), rewards, ended
+            int(self.rewards_in_transit.clock.sum()), rewards, ended
         ):
             self._watch = None
-        pending = self.buffers.pending
+        pending = self.rewards_in_transit.pending
         key = "flushed_reward" if self.on_episode_end == "flush" else "dropped_reward"
         for i, info in enumerate(infos):
             info["undelayed_reward"] = float(rewards[i])

@@ -83,7 +83,7 @@ def checked_rewards(rewards: Any, num_envs: int, wrapper: str) -> np.ndarray:
         return check_rewards("rewards", rewards, num_envs)
     except (TypeError, ValueError) as error:
         raise type(error)(
-            f"{error}; the inner vector env returned them, and {wrapper} refuses to buffer them"
+            f"{error}; the inner vector env returned them, and {wrapper} refuses to delay them"
         ) from None
 
 

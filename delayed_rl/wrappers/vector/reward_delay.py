@@ -9,7 +9,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 
 from delayed_rl.delays import Delay, as_delay, delay_spec
-from delayed_rl.wrappers.buffers import RewardBuffers
+from delayed_rl.wrappers.pending_rewards import PendingRewards
 from delayed_rl.wrappers.reward_delay import check_episode_end, check_max_delay, flush_watch
 from delayed_rl.wrappers.vector._sub_envs import (
     autoreset_mode,
@@ -28,7 +28,7 @@ def _with_mask(info: dict[str, Any], key: str, values: np.ndarray, mask: np.ndar
 class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArgs):
     """Delays each sub-env's rewards independently, with the semantics of :class:`~delayed_rl.wrappers.RewardDelay`.
 
-    Every sub-env has its own buffer and clock; ``on_episode_end`` applies per sub-env when its
+    Every sub-env has its own rewards in transit and clock; ``on_episode_end`` applies per sub-env when its
     episode ends. All three autoreset modes of ``gymnasium.vector`` are supported:
 
     - ``NEXT_STEP`` (the default): the step after an episode ends is the sub-env's reset step; it
@@ -61,7 +61,7 @@ class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
     sub-env drew from one stream seeded with the first seed, so seeded vector runs changed.)
 
     The rings that hold pending rewards start short and grow with the delays drawn, up to
-    :data:`~delayed_rl.wrappers.buffers.MAX_RING_ENTRIES` slots in all; a longer delay keeps its
+    :data:`~delayed_rl.wrappers.pending_rewards.MAX_RING_ENTRIES` slots in all; a longer delay keeps its
     reward in a dict, so memory stays proportional to what is pending whatever the delay
     (``Poisson(1e9)`` included). Sums beyond float64's range raise ``ValueError``.
 
@@ -95,7 +95,7 @@ class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
         self.max_delay = check_max_delay(max_delay)
         self.on_episode_end = check_episode_end(on_episode_end)
         self.autoreset_mode = autoreset_mode(env)
-        self.buffers = RewardBuffers(self.num_envs, self.delay, self.max_delay)
+        self.rewards_in_transit = PendingRewards(self.num_envs, self.delay, self.max_delay)
         # (called as step -> FlushWatch.see_envs -> see)
         self._watch = flush_watch(self.on_episode_end, self.delay, self.max_delay, stacklevel=3)
         self._resetting = np.zeros(self.num_envs, dtype=bool)
@@ -117,10 +117,12 @@ class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
         seeds = sub_env_seeds(seed, self.num_envs)
         envs = reset_mask(options, self.num_envs)
         obs, info = self.env.reset(seed=seed, options=options)
-        self.buffers.seed([s if reset else None for s, reset in zip(seeds, envs, strict=True)])
+        self.rewards_in_transit.seed(
+            [s if reset else None for s, reset in zip(seeds, envs, strict=True)]
+        )
         cut_short = envs & ~self._episode_ended
         if self.on_episode_end != "carry" and cut_short.any():
-            _with_mask(info, "dropped_reward", self.buffers.clear(cut_short), cut_short)
+            _with_mask(info, "dropped_reward", self.rewards_in_transit.clear(cut_short), cut_short)
         self._episode_ended[envs] = False
         self._resetting[envs] = False
         return obs, info
@@ -131,13 +133,15 @@ class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
         rewards = checked_rewards(rewards, self.num_envs, type(self).__name__)
         active = ~self._resetting
         ended = (np.asarray(terminated) | np.asarray(truncated)) & active
-        delivered, delays, settled = self.buffers.step(rewards, active, ended, self.on_episode_end)
+        delivered, delays, settled = self.rewards_in_transit.step(
+            rewards, active, ended, self.on_episode_end
+        )
         if settled is not None:
             key = "flushed_reward" if self.on_episode_end == "flush" else "dropped_reward"
             _with_mask(info, key, settled, ended)
         emitted = np.where(active, rewards, 0.0)
         if self._watch is not None and self._watch.see_envs(
-            int(self.buffers.clock.sum()), emitted, ended
+            int(self.rewards_in_transit.clock.sum()), emitted, ended
         ):
             self._watch = None
         if self.autoreset_mode == AutoresetMode.NEXT_STEP:
@@ -149,5 +153,7 @@ class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
             self._episode_ended |= ended
         _with_mask(info, "undelayed_reward", emitted, active)
         _with_mask(info, "reward_delay", delays, active)
-        _with_mask(info, "pending_reward", self.buffers.pending, np.ones(self.num_envs, bool))
+        _with_mask(
+            info, "pending_reward", self.rewards_in_transit.pending, np.ones(self.num_envs, bool)
+        )
         return obs, delivered, terminated, truncated, info

@@ -1,4 +1,4 @@
-"""Per-env pending-reward buffers shared by the vector twins of :class:`RewardDelay`."""
+"""The rewards in transit of many envs at once, for the vector twins of :class:`~delayed_rl.wrappers.RewardDelay`."""
 
 from __future__ import annotations
 
@@ -10,13 +10,13 @@ from delayed_rl._delay_line import delay_bound, draw_delays, exact_sum, regrow_r
 from delayed_rl.delays import Delay
 from delayed_rl.wrappers.reward_delay import _BLOCK, delay_rng
 
-__all__ = ["INITIAL_RING", "MAX_RING_ENTRIES", "RING_PER_STEP", "RewardBuffers"]
+__all__ = ["INITIAL_RING", "MAX_RING_ENTRIES", "RING_PER_STEP", "PendingRewards"]
 
 _SAFE_MAGNITUDE = 2.0**1020
 """Below this, a sum of numbers whose magnitudes add up to it cannot pass float64's range."""
 
 MAX_RING_ENTRIES = 1 << 22
-"""The most ring slots the buffers of one wrapper hold in all (float64: 32 MiB).
+"""The most ring slots the rings of one wrapper hold in all (float64: 32 MiB).
 
 Each sub-env's ring is at most the largest power of two ``<= MAX_RING_ENTRIES // num_envs``
 slots long (65 536 for 64 sub-envs, more than 400 times the thesis's longest mean delay, λ = 150).
@@ -34,11 +34,11 @@ of two), so a ring is never mostly empty space. A slot costs 8 bytes and a rewar
 about 100: past this the dict is the cheaper of the two."""
 
 
-class RewardBuffers:
-    """``num_envs`` independent reward-delay buffers, advanced together with numpy.
+class PendingRewards:
+    """The rewards in transit of ``num_envs`` independent reward delays, advanced together with numpy.
 
     Each env has its own clock (it advances only on the steps that env really takes), its own
-    delay generator (one stream per env, seeded by :meth:`seed`) and its own ring buffer of
+    delay generator (one stream per env, seeded by :meth:`seed`) and its own ring of
     pending rewards. The rings start short (:data:`INITIAL_RING`) and grow, keeping what is
     pending in place, when a longer delay is drawn; a delay longer than the largest ring allowed
     (:data:`MAX_RING_ENTRIES`, :data:`RING_PER_STEP`) puts its reward in a per-env dict keyed by
@@ -62,7 +62,7 @@ class RewardBuffers:
         self.max_ring = 1 << (per_env.bit_length() - 1)  # a power of two <= per_env
         bound = delay_bound(delay, max_delay)
         length = min(ring_size(min(bound, INITIAL_RING - 1) + 1), self.max_ring)
-        self.buffer = np.zeros((num_envs, length))
+        self.ring = np.zeros((num_envs, length))
         self.clock = np.zeros(num_envs, dtype=np.int64)
         self.rows = np.arange(num_envs)
         self._pending = np.zeros(num_envs)  # running sums, as RewardDelay._pending
@@ -139,7 +139,7 @@ class RewardBuffers:
         ``on_episode_end="flush"`` adds it to what they deliver, ``"drop"`` discards it,
         ``"carry"`` keeps it.
 
-        A step refused with ``ValueError`` changes nothing: the buffers, clocks and delay
+        A step refused with ``ValueError`` changes nothing: the rings, clocks and delay
         streams are as they were before it, so conservation holds and later steps work.
 
         Returns:
@@ -157,7 +157,7 @@ class RewardBuffers:
             bad = np.flatnonzero(~np.isfinite(rewards)).tolist()
             raise ValueError(
                 f"sub-envs {bad} returned non-finite rewards {rewards[bad].tolist()}; "
-                "the reward-delay buffer refuses to store them"
+                "the reward delay refuses to keep them"
             )
         active = np.asarray(active, dtype=bool)
         ended = np.asarray(ended, dtype=bool) & active
@@ -190,7 +190,7 @@ class RewardBuffers:
     def _save(self) -> tuple:
         """Everything :meth:`step` changes (copies), for :meth:`_restore`."""
         return (
-            self.buffer.copy(),
+            self.ring.copy(),
             self.clock.copy(),
             self._pending.copy(),
             self._nonzero.copy(),
@@ -206,7 +206,7 @@ class RewardBuffers:
     def _restore(self, saved: tuple) -> None:
         """Put back the state :meth:`_save` saved."""
         (
-            self.buffer,
+            self.ring,
             self.clock,
             self._pending,
             self._nonzero,
@@ -233,9 +233,9 @@ class RewardBuffers:
             rewards = np.where(active, rewards, 0.0)
         delays = self._draw(active, every)
         longest = int(delays.max(initial=0))
-        if longest >= self.buffer.shape[1]:
+        if longest >= self.ring.shape[1]:
             self._make_room(delays)
-        mask = self.buffer.shape[1] - 1
+        mask = self.ring.shape[1] - 1
         if every and longest <= mask:  # the common case: every env schedules into its ring
             rows, slots, added = self.rows, (self.clock + delays) & mask, rewards
         else:
@@ -246,12 +246,12 @@ class RewardBuffers:
             added = rewards[near]
             if far.any():
                 self._push_far(np.flatnonzero(far & (rewards != 0.0)), rewards, delays)
-        old = self.buffer[rows, slots]
+        old = self.ring[rows, slots]
         new = old + added
         check = float(new.sum())
         if check - check and not np.all(np.isfinite(new)):
             self._overflow(rows[~np.isfinite(new)], "the rewards due at one step")
-        self.buffer[rows, slots] = new
+        self.ring[rows, slots] = new
         if len(rows) == self.num_envs:
             self._nonzero += new != 0.0
             self._nonzero -= old != 0.0
@@ -261,11 +261,11 @@ class RewardBuffers:
         self._magnitude += magnitude if every else np.where(active, magnitude, 0.0)
         now = self.clock & mask
         if every:
-            delivered = self.buffer[self.rows, now]
-            self.buffer[self.rows, now] = 0.0
+            delivered = self.ring[self.rows, now]
+            self.ring[self.rows, now] = 0.0
         else:
-            delivered = np.where(active, self.buffer[self.rows, now], 0.0)
-            self.buffer[self.rows[active], now[active]] = 0.0
+            delivered = np.where(active, self.ring[self.rows, now], 0.0)
+            self.ring[self.rows[active], now[active]] = 0.0
         self._nonzero -= delivered != 0.0
         if self._far_envs:
             self._deliver_far(active, delivered)
@@ -311,7 +311,7 @@ class RewardBuffers:
 
     def _exact(self, env: int) -> float:
         """The exact pending sum of ``env``, rounded once (``ValueError`` beyond float64)."""
-        row = self.buffer[env]
+        row = self.ring[env]
         values = [*row[row != 0.0].tolist(), *self.far[env].values()]
         return exact_sum(values, f"sub-env {env}'s pending rewards")
 
@@ -323,7 +323,7 @@ class RewardBuffers:
         )
 
     def clear(self, envs: np.ndarray) -> np.ndarray:
-        """Empty the buffers of the envs selected by the boolean mask ``envs``.
+        """Empty the rings (and dicts) of the envs selected by the boolean mask ``envs``.
 
         Returns:
             Each env's exact pending sum (rounded once), 0 for the envs not selected.
@@ -338,7 +338,7 @@ class RewardBuffers:
                 amounts[i] = self._exact(i)
             self.far[i].clear()
             self._far_envs.discard(i)
-        self.buffer[envs] = 0.0
+        self.ring[envs] = 0.0
         self._nonzero[envs] = 0
         self._pending[envs] = 0.0
         self._magnitude[envs] = 0.0
@@ -355,12 +355,12 @@ class RewardBuffers:
         allowed = min(self.max_ring, max(INITIAL_RING, ring_size(RING_PER_STEP * steps)))
         fitting = delays[delays < allowed]
         longest = int(fitting.max(initial=0))
-        if longest >= self.buffer.shape[1]:
-            self.buffer = regrow_ring(self.buffer, self.clock, ring_size(longest + 1))
+        if longest >= self.ring.shape[1]:
+            self.ring = regrow_ring(self.ring, self.clock, ring_size(longest + 1))
 
     def __repr__(self) -> str:
         return (
-            f"RewardBuffers(num_envs={self.num_envs}, delay={self.delay!r}, "
-            f"max_delay={self.max_delay!r}, ring={self.buffer.shape[1]}, "
+            f"PendingRewards(num_envs={self.num_envs}, delay={self.delay!r}, "
+            f"max_delay={self.max_delay!r}, ring={self.ring.shape[1]}, "
             f"far={sum(map(len, self.far))})"
         )
