@@ -30,10 +30,12 @@ from typing import Any
 import numpy as np
 
 __all__ = [
+    "Limit",
     "check_bool",
     "check_choice",
     "check_fraction",
     "check_int",
+    "check_limit",
     "check_probability",
     "check_real",
     "check_real_vector",
@@ -296,3 +298,49 @@ def check_rewards(name: str, values: Any, count: int) -> np.ndarray:
     elif len(values) != count:
         raise ValueError(f"{name} must be {allowed}, got {len(values)}: {_shown(values)}")
     return np.array([check_reward(f"{name}[{i}]", v) for i, v in enumerate(values)])
+
+
+class Limit(int):
+    """An integer bound the library states as a named constant; messages name it by :attr:`text`.
+
+    ``Limit(2**40, "MAX_TIMESTEPS", "delayed_rl.agents.common.python_loop", "2**40")`` is the
+    integer ``2**40``, whose ``text`` is ``"MAX_TIMESTEPS = 2**40
+    (delayed_rl.agents.common.python_loop)"``: :func:`check_limit` puts that in its message.
+
+    Args:
+        value: the bound.
+        name: the constant's name.
+        home: the module that defines it.
+        shown: how the message writes the value (``None``: with thousands separators).
+    """
+
+    def __new__(cls, value: int, name: str, home: str, shown: str | None = None) -> Limit:
+        """A new bound (see the class docstring)."""
+        limit = super().__new__(cls, value)
+        limit.name, limit.home, limit.shown = name, home, shown
+        limit.text = f"{name} = {f'{value:,}' if shown is None else shown} ({home})"
+        return limit
+
+    def __reduce__(self) -> tuple:
+        return (Limit, (int(self), self.name, self.home, self.shown))
+
+
+def check_limit(name: str, value: Any, limit: int | float, limit_name: str | None = None) -> Any:
+    """Return ``value`` after checking that it is at most ``limit`` (a checked number, or None).
+
+    The bounds the library states as module constants are checked after the argument's own
+    check (its type and lower bound), so that the message names the constant.
+
+    Args:
+        name: the argument's name, for the message.
+        value: its value (``None`` passes).
+        limit: the largest value allowed: a :class:`Limit`, or a number named by ``limit_name``.
+        limit_name: how the message names ``limit`` (``None``: a :class:`Limit`'s ``text``).
+
+    Raises:
+        ValueError: ``value`` is above ``limit``.
+    """
+    if value is not None and value > limit:
+        shown = limit.text if limit_name is None else limit_name
+        raise ValueError(f"{name} must be at most {shown}, got {value!r}")
+    return value

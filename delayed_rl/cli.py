@@ -35,15 +35,21 @@ from typing import Any
 import gymnasium as gym
 
 import delayed_rl
-from delayed_rl._validation import check_fraction, check_int, check_probability, check_real
-from delayed_rl.agents.common.hyperparameters import MAX_SEED, check_limit
-from delayed_rl.agents.common.python_loop import MAX_TIMESTEPS, MAX_TIMESTEPS_TEXT
+from delayed_rl._validation import (
+    Limit,
+    check_fraction,
+    check_int,
+    check_limit,
+    check_probability,
+    check_real,
+)
+from delayed_rl.agents.common.hyperparameters import MAX_SEED_VALUE
+from delayed_rl.agents.common.python_loop import MAX_TIMESTEPS
 from delayed_rl.agents.registry import AGENTS as AGENT_NAMES
 from delayed_rl.delays import Poisson
 from delayed_rl.envs import env_ids
 from delayed_rl.experiments import DEFAULT_NAMES, LONG_NAMES, NAMES
-from delayed_rl.experiments.framework.experiment import MAX_SEED_TEXT
-from delayed_rl.parallel.pools import BACKENDS, MAX_SEEDS, MAX_SEEDS_TEXT, check_workers
+from delayed_rl.parallel.pools import BACKENDS, MAX_SEED_COUNT, check_workers
 from delayed_rl.sweep.runs import EpisodeTooLong, greedy_rollout
 from delayed_rl.sweep.schema import (
     MAX_EVAL_EPISODES,
@@ -86,11 +92,11 @@ def _checked(kind: type, check: Callable[..., Any], *bounds: Any) -> Callable[[s
     return parse
 
 
-def _limited(low: int, limit: int, limit_text: str) -> Callable[[str], int]:
-    """An argparse ``type``: an integer ``>= low`` and at most ``limit``, named ``limit_text``."""
+def _limited(low: int, limit: Limit) -> Callable[[str], int]:
+    """An argparse ``type``: an integer ``>= low`` and at most ``limit`` (named in the message)."""
 
     def check(name: str, value: Any) -> int:
-        return check_limit(name, check_int(name, value, low), limit, limit_text)
+        return check_limit(name, check_int(name, value, low), limit)
 
     return _checked(int, check)
 
@@ -101,14 +107,12 @@ _poisson_mean = _checked(float, check_real, 0.0, Poisson.MAX_LAM)
 _learning_rate = _checked(float, check_fraction)
 _non_negative_int = _checked(int, check_int, 0)
 _positive_int = _checked(int, check_int, 1)
-_steps = _limited(1, MAX_TIMESTEPS, MAX_TIMESTEPS_TEXT)
-_seeds = _limited(1, MAX_SEEDS, MAX_SEEDS_TEXT)
-_seed = _limited(0, MAX_SEED, MAX_SEED_TEXT)
+_steps = _limited(1, MAX_TIMESTEPS)
+_seeds = _limited(1, MAX_SEED_COUNT)
+_seed = _limited(0, MAX_SEED_VALUE)
 _workers = _checked(int, check_workers)
-_eval_steps = _limited(1, MAX_EVAL_STEPS, "MAX_EVAL_STEPS = 10**9 (delayed_rl.sweep.schema)")
-_eval_episodes = _limited(
-    1, MAX_EVAL_EPISODES, "MAX_EVAL_EPISODES = 10**6 (delayed_rl.sweep.schema)"
-)
+_eval_steps = _limited(1, MAX_EVAL_STEPS)
+_eval_episodes = _limited(1, MAX_EVAL_EPISODES)
 
 #: ``--agent`` choices: the agent class for each (the sweep files' names of the agents whose
 #: options ``train`` has).

@@ -482,7 +482,7 @@ def test_update_names_the_argument_and_what_is_allowed(args, error, match):
         ({"q_init": 1e300}, r"q_init must be within ±MAX_ABS_VALUE = 2\*\*200 \(delayed_rl"),
         (
             {"seed": 2**64},
-            r"seed must be at most MAX_SEED = 2\*\*63 - 1 .*got 18446744073709551616",
+            r"seed must be at most MAX_SEED_VALUE = 2\*\*63 - 1 .*got 18446744073709551616",
         ),
         ({"greedy_window": 2**41}, r"greedy_window must be at most MAX_TIMESTEPS = 2\*\*40"),
     ],

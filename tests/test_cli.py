@@ -149,7 +149,7 @@ def test_evaluate_with_episodes_on_a_continuing_env_fails_clearly(tmp_path, caps
         # sizes beyond the stated limits, refused before anything starts
         (
             "bench mmq-gridworld --seeds 10001",
-            "argument --seeds: must be at most MAX_SEEDS = 10,000",
+            "argument --seeds: must be at most MAX_SEED_COUNT = 10,000",
         ),
         (
             "bench mmq-gridworld --steps 1099511627777",
@@ -158,14 +158,14 @@ def test_evaluate_with_episodes_on_a_continuing_env_fails_clearly(tmp_path, caps
         ("reproduce --steps 100000000000000000000", "--steps: must be at most MAX_TIMESTEPS"),
         (
             "bench roulette --seed 9223372036854775808",
-            "--seed: must be at most MAX_SEED = 2**63 - 1",
+            "--seed: must be at most MAX_SEED_VALUE = 2**63 - 1",
         ),
         ("bench roulette --workers 1025", "--workers: must be at most MAX_WORKERS = 1024"),
         (
             TRAIN + "--steps 1099511627777",
             "argument --steps: must be at most MAX_TIMESTEPS = 2**40",
         ),
-        (TRAIN + "--seed 9223372036854775808", "argument --seed: must be at most MAX_SEED"),
+        (TRAIN + "--seed 9223372036854775808", "argument --seed: must be at most MAX_SEED_VALUE"),
         (
             f"evaluate m.npz --env {GRID} --steps 1000000001",
             "--steps: must be at most MAX_EVAL_STEPS",

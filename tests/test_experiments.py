@@ -120,10 +120,10 @@ def test_running_average_is_the_cumulative_mean():
         (lambda: Config(workers=0), ValueError, "workers must be an integer >= 1, got 0"),
         (lambda: Config(backend="spark"), ValueError, "backend must be one of"),
         (lambda: Config(base_seed=-1), ValueError, "base_seed must be an integer >= 0, got -1"),
-        (lambda: Config(seeds=10**12), ValueError, "seeds must be at most MAX_SEEDS = 10,000"),
+        (lambda: Config(seeds=10**12), ValueError, "seeds must be at most MAX_SEED_COUNT = 10,000"),
         (lambda: Config(steps=2**40 + 1), ValueError, "steps must be at most MAX_TIMESTEPS"),
         (lambda: Config(workers=10**6), ValueError, "workers must be at most MAX_WORKERS = 1024"),
-        (lambda: Config(base_seed=2**63), ValueError, "base_seed must be at most MAX_SEED"),
+        (lambda: Config(base_seed=2**63), ValueError, "base_seed must be at most MAX_SEED_VALUE"),
         (lambda: run_tasks(len, [], 2000, "loky"), ValueError, "workers must be at most"),
     ],
 )

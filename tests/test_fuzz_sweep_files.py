@@ -220,13 +220,13 @@ def plan(**changes) -> dict:
         ({"eval_episodes": 10**7}, r"^eval_episodes must be at most MAX_EVAL_EPISODES = 10\*\*6"),
         (
             {"seeds": 10**6},
-            r"^seeds must be at most MAX_SEEDS = 10,000 \(delayed_rl.parallel.pools\)",
+            r"^seeds must be at most MAX_SEED_COUNT = 10,000 \(delayed_rl.parallel.pools\)",
         ),
-        ({"seeds": 10**30}, r"^seeds must be at most MAX_SEEDS"),
+        ({"seeds": 10**30}, r"^seeds must be at most MAX_SEED_COUNT"),
         ({"seeds": [0, 2**40]}, r"^seeds\[1\] must be at most MAX_SWEEP_SEED = 2\*\*32 - 1"),
         (
             {"seeds": list(range(10_001))},
-            r"^seeds must list at most MAX_SEEDS = 10,000 \(.*\), got 10,001 seeds",
+            r"^seeds must list at most MAX_SEED_COUNT = 10,000 \(.*\), got 10,001 seeds",
         ),
         ({"agents": [{"name": "q", "steps": 10**21}]}, r"^agents\[0\]\.steps must be at most"),
         (

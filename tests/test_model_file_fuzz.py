@@ -937,7 +937,7 @@ REFUSED: list[tuple[str, str, Callable[[Base], bytes], str]] = [
         for kind in ("QLearning", "OracleQLearning", "DeconvQ learned delay")
         for field, value, fragment in (
             ("num_timesteps", 2**62, "MAX_TIMESTEPS"),
-            ("hyperparameters__seed", 2**64, "MAX_SEED"),
+            ("hyperparameters__seed", 2**64, "MAX_SEED_VALUE"),
             ("hyperparameters__q_init", 1e300, "MAX_ABS_VALUE"),
         )
     ],

@@ -8,7 +8,7 @@
 from delayed_rl.parallel.intervals import mean_ci95, t975
 from delayed_rl.parallel.pools import (
     BACKENDS,
-    MAX_SEEDS,
+    MAX_SEED_COUNT,
     MAX_WORKERS,
     check_workers,
     iter_tasks,
@@ -18,7 +18,7 @@ from delayed_rl.parallel.progress import RunProgress, tqdm_installed
 
 __all__ = [
     "BACKENDS",
-    "MAX_SEEDS",
+    "MAX_SEED_COUNT",
     "MAX_WORKERS",
     "RunProgress",
     "check_workers",

@@ -12,25 +12,18 @@ import socket
 from collections.abc import Callable, Iterator
 from typing import Any
 
-from delayed_rl._validation import check_choice, check_int
-from delayed_rl.agents.common.hyperparameters import check_limit
+from delayed_rl._validation import Limit, check_choice, check_int, check_limit
 
 #: The joblib backends :func:`run_tasks` can hand the runs to.
 BACKENDS = ("loky", "ray", "dask")
 
 
-MAX_SEEDS = 10_000
+MAX_SEED_COUNT = Limit(10_000, "MAX_SEED_COUNT", __name__)
 """The most seeds (runs per condition) an experiment or a sweep runs."""
 
 
-MAX_WORKERS = 1024
+MAX_WORKERS = Limit(1024, "MAX_WORKERS", __name__, "1024")
 """The most parallel workers asked for (a process or a cluster task each)."""
-
-
-MAX_SEEDS_TEXT = f"MAX_SEEDS = {MAX_SEEDS:,} (delayed_rl.parallel.pools)"
-
-
-MAX_WORKERS_TEXT = f"MAX_WORKERS = {MAX_WORKERS} (delayed_rl.parallel.pools)"
 
 
 def check_workers(name: str, workers: Any) -> int:
@@ -40,7 +33,7 @@ def check_workers(name: str, workers: Any) -> int:
         TypeError: it is not an integer.
         ValueError: it is below 1 or above :data:`MAX_WORKERS`.
     """
-    return check_limit(name, check_int(name, workers, 1), MAX_WORKERS, MAX_WORKERS_TEXT)
+    return check_limit(name, check_int(name, workers, 1), MAX_WORKERS)
 
 
 def run_tasks(

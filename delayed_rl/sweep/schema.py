@@ -3,7 +3,7 @@
 :func:`~delayed_rl.sweep.reading.read_sweep_file` reads a YAML or JSON file;
 :func:`parse_sweep` checks what it holds, field by field, and returns the plan, a :class:`Sweep`,
 whose :meth:`Sweep.runs` lists the runs. Every size a file sets is bounded by a stated limit
-(``learn()``'s ``MAX_TIMESTEPS``, :data:`MAX_EVAL_STEPS`, :data:`MAX_EVAL_EPISODES`, :data:`~delayed_rl.parallel.pools.MAX_SEEDS`,
+(``learn()``'s ``MAX_TIMESTEPS``, :data:`MAX_EVAL_STEPS`, :data:`MAX_EVAL_EPISODES`, :data:`~delayed_rl.parallel.pools.MAX_SEED_COUNT`,
 :data:`MAX_SWEEP_SEED`, :data:`MAX_RUNS`), checked before anything is built or run.
 :mod:`delayed_rl.sweep` documents the format.
 """
@@ -22,12 +22,11 @@ from typing import Any
 import gymnasium as gym
 
 import delayed_rl  # noqa: F401  (registers the env ids)
-from delayed_rl._validation import check_choice, check_int, check_real
-from delayed_rl.agents.common.hyperparameters import check_limit
-from delayed_rl.agents.common.python_loop import MAX_TIMESTEPS, MAX_TIMESTEPS_TEXT
+from delayed_rl._validation import Limit, check_choice, check_int, check_limit, check_real
+from delayed_rl.agents.common.python_loop import MAX_TIMESTEPS
 from delayed_rl.agents.registry import AGENTS, agent_class
 from delayed_rl.delays import as_delay
-from delayed_rl.parallel.pools import MAX_SEEDS, MAX_SEEDS_TEXT
+from delayed_rl.parallel.pools import MAX_SEED_COUNT
 
 #: The stable-baselines3 algorithms a sweep runs, as ``sb3:NAME``.
 SB3_ALGORITHMS = ("A2C", "DDPG", "DQN", "PPO", "SAC", "TD3")
@@ -42,12 +41,12 @@ DEFAULT_SEEDS = 3
 DEFAULT_STEPS = 100_000
 DEFAULT_EVAL_EPISODES = 10
 
-MAX_EVAL_STEPS = 10**9
+MAX_EVAL_STEPS = Limit(10**9, "MAX_EVAL_STEPS", __name__, "10**9")
 """The most evaluation steps of a run (``eval_steps``)."""
-MAX_EVAL_EPISODES = 10**6
+MAX_EVAL_EPISODES = Limit(10**6, "MAX_EVAL_EPISODES", __name__, "10**6")
 """The most evaluation episodes of a run (``eval_episodes``; each at most
 :data:`~delayed_rl.sweep.runs.MAX_EVAL_EPISODE_STEPS` steps)."""
-MAX_SWEEP_SEED = 2**32 - 1
+MAX_SWEEP_SEED = Limit(2**32 - 1, "MAX_SWEEP_SEED", __name__, "2**32 - 1")
 """The largest seed: what every agent accepts (stable-baselines3 seeds numpy's legacy generator,
 which takes 32 bits)."""
 MAX_TEXT = 1000
@@ -202,7 +201,7 @@ def parse_sweep(data: Any, name: str = "sweep", source: str = "sweep") -> Sweep:
 def _steps(where: str, value: Any, optional: bool = False) -> int | None:
     """A run's training steps: an integer in ``[1, MAX_TIMESTEPS]`` (``learn()``'s bound)."""
     steps = check_int(where, value, 1, optional=optional)
-    return check_limit(where, steps, MAX_TIMESTEPS, MAX_TIMESTEPS_TEXT)
+    return check_limit(where, steps, MAX_TIMESTEPS)
 
 
 def _mapping(where: str, value: Any, what: str = "a mapping") -> Mapping[str, Any]:
@@ -433,15 +432,13 @@ def _parse_evaluation(prefix: str, entry: Mapping[str, Any]) -> Evaluation | Non
             f"{steps!r}): give one of them"
         )
     if episodes is not None:
-        limit = f"MAX_EVAL_EPISODES = 10**6 ({_HERE})"
         count = check_int(f"{prefix}eval_episodes", episodes, 1)
         return Evaluation(
-            "episode", check_limit(f"{prefix}eval_episodes", count, MAX_EVAL_EPISODES, limit)
+            "episode", check_limit(f"{prefix}eval_episodes", count, MAX_EVAL_EPISODES)
         )
     if steps is not None:
-        limit = f"MAX_EVAL_STEPS = 10**9 ({_HERE})"
         count = check_int(f"{prefix}eval_steps", steps, 1)
-        return Evaluation("step", check_limit(f"{prefix}eval_steps", count, MAX_EVAL_STEPS, limit))
+        return Evaluation("step", check_limit(f"{prefix}eval_steps", count, MAX_EVAL_STEPS))
     return None
 
 
@@ -485,20 +482,19 @@ def _parse_delay(where: str, entry: Any) -> SweepDelay:
 
 
 def _parse_seeds(value: Any) -> tuple[int, ...]:
-    """``seeds``: a count in ``[1, MAX_SEEDS]``, or up to that many distinct seeds in a list.
+    """``seeds``: a count in ``[1, MAX_SEED_COUNT]``, or up to that many distinct seeds in a list.
 
     Each seed of a list lies in ``[0, MAX_SWEEP_SEED]``.
     """
     if not isinstance(value, list):
         count = check_int("seeds", value, 1, note=" (a count), or a list of seeds")
-        return tuple(range(check_limit("seeds", count, MAX_SEEDS, MAX_SEEDS_TEXT)))
+        return tuple(range(check_limit("seeds", count, MAX_SEED_COUNT)))
     if not value:
         raise ValueError("seeds must be a count >= 1 or a non-empty list of seeds, got []")
-    if len(value) > MAX_SEEDS:
-        raise ValueError(f"seeds must list at most {MAX_SEEDS_TEXT}, got {len(value):,} seeds")
-    limit = f"MAX_SWEEP_SEED = 2**32 - 1 ({_HERE})"
+    if len(value) > MAX_SEED_COUNT:
+        raise ValueError(f"seeds must list at most {MAX_SEED_COUNT.text}, got {len(value):,} seeds")
     seeds = tuple(
-        check_limit(f"seeds[{i}]", check_int(f"seeds[{i}]", seed, 0), MAX_SWEEP_SEED, limit)
+        check_limit(f"seeds[{i}]", check_int(f"seeds[{i}]", seed, 0), MAX_SWEEP_SEED)
         for i, seed in enumerate(value)
     )
     first: dict[int, int] = {}

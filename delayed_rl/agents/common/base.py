@@ -93,7 +93,7 @@ class TabularAgent(persistence.CopyProtocol, ABC):
         q_init: the initial value of every Q-table entry (optimistic when above the values),
             within ±:data:`~delayed_rl.agents.common.hyperparameters.MAX_ABS_VALUE` (2**200).
         seed: seeds the agent's random choices and the env's first reset after it is set
-            (``None``, or an integer in ``[0, MAX_SEED]``, ``MAX_SEED = 2**63 - 1``).
+            (``None``, or an integer in ``[0, MAX_SEED_VALUE]``, ``MAX_SEED_VALUE = 2**63 - 1``).
         verbose: 0 silent, 1 prints the logged metrics at every dump.
 
     Attributes:

@@ -7,16 +7,22 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from typing import Any, TypeVar
 
-from delayed_rl._validation import check_fraction, check_int, check_probability, check_real
+from delayed_rl._validation import (
+    Limit,
+    check_fraction,
+    check_int,
+    check_limit,
+    check_probability,
+    check_real,
+)
 from delayed_rl.agents.common.schedules import Schedule, as_learning_rate_schedule
 
 __all__ = [
     "DEFAULTS",
     "HYPERPARAMETER_NAMES",
     "MAX_ABS_VALUE",
-    "MAX_SEED",
+    "MAX_SEED_VALUE",
     "AgentDefaults",
-    "check_limit",
     "check_seed",
     "check_value",
     "check_hyperparameters",
@@ -72,29 +78,8 @@ Why this bound: no update can then overflow float64 (largest value about ``2**10
 An env whose own rewards pass it is outside this guarantee (``learn()`` does not check each
 reward it receives).
 """
-MAX_SEED = 2**63 - 1
-"""The largest ``seed`` (the int64 range, which numpy arrays and the sweeps' tables hold)."""
-
-
-def check_limit(name: str, value: Any, limit: int | float, limit_name: str) -> Any:
-    """Return ``value`` after checking that it is at most ``limit`` (a checked number, or None).
-
-    The bounds the library states as module constants are checked after the argument's own
-    check (its type and lower bound), so that the message names the constant.
-
-    Args:
-        name: the argument's name, for the message.
-        value: its value (``None`` passes).
-        limit: the largest value allowed.
-        limit_name: the constant, with where it lives, e.g.
-            ``"MAX_SEED = 2**63 - 1 (delayed_rl.agents.common.hyperparameters.MAX_SEED)"``.
-
-    Raises:
-        ValueError: ``value`` is above ``limit``.
-    """
-    if value is not None and value > limit:
-        raise ValueError(f"{name} must be at most {limit_name}, got {value!r}")
-    return value
+MAX_SEED_VALUE = Limit(2**63 - 1, "MAX_SEED_VALUE", __name__, "2**63 - 1")
+"""The largest ``seed`` value (the int64 range, which numpy arrays and the sweeps' tables hold)."""
 
 
 _MAX_ABS_VALUE = "MAX_ABS_VALUE = 2**200 (delayed_rl.agents.common.hyperparameters.MAX_ABS_VALUE)"
@@ -114,19 +99,14 @@ def check_value(name: str, value: Any) -> float:
 
 
 def check_seed(name: str, value: Any) -> int | None:
-    """Return ``value`` (``None`` or an int in ``[0, MAX_SEED]``) after checking it.
+    """Return ``value`` (``None`` or an int in ``[0, MAX_SEED_VALUE]``) after checking it.
 
     Raises:
         TypeError: ``value`` is neither ``None`` nor an integer.
-        ValueError: it is negative or above :data:`MAX_SEED`.
+        ValueError: it is negative or above :data:`MAX_SEED_VALUE`.
     """
     seed = check_int(name, value, 0, optional=True)
-    return check_limit(
-        name,
-        seed,
-        MAX_SEED,
-        "MAX_SEED = 2**63 - 1 (delayed_rl.agents.common.hyperparameters.MAX_SEED)",
-    )
+    return check_limit(name, seed, MAX_SEED_VALUE)
 
 
 _SHARED = {**asdict(DEFAULTS), "seed": None, "verbose": 0}
@@ -164,7 +144,7 @@ def check_hyperparameters(
 ) -> dict[str, Any]:
     """The shared hyper-parameters, checked, plus the learning rate as a schedule.
 
-    ``q_init`` must lie within ±:data:`MAX_ABS_VALUE` and ``seed`` in ``[0, MAX_SEED]``.
+    ``q_init`` must lie within ±:data:`MAX_ABS_VALUE` and ``seed`` in ``[0, MAX_SEED_VALUE]``.
 
     Returns:
         One entry per argument (``learning_rate`` as given), and ``lr_schedule``.

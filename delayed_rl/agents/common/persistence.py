@@ -22,11 +22,10 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from delayed_rl._validation import check_int, check_probability, check_real
+from delayed_rl._validation import check_int, check_limit, check_probability, check_real
 from delayed_rl._version import __version__
 from delayed_rl.agents.common import save_util
-from delayed_rl.agents.common.hyperparameters import check_limit
-from delayed_rl.agents.common.python_loop import MAX_TIMESTEPS, MAX_TIMESTEPS_TEXT
+from delayed_rl.agents.common.python_loop import MAX_TIMESTEPS
 from delayed_rl.agents.common.schedules import schedule_from_json
 from delayed_rl.agents.common.statistics import TrainingStatistics
 from delayed_rl.agents.common.streams import UniformStream
@@ -55,9 +54,6 @@ _METADATA_KEYS = frozenset(
 _STREAMS = (("rng_state", "rng_block"), ("predict_rng_state", "predict_rng_block"))
 _SCHEDULE_FIELDS = {"linear": ("start", "end", "end_fraction"), "constant": ("value",)}
 _SCHEDULE_FIELDS["callable"] = _SCHEDULE_FIELDS["constant"]  # and its "repr", a string
-_STEPS_NOTE = (
-    " (MAX_TIMESTEPS = 2**40, delayed_rl.agents.common.python_loop.MAX_TIMESTEPS)"  # array checks
-)
 _OPTIONAL = ("env", "_compiled", "_logger")
 """What a copy keeps when it can be copied, and drops (``None``) otherwise."""
 
@@ -354,10 +350,7 @@ def _restore_clock(
     """
     try:
         agent.num_timesteps = check_limit(
-            "num_timesteps",
-            check_int("num_timesteps", metadata["num_timesteps"], 0),
-            MAX_TIMESTEPS,
-            MAX_TIMESTEPS_TEXT,
+            "num_timesteps", check_int("num_timesteps", metadata["num_timesteps"], 0), MAX_TIMESTEPS
         )
         agent._progress_remaining = check_probability(
             "progress_remaining", metadata["progress_remaining"]
@@ -382,7 +375,13 @@ def _restore_clock(
                 f"{counts.shape[0]}"
             )
         check_state_array(
-            "acting_counts", counts, (agent.n_models,), np.int64, 0, MAX_TIMESTEPS, note=_STEPS_NOTE
+            "acting_counts",
+            counts,
+            (agent.n_models,),
+            np.int64,
+            0,
+            MAX_TIMESTEPS,
+            note=f" ({MAX_TIMESTEPS.text})",
         )
         agent._statistics = TrainingStatistics(agent.n_models, agent.num_timesteps)
         agent._statistics.acting_counts = counts.tolist()

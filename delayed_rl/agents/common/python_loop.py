@@ -13,9 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from delayed_rl._validation import check_bool, check_int
+from delayed_rl._validation import Limit, check_bool, check_int, check_limit
 from delayed_rl.agents.common.callbacks import as_callback
-from delayed_rl.agents.common.hyperparameters import check_limit
 from delayed_rl.agents.common.statistics import TrainingStatistics
 
 __all__ = [
@@ -42,7 +41,7 @@ RECORD_DTYPES = {
 """The arrays of ``agent.training_log`` after ``learn(..., record=True)``, and their types."""
 _RECORD_STEP_BYTES = sum(np.dtype(dtype).itemsize for dtype in RECORD_DTYPES.values())
 
-MAX_TIMESTEPS = 2**40
+MAX_TIMESTEPS = Limit(2**40, "MAX_TIMESTEPS", __name__, "2**40")
 """The most training steps an agent counts (about 1.1e12): ``learn()``'s bound, and a file's.
 
 ``learn(total_timesteps)`` refuses more, and with ``reset_num_timesteps=False`` refuses to take
@@ -51,8 +50,6 @@ the agent's step count (``num_timesteps``) past it, before anything starts; a mo
 path's millions of steps a second; the bound keeps every step count, schedule clock and
 ``learn()``'s progress arithmetic far inside int64 and float64's exact integers (``2**53``).
 """
-MAX_TIMESTEPS_TEXT = "MAX_TIMESTEPS = 2**40 (delayed_rl.agents.common.python_loop.MAX_TIMESTEPS)"
-"""How messages name :data:`MAX_TIMESTEPS`."""
 MAX_RECORD_BYTES = 2**30
 """The most memory ``learn(..., record=True)`` may allocate for its record (1 GiB).
 
@@ -245,10 +242,7 @@ def setup_learn(
             above :data:`MAX_RECORD_BYTES`), or the agent has no env.
     """
     n_steps = check_limit(
-        "total_timesteps",
-        check_int("total_timesteps", total_timesteps, 0),
-        MAX_TIMESTEPS,
-        MAX_TIMESTEPS_TEXT,
+        "total_timesteps", check_int("total_timesteps", total_timesteps, 0), MAX_TIMESTEPS
     )
     log_interval = check_int("log_interval", log_interval, 1, optional=True)
     check_bool("reset_num_timesteps", reset_num_timesteps)
@@ -256,7 +250,7 @@ def setup_learn(
     check_bool("record", record)
     if not reset_num_timesteps and agent.num_timesteps + n_steps > MAX_TIMESTEPS:
         raise ValueError(
-            f"total_timesteps must keep the agent's step count within {MAX_TIMESTEPS_TEXT} "
+            f"total_timesteps must keep the agent's step count within {MAX_TIMESTEPS.text} "
             f"with reset_num_timesteps=False, got "
             f"{n_steps} after {agent.num_timesteps} steps"
         )

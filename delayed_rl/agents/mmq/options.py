@@ -15,10 +15,9 @@ from typing import Any
 
 import numpy as np
 
-from delayed_rl._validation import check_int, check_real
-from delayed_rl.agents.common.hyperparameters import check_limit
+from delayed_rl._validation import check_int, check_limit, check_real
 from delayed_rl.agents.common.persistence import check_state_array
-from delayed_rl.agents.common.python_loop import MAX_TIMESTEPS, MAX_TIMESTEPS_TEXT
+from delayed_rl.agents.common.python_loop import MAX_TIMESTEPS
 from delayed_rl.agents.common.q_agent import VALUE_NOTE, VALUE_RANGE
 from delayed_rl.agents.mmq.updates import NO_OPTION, model_weights
 from delayed_rl.compiled.state import TableAverage, credit_kernel
@@ -47,7 +46,6 @@ def check_options(
             "greedy_window",
             check_int("greedy_window", greedy_window, 1, optional=True),
             MAX_TIMESTEPS,
-            MAX_TIMESTEPS_TEXT,
         ),
     )
 
@@ -158,7 +156,7 @@ class GreedyAverage:
         )  # fmt: skip
         clock = check_state_array(
             f"{where}: greedy_clock", arrays.get("greedy_clock"), (2,), np.int64, 0,
-            MAX_TIMESTEPS, note=f" ({MAX_TIMESTEPS_TEXT})",
+            MAX_TIMESTEPS, note=f" ({MAX_TIMESTEPS.text})",
         )  # fmt: skip
         if clock[0] >= self.interval:
             raise ValueError(

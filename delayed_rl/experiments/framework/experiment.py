@@ -39,10 +39,10 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from delayed_rl._validation import check_bool, check_choice, check_int
-from delayed_rl.agents.common.hyperparameters import MAX_SEED, check_limit
-from delayed_rl.agents.common.python_loop import MAX_TIMESTEPS, MAX_TIMESTEPS_TEXT
-from delayed_rl.parallel.pools import BACKENDS, MAX_SEEDS, MAX_SEEDS_TEXT, check_workers
+from delayed_rl._validation import check_bool, check_choice, check_int, check_limit
+from delayed_rl.agents.common.hyperparameters import MAX_SEED_VALUE
+from delayed_rl.agents.common.python_loop import MAX_TIMESTEPS
+from delayed_rl.parallel.pools import BACKENDS, MAX_SEED_COUNT, check_workers
 
 AGREES, DIFFERS, INCONCLUSIVE, REFERENCE = "agrees", "differs", "inconclusive", "reference"
 
@@ -67,8 +67,8 @@ class Config:
     Raises:
         TypeError: a field has the wrong type (e.g. ``seeds="3"``).
         ValueError: a field is out of range (e.g. ``workers=0``; ``seeds`` above
-            :data:`MAX_SEEDS`, ``steps`` above ``MAX_TIMESTEPS`` = 2**40, ``workers`` above
-            :data:`MAX_WORKERS`, ``base_seed`` above ``MAX_SEED`` = 2**63 − 1) or ``backend``
+            :data:`MAX_SEED_COUNT`, ``steps`` above ``MAX_TIMESTEPS`` = 2**40, ``workers`` above
+            :data:`MAX_WORKERS`, ``base_seed`` above ``MAX_SEED_VALUE`` = 2**63 − 1) or ``backend``
             is unknown.
     """
 
@@ -81,23 +81,17 @@ class Config:
 
     def __post_init__(self) -> None:
         self.seeds = check_limit(
-            "seeds", check_int("seeds", self.seeds, 1, optional=True), MAX_SEEDS, MAX_SEEDS_TEXT
+            "seeds", check_int("seeds", self.seeds, 1, optional=True), MAX_SEED_COUNT
         )
         self.steps = check_limit(
-            "steps",
-            check_int("steps", self.steps, 1, optional=True),
-            MAX_TIMESTEPS,
-            MAX_TIMESTEPS_TEXT,
+            "steps", check_int("steps", self.steps, 1, optional=True), MAX_TIMESTEPS
         )
         self.quick = check_bool("quick", self.quick)
         self.workers = check_workers("workers", self.workers)
         self.backend = check_choice("backend", self.backend, BACKENDS)
         self.base_seed = check_limit(
-            "base_seed", check_int("base_seed", self.base_seed, 0), MAX_SEED, MAX_SEED_TEXT
+            "base_seed", check_int("base_seed", self.base_seed, 0), MAX_SEED_VALUE
         )
-
-
-MAX_SEED_TEXT = "MAX_SEED = 2**63 - 1 (delayed_rl.agents.common.hyperparameters)"
 
 
 @dataclass
