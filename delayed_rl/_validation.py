@@ -301,7 +301,7 @@ def check_rewards(name: str, values: Any, count: int) -> np.ndarray:
 
 
 class Limit(int):
-    """An integer bound the library states as a named constant; messages name it by :attr:`text`.
+    """An integer bound the library states as a named constant; messages name it by its ``text``.
 
     ``Limit(2**40, "MAX_TIMESTEPS", "delayed_rl.agents.common.python_loop", "2**40")`` is the
     integer ``2**40``, whose ``text`` is ``"MAX_TIMESTEPS = 2**40
@@ -312,6 +312,10 @@ class Limit(int):
         name: the constant's name.
         home: the module that defines it.
         shown: how the message writes the value (``None``: with thousands separators).
+
+    Attributes:
+        name, home, shown: the arguments.
+        text: ``"NAME = value (home)"``.
     """
 
     def __new__(cls, value: int, name: str, home: str, shown: str | None = None) -> Limit:
