@@ -3,7 +3,7 @@
 - ``delayed-rl list``: the envs, agents and experiments;
 - ``delayed-rl train``: train a tabular agent on an env (optionally reward-delayed) and save it;
 - ``delayed-rl evaluate``: run a saved agent greedily and report its average reward;
-- ``delayed-rl bench NAME``: one thesis experiment over seeds, written to ``--out/NAME``;
+- ``delayed-rl bench NAME``: one experiment over seeds, written to ``--out/NAME``;
 - ``delayed-rl reproduce``: every experiment;
 - ``delayed-rl sweep FILE``: your own agents × envs × delays × seeds, from a YAML or JSON file
   (:mod:`delayed_rl.sweep` documents the file), written to ``--out``.
@@ -353,7 +353,7 @@ def _add_bench_options(parser: argparse.ArgumentParser, default_out: str) -> Non
         "--seeds",
         type=_seeds,
         default=None,
-        help="runs per condition (default: the thesis's, or 2 with --quick)",
+        help="runs per condition (default: the experiment's, or 2 with --quick)",
     )
     parser.add_argument(
         "--steps",
@@ -411,8 +411,8 @@ def _add_train_command(commands: Any) -> None:
     train = commands.add_parser(
         "train",
         help="train a tabular agent and save it",
-        description="Train Q-learning, fixed-delay Q-learning or Multiple Model Q-learning on a "
-        "Gymnasium env with Discrete spaces (optionally behind a Poisson reward delay), save the "
+        description="Train a tabular agent (--agent: Q-learning, fixed-delay Q-learning, Multiple "
+        "Model Q-learning or deconvolution Q-learning) on a Gymnasium env with Discrete spaces (optionally behind a Poisson reward delay), save the "
         "agent and print its average undelayed reward per step during training.",
     )
     train.add_argument(
@@ -546,7 +546,10 @@ def _add_evaluate_command(commands: Any) -> None:
 
 def _add_bench_command(commands: Any) -> None:
     """The ``bench`` sub-command's parser."""
-    bench = commands.add_parser("bench", help="run one thesis experiment over seeds")
+    bench = commands.add_parser(
+        "bench",
+        help="run one experiment (the thesis's or beyond it, `delayed-rl list` names them) over seeds",
+    )
     bench.add_argument("name", choices=NAMES, help="the experiment")
     _add_bench_options(bench, "runs")
     bench.set_defaults(run=_bench)
@@ -554,12 +557,15 @@ def _add_bench_command(commands: Any) -> None:
 
 def _add_reproduce_command(commands: Any) -> None:
     """The ``reproduce`` sub-command's parser."""
-    reproduce = commands.add_parser("reproduce", help="run every thesis experiment")
+    reproduce = commands.add_parser(
+        "reproduce", help="run every experiment (the long ones too with --all) over seeds"
+    )
     _add_bench_options(reproduce, "runs")
     reproduce.add_argument(
         "--all",
         action="store_true",
-        help=f"also run the long experiments ({', '.join(LONG_NAMES)}; they need the sb3 extra)",
+        help=f"also run the long experiments ({', '.join(LONG_NAMES)}; they need the sb3 and "
+        "multiagent extras)",
     )
     reproduce.set_defaults(run=_bench, name="all")
 

@@ -206,7 +206,7 @@ def default_cost(task: dict) -> float:
 
 @dataclass
 class Experiment:
-    """A thesis experiment (see the module docstring).
+    """An experiment, the thesis's or beyond it (see the module docstring).
 
     Attributes:
         name: the name ``delayed-rl bench NAME`` takes.
