@@ -235,7 +235,7 @@ def test_episode_end_resets_env_and_history():
     np.testing.assert_array_equal(np.flatnonzero(done), np.arange(99, 1_000, 100))
     starts = np.flatnonzero(done) + 1
     assert np.all(agent.training_log["obs"][starts] == 24)  # reset to the start cell
-    assert agent._t == 50  # the history restarted at the last reset
+    assert agent._episode_step == 50  # the history restarted at the last reset
     assert agent.logger.dumps[-1]["time/episodes"] == 10
 
 

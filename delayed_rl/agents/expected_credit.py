@@ -236,15 +236,13 @@ class ExpectedCreditQLearning(QAgent):
     def _learn_transition(
         self, s: int, a: int, r: float, s2: int, terminated: bool, truncated: bool
     ) -> None:
-        t = self._t
+        t = self._episode_step
         self._history.record(t, s, s2, s * self.n_actions + a)
         n = self._lags.size if t >= self._last_lag else self._credit_valid[t]
         if n == 1:
             self._credit_one(t, r, terminated)
         elif n:
             self._credit_many(t, n, r, terminated)
-        self.num_timesteps += 1
-        self._t = 0 if (terminated or truncated) else t + 1
 
     def _credit_one(self, t: int, r: float, terminated: bool) -> None:
         """The update of the one creditable lag, the smallest (Python scalars, faster)."""

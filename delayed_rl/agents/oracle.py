@@ -255,7 +255,6 @@ class OracleQLearning(QAgent):
         self._past_terminated[j] = terminated
         if arrivals:
             self._credit(sorted(arrivals) if len(arrivals) > 1 else arrivals)
-        self.num_timesteps += 1
         self._clock = clock + 1
         if terminated or truncated:
             self._episode_start = self._clock

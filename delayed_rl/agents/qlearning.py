@@ -52,7 +52,6 @@ class QLearning(QAgent):
         self, s: int, a: int, r: float, s2: int, terminated: bool, truncated: bool
     ) -> None:
         self._q_learning_update(s, a, r, s2, terminated)
-        self.num_timesteps += 1
 
 
 class FixedDelayQLearning(QAgent):
@@ -111,7 +110,7 @@ class FixedDelayQLearning(QAgent):
     def _learn_transition(
         self, s: int, a: int, r: float, s2: int, terminated: bool, truncated: bool
     ) -> None:
-        lag, t = self.delay_estimate, self._t
+        lag, t = self.delay_estimate, self._episode_step
         if not lag:
             self._q_learning_update(s, a, r, s2, terminated)
         else:  # the transition lag steps back, never terminal (only the current step can be)
@@ -121,5 +120,3 @@ class FixedDelayQLearning(QAgent):
                 j = (t - lag) & history.mask
                 target = r + self.gamma * table.v_max_items[history.s2[j]]
                 table.write(history.s[j], history.cell[j], target, self._alpha)
-        self.num_timesteps += 1
-        self._t = 0 if (terminated or truncated) else t + 1

@@ -9,9 +9,12 @@ made and checked in :mod:`~delayed_rl.agents.common.env_util`. A subclass suppli
 - ``_choose(s, eps, uniform) -> (acting model index, action index)``: one behaviour choice,
   ``uniform()`` drawing its random numbers (a stream, or ``learn()``'s bound ``stream.next``);
 - ``_learn_transition(s, a, r, s2, terminated, truncated)``: one learning step, shared by
-  ``learn()`` and ``update()``; it advances ``num_timesteps``;
+  ``learn()`` and ``update()``; it reads the step's place in its episode,
+  ``_episode_step`` (0 at an episode's first step), which the shell advances, as it advances
+  ``num_timesteps`` (a rule counts steps itself only for its own needs: the oracle numbers
+  the transitions that rewards arrive for);
 - ``_greedy_actions(states)``: the deterministic policy;
-- ``_end_episode()``: forget the episode's history;
+- ``_end_episode()`` (optional): forget the rule's own history of the episode;
 - ``_get_state_arrays()`` / ``_set_state_arrays(arrays, where)``: what a model file holds
   (optional, see :mod:`.persistence`: ``_state_array_specs``, ``_derived``, ``_rebuild_derived``);
 - ``n_models`` (default 1): how many delay models it acts from, for the acting counts;
@@ -193,8 +196,8 @@ class TabularAgent(persistence.CopyProtocol, ABC):
     ) -> None: ...
     @abstractmethod
     def _greedy_actions(self, states: np.ndarray) -> np.ndarray: ...
-    @abstractmethod
-    def _end_episode(self) -> None: ...
+    def _end_episode(self) -> None:
+        """Forget the rule's own history of the episode that ended (none by default)."""
     @abstractmethod
     def _get_state_arrays(self) -> dict[str, np.ndarray]: ...
     @abstractmethod
@@ -240,12 +243,14 @@ class TabularAgent(persistence.CopyProtocol, ABC):
         self._episode_ended = True
         #: A compiled run left the env mid-episode (see ``_compiled._leave_compiled_episode``).
         self._compiled_episode = False
+        self._episode_step = 0
         self._end_episode()
 
     def _reset_env(self) -> int:
         seed = None if self._env_seeded else self.seed
         self._env_seeded = True
         obs, _ = self.env.reset(seed=seed)
+        self._episode_step = 0
         self._end_episode()
         self._episode_ended = False
         self._compiled_episode = False
@@ -362,6 +367,8 @@ class TabularAgent(persistence.CopyProtocol, ABC):
         r = check_value("reward", reward)
         ended = check_bool("terminated", terminated), check_bool("truncated", truncated)
         self._learn_transition(s, a, r, s2, *ended)
+        self.num_timesteps += 1
+        self._episode_step = 0 if (ended[0] or ended[1]) else self._episode_step + 1
 
     def learn(
         self,

@@ -159,6 +159,7 @@ def python_loop(agent: Any, run: LearnRun) -> None:
     schedules_constant = eps_constant and agent._lr_constant
     eps, uniform = agent.exploration_rate, agent._uniform.next
     choose, learn_transition = agent._choose, agent._learn_transition
+    first_timestep = agent.num_timesteps
     observe_info = getattr(agent, "_observe_info", None)
     acting_counts = stats.acting_counts
     s = agent._obs
@@ -178,6 +179,8 @@ def python_loop(agent: Any, run: LearnRun) -> None:
         if observe_info is not None:
             observe_info(info)
         learn_transition(s, a, reward, s2, terminated, truncated)
+        agent.num_timesteps = first_timestep + steps_done  # the shell counts, not the rule
+        agent._episode_step = 0 if (terminated or truncated) else agent._episode_step + 1
         reward_total += reward
         undelayed_total += undelayed
         episode_reward += undelayed

@@ -151,10 +151,6 @@ class QAgent(TabularAgent):
         )
         self.n_models = n_models
         self._table = QTable(self.n_states, n_models, self.n_actions, self.q_init)
-        self._t = 0  # the episode step
-
-    def _end_episode(self) -> None:
-        self._t = 0
 
     def compiled_tables(self) -> CompiledTables:
         """The Q-table, its cache and Λ, which the compiled loop trains in place."""

@@ -356,7 +356,6 @@ class DeconvolutionQLearning(QAgent):
     ) -> None:
         pair = s * self.n_actions + a
         self._q_learning_update(s, a, float(self._reward_model[pair]), s2, terminated)
-        self.num_timesteps += 1
         self._regression.observe(pair, r, terminated or truncated)
         self._since_solve += 1
         if self._since_solve >= self._solve_after:

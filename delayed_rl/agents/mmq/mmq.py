@@ -279,7 +279,7 @@ class MultipleModelQLearning(QAgent):
     def _learn_transition(
         self, s: int, a: int, r: float, s2: int, terminated: bool, truncated: bool
     ) -> None:
-        table, history, t = self._table, self._history, self._t
+        table, history, t = self._table, self._history, self._episode_step
         weights = self._step_weights(s) if self._credit.on else None
         cell = s * table.row_size + a
         largest = len(self._n_valid) - 1
@@ -298,8 +298,6 @@ class MultipleModelQLearning(QAgent):
                 table.write(s, cell, credited + self.gamma * bootstrap, self._alpha)
         elif n:
             self._update_models(n, r, terminated, weights, t)
-        self.num_timesteps += 1
-        self._t = 0 if (terminated or truncated) else t + 1
         if self._average is not None:
             self._average.tick()
 
