@@ -234,48 +234,19 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
     - ``"carry"``: they are kept and delivered in the next episode at their scheduled offsets
       (continuing-task semantics: a robot put back on its track keeps receiving old feedback).
 
-    **The flush trap.** Under ``"flush"``, an env whose only reward comes at an episode's final step
-    (FrozenLake, Minigrid) is not delayed at all: the pending reward is flushed at that very step.
-    The wrapper watches its first episodes (:class:`FlushWatch`) until
-    :data:`FLUSH_WATCH_EPISODES` episodes *with a nonzero reward* have ended (episodes without
-    any do not count: FrozenLake's random walks rarely reach the goal), and for at most
-    :data:`FLUSH_WATCH_STEPS` steps. If the inner env emitted every reward of those episodes at
-    a final step (so every one was delivered as it came), it warns once, naming ``"carry"``
-    (which delays a terminal reward into the next episode). A nonzero reward emitted before an
-    episode's final step ends the watch without a warning; ``"carry"`` and ``"drop"``, and a
-    delay that is always 0, are not watched.
+    Under ``"flush"``, an env whose only reward comes at an episode's final step (FrozenLake,
+    Minigrid) is not delayed at all: the wrapper warns once when its first episodes show it
+    (:class:`FlushWatch`). A ``reset()`` in the middle of an episode (an outer ``TimeLimit``)
+    discards what is pending, with a warning, except under ``"carry"``.
 
-    If ``reset()`` is called in the middle of an episode (for example by an outer ``TimeLimit``
-    that this wrapper cannot see), the pending rewards are discarded under ``"flush"`` and
-    ``"drop"`` (they can no longer be delivered), reported as ``info["dropped_reward"]`` in the
-    reset ``info``, with a warning; ``"carry"`` keeps them. Put ``TimeLimit`` *inside* this wrapper,
-    or use an env that truncates itself, to have them flushed instead.
+    ``info`` on every step: ``undelayed_reward`` (``r_t``), ``reward_delay`` (``d_t``),
+    ``pending_reward`` (emitted, not yet delivered), and with ``record_arrivals=True``
+    ``reward_arrivals``, the ``(emission_step, value)`` pairs delivered now (negative steps:
+    carried from an earlier episode).
 
-    ``info`` on every step:
-
-    - ``undelayed_reward``: ``r_t``, the inner env's reward at this step;
-    - ``reward_delay``: ``d_t``;
-    - ``pending_reward``: the sum of rewards emitted but not yet delivered (after this step);
-    - ``reward_arrivals`` (with ``record_arrivals=True``): the list of ``(emission_step, value)``
-      delivered now, ``emission_step`` on this episode's clock (negative for rewards carried over
-      from an earlier episode): the non-anonymous oracle view, for baselines and tests.
-
-    Delays come only from the wrapper's own generator, seeded by ``reset(seed=...)`` (from a stream
-    independent of the inner env's, so delays do not correlate with the env's own randomness): the
-    same seed gives the same delays. Delays are drawn in blocks of 1024 and pending rewards are kept in a
-    dict keyed by due step (zero rewards are never stored), so the per-step cost stays close to
-    that of Gymnasium's ``RecordEpisodeStatistics``, and memory follows what is pending (a delay
-    of 10⁹ steps costs no more than one of 10).
-
-    Sums are checked: rewards due at one step, or all the rewards pending, that sum to more than
-    float64 can hold (finite rewards near 1e308) raise ``ValueError`` instead of becoming ``inf``;
-    flushed and dropped amounts are exact sums rounded once.
-
-    The wrapper records its arguments (``gym.utils.RecordConstructorArgs``) with the delay as its
-    JSON description (:meth:`~delayed_rl.delays.Delay.to_dict`) and numpy numbers as Python
-    ones, so ``env.spec.to_json()`` works and ``gym.make`` of the spec read back rebuilds the
-    same stack; a registered env's ``reward_delay`` kwarg is recorded in that form too
-    (``reward_delay=np.float32(2.0)`` as ``2.0``).
+    ``reset(seed=...)`` seeds the delays, from a stream of their own (the same seed gives the same
+    delays). ``docs/semantics.md`` has the rest: the flush trap's watch, the cost, the checked
+    sums and the JSON spec.
 
     Args:
         env: the env whose rewards to delay. Its rewards must be real scalars: ``int``,
