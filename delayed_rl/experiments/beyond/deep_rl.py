@@ -73,6 +73,7 @@ from delayed_rl.experiments.framework.experiment import (
     Summary,
 )
 from delayed_rl.experiments.framework.gain_settings import (
+    delay_fields,
     gain_tasks,
     group_results,
     learning_curves,
@@ -162,11 +163,7 @@ def shared_run(task: dict) -> SharedRun:
     run = {key: task[key] for key in (*_RUN_FIELDS, "method", "seed")}
     run.update({key: task[key] for key in _OPTIONAL_RUN_FIELDS if key in task})
     run["eval_episodes"] = EVAL_EPISODES
-    if task["method"] != "oracle":
-        run["delay"] = task["delay"]
-    if task["method"] == "deconv-learned":
-        run["max_delay"] = task["max_delay"]
-    return SharedRun(train_and_score, run)
+    return SharedRun(train_and_score, {**run, **delay_fields(task)})
 
 
 def run_task(task: dict) -> dict:

@@ -53,6 +53,7 @@ from delayed_rl.experiments.framework.gain_settings import (
     group_results,
     learning_curves,
     method_gains,
+    method_scores,
 )
 from delayed_rl.experiments.framework.late_training import (
     CONTROLLERS,
@@ -230,9 +231,7 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
     claims, curves, figures, table = [], [], {}, {}
     for setting, by_method in grouped.items():
         gains, low, high = method_gains(by_method)
-        scores = {
-            m: {seed: r["score"] for seed, r in runs.items()} for m, runs in by_method.items()
-        }
+        scores = method_scores(by_method)
         claims += _setting_claims(setting, gains, scores)
         table[setting] = {}
         for method in gains:
@@ -240,15 +239,13 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
             claims.append(
                 rules.reference_row(f"{setting}: {LABELS[method]} gain", rules.mean_ci_n(values))
             )
-            method_scores = list(scores[method].values())
+            seed_scores = list(scores[method].values())
             table[setting][method] = {
                 "seeds": sorted(scores[method]),
-                "score": dict(
-                    zip(("mean", "ci95"), rules.mean_ci_n(method_scores)[:2], strict=True)
-                ),
+                "score": dict(zip(("mean", "ci95"), rules.mean_ci_n(seed_scores)[:2], strict=True)),
                 "gain": dict(zip(("mean", "ci95"), rules.mean_ci_n(values)[:2], strict=True)),
                 "gains": values,
-                "scores": method_scores,
+                "scores": seed_scores,
             }
         table[setting]["random"] = {"score": low}
         learners = {m: label for m, label in LABELS.items() if m in by_method and m in METHODS}

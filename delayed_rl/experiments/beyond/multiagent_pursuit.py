@@ -42,10 +42,12 @@ from delayed_rl.experiments.framework.deep_training import require_sb3
 from delayed_rl.experiments.framework.delay_estimates import mean_delay_claim
 from delayed_rl.experiments.framework.experiment import Config, Experiment, SharedRun, Summary
 from delayed_rl.experiments.framework.gain_settings import (
+    delay_fields,
     gain_tasks,
     group_results,
     learning_curves,
     method_gains,
+    method_scores,
 )
 from delayed_rl.experiments.framework.multiagent_training import (
     METHODS,
@@ -118,11 +120,7 @@ def shared_run(task: dict) -> SharedRun:
         return SharedRun(random_score, {**fields, "eval_episodes": RANDOM_EPISODES})
     run = {key: task[key] for key in _RUN_FIELDS}
     run.update(method=task["method"], eval_episodes=EVAL_EPISODES)
-    if task["method"] != "oracle":
-        run["delay"] = task["delay"]
-    if task["method"] == "deconv-learned":
-        run["max_delay"] = task["max_delay"]
-    return SharedRun(train_and_score, run)
+    return SharedRun(train_and_score, {**run, **delay_fields(task)})
 
 
 def run_task(task: dict) -> dict:
@@ -169,9 +167,7 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
     claims, curves, figures, table = [], [], {}, {}
     for setting, by_method in grouped.items():
         gains, low, _ = method_gains(by_method)
-        scores = {
-            m: {seed: r["score"] for seed, r in runs.items()} for m, runs in by_method.items()
-        }
+        scores = method_scores(by_method)
         claims += _setting_claims(setting, scores, by_method)
         table[setting] = {"random": {"score": low}}
         for method in METHODS:

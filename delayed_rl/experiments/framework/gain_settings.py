@@ -18,7 +18,14 @@ from delayed_rl.experiments.framework import claims as rules
 from delayed_rl.experiments.framework import plotting
 from delayed_rl.experiments.framework.experiment import Config, Curve
 
-__all__ = ["gain_tasks", "group_results", "learning_curves", "method_gains"]
+__all__ = [
+    "delay_fields",
+    "gain_tasks",
+    "group_results",
+    "learning_curves",
+    "method_gains",
+    "method_scores",
+]
 
 
 def gain_tasks(
@@ -58,6 +65,23 @@ def group_results(task_list: list[dict], results: list[dict]) -> dict[str, dict[
     for task, result in zip(task_list, results, strict=True):
         grouped[task["setting"]][task["method"]][task["seed"]] = result
     return grouped
+
+
+def method_scores(by_method: dict[str, dict[int, dict]]) -> dict[str, dict[int, float]]:
+    """Each method's score per seed, ``{method: {seed: score}}``."""
+    return {m: {seed: r["score"] for seed, r in runs.items()} for m, runs in by_method.items()}
+
+
+def delay_fields(task: dict) -> dict[str, Any]:
+    """What a reward-delay method's run reads of ``task`` beyond the setting's own fields.
+
+    The ``delay`` (not the oracle's, which is undelayed, so that settings that differ only by
+    the delay share its run) and, for ``deconv-learned``, the bound ``max_delay`` it learns on.
+    """
+    fields = {} if task["method"] == "oracle" else {"delay": task["delay"]}
+    if task["method"] == "deconv-learned":
+        fields["max_delay"] = task["max_delay"]
+    return fields
 
 
 def method_gains(
