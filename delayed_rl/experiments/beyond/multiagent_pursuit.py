@@ -56,9 +56,11 @@ from delayed_rl.experiments.framework.multiagent_training import (
 )
 
 LAMBDA = 30
+SEEDS = 5
+SETTING = f"pursuit-poisson{LAMBDA}"
 #: The setting's run fields (see the module docstring).
 SETTINGS: dict[str, dict[str, Any]] = {
-    f"pursuit-poisson{LAMBDA}": {
+    SETTING: {
         "env": "pursuit",
         "env_kwargs": {
             "max_cycles": 200,
@@ -76,7 +78,7 @@ SETTINGS: dict[str, dict[str, Any]] = {
         "eval_every": 30_000,
     }
 }
-QUICK = {f"pursuit-poisson{LAMBDA}": (4000, 2000)}
+QUICK = {SETTING: (4000, 2000)}
 """The quick run's settings: their (steps, eval_every)."""
 EVAL_EPISODES = 10
 RANDOM_EPISODES = 100
@@ -194,15 +196,24 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
 EXPERIMENT = Experiment(
     name="multiagent-pursuit",
     thesis="beyond the thesis (multi-agent delayed rewards, deep)",
-    description="SB3's PPO with parameter sharing (SuperSuit) on SISL's pursuit (4 pursuers, "
-    "6 evaders, 8×8, shared team reward) under Poisson(30) reward delays per pursuer: the "
-    "undelayed oracle, PPO on the delayed rewards, and PPO on deconvolution's R̂ (delay known "
-    "or learned), 5 seeds, 300k pursuer-steps; scores of 10 greedy episodes of the undelayed "
-    "game, gains against a random policy and the oracle.",
+    description=(
+        "SB3's PPO with parameter sharing (SuperSuit) on SISL's pursuit ({n_pursuers} pursuers, "
+        "{n_evaders} evaders, {x_size}×{y_size}, shared team reward) under Poisson({lam}) "
+        "reward delays per pursuer: the undelayed oracle, PPO on the delayed rewards, and PPO "
+        "on deconvolution's R̂ (delay known or learned), {seeds} seeds, {steps:,} "
+        "pursuer-steps; scores of {episodes} greedy episodes of the undelayed game, gains "
+        "against a random policy and the oracle."
+    ).format(
+        **SETTINGS[SETTING]["env_kwargs"],
+        lam=LAMBDA,
+        seeds=SEEDS,
+        steps=SETTINGS[SETTING]["steps"],
+        episodes=EVAL_EPISODES,
+    ),
     tasks=tasks,
     run_task=run_task,
     summarize=summarize,
-    default_seeds=5,
+    default_seeds=SEEDS,
     shared_run=shared_run,
     cost=cost,
     resumable=True,
