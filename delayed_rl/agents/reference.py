@@ -2,7 +2,7 @@
 
 These classes are the rules as their agents' docstrings state them, for reading and for tests:
 both training paths of every agent (the Python loop and the compiled one) are tested against
-them bit for bit, on random transitions (``tests/test_reference_rules.py``). They learn only;
+them bit for bit, on random transitions (``tests/agents/test_reference.py``). They learn only;
 acting is the agents' (ε-greedy with random ties, :class:`~delayed_rl.agents.common.q_table.QTable`).
 
 - :class:`ReferenceMMQ`: Multiple Model Q-learning with its credit options; with Λ = {0} it is

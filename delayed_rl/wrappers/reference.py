@@ -7,9 +7,9 @@ its use: :class:`~delayed_rl.wrappers.RewardDelay` (one env, a schedule of sums)
 :class:`~delayed_rl.wrappers.VectorRewardDelay` and stable-baselines3's
 :class:`~delayed_rl.wrappers.sb3.VecRewardDelay`: one ring per sub-env) and the compiled
 training loop's ring (:mod:`delayed_rl.compiled.kernel`, which inlines it in its step loop).
-Each is tested against this class step by step (``tests/test_reward_delay.py``,
-``tests/test_vector_reward_delay.py``, ``tests/test_sb3_wrapper.py``,
-``tests/test_compiled_path.py``).
+Each is tested against this class step by step (``tests/wrappers/test_reward_delay.py``,
+``tests/wrappers/vector/test_reward_delay.py``, ``tests/wrappers/test_sb3.py``,
+``tests/compiled/test_path.py``).
 
 **The rule.** The reward ``r_t`` emitted at step ``t`` (on the clock of steps since the
 wrapper's construction) with delay ``d_t`` is due at step ``t + d_t``; a step delivers the sum

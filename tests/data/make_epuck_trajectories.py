@@ -1,4 +1,4 @@
-"""Record reference trajectories of the e-puck env, for tests/test_linefollow_trajectories.py.
+"""Record reference trajectories of the e-puck env, for tests/envs/test_linefollow_trajectories.py.
 
 Each configuration below is run from a seeded reset for a fixed number of steps (an episode
 end is followed by an unseeded reset, which continues the env's generator). Every reset and

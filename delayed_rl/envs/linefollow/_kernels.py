@@ -13,7 +13,7 @@ and absolute values run SIMD loops chosen for the CPU, some with fused multiply-
 ``hypot`` (a C library function) and no ``np.maximum`` (whose SIMD loops treat −0.0 their own
 way): a product of complex numbers is written out as ``ar·br − ai·bi``, ``ar·bi + ai·br``, a
 distance as ``sqrt(x·x + y·y)``, a clip as comparisons. numba compiles them without compiled
-operations or reassociation, for any target CPU. ``tests/test_linefollow_kernels.py`` checks
+operations or reassociation, for any target CPU. ``tests/envs/test_linefollow_kernels.py`` checks
 both paths against each other on random queries and ``tests/test_cpu_independence.py`` checks
 whole trajectories with numpy's SIMD loops and numba's host-CPU code turned off.
 

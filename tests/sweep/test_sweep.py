@@ -32,7 +32,7 @@ from delayed_rl.sweep import results as sweep_results
 from delayed_rl.sweep import runs as sweep_runs
 from delayed_rl.wrappers import ObservationDelay, RewardDelay
 
-EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "sweep.yaml"
+EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "sweep.yaml"
 GRID = "delayed_rl/GridWorld-3x3-v0"
 
 #: A sweep of seconds: 4 agents × 2 envs × 2 delays × 2 seeds = 32 runs.

@@ -137,7 +137,7 @@ def test_delay_is_required_and_the_shared_hyperparameters_are_shown():
 
 
 def test_it_runs_compiled_by_default_where_the_stack_compiles():
-    # the compiled rule is the Python one update for update: tests/test_compiled_credit.py
+    # the compiled rule is the Python one update for update: tests/compiled/test_credit.py
     agent = ExpectedCreditQLearning(gym.make(GRID3, reward_delay=2), delay=2, seed=0)
     tables = agent.compiled_tables()
     np.testing.assert_array_equal(tables.delay_estimates, np.flatnonzero(agent.credit_weights))

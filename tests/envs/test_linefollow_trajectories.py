@@ -24,7 +24,7 @@ import pytest
 
 from delayed_rl.envs.linefollow import _chipmunk, _kernels
 
-DATA = Path(__file__).with_name("data")
+DATA = Path(__file__).parents[1] / "data"
 
 
 def _load_generator():

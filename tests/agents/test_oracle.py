@@ -88,7 +88,7 @@ def test_the_wrapper_is_found_anywhere_in_the_stack_and_sets_the_history():
 
 
 def test_it_runs_compiled_by_default_where_the_stack_compiles():
-    # the compiled rule is the Python one update for update: tests/test_compiled_credit.py
+    # the compiled rule is the Python one update for update: tests/compiled/test_credit.py
     agent = OracleQLearning(oracle_env(), seed=0)
     assert agent.compiled_tables().held_transitions == agent.history_length > 0
     agent.learn(100)
