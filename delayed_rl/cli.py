@@ -45,7 +45,7 @@ from delayed_rl._validation import (
 )
 from delayed_rl.agents.common.hyperparameters import MAX_SEED_VALUE
 from delayed_rl.agents.common.python_loop import MAX_TIMESTEPS
-from delayed_rl.agents.registry import AGENTS as AGENT_NAMES
+from delayed_rl.agents.registry import REGISTRY
 from delayed_rl.delays import Poisson
 from delayed_rl.envs import env_ids
 from delayed_rl.experiments import DEFAULT_NAMES, LONG_NAMES, NAMES
@@ -114,11 +114,9 @@ _workers = _checked(int, check_workers)
 _eval_steps = _limited(1, MAX_EVAL_STEPS)
 _eval_episodes = _limited(1, MAX_EVAL_EPISODES)
 
-#: ``--agent`` choices: the agent class for each (the sweep files' names of the agents whose
-#: options ``train`` has).
-AGENTS = {key: AGENT_NAMES[key] for key in ("q", "fixed", "mmq", "deconv")}
-#: The agents that take ``--max-delay-estimate``: MMQ's λ̂max, deconvolution's longest delay.
-_MAX_DELAY_AGENTS = ("mmq", "deconv")
+#: ``--agent`` choices: the agent class for each (the registry's agents whose options ``train``
+#: has: :attr:`~delayed_rl.agents.registry.AgentEntry.train_options`).
+AGENTS = {key: e.class_name for key, e in REGISTRY.items() if e.train_options is not None}
 #: What ``--episodes`` waits for an episode to end before calling the env continuing.
 MAX_EPISODE_STEPS = 100_000
 #: How many episodes ``evaluate`` runs when given neither ``--episodes`` nor ``--steps``.
@@ -207,12 +205,8 @@ def _train(args: argparse.Namespace) -> int:
         "q_init": args.q_init,
         "seed": args.seed,
     }
-    if args.agent == "fixed":
-        options["delay_estimate"] = args.delay_estimate
-    elif args.agent == "mmq":
-        options["max_delay_estimate"] = args.max_delay_estimate
-    elif args.agent == "deconv":  # the delay learned on 0..--max-delay-estimate
-        options["max_delay"] = args.max_delay_estimate
+    for option, argument in REGISTRY[args.agent].train_options.items():
+        options[argument] = getattr(args, option)  # deconv: the delay learned on 0..that
     save = Path(args.save)
     try:  # fail before training, not after, when the model cannot be written there
         save.parent.mkdir(parents=True, exist_ok=True)
@@ -634,6 +628,17 @@ def _check_train_arguments(args: argparse.Namespace) -> None:
         args.parser.error(f"argument --save: {str(error).removeprefix('path ')}")
 
 
+def _check_agent_options(args: argparse.Namespace) -> None:
+    """Refuse an agent option given to an agent that does not take it (a usage error)."""
+    for option in sorted({o for key in AGENTS for o in REGISTRY[key].train_options}):
+        takers = [key for key in AGENTS if option in REGISTRY[key].train_options]
+        if getattr(args, option) is not None and args.agent not in takers:
+            args.parser.error(
+                f"--{option.replace('_', '-')} is for --agent {' or '.join(takers)}, "
+                f"not --agent {args.agent}"
+            )
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``delayed-rl`` with ``argv`` (default: the process's arguments); return the exit code."""
     parser = build_parser()
@@ -641,12 +646,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command == "train":
         if args.agent == "fixed" and args.delay_estimate is None:
             args.parser.error("--agent fixed needs --delay-estimate K (the delay it assumes)")
-        if args.agent != "fixed" and args.delay_estimate is not None:
-            args.parser.error(f"--delay-estimate is for --agent fixed, not --agent {args.agent}")
-        if args.agent not in _MAX_DELAY_AGENTS and args.max_delay_estimate is not None:
-            args.parser.error(
-                f"--max-delay-estimate is for --agent mmq or deconv, not --agent {args.agent}"
-            )
+        _check_agent_options(args)
         _check_train_arguments(args)
     level, gym.logger.min_level = gym.logger.min_level, 40  # Gymnasium's warnings stay out
     try:

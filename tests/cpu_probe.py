@@ -117,7 +117,7 @@ def _grid(seed_lam: float = 3.0, record: bool = False) -> gym.Env:
     )
 
 
-AGENTS: dict[str, Callable[[gym.Env], object]] = {
+PROBES: dict[str, Callable[[gym.Env], object]] = {
     "q": lambda env: QLearning(env, q_init=5.0, seed=1),
     "fixed": lambda env: FixedDelayQLearning(env, delay_estimate=3, q_init=5.0, seed=1),
     "mmq": lambda env: MultipleModelQLearning(env, max_delay_estimate=8, q_init=5.0, seed=1),
@@ -137,7 +137,7 @@ AGENTS: dict[str, Callable[[gym.Env], object]] = {
 def agent_run(name: str, compiled: bool, steps: int = 6000) -> str:
     """Train one agent briefly on a delayed 5×5 grid world; hash its learned arrays."""
     env = _grid(record=name == "oracle")
-    agent = AGENTS[name](env)
+    agent = PROBES[name](env)
     agent.learn(steps, compiled=compiled)
     digest = Digest()
     digest.add(agent.q_table)
@@ -204,7 +204,7 @@ def runs() -> dict[str, Callable[[], str]]:
     table: dict[str, Callable[[], str]] = {
         name: (lambda kwargs=kwargs: epuck_run(kwargs)) for name, kwargs in EPUCK_CONFIGS.items()
     }
-    for name in AGENTS:
+    for name in PROBES:
         for compiled in (False, True):
             path = "compiled" if compiled else "python"
             table[f"{name}-{path}"] = lambda name=name, compiled=compiled: agent_run(name, compiled)

@@ -34,6 +34,7 @@ from delayed_rl.agents import (
     load_agent,
 )
 from delayed_rl.agents.common.hyperparameters import HYPERPARAMETER_NAMES
+from delayed_rl.agents.registry import REGISTRY, agent_class
 
 PACKAGE = Path(delayed_rl.__file__).parent
 
@@ -503,14 +504,7 @@ def test_the_length_check_counts_a_long_function_and_spares_a_kernel():
     assert _long_functions(f"@_jit\ndef kernel():\n{body}\n") == []
 
 
-ALGORITHMS = [
-    QLearning,
-    FixedDelayQLearning,
-    MultipleModelQLearning,
-    agents.ExpectedCreditQLearning,
-    agents.OracleQLearning,
-    agents.DeconvolutionQLearning,
-]
+ALGORITHMS = [agent_class(name) for name in REGISTRY]
 
 
 @pytest.mark.parametrize("cls", ALGORITHMS, ids=lambda cls: cls.__name__)

@@ -171,7 +171,7 @@ def test_anonymous_delay_small_run_writes_table_claims_and_figures(tmp_path):
     summary = run_experiment(experiment, Config(quick=True, seeds=1, steps=2_500), tmp_path, False)
     payload = json.loads((tmp_path / "summary.json").read_text())
     rows = {row["agent"]: row for row in payload["table"]}
-    assert set(rows) == set(settings.AGENTS)
+    assert set(rows) == set(settings.LEARNERS)
     for row in rows.values():
         assert row["seeds"] == 1 and 0 <= row["optimal_seeds"] <= 1
         for key in ("greedy", "average", "second_half_optimal", "ns_per_step"):
@@ -302,7 +302,7 @@ def test_linefollow_deconv_verdicts_flip_with_the_data(tmp_path):
     deconv = [q for q in worse if q.startswith("DeconvQ")]
     assert len(deconv) == 4 and all(worse[q] == "differs" for q in deconv)
     assert worse["MMQ average reward during learning"] == "agrees"  # MMQ's rows unchanged
-    assert set(summary.extra["accumulated_error"]) == set(lfd.AGENTS)
+    assert set(summary.extra["accumulated_error"]) == set(lfd.LEARNERS)
     for name, draw in summary.figures.items():
         draw(tmp_path / f"{name}.png")
     assert len(list(tmp_path.glob("*.png"))) == 3

@@ -21,7 +21,7 @@ def test_the_full_run_has_both_delays_every_learner_and_five_seeds_sharing_the_o
     assert "multiagent-gridworld" in LONG_NAMES and experiment.resumable
     tasks = experiment.tasks(Config(seeds=experiment.default_seeds))
     assert experiment.default_seeds >= 5
-    assert len(tasks) == len(game.LAMS) * len(game.AGENTS) * 5 == 40
+    assert len(tasks) == len(game.LAMS) * len(game.LEARNERS) * 5 == 40
     assert {t["lam"] for t in tasks} == {5, 10} and {t["steps"] for t in tasks} == {150_000}
     keys = {pool_key(experiment.run_of(t)) for t in tasks}
     assert len(keys) == 40 - 5  # Q undelayed: one run per seed, whatever the delay
@@ -34,7 +34,7 @@ def test_the_full_run_has_both_delays_every_learner_and_five_seeds_sharing_the_o
 
 def test_the_quick_run_is_one_delay_and_few_steps():
     tasks = get_experiment("multiagent-gridworld").tasks(Config(quick=True, seeds=2))
-    assert len(tasks) == len(game.AGENTS) * 2
+    assert len(tasks) == len(game.LEARNERS) * 2
     assert {(t["lam"], t["steps"]) for t in tasks} == {(game.QUICK_LAM, game.QUICK_STEPS)}
 
 
@@ -154,16 +154,16 @@ def test_a_tiny_quick_run_writes_its_files_and_resumes(tmp_path):
     config = Config(quick=True, seeds=2, steps=600)
     experiment = get_experiment("multiagent-gridworld")
     summary = run_experiment(experiment, config, tmp_path, False)
-    assert summary.extra["runs"] == 2 * len(game.AGENTS)
+    assert summary.extra["runs"] == 2 * len(game.LEARNERS)
     payload = json.loads((tmp_path / "summary.json").read_text())
     for claim in payload["claims"]:
         assert claim["verdict"] in VERDICTS and claim["criterion"]
         assert math.isfinite(claim["mean"]) or claim["verdict"] == "inconclusive"
-    assert set(payload["table"]["Poisson(10)"]) == set(game.AGENTS)
+    assert set(payload["table"]["Poisson(10)"]) == set(game.LEARNERS)
     assert sorted(p.name for p in tmp_path.glob("*.png")) == [
         "delay_estimate_poisson10.png",
         "greedy_score_poisson10.png",
     ]
-    assert len(list((tmp_path / "runs").glob("*.json"))) == 2 * len(game.AGENTS)
+    assert len(list((tmp_path / "runs").glob("*.json"))) == 2 * len(game.LEARNERS)
     again = run_experiment(experiment, config, tmp_path, False)
     assert [c.mean for c in again.claims] == [c.mean for c in summary.claims]

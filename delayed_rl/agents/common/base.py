@@ -198,6 +198,7 @@ class TabularAgent(persistence.CopyProtocol, ABC):
     def _greedy_actions(self, states: np.ndarray) -> np.ndarray: ...
     def _end_episode(self) -> None:
         """Forget the rule's own history of the episode that ended (none by default)."""
+
     @abstractmethod
     def _get_state_arrays(self) -> dict[str, np.ndarray]: ...
     @abstractmethod

@@ -68,9 +68,9 @@ import numpy as np
 from delayed_rl.experiments.framework.claims import band_claim, mean_ci_n, paired
 from delayed_rl.experiments.framework.delay_estimates import DELAY_TOLERANCE, mean_delay_claim
 from delayed_rl.experiments.framework.delay_settings import (
-    AGENTS,
     DELAYS,
     LAMBDA_MAX,
+    LEARNERS,
     make_delay,
     run_agent,
     setting_label,
@@ -107,7 +107,7 @@ REWARD_TOLERANCE = 0.05
 
 def tasks(config: Config) -> list[dict]:
     """Every (setting, agent, seed) of the seven learners (:func:`~.delay_settings.setting_tasks`)."""
-    return setting_tasks(config, AGENTS)
+    return setting_tasks(config, LEARNERS)
 
 
 def shared_run(task: dict) -> SharedRun | None:

@@ -75,14 +75,14 @@ from delayed_rl.experiments.framework.line_following import (
 )
 
 #: The learners compared.
-AGENTS = ("MMQ", "DeconvQ learned", "Q")
+LEARNERS = ("MMQ", "DeconvQ learned", "Q")
 QUICK_STEPS, STEPS = 5_000, 150_000
 
 
 def tasks(config: Config) -> list[dict]:
-    """Per seed, one run of each of :data:`AGENTS`: 150k steps (5k with ``config.quick``)."""
+    """Per seed, one run of each of :data:`LEARNERS`: 150k steps (5k with ``config.quick``)."""
     steps = config.steps or (QUICK_STEPS if config.quick else STEPS)
-    return seed_tasks(config, AGENTS, steps=steps)
+    return seed_tasks(config, LEARNERS, steps=steps)
 
 
 def run_task(task: dict) -> dict:
@@ -103,7 +103,7 @@ def shared_run(task: dict) -> SharedRun:
     is also the start of ``controllers``' and ``real-robot``'s
     (:func:`~.line_following.logged_run`).
     """
-    check_choice("agent", task["agent"], AGENTS)
+    check_choice("agent", task["agent"], LEARNERS)
     return logged_run(task["agent"], task["seed"], task["steps"])
 
 
@@ -125,7 +125,7 @@ def _paired(runs: dict[str, list[dict]], ours: str, theirs: str, how: str) -> tu
 
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
     """The claims of the module docstring, per-agent statistics in ``extra`` and the figures."""
-    runs: dict[str, list[dict]] = {agent: [] for agent in AGENTS}
+    runs: dict[str, list[dict]] = {agent: [] for agent in LEARNERS}
     curves = []
     for task, result in zip(task_list, results, strict=True):
         runs[task["agent"]].append(result)

@@ -73,7 +73,7 @@ from delayed_rl.experiments.framework.experiment import (
 from delayed_rl.experiments.framework.training import thesis_hyperparameters
 
 #: The learners, in the tables' order.
-AGENTS = ("Q", "DeconvQ known", "DeconvQ learned", "Q undelayed")
+LEARNERS = ("Q", "DeconvQ known", "DeconvQ learned", "Q undelayed")
 SIZE, EPISODE_STEPS = 5, 100
 #: The mean delays λ of the full run, and of ``--quick``.
 LAMS, QUICK_LAM = (5, 10), 10
@@ -110,12 +110,12 @@ def tasks(config: Config) -> list[dict]:
     steps = config.steps or (QUICK_STEPS if config.quick else STEPS)
     lams = (QUICK_LAM,) if config.quick else LAMS
     fields = {"size": SIZE, "episode_steps": EPISODE_STEPS, "steps": steps}
-    return [task for lam in lams for task in seed_tasks(config, AGENTS, lam=lam, **fields)]
+    return [task for lam in lams for task in seed_tasks(config, LEARNERS, lam=lam, **fields)]
 
 
 def shared_run(task: dict) -> SharedRun:
     """The run behind a task: Q undelayed's has no λ, so both delays share it."""
-    check_choice("agent", task["agent"], AGENTS)
+    check_choice("agent", task["agent"], LEARNERS)
     if task["agent"] == "Q undelayed":
         return SharedRun(train_and_score, {k: v for k, v in task.items() if k != "lam"})
     return SharedRun(train_and_score, task)
@@ -308,7 +308,7 @@ def _setting_claims(lam: float, by_agent: dict[str, dict]) -> list[Claim]:
     claims.append(mean_delay_claim(f"{label}: DeconvQ learned mean delay", mean_ci_n(delays), lam))
     claims += [
         reference_row(f"{label}: {agent} score", mean_ci_n(list(scores[agent].values())))
-        for agent in AGENTS
+        for agent in LEARNERS
         if agent in scores
     ]
     return claims

@@ -6,7 +6,7 @@ thesis's), geometric (``Geometric(p)`` with ``p = 1 / (λ + 1)``, mean ``(1 − 
 a bimodal one (mass ½ at 0 and ½ at 2λ, an ``Empirical`` pmf); the quick setting is 7×7 under
 Poisson only, 30k steps. :func:`setting_tasks` makes one task per (setting, agent, seed).
 
-The learners (:data:`AGENTS`, :func:`make_agent`) have the thesis's hyper-parameters (α = 0.1,
+The learners (:data:`LEARNERS`, :func:`make_agent`) have the thesis's hyper-parameters (α = 0.1,
 γ = 0.9, constant ε = 0.1, ``q_init`` = 25, :mod:`.training`) and model delays up to
 :data:`LAMBDA_MAX`. :func:`run_agent` trains one and measures it
 (:func:`~delayed_rl.experiments.framework.snapshot_runs.measure`): it is the run both
@@ -37,7 +37,7 @@ LAMBDA_MAX = 50
 """The longest delay any learner models: MMQ's λ̂max, DeconvQ's ``max_delay``, expected credit's
 last lag."""
 #: The seven learners, in the tables' order (:func:`make_agent`).
-AGENTS = (
+LEARNERS = (
     "Q",
     "MMQ",
     "expected credit",
@@ -130,7 +130,7 @@ def grid(size: int, delay: Delay | None = None, record_arrivals: bool = False) -
 
 
 def make_agent(name: str, size: int, delay: Delay, seed: int, steps: int | None = None) -> Any:
-    """One of :data:`AGENTS` on its own ``size`` grid under ``delay``.
+    """One of :data:`LEARNERS` on its own ``size`` grid under ``delay``.
 
     ``Q`` is Q-learning on the delayed reward, ``MMQ`` Multiple Model Q-learning with
     Λ = {0, ..., ``LAMBDA_MAX``}, ``expected credit`` and ``DeconvQ known`` are told the true
@@ -142,11 +142,11 @@ def make_agent(name: str, size: int, delay: Delay, seed: int, steps: int | None 
 
     Raises:
         TypeError: ``name`` is not a string, or ``steps`` not an integer.
-        ValueError: ``name`` is not one of :data:`AGENTS`, or ``steps`` < 1.
+        ValueError: ``name`` is not one of :data:`LEARNERS`, or ``steps`` < 1.
     """
     from delayed_rl import agents
 
-    check_choice("agent", name, AGENTS)
+    check_choice("agent", name, LEARNERS)
     steps = check_int("steps", steps, 1, optional=True)
     common = thesis_hyperparameters(seed)
     if name == "Q undelayed":
@@ -168,7 +168,7 @@ def make_agent(name: str, size: int, delay: Delay, seed: int, steps: int | None 
 
 
 def run_agent(task: dict) -> dict:
-    """Train one agent of :data:`AGENTS` in its setting (a task of :func:`setting_tasks`), measured.
+    """Train one agent of :data:`LEARNERS` in its setting (a task of :func:`setting_tasks`), measured.
 
     A throw-away agent is trained first, untimed (:func:`~.snapshot_runs.warm_up`); the run's
     result is :func:`~.snapshot_runs.measure`'s.

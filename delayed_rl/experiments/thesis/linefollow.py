@@ -59,13 +59,13 @@ from delayed_rl.experiments.framework.line_following import (
 from delayed_rl.experiments.framework.training import ALPHA, EPSILON, GAMMA
 
 #: The learners compared.
-AGENTS = ("MMQ", "Q")
+LEARNERS = ("MMQ", "Q")
 
 
 def tasks(config: Config) -> list[dict]:
     """Per seed: one Q-learning and one MMQ run, 150k steps each (3k with ``config.quick``)."""
     steps = config.steps or (3_000 if config.quick else 150_000)
-    return seed_tasks(config, AGENTS, steps=steps)
+    return seed_tasks(config, LEARNERS, steps=steps)
 
 
 def run_task(task: dict) -> dict:
@@ -98,7 +98,7 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
     ± :data:`~.line_claims.REWARD_TOLERANCE`, or ± :data:`~.line_claims.RATIO_TOLERANCE` for the
     ratio); MMQ − Q twice: against the band of +0.43, and for its sign alone (MMQ above Q).
     """
-    runs: dict[str, list[dict]] = {agent: [] for agent in AGENTS}
+    runs: dict[str, list[dict]] = {agent: [] for agent in LEARNERS}
     curves = []
     for task, result in zip(task_list, results, strict=True):
         runs[task["agent"]].append(result)

@@ -96,7 +96,7 @@ from delayed_rl.experiments.framework.line_following import (
 )
 
 #: The learners compared.
-AGENTS = ("MMQ", "Q", "DeconvQ learned")
+LEARNERS = ("MMQ", "Q", "DeconvQ learned")
 CONDITIONS = ("real", "control")
 #: The env each condition continues on (a key of :data:`~.line_following.SETTINGS`).
 SETTING = {"real": "real", "control": "clean"}
@@ -119,7 +119,7 @@ def tasks(config: Config) -> list[dict]:
     """Per seed, one task per agent: pretraining, then the real and the control runs."""
     pretrain = config.steps or (QUICK_PRETRAIN_STEPS if config.quick else PRETRAIN_STEPS)
     run = QUICK_RUN_STEPS if config.quick else RUN_STEPS
-    return seed_tasks(config, AGENTS, pretrain_steps=pretrain, steps=run)
+    return seed_tasks(config, LEARNERS, pretrain_steps=pretrain, steps=run)
 
 
 def run_task(task: dict) -> dict:
@@ -139,7 +139,7 @@ def shared_run(task: dict) -> SharedRun:
     of the same learner and seed (:func:`~.line_following.training_run`): run together, each learner
     and seed trains once.
     """
-    check_choice("agent", task["agent"], AGENTS)
+    check_choice("agent", task["agent"], LEARNERS)
     continuations = [
         ["continue", task["pretrain_steps"], SETTING[condition], task["steps"]]
         for condition in CONDITIONS
@@ -168,7 +168,7 @@ def _by_seed(runs: dict, agent: str, condition: str, key: str) -> dict[int, floa
 
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
     """The claims of the module docstring, statistics in ``extra``, and the figures."""
-    runs: dict[str, dict[int, dict]] = {agent: {} for agent in AGENTS}
+    runs: dict[str, dict[int, dict]] = {agent: {} for agent in LEARNERS}
     curves = []
     for task, result in zip(task_list, results, strict=True):
         agent, seed = task["agent"], task["seed"]
@@ -301,23 +301,23 @@ def _deconv_claims(runs: dict) -> list[Claim]:
 
 def _statistics(runs: dict, seeds: list[int]) -> dict[str, Any]:
     """``summary.json``'s statistics: per agent and condition, and the thesis's two runs."""
-    both = [(a, c) for a in AGENTS for c in CONDITIONS]
+    both = [(a, c) for a in LEARNERS for c in CONDITIONS]
     return {
         "average_reward": {f"{a} {c}": _stats(runs, a, c)[:2] for a, c in both},
         "accumulated_error": {f"{a} {c}": _stats(runs, a, c, "total_error")[:2] for a, c in both},
         "line_visible_fraction": {f"{a} {c}": _stats(runs, a, c, "visible")[:2] for a, c in both},
-        "gap_cost": {a: _gap(runs, a)[:2] for a in AGENTS},
+        "gap_cost": {a: _gap(runs, a)[:2] for a in LEARNERS},
         "thesis_runs": {
             name: {
                 "seed": seed,
-                **{a: runs[a][seed]["real"]["average"] for a in AGENTS},
+                **{a: runs[a][seed]["real"]["average"] for a in LEARNERS},
                 "error_ratio_Q_over_MMQ": runs["Q"][seed]["real"]["total_error"]
                 / runs["MMQ"][seed]["real"]["total_error"],
             }
             for name, seed in zip(THESIS_RUNS, seeds, strict=False)
         },
         "pretrain_seconds": {
-            a: mean_ci_n([r["pretrain_seconds"] for r in runs[a].values()])[:2] for a in AGENTS
+            a: mean_ci_n([r["pretrain_seconds"] for r in runs[a].values()])[:2] for a in LEARNERS
         },
     }
 
@@ -348,7 +348,7 @@ def _figures(runs: dict, seeds: list[int]) -> dict:
         ratio = THESIS_ERROR_RATIOS[name]
         for metric, key in (("reward", "curve"), ("error", "error")):
             groups = {
-                a: [(runs[a][seed]["real"]["steps"], runs[a][seed]["real"][key])] for a in AGENTS
+                a: [(runs[a][seed]["real"]["steps"], runs[a][seed]["real"][key])] for a in LEARNERS
             }
             lines = (
                 [(a, thesis[a], f"thesis {a} ≈ {thesis[a]:+g} ({name})") for a in thesis]
@@ -361,7 +361,7 @@ def _figures(runs: dict, seeds: list[int]) -> dict:
         for metric, key in (("reward", "curve"), ("error", "error")):
             groups = {
                 a: [(r[condition]["steps"], r[condition][key]) for r in runs[a].values()]
-                for a in AGENTS
+                for a in LEARNERS
             }
             if metric == "reward":
                 values = THESIS_REAL if condition == "real" else THESIS_SIM
