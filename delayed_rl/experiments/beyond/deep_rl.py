@@ -73,6 +73,7 @@ from delayed_rl.experiments.framework.experiment import (
     Summary,
 )
 from delayed_rl.experiments.framework.gain_settings import (
+    curve_means,
     delay_fields,
     gain_tasks,
     group_results,
@@ -181,29 +182,12 @@ def cost(task: dict) -> float:
 
 def _paired_claim(setting: str, ours: str, theirs: str, gains: dict) -> Claim:
     """``ours − theirs`` gain paired by seed, above 0, noting the seeds its spread would need."""
-    differences = rules.paired(gains[ours], gains[theirs])
-    needed = rules.seeds_to_resolve(differences)
-    note = "" if needed is None else f"at this spread, about {needed} seeds would resolve it"
-    return rules.direction_claim(
+    return rules.paired_direction_claim(
         f"{setting}: {LABELS[ours]} − {LABELS[theirs]} gain",
         f"target: {LABELS[ours]} above {LABELS[theirs]}",
-        rules.mean_ci_n(differences),
-        "above",
-        note=note,
+        gains[ours],
+        gains[theirs],
     )
-
-
-def curve_means(by_method: dict[str, dict[int, dict]]) -> dict[str, dict[int, float]]:
-    """Each run's mean score over its learning curve's evaluations, by method and seed.
-
-    With evaluations every ``eval_every`` steps from step 0, it is the area under the curve
-    over its length: how early a method learns, where final scores tie.
-    """
-    return {
-        method: {seed: float(sum(r["scores"]) / len(r["scores"])) for seed, r in runs.items()}
-        for method, runs in by_method.items()
-        if method != "random"
-    }
 
 
 def _setting_claims(setting: str, gains: dict, curves: dict) -> list[Claim]:

@@ -324,6 +324,24 @@ def paired(
     return [float(ours[s] / theirs[s]) if theirs[s] != 0 else math.nan for s in seeds]
 
 
+def paired_direction_claim(
+    quantity: str,
+    thesis: str,
+    ours: Mapping[int, float],
+    theirs: Mapping[int, float],
+    side: str = "above",
+) -> Claim:
+    """``ours − theirs`` paired by seed, on ``side`` of 0 (:func:`direction_claim`).
+
+    Its note says how many seeds the differences' spread would need to resolve it
+    (:func:`seeds_to_resolve`), when that is a number.
+    """
+    differences = paired(ours, theirs)
+    needed = seeds_to_resolve(differences)
+    note = "" if needed is None else f"at this spread, about {needed} seeds would resolve it"
+    return direction_claim(quantity, thesis, mean_ci_n(differences), side, note=note)
+
+
 def seeds_to_resolve(
     values: Sequence[float], reference: float = 0.0, limit: int = 1000
 ) -> int | None:

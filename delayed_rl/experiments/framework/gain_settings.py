@@ -19,6 +19,7 @@ from delayed_rl.experiments.framework import plotting
 from delayed_rl.experiments.framework.experiment import Config, Curve
 
 __all__ = [
+    "curve_means",
     "delay_fields",
     "gain_tasks",
     "group_results",
@@ -65,6 +66,19 @@ def group_results(task_list: list[dict], results: list[dict]) -> dict[str, dict[
     for task, result in zip(task_list, results, strict=True):
         grouped[task["setting"]][task["method"]][task["seed"]] = result
     return grouped
+
+
+def curve_means(by_method: dict[str, dict[int, dict]]) -> dict[str, dict[int, float]]:
+    """Each run's mean score over its learning curve's evaluations, by method and seed.
+
+    With evaluations every ``eval_every`` steps from step 0, it is the area under the curve
+    over its length: how early a method learns, where final scores tie.
+    """
+    return {
+        method: {seed: float(sum(r["scores"]) / len(r["scores"])) for seed, r in runs.items()}
+        for method, runs in by_method.items()
+        if method != "random"
+    }
 
 
 def method_scores(by_method: dict[str, dict[int, dict]]) -> dict[str, dict[int, float]]:
