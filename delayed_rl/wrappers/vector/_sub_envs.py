@@ -112,3 +112,22 @@ def unbatch_actions(env: VectorEnv, actions: Any) -> list[Any]:
     if len(given) != env.num_envs:
         raise ValueError(f"actions must be {allowed}, got {len(given)}: {actions!r}")
     return given
+
+
+def reset_inner(
+    env: VectorEnv, seed: Any, options: dict[str, Any] | None
+) -> tuple[list[int | None], np.ndarray, Any, dict[str, Any]]:
+    """Check ``seed`` and the reset mask, then reset the inner vector env ``env``.
+
+    Returns:
+        Each sub-env's seed (:func:`sub_env_seeds`), the mask of the sub-envs reset
+        (:func:`reset_mask`), and the env's observations and ``info``.
+
+    Raises:
+        TypeError, ValueError: as :func:`sub_env_seeds` and :func:`reset_mask`, before the env
+            is reset.
+    """
+    seeds = sub_env_seeds(seed, env.num_envs)
+    envs = reset_mask(options, env.num_envs)
+    obs, info = env.reset(seed=seed, options=options)
+    return seeds, envs, obs, info

@@ -16,8 +16,7 @@ from delayed_rl.wrappers.action_delay import ActionLine, _check_action, neutral_
 from delayed_rl.wrappers.reward_delay import DelaySampler, check_max_delay
 from delayed_rl.wrappers.vector._sub_envs import (
     autoreset_mode,
-    reset_mask,
-    sub_env_seeds,
+    reset_inner,
     unbatch_actions,
 )
 
@@ -89,9 +88,7 @@ class VectorActionDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
             TypeError, ValueError: ``seed`` is not ``None``, an integer ``>= 0`` or a list of
                 ``num_envs`` of them (or ``None``).
         """
-        seeds = sub_env_seeds(seed, self.num_envs)
-        envs = reset_mask(options, self.num_envs)
-        obs, info = self.env.reset(seed=seed, options=options)
+        seeds, envs, obs, info = reset_inner(self.env, seed, options)
         for i in np.flatnonzero(envs):
             if seeds[i] is not None:
                 self._samplers[i].seed(seeds[i])

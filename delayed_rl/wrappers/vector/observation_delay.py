@@ -17,7 +17,10 @@ from delayed_rl.wrappers.observation_delay import (
     _settings,
 )
 from delayed_rl.wrappers.reward_delay import DelaySampler
-from delayed_rl.wrappers.vector._sub_envs import autoreset_mode, reset_mask, sub_env_seeds
+from delayed_rl.wrappers.vector._sub_envs import (
+    autoreset_mode,
+    reset_inner,
+)
 
 
 class VectorObservationDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArgs):
@@ -112,9 +115,7 @@ class VectorObservationDelay(gym.vector.VectorWrapper, gym.utils.RecordConstruct
             TypeError, ValueError: ``seed`` is not ``None``, an integer ``>= 0`` or a list of
                 ``num_envs`` of them (or ``None``).
         """
-        seeds = sub_env_seeds(seed, self.num_envs)
-        envs = reset_mask(options, self.num_envs)
-        obs, info = self.env.reset(seed=seed, options=options)
+        seeds, envs, obs, info = reset_inner(self.env, seed, options)
         rows = list(iterate(self.env.observation_space, obs))
         arrived = np.full(self.num_envs, None, dtype=object)
         for i in np.flatnonzero(envs).tolist():

@@ -14,8 +14,7 @@ from delayed_rl.wrappers.reward_delay import check_episode_end, check_max_delay,
 from delayed_rl.wrappers.vector._sub_envs import (
     autoreset_mode,
     checked_rewards,
-    reset_mask,
-    sub_env_seeds,
+    reset_inner,
 )
 
 
@@ -114,9 +113,7 @@ class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
             TypeError, ValueError: ``seed`` is not ``None``, an integer ``>= 0`` or a list of
                 ``num_envs`` of them (or ``None``).
         """
-        seeds = sub_env_seeds(seed, self.num_envs)
-        envs = reset_mask(options, self.num_envs)
-        obs, info = self.env.reset(seed=seed, options=options)
+        seeds, envs, obs, info = reset_inner(self.env, seed, options)
         self.rewards_in_transit.seed(
             [s if reset else None for s, reset in zip(seeds, envs, strict=True)]
         )
