@@ -195,8 +195,8 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
                 "scores": list(scores[method].values()),
                 "gains": values,
             }
-            for key in ("rmse", "mean_delay"):
-                if method.startswith("deconv"):
+            if method.startswith("deconv"):
+                for key in ("rmse", "mean_delay"):
                     row[key] = [r[key] for r in by_method[method].values()]
             table[setting][method] = row
         runs_curves, figures[f"curves_{setting}"] = learning_curves(

@@ -55,8 +55,10 @@ __all__ = [
     "MODEL_METHODS",
     "mean_return",
     "learn_and_score",
+    "relabeling_options",
     "random_score",
     "require_sb3",
+    "task_reward_model",
     "train_and_score",
 ]
 
@@ -110,8 +112,12 @@ def _env(task: dict, delayed: bool) -> gym.Env:
     return env
 
 
-def _reward_model(task: dict, env: gym.Env) -> Any:
-    """The reward model of a model method, seeded with the run's seed."""
+def task_reward_model(task: dict, env: Any) -> Any:
+    """The reward model of a model method (``task["method"]``), seeded with the run's seed.
+
+    ``env`` gives the spaces (a vector env's, for the stacked sub-envs); ``deconv-known`` reads
+    ``task["delay"]``, ``deconv-learned`` ``task["max_delay"]``.
+    """
     from delayed_rl.deep import (
         DeconvolutionRewardModel,
         ReturnDecompositionRewardModel,
@@ -127,6 +133,28 @@ def _reward_model(task: dict, env: gym.Env) -> Any:
     delay = as_delay(task["delay"]) if method == "deconv-known" else None
     max_delay = None if method == "deconv-known" else task["max_delay"]
     return DeconvolutionRewardModel(*spaces, delay=delay, max_delay=max_delay, seed=seed)
+
+
+def relabeling_options(model: Any, on_policy: bool) -> tuple[dict[str, Any], list[Any]]:
+    """The algorithm's keyword arguments and callbacks that relabel its buffer with ``model``'s R̂.
+
+    On-policy: a :class:`~delayed_rl.deep.RelabelingRolloutBuffer` and its
+    :class:`~delayed_rl.deep.RewardModelCallback`; off-policy: a
+    :class:`~delayed_rl.deep.RelabelingReplayBuffer` (no callback).
+    """
+    from delayed_rl.deep import (
+        RelabelingReplayBuffer,
+        RelabelingRolloutBuffer,
+        RewardModelCallback,
+    )
+
+    if on_policy:
+        options = {"rollout_buffer_class": RelabelingRolloutBuffer}
+        return {**options, "rollout_buffer_kwargs": {"reward_model": model}}, [
+            RewardModelCallback()
+        ]
+    options = {"replay_buffer_class": RelabelingReplayBuffer}
+    return {**options, "replay_buffer_kwargs": {"reward_model": model}}, []
 
 
 def mean_return(policy: Any, env: gym.Env, seeds: Any) -> float:
@@ -226,12 +254,7 @@ def train_and_score(task: dict) -> dict:
     from stable_baselines3 import PPO, SAC
     from stable_baselines3.common.env_util import make_vec_env
 
-    from delayed_rl.deep import (
-        IRCRReplayBuffer,
-        RelabelingReplayBuffer,
-        RelabelingRolloutBuffer,
-        RewardModelCallback,
-    )
+    from delayed_rl.deep import IRCRReplayBuffer
 
     torch.set_num_threads(1)
     method, seed = task["method"], task["seed"]
@@ -249,14 +272,9 @@ def train_and_score(task: dict) -> dict:
             raise ValueError("method 'ircr' needs an off-policy algorithm (SAC), got PPO")
         options["replay_buffer_class"] = IRCRReplayBuffer
     if method in MODEL_METHODS:
-        model = _reward_model(task, vec_env)
-        if algorithm is PPO:
-            options = {"rollout_buffer_class": RelabelingRolloutBuffer}
-            options["rollout_buffer_kwargs"] = {"reward_model": model}
-            callbacks.append(RewardModelCallback())
-        else:
-            options["replay_buffer_class"] = RelabelingReplayBuffer
-            options["replay_buffer_kwargs"] = {"reward_model": model}
+        model = task_reward_model(task, vec_env)
+        relabeling, callbacks = relabeling_options(model, on_policy=algorithm is PPO)
+        options.update(relabeling)
     agent = algorithm("MlpPolicy", vec_env, seed=seed, device="cpu", **options)
     result = learn_and_score(agent, task, lambda policy: _scores(policy, task), callbacks)
     if model is not None:

@@ -39,7 +39,11 @@ from typing import Any
 import numpy as np
 
 from delayed_rl.delays import as_delay
-from delayed_rl.experiments.framework.deep_training import learn_and_score
+from delayed_rl.experiments.framework.deep_training import (
+    learn_and_score,
+    relabeling_options,
+    task_reward_model,
+)
 
 __all__ = ["ENVS", "METHODS", "make_env", "random_score", "train_and_score"]
 
@@ -72,12 +76,11 @@ def make_env(task: dict, delayed: bool) -> Any:
     return env
 
 
-def _score(policy: Callable[[np.ndarray], Any], task: dict) -> float:
-    """The mean per-agent return of the evaluation episodes of the undelayed env.
+def _score(policy: Callable[[np.ndarray], Any], env: Any, task: dict) -> float:
+    """The mean per-agent return of the evaluation episodes of ``env`` (the undelayed env).
 
     ``policy`` maps the stack of the live agents' observations to their actions.
     """
-    env = make_env(task, delayed=False)
     returns = []
     for i in range(task["eval_episodes"]):
         observations, _ = env.reset(seed=EVAL_SEED + 1000 * task["seed"] + i)
@@ -90,7 +93,6 @@ def _score(policy: Callable[[np.ndarray], Any], task: dict) -> float:
             for agent, reward in rewards.items():
                 total[agent] = total.get(agent, 0.0) + float(reward)
         returns.append(np.mean(list(total.values())))
-    env.close()
     return float(np.mean(returns))
 
 
@@ -103,7 +105,9 @@ def random_score(task: dict) -> dict:
     env = make_env(task, delayed=False)
     space = env.action_space(env.possible_agents[0])
     space.seed(task["seed"])
-    return {"score": _score(lambda stack: [space.sample() for _ in stack], task)}
+    score = _score(lambda stack: [space.sample() for _ in stack], env, task)
+    env.close()
+    return {"score": score}
 
 
 def train_and_score(task: dict) -> dict:
@@ -118,35 +122,26 @@ def train_and_score(task: dict) -> dict:
     import torch
     from stable_baselines3 import PPO
 
-    from delayed_rl.deep import (
-        DeconvolutionRewardModel,
-        RelabelingRolloutBuffer,
-        RewardModelCallback,
-    )
     from delayed_rl.multiagent import sb3_vec_env
 
     torch.set_num_threads(1)
-    method, seed = task["method"], task["seed"]
+    method = task["method"]
     env = sb3_vec_env(make_env(task, delayed=method != "oracle"))
+    evaluation = make_env(task, delayed=False)
     options: dict[str, Any] = dict(task["ppo"])
     callbacks, model = [], None
     if method.startswith("deconv"):
-        known = method == "deconv-known"
-        model = DeconvolutionRewardModel(
-            env.observation_space,
-            env.action_space,
-            delay=as_delay(task["delay"]) if known else None,
-            max_delay=None if known else task["max_delay"],
-            seed=seed,
-        )
-        options["rollout_buffer_class"] = RelabelingRolloutBuffer
-        options["rollout_buffer_kwargs"] = {"reward_model": model}
-        callbacks.append(RewardModelCallback())
-    agent = PPO("MlpPolicy", env, seed=seed, device="cpu", **options)
-    result = learn_and_score(agent, task, lambda policy: _score(policy, task), callbacks)
+        model = task_reward_model(task, env)
+        relabeling, callbacks = relabeling_options(model, on_policy=True)
+        options.update(relabeling)
+    agent = PPO("MlpPolicy", env, seed=task["seed"], device="cpu", **options)
+    result = learn_and_score(
+        agent, task, lambda policy: _score(policy, evaluation, task), callbacks
+    )
     if model is not None:
         result["rmse"] = model.rmse()
         result["updates"] = model.updates_taken
         result["mean_delay"] = model.mean_delay
     env.close()
+    evaluation.close()
     return result
