@@ -35,7 +35,7 @@ AGENTS: dict[str, Callable[[], TabularAgent]] = {
         _env(), max_delay_estimate=50, q_init=25.0, seed=1
     ),
     "DeconvQ, delay learned": lambda: DeconvolutionQLearning(
-        _env(), max_delay=50, q_init=25.0, seed=1
+        _env(), max_delay_estimate=50, q_init=25.0, seed=1
     ),
     "DeconvQ, delay known": lambda: DeconvolutionQLearning(
         _env(), delay=float(LAMBDA), q_init=25.0, seed=1

@@ -52,14 +52,16 @@ def greedy_return(agent: TabularAgent, env_id: str) -> float:
     return float(np.mean(returns))
 
 
-def make_agent(name: str, env_id: str, lam: float, max_delay: int, seed: int) -> TabularAgent:
+def make_agent(
+    name: str, env_id: str, lam: float, max_delay_estimate: int, seed: int
+) -> TabularAgent:
     """One of the three agents on its own env."""
     if name == "Q undelayed":
         return QLearning(gym.make(env_id), seed=seed)
     env = PoissonRewardDelay(gym.make(env_id), lam)
     if name == "Q":
         return QLearning(env, seed=seed)
-    return DeconvolutionQLearning(env, max_delay=max_delay, seed=seed)
+    return DeconvolutionQLearning(env, max_delay_estimate=max_delay_estimate, seed=seed)
 
 
 def main() -> None:
@@ -67,7 +69,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--lam", type=float, default=5.0)
-    parser.add_argument("--max-delay", type=int, default=20)
+    parser.add_argument("--max-delay-estimate", type=int, default=20)
     parser.add_argument("--env", action="append", help="ENV_ID:STEPS (repeatable)")
     args = parser.parse_args()
     for spec in args.env or DEFAULT_ENVS:
@@ -79,7 +81,7 @@ def main() -> None:
         for name in ("Q", "DeconvQ", "Q undelayed"):
             scores, seconds = [], []
             for seed in range(args.seeds):
-                agent = make_agent(name, env_id, args.lam, args.max_delay, seed)
+                agent = make_agent(name, env_id, args.lam, args.max_delay_estimate, seed)
                 started = time.perf_counter()
                 agent.learn(int(steps), log_interval=None, compiled=False)
                 seconds.append(time.perf_counter() - started)

@@ -64,7 +64,7 @@ def _models() -> dict[str, Callable[[gym.Env], Any] | None]:
             *spaces(env), delay=DELAY, seed=0
         ),
         SHORT_NAMES["learned"]: lambda env: DeconvolutionRewardModel(
-            *spaces(env), delay=None, max_delay=60, seed=0
+            *spaces(env), delay=None, max_delay_estimate=60, seed=0
         ),
         SHORT_NAMES["rrd"]: lambda env: ReturnDecompositionRewardModel(*spaces(env), seed=0),
         SHORT_NAMES["ircr"]: lambda env: IRCRRewardModel(*spaces(env), seed=0),

@@ -73,7 +73,7 @@ def main() -> None:
 
     env = _env()
     model = DeconvolutionRewardModel(
-        env.observation_space, env.action_space, delay=None, max_delay=60, seed=0
+        env.observation_space, env.action_space, delay=None, max_delay_estimate=60, seed=0
     )
     agent = SAC(
         "MlpPolicy",

@@ -42,6 +42,14 @@ RESULTS = Path(__file__).with_suffix(".json")
 PACKAGES = ("numpy", "numba", "gymnasium", "pymunk", "llvmlite")
 STEPS = 4000
 
+#: Settings renamed after the fingerprints were recorded, by class: ``{recorded: current}``.
+#: A file's setting is hashed under its recorded name, so that a rename alone (CHANGELOG.md)
+#: changes no fingerprint while a changed value still does.
+RECORDED_NAMES: dict[str, dict[str, str]] = {
+    "DeconvolutionQLearning": {"max_delay": "max_delay_estimate"},
+    "ExpectedCreditQLearning": {"max_delay": "max_delay_estimate"},
+}
+
 #: Every agent with its options: (name, class name, keyword arguments).
 AGENTS: list[tuple[str, str, dict]] = [
     ("q", "QLearning", {}),
@@ -52,10 +60,14 @@ AGENTS: list[tuple[str, str, dict]] = [
     ("mmq-trace", "MultipleModelQLearning", {"max_delay_estimate": 8, "delay_trace": 0.9}),
     ("mmq-greedy", "MultipleModelQLearning", {"max_delay_estimate": 8, "greedy_window": 200}),
     ("mmq-kernel", "MultipleModelQLearning", {"max_delay_estimate": 8, "reward_kernel": 1.5}),
-    ("expected-credit", "ExpectedCreditQLearning", {"delay": Poisson(3.0), "max_delay": 20}),
+    (
+        "expected-credit",
+        "ExpectedCreditQLearning",
+        {"delay": Poisson(3.0), "max_delay_estimate": 20},
+    ),
     ("oracle", "OracleQLearning", {}),
-    ("deconv-known", "DeconvolutionQLearning", {"delay": Poisson(3.0), "max_delay": 20}),
-    ("deconv-learned", "DeconvolutionQLearning", {"max_delay": 20}),
+    ("deconv-known", "DeconvolutionQLearning", {"delay": Poisson(3.0), "max_delay_estimate": 20}),
+    ("deconv-learned", "DeconvolutionQLearning", {"max_delay_estimate": 20}),
 ]
 
 #: The envs: (name, maker, whether the oracle's arrivals are recorded by the maker).
@@ -93,6 +105,10 @@ def _file_arrays(agent) -> dict:
     metadata = json.loads(str(content.pop("metadata")))
     metadata.pop("class")
     metadata.pop("library_version")
+    settings = metadata.get("hyperparameters", {})
+    for old, new in RECORDED_NAMES.get(type(agent).__name__, {}).items():
+        if new in settings:
+            settings[old] = settings.pop(new)
     return {**content, "metadata": json.dumps(metadata, sort_keys=True)}  # text: its big ints
 
 

@@ -171,13 +171,15 @@ def compiled_agent_runs(steps: int) -> dict[str, Callable[[], float]]:
         "Q-learning": lambda: agents.QLearning(grid()),
         "MMQ |Λ| = 51": lambda: agents.MultipleModelQLearning(grid(), max_delay_estimate=50),
         "expected credit (51 lags)": lambda: agents.ExpectedCreditQLearning(
-            grid(), 13.0, max_delay=50
+            grid(), 13.0, max_delay_estimate=50
         ),
         "oracle": lambda: agents.OracleQLearning(grid(record=True)),
         "DeconvQ, delay known": lambda: agents.DeconvolutionQLearning(
-            grid(), delay=Poisson(13.0), max_delay=50
+            grid(), delay=Poisson(13.0), max_delay_estimate=50
         ),
-        "DeconvQ, delay learned": lambda: agents.DeconvolutionQLearning(grid(), max_delay=50),
+        "DeconvQ, delay learned": lambda: agents.DeconvolutionQLearning(
+            grid(), max_delay_estimate=50
+        ),
     }
 
     def run(make: Callable[[], Any]) -> Callable[[], float]:

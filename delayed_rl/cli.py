@@ -205,8 +205,8 @@ def _train(args: argparse.Namespace) -> int:
         "q_init": args.q_init,
         "seed": args.seed,
     }
-    for option, argument in REGISTRY[args.agent].train_options.items():
-        options[argument] = getattr(args, option)  # deconv: the delay learned on 0..that
+    for option in REGISTRY[args.agent].train_options:
+        options[option] = getattr(args, option)
     save = Path(args.save)
     try:  # fail before training, not after, when the model cannot be written there
         save.parent.mkdir(parents=True, exist_ok=True)

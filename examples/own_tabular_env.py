@@ -54,7 +54,10 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=200_000)
     args = parser.parse_args()
     env = PoissonRewardDelay(Chain(), 3.0)
-    for agent in (QLearning(env, seed=0), DeconvolutionQLearning(env, max_delay=10, seed=0)):
+    for agent in (
+        QLearning(env, seed=0),
+        DeconvolutionQLearning(env, max_delay_estimate=10, seed=0),
+    ):
         agent.learn(args.steps)
         policy = agent.predict(np.arange(2), deterministic=True)[0]
         print(f"{type(agent).__name__}: trained on the {agent.last_learn_path} path, "

@@ -122,14 +122,14 @@ PROBES: dict[str, Callable[[gym.Env], object]] = {
     "fixed": lambda env: FixedDelayQLearning(env, delay_estimate=3, q_init=5.0, seed=1),
     "mmq": lambda env: MultipleModelQLearning(env, max_delay_estimate=8, q_init=5.0, seed=1),
     "expected-credit": lambda env: ExpectedCreditQLearning(
-        env, delay=Poisson(3.0), max_delay=20, q_init=5.0, seed=1
+        env, delay=Poisson(3.0), max_delay_estimate=20, q_init=5.0, seed=1
     ),
     "oracle": lambda env: OracleQLearning(env, q_init=5.0, seed=1),
     "deconv-known": lambda env: DeconvolutionQLearning(
-        env, delay=Poisson(3.0), max_delay=20, solve_interval=1500, q_init=5.0, seed=1
+        env, delay=Poisson(3.0), max_delay_estimate=20, solve_interval=1500, q_init=5.0, seed=1
     ),
     "deconv-learned": lambda env: DeconvolutionQLearning(
-        env, max_delay=20, solve_interval=1500, q_init=5.0, seed=1
+        env, max_delay_estimate=20, solve_interval=1500, q_init=5.0, seed=1
     ),
 }
 
@@ -152,7 +152,7 @@ def agent_run(name: str, compiled: bool, steps: int = 6000) -> str:
 def taxi_deconv_run(steps: int = 4000) -> str:
     """DeconvQ with the delay learned on Taxi: 3000 pairs, the hashed statistics and CG solves."""
     env = PoissonRewardDelay(gym.make("Taxi-v4"), lam=2.0, max_delay=10)
-    agent = DeconvolutionQLearning(env, max_delay=10, solve_interval=2000, seed=4)
+    agent = DeconvolutionQLearning(env, max_delay_estimate=10, solve_interval=2000, seed=4)
     agent.learn(steps, compiled=False)
     digest = Digest()
     for value in (agent.q_table, agent.delay_pmf, agent.reward_model):

@@ -525,17 +525,21 @@ def test_evaluate_of_a_path_without_a_file_name_exits_1_naming_it(path, capsys):
             "delay must be",
         ),
         (
-            lambda env: DeconvolutionQLearning(env, max_delay=4),
-            {"max_delay": 10**9},
-            "max_delay must be at most MAX_MODELLED_DELAY",
+            lambda env: DeconvolutionQLearning(env, max_delay_estimate=4),
+            {"max_delay_estimate": 10**9},
+            "max_delay_estimate must be at most MAX_DELAY_ESTIMATE",
         ),
         (
-            lambda env: DeconvolutionQLearning(env, max_delay=4),
+            lambda env: DeconvolutionQLearning(env, max_delay_estimate=4),
             {"arrays": {"delay_pmf": np.array([2.0, -1.0, 0.0, 0.0, 0.0])}},
             "delay_pmf must hold numbers in [0, 1]",
         ),
     ],
-    ids=["expected credit with delay null", "DeconvQ max_delay 1e9", "DeconvQ pmf off simplex"],
+    ids=[
+        "expected credit with delay null",
+        "DeconvQ max_delay_estimate 1e9",
+        "DeconvQ pmf off simplex",
+    ],
 )
 def test_evaluate_on_a_bad_agent_file_exits_1_with_one_line(tmp_path, capsys, make, edit, fragment):
     good = make(gym.make(GRID)).learn(20).save(tmp_path / "good")

@@ -43,11 +43,11 @@ _TRAIN = textwrap.dedent(
     from delayed_rl.delays import Poisson
 
     learned = DeconvolutionQLearning(
-        gym.make("delayed_rl/GridWorld-v0", size=5, reward_delay=3), max_delay=10, seed=0
+        gym.make("delayed_rl/GridWorld-v0", size=5, reward_delay=3), max_delay_estimate=10, seed=0
     )
     learned.learn(3000)
     big = gym.make("delayed_rl/GridWorld-v0", size=12, reward_delay=3)
-    known = DeconvolutionQLearning(big, delay=Poisson(3), max_delay=10, seed=0)
+    known = DeconvolutionQLearning(big, delay=Poisson(3), max_delay_estimate=10, seed=0)
     assert known.n_states * known.n_actions > DENSE_SOLVE_PAIRS
     known.learn(3000)
     print(json.dumps({

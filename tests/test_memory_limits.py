@@ -226,16 +226,16 @@ def test_deconvq_tables_too_large_fail_before_allocating() -> None:
 
     env = GridWorldEnv(size=200)  # 160,000 pairs: 1025 reward sums each would take 1.2 GiB
     peak = peak_of_error(
-        lambda: DeconvolutionQLearning(env, max_delay=1024),
+        lambda: DeconvolutionQLearning(env, max_delay_estimate=1024),
         ValueError,
-        r"DeconvolutionQLearning\(max_delay=1024\) on an env of 40000 states and 4 actions needs "
+        r"DeconvolutionQLearning\(max_delay_estimate=1024\) on an env of 40000 states and 4 actions needs "
         r"1.\d+ GiB of tables .*over MAX_TABLE_BYTES = 1 GiB",
     )
     assert peak < MB
     peak = peak_of_error(
-        lambda: DeconvolutionQLearning(env, max_delay=10**9),
+        lambda: DeconvolutionQLearning(env, max_delay_estimate=10**9),
         ValueError,
-        "max_delay must be at most MAX_MODELLED_DELAY = 1024",
+        "max_delay_estimate must be at most MAX_DELAY_ESTIMATE = 1024",
     )
     assert peak < MB
 
@@ -248,7 +248,7 @@ def test_deconvq_statistics_a_file_declares_are_checked_before_they_are_read(
     from delayed_rl.agents.deconvolution import agent as deconvolution
 
     path = (
-        DeconvolutionQLearning(GridWorldEnv(size=3), max_delay=5, seed=0)
+        DeconvolutionQLearning(GridWorldEnv(size=3), max_delay_estimate=5, seed=0)
         .learn(50)
         .save(tmp_path / "d")
     )

@@ -21,8 +21,9 @@ update for update, and with ``Constant(0)`` (or ``Poisson(0)``) it is
 **Credit weights.** ``w`` is the pmf of the delay clipped to ``K`` lags, ``min(d, K)``:
 ``w(k) = p(k)`` for ``k < K`` and ``w(K) = P(d ≥ K)``. ``K`` is the distribution's largest value
 or, for an unbounded one such as Poisson, the smallest ``K`` with ``P(d ≤ K) ≥ 1 − 1e-6``
-(:data:`TAIL`); a ``max_delay`` below that is ``K`` instead (the wrappers' ``max_delay`` clips
-delays so: the last weight is then the clipped mass). At most :data:`MAX_LAGS` lags. A step costs
+(:data:`TAIL`); a ``max_delay_estimate`` below that is ``K`` instead (as the wrappers' ``max_delay``
+clips delays: the last weight is then the clipped mass). ``K`` is at most
+:data:`~delayed_rl.agents.common.delay_estimate.MAX_DELAY_ESTIMATE` (1024). A step costs
 O(number of lags with ``w > 0``).
 
 **Saving.** The delay is saved as its JSON description
@@ -39,8 +40,8 @@ import gymnasium as gym
 import numpy as np
 
 from delayed_rl._numba import jit as _jit
-from delayed_rl._validation import check_int
 from delayed_rl.agents.common.compiled_loop import CompiledTables
+from delayed_rl.agents.common.delay_estimate import MAX_DELAY_ESTIMATE, check_max_delay_estimate
 from delayed_rl.agents.common.hyperparameters import shares_hyperparameters
 from delayed_rl.agents.common.q_agent import QAgent
 from delayed_rl.agents.common.q_table import first_max
@@ -52,36 +53,35 @@ __all__ = ["ExpectedCreditQLearning", "credit_weights"]
 TAIL = 1e-6
 """An unbounded delay is credited up to where less than this much of its mass is left."""
 
-MAX_LAGS = 1 << 16
-"""The most lags credited (a delay that reaches further needs ``max_delay``)."""
-
 
 _UNSET: Any = object()  # ``_set_hyperparameters`` without a delay (the constructor's call)
 
 
-def credit_weights(delay: Delay, max_delay: int | None = None) -> np.ndarray:
+def credit_weights(delay: Delay, max_delay_estimate: int | None = None) -> np.ndarray:
     """The pmf of ``min(d, K)`` on ``0..K`` for ``d ~ delay`` (``K`` as the module says).
 
     Args:
         delay: the delay distribution.
-        max_delay: clip at this many steps (``None``: no clip).
+        max_delay_estimate: ``K`` at most this (the pmf clipped there; ``None``: no clip).
 
     Returns:
         A ``float64`` array of length ``K + 1`` summing to 1 (up to rounding).
 
     Raises:
-        ValueError: ``K`` would pass :data:`MAX_LAGS` (give a smaller ``max_delay``), or the
+        ValueError: ``K`` would pass ``MAX_DELAY_ESTIMATE`` (give a ``max_delay_estimate``), or the
             distribution's ``pmf`` does not give one probability in [0, 1] per lag summing to 1.
     """
-    limit = MAX_LAGS if max_delay is None else min(max_delay + 1, MAX_LAGS)
+    max_delay_estimate = check_max_delay_estimate(max_delay_estimate)
+    limit = MAX_DELAY_ESTIMATE + 1 if max_delay_estimate is None else max_delay_estimate + 1
     bounded = delay.support_max is not None
     top = delay.support_max if bounded else _tail_end(delay, limit)
-    if max_delay is not None and (top is None or top > max_delay):
-        top = max_delay
-    if top is None or top >= MAX_LAGS:
+    if max_delay_estimate is not None and (top is None or top > max_delay_estimate):
+        top = max_delay_estimate
+    if top is None or top > MAX_DELAY_ESTIMATE:
         raise ValueError(
-            f"delay must be credited on at most {MAX_LAGS} lags, got {delay!r}, which reaches "
-            f"{'further' if top is None else top}: give a max_delay below {MAX_LAGS}"
+            f"delay must be modelled on at most {MAX_DELAY_ESTIMATE.text} steps, got {delay!r}, "
+            f"which reaches {'further' if top is None else top}: give a max_delay_estimate to "
+            "clip it"
         )
     weights = _pmf(delay, top + 1)
     total = weights.sum()
@@ -141,16 +141,17 @@ class ExpectedCreditQLearning(QAgent):
         delay: the delay distribution, a :class:`~delayed_rl.delays.Delay`, a number ``>= 0``
             read as a Poisson mean (as ``gym.make(id, reward_delay=...)`` reads it) or a
             :meth:`~delayed_rl.delays.Delay.to_dict` description.
-        max_delay: the wrapper's ``max_delay`` when delays are clipped (the weight of the last
-            lag is then the clipped mass); also a cap on the lags credited. ``None``: no clip.
+        max_delay_estimate: ``K``, the last lag credited: the wrapper's ``max_delay`` when
+            delays are clipped (the weight of the last lag is then the clipped mass), or a cap
+            on the lags credited. ``None``: no clip. At most ``MAX_DELAY_ESTIMATE`` (1024).
         **hyperparameters: the hyper-parameters every agent shares, by keyword: see
             :class:`~delayed_rl.agents.common.base.TabularAgent`.
 
     Raises:
         TypeError: ``delay`` is neither a ``Delay``, a number nor a description, or
-            ``max_delay`` is not an integer.
+            ``max_delay_estimate`` is not an integer.
         ValueError: ``delay`` is a negative or non-finite number or describes no distribution,
-            ``max_delay`` is negative, or the delay reaches too far (see
+            ``max_delay_estimate`` is negative, or the delay reaches too far (see
             :func:`credit_weights`).
 
     Example:
@@ -166,22 +167,22 @@ class ExpectedCreditQLearning(QAgent):
         True
     """
 
-    _hyperparameter_names = (*QAgent._hyperparameter_names, "delay", "max_delay")
+    _hyperparameter_names = (*QAgent._hyperparameter_names, "delay", "max_delay_estimate")
 
     @shares_hyperparameters
     def __init__(
         self,
         env: gym.Env | str,
         delay: Delay | float,
-        max_delay: int | None = None,
+        max_delay_estimate: int | None = None,
         **hyperparameters: Any,
     ):
-        self._set_credit(as_delay(delay, "delay"), max_delay)
+        self._set_credit(as_delay(delay, "delay"), max_delay_estimate)
         super().__init__(env, **hyperparameters)
 
-    def _set_credit(self, delay: Delay, max_delay: Any) -> None:
-        self.max_delay = check_int("max_delay", max_delay, 0, optional=True)
-        weights = credit_weights(delay, self.max_delay)
+    def _set_credit(self, delay: Delay, max_delay_estimate: Any) -> None:
+        self.max_delay_estimate = check_max_delay_estimate(max_delay_estimate)
+        weights = credit_weights(delay, self.max_delay_estimate)
         self.delay = delay
         self._weights = weights
         lags = np.flatnonzero(weights > 0.0)
@@ -196,15 +197,15 @@ class ExpectedCreditQLearning(QAgent):
         ).tolist()
 
     def _set_hyperparameters(
-        self, *, delay: Any = _UNSET, max_delay: Any = None, **kwargs: Any
+        self, *, delay: Any = _UNSET, max_delay_estimate: Any = None, **kwargs: Any
     ) -> None:
-        """Also the delay and ``max_delay`` when loading (the constructor sets them itself).
+        """Also the delay and ``max_delay_estimate`` when loading (the constructor sets them itself).
 
         A file's ``delay`` is checked as the constructor checks it: ``null`` (or any other
         value that is not a delay) is refused.
         """
         if delay is not _UNSET:  # loading: they come along
-            self._set_credit(as_delay(delay, "delay"), max_delay)
+            self._set_credit(as_delay(delay, "delay"), max_delay_estimate)
         super()._set_hyperparameters(**kwargs)
 
     def _get_hyperparameters(self) -> dict[str, Any]:

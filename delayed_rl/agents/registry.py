@@ -23,30 +23,24 @@ class AgentEntry:
         label: how tables and figures name it (``"MMQ"``).
         needs_arrivals: its env must record which transition emitted each reward
             (``RewardDelay(..., record_arrivals=True)``: the oracle).
-        train_options: the options ``delayed-rl train`` gives it, each command-line option's
-            destination mapped to the constructor argument it sets (``None``: ``train`` does not
-            take this agent).
+        train_options: the constructor arguments ``delayed-rl train`` sets from its options of
+            the same name (``max_delay_estimate`` from ``--max-delay-estimate``; ``None``:
+            ``train`` does not take this agent).
     """
 
     class_name: str
     label: str
     needs_arrivals: bool = False
-    train_options: dict[str, str] | None = None
+    train_options: tuple[str, ...] | None = None
 
 
 #: The library's agents by the names the command line and sweep files use.
 REGISTRY: dict[str, AgentEntry] = {
-    "q": AgentEntry("QLearning", "Q", train_options={}),
-    "fixed": AgentEntry(
-        "FixedDelayQLearning", "fixed-delay Q", train_options={"delay_estimate": "delay_estimate"}
-    ),
-    "mmq": AgentEntry(
-        "MultipleModelQLearning",
-        "MMQ",
-        train_options={"max_delay_estimate": "max_delay_estimate"},
-    ),
+    "q": AgentEntry("QLearning", "Q", train_options=()),
+    "fixed": AgentEntry("FixedDelayQLearning", "fixed-delay Q", train_options=("delay_estimate",)),
+    "mmq": AgentEntry("MultipleModelQLearning", "MMQ", train_options=("max_delay_estimate",)),
     "deconv": AgentEntry(
-        "DeconvolutionQLearning", "DeconvQ", train_options={"max_delay_estimate": "max_delay"}
+        "DeconvolutionQLearning", "DeconvQ", train_options=("max_delay_estimate",)
     ),
     "oracle": AgentEntry("OracleQLearning", "oracle Q", needs_arrivals=True),
     "expected-credit": AgentEntry("ExpectedCreditQLearning", "expected credit"),

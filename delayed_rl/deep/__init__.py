@@ -29,7 +29,7 @@ Example:
     >>> from delayed_rl.wrappers import RewardDelay
     >>> env = RewardDelay(gym.make("Pendulum-v1"), 20)  # Poisson(20) delays, flushed
     >>> model = DeconvolutionRewardModel(env.observation_space, env.action_space, delay=None,
-    ...                                  max_delay=60, seed=0)
+    ...                                  max_delay_estimate=60, seed=0)
     >>> agent = SAC("MlpPolicy", env, replay_buffer_class=RelabelingReplayBuffer,
     ...             replay_buffer_kwargs={"reward_model": model}, seed=0)
 """

@@ -12,7 +12,7 @@ mode (``on_episode_end``, as :class:`~delayed_rl.wrappers.RewardDelay` takes it)
 
 ``delay``: a known distribution (its pmf clipped to ``0..K``, the last lag holding the tail, as
 :func:`~delayed_rl.agents.expected_credit.credit_weights` makes it), or ``None`` to learn ``p``
-jointly, as a softmax over ``0..max_delay`` started uniform (``delay_pmf``, ``mean_delay``).
+jointly, as a softmax over ``0..max_delay_estimate`` started uniform (``delay_pmf``, ``mean_delay``).
 A batch is ``ceil(batch_size / window)`` windows of ``window`` consecutive targets of one
 sub-env, drawn uniformly, each with the ``K`` steps before it: ``R̂`` is evaluated once a step and
 passed through the causal convolution with ``p``.
@@ -28,16 +28,14 @@ import torch
 from numpy.lib.stride_tricks import sliding_window_view
 
 from delayed_rl._validation import check_choice, check_int, check_real
+from delayed_rl.agents.common.delay_estimate import check_max_delay_estimate
 from delayed_rl.agents.expected_credit import credit_weights
 from delayed_rl.deep.network import as_tensors
 from delayed_rl.deep.reward_model import RewardModel
 from delayed_rl.delays import Delay, Empirical, as_delay
 from delayed_rl.wrappers import EPISODE_END_MODES
 
-__all__ = ["MAX_MODELLED_DELAY", "DeconvolutionRewardModel"]
-
-MAX_MODELLED_DELAY = 4096
-"""The longest delay modelled (``K``): a window evaluates ``R̂`` on ``window + K`` steps."""
+__all__ = ["DeconvolutionRewardModel"]
 
 
 class DeconvolutionRewardModel(RewardModel):
@@ -48,7 +46,7 @@ class DeconvolutionRewardModel(RewardModel):
         action_space: its action space (likewise).
         delay: the delay distribution (a :class:`~delayed_rl.delays.Delay`, a number read as a
             Poisson mean, or a ``to_dict()`` description), or ``None`` to learn it.
-        max_delay: ``K``, the longest delay modelled: required with ``delay=None``; with a known
+        max_delay_estimate: ``K``, the longest delay modelled: required with ``delay=None``; with a known
             delay, a clip (``None``: where the pmf's tail falls below ``1e-12``).
         on_episode_end: the wrapper's episode-end mode: ``"flush"``, ``"drop"`` or ``"carry"``.
         window: targets per window of a batch.
@@ -58,33 +56,40 @@ class DeconvolutionRewardModel(RewardModel):
 
     Raises:
         TypeError, ValueError: a bad argument (the message names it); ``delay=None`` without a
-            ``max_delay``; a ``K`` above :data:`MAX_MODELLED_DELAY`.
+            ``max_delay_estimate``; a ``K`` above
+            :data:`~delayed_rl.agents.common.delay_estimate.MAX_DELAY_ESTIMATE` (1024).
 
     Example:
         >>> import gymnasium as gym
         >>> env = gym.make("Pendulum-v1")
         >>> model = DeconvolutionRewardModel(
-        ...     env.observation_space, env.action_space, delay=None, max_delay=60, seed=0
+        ...     env.observation_space, env.action_space, delay=None, max_delay_estimate=60, seed=0
         ... )
         >>> round(model.mean_delay, 1)  # p starts uniform on 0..60
         30.0
     """
 
-    own_settings = ("delay", "max_delay", "on_episode_end", "window", "delay_learning_rate")
+    own_settings = (
+        "delay",
+        "max_delay_estimate",
+        "on_episode_end",
+        "window",
+        "delay_learning_rate",
+    )
 
     def __init__(
         self,
         observation_space: Any,
         action_space: Any,
         delay: Delay | float | dict | None = None,
-        max_delay: int | None = None,
+        max_delay_estimate: int | None = None,
         *,
         on_episode_end: str = "flush",
         window: int = 64,
         delay_learning_rate: float = 1e-2,
         **kwargs: Any,
     ):
-        self.max_delay = check_int("max_delay", max_delay, 0, MAX_MODELLED_DELAY, optional=True)
+        self.max_delay_estimate = check_max_delay_estimate(max_delay_estimate)
         self.delay = None if delay is None else as_delay(delay)
         self.on_episode_end = check_choice("on_episode_end", on_episode_end, EPISODE_END_MODES)
         self.window = check_int("window", window, 1, 2**16)
@@ -92,17 +97,14 @@ class DeconvolutionRewardModel(RewardModel):
             "delay_learning_rate", delay_learning_rate, 0.0, 1e6, low_open=True
         )
         if self.delay is None:
-            if self.max_delay is None:
-                raise ValueError("max_delay must be given (an integer >= 0) when delay is None")
-            self._known_pmf = None
-            self.support = self.max_delay
-        else:
-            weights = credit_weights(self.delay, self.max_delay)
-            if weights.size - 1 > MAX_MODELLED_DELAY:
+            if self.max_delay_estimate is None:
                 raise ValueError(
-                    f"delay must reach at most MAX_MODELLED_DELAY = {MAX_MODELLED_DELAY} steps, "
-                    f"got {self.delay!r}, which reaches {weights.size - 1}: give a max_delay"
+                    "max_delay_estimate must be given (an integer >= 0) when delay is None"
                 )
+            self._known_pmf = None
+            self.support = self.max_delay_estimate
+        else:
+            weights = credit_weights(self.delay, self.max_delay_estimate)
             self._known_pmf = torch.as_tensor(weights / weights.sum(), dtype=torch.float32)
             self.support = weights.size - 1
         super().__init__(observation_space, action_space, **kwargs)

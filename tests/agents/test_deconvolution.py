@@ -101,7 +101,7 @@ def test_the_agent_finds_the_optimal_loop_where_q_learning_does_not(known):
     for seed in range(3):
         delay = Poisson(4.0) if known else None
         agent = DeconvolutionQLearning(
-            _grid(lam=4.0), delay=delay, max_delay=20, q_init=25.0, seed=seed
+            _grid(lam=4.0), delay=delay, max_delay_estimate=20, q_init=25.0, seed=seed
         )
         agent.learn(60_000, log_interval=None)
         assert agent.last_learn_path == "compiled"
@@ -134,7 +134,9 @@ def test_it_is_anonymous_the_oracle_keys_change_nothing():
     tables = []
     for wrap in (lambda env: env, _StripOracleKeys):
         env = wrap(RewardDelay(GridWorldEnv(size=4), Poisson(3.0), record_arrivals=True))
-        agent = DeconvolutionQLearning(env, max_delay=12, solve_interval=2_000, q_init=20.0, seed=4)
+        agent = DeconvolutionQLearning(
+            env, max_delay_estimate=12, solve_interval=2_000, q_init=20.0, seed=4
+        )
         agent.learn(10_000, compiled=False)  # the Python path: the one that sees info at all
         tables.append((agent.q_table.copy(), agent.delay_pmf))
     np.testing.assert_array_equal(tables[0][0], tables[1][0])
@@ -146,7 +148,7 @@ def test_save_load_resumes_exactly(tmp_path):
         return RewardDelay(GridWorldEnv(size=4, max_steps=40), Poisson(2.0), on_episode_end="drop")
 
     original = DeconvolutionQLearning(
-        fresh_env(), max_delay=10, solve_interval=1_500, q_init=20.0, seed=6
+        fresh_env(), max_delay_estimate=10, solve_interval=1_500, q_init=20.0, seed=6
     )
     original.learn(5_000)
     path = original.save(tmp_path / "deconv")
@@ -181,15 +183,23 @@ def test_the_episode_end_mode_is_read_from_the_wrapper_and_conflicts_are_refused
     [
         ({"delay": "poisson"}, TypeError, "delay must be None"),
         ({"delay": -1.0}, ValueError, "^delay must be a number in \\[0, "),
-        ({"max_delay": -1}, ValueError, "max_delay must be None or an integer >= 0"),
-        ({"max_delay": 2.5}, TypeError, "max_delay must be None or an integer"),
+        (
+            {"max_delay_estimate": -1},
+            ValueError,
+            "max_delay_estimate must be None or an integer >= 0",
+        ),
+        ({"max_delay_estimate": 2.5}, TypeError, "max_delay_estimate must be None or an integer"),
         ({"solve_interval": 0}, ValueError, "solve_interval must be an integer >= 1"),
         ({"ridge": 0.0}, ValueError, "ridge must be a number > 0"),
         ({"ridge": "small"}, TypeError, "ridge must be a number > 0"),
         ({"delay_iterations": 0}, ValueError, "delay_iterations must be an integer >= 1"),
         ({"on_episode_end": "keep"}, ValueError, "on_episode_end must be one of"),
         ({"on_episode_end": 1}, TypeError, "on_episode_end must be one of"),
-        ({"max_delay": 1025}, ValueError, "max_delay must be at most MAX_MODELLED_DELAY = 1024"),
+        (
+            {"max_delay_estimate": 1025},
+            ValueError,
+            "max_delay_estimate must be at most MAX_DELAY_ESTIMATE = 1024",
+        ),
         (
             {"solve_interval": 2**40 + 1},
             ValueError,
@@ -204,7 +214,7 @@ def test_the_episode_end_mode_is_read_from_the_wrapper_and_conflicts_are_refused
         (
             {"delay": Poisson(2000.0)},
             ValueError,
-            "delay must be modelled on at most 1025 lags .* give a max_delay",
+            "delay must be modelled on at most MAX_DELAY_ESTIMATE = 1024 .* give a max_delay_estimate",
         ),
         ({"delay": [0.5, 0.6]}, ValueError, r"delay \(a saved pmf\): pmf must sum to 1"),
     ],
@@ -268,7 +278,7 @@ def test_the_hashed_layout_holds_the_same_counts_and_gives_the_same_solves(mode)
     """Both layouts, the same steps: equal counts per lag, normal equations, R̂ and pmf."""
     direct, hashed = _fed("direct", 3000, mode), _fed("hashed", 3000, mode)
     assert (direct.layout, hashed.layout) == ("direct", "hashed")
-    for lag in range(direct.max_delay + 1):
+    for lag in range(direct.max_delay_estimate + 1):
         np.testing.assert_array_equal(direct.counts(lag), hashed.counts(lag))
     pmf = Poisson(2.5).pmf(np.arange(7))
     pmf = pmf / pmf.sum()
@@ -299,7 +309,7 @@ def test_the_layout_is_chosen_by_size_and_the_hashed_table_grows_with_what_is_se
     """Direct while the counts fit DIRECT_LIMIT; hashed above, sized by the couples that occur."""
     assert RewardRegression(100, 50).layout == "direct"
     big = GridWorldEnv(size=20)  # 1600 pairs: 1600² · 51 · 4 bytes = 498 MiB direct
-    agent = DeconvolutionQLearning(big, max_delay=50, q_init=20.0, seed=0)
+    agent = DeconvolutionQLearning(big, max_delay_estimate=50, q_init=20.0, seed=0)
     assert agent._regression.layout == "hashed"
     agent.learn(3_000)
     regression = agent._regression
@@ -317,8 +327,10 @@ def test_a_hashed_table_that_would_outgrow_the_limit_is_refused(monkeypatch):
     from delayed_rl.agents.deconvolution import regression as regression_module
 
     monkeypatch.setattr(regression_module, "STATISTICS_LIMIT", 2**20)
-    agent = DeconvolutionQLearning(GridWorldEnv(size=20), max_delay=50, q_init=20.0, seed=0)
-    with pytest.raises(ValueError, match=r"max_delay=50: the co-occurrence rows .* MiB"):
+    agent = DeconvolutionQLearning(
+        GridWorldEnv(size=20), max_delay_estimate=50, q_init=20.0, seed=0
+    )
+    with pytest.raises(ValueError, match=r"max_delay_estimate=50: the co-occurrence rows .* MiB"):
         agent.learn(20_000)
 
 
@@ -353,7 +365,7 @@ def test_the_compiled_and_python_paths_learn_the_same_from_the_same_steps():
     rewards = np.where(rng.random(n) < 0.1, rng.choice([-1.0, 10.0], size=n), 0.0)
     env = RewardDelay(GridWorldEnv(size=4), Poisson(2.0), on_episode_end="drop")
     python, compiled = (
-        DeconvolutionQLearning(env, max_delay=8, solve_interval=2_500, q_init=5.0, seed=0)
+        DeconvolutionQLearning(env, max_delay_estimate=8, solve_interval=2_500, q_init=5.0, seed=0)
         for _ in range(2)
     )
     for (s, a, s2), reward, end in zip(rows.tolist(), rewards.tolist(), ends.tolist(), strict=True):
@@ -405,7 +417,7 @@ def test_the_python_path_runs_gymnasiums_tabular_envs_with_the_defaults(env_id, 
 
 
 def test_a_solve_whose_mean_rewards_pass_max_abs_value_is_refused(monkeypatch):
-    agent = DeconvolutionQLearning(GridWorldEnv(size=3), max_delay=4, seed=0)
+    agent = DeconvolutionQLearning(GridWorldEnv(size=3), max_delay_estimate=4, seed=0)
     agent.update(0, 0, 1.0, 1)
     monkeypatch.setattr(RewardRegression, "solve_rewards", lambda *args: np.full(36, np.inf))
     with pytest.raises(ValueError, match=r"mean reward of inf, beyond MAX_ABS_VALUE = 2\*\*200"):
@@ -415,9 +427,9 @@ def test_a_solve_whose_mean_rewards_pass_max_abs_value_is_refused(monkeypatch):
 
 def test_a_shorter_solve_interval_given_to_load_shortens_the_pending_gap(tmp_path):
     """Saved 500 steps into a 1000-step gap; loaded with ``solve_interval=200``: it solves next."""
-    agent = DeconvolutionQLearning(GridWorldEnv(size=3), max_delay=4, q_init=5.0, seed=0).learn(
-        1_500
-    )
+    agent = DeconvolutionQLearning(
+        GridWorldEnv(size=3), max_delay_estimate=4, q_init=5.0, seed=0
+    ).learn(1_500)
     path = agent.save(tmp_path / "deconv")
     kept = load_agent(path, GridWorldEnv(size=3))
     shortened = load_agent(path, GridWorldEnv(size=3), custom_objects={"solve_interval": 200})

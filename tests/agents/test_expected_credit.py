@@ -19,9 +19,10 @@ import pytest
 
 import delayed_rl  # noqa: F401  (registers the env ids)
 from delayed_rl.agents import ExpectedCreditQLearning, FixedDelayQLearning, QLearning, load_agent
+from delayed_rl.agents.common.delay_estimate import MAX_DELAY_ESTIMATE
 from delayed_rl.agents.common.hyperparameters import HYPERPARAMETER_NAMES
 from delayed_rl.agents.common.q_agent import QAgent
-from delayed_rl.agents.expected_credit import MAX_LAGS, TAIL, credit_weights
+from delayed_rl.agents.expected_credit import TAIL, credit_weights
 from delayed_rl.compiled import NotCompilable
 from delayed_rl.delays import Constant, Delay, Empirical, Geometric, Poisson, Uniform
 
@@ -57,21 +58,29 @@ def test_the_weights_are_the_pmf_of_the_delay_clipped_to_k_lags():
     assert 1 - Poisson(3.0).pmf(np.arange(k + 1)).sum() < TAIL
     np.testing.assert_array_equal(poisson[:k], Poisson(3.0).pmf(np.arange(k)))
     assert poisson.sum() == pytest.approx(1.0, abs=1e-15)
-    clipped = credit_weights(Poisson(3.0), max_delay=2)  # the wrappers clip delays so
+    clipped = credit_weights(Poisson(3.0), max_delay_estimate=2)  # the wrappers clip delays so
     np.testing.assert_allclose(
         clipped, [*Poisson(3.0).pmf([0, 1]), 1 - Poisson(3.0).pmf([0, 1]).sum()]
     )
-    np.testing.assert_array_equal(credit_weights(Poisson(3.0), max_delay=100), poisson)
+    np.testing.assert_array_equal(credit_weights(Poisson(3.0), max_delay_estimate=100), poisson)
     np.testing.assert_array_equal(credit_weights(Constant(4)), [0, 0, 0, 0, 1.0])
-    np.testing.assert_array_equal(credit_weights(Constant(4), max_delay=1), [0, 1.0])
+    np.testing.assert_array_equal(credit_weights(Constant(4), max_delay_estimate=1), [0, 1.0])
     np.testing.assert_array_equal(credit_weights(Uniform(1, 3)), [0, 1 / 3, 1 / 3, 1 / 3])
     np.testing.assert_array_equal(credit_weights(Poisson(0.0)), [1.0])
-    assert credit_weights(Geometric(1e-9), max_delay=10).size == 11  # heavy tail, cut by the clip
+    assert (
+        credit_weights(Geometric(1e-9), max_delay_estimate=10).size == 11
+    )  # heavy tail, cut by the clip
 
 
 def test_a_delay_that_reaches_too_far_or_a_broken_pmf_is_refused():
-    with pytest.raises(ValueError, match=f"at most {MAX_LAGS} lags.*give a max_delay below"):
+    with pytest.raises(
+        ValueError, match="at most MAX_DELAY_ESTIMATE = 1024 .*give a max_delay_est"
+    ):
         credit_weights(Geometric(1e-9))
+    assert credit_weights(Poisson(MAX_DELAY_ESTIMATE - 250.0)).size - 1 <= MAX_DELAY_ESTIMATE
+    with pytest.raises(ValueError, match="reaches 1025: give a max_delay_estimate"):
+        credit_weights(Uniform(0, MAX_DELAY_ESTIMATE + 1))
+    assert credit_weights(Uniform(0, MAX_DELAY_ESTIMATE)).size == MAX_DELAY_ESTIMATE + 1
     with pytest.raises(ValueError, match="reaches 1000000"):
         credit_weights(Uniform(0, 10**6))
 
@@ -96,9 +105,9 @@ def test_delay_is_a_delay_a_poisson_mean_or_a_description():
     assert ExpectedCreditQLearning(env, delay=3).delay == Poisson(3)
     assert ExpectedCreditQLearning(env, 2.5).delay == Poisson(2.5)
     assert ExpectedCreditQLearning(env, {"type": "Constant", "k": 2}).delay == Constant(2)
-    agent = ExpectedCreditQLearning(env, Uniform(1, 2), max_delay=1)
+    agent = ExpectedCreditQLearning(env, Uniform(1, 2), max_delay_estimate=1)
     np.testing.assert_array_equal(agent.credit_weights, [0.0, 1.0])
-    assert agent.max_delay == 1
+    assert agent.max_delay_estimate == 1
 
 
 @pytest.mark.parametrize(
@@ -114,9 +123,18 @@ def test_delay_is_a_delay_a_poisson_mean_or_a_description():
         ),
         ({"delay": float("nan")}, ValueError, "delay must be a number in \\[0, "),
         ({"delay": {"type": "Nope"}}, ValueError, "delay must be a dict with a 'type' in"),
-        ({"delay": 3, "max_delay": -1}, ValueError, "max_delay must be None or an integer >= 0"),
-        ({"delay": 3, "max_delay": 2.0}, TypeError, "max_delay must be None or an integer"),
-        ({"delay": Geometric(1e-9)}, ValueError, "give a max_delay below"),
+        (
+            {"delay": 3, "max_delay_estimate": -1},
+            ValueError,
+            "max_delay_estimate must be None or an integer >= 0",
+        ),
+        (
+            {"delay": 3, "max_delay_estimate": 2.0},
+            TypeError,
+            "max_delay_estimate must be None or an integer",
+        ),
+        ({"delay": Geometric(1e-9)}, ValueError, "give a max_delay_estimate to clip it"),
+        ({"delay": 3, "max_delay_estimate": 1025}, ValueError, "at most MAX_DELAY_ESTIMATE = 1024"),
         ({"delay": 3, "gamma": 2.0}, ValueError, "gamma must be a number in \\[0, 1\\]"),
     ],
 )
@@ -129,7 +147,7 @@ def test_delay_is_required_and_the_shared_hyperparameters_are_shown():
     with pytest.raises(TypeError, match="delay"):
         ExpectedCreditQLearning(GRID3)
     shown = inspect.signature(ExpectedCreditQLearning).parameters
-    assert list(shown)[:3] == ["env", "delay", "max_delay"]
+    assert list(shown)[:3] == ["env", "delay", "max_delay_estimate"]
     assert set(HYPERPARAMETER_NAMES) <= set(shown)
     assert shown["learning_rate"].default == 0.1 and shown["seed"].default is None
     with pytest.raises(TypeError, match="unexpected keyword argument 'gammma'"):
@@ -216,7 +234,7 @@ def test_under_poisson_delays_it_beats_q_learning_on_the_same_rewards():
 
 # ---------------------------------------------------------------------- files
 @pytest.mark.parametrize(
-    ("delay", "max_delay"),
+    ("delay", "max_delay_estimate"),
     [
         (Poisson(3.0), None),
         (Constant(2), None),
@@ -225,13 +243,13 @@ def test_under_poisson_delays_it_beats_q_learning_on_the_same_rewards():
         (Empirical([0.2, 0.3, 0.5]), None),
     ],
 )
-def test_save_and_load_round_trip(tmp_path, delay, max_delay):
+def test_save_and_load_round_trip(tmp_path, delay, max_delay_estimate):
     env = gym.make(GRID3, reward_delay=delay)
-    agent = ExpectedCreditQLearning(env, delay, max_delay, seed=0, **SETTINGS).learn(1_000)
+    agent = ExpectedCreditQLearning(env, delay, max_delay_estimate, seed=0, **SETTINGS).learn(1_000)
     path = agent.save(tmp_path / "credit")
     for loaded in (ExpectedCreditQLearning.load(path), load_agent(path), QAgent.load(path)):
         assert type(loaded) is ExpectedCreditQLearning
-        assert loaded.delay == delay and loaded.max_delay == max_delay
+        assert loaded.delay == delay and loaded.max_delay_estimate == max_delay_estimate
         np.testing.assert_array_equal(loaded.credit_weights, agent.credit_weights)
         np.testing.assert_array_equal(loaded.q_table, agent.q_table)
     env = gym.make(GRID3, reward_delay=delay)

@@ -668,15 +668,17 @@ KINDS = {
     ),
     "OracleQLearning": Kind(lambda e: OracleQLearning(e, q_init=5.0, seed=0), _oracle_env),
     "DeconvQ known delay": Kind(
-        lambda e: DeconvolutionQLearning(e, delay=Poisson(2.0), max_delay=6, q_init=5.0, seed=0),
+        lambda e: DeconvolutionQLearning(
+            e, delay=Poisson(2.0), max_delay_estimate=6, q_init=5.0, seed=0
+        ),
         _episodic_env,
     ),
     "DeconvQ learned delay": Kind(
-        lambda e: DeconvolutionQLearning(e, max_delay=5, q_init=5.0, seed=0),
+        lambda e: DeconvolutionQLearning(e, max_delay_estimate=5, q_init=5.0, seed=0),
         lambda: _episodic_env("drop"),
     ),
     "DeconvQ hashed statistics": Kind(
-        lambda e: DeconvolutionQLearning(e, max_delay=5, q_init=5.0, seed=0),
+        lambda e: DeconvolutionQLearning(e, max_delay_estimate=5, q_init=5.0, seed=0),
         _episodic_env,
         hashed=True,
     ),
@@ -856,9 +858,9 @@ REFUSED: list[tuple[str, str, Callable[[Base], bytes], str]] = [
     ),
     (
         "DeconvQ learned delay",
-        "max_delay 10**9",
-        lambda b: _modified(b, hyperparameters__max_delay=10**9),
-        "MAX_MODELLED_DELAY",
+        "max_delay_estimate 10**9",
+        lambda b: _modified(b, hyperparameters__max_delay_estimate=10**9),
+        "MAX_DELAY_ESTIMATE",
     ),
     (
         "ExpectedCreditQLearning",

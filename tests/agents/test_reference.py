@@ -99,10 +99,15 @@ def test_mmq_is_the_reference(estimates, option, steps):
 
 
 @settings(max_examples=examples(40), deadline=None)
-@given(delay=delays, max_delay=st.sampled_from([None, 3]), steps=transitions)
-def test_expected_credit_is_the_reference(delay, max_delay, steps):
+@given(delay=delays, max_delay_estimate=st.sampled_from([None, 3]), steps=transitions)
+def test_expected_credit_is_the_reference(delay, max_delay_estimate, steps):
     agent = ExpectedCreditQLearning(
-        GridWorldEnv(size=3), delay, max_delay, q_init=1.0, learning_rate=ALPHA, gamma=GAMMA
+        GridWorldEnv(size=3),
+        delay,
+        max_delay_estimate,
+        q_init=1.0,
+        learning_rate=ALPHA,
+        gamma=GAMMA,
     )
     weights = agent.credit_weights
     _feed(agent, ReferenceExpectedCredit(N_STATES, N_ACTIONS, weights, 1.0, ALPHA, GAMMA), steps)
@@ -129,7 +134,7 @@ def test_oracle_is_the_reference(steps, data):
 def test_deconvolution_is_q_learning_on_its_reward_model(rewards, steps):
     """Between solves, deconvolution Q-learning is Q-learning on ``R̂(s, a)``."""
     agent = DeconvolutionQLearning(
-        GridWorldEnv(size=3), max_delay=4, solve_interval=10**6, q_init=0.5, learning_rate=ALPHA,
+        GridWorldEnv(size=3), max_delay_estimate=4, solve_interval=10**6, q_init=0.5, learning_rate=ALPHA,
         gamma=GAMMA,
     )  # fmt: skip
     agent._reward_model[:] = rewards
@@ -166,7 +171,7 @@ AGENTS = {
         MultipleModelQLearning,
         {"max_delay_estimate": 6, "reward_kernel": 1.0, "delay_trace": 0.8},
     ),  # fmt: skip
-    "expected-credit": (ExpectedCreditQLearning, {"delay": Poisson(2.0), "max_delay": 8}),
+    "expected-credit": (ExpectedCreditQLearning, {"delay": Poisson(2.0), "max_delay_estimate": 8}),
 }
 
 

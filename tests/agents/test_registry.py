@@ -48,7 +48,7 @@ def test_the_command_line_and_the_sweeps_derive_from_it():
     train = build_parser()._subparsers._group_actions[0].choices["train"]
     dests = {action.dest for action in train._actions}
     for entry in REGISTRY.values():
-        assert set(entry.train_options or {}) <= dests  # every option exists on `train`
+        assert set(entry.train_options or ()) <= dests  # every option exists on `train`
 
 
 def test_every_registered_agent_has_a_seeded_run():

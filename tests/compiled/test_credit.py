@@ -62,7 +62,7 @@ class LoggedGrid(gym.Env):
 )
 def test_compiled_expected_credit_is_the_python_rule(mode, delay, max_delay):
     env = RewardDelay(grid(), delay, max_delay=max_delay, on_episode_end=mode)
-    make = {"delay": delay, "max_delay": max_delay, **SETTINGS}
+    make = {"delay": delay, "max_delay_estimate": max_delay, **SETTINGS}
     compiled = ExpectedCreditQLearning(env, seed=3, **make)
     compiled.learn(STEPS, compiled=True, record=True)
     assert compiled.last_learn_path == "compiled"
@@ -134,7 +134,7 @@ def test_the_compiled_rules_learn_the_grid_under_poisson_delays(agent):
     if agent == "oracle":
         trained = OracleQLearning(env, seed=0, **settings)
     else:
-        trained = ExpectedCreditQLearning(env, delay=5.0, max_delay=30, seed=0, **settings)
+        trained = ExpectedCreditQLearning(env, delay=5.0, max_delay_estimate=30, seed=0, **settings)
     trained.learn(100_000)  # compiled by default
     assert trained.last_learn_path == "compiled"
     assert is_optimal(greedy_policy(trained), 5)

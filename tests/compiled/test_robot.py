@@ -148,8 +148,10 @@ def test_copies_continue_alike_and_apart():
     [
         lambda env: agents.QLearning(env, seed=0),
         lambda env: agents.MultipleModelQLearning(env, max_delay_estimate=12, seed=0),
-        lambda env: agents.DeconvolutionQLearning(env, max_delay=12, seed=0),
-        lambda env: agents.ExpectedCreditQLearning(env, delay=Poisson(5.0), max_delay=12, seed=0),
+        lambda env: agents.DeconvolutionQLearning(env, max_delay_estimate=12, seed=0),
+        lambda env: agents.ExpectedCreditQLearning(
+            env, delay=Poisson(5.0), max_delay_estimate=12, seed=0
+        ),
     ],
     ids=["Q", "MMQ", "DeconvQ", "expected credit"],
 )

@@ -27,7 +27,7 @@ from delayed_rl.wrappers import RewardDelay
 
 pytestmark = [pytest.mark.sb3, pytest.mark.usefixtures("torch_on_one_thread")]
 
-SPEC = {"type": "DeconvolutionRewardModel", "delay": None, "max_delay": 8, "window": 8}
+SPEC = {"type": "DeconvolutionRewardModel", "delay": None, "max_delay_estimate": 8, "window": 8}
 SMALL = {"batch_size": 32, "hidden_sizes": (16,), "warmup_updates": 20}
 
 

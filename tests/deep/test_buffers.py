@@ -75,7 +75,7 @@ def deconvolution(env, **kwargs):
 
     settings = {
         "delay": Poisson(3),
-        "max_delay": 10,
+        "max_delay_estimate": 10,
         "hidden_sizes": (8,),
         "batch_size": 32,
         "window": 8,
@@ -124,7 +124,7 @@ def test_sac_learns_the_same_bits_without_the_diagnostic_infos():
     for strip in (False, True):
         env = pendulum(strip=strip)
         # the box action space as SAC stores it: squashed to [-1, 1]
-        model = deconvolution(env, delay=None, max_delay=12)
+        model = deconvolution(env, delay=None, max_delay_estimate=12)
         agent = sac(env, model)
         agent.learn(250, callback=RewardModelCallback())
         runs.append((env, model, agent))
@@ -233,7 +233,7 @@ def test_ppo_learns_env_rewards_and_keeps_the_truncation_bootstrap():
             self.model.checked = getattr(self.model, "checked", 0) + 1
 
     env = pendulum(steps=10, lam=2.0)
-    model = deconvolution(env, max_delay=6, window=4, warmup_updates=16)
+    model = deconvolution(env, max_delay_estimate=6, window=4, warmup_updates=16)
     agent = PPO(
         "MlpPolicy",
         env,
@@ -380,7 +380,7 @@ def test_replay_buffer_and_algorithm_files_keep_a_working_model(tmp_path):
     from delayed_rl.deep import RewardModel, RewardModelCallback
 
     env = pendulum()
-    model = deconvolution(env, delay=None, max_delay=12)
+    model = deconvolution(env, delay=None, max_delay_estimate=12)
     agent = sac(env, model)
     agent.learn(120, callback=RewardModelCallback())
     probe_obs = np.random.default_rng(0).uniform(-1, 1, (16, 3)).astype(np.float32)
@@ -389,7 +389,7 @@ def test_replay_buffer_and_algorithm_files_keep_a_working_model(tmp_path):
     taken = model.updates_taken
 
     agent.save_replay_buffer(tmp_path / "buffer.pkl")
-    fresh = sac(pendulum(), deconvolution(env, delay=None, max_delay=12, seed=9))
+    fresh = sac(pendulum(), deconvolution(env, delay=None, max_delay_estimate=12, seed=9))
     fresh.load_replay_buffer(tmp_path / "buffer.pkl")
     loaded = fresh.replay_buffer.reward_model
     assert isinstance(loaded, RewardModel) and loaded is not model
@@ -450,12 +450,17 @@ def test_a_buffer_makes_its_reward_model_from_a_mapping_for_its_spaces():
     from delayed_rl.deep import DeconvolutionRewardModel, RelabelingReplayBuffer
 
     env = gym.make("Pendulum-v1")
-    spec = {"type": "DeconvolutionRewardModel", "delay": None, "max_delay": 7, "seed": 3}
+    spec = {"type": "DeconvolutionRewardModel", "delay": None, "max_delay_estimate": 7, "seed": 3}
     buffer = RelabelingReplayBuffer(100, env.observation_space, env.action_space, reward_model=spec)
     model = buffer.reward_model
     assert isinstance(model, DeconvolutionRewardModel)
-    assert (model.max_delay, model.seed, model.delay) == (7, 3, None)
-    assert spec == {"type": "DeconvolutionRewardModel", "delay": None, "max_delay": 7, "seed": 3}
+    assert (model.max_delay_estimate, model.seed, model.delay) == (7, 3, None)
+    assert spec == {
+        "type": "DeconvolutionRewardModel",
+        "delay": None,
+        "max_delay_estimate": 7,
+        "seed": 3,
+    }
 
 
 @pytest.mark.parametrize(

@@ -38,8 +38,11 @@ OBS = spaces.Box(-1.0, 1.0, (3,), np.float32)
 ACT = spaces.Discrete(3)
 
 KINDS = {
-    "known": ("DeconvolutionRewardModel", {"delay": Geometric(0.5), "max_delay": 4, "window": 4}),
-    "learned": ("DeconvolutionRewardModel", {"delay": None, "max_delay": 4, "window": 4}),
+    "known": (
+        "DeconvolutionRewardModel",
+        {"delay": Geometric(0.5), "max_delay_estimate": 4, "window": 4},
+    ),
+    "learned": ("DeconvolutionRewardModel", {"delay": None, "max_delay_estimate": 4, "window": 4}),
     "carry": (
         "DeconvolutionRewardModel",
         {"delay": Constant(2), "on_episode_end": "carry", "window": 3},
@@ -251,7 +254,7 @@ def test_a_users_delay_is_saved_as_its_clipped_pmf(tmp_path):
         def support_max(self):
             return 2
 
-    model = build("known", delay=Twos(), max_delay=None)
+    model = build("known", delay=Twos(), max_delay_estimate=None)
     loaded = load_reward_model(model.save(tmp_path / "twos.zip"))
     assert loaded.settings()["delay"]["type"] == "Empirical"
     np.testing.assert_array_equal(loaded.delay_pmf, [0.0, 0.0, 1.0])

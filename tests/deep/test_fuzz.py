@@ -154,7 +154,7 @@ SETTINGS = {
     "capacity": st.one_of(st.integers(max_value=0), st.text(max_size=2)),
     "seed": st.one_of(st.integers(max_value=-1), st.integers(min_value=2**63), st.floats()),
     "window": st.one_of(st.integers(max_value=0), st.text(max_size=2)),
-    "max_delay": st.one_of(st.integers(max_value=-1), st.text(max_size=2)),
+    "max_delay_estimate": st.one_of(st.integers(max_value=-1), st.text(max_size=2)),
 }
 
 

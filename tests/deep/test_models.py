@@ -170,7 +170,7 @@ def test_known_delay_loss_is_the_direct_sum(mode, spaces_name, capacity):
         observation_space,
         action_space,
         delay=delay,
-        max_delay=3,
+        max_delay_estimate=3,
         on_episode_end=mode,
         window=4,
         hidden_sizes=(8,),
@@ -200,7 +200,7 @@ def test_clipped_poisson_pmf_is_credit_weights():
     from delayed_rl.deep import DeconvolutionRewardModel
 
     model = DeconvolutionRewardModel(
-        spaces.Discrete(2), spaces.Discrete(2), delay=Poisson(1.5), max_delay=3, seed=0
+        spaces.Discrete(2), spaces.Discrete(2), delay=Poisson(1.5), max_delay_estimate=3, seed=0
     )
     pmf = [math.exp(-1.5) * 1.5**k / math.factorial(k) for k in range(3)]
     expected = [*pmf, 1.0 - sum(pmf)]  # the last lag holds the tail
@@ -218,7 +218,7 @@ def test_learned_delay_starts_uniform_and_its_loss_is_the_direct_sum():
         observation_space,
         action_space,
         delay=None,
-        max_delay=3,
+        max_delay_estimate=3,
         window=4,
         hidden_sizes=(8,),
         batch_size=32,
@@ -303,7 +303,7 @@ def test_a_history_too_short_for_a_window_is_refused():
         )
     with pytest.raises(ValueError, match="capacity"):
         DeconvolutionRewardModel(
-            spaces.Discrete(2), spaces.Discrete(2), max_delay=10, window=64, capacity=73
+            spaces.Discrete(2), spaces.Discrete(2), max_delay_estimate=10, window=64, capacity=73
         )
 
 
@@ -347,7 +347,7 @@ def test_known_delay_learns_the_reward():
         env.observation_space,
         env.action_space,
         delay=Poisson(3),
-        max_delay=10,
+        max_delay_estimate=10,
         hidden_sizes=(16,),
         batch_size=128,
         window=16,
@@ -375,7 +375,7 @@ def test_learned_delay_finds_the_mean():
         env.observation_space,
         env.action_space,
         delay=None,
-        max_delay=15,
+        max_delay_estimate=15,
         hidden_sizes=(16,),
         batch_size=128,
         window=16,
@@ -467,7 +467,7 @@ def test_learning_is_the_same_bits_without_the_infos():
             env.observation_space,
             env.action_space,
             delay=None,
-            max_delay=8,
+            max_delay_estimate=8,
             hidden_sizes=(8,),
             batch_size=32,
             window=8,
@@ -582,7 +582,7 @@ def random_steps(count, seed, n_envs=1, end_chance=0.2):
 @pytest.mark.parametrize(
     ("kind", "kwargs"),
     [
-        ("DeconvolutionRewardModel", {"delay": None, "max_delay": 3, "window": 4}),
+        ("DeconvolutionRewardModel", {"delay": None, "max_delay_estimate": 3, "window": 4}),
         ("ReturnDecompositionRewardModel", {"subset_size": 4}),
         ("ReturnRegressionRewardModel", {}),
     ],
@@ -688,7 +688,7 @@ def test_without_a_warmup_ready_needs_one_update():
 
 # ---------------------------------------------------------------------- seeds
 KINDS = [
-    ("DeconvolutionRewardModel", {"delay": None, "max_delay": 3, "window": 4}),
+    ("DeconvolutionRewardModel", {"delay": None, "max_delay_estimate": 3, "window": 4}),
     ("DeconvolutionRewardModel", {"delay": Constant(1), "window": 4}),
     ("ReturnDecompositionRewardModel", {"subset_size": 4}),
     ("ReturnRegressionRewardModel", {}),
@@ -845,7 +845,9 @@ class Logger:
 def test_record_writes_the_loss_diagnostics_metrics_and_updates():
     from delayed_rl.deep.reward_model import DIAGNOSTIC_PAIRS
 
-    model = make(delay=None, max_delay=3, window=4, **{**SMALL, "warmup_updates": 2}, seed=0)
+    model = make(
+        delay=None, max_delay_estimate=3, window=4, **{**SMALL, "warmup_updates": 2}, seed=0
+    )
     logger = Logger()
     model.record(logger)
     assert logger.values == {"reward_model/mean_delay": 1.5, "reward_model/updates": 0}
@@ -903,10 +905,14 @@ def make(kind="DeconvolutionRewardModel", observation_space=None, action_space=N
             ValueError,
             r"observation_space\['a'\]",
         ),
-        ({"max_delay": -1}, ValueError, "max_delay"),
-        ({"max_delay": 1.5}, TypeError, "max_delay"),
-        ({"max_delay": 5000}, ValueError, "max_delay"),
-        ({"delay": None}, ValueError, "max_delay must be given"),
+        ({"max_delay_estimate": -1}, ValueError, "max_delay_estimate"),
+        ({"max_delay_estimate": 1.5}, TypeError, "max_delay_estimate"),
+        (
+            {"max_delay_estimate": 1025},
+            ValueError,
+            "max_delay_estimate must be at most MAX_DELAY_E",
+        ),
+        ({"delay": None}, ValueError, "max_delay_estimate must be given"),
         ({"delay": "Poisson"}, TypeError, "delay"),
         ({"delay": -2.0}, ValueError, "delay"),
         ({"delay": {"type": "Nope"}}, ValueError, "delay"),

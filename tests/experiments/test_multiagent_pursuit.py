@@ -44,7 +44,10 @@ def test_the_full_run_has_every_method_five_seeds_and_the_oracle_ignores_the_del
     assert {t["steps"] for t in tasks} == {300_000}
     runs = {t["method"]: experiment.run_of(t).task for t in tasks if t["seed"] == 2}
     assert "delay" not in runs["oracle"] and runs["raw"]["delay"] == Poisson(30).to_dict()
-    assert "max_delay" in runs["deconv-learned"] and "max_delay" not in runs["deconv-known"]
+    assert (
+        "max_delay_estimate" in runs["deconv-learned"]
+        and "max_delay_estimate" not in runs["deconv-known"]
+    )
     assert "steps" not in runs["random"]
     assert len({pool_key(experiment.run_of(t)) for t in tasks}) == len(tasks)
 
@@ -85,9 +88,9 @@ def test_every_agent_is_a_sub_env_and_a_seed_fixes_the_env_and_the_delays():
 
 @pytest.mark.sb3
 def test_a_seed_gives_the_same_run_and_another_seed_another():
-    first = training.train_and_score(_tiny("deconv-learned", max_delay=20))
-    again = training.train_and_score(_tiny("deconv-learned", max_delay=20))
-    other = training.train_and_score(_tiny("deconv-learned", seed=1, max_delay=20))
+    first = training.train_and_score(_tiny("deconv-learned", max_delay_estimate=20))
+    again = training.train_and_score(_tiny("deconv-learned", max_delay_estimate=20))
+    other = training.train_and_score(_tiny("deconv-learned", seed=1, max_delay_estimate=20))
     for result in (first, again, other):
         result.pop("train_seconds")
     assert first == again and first != other

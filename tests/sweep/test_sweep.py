@@ -41,7 +41,7 @@ TINY = {
     "agents": [
         "q",
         {"name": "fixed", "kwargs": {"delay_estimate": "$delay_steps"}},
-        {"name": "expected-credit", "kwargs": {"delay": "$delay", "max_delay": 10}},
+        {"name": "expected-credit", "kwargs": {"delay": "$delay", "max_delay_estimate": 10}},
         "oracle",
     ],
     "envs": [

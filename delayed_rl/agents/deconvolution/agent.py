@@ -9,7 +9,7 @@ convolution of the delay pmf with the mean rewards ``R`` of the (state, action) 
    ``O(K)`` per step, never the history) and, after 1000, 2000, 4000, ... steps and then every
    ``solve_interval`` steps (the gaps double until they reach it), solves the least
    squares for ``R̂`` — with the delay pmf known (``delay=``), or estimated with it (``delay=None``:
-   ``p`` on ``0..max_delay`` and ``R`` alternate, ``p`` kept a distribution);
+   ``p`` on ``0..max_delay_estimate`` and ``R`` alternate, ``p`` kept a distribution);
 2. it runs Q-learning on the observed, undelayed transitions ``(s, a, s′)`` with reward
    ``R̂(s, a)``: ``Q(s, a) += α (R̂(s, a) + γ (1 − terminated) max_a′ Q(s′, a′) − Q(s, a))``.
 
@@ -44,6 +44,10 @@ import numpy as np
 
 from delayed_rl._validation import check_choice, check_int, check_real
 from delayed_rl.agents.common.compiled_loop import CompiledTables
+from delayed_rl.agents.common.delay_estimate import (
+    DEFAULT_MAX_DELAY_ESTIMATE,
+    check_max_delay_estimate,
+)
 from delayed_rl.agents.common.hyperparameters import (
     MAX_ABS_VALUE,
     check_limit,
@@ -65,23 +69,12 @@ from delayed_rl.wrappers.reward_delay import find_reward_delay
 
 __all__ = [
     "MAX_DELAY_ITERATIONS",
-    "MAX_MODELLED_DELAY",
     "MAX_SOLVE_INTERVAL",
     "PMF_TOLERANCE",
     "DeconvolutionQLearning",
 ]
 
 EPISODE_END_MODES = ("flush", "drop", "carry")
-DEFAULT_MAX_DELAY = 50  # as MMQ's λ̂max: the thesis's grid-world cut-off
-MAX_MODELLED_DELAY = 1024
-"""The longest delay ``K`` DeconvQ models (``max_delay``, or a known delay's reach): 1024 steps.
-
-A solve builds ``(K + 1)²`` matrices (24 MiB at the limit) and costs ``O(K³)`` for the rows
-after each segment's end, and for a learned delay ``O(K · L²)`` per ended segment of ``L <= K
-+ 1`` steps; the statistics take ``(K + 1)·|S|·|A|`` reward sums. The experiments model at most
-150 steps. ``max_delay`` above it, or a known delay that reaches further without a
-``max_delay`` to clip it, is refused at construction and in a model file.
-"""
 MAX_DELAY_ITERATIONS = 100
 """The most ``delay_iterations`` (alternations of the ``R`` and ``p`` solves at each solve).
 
@@ -99,7 +92,7 @@ _FIRST_SOLVE = 1_000  # steps before the first solve; the gaps then double to so
 _HERE = "(delayed_rl.agents.deconvolution)"
 _OWN_NAMES = {  # this class's own constructor arguments, and their defaults
     "delay": None,
-    "max_delay": None,
+    "max_delay_estimate": None,
     "solve_interval": 20_000,
     "ridge": 1.0,
     "delay_iterations": 2,
@@ -126,10 +119,10 @@ class DeconvolutionQLearning(QAgent):
         delay: the delay distribution when it is known (a :class:`~delayed_rl.delays.Delay`, or a
             number read as a Poisson mean), modelled on ``0..K`` with ``K`` its largest value (or,
             for an unbounded one, where less than 1e-6 of its mass is left, at most
-            ``max_delay``); ``None`` (default) learns it on ``0..max_delay``.
-        max_delay: ``K`` for a learned delay, the longest delay modelled (the designer's cut-off,
+            ``max_delay_estimate``); ``None`` (default) learns it on ``0..max_delay_estimate``.
+        max_delay_estimate: ``K`` for a learned delay, the longest delay modelled (the designer's cut-off,
             like MMQ's λ̂max; default 50); with a known delay, a cap on its support. At most
-            :data:`MAX_MODELLED_DELAY` (1024), and a known delay must be modelled within it.
+            :data:`MAX_DELAY_ESTIMATE` (1024), and a known delay must be modelled within it.
         solve_interval: the longest gap between two least-squares solves (default 20,000); the
             first solve comes after 1000 steps (or ``solve_interval``, if shorter) and the gaps
             double up to it, so early estimates come fast and long runs pay little for them.
@@ -161,10 +154,10 @@ class DeconvolutionQLearning(QAgent):
         >>> import delayed_rl
         >>> from delayed_rl.agents import DeconvolutionQLearning
         >>> env = gym.make("delayed_rl/GridWorld-3x3-v0", reward_delay=2)
-        >>> agent = DeconvolutionQLearning(env, max_delay=8, q_init=10.0, seed=0).learn(20_000)
+        >>> agent = DeconvolutionQLearning(env, max_delay_estimate=8, q_init=10.0, seed=0).learn(20_000)
         >>> agent.predict(8, deterministic=True)[0] in (0, 3)  # from the start: up or left
         True
-        >>> agent.delay_pmf.shape  # the learned pmf on 0..max_delay
+        >>> agent.delay_pmf.shape  # the learned pmf on 0..max_delay_estimate
         (9,)
     """
 
@@ -175,7 +168,7 @@ class DeconvolutionQLearning(QAgent):
         self,
         env: gym.Env | str,
         delay: Delay | float | None = None,
-        max_delay: int | None = None,
+        max_delay_estimate: int | None = None,
         solve_interval: int = 20_000,
         ridge: float = 1.0,
         delay_iterations: int = 2,
@@ -183,7 +176,7 @@ class DeconvolutionQLearning(QAgent):
         **hyperparameters: Any,
     ):
         self._set_deconvolution(
-            delay, max_delay, solve_interval, ridge, delay_iterations, on_episode_end
+            delay, max_delay_estimate, solve_interval, ridge, delay_iterations, on_episode_end
         )
         super().__init__(env, **hyperparameters)
 
@@ -191,7 +184,7 @@ class DeconvolutionQLearning(QAgent):
     def _set_deconvolution(
         self,
         delay: Any,
-        max_delay: Any,
+        max_delay_estimate: Any,
         solve_interval: Any,
         ridge: Any,
         delay_iterations: Any,
@@ -200,20 +193,15 @@ class DeconvolutionQLearning(QAgent):
         """Check and set this class's own arguments; the pmf's support ``K`` (nothing allocated).
 
         The checks are the constructor's and a model file's alike (the limits are
-        :data:`MAX_MODELLED_DELAY`, :data:`MAX_SOLVE_INTERVAL`, :data:`MAX_DELAY_ITERATIONS`,
+        :data:`MAX_DELAY_ESTIMATE`, :data:`MAX_SOLVE_INTERVAL`, :data:`MAX_DELAY_ITERATIONS`,
         and ``MAX_ABS_VALUE`` for ``ridge``).
 
         Raises:
             TypeError: an argument of the wrong type (the message names it).
             ValueError: an argument out of range, or a known delay that reaches beyond
-                :data:`MAX_MODELLED_DELAY` steps (give a ``max_delay`` to clip it).
+                :data:`MAX_DELAY_ESTIMATE` steps (give a ``max_delay_estimate`` to clip it).
         """
-        self.max_delay = check_limit(
-            "max_delay",
-            check_int("max_delay", max_delay, 0, optional=True),
-            MAX_MODELLED_DELAY,
-            f"MAX_MODELLED_DELAY = {MAX_MODELLED_DELAY} {_HERE}",
-        )
+        self.max_delay_estimate = check_max_delay_estimate(max_delay_estimate)
         self.delay = _as_known_delay(delay)
         self.solve_interval = check_limit(
             "solve_interval",
@@ -238,17 +226,14 @@ class DeconvolutionQLearning(QAgent):
         self.on_episode_end = on_episode_end
         if self.delay is None:
             self._known_pmf = None
-            self._support = DEFAULT_MAX_DELAY if self.max_delay is None else self.max_delay
+            self._support = (
+                DEFAULT_MAX_DELAY_ESTIMATE
+                if self.max_delay_estimate is None
+                else self.max_delay_estimate
+            )
             return
         # expected credit's weights: the pmf of min(d, K), K as the class docstring says
-        weights = credit_weights(self.delay, self.max_delay)
-        if weights.size - 1 > MAX_MODELLED_DELAY:
-            raise ValueError(
-                f"delay must be modelled on at most {MAX_MODELLED_DELAY + 1} lags (MAX_MODELLED_DELAY "
-                f"= {MAX_MODELLED_DELAY} {_HERE}), got "
-                f"{self.delay!r}, which reaches {weights.size - 1} steps: give a max_delay of at "
-                f"most {MAX_MODELLED_DELAY} to clip it"
-            )
+        weights = credit_weights(self.delay, self.max_delay_estimate)
         self._known_pmf = weights / weights.sum()
         self._support = weights.size - 1
 
@@ -283,7 +268,7 @@ class DeconvolutionQLearning(QAgent):
         (:func:`~delayed_rl.agents.deconvolution.regression.statistics_bytes`) together.
 
         Raises:
-            ValueError: the message names ``max_delay``, the env's size and the memory needed.
+            ValueError: the message names ``max_delay_estimate``, the env's size and the memory needed.
         """
         pairs = self.n_states * self.n_actions
         size = (
@@ -294,12 +279,12 @@ class DeconvolutionQLearning(QAgent):
         )
         if size > MAX_TABLE_BYTES:
             raise ValueError(
-                f"{type(self).__name__}(max_delay={self.max_delay}) on an env of {self.n_states} "
+                f"{type(self).__name__}(max_delay_estimate={self.max_delay_estimate}) on an env of {self.n_states} "
                 f"states and {self.n_actions} actions needs {size / 2**30:.3g} GiB of tables "
                 f"(delays modelled up to {self._support} steps: {self._support + 1} reward sums "
                 f"per (state, action) pair), over MAX_TABLE_BYTES = "
                 f"{MAX_TABLE_BYTES / 2**30:g} GiB (delayed_rl.agents.common.q_table.MAX_TABLE_BYTES): use a "
-                "shorter max_delay or a smaller state space"
+                "shorter max_delay_estimate or a smaller state space"
             )
 
     def _new_regression(self, mode: str) -> RewardRegression:
@@ -576,7 +561,13 @@ def _check_pmf(pmf: Any, size: int, known: np.ndarray | None) -> np.ndarray:
             within :data:`PMF_TOLERANCE`, or differs from ``known`` by more than that.
     """
     pmf = check_state_array(
-        "delay_pmf", pmf, (size,), np.float64, 0.0, 1.0, note=" (a delay pmf on 0..max_delay)"
+        "delay_pmf",
+        pmf,
+        (size,),
+        np.float64,
+        0.0,
+        1.0,
+        note=" (a delay pmf on 0..max_delay_estimate)",
     )
     total = math.fsum(pmf.tolist())
     if abs(total - 1.0) > PMF_TOLERANCE:

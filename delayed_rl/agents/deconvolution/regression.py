@@ -55,7 +55,7 @@ STATISTICS_LIMIT = 256 * 2**20
 
 GridWorld-9x9 with delays up to 50 steps takes 21 MiB (direct). In the hashed layout the table
 grows with the couples seen; a run that would take it past the limit stops with an error that
-names ``max_delay``.
+names ``max_delay_estimate``.
 """
 DIRECT_LIMIT = 64 * 2**20
 """The direct layout (``(K + 1)·P²`` counts, no lookups) is used up to this many bytes: 64 MiB."""
@@ -476,7 +476,7 @@ def _projected_gradient(g, z, start, scale, iterations):
     return p
 
 
-def statistics_bytes(n_pairs: int, max_delay: int) -> int:
+def statistics_bytes(n_pairs: int, max_delay_estimate: int) -> int:
     """The bytes :class:`RewardRegression` starts with, and its solves' workspace, before any.
 
     The counts (the direct layout's ``(K + 1)·P²`` int32 while they fit :data:`DIRECT_LIMIT`,
@@ -488,9 +488,9 @@ def statistics_bytes(n_pairs: int, max_delay: int) -> int:
 
     Args:
         n_pairs: ``P``, the (state, action) pairs.
-        max_delay: ``K``.
+        max_delay_estimate: ``K``.
     """
-    k1 = max_delay + 1
+    k1 = max_delay_estimate + 1
     direct = k1 * n_pairs * n_pairs * 4
     counts = direct if direct <= DIRECT_LIMIT else _FIRST_ROWS * (k1 * 4 + 8)
     solve = 24 * n_pairs * (n_pairs if n_pairs <= DENSE_SOLVE_PAIRS else 4) + 24 * k1 * k1
@@ -502,7 +502,7 @@ class RewardRegression:
 
     Args:
         n_pairs: how many (state, action) pairs (``|S|·|A|``).
-        max_delay: ``K``, the longest delay modelled.
+        max_delay_estimate: ``K``, the longest delay modelled.
         flush: the last step of an ending segment carries every pending reward (the reward-delay
             wrapper's ``"flush"``); ``False`` for ``"drop"`` (those rewards never come).
         carry: pending rewards carry over episode ends (``"carry"``): the stream is one segment.
@@ -517,12 +517,12 @@ class RewardRegression:
     def __init__(
         self,
         n_pairs: int,
-        max_delay: int,
+        max_delay_estimate: int,
         flush: bool = True,
         carry: bool = False,
         layout: str | None = None,
     ):
-        k = max_delay + 1
+        k = max_delay_estimate + 1
         direct = k * n_pairs * n_pairs * 4
         if layout is None:
             layout = "direct" if direct <= DIRECT_LIMIT else "hashed"
@@ -530,12 +530,17 @@ class RewardRegression:
             raise ValueError(f"layout must be 'direct', 'hashed' or None, got {layout!r}")
         if layout == "direct" and direct > STATISTICS_LIMIT:
             raise ValueError(
-                f"max_delay={max_delay} with {n_pairs} (state, action) pairs needs "
+                f"max_delay_estimate={max_delay_estimate} with {n_pairs} (state, action) pairs needs "
                 f"{direct / 2**20:,.0f} MiB of co-occurrence counts in the direct layout, more "
                 f"than the limit of {STATISTICS_LIMIT / 2**20:.0f} MiB: choose a shorter "
-                "max_delay or the hashed layout"
+                "max_delay_estimate or the hashed layout"
             )
-        self.n_pairs, self.max_delay, self.flush, self.carry = n_pairs, max_delay, flush, carry
+        self.n_pairs, self.max_delay_estimate, self.flush, self.carry = (
+            n_pairs,
+            max_delay_estimate,
+            flush,
+            carry,
+        )
         rows = n_pairs * n_pairs if layout == "direct" else _FIRST_ROWS
         keys = np.zeros(0, np.int64) if layout == "direct" else np.full(rows, -1, np.int64)
         self.stats = Statistics(
@@ -575,7 +580,7 @@ class RewardRegression:
 
         Raises:
             ValueError: the hashed table would grow past :data:`STATISTICS_LIMIT` (the message
-                names ``max_delay``).
+                names ``max_delay_estimate``).
         """
         stats = self.stats
         needed = int(stats.counters[2]) + steps
@@ -591,16 +596,16 @@ class RewardRegression:
                 end_flushed=grown[3],
             )
         if stats.keys.size:  # at most half full after the steps' new rows
-            rows = 2 * (int(stats.counters[6]) + steps * (self.max_delay + 1))
+            rows = 2 * (int(stats.counters[6]) + steps * (self.max_delay_estimate + 1))
             if rows > stats.keys.size:
                 size = 1 << (rows - 1).bit_length()
                 nbytes = size * (stats.cooc.shape[1] * 4 + 8)
                 if nbytes > STATISTICS_LIMIT:
                     raise ValueError(
-                        f"max_delay={self.max_delay}: the co-occurrence rows of "
+                        f"max_delay_estimate={self.max_delay_estimate}: the co-occurrence rows of "
                         f"{self.steps:,} steps over {self.n_pairs} (state, action) pairs would "
                         f"take {nbytes / 2**20:,.0f} MiB, more than the limit of "
-                        f"{STATISTICS_LIMIT / 2**20:.0f} MiB: choose a shorter max_delay"
+                        f"{STATISTICS_LIMIT / 2**20:.0f} MiB: choose a shorter max_delay_estimate"
                     )
                 keys, cooc = _rehash(stats.keys, stats.cooc, size)
                 stats = stats._replace(keys=keys, cooc=cooc)
@@ -667,7 +672,7 @@ class RewardRegression:
         Raises:
             ValueError: naming the first array of :class:`Statistics`' order that is not.
         """
-        k1, n_pairs = self.max_delay + 1, self.n_pairs
+        k1, n_pairs = self.max_delay_estimate + 1, self.n_pairs
         ends = arrays["end_lengths"].shape[0]
         shapes = {
             "cooc": (rows, k1),
@@ -706,7 +711,7 @@ class RewardRegression:
                 segment ends are not ``ends`` (the end arrays' length) or the pairs not ``P``;
                 or the flush and carry flags are not this regression's.
         """
-        k1, n_pairs = self.max_delay + 1, self.n_pairs
+        k1, n_pairs = self.max_delay_estimate + 1, self.n_pairs
         length, steps, n_ends, flush, carry, pairs, _ = (int(v) for v in counters)
         if not 0 <= length <= k1 or steps < 0 or n_ends != ends or pairs != n_pairs:
             raise ValueError(
@@ -728,7 +733,7 @@ class RewardRegression:
                 outside ``1..K + 1``, a carried-over stream has an end, or an end is not flushed
                 exactly under ``"flush"``.
         """
-        k1, n_pairs = self.max_delay + 1, self.n_pairs
+        k1, n_pairs = self.max_delay_estimate + 1, self.n_pairs
         indices = np.concatenate([arrays["window"], arrays["end_windows"].ravel()])
         if indices.size and (indices.min() < 0 or indices.max() >= n_pairs):
             raise ValueError(
@@ -828,7 +833,7 @@ class RewardRegression:
 
     def delay_gram(self, reward: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(G, z)`` of the least-squares problem for the pmf, given the mean rewards."""
-        k = self.max_delay
+        k = self.max_delay_estimate
         q = _lag_quadratic_forms(self.stats, reward)
         lags = np.abs(np.subtract.outer(np.arange(k + 1), np.arange(k + 1)))
         g = q[lags]

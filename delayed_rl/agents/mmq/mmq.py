@@ -35,6 +35,7 @@ import numpy as np
 
 from delayed_rl._validation import check_int
 from delayed_rl.agents.common.compiled_loop import CompiledTables
+from delayed_rl.agents.common.delay_estimate import DEFAULT_MAX_DELAY_ESTIMATE
 from delayed_rl.agents.common.hyperparameters import shares_hyperparameters
 from delayed_rl.agents.common.q_agent import QAgent, check_delay_estimates, shown
 from delayed_rl.agents.common.q_table import check_table_size, greedy_actions
@@ -47,10 +48,7 @@ from delayed_rl.agents.mmq.options import (
 )
 from delayed_rl.agents.mmq.updates import FULL_CREDIT, update_models
 
-__all__ = ["DEFAULT_MAX_DELAY_ESTIMATE", "MultipleModelQLearning", "delay_estimates_from"]
-
-DEFAULT_MAX_DELAY_ESTIMATE = 50
-"""The thesis's λ̂max in the 9×9 grid world (section 5.1.1): Λ = {0..50} by default."""
+__all__ = ["MultipleModelQLearning", "delay_estimates_from"]
 
 
 def delay_estimates_from(

@@ -9,7 +9,7 @@ learners on the grid world, each with the thesis's hyper-parameters (α = 0.1, �
 - ``MMQ``: Multiple Model Q-learning, Λ = {0, ..., 50} (the thesis's rule);
 - ``expected credit``: :class:`~delayed_rl.agents.ExpectedCreditQLearning` given the true delay
   (its pmf clipped to 50 lags, the horizon every learner here has);
-- ``DeconvQ known``: :class:`~DeconvolutionQLearning` given the true delay (``max_delay`` 50);
+- ``DeconvQ known``: :class:`~DeconvolutionQLearning` given the true delay (``max_delay_estimate`` 50);
 - ``DeconvQ learned``: :class:`~DeconvolutionQLearning` learning the delay on 0..50;
 - ``oracle``: :class:`~delayed_rl.agents.OracleQLearning`, which is told which transition each
   reward came from (the non-anonymous upper bound);

@@ -83,16 +83,16 @@ from delayed_rl.experiments.framework.gain_settings import (
 
 
 def _pendulum(
-    delay: Any, max_delay: int, seeds: int, episode_steps: int = 200, **fields: Any
+    delay: Any, max_delay_estimate: int, seeds: int, episode_steps: int = 200, **fields: Any
 ) -> dict[str, Any]:
     """SAC on Pendulum-v1 for 10k steps, scored every 1000 steps (2500 for long episodes)."""
     return {"env_id": "Pendulum-v1", "algorithm": "SAC", "n_envs": 1,
-            "episode_steps": episode_steps, "delay": delay.to_dict(), "max_delay": max_delay,
+            "episode_steps": episode_steps, "delay": delay.to_dict(), "max_delay_estimate": max_delay_estimate,
             "steps": 10_000, "eval_every": 1000 if episode_steps <= 200 else 2500,
             "warmup_episodes": WARMUP_EPISODES, "seeds": seeds, **fields}  # fmt: skip
 
 
-#: Each setting's run fields (see the module docstring); ``max_delay`` bounds a learned ``p``;
+#: Each setting's run fields (see the module docstring); ``max_delay_estimate`` bounds a learned ``p``;
 #: ``seeds`` is the setting's number of seeds (``--seeds`` caps it).
 SETTINGS: dict[str, dict[str, Any]] = {
     "pendulum-poisson5": _pendulum(Poisson(5), 20, 5),
@@ -102,7 +102,7 @@ SETTINGS: dict[str, dict[str, Any]] = {
     "pendulum1000-upright": _pendulum(Poisson(20), 60, 10, episode_steps=1000, reward="upright"),
     "cartpole-poisson20": {"env_id": "CartPole-v1", "algorithm": "PPO", "n_envs": 4,
                            "episode_steps": 500, "delay": Poisson(20).to_dict(),
-                           "max_delay": 60, "steps": 100_000, "eval_every": 10_000,
+                           "max_delay_estimate": 60, "steps": 100_000, "eval_every": 10_000,
                            "seeds": 5},
 }  # fmt: skip
 LONG_EPISODES = ("pendulum1000-poisson20", "pendulum1000-upright")

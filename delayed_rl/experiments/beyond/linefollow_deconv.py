@@ -10,7 +10,7 @@ Poisson(90) reward delays, 150k steps a run, 5 seeds; α = 0.1, γ = 0.9, consta
 
 - ``MMQ``: Λ = {0, ..., 150} (the thesis's λ̂max = 150);
 - ``DeconvQ learned``: :class:`~DeconvolutionQLearning` learning the delay on 0..150
-  (``max_delay`` = 150, the same horizon), never told it is Poisson;
+  (``max_delay_estimate`` = 150, the same horizon), never told it is Poisson;
 - ``Q``: Q-learning on the delayed reward.
 
 ``--quick``: 2 seeds, 5k steps. 15 tasks at full size; MMQ's and Q's are ``linefollow``'s runs

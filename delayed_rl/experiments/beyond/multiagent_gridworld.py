@@ -81,7 +81,7 @@ STEPS, QUICK_STEPS = 150_000, 10_000
 CHECKPOINTS = 30
 """Greedy evaluations a run: the learning curve's points, every ``steps // CHECKPOINTS``."""
 LAMBDA_MAX = 50
-"""The longest delay DeconvQ models (``max_delay``), as in ``anonymous-delay``."""
+"""The longest delay DeconvQ models (``max_delay_estimate``), as in ``anonymous-delay``."""
 OPTIMAL_FRACTION = 0.95
 """A joint policy is optimal when its score is at least this share of the optimum."""
 SEED_SHARE = 0.8
@@ -172,7 +172,7 @@ def make_learner(task: dict, env: gym.Env, seed: int) -> TabularAgent:
         return QLearning(env, **hyperparameters)
     known = Poisson(task["lam"]) if task["agent"] == "DeconvQ known" else None
     return DeconvolutionQLearning(
-        env, delay=known, max_delay=LAMBDA_MAX, on_episode_end="flush", **hyperparameters
+        env, delay=known, max_delay_estimate=LAMBDA_MAX, on_episode_end="flush", **hyperparameters
     )
 
 

@@ -75,7 +75,7 @@ SETTINGS: dict[str, dict[str, Any]] = {
             "n_catch": 2,
         },
         "delay": Poisson(LAMBDA).to_dict(),
-        "max_delay": 3 * LAMBDA,
+        "max_delay_estimate": 3 * LAMBDA,
         "ppo": {"n_steps": 512, "batch_size": 256},
         "steps": 300_000,
         "eval_every": 30_000,

@@ -16,8 +16,8 @@ the ``seed``. The methods (:data:`METHODS`):
 - ``return-regression``: :class:`~delayed_rl.deep.ReturnRegressionRewardModel`, IRCR's target
   learned by a network;
 - ``deconv-known``: :class:`~delayed_rl.deep.DeconvolutionRewardModel` with the delay's pmf;
-- ``deconv-learned``: the same with ``p`` learned on ``0..max_delay`` (the task's
-  ``max_delay``, a bound the user would choose, not the delay).
+- ``deconv-learned``: the same with ``p`` learned on ``0..max_delay_estimate`` (the task's
+  ``max_delay_estimate``, a bound the user would choose, not the delay).
 
 The reward models have their defaults (an update a vector-env step and a warm-up of 1000
 updates before they relabel, trained when the algorithm trains) and the run's seed; off-policy
@@ -116,7 +116,7 @@ def task_reward_model(task: dict, env: Any) -> Any:
     """The reward model of a model method (``task["method"]``), seeded with the run's seed.
 
     ``env`` gives the spaces (a vector env's, for the stacked sub-envs); ``deconv-known`` reads
-    ``task["delay"]``, ``deconv-learned`` ``task["max_delay"]``.
+    ``task["delay"]``, ``deconv-learned`` ``task["max_delay_estimate"]``.
     """
     from delayed_rl.deep import (
         DeconvolutionRewardModel,
@@ -131,8 +131,10 @@ def task_reward_model(task: dict, env: Any) -> Any:
     if method == "return-regression":
         return ReturnRegressionRewardModel(*spaces, seed=seed)
     delay = as_delay(task["delay"]) if method == "deconv-known" else None
-    max_delay = None if method == "deconv-known" else task["max_delay"]
-    return DeconvolutionRewardModel(*spaces, delay=delay, max_delay=max_delay, seed=seed)
+    max_delay_estimate = None if method == "deconv-known" else task["max_delay_estimate"]
+    return DeconvolutionRewardModel(
+        *spaces, delay=delay, max_delay_estimate=max_delay_estimate, seed=seed
+    )
 
 
 def relabeling_options(model: Any, on_policy: bool) -> tuple[dict[str, Any], list[Any]]:

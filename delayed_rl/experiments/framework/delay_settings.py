@@ -34,7 +34,7 @@ QUICK_SIZE, QUICK_LAM, QUICK_STEPS = 7, 8, 30_000
 #: The three delay distributions of each world, all of mean λ (:func:`make_delay`).
 DELAYS = ("Poisson", "geometric", "bimodal")
 LAMBDA_MAX = 50
-"""The longest delay any learner models: MMQ's λ̂max, DeconvQ's ``max_delay``, expected credit's
+"""The longest delay any learner models: MMQ's λ̂max, DeconvQ's ``max_delay_estimate``, expected credit's
 last lag."""
 #: The seven learners, in the tables' order (:func:`make_agent`).
 LEARNERS = (
@@ -162,9 +162,11 @@ def make_agent(name: str, size: int, delay: Delay, seed: int, steps: int | None 
             env, max_delay_estimate=LAMBDA_MAX, greedy_window=window, **common
         )
     if name == "expected credit":
-        return agents.ExpectedCreditQLearning(env, delay=delay, max_delay=LAMBDA_MAX, **common)
+        return agents.ExpectedCreditQLearning(
+            env, delay=delay, max_delay_estimate=LAMBDA_MAX, **common
+        )
     known = delay if name == "DeconvQ known" else None
-    return agents.DeconvolutionQLearning(env, delay=known, max_delay=LAMBDA_MAX, **common)
+    return agents.DeconvolutionQLearning(env, delay=known, max_delay_estimate=LAMBDA_MAX, **common)
 
 
 def run_agent(task: dict) -> dict:

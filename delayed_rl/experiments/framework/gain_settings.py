@@ -90,11 +90,11 @@ def delay_fields(task: dict) -> dict[str, Any]:
     """What a reward-delay method's run reads of ``task`` beyond the setting's own fields.
 
     The ``delay`` (not the oracle's, which is undelayed, so that settings that differ only by
-    the delay share its run) and, for ``deconv-learned``, the bound ``max_delay`` it learns on.
+    the delay share its run) and, for ``deconv-learned``, the bound ``max_delay_estimate`` it learns on.
     """
     fields = {} if task["method"] == "oracle" else {"delay": task["delay"]}
     if task["method"] == "deconv-learned":
-        fields["max_delay"] = task["max_delay"]
+        fields["max_delay_estimate"] = task["max_delay_estimate"]
     return fields
 
 

@@ -82,7 +82,7 @@ def make_agent(kind: str, env: gym.Env, seed: int) -> Any:
         return QLearning(env, **common)
     if kind == "MMQ":
         return MultipleModelQLearning(env, max_delay_estimate=LAMBDA_MAX, **common)
-    return DeconvolutionQLearning(env, delay=None, max_delay=LAMBDA_MAX, **common)
+    return DeconvolutionQLearning(env, delay=None, max_delay_estimate=LAMBDA_MAX, **common)
 
 
 def line_error(centroids: np.ndarray) -> np.ndarray:

@@ -21,8 +21,8 @@ The methods (:data:`METHODS`):
   :class:`~delayed_rl.deep.RelabelingRolloutBuffer` (PPO learns from ``R̂(s, a)`` in place of
   the delivered rewards) with its callback; the model reads the stacked sub-envs as it reads
   any vector env's, each agent's delivered rewards a stream of their own;
-- ``deconv-learned``: the same learning the delay's pmf on ``0..max_delay`` (the task's
-  ``max_delay``, a bound the user would choose, not the delay).
+- ``deconv-learned``: the same learning the delay's pmf on ``0..max_delay_estimate`` (the task's
+  ``max_delay_estimate``, a bound the user would choose, not the delay).
 
 The score is the mean per-agent return of ``eval_episodes`` episodes of the *undelayed* env,
 every agent acting greedily with the shared policy, reset with seeds fixed per seed and
