@@ -226,6 +226,20 @@ def _check_keys(
             raise ValueError(f"{where} must have the key {key!r}, got the keys {list(mapping)}")
 
 
+def _named_entry(
+    where: str, entry: Any, key: str, allowed: Sequence[str], named: str
+) -> Mapping[str, Any]:
+    """An entry given as its ``key`` alone (``named``, a string) or as a mapping with ``key``.
+
+    Returns the mapping (``{key: entry}`` for a string), its keys checked against ``allowed``.
+    """
+    if isinstance(entry, str):
+        entry = {key: entry}
+    entry = _mapping(where, entry, f"{named} or a mapping with {key!r}")
+    _check_keys(where, entry, allowed, required=(key,))
+    return entry
+
+
 def _text(where: str, value: Any) -> str:
     """A name, label or id: a non-empty string of at most :data:`MAX_TEXT` characters.
 
@@ -324,10 +338,7 @@ def _check_agent_kwargs(where: str, name: str, kwargs: Mapping[str, Any]) -> Non
 
 
 def _parse_agent(where: str, entry: Any) -> SweepAgent:
-    if isinstance(entry, str):
-        entry = {"name": entry}
-    entry = _mapping(where, entry, "an agent's name or a mapping with 'name'")
-    _check_keys(where, entry, _AGENT_KEYS, required=("name",))
+    entry = _named_entry(where, entry, "name", _AGENT_KEYS, "an agent's name")
     name = _agent_name(f"{where}.name", entry["name"])
     why = "the sweep makes the env and seeds every run from 'seeds'"
     kwargs = _kwargs(f"{where}.kwargs", entry.get("kwargs", {}), ("env", "seed"), why)
@@ -407,10 +418,7 @@ def _check_env_id(where: str, env_id: Any) -> str:
 
 
 def _parse_env(where: str, entry: Any) -> SweepEnv:
-    if isinstance(entry, str):
-        entry = {"id": entry}
-    entry = _mapping(where, entry, "a Gymnasium id or a mapping with 'id'")
-    _check_keys(where, entry, _ENV_KEYS, required=("id",))
+    entry = _named_entry(where, entry, "id", _ENV_KEYS, "a Gymnasium id")
     env_id = _check_env_id(f"{where}.id", entry["id"])
     why = "set the delays in 'delays'"
     kwargs = _kwargs(f"{where}.kwargs", entry.get("kwargs", {}), _ENV_DELAY_KWARGS, why)
