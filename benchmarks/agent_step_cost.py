@@ -31,7 +31,17 @@ import random
 from collections.abc import Callable
 
 import gymnasium as gym
-from interleaved import Repeat, fastest, interleave, median_ratio, seconds_per_step, shown, spread
+from interleaved import (
+    Repeat,
+    fastest,
+    interleave,
+    median_ratio,
+    seconds_per_step,
+    shown,
+    spread,
+    target_summary,
+    verdict,
+)
 
 import delayed_rl  # noqa: F401  (registers the env ids)
 from delayed_rl.agents import DEFAULTS, MultipleModelQLearning, QLearning
@@ -140,13 +150,8 @@ def measure(steps: int, repeats: int, compiled: bool = False) -> dict[str, float
 def floor_summary(per_repeat: list[Repeat]) -> str:
     """Q-learning's ``learn()`` against the floor, within each repeat (min–median–max)."""
     ratios = [median_ratio(r, "9x9, |Λ|=1", FLOOR) for r in per_repeat]
-    floor = spread([fastest(r)[FLOOR] * 1e6 for r in per_repeat])
-    verdict = _verdict(max(ratios), 2)
-    return (
-        f"learn() of Q-learning / minimal loop = {shown(spread(ratios))} (min–median–max of "
-        f"{len(ratios)} repeats; target <= 2 in every repeat: {verdict}); floor, the minimal "
-        f"loop: {shown(floor)} µs/step"
-    )
+    what = "learn() of Q-learning / minimal loop ="
+    return target_summary(what, ratios, 2, per_repeat, FLOOR, "the minimal loop")
 
 
 def main() -> None:
@@ -171,17 +176,12 @@ def main() -> None:
     print(floor_summary(per_repeat))
     print(
         f"cost(|Λ|=151) / cost(|Λ|=1) = {shown(spread(scaling))}  (target <= 3)  "
-        f"{_verdict(max(scaling), 3)}"
+        f"{verdict(max(scaling), 3)}"
     )
     print(
         f"cost(30x30) / cost(9x9) at |Λ|=51 = {shown(spread(world))}  (target <= 1.5)  "
-        f"{_verdict(max(world), 1.5)}"
+        f"{verdict(max(world), 1.5)}"
     )
-
-
-def _verdict(ratio: float, target: float) -> str:
-    """``ok`` when ``ratio`` meets its target (at most ``target``), else ``MISSED``."""
-    return "ok" if ratio <= target else "MISSED"
 
 
 if __name__ == "__main__":

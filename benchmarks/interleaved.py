@@ -83,6 +83,39 @@ def shown(values: tuple[float, float, float], digits: int = 2) -> str:
     return "–".join(f"{value:.{digits}f}" for value in values)
 
 
+def verdict(worst: float, target: float) -> str:
+    """``ok`` when ``worst`` meets its target (at most ``target``), else ``MISSED``."""
+    return "ok" if worst <= target else "MISSED"
+
+
+def target_summary(
+    what: str,
+    ratios: list[float],
+    target: float,
+    per_repeat: list[Repeat],
+    floor: str,
+    floor_text: str,
+    floor_digits: int = 2,
+) -> str:
+    """One line: a ratio of each repeat against its target, beside the floor's cost.
+
+    Args:
+        what: what the ratios are, with the sign that introduces them (``"a / b ="``).
+        ratios: one ratio per repeat (shown min–median–max; the largest must meet ``target``).
+        target: the most a repeat's ratio may be.
+        per_repeat: the repeats, whose fastest rounds give the floor's cost.
+        floor: the name of the floor's timings.
+        floor_text: how the line names the floor.
+        floor_digits: the decimals of the floor's µs/step.
+    """
+    floor_cost = spread([fastest(r)[floor] * 1e6 for r in per_repeat])
+    return (
+        f"{what} {shown(spread(ratios))} (min–median–max of {len(ratios)} repeats; target ≤ "
+        f"{target} in every repeat: {verdict(max(ratios), target)}); floor, {floor_text}: "
+        f"{shown(floor_cost, floor_digits)} µs/step"
+    )
+
+
 def one_repeat(timed: dict[str, Callable[[], float]], rounds: int) -> Repeat:
     """A single repeat of ``rounds`` rounds (:func:`interleave`), for figures over rounds."""
     return interleave(timed, 1, rounds)[0]

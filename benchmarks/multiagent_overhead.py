@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 from gymnasium import spaces
-from interleaved import Repeat, interleave, median_ratio, seconds_per_step, shown, spread
+from interleaved import Repeat, interleave, median_ratio, seconds_per_step, shown, spread, verdict
 from pettingzoo import ParallelEnv
 from pettingzoo.utils import BaseParallelWrapper
 
@@ -155,11 +155,10 @@ def report(env: str, repeats: list[Repeat]) -> str:
         worst = max(worst, max(ratios)) if name != FLOOR else worst
         lines.append(f"{name:<36}{shown(cost, 1):>26}{shown(spread(ratios), 3):>26}")
     lines.append(f"(min–median–max over {len(repeats)} repeats)\n")
-    verdict = "ok" if worst <= TARGET else "MISSED"
     scope = "" if env == "pursuit" else " (stated on pursuit; for information here)"
     lines.append(
         f"Largest ratio of a wrapper to the {FLOOR} wrapper on {env}: {worst:.3f} "
-        f"(target ≤ {TARGET} in every repeat{scope}: {verdict})"
+        f"(target ≤ {TARGET} in every repeat{scope}: {verdict(worst, TARGET)})"
     )
     return "\n".join(lines)
 

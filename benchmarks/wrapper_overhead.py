@@ -25,7 +25,7 @@ import argparse
 
 import gymnasium as gym
 import numpy as np
-from interleaved import Repeat, fastest, interleave, seconds_per_step, shown, spread
+from interleaved import Repeat, fastest, interleave, seconds_per_step, shown, spread, target_summary
 
 from delayed_rl.envs.gridworld import GridWorldEnv
 from delayed_rl.wrappers import PoissonRewardDelay
@@ -104,13 +104,8 @@ def cost_rows(repeats: list[Repeat]) -> list[tuple[str, str, str]]:
 def summary(repeats: list[Repeat]) -> str:
     """One line: the overhead ratio within each repeat (min–median–max) beside the floor."""
     ratios = [repeat_ratio(r) for r in repeats]
-    floor = spread([fastest(r)["bare"] * 1e6 for r in repeats])
-    verdict = "ok" if max(ratios) <= TARGET else "MISSED"
-    return (
-        f"Overhead ratio PoissonRewardDelay / RecordEpisodeStatistics: {shown(spread(ratios), 2)} "
-        f"(min–median–max of {len(ratios)} repeats; target ≤ {TARGET} in every repeat: "
-        f"{verdict}); floor, the bare env: {shown(floor, 3)} µs/step"
-    )
+    what = "Overhead ratio PoissonRewardDelay / RecordEpisodeStatistics:"
+    return target_summary(what, ratios, TARGET, repeats, "bare", "the bare env", floor_digits=3)
 
 
 def main() -> None:
