@@ -102,10 +102,45 @@ def _check_dict_space(buffer: Any, observation_space: Any) -> None:
         )
 
 
-class _RelabelingOffPolicy:
-    """What the off-policy relabelling buffers share (a mixin before SB3's buffer class)."""
+class _Relabeling:
+    """What every relabelling buffer shares: its reward model's checks and its binding."""
 
     takes_dict = False
+
+    def _checked_model(
+        self,
+        reward_model: RewardModel | dict[str, Any],
+        observation_space: Any,
+        action_space: Any,
+        settings: dict[str, Any],
+    ) -> RewardModel:
+        """The buffer's reward model (made for its spaces from a mapping), after its checks.
+
+        Refuses the unknown ``settings`` and an observation space of the other kind (``Dict``
+        or not) before the model is made.
+        """
+        _refuse_unknown(type(self), settings)
+        _check_dict_space(self, observation_space)
+        return make_reward_model(reward_model, observation_space, action_space)
+
+    def _bind_to_caller(self) -> None:
+        """Start unwatched; bind to the algorithm building the buffer, if one is, once checked.
+
+        The algorithm is the one whose ``_setup_model`` is running; :meth:`_check_algorithm`
+        refuses one the buffer cannot serve.
+        """
+        self.watched = False
+        algorithm = calling_algorithm("_setup_model")
+        if algorithm is not None:
+            self._check_algorithm(algorithm)
+            bind(self, algorithm)
+
+    def _check_algorithm(self, algorithm: Any) -> None:
+        """Refuse an algorithm whose settings the buffer cannot serve (none here)."""
+
+
+class _RelabelingOffPolicy(_Relabeling):
+    """What the off-policy relabelling buffers share (a mixin before SB3's buffer class)."""
 
     def __init__(
         self,
@@ -121,9 +156,7 @@ class _RelabelingOffPolicy:
         **settings: Any,
     ):
         own = {key: settings.pop(key) for key in ("n_steps", "gamma") if key in settings}
-        _refuse_unknown(type(self), settings)
-        _check_dict_space(self, observation_space)
-        model = make_reward_model(reward_model, observation_space, action_space)
+        model = self._checked_model(reward_model, observation_space, action_space, settings)
         super().__init__(
             buffer_size,
             observation_space,
@@ -137,11 +170,7 @@ class _RelabelingOffPolicy:
         self.reward_model = model
         self.delivered_rewards = np.zeros_like(self.rewards)
         self.undelayed_rewards = np.full_like(self.rewards, np.nan)
-        self.watched = False
-        algorithm = calling_algorithm("_setup_model")
-        if algorithm is not None:
-            self._check_algorithm(algorithm)
-            bind(self, algorithm)
+        self._bind_to_caller()
 
     def _own_settings(self, settings: dict[str, Any]) -> dict[str, Any]:
         """The settings this class's SB3 parent takes beside the common ones (n-step's)."""
@@ -287,10 +316,8 @@ class RelabelingNStepReplayBuffer(_RelabelingOffPolicy, NStepReplayBuffer):
         return np.unique((batch_inds[:, None] + steps) % self.buffer_size)
 
 
-class _RelabelingOnPolicy:
+class _RelabelingOnPolicy(_Relabeling):
     """What the on-policy relabelling buffers share (a mixin before SB3's buffer class)."""
-
-    takes_dict = False
 
     def __init__(
         self,
@@ -305,9 +332,7 @@ class _RelabelingOnPolicy:
         reward_model: RewardModel | dict[str, Any],
         **settings: Any,
     ):
-        _refuse_unknown(type(self), settings)
-        _check_dict_space(self, observation_space)
-        model = make_reward_model(reward_model, observation_space, action_space)
+        model = self._checked_model(reward_model, observation_space, action_space, settings)
         if model.capacity < buffer_size:
             raise ValueError(
                 f"reward_model's capacity ({model.capacity} steps) must hold a rollout of "
@@ -326,10 +351,7 @@ class _RelabelingOnPolicy:
             gamma=gamma,
             n_envs=n_envs,
         )
-        self.watched = False
-        algorithm = calling_algorithm("_setup_model")
-        if algorithm is not None:
-            bind(self, algorithm)
+        self._bind_to_caller()
 
     def reset(self) -> None:
         """SB3's reset, and the per-step records emptied."""
