@@ -73,6 +73,7 @@ from delayed_rl.experiments.framework.line_following import (
     logged_run,
     training_cost,
 )
+from delayed_rl.experiments.framework.results import pivot
 
 #: The learners compared.
 LEARNERS = ("MMQ", "DeconvQ learned", "Q")
@@ -112,35 +113,35 @@ def cost(task: dict) -> float:
     return training_cost(task["agent"], task["steps"])
 
 
-def _paired(runs: dict[str, list[dict]], ours: str, theirs: str, how: str) -> tuple:
+def _paired(runs: dict[str, dict[int, dict]], ours: str, theirs: str, how: str) -> tuple:
     """(mean, CI, n) by seed of ``ours − theirs`` (average reward) or ``ours / theirs`` (error).
 
-    ``how="difference"`` pairs the average rewards, ``"ratio"`` the accumulated errors; the
-    runs of every agent are in the order of the seeds (:func:`tasks`).
+    ``how="difference"`` pairs the average rewards, ``"ratio"`` the accumulated errors, over
+    the seeds both agents ran.
     """
     key = "average" if how == "difference" else "total_error"
-    values = [{i: r[key] for i, r in enumerate(runs[name])} for name in (ours, theirs)]
+    values = [{seed: r[key] for seed, r in runs[name].items()} for name in (ours, theirs)]
     return mean_ci_n(paired(*values, how=how))
 
 
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
     """The claims of the module docstring, per-agent statistics in ``extra`` and the figures."""
-    runs: dict[str, list[dict]] = {agent: [] for agent in LEARNERS}
+    by_agent = pivot(task_list, results, by=("agent",))
+    runs = {agent: by_agent.get(agent, {}) for agent in LEARNERS}
     curves = []
     for task, result in zip(task_list, results, strict=True):
-        runs[task["agent"]].append(result)
         agent, seed, steps = task["agent"], task["seed"], result["steps"]
         curves.append(Curve(agent, seed, steps, result["curve"]))
         curves.append(Curve(agent, seed, steps, result["error"], "accumulated_error"))
     return Summary(_claims(runs), curves, _figures(runs), _statistics(runs))
 
 
-def _claims(runs: dict[str, list[dict]]) -> list:
-    """The claims of the module docstring, from each agent's runs (in the order of the seeds)."""
-    stat = {agent: mean_ci_n([r["average"] for r in rs]) for agent, rs in runs.items()}
+def _claims(runs: dict[str, dict[int, dict]]) -> list:
+    """The claims of the module docstring, from each agent's runs by seed."""
+    stat = {agent: mean_ci_n([r["average"] for r in rs.values()]) for agent, rs in runs.items()}
     over_mmq = _paired(runs, "DeconvQ learned", "MMQ", "difference")
     over_q = _paired(runs, "DeconvQ learned", "Q", "difference")
-    delays = mean_ci_n([r["mean_delay"] for r in runs["DeconvQ learned"]])
+    delays = mean_ci_n([r["mean_delay"] for r in runs["DeconvQ learned"].values()])
     return [
         *reward_claims(stat),
         reference_row(
@@ -175,10 +176,11 @@ def _claims(runs: dict[str, list[dict]]) -> list:
     ]
 
 
-def _statistics(runs: dict[str, list[dict]]) -> dict:
+def _statistics(by_seed: dict[str, dict[int, dict]]) -> dict:
     """``summary.json``'s statistics per agent: line, reward, ns/step, mean delay, paths."""
+    runs = {agent: list(rs.values()) for agent, rs in by_seed.items()}
     return {
-        **line_statistics(runs),
+        **line_statistics(by_seed),
         "average_reward": {a: mean_ci_n([r["average"] for r in rs])[:2] for a, rs in runs.items()},
         "ns_per_step": {a: mean_ci_n([r["ns_per_step"] for r in rs])[:2] for a, rs in runs.items()},
         "mean_delay": {
@@ -190,10 +192,11 @@ def _statistics(runs: dict[str, list[dict]]) -> dict:
     }
 
 
-def _figures(runs: dict[str, list[dict]]) -> dict:
+def _figures(by_seed: dict[str, dict[int, dict]]) -> dict:
     """Reward and accumulated-error curves with 95 % bands; the delay estimates over Poisson(90)."""
     from delayed_rl.delays import Poisson
 
+    runs = {agent: list(rs.values()) for agent, rs in by_seed.items()}
     title = f"line following, Poisson delays of mean λ = {LAM}, λ̂max = {LAMBDA_MAX}"
     rewards = {a: [(r["steps"], r["curve"]) for r in rs] for a, rs in runs.items()}
     errors = {a: [(r["steps"], r["error"]) for r in rs] for a, rs in runs.items()}

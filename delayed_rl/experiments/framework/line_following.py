@@ -91,18 +91,21 @@ def line_error(centroids: np.ndarray) -> np.ndarray:
     return np.where(centroids == 0, UNSEEN_ERROR, np.abs(centroids - CENTRE))
 
 
-def line_statistics(runs: dict[str, list[dict]]) -> dict[str, dict[str, tuple[float, float]]]:
+def line_statistics(runs: dict[str, dict[int, dict]]) -> dict[str, dict[str, tuple[float, float]]]:
     """Mean and 95 % CI, per contestant, of the accumulated error and of the line's visibility.
 
     Args:
-        runs: each contestant's run results, with ``total_error`` (Σ|Δ| over the run) and
-            ``visible`` (the fraction of steps that saw the line).
+        runs: each contestant's run results by seed (:func:`~.results.pivot`), with
+            ``total_error`` (Σ|Δ| over the run) and ``visible`` (the fraction of steps that saw
+            the line).
 
     Returns:
         ``{"accumulated_error": {name: (mean, ci)}, "line_visible_fraction": {name: (mean, ci)}}``.
     """
     return {
-        summary: {name: mean_ci95([r[key] for r in results]) for name, results in runs.items()}
+        summary: {
+            name: mean_ci95([r[key] for r in results.values()]) for name, results in runs.items()
+        }
         for summary, key in (
             ("accumulated_error", "total_error"),
             ("line_visible_fraction", "visible"),

@@ -4,18 +4,19 @@ The grid-world experiments ``delay-sweep``, ``world-size`` and ``estimate-error`
 design: for every seed and world size, an undelayed Q-learning *reference* run, and delayed
 runs whose average reward is divided by the reference's. :func:`grid_tasks` builds those tasks,
 :func:`grid_task` runs one (it is those experiments' ``run_task``), and :func:`normalised`
-pairs each delayed run with its reference.
+pairs each delayed run with its reference; the experiments pivot its results by their own
+fields (:func:`~.results.pivot`), into :func:`condition_means` and :func:`learning_curve_groups`.
 """
 
 from __future__ import annotations
 
-from collections import defaultdict
 from collections.abc import Sequence
 
 import numpy as np
 
 from delayed_rl.experiments.framework.claims import mean_ci_n
 from delayed_rl.experiments.framework.experiment import Config, Curve, running_average
+from delayed_rl.experiments.framework.results import pivot
 from delayed_rl.experiments.framework.training import grid_env, train
 
 
@@ -62,58 +63,71 @@ def grid_task(task: dict) -> dict:
     return {"steps": steps, "curve": curve, "average": float(rewards.mean())}
 
 
-def _references(tasks: list[dict], results: list[dict]) -> dict:
-    """The undelayed reference runs' results, keyed by ``(size, seed)``."""
+def _is_reference(task: dict) -> bool:
+    return bool(task.get("reference"))
+
+
+def normalised(tasks: list[dict], results: list[dict]) -> tuple[list[dict], list[dict]]:
+    """Eq. 5.3 per delayed task: its average reward over that of the matching undelayed run.
+
+    Each delayed task is matched with the reference run of its world size and seed. The curve
+    is normalised step by step (NaN while the reference has earned nothing yet).
+
+    Returns:
+        The delayed tasks (the reference runs left out), in the order of ``tasks``, and one
+        result per delayed task: its ``steps``, normalised ``curve`` and normalised
+        ``average``, ready for :func:`~.results.pivot`.
+    """
+    references = pivot(tasks, results, by=("size",), where=_is_reference)
+    delayed, out = [], []
+    for task, result in zip(tasks, results, strict=True):
+        if _is_reference(task):
+            continue
+        base = references[task["size"]][task["seed"]]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            curve = np.where(base["curve"] > 0, result["curve"] / base["curve"], np.nan)
+        delayed.append(task)
+        out.append(
+            {
+                "steps": result["steps"],
+                "curve": curve,
+                "average": result["average"] / base["average"],
+            }
+        )
+    return delayed, out
+
+
+def normalised_curves(tasks: list[dict], normalised_results: list[dict]) -> list[Curve]:
+    """The normalised curves for the CSV, condition by condition (each task's ``condition``).
+
+    Args:
+        tasks: the delayed tasks and their normalised results, as :func:`normalised` returns them.
+        normalised_results: see ``tasks``.
+    """
+    return [
+        Curve(condition, seed, run["steps"], run["curve"], "normalised_average_reward")
+        for condition, runs in pivot(tasks, normalised_results, by=("condition",)).items()
+        for seed, run in runs.items()
+    ]
+
+
+def condition_means(groups: dict) -> dict:
+    """(mean, 95 % CI, n) of the normalised average of each group of :func:`~.results.pivot`.
+
+    Args:
+        groups: ``{key: {seed: normalised result}}``, a pivot of :func:`normalised`'s results.
+    """
     return {
-        (task["size"], task["seed"]): result
-        for task, result in zip(tasks, results, strict=True)
-        if task.get("reference")
+        key: mean_ci_n([run["average"] for run in runs.values()]) for key, runs in groups.items()
     }
 
 
-def normalised(tasks: list[dict], results: list[dict]) -> dict:
-    """Eq. 5.3 per delayed task: its average reward over that of the matching undelayed run.
-
-    The curve is normalised step by step (NaN while the reference has earned nothing yet).
-
-    Returns:
-        ``{condition: [(seed, steps, normalised curve, normalised average), ...]}``, the
-        conditions in the order of ``tasks``.
-    """
-    reference = _references(tasks, results)
-    out = defaultdict(list)
-    for task, result in zip(tasks, results, strict=True):
-        if task.get("reference"):
-            continue
-        base = reference[(task["size"], task["seed"])]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            curve = np.where(base["curve"] > 0, result["curve"] / base["curve"], np.nan)
-        out[task["condition"]].append(
-            (task["seed"], result["steps"], curve, result["average"] / base["average"])
-        )
-    return out
-
-
-def curves_and_means(
-    per_condition: dict,
-) -> tuple[list[Curve], dict[str, tuple[float, float, int]]]:
-    """Curves for the CSV and (mean, 95 % CI, n) of the normalised average per condition.
+def learning_curve_groups(groups: dict) -> dict:
+    """``{key: [(steps, normalised curve), ...]}``: the groups a learning-curve figure draws.
 
     Args:
-        per_condition: what :func:`normalised` returns.
+        groups: ``{key: {seed: normalised result}}``, a pivot of :func:`normalised`'s results.
     """
-    curves, stats = [], {}
-    for condition, runs in per_condition.items():
-        for seed, steps, curve, _ in runs:
-            curves.append(Curve(condition, seed, steps, curve, "normalised_average_reward"))
-        stats[condition] = mean_ci_n([average for *_, average in runs])
-    return curves, stats
-
-
-def learning_curve_groups(per_condition: dict) -> dict[str, list[tuple[np.ndarray, np.ndarray]]]:
-    """``{condition: [(steps, normalised curve), ...]}``: the groups a learning-curve figure draws.
-
-    Args:
-        per_condition: what :func:`normalised` returns.
-    """
-    return {c: [(steps, curve) for _, steps, curve, _ in runs] for c, runs in per_condition.items()}
+    return {
+        key: [(run["steps"], run["curve"]) for run in runs.values()] for key, runs in groups.items()
+    }

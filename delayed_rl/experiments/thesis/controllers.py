@@ -48,6 +48,7 @@ from delayed_rl.experiments.framework.line_following import (
     run_metrics,
     training_cost,
 )
+from delayed_rl.experiments.framework.results import pivot
 
 RUN_STEPS = 1700
 #: Thesis Fig. 5.19's final average rewards, in the thesis's order of performance.
@@ -150,14 +151,14 @@ def cost(task: dict) -> float:
 
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
     """Fig. 5.19's claims: each controller's final average reward, and their order."""
-    runs: dict[str, list[dict]] = {name: [] for name in THESIS}
-    by_seed: dict[str, dict[int, float]] = {name: {} for name in THESIS}
-    curves = []
-    for task, result in zip(task_list, results, strict=True):
-        runs[task["controller"]].append(result)
-        by_seed[task["controller"]][task["seed"]] = result["average"]
-        curves.append(Curve(task["controller"], task["seed"], result["steps"], result["curve"]))
-    stat = {name: mean_ci_n([r["average"] for r in rs]) for name, rs in runs.items()}
+    by_controller = pivot(task_list, results, by=("controller",))
+    runs = {name: by_controller[name] for name in THESIS}
+    by_seed = pivot(task_list, results, by=("controller",), value="average")
+    curves = [
+        Curve(task["controller"], task["seed"], result["steps"], result["curve"])
+        for task, result in zip(task_list, results, strict=True)
+    ]
+    stat = {name: mean_ci_n([r["average"] for r in rs.values()]) for name, rs in runs.items()}
     run_steps = task_list[0]["run_steps"]
     claims = [
         band_claim(
@@ -181,7 +182,7 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
                 note=f"measured order of the means: {measured_order}",
             )
         )
-    groups = {name: [(r["steps"], r["curve"]) for r in rs] for name, rs in runs.items()}
+    groups = {name: [(r["steps"], r["curve"]) for r in rs.values()] for name, rs in runs.items()}
     figures = {
         "fig5_19_controllers": plotting.figure(
             plotting.learning_curves,

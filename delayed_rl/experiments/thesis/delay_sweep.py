@@ -14,12 +14,14 @@ from delayed_rl.experiments.framework.claims import (
 )
 from delayed_rl.experiments.framework.experiment import Config, Experiment, Summary
 from delayed_rl.experiments.framework.normalised_runs import (
-    curves_and_means,
+    condition_means,
     grid_task,
     grid_tasks,
     learning_curve_groups,
     normalised,
+    normalised_curves,
 )
+from delayed_rl.experiments.framework.results import common_seeds, pivot
 
 LAMS = (1, 2, 5, 10, 20, 50)
 QUICK_LAMS = (2, 10, 50)
@@ -49,18 +51,17 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
     seed (below 0). Each λ's normalised reward is a ``reference`` row: the thesis gives the
     curves, not a value per λ to test.
     """
-    per_condition = normalised(task_list, results)
-    curves, stats = curves_and_means(per_condition)
-    lams = sorted({t["lam"] for t in task_list if not t.get("reference")})
-    means = [stats[f"lambda={lam}"][0] for lam in lams]
-    by_seed = {
-        lam: {seed: average for seed, *_, average in per_condition[f"lambda={lam}"]} for lam in lams
-    }
-    seeds = [s for s in by_seed[lams[0]] if all(s in by_seed[lam] for lam in lams)]
+    delayed, scaled = normalised(task_list, results)
+    by_lam = pivot(delayed, scaled, by=("lam",))
+    by_seed = pivot(delayed, scaled, by=("lam",), value="average")
+    stats = condition_means(by_lam)
+    lams = sorted(by_lam)
+    means = [stats[lam][0] for lam in lams]
+    seeds = common_seeds(*(by_seed[lam] for lam in lams))
     claims = [
         reference_row(
             f"normalised average reward, λ = {lam}",
-            stats[f"lambda={lam}"],
+            stats[lam],
             "a point of the falling curve (Fig. 5.2)",
         )
         for lam in lams
@@ -86,17 +87,14 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
     figures = {
         "fig5_2_delay_sweep": plotting.figure(
             plotting.learning_curves,
-            {
-                f"λ = {condition.split('=')[1]}": runs
-                for condition, runs in learning_curve_groups(per_condition).items()
-            },
+            {f"λ = {lam}": runs for lam, runs in learning_curve_groups(by_lam).items()},
             "3×3 grid world: Q-learning under Poisson delays of mean λ (Fig. 5.2)\n"
             f"thesis: {THESIS_TREND} (it gives no value per λ)",
             "normalised average reward (Eq. 5.3)",
         )
     }
     extra = {"normalised_means": dict(zip(map(str, lams), means, strict=True))}
-    return Summary(claims, curves, figures, extra)
+    return Summary(claims, normalised_curves(delayed, scaled), figures, extra)
 
 
 EXPERIMENT = Experiment(

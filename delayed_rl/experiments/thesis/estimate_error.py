@@ -8,11 +8,13 @@ from delayed_rl.experiments.framework import plotting
 from delayed_rl.experiments.framework.claims import band_claim, direction_claim, mean_ci_n, paired
 from delayed_rl.experiments.framework.experiment import Config, Experiment, Summary
 from delayed_rl.experiments.framework.normalised_runs import (
-    curves_and_means,
+    condition_means,
     grid_task,
     grid_tasks,
     normalised,
+    normalised_curves,
 )
+from delayed_rl.experiments.framework.results import common_seeds, pivot
 
 LAM = 17
 #: The thesis's peak of Fig. 5.6: 60 % of the undelayed reward, at i = 0.
@@ -48,13 +50,13 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
     the peak" read as less than half of it. A seed whose peak is not positive (a run too short
     to learn) has no such half: NaN, and the row is ``inconclusive``.
     """
-    per_condition = normalised(task_list, results)
-    curves, stats = curves_and_means(per_condition)
-    errors = sorted({t["error"] for t in task_list if "error" in t})
-    means = np.array([stats[f"i={e}"][0] for e in errors])
-    cis = np.array([stats[f"i={e}"][1] for e in errors])
-    by_seed = {e: {seed: avg for seed, *_, avg in per_condition[f"i={e}"]} for e in errors}
-    seeds = [s for s in by_seed[errors[0]] if all(s in by_seed[e] for e in errors)]
+    delayed, scaled = normalised(task_list, results)
+    stats = condition_means(pivot(delayed, scaled, by=("error",)))
+    by_seed = pivot(delayed, scaled, by=("error",), value="average")
+    errors = sorted(by_seed)
+    means = np.array([stats[e][0] for e in errors])
+    cis = np.array([stats[e][1] for e in errors])
+    seeds = common_seeds(*(by_seed[e] for e in errors))
     table = np.array([[by_seed[e][s] for e in errors] for s in seeds])  # (seeds, errors)
     best = [float(errors[int(np.argmax(row))]) for row in table]
     peaks = table.max(axis=1)  # a seed whose peak is not positive has no "half of it": NaN
@@ -63,7 +65,7 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
         band_claim(
             "normalised reward at i = 0",
             "≈ 0.6 (peak of Fig. 5.6)",
-            stats["i=0"],
+            stats[0],
             THESIS_PEAK,
             PEAK_TOLERANCE,
         ),
@@ -95,10 +97,11 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
             "(Fig. 5.6)\nthesis: a Poisson-like peak at i = 0, far lower at both ends",
             "estimate error i = λ̂ − λ",
             "normalised average reward (Eq. 5.3)",
-            n=min(stats[f"i={e}"][2] for e in errors),
+            n=min(stats[e][2] for e in errors),
             thesis=[(0, THESIS_PEAK, f"thesis: peak ≈ {THESIS_PEAK} at i = 0 (Fig. 5.6)")],
         )
     }
+    curves = normalised_curves(delayed, scaled)
     return Summary(claims, curves, figures, {"errors": errors, "normalised_means": means})
 
 

@@ -30,7 +30,7 @@ Metrics come from the undelayed streams of ``training_log`` (``learn(..., record
 from __future__ import annotations
 
 from delayed_rl.experiments.framework import plotting
-from delayed_rl.experiments.framework.claims import band_claim, direction_claim, mean_ci_n
+from delayed_rl.experiments.framework.claims import band_claim, direction_claim, mean_ci_n, paired
 from delayed_rl.experiments.framework.experiment import (
     Config,
     Curve,
@@ -56,6 +56,7 @@ from delayed_rl.experiments.framework.line_following import (
     logged_run,
     training_cost,
 )
+from delayed_rl.experiments.framework.results import pivot
 from delayed_rl.experiments.framework.training import ALPHA, EPSILON, GAMMA
 
 #: The learners compared.
@@ -98,19 +99,18 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
     ± :data:`~.line_claims.REWARD_TOLERANCE`, or ± :data:`~.line_claims.RATIO_TOLERANCE` for the
     ratio); MMQ − Q twice: against the band of +0.43, and for its sign alone (MMQ above Q).
     """
-    runs: dict[str, list[dict]] = {agent: [] for agent in LEARNERS}
+    by_agent = pivot(task_list, results, by=("agent",))
+    runs = {agent: by_agent[agent] for agent in LEARNERS}
     curves = []
     for task, result in zip(task_list, results, strict=True):
-        runs[task["agent"]].append(result)
-        steps = result["steps"]
-        curves.append(Curve(task["agent"], task["seed"], steps, result["curve"]))
-        curves.append(
-            Curve(task["agent"], task["seed"], steps, result["error"], "accumulated_error")
-        )
-    stat = {agent: mean_ci_n([r["average"] for r in rs]) for agent, rs in runs.items()}
-    pairs = list(zip(runs["MMQ"], runs["Q"], strict=True))
-    ratio = mean_ci_n([m["total_error"] / q["total_error"] for m, q in pairs])
-    gap = mean_ci_n([m["average"] - q["average"] for m, q in pairs])
+        agent, seed, steps = task["agent"], task["seed"], result["steps"]
+        curves.append(Curve(agent, seed, steps, result["curve"]))
+        curves.append(Curve(agent, seed, steps, result["error"], "accumulated_error"))
+    stat = {agent: mean_ci_n([r["average"] for r in rs.values()]) for agent, rs in runs.items()}
+    errors = pivot(task_list, results, by=("agent",), value="total_error")
+    averages = pivot(task_list, results, by=("agent",), value="average")
+    ratio = mean_ci_n(paired(errors["MMQ"], errors["Q"], "ratio"))
+    gap = mean_ci_n(paired(averages["MMQ"], averages["Q"]))
     claims = [
         *reward_claims(stat),
         band_claim(
@@ -144,14 +144,14 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
     return Summary(claims, curves, _figures(runs, config.seeds), extra)
 
 
-def _figures(runs: dict[str, list[dict]], seeds: int) -> dict:
+def _figures(runs: dict[str, dict[int, dict]], seeds: int) -> dict:
     """Figs. 5.20–5.23: reward and accumulated error, of the first seed and of every seed.
 
     Every panel carries the thesis's 5-run values (Figs. 5.22–5.23): the average rewards as
     dashed levels, the error ratio as a dashed curve, ``THESIS_ERROR_RATIO`` × Q's error.
     """
-    rewards = {a: [(r["steps"], r["curve"]) for r in rs] for a, rs in runs.items()}
-    errors = {a: [(r["steps"], r["error"]) for r in rs] for a, rs in runs.items()}
+    rewards = {a: [(r["steps"], r["curve"]) for r in rs.values()] for a, rs in runs.items()}
+    errors = {a: [(r["steps"], r["error"]) for r in rs.values()] for a, rs in runs.items()}
     first_rewards = {a: rs[:1] for a, rs in rewards.items()}
     first_errors = {a: rs[:1] for a, rs in errors.items()}
     title = f"line following, Poisson delays of mean λ = {LAM}, MMQ with λ̂max = {LAMBDA_MAX}"

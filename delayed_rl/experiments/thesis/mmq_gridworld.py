@@ -52,6 +52,7 @@ from delayed_rl.experiments.framework.experiment import (
     Summary,
     running_average,
 )
+from delayed_rl.experiments.framework.results import pivot
 from delayed_rl.experiments.framework.snapshot_runs import (
     LOOP_FRACTION,
     SNAPSHOTS,
@@ -189,13 +190,14 @@ _PER_SEED = "per seed, the share of its snapshots after half the steps"
 
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
     """Fig. 5.9's and Table 5.1's claims (see the module docstring), curves and figures."""
-    by_agent: dict[str, list[dict]] = {}
-    by_seed: dict[str, dict[int, dict]] = {}
+    by_agent = {
+        agent: list(runs.values())
+        for agent, runs in pivot(task_list, results, by=("agent",)).items()
+    }
+    training = pivot(task_list, results, by=("agent",), value="average")
     curves = []
     for task, result in zip(task_list, results, strict=True):
         agent, seed = task["agent"], task["seed"]
-        by_agent.setdefault(agent, []).append(result)
-        by_seed.setdefault(agent, {})[seed] = result
         curves.append(Curve(agent, seed, result["steps"], result["curve"]))
         curves.append(
             Curve(
@@ -212,7 +214,6 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
         for agent, runs in by_agent.items()
     }
     optimal_seeds = {a: sum(r["optimal"] for r in runs) for a, runs in by_agent.items()}
-    training = {a: {s: r["average"] for s, r in runs.items()} for a, runs in by_seed.items()}
     claims = [
         *_greedy_claims(stat, optimal_seeds, {a: len(runs) for a, runs in by_agent.items()}),
         *_training_claims(stat, training),

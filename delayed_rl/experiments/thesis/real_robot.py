@@ -94,6 +94,7 @@ from delayed_rl.experiments.framework.line_following import (
     pooled_training,
     training_cost,
 )
+from delayed_rl.experiments.framework.results import pivot
 
 #: The learners compared.
 LEARNERS = ("MMQ", "Q", "DeconvQ learned")
@@ -162,17 +163,17 @@ def cost(task: dict) -> float:
 
 
 def _by_seed(runs: dict, agent: str, condition: str, key: str) -> dict[int, float]:
-    """``{seed: result[condition][key]}`` of one agent's runs."""
+    """``{seed: result[condition][key]}`` of one agent's runs (``runs``: a pivot by agent)."""
     return {seed: result[condition][key] for seed, result in runs[agent].items()}
 
 
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
     """The claims of the module docstring, statistics in ``extra``, and the figures."""
-    runs: dict[str, dict[int, dict]] = {agent: {} for agent in LEARNERS}
+    by_agent = pivot(task_list, results, by=("agent",))
+    runs = {agent: by_agent.get(agent, {}) for agent in LEARNERS}
     curves = []
     for task, result in zip(task_list, results, strict=True):
         agent, seed = task["agent"], task["seed"]
-        runs[agent][seed] = result
         for condition in CONDITIONS:
             r = result[condition]
             name = f"{agent} {condition}"

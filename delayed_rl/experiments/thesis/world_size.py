@@ -12,12 +12,14 @@ from delayed_rl.experiments.framework.claims import (
 )
 from delayed_rl.experiments.framework.experiment import Config, Experiment, Summary
 from delayed_rl.experiments.framework.normalised_runs import (
-    curves_and_means,
+    condition_means,
     grid_task,
     grid_tasks,
     learning_curve_groups,
     normalised,
+    normalised_curves,
 )
+from delayed_rl.experiments.framework.results import pivot
 
 SIZES = (3, 5, 9)
 LAMS = (5, 50, 150)
@@ -54,19 +56,17 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
     [0, 1] ("above 0, below 1": a delayed learner earns something, less than undelayed); the
     last row per λ is the 9×9 minus 3×3 normalised reward, paired by seed (below 0).
     """
-    per_condition = normalised(task_list, results)
-    curves, stats = curves_and_means(per_condition)
-    groups = learning_curve_groups(per_condition)
-    lams = sorted({t["lam"] for t in task_list if not t.get("reference")})
+    delayed, scaled = normalised(task_list, results)
+    by_world = pivot(delayed, scaled, by=("size", "lam"))
+    by_seed = pivot(delayed, scaled, by=("size", "lam"), value="average")
+    stats = condition_means(by_world)
+    groups = learning_curve_groups(by_world)
+    lams = sorted({lam for _, lam in by_world})
     claims, figures = [], {}
     for lam in lams:
-        by_seed = {
-            size: {seed: avg for seed, *_, avg in per_condition[f"{size}x{size} lambda={lam}"]}
-            for size in SIZES
-        }
         for size in SIZES:
             quantity = f"normalised reward {size}×{size}, λ = {lam}"
-            size_stats = stats[f"{size}x{size} lambda={lam}"]
+            size_stats = stats[(size, lam)]
             if size == 9:
                 claims.append(
                     band_claim(quantity, "≈ 0 % (Figs. 5.3–5.5)", size_stats, THESIS_9X9, NEAR_ZERO)
@@ -77,20 +77,20 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
             direction_claim(
                 f"9×9 minus 3×3 normalised reward at λ = {lam} (paired by seed)",
                 "< 0: larger world, lower reward",
-                mean_ci_n(paired(by_seed[9], by_seed[3])),
+                mean_ci_n(paired(by_seed[(9, lam)], by_seed[(3, lam)])),
                 "below",
             )
         )
         figures[f"fig5_3to5_world_size_lambda{lam}"] = plotting.figure(
             plotting.learning_curves,
-            {f"{s}×{s}": groups[f"{s}x{s} lambda={lam}"] for s in SIZES},
+            {f"{s}×{s}": groups[(s, lam)] for s in SIZES},
             f"Q-learning in three world sizes, Poisson delays of mean λ = {lam} (Figs. 5.3–5.5)\n"
             "thesis: 3×3 and 5×5 above 0 and below 1; 9×9 ≈ 0 %",
             "normalised average reward (Eq. 5.3)",
             thesis=[(THESIS_9X9, "thesis 9×9 ≈ 0 % (Figs. 5.3–5.5)", "9×9")],
             settle=SETTLE,
         )
-    return Summary(claims, curves, figures)
+    return Summary(claims, normalised_curves(delayed, scaled), figures)
 
 
 #: The first fifth of training does not set the figures' y-range: the 9×9 curves divide by an

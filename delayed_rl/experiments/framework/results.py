@@ -1,0 +1,99 @@
+"""The experiments' results by condition and seed: one pivot for every ``summarize``.
+
+An experiment's ``summarize`` gets its tasks and their results as two parallel lists.
+:func:`pivot` turns them into ``{condition: {seed: value}}``, the condition being any of the
+tasks' fields (``by=("agent",)``, ``by=("setting", "method")``...), the value the whole result,
+one of its entries or any function of it; :func:`common_seeds` gives the seeds that several such
+groups share, the ones a paired comparison reads. Both keep the order of the tasks, so the
+statistics (and the tables, curves and figures drawn from them) come out in the order the tasks
+were made.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+__all__ = ["common_seeds", "pivot"]
+
+
+def pivot(
+    tasks: Sequence[Mapping[str, Any]],
+    results: Sequence[Any],
+    by: Sequence[str] = ("method",),
+    value: str | Callable[[Any], Any] | None = None,
+    where: Callable[[Mapping[str, Any]], bool] | None = None,
+    nested: bool = False,
+) -> dict[Any, Any]:
+    """The results by the tasks' fields ``by``, then by seed: ``{key: {seed: value}}``.
+
+    Keys and seeds are in the order the tasks first name them.
+
+    Args:
+        tasks: the experiment's tasks, each with a ``seed`` and the fields of ``by``.
+        results: one result per task, in the same order.
+        by: the fields that tell the groups apart. With one field a group's key is that field's
+            value (``{"MMQ": {0: ..., 1: ...}}``), with several the tuple of their values.
+        value: what to keep of a result: all of it (``None``), its entry of that name (a
+            string), or what a function makes of it.
+        where: keep only the tasks (and their results) for which it is true (``None``: all).
+        nested: with several fields, one level of dicts per field instead of tuple keys:
+            ``{setting: {method: {seed: value}}}``.
+
+    Returns:
+        ``{key: {seed: value}}`` (``nested``: ``{key1: {key2: ... {seed: value}}}``).
+
+    Raises:
+        ValueError: ``tasks`` and ``results`` differ in length, ``by`` names no field, or two
+            of the kept tasks have the same key and seed.
+
+    >>> tasks = [{"agent": "Q", "seed": 0}, {"agent": "MMQ", "seed": 0}, {"agent": "Q", "seed": 1}]
+    >>> pivot(tasks, [{"r": 1}, {"r": 2}, {"r": 3}], by=("agent",), value="r")
+    {'Q': {0: 1, 1: 3}, 'MMQ': {0: 2}}
+    """
+    if isinstance(by, str) or not by:
+        raise ValueError(f"by must name one field or more (a tuple of names), got {by!r}")
+    if len(tasks) != len(results):
+        raise ValueError(f"{len(tasks)} tasks but {len(results)} results")
+    pick: Callable[[Any], Any]
+    if value is None:
+        pick = _whole
+    elif isinstance(value, str):
+        name = value
+
+        def pick(result: Any) -> Any:
+            return result[name]
+    else:
+        pick = value
+    out: dict[Any, Any] = {}
+    for task, result in zip(tasks, results, strict=True):
+        if where is not None and not where(task):
+            continue
+        keys = [task[field] for field in by]
+        if nested:
+            group = out
+            for key in keys:
+                group = group.setdefault(key, {})
+        else:
+            group = out.setdefault(keys[0] if len(keys) == 1 else tuple(keys), {})
+        seed = task["seed"]
+        if seed in group:
+            raise ValueError(f"two tasks with {dict(zip(by, keys, strict=True))} and seed {seed}")
+        group[seed] = pick(result)
+    return out
+
+
+def _whole(result: Any) -> Any:
+    return result
+
+
+def common_seeds(*groups: Mapping[int, Any]) -> list[int]:
+    """The seeds present in every one of ``groups`` (``{seed: value}`` each), in the first's order.
+
+    >>> common_seeds({0: "a", 1: "b", 2: "c"}, {2: "x", 1: "y"})
+    [1, 2]
+    """
+    if not groups:
+        return []
+    first, *rest = groups
+    return [seed for seed in first if all(seed in group for group in rest)]
