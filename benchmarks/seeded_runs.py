@@ -35,7 +35,7 @@ import cpu_probe  # noqa: E402  (tests/cpu_probe.py: the Digest and the CPU prob
 
 import delayed_rl  # noqa: E402, F401  (registers the envs)
 from delayed_rl import agents  # noqa: E402
-from delayed_rl.delays import Geometric, Poisson  # noqa: E402
+from delayed_rl.delays import Delay, Geometric, Poisson  # noqa: E402
 from delayed_rl.wrappers import PoissonRewardDelay, RewardDelay  # noqa: E402
 
 RESULTS = Path(__file__).with_suffix(".json")
@@ -70,25 +70,21 @@ AGENTS: list[tuple[str, str, dict]] = [
     ("deconv-learned", "DeconvolutionQLearning", {"max_delay_estimate": 20}),
 ]
 
+
+def _delayed(env_id: str, delay: Delay, on_episode_end: str) -> Callable[[str, bool], gym.Env]:
+    """A maker of ``env_id`` behind a ``RewardDelay`` of ``delay`` (clipped at 20 steps)."""
+    return lambda mode, rec: RewardDelay(
+        gym.make(env_id), delay, max_delay=20, on_episode_end=on_episode_end, record_arrivals=rec
+    )
+
+
 #: The envs: (name, maker, whether the oracle's arrivals are recorded by the maker).
 ENVS: dict[str, Callable[[str, bool], gym.Env]] = {
     "grid5-flush": lambda mode, rec: PoissonRewardDelay(
         gym.make("delayed_rl/GridWorld-5x5-v0"), lam=3.0, max_delay=20, record_arrivals=rec
     ),
-    "frozenlake-carry": lambda mode, rec: RewardDelay(
-        gym.make("FrozenLake-v1"),
-        Geometric(0.4),
-        max_delay=20,
-        on_episode_end="carry",
-        record_arrivals=rec,
-    ),
-    "taxi-drop": lambda mode, rec: RewardDelay(
-        gym.make("Taxi-v4"),
-        Poisson(2.0),
-        max_delay=20,
-        on_episode_end="drop",
-        record_arrivals=rec,
-    ),
+    "frozenlake-carry": _delayed("FrozenLake-v1", Geometric(0.4), "carry"),
+    "taxi-drop": _delayed("Taxi-v4", Poisson(2.0), "drop"),
 }
 
 
