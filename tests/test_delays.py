@@ -224,12 +224,12 @@ def test_valid_argument_types_are_normalised() -> None:
     assert Empirical(np.array([1, 0])).probs.tolist() == [1.0, 0.0]
 
 
-# --- the delays the reward wrapper actually applies (the info["reward_delay"] stream) ---------
+# --- the delays the reward wrapper actually applies (the info["drawn_reward_delay"] stream) ---------
 
 
 def delay_stream(env: gym.Env, n: int, seed: int) -> np.ndarray:
     env.reset(seed=seed)
-    return np.array([env.step(0)[4]["reward_delay"] for _ in range(n)])
+    return np.array([env.step(0)[4]["drawn_reward_delay"] for _ in range(n)])
 
 
 @pytest.mark.parametrize("lam", LAMS)

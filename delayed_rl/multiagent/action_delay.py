@@ -54,7 +54,7 @@ class ParallelActionDelay(ParallelDelayWrapper):
     and where it leaves, as :class:`~delayed_rl.wrappers.ActionDelay` does. ``info[agent]``
     holds :class:`~delayed_rl.wrappers.ActionDelay`'s entries for every agent that sent an
     action: ``executed_action`` (a copy of the action the env executed), ``executed_action_step``
-    (the agent's step that sent it, ``-1`` for its initial action) and ``action_delay``
+    (the agent's step that sent it, ``-1`` for its initial action) and ``drawn_action_delay``
     (``d_t``). The ``infos`` returned are new dicts (the env's own are not modified).
 
     ``reset(seed=s)`` seeds agent ``i`` (its position in ``possible_agents``) with
@@ -149,7 +149,7 @@ class ParallelActionDelay(ParallelDelayWrapper):
             info = infos.setdefault(agent, {})
             info["executed_action"] = copy_sample(action)
             info["executed_action_step"] = self.lines[agent].executed_step
-            info["action_delay"] = delay
+            info["drawn_action_delay"] = delay
         for agent in {**terminated, **truncated}:
             if (terminated.get(agent) or truncated.get(agent)) and agent in self.lines:
                 line = self.lines[agent]

@@ -32,7 +32,7 @@ class ParallelObservationDelay(ParallelDelayWrapper):
     the observation of its last step is delayed like the others) and at ``reset()``.
 
     ``info[agent]`` holds :class:`~delayed_rl.wrappers.ObservationDelay`'s entries:
-    ``observation_delay`` (the age of the observation shown, 0 for an ``o_0``) and
+    ``observation_age`` (the age of the observation shown, 0 for an ``o_0``) and
     ``arrived_observations`` (the ``(i, o_i)`` received at this step). The ``infos`` returned are
     new dicts (the env's own are not modified).
 
@@ -71,7 +71,7 @@ class ParallelObservationDelay(ParallelDelayWrapper):
         >>> env = ParallelObservationDelay(parallel_env(), Constant(1))
         >>> _ = env.reset(seed=0)
         >>> obs, _, _, _, infos = env.step({"player_0": 1, "player_1": 0})
-        >>> int(obs["player_0"]), infos["player_0"]["observation_delay"]  # still o_0 (none)
+        >>> int(obs["player_0"]), infos["player_0"]["observation_age"]  # still o_0 (none)
         (3, 1)
         >>> int(env.step({"player_0": 2, "player_1": 2})[0]["player_0"])  # o_1: rock
         0
@@ -100,7 +100,7 @@ class ParallelObservationDelay(ParallelDelayWrapper):
         """Reset the env and every agent's rule; ``seed`` also reseeds every agent's delays.
 
         Each agent's first observation is returned undelayed (a copy), with
-        ``info[agent]["observation_delay"] = 0`` and
+        ``info[agent]["observation_age"] = 0`` and
         ``info[agent]["arrived_observations"] = ((0, o_0),)``.
 
         Raises:
@@ -131,7 +131,7 @@ class ParallelObservationDelay(ParallelDelayWrapper):
                 copy_sample(made), self._samplers[agent]()
             )
             info = infos.setdefault(agent, {})
-            info["observation_delay"] = age
+            info["observation_age"] = age
             info["arrived_observations"] = tuple((i, copy_sample(o)) for i, o in arrived)
             shown[agent] = copy_sample(seen)
         for ends in (terminated, truncated):
@@ -147,6 +147,6 @@ class ParallelObservationDelay(ParallelDelayWrapper):
         self.rules[agent].reset(first)
         self._live.add(agent)
         info = infos.setdefault(agent, {})
-        info["observation_delay"] = 0
+        info["observation_age"] = 0
         info["arrived_observations"] = ((0, copy_sample(first)),)
         return copy_sample(first)

@@ -49,7 +49,7 @@ class ParallelRewardDelay(ParallelDelayWrapper):
     agent's last step is not delayed), over all agents together, and warns at most once.
 
     ``info[agent]`` on every step that names the agent: ``undelayed_reward`` (``r_t``),
-    ``reward_delay`` (``d_t``), ``pending_reward`` (what it has emitted and not received), and
+    ``drawn_reward_delay`` (``d_t``), ``pending_reward`` (what it has emitted and not received), and
     at its last step ``flushed_reward`` or ``dropped_reward``. The ``infos`` returned are new
     dicts (the env's own are not modified); rewards are returned as Python floats.
 
@@ -187,7 +187,7 @@ class ParallelRewardDelay(ParallelDelayWrapper):
             delivered_rewards[agent] = float(delivered[i])
             info = infos.setdefault(agent, {})
             info["undelayed_reward"] = float(emitted[i])
-            info["reward_delay"] = int(delays[i])
+            info["drawn_reward_delay"] = int(delays[i])
             info["pending_reward"] = float(pending[i])
             if key is not None and ended[i]:
                 info[key] = float(settled[i])

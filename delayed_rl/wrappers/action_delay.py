@@ -155,7 +155,7 @@ class ActionDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
     or an inner env that edits its action in place, changes neither the actions in transit nor
     ``initial_action``. ``info`` is the inner env's plus
     ``info["executed_action"]`` (the action the env executed), ``info["executed_action_step"]``
-    (the episode step that sent it, ``-1`` for ``initial_action``) and ``info["action_delay"]``
+    (the episode step that sent it, ``-1`` for ``initial_action``) and ``info["drawn_action_delay"]``
     (``d_t``, the transit time drawn for this step's action). Seeded by ``reset(seed=...)`` from
     an independent delay stream, as :class:`~delayed_rl.wrappers.RewardDelay`.
 
@@ -225,5 +225,5 @@ class ActionDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
         obs, reward, terminated, truncated, info = self.env.step(copy_sample(executed))
         info["executed_action"] = copy_sample(executed)
         info["executed_action_step"] = self.line.executed_step
-        info["action_delay"] = delay
+        info["drawn_action_delay"] = delay
         return obs, reward, terminated, truncated, info

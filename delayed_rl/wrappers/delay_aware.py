@@ -225,7 +225,7 @@ class ViewState:
         Args:
             sent: the action sent at this step, in the action space's form.
             obs: the observation the stack returned.
-            shown_age: its ``info["observation_delay"]`` (0 without an observation delay).
+            shown_age: its ``info["observation_age"]`` (0 without an observation delay).
             arrived: the stack's ``info["arrived_observations"]``; ``None`` without an
                 observation delay.
 
@@ -261,13 +261,13 @@ class DelayAwareObservation(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstruc
     ``env`` is a stack holding an :class:`~delayed_rl.wrappers.ObservationDelay`, an
     :class:`~delayed_rl.wrappers.ActionDelay`, both or neither (found by walking ``.env`` down the
     wrappers; at most one of each). The view is built only from what the stack reports to the
-    agent: the observations it returns with their ``info["observation_delay"]``, and the actions
+    agent: the observations it returns with their ``info["observation_age"]``, and the actions
     given to this wrapper's ``step``; never from the undelayed state. Observations are numbered
     from the reset observation ``o_0``; step ``t`` (counted from 0) makes ``o_{t+1}``. The
     observation is a ``Dict``:
 
     - ``"observation"``: the newest observation received so far, by the step it was made at: the
-      one returned at step ``t`` was made at ``i = t + 1 − info["observation_delay"]``, and it
+      one returned at step ``t`` was made at ``i = t + 1 − info["observation_age"]``, and it
       replaces the view's only if ``i`` is larger (under the ``"stale"`` rule an older one can be
       shown after a newer one; it changes nothing). Without an ``ObservationDelay``, ``o_{t+1}``.
       Its space is ``env``'s observation space.
@@ -396,7 +396,7 @@ class DelayAwareObservation(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstruc
         """
         if self._observation_delay is None:
             return 0, None
-        return info["observation_delay"], info["arrived_observations"]
+        return info["observation_age"], info["arrived_observations"]
 
 
 class DiscreteDelayAwareObservation(JsonSpecMixin, DiscreteObservation):

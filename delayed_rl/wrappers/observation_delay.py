@@ -166,7 +166,7 @@ class ObservationDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorAr
 
     Rewards, termination and ``info`` are the inner env's, plus:
 
-    - ``info["observation_delay"]``: the age of the observation returned, the steps since it was
+    - ``info["observation_age"]``: the age of the observation returned, the steps since it was
       made (``t + 1 − i`` for ``o_i``; under ``"stale"``, ``d_t`` clipped to the episode's start
       and to the history kept), 0 at ``reset()``;
     - ``info["arrived_observations"]``: a tuple of the ``(i, o_i)`` received at this step, in the
@@ -177,7 +177,7 @@ class ObservationDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorAr
     Under ``"stale"`` the wrapper keeps the last ``history`` observations: ``max_delay + 1`` when
     ``max_delay`` is set, otherwise enough for all but a negligible tail of the distribution
     (mean + 10·√mean + 20 steps for an unbounded one). A delay reaching further back than that is
-    applied as the oldest observation kept, and ``info["observation_delay"]`` says so; the history
+    applied as the oldest observation kept, and ``info["observation_age"]`` says so; the history
     is a ``deque`` holding only the observations made, so a long delay bound costs no memory until
     the steps are taken. Under ``"network"`` the wrapper keeps only the observations in transit
     and the newest arrived, and no delay is clipped but by ``max_delay``. Seeded by
@@ -233,13 +233,13 @@ class ObservationDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorAr
         """Reset the env and the observations kept; ``seed`` also reseeds the delay generator.
 
         The reset observation is returned undelayed (a copy, if it is an array), with
-        ``info["observation_delay"] = 0`` and ``info["arrived_observations"] = ((0, o_0),)``.
+        ``info["observation_age"] = 0`` and ``info["arrived_observations"] = ((0, o_0),)``.
         """
         obs, info = self.env.reset(seed=seed, options=options)
         if seed is not None:
             self._sampler.seed(seed)
         self._rule.reset(obs)
-        info["observation_delay"] = 0
+        info["observation_age"] = 0
         info["arrived_observations"] = ((0, copy_sample(obs)),)
         return copy_sample(obs), info
 
@@ -247,6 +247,6 @@ class ObservationDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorAr
         """Step the env; return an older observation (see the class docstring) with its reward."""
         obs, reward, terminated, truncated, info = self.env.step(action)
         age, shown, arrived = self._rule.receive(obs, self._sampler())
-        info["observation_delay"] = age
+        info["observation_age"] = age
         info["arrived_observations"] = tuple((i, copy_sample(o)) for i, o in arrived)
         return copy_sample(shown), reward, terminated, truncated, info

@@ -239,7 +239,7 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
     (:class:`FlushWatch`). A ``reset()`` in the middle of an episode (an outer ``TimeLimit``)
     discards what is pending, with a warning, except under ``"carry"``.
 
-    ``info`` on every step: ``undelayed_reward`` (``r_t``), ``reward_delay`` (``d_t``),
+    ``info`` on every step: ``undelayed_reward`` (``r_t``), ``drawn_reward_delay`` (``d_t``),
     ``pending_reward`` (emitted, not yet delivered), and with ``record_arrivals=True``
     ``reward_arrivals``, the ``(emission_step, value)`` pairs delivered now (negative steps:
     carried from an earlier episode).
@@ -392,7 +392,7 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
             if self._watch is not None:
                 self._watch_see(False, (reward,))
         info["undelayed_reward"] = reward
-        info["reward_delay"] = delay
+        info["drawn_reward_delay"] = delay
         info["pending_reward"] = self._pending
         if self.record_arrivals:
             info["reward_arrivals"] = self._arrivals_now(

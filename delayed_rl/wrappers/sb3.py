@@ -23,7 +23,7 @@ class VecRewardDelay(VecEnvWrapper):
 
     SB3 vector envs reset a sub-env in the step that ends its episode (``dones[i]`` is True and the
     returned observation is already the next episode's); pending rewards follow ``on_episode_end``
-    at that step. Each ``infos[i]`` gets ``undelayed_reward``, ``reward_delay``,
+    at that step. Each ``infos[i]`` gets ``undelayed_reward``, ``drawn_reward_delay``,
     ``pending_reward``, and at an episode end ``flushed_reward`` or ``dropped_reward``.
 
     Nothing is lost silently. SB3's ``reset()`` returns only observations and keeps the reset
@@ -155,7 +155,7 @@ class VecRewardDelay(VecEnvWrapper):
         key = "flushed_reward" if self.on_episode_end == "flush" else "dropped_reward"
         for i, info in enumerate(infos):
             info["undelayed_reward"] = float(rewards[i])
-            info["reward_delay"] = int(delays[i])
+            info["drawn_reward_delay"] = int(delays[i])
             info["pending_reward"] = float(pending[i])
             if amounts is not None and ended[i]:
                 info[key] = float(amounts[i])

@@ -125,7 +125,7 @@ class _StripOracleKeys(gym.Wrapper):
 
     def step(self, action):
         obs, reward, terminated, truncated, info = self.env.step(action)
-        for key in ("undelayed_reward", "reward_delay", "reward_arrivals", "pending_reward"):
+        for key in ("undelayed_reward", "drawn_reward_delay", "reward_arrivals", "pending_reward"):
             info.pop(key, None)
         return obs, reward, terminated, truncated, info
 

@@ -23,7 +23,7 @@ pytestmark = [pytest.mark.sb3, pytest.mark.usefixtures("torch_on_one_thread")]
 
 DIAGNOSTIC_KEYS = (
     "undelayed_reward",
-    "reward_delay",
+    "drawn_reward_delay",
     "pending_reward",
     "flushed_reward",
     "dropped_reward",

@@ -514,7 +514,7 @@ def test_add_reads_nothing_but_the_undelayed_reward_from_infos():
         return [
             {
                 "undelayed_reward": float(step),
-                "reward_delay": step,
+                "drawn_reward_delay": step,
                 "pending_reward": 9.0,
                 "reward_arrivals": [(step, 1.0)],
                 "flushed_reward": -3.0,

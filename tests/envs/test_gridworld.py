@@ -134,7 +134,7 @@ def test_pickle_round_trip_mid_episode() -> None:
     b = [clone.step(x) for x in actions]
     assert a == b
     assert a[-1][3] is True  # reached the truncation with the rest flushed
-    assert sum(x[4]["reward_delay"] for x in a) > 0
+    assert sum(x[4]["drawn_reward_delay"] for x in a) > 0
 
 
 def test_render_ansi() -> None:

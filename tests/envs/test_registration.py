@@ -64,7 +64,7 @@ def test_make_with_reward_delay_wraps(env_id: str, lam: float) -> None:
     _, info = env.reset(seed=0)
     assert info["pending_reward"] == 0.0
     *_, info = env.step(env.action_space.sample())
-    assert {"undelayed_reward", "reward_delay", "pending_reward"} <= set(info)
+    assert {"undelayed_reward", "drawn_reward_delay", "pending_reward"} <= set(info)
 
 
 def test_make_with_a_delay_distribution() -> None:
@@ -75,7 +75,7 @@ def test_make_with_a_delay_distribution() -> None:
 
 def reward_row(obs, reward, terminated, truncated, info):
     """What a reward-delayed step shows."""
-    return reward, info["reward_delay"], info["undelayed_reward"], terminated, truncated
+    return reward, info["drawn_reward_delay"], info["undelayed_reward"], terminated, truncated
 
 
 def trajectory(env: gym.Env, seed: int, n: int = 300, row=reward_row):
@@ -171,14 +171,19 @@ def test_every_id_takes_the_three_delays_in_the_documented_order(env_id: str) ->
     ).delay == Constant(1)
     env.reset(seed=0)
     *_, info = env.step(env.action_space.sample())
-    assert {"executed_action", "action_delay", "observation_delay", "reward_delay"} <= set(info)
+    assert {
+        "executed_action",
+        "drawn_action_delay",
+        "observation_age",
+        "drawn_reward_delay",
+    } <= set(info)
     only_actions = gym.make(env_id, action_delay=Geometric(0.5), **kwargs)
     assert layers(only_actions) == ["ActionDelay"]
 
 
 def action_row(obs, reward, terminated, truncated, info):
     """What a step under all three delays shows."""
-    return obs, reward, info["executed_action"], info["observation_delay"], truncated
+    return obs, reward, info["executed_action"], info["observation_age"], truncated
 
 
 @pytest.mark.parametrize("through_json", [False, True])

@@ -74,7 +74,7 @@ def test_every_agent_is_a_sub_env_and_a_seed_fixes_the_env_and_the_delays():
         delays = []
         for row in actions:  # two 40-step episodes: SuperSuit resets between them unseeded
             _, _, _, infos = venv.step(row)
-            delays.append([info.get("reward_delay") for info in infos])
+            delays.append([info.get("drawn_reward_delay") for info in infos])
         return first, delays
 
     first, delays = rollout(7)

@@ -87,7 +87,7 @@ def test_every_executed_action_is_a_single_agent_action_delays_step_by_step(seed
             for agent, action in actions.items():
                 ref_info = refs[agent].step(action)[-1]
                 _equal(given[agent], refs[agent].env.received[-1])
-                for key in ("executed_action", "executed_action_step", "action_delay"):
+                for key in ("executed_action", "executed_action_step", "drawn_action_delay"):
                     _equal(infos[agent][key], ref_info[key])
                 sent += 1
             for agent in infos:

@@ -37,7 +37,7 @@ def _replay(episodes):
 
 def _same(shown, info, expected, ref_info):
     np.testing.assert_array_equal(shown, expected)
-    assert info["observation_delay"] == ref_info["observation_delay"]
+    assert info["observation_age"] == ref_info["observation_age"]
     got, want = info["arrived_observations"], ref_info["arrived_observations"]
     assert [i for i, _ in got] == [i for i, _ in want]
     for (_, a), (_, b) in zip(got, want, strict=True):
@@ -95,7 +95,7 @@ def test_an_agent_that_joins_starts_with_its_own_first_observation_and_leaves_no
     for t in range(1, 14):
         obs, _, terminated, truncated, infos = env.step(dict.fromkeys(env.agents, 0))
         if t == JOINS["d"]:
-            assert infos["d"]["observation_delay"] == 0
+            assert infos["d"]["observation_age"] == 0
             assert obs["d"][0] == t  # made at the join step
             assert [i for i, _ in infos["d"]["arrived_observations"]] == [0]
         for agent in obs:
@@ -158,7 +158,7 @@ def test_the_delays_come_from_each_agents_own_seeded_stream():
         seen = {agent: [] for agent in long}
         for _ in range(100):
             for agent, info in env.step(dict.fromkeys(env.agents, 0))[-1].items():
-                seen[agent].append(info["observation_delay"])
+                seen[agent].append(info["observation_age"])
         return seen
 
     first, again, other = ages(3), ages(3), ages(4)

@@ -81,7 +81,7 @@ def test_the_same_seed_gives_the_same_run_and_another_seed_another(env_name):
     """A stronger seed test than PettingZoo's (which stops after one step): 12 steps."""
     first, again = _run(stack(make(env_name)), 4, 12), _run(stack(make(env_name)), 4, 12)
     assert len(first) > 5 and data_equivalence(first, again)
-    delays = [info.get("reward_delay") for *_, infos in first[1:] for info in infos.values()]
+    delays = [info.get("drawn_reward_delay") for *_, infos in first[1:] for info in infos.values()]
     assert len(set(delays)) > 1
     other = _run(stack(make(env_name)), 5, 12)
     assert not data_equivalence(first, other)
@@ -145,7 +145,10 @@ def test_supersuits_vector_conversion_accepts_the_wrappers():
             actions = np.array([vec.action_space.sample() for _ in range(vec.num_envs)])
             obs, rewards, terminated, truncated, infos = vec.step(actions)
             assert obs.shape == (6, 7, 7, 3) and rewards.shape == (6,)
-        assert any(key in infos[0] for key in ("reward_delay", "observation_delay", "action_delay"))
+        assert any(
+            key in infos[0]
+            for key in ("drawn_reward_delay", "observation_age", "drawn_action_delay")
+        )
         vec.close()
 
 

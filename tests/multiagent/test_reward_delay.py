@@ -30,7 +30,13 @@ ENDS = {
 JOINS = {"d": 3}
 #: "a" and "d" share a distribution (one buffer between them), the others have their own.
 DELAYS = {"a": Poisson(2.5), "b": Constant(3), "c": Uniform(0, 6), "d": Poisson(2.5)}
-KEYS = ("undelayed_reward", "reward_delay", "pending_reward", "flushed_reward", "dropped_reward")
+KEYS = (
+    "undelayed_reward",
+    "drawn_reward_delay",
+    "pending_reward",
+    "flushed_reward",
+    "dropped_reward",
+)
 SEED = 11
 
 
@@ -185,7 +191,7 @@ def test_each_agent_draws_from_its_own_distribution():
 
     def on_step(episode, obs, rewards, terminated, truncated, infos):
         for agent in rewards:
-            seen[agent].append(infos[agent]["reward_delay"])
+            seen[agent].append(infos[agent]["drawn_reward_delay"])
 
     run(env, [None, None], on_step=on_step)
     assert set(seen["a"]) == {0} and set(seen["b"]) == {2}
@@ -202,7 +208,7 @@ def _delays(env, seed, steps):
     for _ in range(steps):
         infos = env.step(dict.fromkeys(env.agents, 0))[-1]
         for agent, info in infos.items():
-            seen[agent].append(info["reward_delay"])
+            seen[agent].append(info["drawn_reward_delay"])
     return {agent: np.array(values) for agent, values in seen.items()}
 
 
@@ -240,7 +246,9 @@ def test_an_agents_stream_is_the_single_wrappers_for_its_seed_whatever_the_other
     seen = _delays(env, 21, 50)
     ref = RewardDelay(AgentReplay([(None, [(1.0, None, False, False)] * 50)]), Poisson(3))
     ref.reset(seed=agent_seed(21, 2))
-    np.testing.assert_array_equal(seen["c"], [ref.step(0)[-1]["reward_delay"] for _ in range(50)])
+    np.testing.assert_array_equal(
+        seen["c"], [ref.step(0)[-1]["drawn_reward_delay"] for _ in range(50)]
+    )
 
 
 def test_the_envs_own_randomness_is_unaffected():
@@ -359,5 +367,5 @@ def test_the_infos_are_new_dicts():
     )
     env.reset(seed=0)
     infos = env.step(dict.fromkeys(env.agents, 0))[-1]
-    assert [infos[a]["reward_delay"] for a in "abcd"] == [0, 1, 2, 3]
+    assert [infos[a]["drawn_reward_delay"] for a in "abcd"] == [0, 1, 2, 3]
     assert all(info == {"env": 1} for info in env.env.last_infos.values())

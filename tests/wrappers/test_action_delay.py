@@ -49,7 +49,7 @@ def test_a_constant_delay_is_the_classic_constant_delay_mdp(k):
     infos = [env.step(a)[-1] for a in sent]
     assert env.unwrapped.executed == [7] * k + sent[: len(sent) - k]
     assert [i["executed_action_step"] for i in infos] == [-1] * k + list(range(len(sent) - k))
-    assert {i["action_delay"] for i in infos} == {k}
+    assert {i["drawn_action_delay"] for i in infos} == {k}
     env.reset()  # a new episode: the initial action again until the first arrives
     env.step(40)
     assert env.unwrapped.executed[-1] == (40 if k == 0 else 7)
@@ -67,7 +67,7 @@ def test_random_delays_execute_the_latest_sent_action_that_has_arrived(delay):
     infos = [env.step(a)[-1] for a in actions]
     expected = reference(actions, delays, 3)
     assert env.unwrapped.executed == expected == [i["executed_action"] for i in infos]
-    assert [i["action_delay"] for i in infos] == delays
+    assert [i["drawn_action_delay"] for i in infos] == delays
     stale = sum(  # actions overtaken in transit by a later-sent one: never executed
         any(j > i and j + delays[j] <= i + delays[i] for j in range(i + 1, min(400, i + 12)))
         for i in range(390)
@@ -90,10 +90,10 @@ def test_seeded_resets_draw_the_same_delays_and_max_delay_clips():
     runs = []
     for _ in range(2):
         env.reset(seed=11)
-        runs.append([env.step(a % 50)[-1]["action_delay"] for a in range(100)])
+        runs.append([env.step(a % 50)[-1]["drawn_action_delay"] for a in range(100)])
     assert runs[0] == runs[1] and max(runs[0]) == 6
     env.reset(seed=12)
-    assert [env.step(a % 50)[-1]["action_delay"] for a in range(100)] != runs[0]
+    assert [env.step(a % 50)[-1]["drawn_action_delay"] for a in range(100)] != runs[0]
 
 
 def test_memory_follows_what_is_in_transit():

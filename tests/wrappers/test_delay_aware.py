@@ -234,7 +234,7 @@ def test_an_older_observation_received_later_does_not_replace_the_view() -> None
     made = {i: o for s in steps for i, o in s[-1]["received_observations"]}
     assert [s[0]["observation"] for s in steps] == [made[i] for i in (1, 1, 3, 3, 4)]
     assert [int(s[0]["age"]) for s in steps] == [0, 1, 0, 1, 1]
-    assert [s[-1]["observation_delay"] for s in steps] == [0, 2, 0, 3, 1]  # the stack's own
+    assert [s[-1]["observation_age"] for s in steps] == [0, 2, 0, 3, 1]  # the stack's own
 
 
 @pytest.mark.parametrize(
@@ -334,7 +334,7 @@ def test_without_an_observation_delay_every_observation_is_received_at_once() ->
     for t in range(1, 6):
         obs, *_, info = env.step(1)
         assert info["received_observations"] == ((t, obs["observation"]),)
-        assert obs["age"] == 0 and "observation_delay" not in info and info["t"] == t
+        assert obs["age"] == 0 and "observation_age" not in info and info["t"] == t
 
 
 @pytest.mark.parametrize("rule", ARRIVAL_RULES)
@@ -434,7 +434,7 @@ def test_gym_make_builds_the_view_inside_the_reward_delay() -> None:
     assert env.observation_space["actions"] == spaces.MultiDiscrete([4] * 3)
     obs, info = env.reset(seed=0)
     *_, info = env.step(0)
-    assert {"received_observations", "reward_delay", "executed_action"} <= set(info)
+    assert {"received_observations", "drawn_reward_delay", "executed_action"} <= set(info)
     unbounded = gym.make(
         "delayed_rl/Roulette-v0", action_delay=2.0, delay_aware=True, action_history=5
     )

@@ -52,12 +52,12 @@ def network_reference(delays: list[int], steps: int) -> list[tuple[tuple[int, ..
 
 
 def run(env: gym.Env, steps: int, seed: int | None = 0) -> list[tuple]:
-    """``(observation, info["observation_delay"], arrived indices)`` of each step after a reset."""
+    """``(observation, info["observation_age"], arrived indices)`` of each step after a reset."""
     env.reset(seed=seed)
     rows = []
     for _ in range(steps):
         obs, *_, info = env.step(0)
-        rows.append((obs, info["observation_delay"], [i for i, _ in info["arrived_observations"]]))
+        rows.append((obs, info["observation_age"], [i for i, _ in info["arrived_observations"]]))
     return rows
 
 
@@ -71,12 +71,12 @@ def test_every_observation_arrives_at_its_index_plus_its_delay(delay, max_delay)
         delays = np.minimum(delays, max_delay)
     env = ObservationDelay(Counter(), delay, max_delay=max_delay, arrival="network")
     obs, info = env.reset(seed=seed)
-    assert (obs, info["observation_delay"], info["arrived_observations"]) == (0, 0, ((0, 0),))
+    assert (obs, info["observation_age"], info["arrived_observations"]) == (0, 0, ((0, 0),))
     for t, (now, shown) in enumerate(network_reference(delays.tolist(), steps)):
         obs, *_, info = env.step(0)
         assert tuple(i for i, _ in info["arrived_observations"]) == now, t
         assert all(i == o for i, o in info["arrived_observations"])  # o_i is i
-        assert obs == shown and info["observation_delay"] == t + 1 - shown, t
+        assert obs == shown and info["observation_age"] == t + 1 - shown, t
     overtaken = sum(len(now) > 1 for now, _ in network_reference(delays.tolist(), steps))
     assert overtaken > 0  # several observations arrived at once, older ones among them
 
@@ -152,7 +152,7 @@ def test_observations_reported_are_copies(rule: str) -> None:
         for i, arrived in info["arrived_observations"]:
             assert arrived is not obs
             np.testing.assert_array_equal(arrived, kept.setdefault(i, arrived.copy()))
-        np.testing.assert_array_equal(obs, kept[t - info["observation_delay"]])
+        np.testing.assert_array_equal(obs, kept[t - info["observation_age"]])
         for _, arrived in info["arrived_observations"]:
             scribble(arrived)  # the caller writes into what info reports
         scribble(obs)  # and into the observation returned
@@ -182,7 +182,7 @@ def test_the_rule_round_trips_through_the_spec() -> None:
         env.reset(seed=2)
         env.action_space.seed(2)
         return [
-            (obs, info["observation_delay"], info["arrived_observations"])
+            (obs, info["observation_age"], info["arrived_observations"])
             for obs, *_, info in (env.step(env.action_space.sample()) for _ in range(100))
         ]
 
@@ -208,7 +208,9 @@ def test_a_stacks_observation_and_action_delays_are_independent():
     delay, steps = Uniform(0, 3), 1000
     env = ObservationDelay(ActionDelay(gym.make("Pendulum-v1"), delay), delay)
     env.reset(seed=1)
-    acted = [env.step(np.zeros(1, dtype=np.float32))[-1]["action_delay"] for _ in range(steps)]
+    acted = [
+        env.step(np.zeros(1, dtype=np.float32))[-1]["drawn_action_delay"] for _ in range(steps)
+    ]
     assert acted == delay.sample(delay_rng(1, "action"), steps).tolist()
     observed = delay.sample(delay_rng(1, "observation"), steps)
     # independent streams: their correlation is within 4 standard errors of 0

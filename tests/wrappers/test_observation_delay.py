@@ -42,12 +42,12 @@ def test_observation_is_the_delayed_one(lam: float) -> None:
     raw = Poisson(lam).sample(delay_rng(seed, "observation"), 1024)  # the wrapper's stream
     env = ObservationDelay(CounterEnv(episode_length=400), lam)
     obs, info = env.reset(seed=seed)
-    assert obs == 0 and info["observation_delay"] == 0
+    assert obs == 0 and info["observation_age"] == 0
     for t in range(400):
         obs, reward, terminated, truncated, info = env.step(0)
         d = int(raw[t])
         assert obs == max(0, t + 1 - d), t
-        assert info["observation_delay"] == min(d, t + 1)
+        assert info["observation_age"] == min(d, t + 1)
         assert reward == float(t + 1) and info["t"] == t + 1  # rewards and info untouched
         assert terminated == (t == 399) and truncated is False
     assert raw[:400].max() > 0  # the test exercised real delays
@@ -58,7 +58,7 @@ def test_constant_delay_and_clipping_to_first_observation() -> None:
     env.reset(seed=0)
     got = [env.step(0) for _ in range(8)]
     assert [g[0] for g in got] == [0, 0, 0, 1, 2, 3, 4, 5]
-    assert [g[4]["observation_delay"] for g in got] == [1, 2, 3, 3, 3, 3, 3, 3]
+    assert [g[4]["observation_age"] for g in got] == [1, 2, 3, 3, 3, 3, 3, 3]
 
 
 def test_new_episode_clips_to_its_own_first_observation() -> None:
@@ -67,7 +67,7 @@ def test_new_episode_clips_to_its_own_first_observation() -> None:
     for _ in range(10):
         env.step(0)
     obs, info = env.reset()
-    assert obs == EPISODE_STRIDE and info["observation_delay"] == 0  # reset obs never delayed
+    assert obs == EPISODE_STRIDE and info["observation_age"] == 0  # reset obs never delayed
     got = [env.step(0)[0] for _ in range(6)]
     assert got == [EPISODE_STRIDE] * 4 + [EPISODE_STRIDE + 1, EPISODE_STRIDE + 2]
 
@@ -90,8 +90,8 @@ def test_max_delay_clips_delays() -> None:
     env.reset(seed=1)
     for t in range(300):
         obs, *_, info = env.step(0)
-        assert info["observation_delay"] <= 2
-        assert obs == t + 1 - info["observation_delay"]
+        assert info["observation_age"] <= 2
+        assert obs == t + 1 - info["observation_age"]
 
 
 def test_delay_beyond_history_uses_oldest_kept_observation() -> None:
@@ -103,7 +103,7 @@ def test_delay_beyond_history_uses_oldest_kept_observation() -> None:
     for _ in range(200):
         env.step(0)
     obs, *_, info = env.step(0)  # step t = 200 sees o_201 undelayed
-    assert info["observation_delay"] == history - 1
+    assert info["observation_age"] == history - 1
     assert obs == 201 - (history - 1)
 
 
@@ -111,7 +111,7 @@ def test_seeded_determinism() -> None:
     def run(seed):
         env = ObservationDelay(CounterEnv(), 4)
         env.reset(seed=seed)
-        return [env.step(0)[4]["observation_delay"] for _ in range(200)]
+        return [env.step(0)[4]["observation_age"] for _ in range(200)]
 
     assert run(3) == run(3)
     assert run(3) != run(4)
@@ -131,7 +131,7 @@ def test_box_observations_match_an_undelayed_twin() -> None:
         raw_obs, raw_reward, *_ = twin.step(action)
         raw.append(raw_obs)
         assert reward == raw_reward
-        np.testing.assert_array_equal(obs, raw[t + 1 - info["observation_delay"]])
+        np.testing.assert_array_equal(obs, raw[t + 1 - info["observation_age"]])
 
 
 @pytest.mark.parametrize(

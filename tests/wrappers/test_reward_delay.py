@@ -114,7 +114,7 @@ def run_and_check(env: RewardDelay, inner_seed: int, n_steps: int, mode: str, re
         obs, reward, terminated, truncated, info = env.step(int(rng.integers(2)))
         assert isinstance(reward, float)
         ended = terminated or truncated
-        d = info["reward_delay"]
+        d = info["drawn_reward_delay"]
         assert isinstance(d, int) and d >= 0
         if bound is not None:
             assert d <= bound
@@ -209,7 +209,7 @@ def test_zero_delay_is_the_identity() -> None:
     env.reset(seed=3)
     for _ in range(500):
         _, reward, terminated, truncated, info = env.step(0)
-        assert reward == info["raw_reward"] and info["reward_delay"] == 0
+        assert reward == info["raw_reward"] and info["drawn_reward_delay"] == 0
         assert info["pending_reward"] == 0.0
         if terminated or truncated:
             env.reset()
@@ -245,7 +245,7 @@ def test_thesis_table_3_1_overlap_and_out_of_order() -> None:
         arrivals = expected_arrivals.get(round_, [])
         assert info["reward_arrivals"] == arrivals, round_
         assert reward == sum(r for _, r in arrivals), round_
-        assert info["reward_delay"] == (delays + [50] * 7)[round_ - 1]
+        assert info["drawn_reward_delay"] == (delays + [50] * 7)[round_ - 1]
         assert info["undelayed_reward"] == undelayed[round_ - 1]
         pending += undelayed[round_ - 1] - reward
         assert info["pending_reward"] == pytest.approx(pending)
@@ -402,7 +402,7 @@ def trajectory(env: gym.Env, seed: int, n: int = 400):
     out = []
     for _ in range(n):
         _, reward, terminated, truncated, info = env.step(env.action_space.sample())
-        out.append((reward, info["reward_delay"]))
+        out.append((reward, info["drawn_reward_delay"]))
         if terminated or truncated:
             env.reset()
     return out
@@ -435,7 +435,7 @@ def test_delays_do_not_depend_on_the_inner_env() -> None:
 def test_delay_stream_is_independent_of_env_np_random() -> None:
     env = PoissonRewardDelay(ConstantRewardEnv(1.0), 5)
     env.reset(seed=11)
-    wrapper_delays = [env.step(0)[4]["reward_delay"] for _ in range(200)]
+    wrapper_delays = [env.step(0)[4]["drawn_reward_delay"] for _ in range(200)]
     twin = ConstantRewardEnv(1.0)
     twin.reset(seed=11)
     env_stream = twin.np_random.poisson(5, 200).tolist()
@@ -448,12 +448,12 @@ def test_delay_stream_is_independent_of_env_np_random() -> None:
 def test_reset_without_seed_continues_the_stream() -> None:
     env = PoissonRewardDelay(ScriptedEnv([], [5, 5]), 4)
     env.reset(seed=1)
-    first = [env.step(0)[4]["reward_delay"] for _ in range(5)]
+    first = [env.step(0)[4]["drawn_reward_delay"] for _ in range(5)]
     env.reset()
-    second = [env.step(0)[4]["reward_delay"] for _ in range(5)]
+    second = [env.step(0)[4]["drawn_reward_delay"] for _ in range(5)]
     twin = PoissonRewardDelay(ScriptedEnv([], [10]), 4)
     twin.reset(seed=1)
-    assert [twin.step(0)[4]["reward_delay"] for _ in range(10)] == first + second
+    assert [twin.step(0)[4]["drawn_reward_delay"] for _ in range(10)] == first + second
 
 
 # --- third-party envs --------------------------------------------------------------------------

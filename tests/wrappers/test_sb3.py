@@ -84,7 +84,7 @@ def test_vec_reward_delay_conservation_and_info(on_episode_end, delay) -> None:
         assert rewards.dtype == np.float32
         for i, info in enumerate(infos):
             assert info["undelayed_reward"] == pytest.approx(float(raw[i]), rel=1e-6)
-            d = info["reward_delay"]
+            d = info["drawn_reward_delay"]
             assert isinstance(d, int) and d >= 0
             if delay.support_max is not None:
                 assert d <= delay.support_max
@@ -129,7 +129,7 @@ def test_vec_reward_delay_seeding() -> None:
             env.seed(seed)
         env.reset()
         return [
-            [info["reward_delay"] for info in env.step(np.zeros(2, dtype=int))[3]]
+            [info["drawn_reward_delay"] for info in env.step(np.zeros(2, dtype=int))[3]]
             for _ in range(80)
         ]
 
@@ -279,7 +279,7 @@ def sb3_delays(seed=None, n_envs=2, via_seed_method=False, steps=60):
     env.reset()
     return np.array(
         [
-            [info["reward_delay"] for info in env.step(np.zeros(n_envs, int))[3]]
+            [info["drawn_reward_delay"] for info in env.step(np.zeros(n_envs, int))[3]]
             for _ in range(steps)
         ]
     )
@@ -293,7 +293,7 @@ def test_sub_env_i_gets_seed_plus_i_like_sb3_vec_env_seed() -> None:
         for i in range(3):
             single = RewardDelay(RandomEndEnv(0.0, 1.0), 5)
             single.reset(seed=20 + i)
-            expected = [single.step(0)[4]["reward_delay"] for _ in range(60)]
+            expected = [single.step(0)[4]["drawn_reward_delay"] for _ in range(60)]
             assert d[:, i].tolist() == expected
     assert not np.array_equal(sb3_delays(20)[:, 0], sb3_delays(20)[:, 1])
 

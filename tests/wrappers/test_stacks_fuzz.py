@@ -151,7 +151,7 @@ def test_a_single_stack_conserves_rewards_and_executes_each_action_as_sent(
                 reference.restart()
             action = space.sample()
             _, reward, terminated, truncated, info = env.step(action)
-            expected, step = reference.send(action, info["action_delay"])
+            expected, step = reference.send(action, info["drawn_action_delay"])
             scribble(action)
             assert info["executed_action_step"] == step
             assert same(info["executed_action"], expected)
@@ -208,7 +208,7 @@ def test_a_vector_stack_conserves_rewards_and_executes_each_action_as_sent(
                     references[i].restart()
                     assert not info["_executed_action"][i]
                     continue
-                expected, step = references[i].send(sent[i], int(info["action_delay"][i]))
+                expected, step = references[i].send(sent[i], int(info["drawn_action_delay"][i]))
                 assert info["executed_action_step"][i] == step
                 assert same(reported[i], expected)
                 assert same(inner.envs[i].executed[-1], expected)

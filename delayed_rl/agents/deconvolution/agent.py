@@ -14,7 +14,7 @@ convolution of the delay pmf with the mean rewards ``R`` of the (state, action) 
    ``R̂(s, a)``: ``Q(s, a) += α (R̂(s, a) + γ (1 − terminated) max_a′ Q(s′, a′) − Q(s, a))``.
 
 It is anonymous: it reads only the reward delivered at each step, the observations, actions and
-episode ends — never ``info["undelayed_reward"]``, ``reward_delay`` or ``reward_arrivals``.
+episode ends — never ``info["undelayed_reward"]``, ``drawn_reward_delay`` or ``reward_arrivals``.
 
 **Sizes.** The statistics take ``(K + 1)·P²`` 4-byte counts for ``P`` (state, action) pairs
 while that fits 64 MiB (the grid worlds); above (Taxi's 3000 pairs), a hashed table holds only

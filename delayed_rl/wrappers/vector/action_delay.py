@@ -33,7 +33,7 @@ class VectorActionDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
     the ending step, under ``DISABLED`` when ``reset(options={"reset_mask": ...})`` resets it.
 
     ``info`` holds, with Gymnasium's ``_key`` masks, ``executed_action`` (the batch of actions
-    executed), ``executed_action_step`` and ``action_delay`` (for the sub-envs that sent an
+    executed), ``executed_action_step`` and ``drawn_action_delay`` (for the sub-envs that sent an
     action at this step).
 
     Actions are batched as in ``gymnasium.vector``: an array with one row per sub-env, and for
@@ -130,7 +130,7 @@ class VectorActionDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
         for key, values in (
             ("executed_action", report),
             ("executed_action_step", sent_steps),
-            ("action_delay", delays),
+            ("drawn_action_delay", delays),
         ):
             info[key], info["_" + key] = values, sending.copy()
         return obs, rewards, terminated, truncated, info

@@ -30,7 +30,7 @@ class VectorDelayAwareObservation(gym.vector.VectorWrapper, gym.utils.RecordCons
     :class:`~delayed_rl.wrappers.VectorActionDelay`, both or neither (found by walking ``.env``
     down the ``gym.vector.VectorWrapper`` layers; at most one of each). Each sub-env has its own
     :class:`~delayed_rl.wrappers.delay_aware.ViewState`, fed what the stack reports for it (its row of the observations,
-    ``info["observation_delay"]`` and ``info["arrived_observations"]``) and its action given to
+    ``info["observation_age"]`` and ``info["arrived_observations"]``) and its action given to
     this wrapper's ``step``, so sub-env ``i`` observes exactly the view of a
     :class:`~delayed_rl.wrappers.DelayAwareObservation` over the same sub-env under an ``ObservationDelay`` and an
     ``ActionDelay`` of the same arguments, reset with the seed the stack gives sub-env ``i``.
@@ -64,7 +64,7 @@ class VectorDelayAwareObservation(gym.vector.VectorWrapper, gym.utils.RecordCons
     Wrap outside the delays: wrappers between them and the view must not change observations or
     drop ``info`` entries. The view reads only vector delay wrappers: a stack whose sub-envs hold
     an ``ObservationDelay`` or an ``ActionDelay`` of their own (seen by their ``info`` entries,
-    ``observation_delay`` at ``reset()`` and ``executed_action`` at ``step()``) is refused; wrap
+    ``observation_age`` at ``reset()`` and ``executed_action`` at ``step()``) is refused; wrap
     each of those sub-envs with :class:`~delayed_rl.wrappers.DelayAwareObservation` instead.
 
     Args:
@@ -127,7 +127,7 @@ class VectorDelayAwareObservation(gym.vector.VectorWrapper, gym.utils.RecordCons
         """
         envs = reset_mask(options, self.num_envs)
         obs, info = self.env.reset(seed=seed, options=options)
-        self._check_visible(info, "observation_delay")
+        self._check_visible(info, "observation_age")
         rows = list(iterate(self.env.observation_space, obs))
         entries = self._entries()
         for i in np.flatnonzero(envs).tolist():
@@ -187,17 +187,17 @@ class VectorDelayAwareObservation(gym.vector.VectorWrapper, gym.utils.RecordCons
         """
         if self._observation_delay is None:
             return 0, None
-        return int(info["observation_delay"][i]), info["arrived_observations"][i]
+        return int(info["observation_age"][i]), info["arrived_observations"][i]
 
     def _check_visible(self, info: dict[str, Any], key: str) -> None:
         """Refuse a stack whose sub-envs delay by themselves (``info[key]`` and no vector twin).
 
         Raises:
-            ValueError: ``info`` holds ``key`` (``"observation_delay"`` or
+            ValueError: ``info`` holds ``key`` (``"observation_age"`` or
                 ``"executed_action"``) but the stack holds no vector wrapper that reports it.
         """
-        kind = "ObservationDelay" if key == "observation_delay" else "ActionDelay"
-        wrapper = self._observation_delay if key == "observation_delay" else self._action_delay
+        kind = "ObservationDelay" if key == "observation_age" else "ActionDelay"
+        wrapper = self._observation_delay if key == "observation_age" else self._action_delay
         if wrapper is None and key in info:
             raise ValueError(
                 f"env reports info[{key!r}] but holds no Vector{kind}: its sub-envs hold an "

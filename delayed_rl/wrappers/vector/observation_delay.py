@@ -41,7 +41,7 @@ class VectorObservationDelay(gym.vector.VectorWrapper, gym.utils.RecordConstruct
       rule like any other; the step returns the new episode's ``o_0``, and
       ``info["final_obs"]`` holds, for the sub-envs whose episode ended, the observation the
       delayed sub-env shows at that last step (not the undelayed one the inner env reports
-      there: that would leak the state the delay hides). That step's ``observation_delay`` and
+      there: that would leak the state the delay hides). That step's ``observation_age`` and
       ``arrived_observations`` are in ``info["final_info"]``, and the top-level entries are those
       of the new episode's ``o_0``, which is what a ``SyncVectorEnv`` of
       :class:`~delayed_rl.wrappers.ObservationDelay` sub-envs reports;
@@ -50,7 +50,7 @@ class VectorObservationDelay(gym.vector.VectorWrapper, gym.utils.RecordConstruct
 
     ``info`` holds, with Gymnasium's ``_key`` masks (set for the sub-envs stepped or reset):
 
-    - ``info["observation_delay"]``: an ``int64`` array, each sub-env's age of the observation
+    - ``info["observation_age"]``: an ``int64`` array, each sub-env's age of the observation
       it shows (as :class:`~delayed_rl.wrappers.ObservationDelay`'s, 0 for an ``o_0``);
     - ``info["arrived_observations"]``: an object array holding, for each sub-env, the tuple of
       the ``(i, o_i)`` it received at this step (``((0, o_0),)`` for an ``o_0``).
@@ -78,7 +78,7 @@ class VectorObservationDelay(gym.vector.VectorWrapper, gym.utils.RecordConstruct
         >>> envs = VectorObservationDelay(envs, Constant(1), arrival="network")
         >>> _ = envs.reset(seed=0)
         >>> info = envs.step(np.array([0, 1]))[-1]
-        >>> info["observation_delay"].tolist(), [len(got) for got in info["arrived_observations"]]
+        >>> info["observation_age"].tolist(), [len(got) for got in info["arrived_observations"]]
         ([1, 1], [0, 0])
     """
 
@@ -107,7 +107,7 @@ class VectorObservationDelay(gym.vector.VectorWrapper, gym.utils.RecordConstruct
     def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
         """Reset all sub-envs, or those in ``options["reset_mask"]``, and their rules.
 
-        The reset sub-envs show their ``o_0`` undelayed, with ``info["observation_delay"]`` 0 and
+        The reset sub-envs show their ``o_0`` undelayed, with ``info["observation_age"]`` 0 and
         ``info["arrived_observations"]`` ``((0, o_0),)`` (masked to them); each one's delay
         stream is reseeded with its own seed (see the class docstring).
 
@@ -179,6 +179,6 @@ class VectorObservationDelay(gym.vector.VectorWrapper, gym.utils.RecordConstruct
     def _report(
         info: dict[str, Any], delays: np.ndarray, arrived: np.ndarray, mask: np.ndarray
     ) -> None:
-        """Store ``observation_delay`` and ``arrived_observations`` in ``info``, masked."""
-        for key, values in (("observation_delay", delays), ("arrived_observations", arrived)):
+        """Store ``observation_age`` and ``arrived_observations`` in ``info``, masked."""
+        for key, values in (("observation_age", delays), ("arrived_observations", arrived)):
             info[key], info["_" + key] = values, mask.copy()

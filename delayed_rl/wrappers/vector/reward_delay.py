@@ -48,7 +48,7 @@ class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
     ``num_envs`` ints or floats, as :class:`~delayed_rl.wrappers.RewardDelay` accepts them one by one): anything else
     raises ``TypeError`` (``ValueError`` for the wrong count), naming ``rewards[i]`` and its value.
 
-    ``info`` holds arrays (with Gymnasium's ``_key`` masks): ``undelayed_reward``, ``reward_delay``,
+    ``info`` holds arrays (with Gymnasium's ``_key`` masks): ``undelayed_reward``, ``drawn_reward_delay``,
     ``pending_reward`` on every step; ``flushed_reward`` or ``dropped_reward`` for the sub-envs
     whose episode ended at this step.
 
@@ -149,7 +149,7 @@ class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
         else:
             self._episode_ended |= ended
         _with_mask(info, "undelayed_reward", emitted, active)
-        _with_mask(info, "reward_delay", delays, active)
+        _with_mask(info, "drawn_reward_delay", delays, active)
         _with_mask(
             info, "pending_reward", self.rewards_in_transit.pending, np.ones(self.num_envs, bool)
         )

@@ -41,7 +41,7 @@ STACKS = {  # name: (observation delay, its max_delay, arrival, action delay, it
     "no delay": (None, None, None, None, None, None, 2),
 }
 VIEW_KEYS = ("received_observations", "age_clipped")
-DELAY_KEYS = ("observation_delay", "arrived_observations")
+DELAY_KEYS = ("observation_age", "arrived_observations")
 
 
 def make_pair(env_id, stack, mode, wrappers=()):
@@ -268,7 +268,7 @@ def test_an_unknown_autoreset_mode_is_refused() -> None:
 
 def test_delays_inside_the_sub_envs_are_refused_not_ignored() -> None:
     observed = VectorDelayAwareObservation(_vec([lambda e: ObservationDelay(e, Constant(1))]))
-    with pytest.raises(ValueError, match="^env reports info\\['observation_delay'\\] but holds no"):
+    with pytest.raises(ValueError, match="^env reports info\\['observation_age'\\] but holds no"):
         observed.reset(seed=0)
     acted = VectorDelayAwareObservation(_vec([lambda e: ActionDelay(e, Constant(1))]))
     acted.reset(seed=0)

@@ -29,7 +29,7 @@ DELAYS = [  # (delay, max_delay, num_envs)
     (Constant(2), None, 1),
     (Poisson(2.0), 4, 2),
 ]
-KEYS = ("observation_delay", "arrived_observations")
+KEYS = ("observation_age", "arrived_observations")
 
 
 def make_pair(env_id, n, mode, delay, max_delay, rule):
@@ -87,7 +87,7 @@ def test_each_sub_env_is_an_observation_delay_reset_with_seed_s_plus_i(
         assert np.array_equal(truncated, expected[3]), t
         same_info(info, expected[4], f"step {t}")
         ends += int((terminated | truncated).sum())
-        ages += int(info["observation_delay"].sum())
+        ages += int(info["observation_age"].sum())
     assert ends > 0  # episodes restarted, under the autoreset mode
     assert ages > 0  # and observations were delayed
 
@@ -110,7 +110,7 @@ def test_under_disabled_autoreset_a_reset_mask_restarts_only_its_sub_envs(rule) 
             expected_obs, expected_info = reference.reset(options=dict(mask))
             assert same(obs, expected_obs), t  # the others show again what they showed
             same_info(info, expected_info, f"reset {t}")
-            assert np.array_equal(info["_observation_delay"], ended)
+            assert np.array_equal(info["_observation_age"], ended)
             masked += 1
     assert masked > 0
 
@@ -138,10 +138,10 @@ def test_same_step_reports_the_delayed_final_observation_not_the_undelayed_one()
             made[i].append(undelayed["final_obs"][i])  # o_T, which the delay hides
             assert same(info["final_obs"][i], made[i][-4])  # o_{T-3}, as shown at step T-1
             assert not same(info["final_obs"][i], made[i][-1])
-            assert info["final_info"]["observation_delay"][i] == 3
+            assert info["final_info"]["observation_age"][i] == 3
             assert info["final_info"]["arrived_observations"][i][0][0] == len(made[i]) - 4
             assert same(shown[i], rows[i])  # the new episode's o_0, undelayed
-            assert info["observation_delay"][i] == 0 and info["arrived_observations"][i][0][0] == 0
+            assert info["observation_age"][i] == 0 and info["arrived_observations"][i][0][0] == 0
             made[i] = [rows[i]]
             finals += 1
     assert finals > 2

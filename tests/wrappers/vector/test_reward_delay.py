@@ -71,14 +71,14 @@ def run_vector(autoreset: AutoresetMode, on_episode_end: str, delay, n_envs=3, s
         ended = terminated | truncated
         active = ~resetting
         np.testing.assert_array_equal(info["_undelayed_reward"], active)
-        np.testing.assert_array_equal(info["_reward_delay"], active)
+        np.testing.assert_array_equal(info["_drawn_reward_delay"], active)
         for i in range(n_envs):
             if not active[i]:  # the reset step emits and delivers nothing
-                assert rewards[i] == 0.0 and info["reward_delay"][i] == 0
+                assert rewards[i] == 0.0 and info["drawn_reward_delay"][i] == 0
                 assert info["undelayed_reward"][i] == 0.0
                 assert not ended[i]
                 continue
-            d = int(info["reward_delay"][i])
+            d = int(info["drawn_reward_delay"][i])
             assert d >= 0
             assert info["undelayed_reward"][i] == raw[i]
             arrivals, flushed, dropped = refs[i].step(float(raw[i]), d, bool(ended[i]))
@@ -138,7 +138,9 @@ def test_same_seed_same_delays_different_seeds_differ() -> None:
     def delays(seed):
         env = VectorRewardDelay(make_vec(2, AutoresetMode.NEXT_STEP), 5)
         env.reset(seed=seed)
-        return np.array([env.step(np.zeros(2, dtype=int))[4]["reward_delay"] for _ in range(100)])
+        return np.array(
+            [env.step(np.zeros(2, dtype=int))[4]["drawn_reward_delay"] for _ in range(100)]
+        )
 
     np.testing.assert_array_equal(delays(1), delays(1))
     assert not np.array_equal(delays(1), delays(2))
@@ -244,7 +246,7 @@ def vector_delays(seed, n_envs=2, steps=60, delay=5, mode=AutoresetMode.NEXT_STE
     env = VectorRewardDelay(make_vec(n_envs, mode, p_end=0.0), delay)
     env.reset(seed=seed)
     return np.array(
-        [env.step(np.zeros(n_envs, dtype=int))[4]["reward_delay"] for _ in range(steps)]
+        [env.step(np.zeros(n_envs, dtype=int))[4]["drawn_reward_delay"] for _ in range(steps)]
     )
 
 
@@ -253,7 +255,7 @@ def single_delays(seed, steps=60, delay=5):
 
     env = RewardDelay(RandomEndEnv(p_end=0.0), delay)
     env.reset(seed=seed)
-    return np.array([env.step(0)[4]["reward_delay"] for _ in range(steps)])
+    return np.array([env.step(0)[4]["drawn_reward_delay"] for _ in range(steps)])
 
 
 def test_each_sub_env_follows_its_own_seed() -> None:
@@ -273,9 +275,9 @@ def test_an_int_seed_seeds_sub_env_i_with_seed_plus_i_like_sync_vector_env() -> 
 def test_a_none_entry_leaves_that_sub_env_unseeded() -> None:
     env = VectorRewardDelay(make_vec(2, AutoresetMode.NEXT_STEP, p_end=0.0), 5)
     env.reset(seed=[3, 4])
-    first = np.array([env.step(np.zeros(2, dtype=int))[4]["reward_delay"] for _ in range(30)])
+    first = np.array([env.step(np.zeros(2, dtype=int))[4]["drawn_reward_delay"] for _ in range(30)])
     env.reset(seed=[3, None])  # sub-env 0 starts over, sub-env 1 continues its stream
-    again = np.array([env.step(np.zeros(2, dtype=int))[4]["reward_delay"] for _ in range(30)])
+    again = np.array([env.step(np.zeros(2, dtype=int))[4]["drawn_reward_delay"] for _ in range(30)])
     np.testing.assert_array_equal(again[:, 0], first[:, 0])
     np.testing.assert_array_equal(again[:, 1], single_delays(4, steps=60)[30:])
 
@@ -283,9 +285,9 @@ def test_a_none_entry_leaves_that_sub_env_unseeded() -> None:
 def test_reset_mask_seeds_only_the_reset_sub_envs() -> None:
     env = VectorRewardDelay(make_vec(2, AutoresetMode.DISABLED, p_end=0.0), 5)
     env.reset(seed=[3, 4])
-    first = np.array([env.step(np.zeros(2, dtype=int))[4]["reward_delay"] for _ in range(30)])
+    first = np.array([env.step(np.zeros(2, dtype=int))[4]["drawn_reward_delay"] for _ in range(30)])
     env.reset(seed=[3, 3], options={"reset_mask": np.array([False, True])})
-    again = np.array([env.step(np.zeros(2, dtype=int))[4]["reward_delay"] for _ in range(30)])
+    again = np.array([env.step(np.zeros(2, dtype=int))[4]["drawn_reward_delay"] for _ in range(30)])
     np.testing.assert_array_equal(again[:, 0], single_delays(3, steps=60)[30:])
     np.testing.assert_array_equal(again[:, 1], first[:, 0])
 
