@@ -76,10 +76,10 @@ from delayed_rl.experiments.framework.gain_settings import (
     curve_means,
     delay_fields,
     gain_tasks,
-    group_results,
     learning_curves,
     method_gains,
 )
+from delayed_rl.experiments.framework.results import pivot
 
 
 def _pendulum(
@@ -258,7 +258,7 @@ def _table_row(method: str, runs: dict[int, dict], gains: dict[int, float]) -> d
 
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
     """The claims, reference rows of every gain, the table and a learning-curve figure a setting."""
-    grouped = group_results(task_list, results)
+    grouped = pivot(task_list, results, by=("setting", "method"), nested=True)
     claims, curves, figures, table = [], [], {}, {}
     for setting, by_method in grouped.items():
         gains, low, high = method_gains(by_method)

@@ -50,10 +50,8 @@ from delayed_rl.experiments.framework.deep_training import require_sb3
 from delayed_rl.experiments.framework.experiment import Config, Experiment, SharedRun, Summary
 from delayed_rl.experiments.framework.gain_settings import (
     gain_tasks,
-    group_results,
     learning_curves,
     method_gains,
-    method_scores,
 )
 from delayed_rl.experiments.framework.late_training import (
     CONTROLLERS,
@@ -62,6 +60,7 @@ from delayed_rl.experiments.framework.late_training import (
     random_score,
     train_and_score,
 )
+from delayed_rl.experiments.framework.results import pivot
 
 
 def _pendulum(
@@ -227,11 +226,12 @@ def _setting_claims(setting: str, gains: dict, scores: dict) -> list[rules.Claim
 
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
     """The claims, reference rows of every gain, the table and a learning-curve figure a setting."""
-    grouped = group_results(task_list, results)
+    grouped = pivot(task_list, results, by=("setting", "method"), nested=True)
+    all_scores = pivot(task_list, results, by=("setting", "method"), value="score", nested=True)
     claims, curves, figures, table = [], [], {}, {}
     for setting, by_method in grouped.items():
         gains, low, high = method_gains(by_method)
-        scores = method_scores(by_method)
+        scores = all_scores[setting]
         claims += _setting_claims(setting, gains, scores)
         table[setting] = {}
         for method in gains:

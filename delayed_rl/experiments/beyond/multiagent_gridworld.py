@@ -70,6 +70,7 @@ from delayed_rl.experiments.framework.experiment import (
     running_average,
     seed_tasks,
 )
+from delayed_rl.experiments.framework.results import pivot
 from delayed_rl.experiments.framework.training import thesis_hyperparameters
 
 #: The learners, in the tables' order.
@@ -253,30 +254,29 @@ def setting_label(lam: float) -> str:
     return f"Poisson({lam:g})"
 
 
-def _group(task_list: list[dict], results: list[dict]) -> dict[float, dict[str, dict]]:
-    """``{λ: {agent: {seed: result}}}``, in the order of ``task_list``."""
-    groups: dict[float, dict[str, dict]] = {}
-    for task, result in zip(task_list, results, strict=True):
-        by_agent = groups.setdefault(task["lam"], {})
-        by_agent.setdefault(task["agent"], {})[task["seed"]] = result
-    return groups
+def _score(result: dict) -> float:
+    """A run's score, as a float."""
+    return float(result["score"])
 
 
-def _scores(runs: dict[int, dict]) -> dict[int, float]:
-    return {seed: float(result["score"]) for seed, result in runs.items()}
-
-
-def _optimal_claim(quantity: str, thesis: str, runs: dict[int, dict]) -> Claim:
+def _optimal_claim(quantity: str, thesis: str, scores: dict[int, float]) -> Claim:
     """The seeds whose final greedy policy is optimal, against :data:`SEED_SHARE` of them."""
-    values = [score / optimum() for score in _scores(runs).values()]
+    values = [score / optimum() for score in scores.values()]
     at_least = math.ceil(SEED_SHARE * len(values))
     return seed_rule_claim(quantity, thesis, values, OPTIMAL_FRACTION, at_least)
 
 
-def _setting_claims(lam: float, by_agent: dict[str, dict]) -> list[Claim]:
-    """The claims of one delay (see the module docstring), then every learner's score."""
+def _setting_claims(
+    lam: float, by_agent: dict[str, dict[int, dict]], scores: dict[str, dict[int, float]]
+) -> list[Claim]:
+    """The claims of one delay (see the module docstring), then every learner's score.
+
+    Args:
+        lam: the delay's mean.
+        by_agent: its results, ``{agent: {seed: result}}``.
+        scores: their scores, ``{agent: {seed: score}}``.
+    """
     label = setting_label(lam)
-    scores = {agent: _scores(runs) for agent, runs in by_agent.items()}
     claims = []
     for name in ("DeconvQ known", "DeconvQ learned"):
         claims.append(
@@ -292,7 +292,7 @@ def _setting_claims(lam: float, by_agent: dict[str, dict]) -> list[Claim]:
             _optimal_claim(
                 f"{label}: {name}, score / optimum (seeds ≥ {OPTIMAL_FRACTION:g})",
                 f"extension: optimal on ≥ {SEED_SHARE * 100:g} % of the seeds",
-                by_agent[name],
+                scores[name],
             )
         )
     claims.append(
@@ -393,8 +393,9 @@ def _figures(groups: dict[float, dict[str, dict]]) -> dict:
 
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
     """The claims of the module docstring, the table (``extra["table"]``) and the figures."""
-    groups = _group(task_list, results)
-    undelayed = next(iter(groups.values()))["Q undelayed"]
+    groups = pivot(task_list, results, by=("lam", "agent"), nested=True)
+    scores = pivot(task_list, results, by=("lam", "agent"), value=_score, nested=True)
+    undelayed = next(iter(scores.values()))["Q undelayed"]
     claims = [
         _optimal_claim(
             f"Q undelayed, score / optimum (seeds ≥ {OPTIMAL_FRACTION:g})",
@@ -403,7 +404,9 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
         )
     ]
     claims += [
-        claim for lam, by_agent in groups.items() for claim in _setting_claims(lam, by_agent)
+        claim
+        for lam, by_agent in groups.items()
+        for claim in _setting_claims(lam, by_agent, scores[lam])
     ]
     extra = {
         "table": _table(groups),

@@ -47,16 +47,15 @@ from delayed_rl.experiments.framework.gain_settings import (
     curve_means,
     delay_fields,
     gain_tasks,
-    group_results,
     learning_curves,
     method_gains,
-    method_scores,
 )
 from delayed_rl.experiments.framework.multiagent_training import (
     METHODS,
     random_score,
     train_and_score,
 )
+from delayed_rl.experiments.framework.results import pivot
 
 LAMBDA = 30
 SEEDS = 5
@@ -178,11 +177,12 @@ def _setting_claims(setting: str, scores: dict, by_method: dict) -> list[rules.C
 
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
     """The claims, a reference row of every gain, the table and the learning curves."""
-    grouped = group_results(task_list, results)
+    grouped = pivot(task_list, results, by=("setting", "method"), nested=True)
+    all_scores = pivot(task_list, results, by=("setting", "method"), value="score", nested=True)
     claims, curves, figures, table = [], [], {}, {}
     for setting, by_method in grouped.items():
         gains, low, _ = method_gains(by_method)
-        scores = method_scores(by_method)
+        scores = all_scores[setting]
         claims += _setting_claims(setting, scores, by_method)
         table[setting] = {"random": {"score": low}}
         for method in METHODS:

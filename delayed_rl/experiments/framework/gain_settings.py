@@ -3,13 +3,14 @@
 A *setting* is a dict of run fields; each (setting, method, seed) is a task. A method's *gain*
 in a setting is ``(score − random) / (oracle − random)``, with the mean scores of the random
 policy (method ``"random"``) and of the oracle (method ``"oracle"``) over the setting's seeds:
-0 is the random policy's level, 1 the oracle's.
+0 is the random policy's level, 1 the oracle's. The experiments read their results by setting,
+method and seed (``{setting: {method: {seed: result}}}``), a nested
+:func:`~delayed_rl.experiments.framework.results.pivot`.
 """
 
 from __future__ import annotations
 
 import math
-from collections import defaultdict
 from typing import Any
 
 import numpy as np
@@ -22,10 +23,8 @@ __all__ = [
     "curve_means",
     "delay_fields",
     "gain_tasks",
-    "group_results",
     "learning_curves",
     "method_gains",
-    "method_scores",
 ]
 
 
@@ -60,14 +59,6 @@ def gain_tasks(
     return out
 
 
-def group_results(task_list: list[dict], results: list[dict]) -> dict[str, dict[str, dict]]:
-    """``{setting: {method: {seed: result}}}``."""
-    grouped: dict[str, dict[str, dict[int, dict]]] = defaultdict(lambda: defaultdict(dict))
-    for task, result in zip(task_list, results, strict=True):
-        grouped[task["setting"]][task["method"]][task["seed"]] = result
-    return grouped
-
-
 def curve_means(by_method: dict[str, dict[int, dict]]) -> dict[str, dict[int, float]]:
     """Each run's mean score over its learning curve's evaluations, by method and seed.
 
@@ -79,11 +70,6 @@ def curve_means(by_method: dict[str, dict[int, dict]]) -> dict[str, dict[int, fl
         for method, runs in by_method.items()
         if method != "random"
     }
-
-
-def method_scores(by_method: dict[str, dict[int, dict]]) -> dict[str, dict[int, float]]:
-    """Each method's score per seed, ``{method: {seed: score}}``."""
-    return {m: {seed: r["score"] for seed, r in runs.items()} for m, runs in by_method.items()}
 
 
 def delay_fields(task: dict) -> dict[str, Any]:
