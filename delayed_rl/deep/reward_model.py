@@ -274,14 +274,7 @@ class RewardModel(ABC):
             raise ValueError(f"rewards must be finite, got {reward}")
         ends = _pair("episode_ends", episode_ends, count).astype(bool)
         obs = self.observations.batch(observations, count)
-        next_obs = None
-        if self.reads_next_observation:
-            if next_observations is None:
-                raise ValueError(
-                    f"{type(self).__name__} reads the next observation (state_change=True): "
-                    "add() needs next_observations, got None"
-                )
-            next_obs = self.observations.batch(next_observations, count)
+        next_obs = self._next_batch("add()", next_observations, count)
         action = self.actions.batch(actions, count)
         undelayed = np.full(count, np.nan)
         if infos is not None:
@@ -373,14 +366,25 @@ class RewardModel(ABC):
         """
         count = _count(self.actions, actions)
         inputs = [self.observations.batch(observations, count), self.actions.batch(actions, count)]
-        if self.reads_next_observation:
-            if next_observations is None:
-                raise ValueError(
-                    f"{type(self).__name__} reads the next observation (state_change=True): "
-                    "predict() needs next_observations, got None"
-                )
-            inputs.append(self.observations.batch(next_observations, count))
+        following = self._next_batch("predict()", next_observations, count)
+        if following is not None:
+            inputs.append(following)
         return self.reward_tensor(*inputs).numpy().astype(np.float32)
+
+    def _next_batch(self, caller: str, next_observations: Any, count: int) -> Any:
+        """The batch of ``next_observations`` for a model that reads them (else ``None``).
+
+        Raises:
+            ValueError: the model reads them and ``caller`` was given none.
+        """
+        if not self.reads_next_observation:
+            return None
+        if next_observations is None:
+            raise ValueError(
+                f"{type(self).__name__} reads the next observation (state_change=True): "
+                f"{caller} needs next_observations, got None"
+            )
+        return self.observations.batch(next_observations, count)
 
     # ------------------------------------------------------------------ diagnostics
     def rmse(self, last: int = 10_000) -> float:
