@@ -259,63 +259,32 @@ class DelayAwareObservation(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstruc
     """Observe what the agent can know: the newest observation received, its age, the actions sent.
 
     ``env`` is a stack holding an :class:`~delayed_rl.wrappers.ObservationDelay`, an
-    :class:`~delayed_rl.wrappers.ActionDelay`, both or neither (found by walking ``.env`` down the
-    wrappers; at most one of each). The view is built only from what the stack reports to the
-    agent: the observations it returns with their ``info["observation_age"]``, and the actions
-    given to this wrapper's ``step``; never from the undelayed state. Observations are numbered
-    from the reset observation ``o_0``; step ``t`` (counted from 0) makes ``o_{t+1}``. The
-    observation is a ``Dict``:
+    :class:`~delayed_rl.wrappers.ActionDelay`, both or neither (at most one of each; wrap outside
+    them and inside a reward delay, as :func:`~delayed_rl.wrappers.wrap_delays` does). The view
+    is built only from what the stack reports to the agent (the observations it returns, their
+    ``info["observation_age"]``, the actions sent), never from the undelayed state. Observations
+    are numbered from the reset's ``o_0``; step ``t`` makes ``o_{t+1}``. The observation is a
+    ``Dict``:
 
-    - ``"observation"``: the newest observation received so far, by the step it was made at: the
-      one returned at step ``t`` was made at ``i = t + 1 − info["observation_age"]``, and it
-      replaces the view's only if ``i`` is larger (under the ``"stale"`` rule an older one can be
-      shown after a newer one; it changes nothing). Without an ``ObservationDelay``, ``o_{t+1}``.
-      Its space is ``env``'s observation space.
-    - ``"age"``: the steps since that observation was made, ``t + 1 − i`` (0 at ``reset()``), in
-      ``Discrete(D + 1)``: ``D`` is the observation delay's bound (0 without an
-      ``ObservationDelay``). For an unbounded observation delay ``D`` is ``action_history``, and
-      an older age is reported as ``D`` with ``info["age_clipped"] = True``.
-    - ``"actions"``: the last ``K`` actions sent (given to this wrapper's ``step``), newest first:
-      row 0 is the previous action, row ``j`` the one sent ``j + 1`` steps ago. Rows before the
-      episode's first action hold the ``ActionDelay``'s ``initial_action`` (without one, the
-      action space's :func:`~delayed_rl.wrappers.action_delay.neutral_action`), which is what
-      the env executes until the first action arrives. For a ``Discrete(n, start)`` action space
-      the rows form a ``MultiDiscrete([n] * K, start=[start] * K)``; for a ``Box``,
-      ``MultiDiscrete`` or ``MultiBinary`` one, a space of the same kind and shape
-      ``(K, *action_shape)`` with the bounds (``nvec``, ``start``) repeated on each row.
+    - ``"observation"``: the newest observation received so far, by the step it was made at (an
+      older one shown after a newer one changes nothing); the env's space.
+    - ``"age"``: the steps since it was made (0 at ``reset()``), in ``Discrete(D + 1)``, ``D``
+      the observation delay's bound (``action_history`` for an unbounded delay, where an older
+      age is reported as ``D`` with ``info["age_clipped"] = True``).
+    - ``"actions"``: the last ``K`` actions sent, newest first, padded before the episode's first
+      action with the ``ActionDelay``'s ``initial_action`` (else the neutral action); for
+      ``Discrete`` actions a ``MultiDiscrete``, else a space of the action space's kind and shape
+      ``(K, *action_shape)``.
 
-    ``K`` is the observation delay's bound plus the action delay's bound, each the smaller of the
-    wrapper's ``max_delay`` and its distribution's ``support_max`` (0 without the wrapper): the
-    actions that can have changed the state since the observation was made. At least 1: the
-    previous action is always observed (so an undelayed stack observes ``(o_{t+1}, 0, a_t)``, and
-    the ``actions`` key is never empty). An unbounded delay (a ``Poisson`` or ``Geometric`` without
-    ``max_delay``) has no such bound: give ``action_history``.
+    ``K``, at least 1, is the observation delay's bound plus the action delay's (each the
+    wrapper's ``max_delay`` or the distribution's ``support_max``): the actions that can have
+    changed the state since the observation was made. An unbounded delay needs
+    ``action_history``.
 
-    ``info`` is the inner env's, plus ``info["received_observations"]``: a tuple of the
-    ``(i, o_i)`` pairs received at this step (the stack's ``info["arrived_observations"]``; without
-    an ``ObservationDelay``, ``((t + 1, o_{t+1}),)``, and ``((0, o_0),)`` at ``reset()``), so that a
-    learner can use every observation received, not only the newest; and ``info["age_clipped"]``
-    (see ``"age"``; always ``False`` for a bounded observation delay).
-
-    Everything handed out is a copy (:func:`~delayed_rl.wrappers._samples.copy_sample`): the
-    view's entries, the received observations. Each action is checked against the action space
-    before the stack is stepped with it. The wrapper draws nothing: ``reset(seed=...)`` seeds the
-    stack, whose delays then repeat. It records ``action_history`` in the env spec, so
-    ``gym.make(env.spec)`` rebuilds it.
-
-    For an MLP policy, ``gymnasium.wrappers.FlattenObservation`` turns the view into one ``Box``
-    (one-hot ``Discrete`` and ``MultiDiscrete`` entries); stable-baselines3's ``MultiInputPolicy``
-    takes the ``Dict`` as it is. For vector envs, either wrap each sub-env (``gym.make_vec(id,
-    ..., delay_aware=True)`` for a ``delayed_rl/`` id, ``gym.make_vec(id, wrappers=[...])`` or
-    ``SyncVectorEnv`` of wrapped envs otherwise, and stable-baselines3's ``make_vec_env(id,
-    wrapper_class=wrap_delays, wrapper_kwargs={..., "delay_aware": True})``), or wrap the vector
-    env with the twins: :class:`VectorDelayAwareObservation` over a
-    :class:`~delayed_rl.wrappers.VectorObservationDelay` and a
-    :class:`~delayed_rl.wrappers.VectorActionDelay` gives each sub-env the same view. (Each
-    view reads only the delay wrappers of its own kind: a ``VectorActionDelay`` around the vector
-    env is invisible to the sub-envs' views.) Wrap outside the delays and
-    inside a reward delay, as :func:`~delayed_rl.wrappers.wrap_delays` does: wrappers between the
-    ``ObservationDelay`` and the view must not change observations or drop ``info`` entries.
+    ``info`` is the inner env's plus ``info["received_observations"]``, the ``(i, o_i)`` pairs
+    received at this step, and ``info["age_clipped"]``. Everything handed out is a copy. The
+    wrapper draws nothing: ``reset(seed=...)`` seeds the stack. The rules in full, the vector
+    twins and the policies that read the view: the late-observations page of the docs.
 
     Args:
         env: the stack to observe.

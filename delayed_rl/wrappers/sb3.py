@@ -54,6 +54,22 @@ class VecRewardDelay(VecEnvWrapper):
     range raise ``ValueError``; the rings that hold pending rewards grow with the delays drawn
     (see :data:`~delayed_rl.wrappers.pending_rewards.MAX_RING_ENTRIES`).
 
+    Example:
+        >>> import gymnasium as gym
+        >>> import numpy as np
+        >>> import delayed_rl
+        >>> from stable_baselines3.common.vec_env import DummyVecEnv
+        >>> from delayed_rl.delays import Constant
+        >>> grids = DummyVecEnv([lambda: gym.make("delayed_rl/GridWorld-3x3-v0")] * 2)
+        >>> venv = VecRewardDelay(grids, Constant(2), seed=0)
+        >>> _ = venv.reset()
+        >>> for _ in range(3):
+        ...     _, rewards, _, infos = venv.step(np.array([1, 1]))
+        ...     print(rewards, [info["undelayed_reward"] for info in infos])
+        [0. 0.] [-1.0, -1.0]
+        [0. 0.] [-1.0, -1.0]
+        [-1. -1.] [-1.0, -1.0]
+
     Args:
         venv: the SB3 ``VecEnv`` to wrap.
         delay: a :class:`~delayed_rl.delays.Delay`, its ``to_dict()`` description, or a number

@@ -42,6 +42,19 @@ class VectorActionDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
     :class:`~delayed_rl.wrappers.ActionDelay` copies them: the batch given to the inner env and the one reported are
     new objects built from copies of what the lines keep.
 
+    Example:
+        >>> import gymnasium as gym
+        >>> import numpy as np
+        >>> from delayed_rl.delays import Constant
+        >>> envs = VectorActionDelay(gym.make_vec("Pendulum-v1", num_envs=2), Constant(1))
+        >>> _ = envs.reset(seed=0)
+        >>> *_, info = envs.step(np.array([[1.0], [2.0]], dtype=np.float32))
+        >>> info["executed_action"].tolist(), info["executed_action_step"].tolist()  # the neutral
+        ([[0.0], [0.0]], [-1, -1])
+        >>> *_, info = envs.step(np.array([[0.5], [0.5]], dtype=np.float32))
+        >>> info["executed_action"].tolist(), info["drawn_action_delay"].tolist()  # one step late
+        ([[1.0], [2.0]], [1, 1])
+
     Args:
         env: a Gymnasium ``VectorEnv``.
         delay: a :class:`~delayed_rl.delays.Delay`, its ``to_dict()`` description, or a number

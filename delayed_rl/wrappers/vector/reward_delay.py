@@ -64,6 +64,21 @@ class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
     reward in a dict, so memory stays proportional to what is pending whatever the delay
     (``Poisson(1e9)`` included). Sums beyond float64's range raise ``ValueError``.
 
+    Example:
+        >>> import gymnasium as gym
+        >>> import numpy as np
+        >>> import delayed_rl
+        >>> from delayed_rl.delays import Constant
+        >>> envs = gym.make_vec("delayed_rl/GridWorld-3x3-v0", num_envs=2, vectorization_mode="sync")
+        >>> envs = VectorRewardDelay(envs, Constant(2))  # every reward arrives 2 steps late
+        >>> _ = envs.reset(seed=0)
+        >>> for _ in range(3):
+        ...     _, rewards, _, _, info = envs.step(np.array([1, 1]))
+        ...     print(rewards, info["undelayed_reward"], info["drawn_reward_delay"])
+        [0. 0.] [-1. -1.] [2 2]
+        [0. 0.] [-1. -1.] [2 2]
+        [-1. -1.] [-1. -1.] [2 2]
+
     Args:
         env: a Gymnasium ``VectorEnv``.
         delay: a :class:`~delayed_rl.delays.Delay`, its ``to_dict()`` description, or a number
