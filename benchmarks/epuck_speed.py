@@ -24,9 +24,9 @@ import io
 import pstats
 import statistics
 import time
-from collections.abc import Callable
 from typing import Any
 
+from interleaved import seconds_per_call
 from pymunk._chipmunk_cffi import lib as chipmunk
 
 from delayed_rl.envs.linefollow.env import REAL_ROBOT, EPuckLineFollowEnv
@@ -71,14 +71,6 @@ def seconds_per_step(env: EPuckLineFollowEnv, steps: int, seed: int) -> float:
         if terminated or truncated:
             reset()
     return (time.perf_counter() - start) / steps
-
-
-def seconds_per_call(function: Callable[[], Any], calls: int) -> float:
-    """Mean seconds per call of ``function`` over ``calls`` calls."""
-    start = time.perf_counter()
-    for _ in range(calls):
-        function()
-    return (time.perf_counter() - start) / calls
 
 
 def space_step_floor(env: EPuckLineFollowEnv, calls: int) -> float:

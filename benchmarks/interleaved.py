@@ -40,6 +40,14 @@ def seconds_per_step(run: Callable[[], object], steps: int) -> float:
         return (time.perf_counter() - start) / steps
 
 
+def seconds_per_call(function: Callable[[], object], calls: int) -> float:
+    """Mean seconds per call of ``function`` over ``calls`` calls (garbage collector as it is)."""
+    start = time.perf_counter()
+    for _ in range(calls):
+        function()
+    return (time.perf_counter() - start) / calls
+
+
 def interleave(timed: dict[str, Callable[[], float]], repeats: int, rounds: int) -> list[Repeat]:
     """Time every run of ``timed`` once per round, ``rounds`` rounds per repeat.
 

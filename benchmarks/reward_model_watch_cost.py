@@ -28,6 +28,7 @@ import time
 
 import gymnasium as gym
 import numpy as np
+from interleaved import seconds_per_call
 
 from delayed_rl.delays import Poisson
 from delayed_rl.wrappers import RewardDelay
@@ -43,13 +44,6 @@ def _env() -> gym.Env:
 def _spread(values: list[float], scale: float = 1.0, digits: int = 3) -> str:
     low, mid, high = min(values), statistics.median(values), max(values)
     return f"{low * scale:.{digits}f}–{mid * scale:.{digits}f}–{high * scale:.{digits}f}"
-
-
-def _per_call(function, calls: int) -> float:
-    start = time.perf_counter()
-    for _ in range(calls):
-        function()
-    return (time.perf_counter() - start) / calls
 
 
 def main() -> None:
@@ -103,11 +97,11 @@ def main() -> None:
         start = time.perf_counter()
         alone.learn(args.step_sample, reset_num_timesteps=False)
         sac_step.append((time.perf_counter() - start) / args.step_sample)
-        watched = _per_call(relabel(True), args.calls)
-        unwatched = _per_call(relabel(False), args.calls)
+        watched = seconds_per_call(relabel(True), args.calls)
+        unwatched = seconds_per_call(relabel(False), args.calls)
         added.append(max(0.0, watched - unwatched))
-        on_step.append(_per_call(callback.on_step, args.calls))
-        logging.append(_per_call(callback.on_rollout_end, args.calls))
+        on_step.append(seconds_per_call(callback.on_step, args.calls))
+        logging.append(seconds_per_call(callback.on_rollout_end, args.calls))
     buffer.watched = True
     total = [sum(parts) for parts in zip(added, on_step, logging, strict=True)]
     shares = [cost / step for cost, step in zip(total, sac_step, strict=True)]
