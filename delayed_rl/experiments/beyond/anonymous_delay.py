@@ -62,6 +62,7 @@ and :mod:`~delayed_rl.experiments.framework.setting_summaries` (tables, claims, 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -83,15 +84,15 @@ from delayed_rl.experiments.framework.experiment import (
     SharedRun,
     Summary,
 )
+from delayed_rl.experiments.framework.results import common_seeds, pivot
 from delayed_rl.experiments.framework.setting_summaries import (
     SEED_SHARE,
     STABLE_SHARE,
-    by_seed,
     curves_of,
-    group_runs,
     optimal_seeds_claim,
     paired_gap_claim,
     result_table,
+    setting_fields,
     setting_figures,
     stability_claim,
 )
@@ -135,16 +136,19 @@ def cost(task: dict) -> float:
 
 
 def relative_gap_claim(
-    quantity: str, thesis: str, runs: list[tuple], baseline: list[tuple], tolerance: float
+    quantity: str,
+    thesis: str,
+    ours: Mapping[int, float],
+    theirs: Mapping[int, float],
+    tolerance: float,
 ) -> Claim:
-    """``runs``' training reward within ``tolerance`` of ``baseline``'s, relative, by seed.
+    """``ours`` (training rewards by seed) within ``tolerance`` of ``theirs``, relative, by seed.
 
     The statistic is ``(ours_s − theirs_s) / mean(theirs)`` per seed ``s``, tested against the
     band 0 ± ``tolerance``. A baseline that earns nothing on average (mean ≤ 0) leaves no
     relative gap: NaN, and the claim is inconclusive.
     """
-    ours, theirs = by_seed(runs, "average"), by_seed(baseline, "average")
-    seeds = [seed for seed in ours if seed in theirs]
+    seeds = common_seeds(ours, theirs)
     scale = float(np.mean([theirs[s] for s in seeds])) if seeds else math.nan
     if not seeds or not scale > 0:
         stats = (math.nan, math.nan, len(seeds))
@@ -155,16 +159,30 @@ def relative_gap_claim(
     )
 
 
-def delay_claim(quantity: str, runs: list[tuple]) -> Claim:
-    """The estimated mean delay against the true mean ± ``DELAY_TOLERANCE`` of it."""
-    task0 = runs[0][0]
-    true = make_delay(task0["delay"], task0["lam"]).mean
-    stats = mean_ci_n([result["mean_delay"] for _, result in runs])
+def delay_claim(quantity: str, runs: Mapping[int, dict], setting: dict) -> Claim:
+    """The estimated mean delay (``runs``: results by seed) against the true mean ± ``DELAY_TOLERANCE``.
+
+    ``setting`` is the setting's fields (:func:`~.setting_summaries.setting_fields`).
+    """
+    true = make_delay(setting["delay"], setting["lam"]).mean
+    stats = mean_ci_n([result["mean_delay"] for result in runs.values()])
     return mean_delay_claim(quantity, stats, true)
 
 
-def _setting_claims(setting: str, by_agent: dict[str, list[tuple]]) -> list[Claim]:
-    """The claims of one setting (see the module docstring), for the agents it ran."""
+def _setting_claims(
+    setting: str,
+    by_agent: dict[str, dict[int, dict]],
+    averages: dict[str, dict[int, float]],
+    fields: dict,
+) -> list[Claim]:
+    """The claims of one setting (see the module docstring), for the agents it ran.
+
+    Args:
+        setting: the setting's label.
+        by_agent: its results, ``{agent: {seed: result}}``.
+        averages: their training rewards, ``{agent: {seed: average}}``.
+        fields: the setting's fields (:func:`~.setting_summaries.setting_fields`).
+    """
     claims = []
     poisson = "Poisson" in setting
     mmq_thesis = (
@@ -174,31 +192,35 @@ def _setting_claims(setting: str, by_agent: dict[str, list[tuple]]) -> list[Clai
     )
     deconv = by_agent.get("DeconvQ learned")
     if deconv:
-        claims.append(optimal_seeds_claim("DeconvQ learned", deconv, "extension: ≥ 95 % of seeds"))
+        claims.append(
+            optimal_seeds_claim(setting, "DeconvQ learned", deconv, "extension: ≥ 95 % of seeds")
+        )
         if "oracle" in by_agent:
             claims.append(
                 relative_gap_claim(
                     f"{setting}: DeconvQ learned training reward relative to the oracle's",
                     "extension: within 5 % of the oracle's",
-                    deconv,
-                    by_agent["oracle"],
+                    averages["DeconvQ learned"],
+                    averages["oracle"],
                     REWARD_TOLERANCE,
                 )
             )
-        claims.append(delay_claim(f"{setting}: DeconvQ learned mean delay", deconv))
+        claims.append(delay_claim(f"{setting}: DeconvQ learned mean delay", deconv, fields))
     mmq = by_agent.get("MMQ")
     if mmq:
-        claims.append(optimal_seeds_claim("MMQ", mmq, mmq_thesis))
+        claims.append(optimal_seeds_claim(setting, "MMQ", mmq, mmq_thesis))
         claims.append(
-            stability_claim("MMQ", mmq, "extension: a settled greedy policy (≥ 90 % optimal)")
+            stability_claim(
+                setting, "MMQ", mmq, "extension: a settled greedy policy (≥ 90 % optimal)"
+            )
         )
         if "Q" in by_agent:
             claims.append(
                 paired_gap_claim(
                     f"{setting}: MMQ minus delayed Q training reward",
                     "MMQ above Q (Fig. 5.9)" if poisson else "extension: MMQ above Q",
-                    mmq,
-                    by_agent["Q"],
+                    averages["MMQ"],
+                    averages["Q"],
                 )
             )
     return claims
@@ -206,10 +228,16 @@ def _setting_claims(setting: str, by_agent: dict[str, list[tuple]]) -> list[Clai
 
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
     """The claims per setting, the full table (``extra["table"]``) and the figures."""
-    groups = group_runs(task_list, results)
-    claims = [c for setting, by_agent in groups.items() for c in _setting_claims(setting, by_agent)]
+    groups = pivot(task_list, results, by=("setting", "agent"), nested=True)
+    averages = pivot(task_list, results, by=("setting", "agent"), value="average", nested=True)
+    settings = setting_fields(task_list)
+    claims = [
+        claim
+        for setting, by_agent in groups.items()
+        for claim in _setting_claims(setting, by_agent, averages[setting], settings[setting])
+    ]
     extra = {
-        "table": result_table(groups),
+        "table": result_table(groups, settings),
         "rules": {
             "loop_fraction": LOOP_FRACTION,
             "seed_share": SEED_SHARE,
@@ -220,7 +248,7 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
             "lambda_max": LAMBDA_MAX,
         },
     }
-    figures = setting_figures(groups, estimators=("DeconvQ learned", "MMQ"))
+    figures = setting_figures(groups, settings, estimators=("DeconvQ learned", "MMQ"))
     return Summary(claims, curves_of(task_list, results), figures, extra)
 
 

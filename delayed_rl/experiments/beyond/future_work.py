@@ -57,6 +57,7 @@ from delayed_rl.experiments.framework.experiment import (
     SharedRun,
     Summary,
 )
+from delayed_rl.experiments.framework.results import pivot
 from delayed_rl.experiments.framework.training import thesis_hyperparameters
 
 THESIS = "MMQ (thesis)"
@@ -147,14 +148,23 @@ def run_task(task: dict) -> dict:
     return snapshot_runs.measure(make_variant(task["agent"], size, delay, steps, seed), task)
 
 
-def _setting_claims(setting: str, by_variant: dict[str, list[tuple]]) -> list[Claim]:
-    """Per variant: optimal seeds, second-half stability and (variants) reward against the thesis."""
+def _setting_claims(
+    setting: str, by_variant: dict[str, dict[int, dict]], averages: dict[str, dict[int, float]]
+) -> list[Claim]:
+    """Per variant: optimal seeds, second-half stability and (variants) reward against the thesis.
+
+    Args:
+        setting: the setting's label.
+        by_variant: its results, ``{variant: {seed: result}}``.
+        averages: their training rewards, ``{variant: {seed: average}}``.
+    """
     claims = []
     thesis = by_variant.get(THESIS)
     for variant, runs in by_variant.items():
         is_thesis = variant == THESIS
         claims.append(
             setting_summaries.optimal_seeds_claim(
+                setting,
                 variant,
                 runs,
                 "near-optimal greedy policy (Fig. 5.9)"
@@ -164,7 +174,7 @@ def _setting_claims(setting: str, by_variant: dict[str, list[tuple]]) -> list[Cl
         )
         claims.append(
             setting_summaries.stability_claim(
-                variant, runs, "future work: a settled greedy policy (≥ 90 %)"
+                setting, variant, runs, "future work: a settled greedy policy (≥ 90 %)"
             )
         )
         if not is_thesis and thesis and variant not in GREEDY_ONLY:
@@ -172,8 +182,8 @@ def _setting_claims(setting: str, by_variant: dict[str, list[tuple]]) -> list[Cl
                 setting_summaries.paired_gap_claim(
                     f"{setting}: {variant} minus {THESIS} training reward",
                     "future work: above the thesis rule",
-                    runs,
-                    thesis,
+                    averages[variant],
+                    averages[THESIS],
                 )
             )
     return claims
@@ -181,10 +191,16 @@ def _setting_claims(setting: str, by_variant: dict[str, list[tuple]]) -> list[Cl
 
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
     """The claims per setting and variant, the full table (``extra["table"]``), the figures."""
-    groups = setting_summaries.group_runs(task_list, results)
-    claims = [c for setting, runs in groups.items() for c in _setting_claims(setting, runs)]
+    groups = pivot(task_list, results, by=("setting", "agent"), nested=True)
+    averages = pivot(task_list, results, by=("setting", "agent"), value="average", nested=True)
+    settings = setting_summaries.setting_fields(task_list)
+    claims = [
+        claim
+        for setting, runs in groups.items()
+        for claim in _setting_claims(setting, runs, averages[setting])
+    ]
     extra = {
-        "table": setting_summaries.result_table(groups),
+        "table": setting_summaries.result_table(groups, settings),
         "variants": {
             name: options(name, task_list[0]["steps"]) if task_list else VARIANTS[name]
             for name in VARIANTS
@@ -199,7 +215,7 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
     }
     estimators = tuple(name for name in VARIANTS if name not in GREEDY_ONLY)
     figures = setting_summaries.setting_figures(
-        groups, estimators=estimators, same_curves=GREEDY_ONLY
+        groups, settings, estimators=estimators, same_curves=GREEDY_ONLY
     )
     curves = setting_summaries.curves_of(task_list, results)
     return Summary(claims, curves, figures, extra)

@@ -1,10 +1,11 @@
 """Tables, claims and figures of the anonymous-delay settings' runs, setting by setting.
 
 ``anonymous-delay`` and ``future-work`` run learners on the same settings
-(:mod:`.delay_settings`) and report them alike: :func:`group_runs` sorts the runs by setting
-and agent, :func:`result_table` makes ``summary.json``'s ``table`` (one :func:`agent_stats` row
-per setting and agent), :func:`curves_of` the curves, and :func:`setting_figures` the figures of
-each setting. The claims they share, with their rules:
+(:mod:`.delay_settings`) and report them alike, from their results by setting, agent and seed
+(``{setting: {agent: {seed: result}}}``, a nested :func:`~.results.pivot`) and each setting's
+fields (:func:`setting_fields`): :func:`result_table` makes ``summary.json``'s ``table`` (one
+:func:`agent_stats` row per setting and agent), :func:`curves_of` the curves, and
+:func:`setting_figures` the figures of each setting. The claims they share, with their rules:
 
 - :func:`optimal_seeds_claim`: the seeds whose final greedy policy is optimal, the count rule
   (the Wilson 95 % interval inside ``[SEED_SHARE, 1]``: at 20 seeds at best ``inconclusive``);
@@ -15,7 +16,7 @@ each setting. The claims they share, with their rules:
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -38,27 +39,27 @@ from delayed_rl.experiments.framework.snapshot_runs import LOOP_FRACTION, optima
 SEED_SHARE, STABLE_SHARE = 0.95, 0.90
 
 
-def group_runs(task_list: list[dict], results: list[dict]) -> dict[str, dict[str, list[tuple]]]:
-    """``{setting: {agent: [(task, result), ...]}}``, in the order of ``task_list``."""
-    groups: dict[str, dict[str, list[tuple]]] = {}
-    for task, result in zip(task_list, results, strict=True):
-        groups.setdefault(task["setting"], {}).setdefault(task["agent"], []).append((task, result))
-    return groups
+def setting_fields(task_list: list[dict]) -> dict[str, dict]:
+    """Each setting's first task, by its label: what the setting's ``size``, ``delay``, ``lam`` are."""
+    fields: dict[str, dict] = {}
+    for task in task_list:
+        fields.setdefault(task["setting"], task)
+    return fields
 
 
-def agent_stats(runs: list[tuple[dict, dict]]) -> dict[str, Any]:
+def agent_stats(runs: Mapping[int, dict], setting: dict) -> dict[str, Any]:
     """One row of the table: one agent's metrics in one setting, over its seeds.
 
     Args:
-        runs: the agent's ``(task, result)`` pairs, one per seed.
+        runs: the agent's results by seed.
+        setting: the setting's fields (:func:`setting_fields`).
 
     Returns:
         ``optimal_seeds`` and ``seeds`` (k of n), then ``(mean, ci95, n)`` of ``greedy``,
         ``average`` (training), ``second_half_optimal``, ``ns_per_step`` and, when the agent
         estimates the delay, ``mean_delay``; with ``true_mean_delay``.
     """
-    task0 = runs[0][0]
-    results = [result for _, result in runs]
+    results = list(runs.values())
     row: dict[str, Any] = {
         "optimal_seeds": int(sum(r["optimal"] for r in results)),
         "seeds": len(results),
@@ -67,17 +68,24 @@ def agent_stats(runs: list[tuple[dict, dict]]) -> dict[str, Any]:
         row[key] = mean_ci_n([r[key] for r in results])
     if all("mean_delay" in r for r in results):
         row["mean_delay"] = mean_ci_n([r["mean_delay"] for r in results])
-    row["true_mean_delay"] = make_delay(task0["delay"], task0["lam"]).mean
+    row["true_mean_delay"] = make_delay(setting["delay"], setting["lam"]).mean
     row["paths"] = sorted({r["path"] for r in results})
     return row
 
 
-def result_table(groups: dict[str, dict[str, list[tuple]]]) -> list[dict[str, Any]]:
-    """The full table for ``summary.json``: one :func:`agent_stats` row per (setting, agent)."""
+def result_table(
+    groups: dict[str, dict[str, dict[int, dict]]], settings: dict[str, dict]
+) -> list[dict[str, Any]]:
+    """The full table for ``summary.json``: one :func:`agent_stats` row per (setting, agent).
+
+    Args:
+        groups: the results, ``{setting: {agent: {seed: result}}}``.
+        settings: each setting's fields (:func:`setting_fields`).
+    """
     table = []
     for setting, by_agent in groups.items():
         for agent, runs in by_agent.items():
-            row = agent_stats(runs)
+            row = agent_stats(runs, settings[setting])
             flat: dict[str, Any] = {"setting": setting, "agent": agent}
             for key, value in row.items():
                 if isinstance(value, tuple):
@@ -89,16 +97,29 @@ def result_table(groups: dict[str, dict[str, list[tuple]]]) -> list[dict[str, An
 
 
 def optimal_seeds_claim(
-    agent: str, runs: list[tuple], thesis: str, low: float = SEED_SHARE, high: float = 1.0
+    setting: str,
+    agent: str,
+    runs: Mapping[int, dict],
+    thesis: str,
+    low: float = SEED_SHARE,
+    high: float = 1.0,
 ) -> Claim:
     """``agent``'s seeds whose final greedy policy is optimal, k of n: the share in [low, high].
 
     The count rule (:func:`~delayed_rl.experiments.framework.claims.count_claim`): the Wilson 95 %
     interval of the share against the band, ``[SEED_SHARE, 1]`` by default.
+
+    Args:
+        setting: the setting's label.
+        agent: the agent's name.
+        runs: its results in the setting, by seed.
+        thesis: what the thesis says.
+        low: the band's lower end.
+        high: the band's upper end.
     """
-    flags = [bool(result["optimal"]) for _, result in runs]
+    flags = [bool(result["optimal"]) for result in runs.values()]
     return count_claim(
-        f"{runs[0][0]['setting']}: {agent} seeds whose greedy policy is optimal",
+        f"{setting}: {agent} seeds whose greedy policy is optimal",
         thesis,
         sum(flags),
         len(flags),
@@ -108,30 +129,38 @@ def optimal_seeds_claim(
     )
 
 
-def by_seed(runs: list[tuple], key: str) -> dict[int, float]:
-    """``{seed: result[key]}`` of ``(task, result)`` pairs."""
-    return {task["seed"]: result[key] for task, result in runs}
-
-
 def paired_gap_claim(
-    quantity: str, thesis: str, runs: list[tuple], baseline: list[tuple], key: str = "average"
+    quantity: str, thesis: str, ours: Mapping[int, float], theirs: Mapping[int, float]
 ) -> Claim:
-    """``runs`` above ``baseline`` on ``key``: the direction rule on the paired-by-seed difference."""
-    gaps = paired(by_seed(runs, key), by_seed(baseline, key))
+    """``ours`` above ``theirs`` (``{seed: value}``): the direction rule on the paired difference."""
+    gaps = paired(ours, theirs)
     return direction_claim(quantity, thesis, mean_ci_n(gaps), "above", note="paired by seed")
 
 
 def stability_claim(
-    agent: str, runs: list[tuple], thesis: str, low: float = STABLE_SHARE, high: float = 1.0
+    setting: str,
+    agent: str,
+    runs: Mapping[int, dict],
+    thesis: str,
+    low: float = STABLE_SHARE,
+    high: float = 1.0,
 ) -> Claim:
     """``agent``'s share of second-half greedy snapshots that are optimal, in [low, high].
 
     Per seed, the share of its snapshots after half the steps that are optimal; the 95 % CI
     of its mean over the seeds against the band (``[STABLE_SHARE, 1]`` by default).
+
+    Args:
+        setting: the setting's label.
+        agent: the agent's name.
+        runs: its results in the setting, by seed.
+        thesis: what the thesis says.
+        low: the band's lower end.
+        high: the band's upper end.
     """
-    stats = mean_ci_n([result["second_half_optimal"] for _, result in runs])
+    stats = mean_ci_n([result["second_half_optimal"] for result in runs.values()])
     return range_claim(
-        f"{runs[0][0]['setting']}: {agent} share of second-half greedy snapshots optimal",
+        f"{setting}: {agent} share of second-half greedy snapshots optimal",
         thesis,
         stats,
         low,
@@ -165,25 +194,27 @@ def slug(setting: str) -> str:
 
 
 def setting_figures(
-    groups: dict[str, dict[str, list[tuple]]],
+    groups: dict[str, dict[str, dict[int, dict]]],
+    settings: dict[str, dict],
     estimators: Sequence[str],
     same_curves: Sequence[str] = (),
 ) -> dict[str, Callable[[Path], None]]:
     """Per setting: learning curves, the delay estimates of ``estimators``, optimal snapshots.
 
     Args:
-        groups: what :func:`group_runs` returns.
+        groups: the results, ``{setting: {agent: {seed: result}}}``.
+        settings: each setting's fields (:func:`setting_fields`).
         estimators: the agents whose delay estimates are drawn (those that have one).
         same_curves: agents left out of the learning curves because they train exactly as
             another one (the title says so).
     """
     figures = {}
     for setting, by_agent in groups.items():
-        task0 = next(iter(by_agent.values()))[0][0]
+        task0 = settings[setting]
         size, name = task0["size"], slug(setting)
         optimum = (optimal_average(size), f"optimal loop ({optimal_average(size):.3f})")
         curves = {
-            a: [(r["steps"], r["curve"]) for _, r in runs]
+            a: [(r["steps"], r["curve"]) for r in runs.values()]
             for a, runs in by_agent.items()
             if a not in same_curves
         }
@@ -194,7 +225,7 @@ def setting_figures(
             above = ", above Q" if "Q" in by_agent else ""
             thesis = f"\nthesis (Poisson, Fig. 5.9): MMQ near-optimal{above}"
         snaps = {
-            a: [(r["snapshot_steps"], r["snapshot_optimal"]) for _, r in runs]
+            a: [(r["snapshot_steps"], r["snapshot_optimal"]) for r in runs.values()]
             for a, runs in by_agent.items()
         }
         figures[f"learning_curves_{name}"] = plotting.figure(
@@ -215,9 +246,9 @@ def setting_figures(
             (-0.05, 1.05),
         )
         estimates = {
-            a: [(r["estimate_support"], r["estimate"]) for _, r in by_agent[a]]
+            a: [(r["estimate_support"], r["estimate"]) for r in by_agent[a].values()]
             for a in estimators
-            if a in by_agent and all("estimate" in r for _, r in by_agent[a])
+            if a in by_agent and all("estimate" in r for r in by_agent[a].values())
         }
         if estimates:
             delay = make_delay(task0["delay"], task0["lam"])
