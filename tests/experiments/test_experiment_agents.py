@@ -17,6 +17,7 @@ from delayed_rl.experiments.framework import delay_settings as settings
 from delayed_rl.experiments.framework import setting_summaries as summaries
 from delayed_rl.experiments.framework import snapshot_runs as snapshots
 from delayed_rl.experiments.framework.experiment import VERDICTS
+from delayed_rl.experiments.framework.results import pivot
 from delayed_rl.experiments.framework.training import greedy_average_reward
 
 UP, RIGHT, DOWN, LEFT = 0, 1, 2, 3
@@ -256,22 +257,19 @@ def test_the_share_of_optimal_seeds_reads_its_wilson_interval():
         task, result = _fake("DeconvQ learned", seed, seed != 0, 0.7, 8, 1.0)
         tasks.append(task)
         results.append(result)
-    claim = summaries.optimal_seeds_claim(
-        "DeconvQ learned", list(zip(tasks, results, strict=True)), ""
-    )
+    runs = pivot(tasks, results, by=("agent",))["DeconvQ learned"]
+    claim = summaries.optimal_seeds_claim(tasks[0]["setting"], "DeconvQ learned", runs, "")
     # 19 of 20: Wilson [0.76, 0.99], neither inside nor wholly outside [0.95, 1]
     assert claim.verdict == "inconclusive" and claim.note.startswith("19 of 20 seeds")
     for result in results[1:9]:
         result["optimal"] = False
-    claim = summaries.optimal_seeds_claim(
-        "DeconvQ learned", list(zip(tasks, results, strict=True)), ""
-    )
+    claim = summaries.optimal_seeds_claim(tasks[0]["setting"], "DeconvQ learned", runs, "")
     assert claim.verdict == "differs" and claim.mean == pytest.approx(0.55)
 
 
 def test_relative_gap_is_nan_and_inconclusive_when_the_oracle_earns_nothing():
-    ours = [_fake("DeconvQ learned", s, True, 0.1, 8, 1.0) for s in range(3)]
-    oracle = [_fake("oracle", s, True, -0.1, 0, 1.0) for s in range(3)]
+    ours = {s: _fake("DeconvQ learned", s, True, 0.1, 8, 1.0)[1]["average"] for s in range(3)}
+    oracle = {s: _fake("oracle", s, True, -0.1, 0, 1.0)[1]["average"] for s in range(3)}
     claim = ad.relative_gap_claim("q", "t", ours, oracle, 0.05)
     assert np.isnan(claim.mean) and claim.verdict == "inconclusive"
 
