@@ -36,16 +36,24 @@ DELAYS = ("Poisson", "geometric", "bimodal")
 LAMBDA_MAX = 50
 """The longest delay any learner models: MMQ's λ̂max, DeconvQ's ``max_delay_estimate``, expected credit's
 last lag."""
+#: Where :func:`make_agent` puts the run's true delay among a learner's arguments.
+_TRUE_DELAY = object()
+#: Each learner: its agent in :data:`~delayed_rl.agents.registry.REGISTRY`, and its arguments
+#: beyond the thesis's hyper-parameters (:func:`make_agent`).
+_AGENTS: dict[str, tuple[str, dict[str, Any]]] = {
+    "Q": ("q", {}),
+    "MMQ": ("mmq", {"max_delay_estimate": LAMBDA_MAX}),
+    "expected credit": (
+        "expected-credit",
+        {"delay": _TRUE_DELAY, "max_delay_estimate": LAMBDA_MAX},
+    ),
+    "DeconvQ known": ("deconv", {"delay": _TRUE_DELAY, "max_delay_estimate": LAMBDA_MAX}),
+    "DeconvQ learned": ("deconv", {"delay": None, "max_delay_estimate": LAMBDA_MAX}),
+    "oracle": ("oracle", {}),
+    "Q undelayed": ("q", {}),
+}
 #: The seven learners, in the tables' order (:func:`make_agent`).
-LEARNERS = (
-    "Q",
-    "MMQ",
-    "expected credit",
-    "DeconvQ known",
-    "DeconvQ learned",
-    "oracle",
-    "Q undelayed",
-)
+LEARNERS = tuple(_AGENTS)
 WINDOW_DIVISOR = 10
 """MMQ's runs keep a greedy window of ``steps // WINDOW_DIVISOR`` steps (100k of 1M): the
 averaged table ``future-work``'s greedy-window variant reads (:func:`make_agent`)."""
@@ -130,7 +138,7 @@ def grid(size: int, delay: Delay | None = None, record_arrivals: bool = False) -
 
 
 def make_agent(name: str, size: int, delay: Delay, seed: int, steps: int | None = None) -> Any:
-    """One of :data:`LEARNERS` on its own ``size`` grid under ``delay``.
+    """One of :data:`LEARNERS` on its own ``size`` grid under ``delay``, built from the registry.
 
     ``Q`` is Q-learning on the delayed reward, ``MMQ`` Multiple Model Q-learning with
     Λ = {0, ..., ``LAMBDA_MAX``}, ``expected credit`` and ``DeconvQ known`` are told the true
@@ -144,29 +152,19 @@ def make_agent(name: str, size: int, delay: Delay, seed: int, steps: int | None 
         TypeError: ``name`` is not a string, or ``steps`` not an integer.
         ValueError: ``name`` is not one of :data:`LEARNERS`, or ``steps`` < 1.
     """
-    from delayed_rl import agents
+    from delayed_rl.agents.registry import REGISTRY, agent_class
 
     check_choice("agent", name, LEARNERS)
     steps = check_int("steps", steps, 1, optional=True)
-    common = thesis_hyperparameters(seed)
-    if name == "Q undelayed":
-        return agents.QLearning(grid(size), **common)
-    if name == "oracle":
-        return agents.OracleQLearning(grid(size, delay, record_arrivals=True), **common)
-    env = grid(size, delay)
-    if name == "Q":
-        return agents.QLearning(env, **common)
+    agent, extra = _AGENTS[name]
+    options = {key: delay if value is _TRUE_DELAY else value for key, value in extra.items()}
     if name == "MMQ":
-        window = None if steps is None else max(1, steps // WINDOW_DIVISOR)
-        return agents.MultipleModelQLearning(
-            env, max_delay_estimate=LAMBDA_MAX, greedy_window=window, **common
-        )
-    if name == "expected credit":
-        return agents.ExpectedCreditQLearning(
-            env, delay=delay, max_delay_estimate=LAMBDA_MAX, **common
-        )
-    known = delay if name == "DeconvQ known" else None
-    return agents.DeconvolutionQLearning(env, delay=known, max_delay_estimate=LAMBDA_MAX, **common)
+        options["greedy_window"] = None if steps is None else max(1, steps // WINDOW_DIVISOR)
+    if name == "Q undelayed":
+        env = grid(size)
+    else:
+        env = grid(size, delay, record_arrivals=REGISTRY[agent].needs_arrivals)
+    return agent_class(agent)(env, **options, **thesis_hyperparameters(seed))
 
 
 def run_agent(task: dict) -> dict:

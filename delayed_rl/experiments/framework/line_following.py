@@ -45,8 +45,16 @@ LAM, LAMBDA_MAX = 90, 150
 #: thesis's, :mod:`delayed_rl.experiments.framework.training`).
 Q_INIT = 10.0
 CENTRE, UNSEEN_ERROR = 20, 20
+#: The learners :func:`make_agent` makes (``linefollow``'s MMQ and Q, and DeconvQ learned): each
+#: one's agent in :data:`~delayed_rl.agents.registry.REGISTRY` and its arguments beyond the
+#: thesis's hyper-parameters.
+_AGENTS: dict[str, tuple[str, dict[str, Any]]] = {
+    "MMQ": ("mmq", {"max_delay_estimate": LAMBDA_MAX}),
+    "Q": ("q", {}),
+    "DeconvQ learned": ("deconv", {"delay": None, "max_delay_estimate": LAMBDA_MAX}),
+}
 #: The learners :func:`make_agent` makes: ``linefollow``'s MMQ and Q, and DeconvQ learned.
-LEARNERS = ("MMQ", "Q", "DeconvQ learned")
+LEARNERS = tuple(_AGENTS)
 
 
 def line_env(reward_delay: float | None = LAM, env_id: str = ENV_ID, **kwargs: Any) -> gym.Env:
@@ -64,7 +72,7 @@ def line_env(reward_delay: float | None = LAM, env_id: str = ENV_ID, **kwargs: A
 
 
 def make_agent(kind: str, env: gym.Env, seed: int) -> Any:
-    """A thesis-setting learner on ``env``, one of :data:`LEARNERS`.
+    """A thesis-setting learner on ``env``, one of :data:`LEARNERS`, built from the registry.
 
     ``"Q"`` (Q-learning), ``"MMQ"`` (Λ = {0, ..., 150}) or ``"DeconvQ learned"``
     (:class:`~DeconvolutionQLearning` learning the delay on 0..150), with the thesis's
@@ -74,15 +82,11 @@ def make_agent(kind: str, env: gym.Env, seed: int) -> Any:
         TypeError: ``kind`` is not a string.
         ValueError: ``kind`` is not one of :data:`LEARNERS`.
     """
-    from delayed_rl.agents import DeconvolutionQLearning, MultipleModelQLearning, QLearning
+    from delayed_rl.agents.registry import agent_class
 
     check_choice("kind", kind, LEARNERS)
-    common = thesis_hyperparameters(seed, q_init=Q_INIT)
-    if kind == "Q":
-        return QLearning(env, **common)
-    if kind == "MMQ":
-        return MultipleModelQLearning(env, max_delay_estimate=LAMBDA_MAX, **common)
-    return DeconvolutionQLearning(env, delay=None, max_delay_estimate=LAMBDA_MAX, **common)
+    agent, options = _AGENTS[kind]
+    return agent_class(agent)(env, **options, **thesis_hyperparameters(seed, q_init=Q_INIT))
 
 
 def line_error(centroids: np.ndarray) -> np.ndarray:
