@@ -4,6 +4,7 @@
 - :mod:`.report`: the files an experiment writes, and a reproduction's index;
 - :mod:`.pool`: every experiment's runs, each distinct one run once, on one pool of workers
   (:mod:`delayed_rl.parallel`'s);
+- :mod:`.results`: an experiment's results by any of its tasks' fields and by seed;
 - :mod:`.claims`: the 95 % intervals and the rules that turn them into verdicts;
 - :mod:`.plotting`: the figures;
 - :mod:`.training`: the thesis's hyper-parameters and its grid-world training runs;
