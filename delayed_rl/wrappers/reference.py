@@ -1,22 +1,8 @@
 """The reward-delay rule, written plainly: a schedule keyed by the step clock.
 
-:class:`ReferenceRewardDelay` is the one statement of what every reward-delay implementation
-of the library does, for reading and for tests. Three implementations follow it, each tuned for
-its use: :class:`~delayed_rl.wrappers.RewardDelay` (one env, a schedule of sums),
-:class:`~delayed_rl.wrappers.pending_rewards.PendingRewards` (shared by
-:class:`~delayed_rl.wrappers.VectorRewardDelay` and stable-baselines3's
-:class:`~delayed_rl.wrappers.sb3.VecRewardDelay`: one ring per sub-env) and the compiled
-training loop's ring (:mod:`delayed_rl.compiled.kernel`, which inlines it in its step loop).
-Each is tested against this class step by step (``tests/wrappers/test_reward_delay.py``,
-``tests/wrappers/vector/test_reward_delay.py``, ``tests/wrappers/test_sb3.py``,
-``tests/compiled/test_path.py``).
-
-**The rule.** The reward ``r_t`` emitted at step ``t`` (on the clock of steps since the
-wrapper's construction) with delay ``d_t`` is due at step ``t + d_t``; a step delivers the sum
-of the rewards due then. When an episode ends at step ``t`` (terminated or truncated), what is
-still pending is, by ``on_episode_end``: delivered at that step too (``"flush"``), discarded
-(``"drop"``), or kept, due at its own steps in the next episodes (``"carry"``). A reset in the
-middle of an episode discards what is pending except under ``"carry"``.
+:class:`ReferenceRewardDelay` is the one statement of what every reward-delay implementation of
+the library does, for reading and for tests: each implementation is tested against it step by
+step (``docs/semantics.md`` lists them and the tests).
 """
 
 from __future__ import annotations
@@ -28,7 +14,14 @@ __all__ = ["ReferenceRewardDelay"]
 
 
 class ReferenceRewardDelay:
-    """The reward-delay rule for one env, step by step (see the module docstring).
+    """The reward-delay rule for one env, step by step.
+
+    The reward ``r_t`` emitted at step ``t`` (on the clock of steps since construction) with
+    delay ``d_t`` is due at step ``t + d_t``; a step delivers the sum of the rewards due then.
+    When an episode ends at step ``t`` (terminated or truncated), what is still pending is, by
+    ``on_episode_end``: delivered at that step too (``"flush"``), discarded (``"drop"``), or
+    kept, due at its own steps in the next episodes (``"carry"``). A reset in the middle of an
+    episode discards what is pending except under ``"carry"``.
 
     Args:
         on_episode_end: ``"flush"``, ``"drop"`` or ``"carry"``.

@@ -220,39 +220,23 @@ def flush_watch(
 class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Delays every reward by its own random number of steps, drawn from ``delay``.
 
-    At step ``t`` (counted from 0 in each episode) the inner env emits ``r_t``; the wrapper draws
-    ``d_t`` from ``delay`` (clipped to ``max_delay`` if given) and returns, at step ``t``, the sum
-    of every ``r_j`` with ``j + d_j = t``. Rewards therefore overlap (they are summed) and arrive out
-    of order; a step with nothing due returns ``0.0``. ``d_t = 0`` delivers ``r_t`` at once.
+    At step ``t`` of an episode the inner env emits ``r_t``; the wrapper draws ``d_t`` (clipped
+    to ``max_delay``) and returns the sum of every ``r_j`` with ``j + d_j = t``: rewards overlap
+    and arrive out of order, and a step with nothing due returns ``0.0``. When an episode ends,
+    the rewards still pending follow ``on_episode_end``: added to the last reward (``"flush"``,
+    so the return is the undelayed return), discarded (``"drop"``) or kept for the next episode
+    (``"carry"``). Under ``"flush"`` it warns once if the env rewards only at episodes' ends
+    (then the delay has no effect). ``reset(seed=...)`` seeds the delays, from a stream of their
+    own. ``docs/semantics.md`` has the rules in full: episode ends and resets, the flush trap's
+    watch, the rewards accepted, the checked sums, the cost and the JSON spec.
 
-    Nothing is lost silently. When an episode ends (terminated or truncated), the rewards still
-    pending follow ``on_episode_end``:
-
-    - ``"flush"`` (default): they are added to the final step's reward, so the episode's return
-      equals the undelayed return (``info["flushed_reward"]`` says how much was added);
-    - ``"drop"``: they are discarded and reported as ``info["dropped_reward"]``;
-    - ``"carry"``: they are kept and delivered in the next episode at their scheduled offsets
-      (continuing-task semantics: a robot put back on its track keeps receiving old feedback).
-
-    Under ``"flush"``, an env whose only reward comes at an episode's final step (FrozenLake,
-    Minigrid) is not delayed at all: the wrapper warns once when its first episodes show it
-    (:class:`FlushWatch`). A ``reset()`` in the middle of an episode (an outer ``TimeLimit``)
-    discards what is pending, with a warning, except under ``"carry"``.
-
-    ``info`` on every step: ``undelayed_reward`` (``r_t``), ``drawn_reward_delay`` (``d_t``),
-    ``pending_reward`` (emitted, not yet delivered), and with ``record_arrivals=True``
-    ``reward_arrivals``, the ``(emission_step, value)`` pairs delivered now (negative steps:
-    carried from an earlier episode).
-
-    ``reset(seed=...)`` seeds the delays, from a stream of their own (the same seed gives the same
-    delays). ``docs/semantics.md`` has the rest: the flush trap's watch, the cost, the checked
-    sums and the JSON spec.
+    ``info`` adds, on every step, ``undelayed_reward`` (``r_t``), ``drawn_reward_delay``
+    (``d_t``) and ``pending_reward`` (emitted, not yet delivered); at an episode's end
+    ``flushed_reward`` or ``dropped_reward``; with ``record_arrivals=True``,
+    ``reward_arrivals``, the ``(emission_step, value)`` pairs delivered now.
 
     Args:
-        env: the env whose rewards to delay. Its rewards must be real scalars: ``int``,
-            ``float``, numpy integer and floating scalars or 0-d arrays of them (summed as
-            float64); a bool, a complex number, ``None``, a list or an array of one or more
-            dimensions (a 1-element one included) raises ``TypeError`` at that step.
+        env: the env whose rewards to delay; its rewards must be real scalars.
         delay: a :class:`~delayed_rl.delays.Delay`, its ``to_dict()`` description, or a number
             read as a Poisson mean.
         max_delay: clip delays to at most this many steps (``None``: unbounded).
@@ -261,11 +245,9 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     Raises:
         TypeError, ValueError: at construction, for an invalid argument (the message names it).
-        TypeError: at a step where the inner env returns a reward that is not a real scalar
-            (the message names the reward, its value and the episode step).
-        ValueError: at a step where the inner env returns a NaN or infinite reward (or an int
-            beyond float64's range), or where the rewards due at one step or all those pending
-            sum beyond float64's range.
+        TypeError: at a step where the inner env returns a reward that is not a real scalar.
+        ValueError: at a step where the inner env returns a NaN or infinite reward, or where
+            the rewards due at one step or all those pending sum beyond float64's range.
 
     Example:
         >>> import gymnasium as gym

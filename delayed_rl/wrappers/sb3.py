@@ -19,40 +19,33 @@ from delayed_rl.wrappers.vector._sub_envs import checked_rewards
 
 
 class VecRewardDelay(VecEnvWrapper):
-    """Delays each sub-env's rewards independently, with the semantics of :class:`RewardDelay`.
+    """Delays each sub-env's rewards independently, with the semantics of :class:`~delayed_rl.wrappers.RewardDelay`.
 
-    SB3 vector envs reset a sub-env in the step that ends its episode (``dones[i]`` is True and the
-    returned observation is already the next episode's); pending rewards follow ``on_episode_end``
-    at that step. Each ``infos[i]`` gets ``undelayed_reward``, ``drawn_reward_delay``,
-    ``pending_reward``, and at an episode end ``flushed_reward`` or ``dropped_reward``.
+    SB3 vector envs reset a sub-env in the step that ends its episode (``dones[i]`` true, the
+    observation already the next episode's): the pending rewards follow ``on_episode_end`` at
+    that step. A ``reset()`` after the first discards them (except under ``"carry"``), warning
+    when they are not zero. ``seed=s``, or ``venv.seed(s)`` then ``reset()``, gives sub-env
+    ``i`` the delays of a :class:`~delayed_rl.wrappers.RewardDelay` reset with ``seed=s + i``.
+    Rewards come back in the inner ``VecEnv``'s floating dtype (at least float32).
+    ``docs/semantics.md`` (stable-baselines3) has the rules in full.
 
-    Nothing is lost silently. SB3's ``reset()`` returns only observations and keeps the reset
-    infos in ``reset_infos`` (as ``DummyVecEnv`` does): this wrapper's ``reset_infos[i]`` is the
-    inner env's plus ``pending_reward`` and, for a ``reset()`` in the middle of the episodes
-    (every ``reset()`` after the first: SB3 sub-envs are always in an episode), the rewards it
-    discarded under ``"flush"``/``"drop"`` as ``dropped_reward``, with a warning when they are not
-    zero (``"carry"`` keeps them). An autoreset at an episode's end updates ``reset_infos[i]``
-    too.
+    Each ``infos[i]`` gets ``undelayed_reward``, ``drawn_reward_delay``, ``pending_reward``, and
+    at an episode end ``flushed_reward`` or ``dropped_reward``; ``reset_infos[i]`` gets
+    ``pending_reward``, and ``dropped_reward`` at a ``reset()`` after the first (not under
+    ``"carry"``).
 
-    Under ``"flush"`` the wrapper watches for the flush trap as :class:`RewardDelay` does
-    (:class:`~delayed_rl.wrappers.reward_delay.FlushWatch`), over all its sub-envs together, and
-    warns at most once.
+    Args:
+        venv: the SB3 ``VecEnv`` to wrap.
+        delay: a :class:`~delayed_rl.delays.Delay`, its ``to_dict()`` description, or a number
+            read as a Poisson mean.
+        max_delay: clip delays to at most this many steps (``None``: unbounded).
+        on_episode_end: ``"flush"`` (default), ``"drop"`` or ``"carry"``.
+        seed: seed of the delay generators, an integer ``>= 0`` (``None``: fresh entropy).
 
-    Delays come from the wrapper's own generators, one per sub-env: ``seed=s`` here, or
-    ``venv.seed(s)`` followed by ``reset()``, seeds sub-env ``i``'s delays with ``s + i``, as
-    ``VecEnv.seed`` seeds the envs; sub-env ``i`` then draws the delays of a
-    :class:`~delayed_rl.wrappers.RewardDelay` reset with ``seed=s + i``. (Since 0.2; before,
-    all sub-envs drew from one stream, so seeded runs changed.)
-
-    The inner ``VecEnv``'s rewards must be one real scalar per sub-env, as for
-    :class:`~delayed_rl.wrappers.VectorRewardDelay`: anything else raises ``TypeError``
-    (``ValueError`` for the wrong count), naming ``rewards[i]`` and its value.
-
-    Pending rewards are summed in float64; the rewards returned have the inner ``VecEnv``'s
-    floating dtype (float32 for SB3's ``DummyVecEnv`` and ``SubprocVecEnv``, whose reward buffers
-    are float32: the point where SB3 itself casts), never less than float32. Sums beyond float64's
-    range raise ``ValueError``; the rings that hold pending rewards grow with the delays drawn
-    (see :data:`~delayed_rl.wrappers.pending_rewards.MAX_RING_ENTRIES`).
+    Raises:
+        TypeError, ValueError: as :class:`~delayed_rl.wrappers.RewardDelay`, at construction (a
+            ``seed`` that is not an integer ``>= 0`` included) or at a step (one real scalar
+            reward per sub-env).
 
     Example:
         >>> import gymnasium as gym
@@ -69,20 +62,6 @@ class VecRewardDelay(VecEnvWrapper):
         [0. 0.] [-1.0, -1.0]
         [0. 0.] [-1.0, -1.0]
         [-1. -1.] [-1.0, -1.0]
-
-    Args:
-        venv: the SB3 ``VecEnv`` to wrap.
-        delay: a :class:`~delayed_rl.delays.Delay`, its ``to_dict()`` description, or a number
-            read as a Poisson mean.
-        max_delay: clip delays to at most this many steps (``None``: unbounded).
-        on_episode_end: ``"flush"`` (default), ``"drop"`` or ``"carry"``.
-        seed: seed of the delay generators, an integer ``>= 0`` (``None``: fresh entropy).
-
-    Raises:
-        TypeError: ``delay`` is neither a ``Delay`` nor a number, ``max_delay`` or ``seed`` is
-            not an integer, or ``on_episode_end`` is not a string.
-        ValueError: ``delay`` is a number that is not a valid Poisson mean, ``max_delay`` or
-            ``seed`` is negative, or ``on_episode_end`` is not one of the modes.
     """
 
     def __init__(

@@ -27,42 +27,30 @@ def _with_mask(info: dict[str, Any], key: str, values: np.ndarray, mask: np.ndar
 class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArgs):
     """Delays each sub-env's rewards independently, with the semantics of :class:`~delayed_rl.wrappers.RewardDelay`.
 
-    Every sub-env has its own rewards in transit and clock; ``on_episode_end`` applies per sub-env when its
-    episode ends. All three autoreset modes of ``gymnasium.vector`` are supported:
+    Every sub-env has its own rewards in transit, clock and delay stream; ``on_episode_end``
+    applies to a sub-env when its episode ends, under each autoreset mode of
+    ``gymnasium.vector`` (under ``NEXT_STEP`` the reset step emits and delivers nothing).
+    ``reset(seed=s)`` seeds sub-env ``i`` with ``s + i`` (``reset(seed=[s0, s1, ...])`` with its
+    entry), so that it draws exactly the delays of a :class:`~delayed_rl.wrappers.RewardDelay`
+    reset with that seed. The flush-trap warning watches all sub-envs together, and comes at
+    most once. ``docs/semantics.md`` (vector envs) has the rules in full: the autoreset modes,
+    seeding, the rewards accepted and the memory used.
 
-    - ``NEXT_STEP`` (the default): the step after an episode ends is the sub-env's reset step; it
-      is not a step of any episode, so it emits and delivers nothing (reward 0, delay 0) and the
-      sub-env's clock does not advance;
-    - ``SAME_STEP``: the ending step is both the last step of one episode and the reset; the
-      pending rewards follow ``on_episode_end`` at that step;
-    - ``DISABLED``: sub-envs are reset by ``reset(options={"reset_mask": mask})``; a masked sub-env
-      whose episode had not ended loses its pending rewards under ``"flush"``/``"drop"`` (reported
-      as ``info["dropped_reward"]``), as in :class:`~delayed_rl.wrappers.RewardDelay`.
+    ``info`` holds arrays with Gymnasium's ``_key`` masks: ``undelayed_reward``,
+    ``drawn_reward_delay`` and ``pending_reward`` on every step; ``flushed_reward`` or
+    ``dropped_reward`` for the sub-envs whose episode ended at this step.
 
-    Under ``"flush"`` the wrapper watches for the flush trap as :class:`~delayed_rl.wrappers.RewardDelay` does
-    (:class:`~delayed_rl.wrappers.reward_delay.FlushWatch`), over all its sub-envs together: their
-    episodes with a reward count towards one total, their steps towards one step cap, and it
-    warns at most once.
+    Args:
+        env: a Gymnasium ``VectorEnv``.
+        delay: a :class:`~delayed_rl.delays.Delay`, its ``to_dict()`` description, or a number
+            read as a Poisson mean.
+        max_delay: clip delays to at most this many steps (``None``: unbounded).
+        on_episode_end: ``"flush"`` (default), ``"drop"`` or ``"carry"``.
 
-    The inner env's rewards must be one real scalar per sub-env (an array, list or tuple of
-    ``num_envs`` ints or floats, as :class:`~delayed_rl.wrappers.RewardDelay` accepts them one by one): anything else
-    raises ``TypeError`` (``ValueError`` for the wrong count), naming ``rewards[i]`` and its value.
-
-    ``info`` holds arrays (with Gymnasium's ``_key`` masks): ``undelayed_reward``, ``drawn_reward_delay``,
-    ``pending_reward`` on every step; ``flushed_reward`` or ``dropped_reward`` for the sub-envs
-    whose episode ended at this step.
-
-    Each sub-env has its own delay stream, seeded as Gymnasium's vector envs seed their sub-envs:
-    ``reset(seed=s)`` seeds sub-env ``i`` with ``s + i``, ``reset(seed=[s0, s1, ...])`` with its
-    entry (``None``: left unseeded, its stream goes on); only the sub-envs being reset are
-    reseeded. Sub-env ``i`` seeded with ``s`` draws exactly the delays of a
-    :class:`~delayed_rl.wrappers.RewardDelay` reset with ``seed=s``. (Since 0.2; before, every
-    sub-env drew from one stream seeded with the first seed, so seeded vector runs changed.)
-
-    The rings that hold pending rewards start short and grow with the delays drawn, up to
-    :data:`~delayed_rl.wrappers.pending_rewards.MAX_RING_ENTRIES` slots in all; a longer delay keeps its
-    reward in a dict, so memory stays proportional to what is pending whatever the delay
-    (``Poisson(1e9)`` included). Sums beyond float64's range raise ``ValueError``.
+    Raises:
+        TypeError, ValueError: as :class:`~delayed_rl.wrappers.RewardDelay`, at construction or
+            at a step (one real scalar reward per sub-env); ``ValueError`` also for an env whose
+            ``metadata["autoreset_mode"]`` is not a ``gymnasium.vector.AutoresetMode``.
 
     Example:
         >>> import gymnasium as gym
@@ -78,20 +66,6 @@ class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
         [0. 0.] [-1. -1.] [2 2]
         [0. 0.] [-1. -1.] [2 2]
         [-1. -1.] [-1. -1.] [2 2]
-
-    Args:
-        env: a Gymnasium ``VectorEnv``.
-        delay: a :class:`~delayed_rl.delays.Delay`, its ``to_dict()`` description, or a number
-            read as a Poisson mean.
-        max_delay: clip delays to at most this many steps (``None``: unbounded).
-        on_episode_end: ``"flush"`` (default), ``"drop"`` or ``"carry"``.
-
-    Raises:
-        TypeError: ``delay`` is neither a ``Delay`` nor a number, ``max_delay`` is not an integer
-            or ``on_episode_end`` is not a string.
-        ValueError: ``delay`` is a number that is not a valid Poisson mean, ``max_delay`` is
-            negative, ``on_episode_end`` is not one of the modes, or the env's
-            ``metadata["autoreset_mode"]`` is not a ``gymnasium.vector.AutoresetMode``.
     """
 
     def __init__(
