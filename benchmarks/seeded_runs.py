@@ -35,6 +35,7 @@ import cpu_probe  # noqa: E402  (tests/cpu_probe.py: the Digest and the CPU prob
 
 import delayed_rl  # noqa: E402, F401  (registers the envs)
 from delayed_rl import agents  # noqa: E402
+from delayed_rl.agents.registry import REGISTRY  # noqa: E402
 from delayed_rl.delays import Delay, Geometric, Poisson  # noqa: E402
 from delayed_rl.wrappers import PoissonRewardDelay, RewardDelay  # noqa: E402
 
@@ -68,6 +69,13 @@ AGENTS: list[tuple[str, str, dict]] = [
     ("oracle", "OracleQLearning", {}),
     ("deconv-known", "DeconvolutionQLearning", {"delay": Poisson(3.0), "max_delay_estimate": 20}),
     ("deconv-learned", "DeconvolutionQLearning", {"max_delay_estimate": 20}),
+]
+#: A registered agent without a row above runs with its defaults, under its registry name (so
+#: a new agent needs no row here, only ``--write`` to record its fingerprints).
+AGENTS += [
+    (name, entry.class_name, {})
+    for name, entry in REGISTRY.items()
+    if entry.class_name not in {class_name for _, class_name, _ in AGENTS}
 ]
 
 

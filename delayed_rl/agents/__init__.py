@@ -25,11 +25,11 @@ All share :class:`~delayed_rl.agents.common.base.TabularAgent`: ``learn``, ``pre
 from delayed_rl.agents.common.base import RECORD_KEYS, TabularAgent, load_agent
 from delayed_rl.agents.common.hyperparameters import DEFAULTS, AgentDefaults
 from delayed_rl.agents.common.schedules import ConstantSchedule, LinearSchedule
-from delayed_rl.agents.deconvolution import DeconvolutionQLearning
-from delayed_rl.agents.expected_credit import ExpectedCreditQLearning
-from delayed_rl.agents.mmq import MultipleModelQLearning
-from delayed_rl.agents.oracle import OracleQLearning
-from delayed_rl.agents.qlearning import FixedDelayQLearning, QLearning
+from delayed_rl.agents.registry import REGISTRY, agent_class
+
+#: The registered algorithms by class name, exported here (the registry is their one list).
+_ALGORITHMS = {entry.class_name: agent_class(name) for name, entry in REGISTRY.items()}
+globals().update(_ALGORITHMS)
 
 __all__ = [
     "DEFAULTS",
@@ -37,15 +37,10 @@ __all__ = [
     "RECORD_KEYS",
     "AgentDefaults",
     "ConstantSchedule",
-    "DeconvolutionQLearning",
-    "ExpectedCreditQLearning",
-    "FixedDelayQLearning",
     "LinearSchedule",
-    "MultipleModelQLearning",
-    "OracleQLearning",
-    "QLearning",
     "TabularAgent",
     "load_agent",
+    *_ALGORITHMS,
 ]
 
 

@@ -1,9 +1,10 @@
 """The agents by their short names: the one list of the library's tabular agents.
 
-Everything that lists agents derives from :data:`REGISTRY`: ``delayed-rl train --agent`` (the
-agents with ``train_options``), ``delayed-rl list``, sweep files' ``agents[].name``, the sweeps'
-arrival recording and the tests of every agent. Adding an agent is its module and one entry
-here.
+Everything that lists agents derives from :data:`REGISTRY`: the classes
+:mod:`delayed_rl.agents` exports, ``delayed-rl train --agent`` (the agents with
+``train_options``), ``delayed-rl list``, sweep files' ``agents[].name``, the sweeps' arrival
+recording, the seeded runs and the tests of every agent. Adding an agent is its module and one
+entry here, as Gymnasium registers an env by its entry point.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ class AgentEntry:
     """One agent of the registry.
 
     Attributes:
-        class_name: its class, in :mod:`delayed_rl.agents`.
+        entry_point: where its class is defined, ``"module:ClassName"``.
         label: how tables and figures name it (``"MMQ"``).
         needs_arrivals: its env must record which transition emitted each reward
             (``RewardDelay(..., record_arrivals=True)``: the oracle).
@@ -28,22 +29,39 @@ class AgentEntry:
             ``train`` does not take this agent).
     """
 
-    class_name: str
+    entry_point: str
     label: str
     needs_arrivals: bool = False
     train_options: tuple[str, ...] | None = None
 
+    @property
+    def class_name(self) -> str:
+        """Its class's name (the part of ``entry_point`` after the colon)."""
+        return self.entry_point.partition(":")[2]
+
 
 #: The library's agents by the names the command line and sweep files use.
 REGISTRY: dict[str, AgentEntry] = {
-    "q": AgentEntry("QLearning", "Q", train_options=()),
-    "fixed": AgentEntry("FixedDelayQLearning", "fixed-delay Q", train_options=("delay_estimate",)),
-    "mmq": AgentEntry("MultipleModelQLearning", "MMQ", train_options=("max_delay_estimate",)),
-    "deconv": AgentEntry(
-        "DeconvolutionQLearning", "DeconvQ", train_options=("max_delay_estimate",)
+    "q": AgentEntry("delayed_rl.agents.qlearning:QLearning", "Q", train_options=()),
+    "fixed": AgentEntry(
+        "delayed_rl.agents.qlearning:FixedDelayQLearning",
+        "fixed-delay Q",
+        train_options=("delay_estimate",),
     ),
-    "oracle": AgentEntry("OracleQLearning", "oracle Q", needs_arrivals=True),
-    "expected-credit": AgentEntry("ExpectedCreditQLearning", "expected credit"),
+    "mmq": AgentEntry(
+        "delayed_rl.agents.mmq:MultipleModelQLearning", "MMQ", train_options=("max_delay_estimate",)
+    ),
+    "deconv": AgentEntry(
+        "delayed_rl.agents.deconvolution:DeconvolutionQLearning",
+        "DeconvQ",
+        train_options=("max_delay_estimate",),
+    ),
+    "oracle": AgentEntry(
+        "delayed_rl.agents.oracle:OracleQLearning", "oracle Q", needs_arrivals=True
+    ),
+    "expected-credit": AgentEntry(
+        "delayed_rl.agents.expected_credit:ExpectedCreditQLearning", "expected credit"
+    ),
 }
 #: Each agent's class name, by its short name.
 AGENTS = {name: entry.class_name for name, entry in REGISTRY.items()}
@@ -57,4 +75,5 @@ def agent_class(name: str) -> type:
     Raises:
         KeyError: ``name`` is not a key of :data:`REGISTRY`.
     """
-    return getattr(importlib.import_module("delayed_rl.agents"), AGENTS[name])
+    module, _, class_name = REGISTRY[name].entry_point.partition(":")
+    return getattr(importlib.import_module(module), class_name)
