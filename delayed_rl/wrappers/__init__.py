@@ -1,22 +1,11 @@
 """Wrappers that delay rewards, observations and actions by random numbers of steps.
 
-- :class:`RewardDelay`, :class:`PoissonRewardDelay`: one env, the library's core;
-- :class:`ObservationDelay`: the same idea for observations (the thesis's stale sensor, or
-  rlrd's network where every observation travels on its own: ``arrival=``), with its
-  ``gymnasium.vector`` twin :class:`VectorObservationDelay`;
-- :class:`ActionDelay`: for actions (the env executes an action sent steps earlier), with its
-  ``gymnasium.vector`` twin :class:`VectorActionDelay`;
-- :class:`DelayAwareObservation`: what the agent can know under those delays (the newest
-  observation received, its age, the actions sent since), with its ``gymnasium.vector`` twin
-  :class:`VectorDelayAwareObservation`, and :class:`DiscreteDelayAwareObservation`, the same as
-  one ``Discrete`` index for tabular agents;
-- :func:`wrap_delays`: all three (and the delay-aware view) on one env, in the order
-  ``gym.make(id, ...)`` stacks them;
-- :class:`DiscreteObservation`: observations of several discrete parts (``Blackjack-v1``'s
-  ``Tuple``) as one ``Discrete`` index, for the tabular agents;
-- :class:`VectorRewardDelay`: the twin for ``gymnasium.vector`` envs;
-- :class:`delayed_rl.wrappers.sb3.VecRewardDelay`: the twin for stable-baselines3 ``VecEnv`` objects
-  (imported from its own module so that stable-baselines3 and torch load only when used).
+One wrapper per delayed signal (:class:`RewardDelay`, :class:`ObservationDelay`,
+:class:`ActionDelay`) with its ``gymnasium.vector`` twin, :func:`wrap_delays` to stack them as
+``gym.make(id, ...)`` does, :class:`DelayAwareObservation` for what the agent can know under
+them, and :class:`DiscreteObservation` for tabular agents. The stable-baselines3 twin,
+:class:`delayed_rl.wrappers.sb3.VecRewardDelay`, is imported from its own module.
+``docs/semantics.md`` states the rules.
 """
 
 from delayed_rl.wrappers.action_delay import ActionDelay

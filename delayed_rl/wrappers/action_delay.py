@@ -138,37 +138,26 @@ class ActionLine:
 class ActionDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Executes, at step ``t``, the action sent ``d_t`` steps earlier, ``d_t`` drawn from ``delay``.
 
-    The rule (:class:`ActionLine`): the action sent at step ``t`` arrives at step ``t + d_t``; the
-    env executes, at each step, the latest-sent action that has arrived — actions arriving out of
-    order after a later-sent one are never executed — and, before the episode's first action
-    arrives, ``initial_action``. A constant delay ``k`` (``Constant(k)``) is the classic
-    constant-delay MDP: step ``t`` executes ``a_{t−k}``, and ``initial_action`` for ``t < k``.
-    Actions still in transit when an episode ends are discarded by the next ``reset()``.
+    The action sent at step ``t`` arrives at step ``t + d_t`` (:class:`ActionLine` states the
+    rule); the env executes, at each step, the latest-sent action that has arrived (one
+    overtaken in transit by a later-sent one is never executed), and ``initial_action`` before
+    the episode's first action arrives. ``Constant(k)`` is the classic constant-delay MDP.
+    Every action sent is checked against the action space (any space, nested ``Dict`` and
+    ``Tuple`` included), and actions are copied where they enter and where they leave.
+    ``reset(seed=...)`` seeds the delays, from a stream of their own. ``docs/semantics.md`` has
+    the rules in full: the copies, the initial action's forms, what a reset discards.
 
-    Every action sent is checked against the action space (an action that would never be
-    executed is still refused if it is invalid), for any space (``Discrete``, ``Box``,
-    ``MultiDiscrete``, ``MultiBinary``, ``Dict`` and ``Tuple``, nested). Actions are copied
-    (:func:`~delayed_rl.wrappers._samples.copy_sample`: arrays copied, dicts and tuples rebuilt)
-    where they enter and where they leave: the wrapper keeps a copy of each action sent, steps
-    the inner env with a copy of the action executed and reports another copy in ``info``. So
-    reusing or modifying an action after ``step()``, writing into ``info["executed_action"]``,
-    or an inner env that edits its action in place, changes neither the actions in transit nor
-    ``initial_action``. ``info`` is the inner env's plus
-    ``info["executed_action"]`` (the action the env executed), ``info["executed_action_step"]``
-    (the episode step that sent it, ``-1`` for ``initial_action``) and ``info["drawn_action_delay"]``
-    (``d_t``, the transit time drawn for this step's action). Seeded by ``reset(seed=...)`` from
-    an independent delay stream, as :class:`~delayed_rl.wrappers.RewardDelay`.
+    ``info`` adds ``executed_action`` (the action the env executed), ``executed_action_step``
+    (the episode step that sent it, ``-1`` for ``initial_action``) and ``drawn_action_delay``
+    (``d_t``, the transit time drawn for this step's action).
 
     Args:
         env: the env whose actions to delay.
         delay: a :class:`~delayed_rl.delays.Delay`, its ``to_dict()`` description, or a number
             read as a Poisson mean.
-        initial_action: executed until the episode's first action arrives; ``None``: the
-            space's neutral action (:func:`neutral_action`: 0 for ``Discrete``, zeros for
-            ``Box``). Anything the space's ``contains`` accepts, kept as a copy in the form of
-            the space's samples (a list for a ``Box`` becomes an array of its dtype, a list for
-            a ``Tuple`` a tuple), and recorded in the env spec in JSON form (arrays as lists),
-            which reads back to the same action.
+        initial_action: executed until the episode's first action arrives, anything the
+            space's ``contains`` accepts; ``None``: the space's neutral action
+            (:func:`neutral_action`: 0 for ``Discrete``, zeros for ``Box``).
         max_delay: clip delays to at most this many steps (``None``: unbounded).
 
     Raises:

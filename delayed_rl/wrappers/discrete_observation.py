@@ -1,15 +1,7 @@
 """``DiscreteObservation``: observations made of discrete parts as one ``Discrete`` index.
 
-The tabular agents need a ``Discrete`` observation space. Some envs observe several discrete
-parts: Gymnasium's ``Blackjack-v1`` sees a ``Tuple`` of the player's sum, the dealer's card and
-whether the player holds a usable ace. :class:`DiscreteObservation` numbers every combination of
-the parts, so that such an env can be learned by any of the library's agents (on the Python
-path: the compiled one needs the env's outcome tables, ``P``, which Blackjack does not have).
-
-The numbering is mixed radix with the first part most significant, as
-``numpy.ravel_multi_index`` numbers a C-ordered array's cells: for parts ``x_i`` of
-``Discrete(n_i, start=s_i)``, the index is ``Σ_i (x_i − s_i) · Π_{j > i} n_j``, in
-``0 .. Π n_i − 1``; :meth:`DiscreteObservation.decode` maps an index back to its parts.
+The tabular agents need a ``Discrete`` observation space; some envs observe several discrete
+parts (Gymnasium's ``Blackjack-v1``: the player's sum, the dealer's card, a usable ace).
 """
 
 from __future__ import annotations
@@ -45,16 +37,21 @@ def _parts(space: spaces.Space) -> tuple[list[int], list[int]]:
 class DiscreteObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
     """Observe one ``Discrete`` index per combination of the env's discrete parts.
 
+    Such an env can then be learned by any of the library's agents (on the Python path: the
+    compiled one needs the env's outcome tables, ``P``, which Blackjack does not have). The
+    wrapped env's observation space is ``Discrete(Π n_i)``, numbered mixed radix with the first
+    part most significant, as ``numpy.ravel_multi_index`` numbers a C-ordered array's cells: for
+    parts ``x_i`` of ``Discrete(n_i, start=s_i)``, the index is ``Σ_i (x_i − s_i) · Π_{j > i}
+    n_j``, in ``0 .. Π n_i − 1``; :meth:`decode` maps an index back to its parts. An observation
+    outside the env's own space (a part missing, of the wrong type or out of its range) raises
+    ``ValueError`` rather than mapping to another state's index.
+
     Args:
         env: an env whose ``observation_space`` is a ``Tuple`` of ``Discrete`` spaces (e.g.
             ``Blackjack-v1``) or a one-dimensional ``MultiDiscrete``.
 
     Raises:
         TypeError: the observation space is neither.
-
-    The wrapped env's observation space is ``Discrete(Π n_i)`` (see the module docstring for
-    the numbering). An observation outside the env's own space (a part missing, of the wrong
-    type or out of its range) raises ``ValueError`` rather than mapping to another state's index.
 
     Example:
         >>> import gymnasium as gym

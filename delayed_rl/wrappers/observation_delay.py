@@ -126,9 +126,10 @@ class NetworkArrival:
 def _settings(delay: Any, max_delay: Any, arrival: Any) -> tuple[Delay, int | None, str, int]:
     """An observation delay's ``delay``, ``max_delay`` and ``arrival``, checked, and its ``history``.
 
-    ``history`` is how many observations the ``"stale"`` rule keeps (:class:`ObservationDelay`
-    says how it is chosen). :class:`ObservationDelay` and :class:`VectorObservationDelay` read
-    their arguments here, so that both refuse the same values with the same messages.
+    ``history`` is how many observations the ``"stale"`` rule keeps: the delay's bound plus 1
+    (:func:`~delayed_rl._delay_line.delay_bound`, capped below ``MAX_DELAY``).
+    :class:`ObservationDelay` and :class:`VectorObservationDelay` read their arguments here, so
+    that both refuse the same values with the same messages.
 
     Raises:
         TypeError, ValueError: as :class:`ObservationDelay`.
@@ -147,49 +148,23 @@ def _new_rule(arrival: str, history: int) -> StaleArrival | NetworkArrival:
 class ObservationDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Shows, at step ``t``, an observation made ``d`` steps earlier, ``d`` drawn from ``delay``.
 
-    Observations are numbered from the reset observation ``o_0``; step ``t`` (counted from 0)
-    makes ``o_{t+1}``, which it would return undelayed. The reset observation itself is never
-    delayed. Two arrival rules (``arrival``) say which observation step ``t`` returns:
+    Observations are numbered from the reset observation ``o_0``, which is never delayed; step
+    ``t`` makes ``o_{t+1}``. The arrival rule (``arrival``) says which one step ``t`` returns:
 
-    - ``"stale"`` (the default; :class:`StaleArrival`): the stale sensor. Step ``t`` draws
-      ``d_t`` and returns ``o_{max(0, t+1−d_t)}``: a delay reaching back past the episode's start
-      shows the episode's first observation. Some observations are never seen; one can be seen
-      again, or after a newer one. This is the thesis's delayed-sensing baseline (section 5.2.3:
-      the P-controller fed camera readings λ = 90 steps old on average).
-    - ``"network"`` (:class:`NetworkArrival`): rlrd's rule (Bouteiller et al., ICLR 2021). Every
-      observation ``o_i`` (``i ≥ 1``) draws its own delay ``d_i`` when it is made and arrives at
-      index ``i + d_i``: by step ``t`` if ``i + d_i ≤ t + 1``. Step ``t`` returns the newest
-      observation (largest ``i``) arrived so far; an older one that arrives after a newer one
-      does not replace it. A constant delay ``k`` gives the same observations under both rules.
+    - ``"stale"`` (the default; :class:`StaleArrival`), the thesis's stale sensor: step ``t``
+      draws ``d_t`` and returns ``o_{max(0, t+1−d_t)}``. Some observations are never seen; one
+      can be seen again, or after a newer one.
+    - ``"network"`` (:class:`NetworkArrival`), rlrd's rule: every ``o_i`` draws its own delay
+      and arrives at step index ``i + d_i``; step ``t`` returns the newest arrived so far.
 
-    Both rules draw one delay a step from the same stream, so the same seed gives the same delays.
+    Rewards and termination are the inner env's. Array observations are handed out as copies.
+    ``reset(seed=...)`` seeds the delays, from a stream of their own. ``docs/semantics.md`` has
+    the rules in full: the ages reported, the history kept, the copies.
 
-    Rewards, termination and ``info`` are the inner env's, plus:
-
-    - ``info["observation_age"]``: the age of the observation returned, the steps since it was
-      made (``t + 1 − i`` for ``o_i``; under ``"stale"``, ``d_t`` clipped to the episode's start
-      and to the history kept), 0 at ``reset()``;
-    - ``info["arrived_observations"]``: a tuple of the ``(i, o_i)`` received at this step, in the
-      order of ``i``: under ``"stale"`` the one returned; under ``"network"`` every one arriving
-      now (possibly none), those older than the one returned included. ``((0, o_0),)`` at
-      ``reset()``. Learners that use every observation received, not only the newest, read it.
-
-    Under ``"stale"`` the wrapper keeps the last ``history`` observations: ``max_delay + 1`` when
-    ``max_delay`` is set, otherwise enough for all but a negligible tail of the distribution
-    (mean + 10·√mean + 20 steps for an unbounded one). A delay reaching further back than that is
-    applied as the oldest observation kept, and ``info["observation_age"]`` says so; the history
-    is a ``deque`` holding only the observations made, so a long delay bound costs no memory until
-    the steps are taken. Under ``"network"`` the wrapper keeps only the observations in transit
-    and the newest arrived, and no delay is clipped but by ``max_delay``. Seeded by
-    ``reset(seed=...)`` from the same independent delay stream as
-    :class:`~delayed_rl.wrappers.RewardDelay`; observations still in transit when an episode ends
-    are discarded by the next ``reset()``.
-
-    The same observation can be handed out at several steps (returned again, or in
-    ``arrived_observations``), so array observations are handed out as copies, every time and
-    everywhere (:func:`~delayed_rl.wrappers._samples.copy_sample`): modifying one changes neither
-    what the wrapper keeps nor any other observation returned or reported, as
-    ``gymnasium.utils.env_checker.check_env`` requires. (Integer observations need no copy.)
+    ``info`` adds ``observation_age``, the steps since the observation returned was made (0 at
+    ``reset()``), and ``arrived_observations``, the ``(i, o_i)`` received at this step, in the
+    order of ``i`` (under ``"network"`` possibly none, or several; ``((0, o_0),)`` at
+    ``reset()``).
 
     Args:
         env: the env whose observations to delay.

@@ -24,23 +24,28 @@ from delayed_rl.wrappers.vector._sub_envs import (
 class VectorActionDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArgs):
     """Delays each sub-env's actions independently, with the rule of :class:`~delayed_rl.wrappers.ActionDelay`.
 
-    Every sub-env has its own :class:`~delayed_rl.wrappers.action_delay.ActionLine` and delay stream (seeded as
-    :class:`~delayed_rl.wrappers.VectorRewardDelay` seeds them: ``reset(seed=s)`` gives sub-env
-    ``i`` the seed ``s + i``, so it executes exactly the actions an :class:`~delayed_rl.wrappers.ActionDelay` reset
-    with ``seed=s + i`` would). A sub-env's line restarts with its episode: under the
-    ``NEXT_STEP`` autoreset mode at the reset step that follows an episode's end (the action
-    given for that step is not sent: the sub-env ignores it), under ``SAME_STEP`` right after
-    the ending step, under ``DISABLED`` when ``reset(options={"reset_mask": ...})`` resets it.
+    Every sub-env has its own :class:`~delayed_rl.wrappers.action_delay.ActionLine` and delay
+    stream. ``reset(seed=s)`` gives sub-env ``i`` the seed ``s + i``, so that it executes
+    exactly the actions an :class:`~delayed_rl.wrappers.ActionDelay` reset with that seed would.
+    A sub-env's line restarts with its episode, under each autoreset mode (under ``NEXT_STEP``
+    the action given for the reset step is not sent). Actions are batched as in
+    ``gymnasium.vector`` and copied as :class:`~delayed_rl.wrappers.ActionDelay` copies them.
+    ``docs/semantics.md`` (vector envs) has the rules in full.
 
     ``info`` holds, with Gymnasium's ``_key`` masks, ``executed_action`` (the batch of actions
     executed), ``executed_action_step`` and ``drawn_action_delay`` (for the sub-envs that sent an
     action at this step).
 
-    Actions are batched as in ``gymnasium.vector``: an array with one row per sub-env, and for
-    a ``Dict`` (``Tuple``) action space a dict (tuple) of such batches, nested as the space is;
-    ``info["executed_action"]`` is a batch of the same form. They are copied as
-    :class:`~delayed_rl.wrappers.ActionDelay` copies them: the batch given to the inner env and the one reported are
-    new objects built from copies of what the lines keep.
+    Args:
+        env: a Gymnasium ``VectorEnv``.
+        delay: a :class:`~delayed_rl.delays.Delay`, its ``to_dict()`` description, or a number
+            read as a Poisson mean.
+        initial_action: one sub-env's initial action (``None``: the neutral action of its
+            action space, :func:`~delayed_rl.wrappers.action_delay.neutral_action`).
+        max_delay: clip delays to at most this many steps (``None``: unbounded).
+
+    Raises:
+        TypeError, ValueError: as :class:`~delayed_rl.wrappers.ActionDelay`, and for an unknown autoreset mode.
 
     Example:
         >>> import gymnasium as gym
@@ -54,17 +59,6 @@ class VectorActionDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
         >>> *_, info = envs.step(np.array([[0.5], [0.5]], dtype=np.float32))
         >>> info["executed_action"].tolist(), info["drawn_action_delay"].tolist()  # one step late
         ([[1.0], [2.0]], [1, 1])
-
-    Args:
-        env: a Gymnasium ``VectorEnv``.
-        delay: a :class:`~delayed_rl.delays.Delay`, its ``to_dict()`` description, or a number
-            read as a Poisson mean.
-        initial_action: one sub-env's initial action (``None``: the neutral action of its
-            action space, :func:`~delayed_rl.wrappers.action_delay.neutral_action`).
-        max_delay: clip delays to at most this many steps (``None``: unbounded).
-
-    Raises:
-        TypeError, ValueError: as :class:`~delayed_rl.wrappers.ActionDelay`, and for an unknown autoreset mode.
     """
 
     def __init__(

@@ -27,55 +27,31 @@ class VectorDelayAwareObservation(gym.vector.VectorWrapper, gym.utils.RecordCons
     """Observe, for each sub-env of a vector stack, the view of :class:`~delayed_rl.wrappers.DelayAwareObservation`.
 
     ``env`` is a vector stack holding a :class:`~delayed_rl.wrappers.VectorObservationDelay`, a
-    :class:`~delayed_rl.wrappers.VectorActionDelay`, both or neither (found by walking ``.env``
-    down the ``gym.vector.VectorWrapper`` layers; at most one of each). Each sub-env has its own
-    :class:`~delayed_rl.wrappers.delay_aware.ViewState`, fed what the stack reports for it (its row of the observations,
-    ``info["observation_age"]`` and ``info["arrived_observations"]``) and its action given to
-    this wrapper's ``step``, so sub-env ``i`` observes exactly the view of a
-    :class:`~delayed_rl.wrappers.DelayAwareObservation` over the same sub-env under an ``ObservationDelay`` and an
-    ``ActionDelay`` of the same arguments, reset with the seed the stack gives sub-env ``i``.
-    ``K`` (``action_history``) and ``D`` (``max_age``) are read from the delays' bounds as
-    :class:`~delayed_rl.wrappers.DelayAwareObservation` reads them, and the rows before an episode's first action hold
-    the ``VectorActionDelay``'s ``initial_action`` (without one, the neutral action).
+    :class:`~delayed_rl.wrappers.VectorActionDelay`, both or neither (at most one of each; wrap
+    outside them). Each sub-env has its own view, built from what the stack reports for it and
+    the actions it is given, so sub-env ``i`` observes exactly what a
+    :class:`~delayed_rl.wrappers.DelayAwareObservation` over the same sub-env and delays, reset
+    with the seed the stack gives it, would. ``observation_space`` is the batch of the single
+    view's ``Dict`` (a ``Dict`` of batches). A sub-env's view restarts with its episode, under
+    each autoreset mode. Everything handed out is a copy; the wrapper draws nothing:
+    ``reset(seed=...)`` seeds the stack. The rules in full: the late-observations page of the
+    docs.
 
-    ``single_observation_space`` is :class:`~delayed_rl.wrappers.DelayAwareObservation`'s ``Dict``;
-    ``observation_space`` is its batch (``gymnasium.vector.utils.batch_space``: a ``Dict`` of
-    batches), and the views are batched with ``gymnasium.vector.utils.concatenate`` into new
-    arrays. A sub-env's view restarts with its episode, as the stack's delays do:
-
-    - ``NEXT_STEP`` (the default autoreset mode): at the reset step that follows an episode's end
-      (the action given for it is neither checked nor recorded: the sub-env ignores it), with the
-      new episode's ``o_0``;
-    - ``SAME_STEP``: the ending step is recorded in the ending episode's view, which
-      ``info["final_obs"]`` holds for that sub-env (built from the observation the stack reports
-      there, the delayed one under a ``VectorObservationDelay``); that step's
-      ``received_observations`` and ``age_clipped`` are in ``info["final_info"]``, and the view
-      returned is the new episode's, at ``o_0``;
-    - ``DISABLED``: when ``reset(options={"reset_mask": ...})`` resets the sub-env; the others
-      keep their views.
-
-    ``info`` holds, with Gymnasium's ``_key`` masks (set for the sub-envs stepped or reset),
-    ``received_observations`` (an object array: each sub-env's tuple of the ``(i, o_i)`` received
-    at this step, as :class:`~delayed_rl.wrappers.DelayAwareObservation` reports it) and ``age_clipped`` (a ``bool``
-    array). Everything handed out is a copy, as :class:`~delayed_rl.wrappers.DelayAwareObservation`'s. Each sub-env's
-    action is checked against the single action space before the stack is stepped. The wrapper
-    draws nothing: ``reset(seed=...)`` seeds the stack.
-
-    Wrap outside the delays: wrappers between them and the view must not change observations or
-    drop ``info`` entries. The view reads only vector delay wrappers: a stack whose sub-envs hold
-    an ``ObservationDelay`` or an ``ActionDelay`` of their own (seen by their ``info`` entries,
-    ``observation_age`` at ``reset()`` and ``executed_action`` at ``step()``) is refused; wrap
-    each of those sub-envs with :class:`~delayed_rl.wrappers.DelayAwareObservation` instead.
+    ``info`` holds, with Gymnasium's ``_key`` masks, ``received_observations`` (an object array
+    of each sub-env's ``(i, o_i)`` received at this step) and ``age_clipped`` (a ``bool``
+    array); under ``SAME_STEP``, the ending step's are in ``info["final_info"]``.
 
     Args:
         env: the vector stack to observe.
         action_history: as :class:`~delayed_rl.wrappers.DelayAwareObservation`'s.
 
     Raises:
-        TypeError, ValueError: as :class:`~delayed_rl.wrappers.DelayAwareObservation` (the stack holding two
-            ``VectorObservationDelay`` or ``VectorActionDelay`` wrappers), and ``ValueError`` for
-            an env whose ``metadata["autoreset_mode"]`` is not a
-            ``gymnasium.vector.AutoresetMode``.
+        TypeError, ValueError: as :class:`~delayed_rl.wrappers.DelayAwareObservation` (the stack
+            holding two ``VectorObservationDelay`` or ``VectorActionDelay`` wrappers), and
+            ``ValueError`` for an env whose ``metadata["autoreset_mode"]`` is not a
+            ``gymnasium.vector.AutoresetMode``, or at ``reset()`` or ``step()`` for a stack whose
+            sub-envs hold an ``ObservationDelay`` or ``ActionDelay`` of their own (wrap each
+            sub-env with :class:`~delayed_rl.wrappers.DelayAwareObservation` instead).
 
     Example:
         >>> import gymnasium as gym

@@ -26,40 +26,19 @@ from delayed_rl.wrappers.vector._sub_envs import (
 class VectorObservationDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArgs):
     """Delays each sub-env's observations independently, with the rule of :class:`~delayed_rl.wrappers.ObservationDelay`.
 
-    Every sub-env has its own arrival rule (:class:`~delayed_rl.wrappers.observation_delay.StaleArrival` or :class:`~delayed_rl.wrappers.observation_delay.NetworkArrival`, as
-    ``arrival`` says) and its own delay stream, seeded as
-    :class:`~delayed_rl.wrappers.VectorActionDelay` seeds them: ``reset(seed=s)`` gives sub-env
-    ``i`` the seed ``s + i`` (``reset(seed=[s0, s1, ...])`` its entry), so sub-env ``i`` shows
-    exactly the observations of an :class:`~delayed_rl.wrappers.ObservationDelay` over the same env reset with
-    ``seed=s + i``, and reports the same ``info`` entries. A sub-env's rule restarts with its
-    episode, and the episode's first observation ``o_0`` is shown undelayed, as at
-    :class:`~delayed_rl.wrappers.ObservationDelay`'s ``reset()``:
+    Every sub-env has its own arrival rule (``arrival``) and delay stream. ``reset(seed=s)``
+    gives sub-env ``i`` the seed ``s + i`` (``reset(seed=[s0, s1, ...])`` its entry), so that
+    it shows exactly the observations of an :class:`~delayed_rl.wrappers.ObservationDelay`
+    reset with that seed, and reports the same ``info`` entries. A sub-env's rule restarts with
+    its episode, whose first observation is shown undelayed, under each autoreset mode; under
+    ``SAME_STEP``, ``info["final_obs"]`` holds the delayed observation shown at the last step,
+    not the undelayed one. Everything handed out is a copy. ``docs/semantics.md`` (vector envs)
+    has the rules in full.
 
-    - ``NEXT_STEP`` (the default autoreset mode): the step after an episode ends is the sub-env's
-      reset step; it returns the new episode's ``o_0`` (age 0) and draws no delay;
-    - ``SAME_STEP``: the ending step makes the episode's last observation, which goes through the
-      rule like any other; the step returns the new episode's ``o_0``, and
-      ``info["final_obs"]`` holds, for the sub-envs whose episode ended, the observation the
-      delayed sub-env shows at that last step (not the undelayed one the inner env reports
-      there: that would leak the state the delay hides). That step's ``observation_age`` and
-      ``arrived_observations`` are in ``info["final_info"]``, and the top-level entries are those
-      of the new episode's ``o_0``, which is what a ``SyncVectorEnv`` of
-      :class:`~delayed_rl.wrappers.ObservationDelay` sub-envs reports;
-    - ``DISABLED``: a sub-env restarts when ``reset(options={"reset_mask": ...})`` resets it; the
-      sub-envs left alone keep their episodes and show again what they showed last.
-
-    ``info`` holds, with Gymnasium's ``_key`` masks (set for the sub-envs stepped or reset):
-
-    - ``info["observation_age"]``: an ``int64`` array, each sub-env's age of the observation
-      it shows (as :class:`~delayed_rl.wrappers.ObservationDelay`'s, 0 for an ``o_0``);
-    - ``info["arrived_observations"]``: an object array holding, for each sub-env, the tuple of
-      the ``(i, o_i)`` it received at this step (``((0, o_0),)`` for an ``o_0``).
-
-    Observations are batched with ``gymnasium.vector.utils`` (``iterate``, ``concatenate``,
-    ``create_empty_array``) and copied as :class:`~delayed_rl.wrappers.ObservationDelay` copies them: the rules keep
-    copies of the inner env's observations (its batch may be reused), and the batch returned,
-    the arrived observations and ``info["final_obs"]`` are new objects built from copies, so
-    that modifying any of them changes nothing the wrapper keeps or returns later.
+    ``info`` holds, with Gymnasium's ``_key`` masks (set for the sub-envs stepped or reset),
+    ``observation_age`` (an ``int64`` array, each sub-env's age of the observation it shows) and
+    ``arrived_observations`` (an object array of each sub-env's tuple of the ``(i, o_i)`` it
+    received at this step); under ``SAME_STEP``, the ending step's are in ``info["final_info"]``.
 
     Args:
         env: a Gymnasium ``VectorEnv``.
@@ -69,8 +48,9 @@ class VectorObservationDelay(gym.vector.VectorWrapper, gym.utils.RecordConstruct
         arrival: the arrival rule, ``"stale"`` or ``"network"`` (see :class:`~delayed_rl.wrappers.ObservationDelay`).
 
     Raises:
-        TypeError, ValueError: as :class:`~delayed_rl.wrappers.ObservationDelay`; ``ValueError`` also for an env whose
-            ``metadata["autoreset_mode"]`` is not a ``gymnasium.vector.AutoresetMode``.
+        TypeError, ValueError: as :class:`~delayed_rl.wrappers.ObservationDelay`; ``ValueError``
+            also for an env whose ``metadata["autoreset_mode"]`` is not a
+            ``gymnasium.vector.AutoresetMode``.
 
     Example:
         >>> from delayed_rl.delays import Constant
