@@ -1,16 +1,10 @@
 """Random reward, observation and action delays for PettingZoo's ``ParallelEnv``, per agent.
 
 :class:`ParallelRewardDelay`, :class:`ParallelObservationDelay` and :class:`ParallelActionDelay`
-apply their single-agent namesakes' rules (:mod:`delayed_rl.wrappers`) to every agent on its
-own: ``delay`` is one distribution for all or a mapping from agent to one, and
-``reset(seed=s)`` seeds agent ``i`` with :func:`agent_seed` ``(s, i)``, so that it draws exactly
-its namesake's delays. They are ``BaseParallelWrapper`` objects: they stack, pass PettingZoo's
-API and seed tests, and :func:`sb3_vec_env` (SuperSuit's conversion, with a ``seed()``) hands
-them to stable-baselines3 with one policy for every agent. :class:`CooperativeGridWorldEnv` is
-a small two-agent game to learn on. ``docs/multiagent.md`` covers agents that leave or join,
-AEC envs (through PettingZoo's conversions; turn-based games are not covered) and the learners.
-
-PettingZoo is imported when a wrapper is first used; install it with the ``multiagent`` extra.
+apply their single-agent namesakes' rules to every agent on its own; :func:`sb3_vec_env` hands
+them to stable-baselines3, and :class:`CooperativeGridWorldEnv` is a small game to learn on.
+PettingZoo is imported when a wrapper is first used (the ``multiagent`` extra).
+``docs/multiagent.md`` has the rules.
 
 Example:
     >>> from pettingzoo.classic.rps.rps import parallel_env  # rock-paper-scissors

@@ -36,30 +36,17 @@ class ParallelActionDelay(ParallelDelayWrapper):
     """Delays every agent's actions independently, with the rule of :class:`~delayed_rl.wrappers.ActionDelay`.
 
     Each agent has its own :class:`~delayed_rl.wrappers.action_delay.ActionLine` and delay
-    stream: the action it sends at its step ``t`` arrives at its step ``t + d_t``, and the env
-    executes, at each step, the latest-sent action of the agent that has arrived, or its
-    ``initial_action`` before its first one arrives. An agent's steps are those at which
-    ``actions`` names it (an agent left out of ``actions`` sends nothing, and the env is given
-    no action for it); the line restarts, empty, at ``reset()`` and when the agent leaves, so an
-    agent that joins in the middle of an episode starts with nothing in transit.
+    stream: the action it sends at its step ``t`` arrives at its step ``t + d_t``. An agent's
+    actions in transit are discarded when it leaves, and it joins with none. Actions are checked
+    and copied as :class:`~delayed_rl.wrappers.ActionDelay` does. ``reset(seed=s)`` seeds agent
+    ``i`` with :func:`~delayed_rl.multiagent.agent_seed` ``(s, i)``: it executes the actions of
+    an :class:`~delayed_rl.wrappers.ActionDelay` reset with that seed. ``docs/multiagent.md``
+    has the rules in full.
 
-    **Actions in transit when an agent leaves.** At the step an agent terminates or is
-    truncated, the actions it sent that have not arrived are discarded and reported in its last
-    ``info``: ``info[agent]["discarded_actions"]``, a tuple of the ``(sent step, action)``
-    pairs (copies), by sent step, empty if none. A ``reset()`` discards the actions in transit
-    of the agents still live, reported likewise in the reset ``infos`` (for the agents there
-    whose line held any).
-
-    Every action sent is checked against its agent's action space and copied where it comes in
-    and where it leaves, as :class:`~delayed_rl.wrappers.ActionDelay` does. ``info[agent]``
-    holds :class:`~delayed_rl.wrappers.ActionDelay`'s entries for every agent that sent an
-    action: ``executed_action`` (a copy of the action the env executed), ``executed_action_step``
-    (the agent's step that sent it, ``-1`` for its initial action) and ``drawn_action_delay``
-    (``d_t``). The ``infos`` returned are new dicts (the env's own are not modified).
-
-    ``reset(seed=s)`` seeds agent ``i`` (its position in ``possible_agents``) with
-    :func:`~delayed_rl.multiagent.agent_seed` ``(s, i)``, so that it executes exactly the
-    actions of an :class:`~delayed_rl.wrappers.ActionDelay` reset with that seed.
+    ``info[agent]``, for every agent that sent an action: ``executed_action``,
+    ``executed_action_step`` (``-1`` for its initial action) and ``drawn_action_delay``
+    (``d_t``); at its last step (or a ``reset()``), ``discarded_actions``, the
+    ``(sent step, action)`` pairs it had in transit.
 
     Args:
         env: a ``pettingzoo.ParallelEnv`` with ``possible_agents``.
@@ -67,17 +54,13 @@ class ParallelActionDelay(ParallelDelayWrapper):
             read as a Poisson mean, for every agent; or a mapping from every agent of
             ``possible_agents`` to one of those.
         initial_action: what an agent executes until its first action arrives: one action for
-            every agent, or a mapping from every agent to its own; ``None`` (or a ``None``
-            entry): the agent's neutral action
-            (:func:`~delayed_rl.wrappers.action_delay.neutral_action`). A mapping is read as
-            one entry per agent when a key is an agent's name or no agent has a ``Dict`` action
-            space; otherwise as one ``Dict`` action for every agent.
+            every agent, or a mapping from every agent to its own; ``None``: the neutral action
+            (:func:`~delayed_rl.wrappers.action_delay.neutral_action`).
         max_delay: clip delays to at most this many steps (``None``: unbounded).
 
     Raises:
         TypeError, ValueError: for an invalid argument, as :class:`~delayed_rl.wrappers.ActionDelay`
-            (the message names it: ``delay['agent']`` or ``initial_action['agent']`` for an
-            entry of a mapping, which must name every agent and no other).
+            (the message names it: ``initial_action['agent']`` for a mapping's entry).
         ValueError: at a step, an action not in its agent's space (the message names
             ``actions['agent']``), or an agent not in ``possible_agents``.
 

@@ -22,61 +22,34 @@ class CooperativeGridWorldEnv(ParallelEnv):
     """Two agents on the thesis's grid world, paid +10 only when both stand on the reward cell.
 
     ## Description
-    The grid world of :class:`~delayed_rl.envs.gridworld.GridWorldEnv` (the thesis's section
-    5.1), walked by two agents at once. Both start in the bottom-right cell and must walk to
-    the reward cell in the top-left corner. An agent that gets there first waits on it (whatever
-    its action, it stays, at no cost) until the other arrives; at the step where both are on it,
-    any joint action pays +10 and warps both back to the start cell. So the loop of the single
-    grid world, ``2(size − 1)`` moves and one collecting step, pays +10 to the team only if both
-    agents walk it, and in step: the optimal average reward is the single world's,
-    ``10 / (2(size − 1) + 1)`` (1.11 for 5×5), and a team whose second agent dawdles waits for it.
+    The grid world of :class:`~delayed_rl.envs.gridworld.GridWorldEnv`, walked by two agents,
+    ``"agent_0"`` and ``"agent_1"``, both live from the reset to the episode's end. Both start
+    in the bottom-right cell; an agent on the top-left reward cell waits there until the other
+    arrives, and then both are paid and go home, so the team must walk the single world's loop
+    in step. The optimal average reward is the single world's, 1.11 for 5×5. The rules in full
+    are on the multi-agent page of the docs.
 
-    ## Agents
-    ``possible_agents`` is ``["agent_0", "agent_1"]``; both are live from the reset to the
-    episode's end (neither leaves early).
-
-    ## Action Space
-    ``Discrete(4)`` per agent: 0 up, 1 right, 2 down, 3 left, checked as the single grid world
-    checks them (an ``int``, a numpy integer or a 0-d integer array; a bool, float or string
-    raises ``TypeError``, an integer outside 0–3 ``ValueError``). ``step`` needs an action for
-    every live agent and refuses one for any other (``ValueError``).
-
-    ## Observation Space
-    ``Discrete(size²)`` per agent: the agent's *own* cell, row-major from the top-left corner
-    (the reward cell is 0, the start cell ``size² − 1``), as in the single world. An agent does
-    not see the other: the optimal joint policy needs no more (each walks to the reward cell and
-    waits), and a tabular learner keeps the single world's ``size²`` states rather than
-    ``size⁴``. The joint position is :meth:`state` (``Discrete(size⁴)``: ``s_0 · size² + s_1``),
-    for learners that use it.
+    ## Spaces
+    Actions: ``Discrete(4)`` per agent (0 up, 1 right, 2 down, 3 left), one for every live
+    agent. Observations: ``Discrete(size²)`` per agent, its *own* cell, row-major from the
+    top-left corner; the joint position is :meth:`state`.
 
     ## Rewards
-    One shared reward, the same for both agents at every step (a fully cooperative game):
-
-    - +10 when both agents are on the reward cell at the start of the step (then both warp to
-      the start cell);
-    - −1 for each agent that moves into a wall (it stays where it is): −2 when both do;
-    - 0 otherwise, waiting on the reward cell included.
-
-    ## Starting State
-    Both agents on the bottom-right cell (index ``size² − 1``), as in the thesis;
-    ``reset(options={"states": {"agent_0": k}})`` starts an agent on cell ``k`` instead (the
-    others on the start cell). Other ``options`` keys are ignored.
+    Shared: +10 when both agents are on the reward cell at the start of the step (then both
+    warp to the start cell), −1 for each agent that moves into a wall, 0 otherwise.
 
     ## Episode End
-    Never terminates. Both agents are truncated after ``max_steps`` steps (default 100), so a
-    :class:`~delayed_rl.multiagent.ParallelRewardDelay` on top sees the end and can flush;
-    ``max_steps=None`` never ends (a continuing task, as the single world's default). The env
-    draws nothing at random: ``reset(seed=...)`` seeds ``np_random`` for wrappers that ask for
-    it, and every seed gives the same episode for the same actions.
+    Never terminates; both agents are truncated after ``max_steps`` steps. It draws nothing at random.
 
-    ## Arguments
-    - ``size``: the side length, an integer ≥ 2 (default 5), within the single world's
-      ``MAX_SIDE`` (256).
-    - ``max_steps``: the episode's length, an integer ≥ 1 or ``None`` (default 100).
-    - ``render_mode``: ``None`` or ``"ansi"`` (a text picture of the grid).
+    Args:
+        size: the side length, an integer ≥ 2 (at most 256).
+        max_steps: the episode's length, an integer ≥ 1, or ``None`` (never ends).
+        render_mode: ``None`` or ``"ansi"`` (a text picture of the grid).
 
-    A wrong type (``size=3.0``) raises ``TypeError``, a value out of range (``size=1``,
-    ``max_steps=0``, ``render_mode="human"``) ``ValueError``.
+    Raises:
+        TypeError: an argument of the wrong type (``size=3.0``).
+        ValueError: an argument out of range (``size=1``, ``max_steps=0``,
+            ``render_mode="human"``).
 
     Example:
         >>> env = CooperativeGridWorldEnv(size=3)

@@ -18,32 +18,15 @@ __all__ = ["ParallelObservationDelay"]
 class ParallelObservationDelay(ParallelDelayWrapper):
     """Delays every agent's observations independently, with the rule of :class:`~delayed_rl.wrappers.ObservationDelay`.
 
-    Each agent has its own arrival rule (``arrival``:
-    :class:`~delayed_rl.wrappers.observation_delay.StaleArrival` or
-    :class:`~delayed_rl.wrappers.observation_delay.NetworkArrival`, the classes
-    :class:`~delayed_rl.wrappers.ObservationDelay` uses), its own delay stream and its own
-    observation space (any: ``Box`` images, ``Dict``, ``Discrete``...). An agent's observations
-    are numbered from its first, ``o_0``, shown undelayed: at ``reset()``, or at the step it
-    joins the episode; each later step that gives it an observation makes the next one, and
-    shows the one its rule says. Under ``"stale"`` the rule keeps the agent's last
-    ``histories[agent]`` observations (what its delay can reach, as
-    :class:`~delayed_rl.wrappers.ObservationDelay` chooses it), under ``"network"`` only those in
-    transit; an agent's observations are let go when it leaves (terminates or is truncated:
-    the observation of its last step is delayed like the others) and at ``reset()``.
-
-    ``info[agent]`` holds :class:`~delayed_rl.wrappers.ObservationDelay`'s entries:
-    ``observation_age`` (the age of the observation shown, 0 for an ``o_0``) and
-    ``arrived_observations`` (the ``(i, o_i)`` received at this step). The ``infos`` returned are
-    new dicts (the env's own are not modified).
-
-    Observations are copied as :class:`~delayed_rl.wrappers.ObservationDelay` copies them, and
-    where they come in too (a PettingZoo env may hand out views of its own state, which it
-    changes at the next step): the rules keep copies, and every observation returned or reported
-    is another copy, so modifying one changes nothing the wrapper keeps or returns later.
-
-    ``reset(seed=s)`` seeds agent ``i`` (its position in ``possible_agents``) with
-    :func:`~delayed_rl.multiagent.agent_seed` ``(s, i)``, so that it shows exactly the
+    Each agent has its own arrival rule (``arrival``), delay stream and observation space (any).
+    An agent's first observation, at ``reset()`` or at the step it joins, is shown undelayed.
+    Observations are copied where they come in and where they leave. ``reset(seed=s)`` seeds
+    agent ``i`` with :func:`~delayed_rl.multiagent.agent_seed` ``(s, i)``: it shows the
     observations of an :class:`~delayed_rl.wrappers.ObservationDelay` reset with that seed.
+    ``docs/multiagent.md`` has the rules in full.
+
+    ``info[agent]`` holds ``observation_age`` (the age of the observation shown, 0 for the
+    first) and ``arrived_observations`` (the ``(i, o_i)`` received at this step).
 
     Args:
         env: a ``pettingzoo.ParallelEnv`` with ``possible_agents``.
@@ -56,9 +39,8 @@ class ParallelObservationDelay(ParallelDelayWrapper):
 
     Raises:
         TypeError, ValueError: for an invalid argument, as :class:`~delayed_rl.wrappers.ObservationDelay`
-            (the message names it: ``delay['agent']`` for an entry of a mapping, which must
-            name every agent and no other); ``ValueError`` at a step where the env names an
-            agent not in ``possible_agents``.
+            (the message names it); ``ValueError`` at a step where the env names an agent not
+            in ``possible_agents``.
 
     Attributes:
         delays: each agent's distribution.

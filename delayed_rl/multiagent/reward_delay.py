@@ -23,42 +23,16 @@ class ParallelRewardDelay(ParallelDelayWrapper):
     """Delays every agent's rewards independently, with the rule of :class:`~delayed_rl.wrappers.RewardDelay`.
 
     Each agent has its own pending rewards, clock and delay stream: the reward ``r_t`` it is
-    given at its step ``t`` is delivered to it at its step ``t + d_t``, summed with the others
-    due then (:class:`~delayed_rl.wrappers.RewardDelay` states the rule; the agents' pending
-    rewards are kept in :class:`~delayed_rl.wrappers.pending_rewards.PendingRewards`, one row per agent,
-    as :class:`~delayed_rl.wrappers.VectorRewardDelay` keeps its sub-envs'). An agent's clock
-    advances at the steps whose ``rewards`` name it, the step it joins at included (a reward
-    given then is delayed like any other).
+    given at its step ``t`` is delivered at its step ``t + d_t``. When an agent leaves
+    (terminates or is truncated), its pending rewards follow ``on_episode_end`` at that step,
+    its last; a ``reset()`` discards the live agents' (except under ``"carry"``), warning if
+    not zero. ``reset(seed=s)`` seeds agent ``i`` with :func:`~delayed_rl.multiagent.agent_seed`
+    ``(s, i)``: it draws the delays of a :class:`~delayed_rl.wrappers.RewardDelay` reset with
+    that seed. ``docs/multiagent.md`` has the rules in full.
 
-    **Agents that leave.** When an agent terminates or is truncated, whether or not the others go
-    on, its pending rewards follow ``on_episode_end`` at that step, its last:
-
-    - ``"flush"`` (default): added to its last reward (``info[agent]["flushed_reward"]`` says how
-      much), so every agent's delivered return equals its undelayed return;
-    - ``"drop"``: discarded, reported as ``info[agent]["dropped_reward"]``;
-    - ``"carry"``: kept for the agent's next episode (after the next ``reset()``, or if it joins
-      again), delivered there at their scheduled steps of its clock.
-
-    An agent that joins in the middle of an episode starts with nothing pending (under
-    ``"carry"``, with what it carried from its last episode). A ``reset()`` while agents are
-    still live discards their pending rewards (except under ``"carry"``), reported as
-    ``info[agent]["dropped_reward"]`` in the reset ``infos`` (for the agents there), with a
-    warning if any was not zero; ``info[agent]["pending_reward"]`` at reset is what is pending.
-    Under ``"flush"`` the wrapper watches for the flush trap
-    (:class:`~delayed_rl.wrappers.reward_delay.FlushWatch`: an env that rewards only at an
-    agent's last step is not delayed), over all agents together, and warns at most once.
-
-    ``info[agent]`` on every step that names the agent: ``undelayed_reward`` (``r_t``),
-    ``drawn_reward_delay`` (``d_t``), ``pending_reward`` (what it has emitted and not received), and
-    at its last step ``flushed_reward`` or ``dropped_reward``. The ``infos`` returned are new
-    dicts (the env's own are not modified); rewards are returned as Python floats.
-
-    **Seeds.** ``reset(seed=s)`` seeds agent ``i`` (its position in ``possible_agents``) with
-    :func:`~delayed_rl.multiagent.agent_seed` ``(s, i)``: each agent's delays come from its own
-    generator, independent of the other agents' and of the env's own randomness, and are those
-    of a :class:`~delayed_rl.wrappers.RewardDelay` reset with that seed; the same seed gives the
-    same delays. The wrapper records its arguments in JSON form (``_saved_kwargs``, as
-    Gymnasium's ``RecordConstructorArgs``).
+    ``info[agent]``, on every step that names the agent: ``undelayed_reward`` (``r_t``),
+    ``drawn_reward_delay`` (``d_t``), ``pending_reward``; at its last step ``flushed_reward`` or
+    ``dropped_reward`` (also in the ``infos`` of a ``reset()`` that discarded rewards).
 
     Args:
         env: a ``pettingzoo.ParallelEnv`` with ``possible_agents``. Its rewards must be real
@@ -70,9 +44,8 @@ class ParallelRewardDelay(ParallelDelayWrapper):
         on_episode_end: ``"flush"``, ``"drop"`` or ``"carry"`` (see above).
 
     Raises:
-        TypeError, ValueError: at construction, for an invalid argument (the message names it:
-            ``delay['agent']`` for an entry of a mapping, which must name every agent and no
-            other).
+        TypeError, ValueError: at construction, for an invalid argument (the message names
+            it: ``delay['agent']`` for a mapping's entry; a mapping names every agent, no other).
         TypeError: at a step where the env gives an agent a reward that is not a real scalar.
         ValueError: at a step where the env gives a NaN or infinite reward, names an agent not
             in ``possible_agents``, or where sums pass float64's range.
