@@ -1,25 +1,14 @@
-"""Tabular agents with a stable-baselines3-like API.
+"""Tabular agents with a stable-baselines3-like API (``learn``, ``predict``, ``save``/``load``).
 
-The algorithms, side by side over the shell of :mod:`delayed_rl.agents.common`:
+- :class:`QLearning` and :class:`FixedDelayQLearning` (a constant delay ``k``);
+- :class:`MultipleModelQLearning`: the thesis's agent, over parallel delay hypotheses;
+- :class:`ExpectedCreditQLearning`: each reward spread over the past by a known delay's pmf;
+- :class:`OracleQLearning`: each reward credited to its own transition (the upper bound);
+- :class:`DeconvolutionQLearning`: Q-learning on deconvolved mean rewards, delay known or learned;
+- :func:`load_agent`, and ``ProportionalController`` (thesis Eqs. 5.8–5.9, imported on first use).
 
-- :class:`QLearning`: Q-learning (rewards credited to the step that just happened);
-- :class:`FixedDelayQLearning`: Q-learning that assumes a constant delay ``k``;
-- :class:`MultipleModelQLearning`: Multiple Model Q-learning, which learns over parallel delay
-  hypotheses (thesis section 3.2);
-- :class:`ExpectedCreditQLearning`: Q-learning that spreads each received reward over the past
-  steps by a known delay distribution's pmf (the cheap anonymous baseline);
-- :class:`OracleQLearning`: Q-learning that credits each reward to the transition that emitted
-  it, read from ``RewardDelay(..., record_arrivals=True)`` (the non-anonymous upper bound);
-- :class:`DeconvolutionQLearning`: Q-learning on mean rewards estimated by deconvolving the
-  delayed reward stream, with the delay known or learned;
-- :func:`load_agent`: load any of them from a file, whatever its class;
-- ``ProportionalController`` (thesis Eqs. 5.8–5.9), imported from
-  :mod:`delayed_rl.agents.proportional` on first access.
-
-Each learning rule is also written plainly, without caches or compiled code, in
-:mod:`delayed_rl.agents.reference`; both training paths are tested against it bit for bit.
-All share :class:`~delayed_rl.agents.common.base.TabularAgent`: ``learn``, ``predict``,
-``update``, ``save``/``load``, ``get_env``/``set_env``, ``logger``, and SB3 callbacks.
+All share :class:`~delayed_rl.agents.common.base.TabularAgent`; the rules are written plainly in
+:mod:`delayed_rl.agents.reference` and stated on the docs' agents page (``docs/agents.md``).
 """
 
 from delayed_rl.agents.common.base import RECORD_KEYS, TabularAgent, load_agent

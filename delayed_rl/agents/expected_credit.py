@@ -1,35 +1,9 @@
 """Expected-credit Q-learning: each received reward spread over the past by the delay's pmf.
 
-The cheap, anonymous baseline for rewards delayed by a known distribution ``p``: the reward
-``r_t`` received at episode step ``t`` came from the transition ``k`` steps back with probability
-``p(k)``, so every recent transition gets a share of the step's TD update in proportion.
-
-**Rule.** With ``w`` the credit weights (below), at every step ``t``, for every lag ``k`` with
-``w(k) > 0`` whose step ``j = t − k`` is in this episode's history, with
-``(s_j, a_j, s′_j)`` that step's transition::
-
-    δ_k = r_t + γ (1 − terminated_j) max_a′ Q(s′_j, a′) − Q(s_j, a_j)
-    Q(s_j, a_j) += α w(k) δ_k
-
-All the ``δ_k`` of a step are computed from the table before any of its writes, and the
-increments to the same entry add up (the parallel update of MMQ, here in one table). Only the
-current step (``k = 0``) can be terminal within an episode. With ``p = Constant(k)`` there is one
-lag of weight 1: this is :class:`~delayed_rl.agents.FixedDelayQLearning` ``(delay_estimate=k)``,
-update for update, and with ``Constant(0)`` (or ``Poisson(0)``) it is
-:class:`~delayed_rl.agents.QLearning`.
-
-**Credit weights.** ``w`` is the pmf of the delay clipped to ``K`` lags, ``min(d, K)``:
-``w(k) = p(k)`` for ``k < K`` and ``w(K) = P(d ≥ K)``. ``K`` is the distribution's largest value
-or, for an unbounded one such as Poisson, the smallest ``K`` with ``P(d ≤ K) ≥ 1 − 1e-6``
-(:data:`TAIL`); a ``max_delay_estimate`` below that is ``K`` instead (as the wrappers' ``max_delay``
-clips delays: the last weight is then the clipped mass). ``K`` is at most
-:data:`~delayed_rl.agents.common.delay_estimate.MAX_DELAY_ESTIMATE` (1024). A step costs
-O(number of lags with ``w > 0``).
-
-**Saving.** The delay is saved as its JSON description
-(:meth:`~delayed_rl.delays.Delay.to_dict`), so a loaded agent has an equal ``delay`` and the same
-weights. A ``Delay`` subclass of your own has no description: it is saved as ``Empirical`` of the
-credit weights (normalised) and comes back as that.
+:class:`ExpectedCreditQLearning` is the cheap, anonymous baseline for rewards delayed by a known
+distribution: every recent transition gets a share of the step's TD update in proportion to the
+probability that the reward came from it. The exact rule, the credit weights and how the delay
+is saved are on the docs' agents page (``docs/agents.md``).
 """
 
 from __future__ import annotations
@@ -129,8 +103,8 @@ class ExpectedCreditQLearning(QAgent):
 
     For rewards delayed by a known distribution (e.g. :class:`~delayed_rl.wrappers.RewardDelay`
     with ``delay``): the TD update of each step is shared among the transitions 1, 2, ... steps
-    back in proportion to the probability that the reward came from them (see the module
-    docstring for the exact rule and the weights). It is anonymous: it reads only the received
+    back in proportion to the probability that the reward came from them (``docs/agents.md``
+    states the exact rule and the weights). It is anonymous: it reads only the received
     reward, never the wrapper's ``info``. ``q_table`` has shape ``(|S|, 1, |A|)`` and acting is
     Q-learning's, so ``predict``, ``greedy_actions`` and ``save``/``load`` work as for
     :class:`~delayed_rl.agents.QLearning`. ``learn()`` runs compiled when the env stack does

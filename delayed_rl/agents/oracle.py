@@ -1,33 +1,10 @@
 """Oracle Q-learning: every delayed reward credited to the transition that emitted it.
 
-The non-anonymous upper bound for delayed rewards. :class:`~delayed_rl.wrappers.RewardDelay`
-with ``record_arrivals=True`` reports, at every step, the list ``info["reward_arrivals"]`` of the
-``(emission_step, value)`` pairs delivered at that step, ``emission_step`` on the episode's clock.
-It holds one entry for *every* transition, zero rewards included, delivered once when the
-transition's delay has run out (under ``"flush"``, at the latest at the episode's last step; under
-``"carry"``, possibly in a later episode, with a negative ``emission_step``; under ``"drop"``,
-never if the episode ended first). So the agent knows each transition's own reward ``r_e``
-exactly, at the step it arrives.
-
-**Rule.** At each step the agent stores the transition ``(s_t, a_t, s′_t, terminated_t)``; then,
-for every arrival ``(e, r_e)`` of the step, in the order of the emission steps ``e``, it makes the
-textbook Q-learning update of transition ``e`` with its own reward::
-
-    Q(s_e, a_e) += α (r_e + γ (1 − terminated_e) max_a′ Q(s′_e, a′) − Q(s_e, a_e))
-
-with α and the bootstrap ``max Q(s′_e)`` as they are at the arrival step. Each transition is
-updated exactly once, when its reward is known: Q-learning on the transitions in the order their
-rewards arrive. Under no delay (``Constant(0)``) that is :class:`~delayed_rl.agents.QLearning`
-and under ``Constant(k)`` in a continuing task :class:`~delayed_rl.agents.FixedDelayQLearning`
-``(delay_estimate=k)``, update for update. A transition whose reward is dropped (``"drop"``) is
-never updated: its reward is unknown, and leaving it out biases nothing, since delays do not
-depend on rewards.
-
-**History.** The agent keeps the last ``delay_bound + 1`` transitions, ``delay_bound`` being how
-far the wrapper's delays reach (its ``max_delay``, else the distribution's largest value, else
-for an unbounded one such as Poisson(λ) ``λ + 10√λ + 20``, beyond which the tail weighs less
-than 1e-20: see :func:`delayed_rl._delay_line.delay_bound`). An arrival whose transition it does
-not hold (emitted before :meth:`~OracleQLearning.set_env`, or further back than that) is ignored.
+:class:`OracleQLearning` is the non-anonymous upper bound for delayed rewards: it reads
+``info["reward_arrivals"]`` (:class:`~delayed_rl.wrappers.RewardDelay` with
+``record_arrivals=True``) and makes one Q-learning update per transition with its own reward,
+when that arrives. The exact rule and the history it keeps are on the docs' agents page
+(``docs/agents.md``).
 """
 
 from __future__ import annotations
@@ -55,7 +32,7 @@ class OracleQLearning(QAgent):
     The upper bound of what any delayed-reward agent can learn from the same experience: it reads
     the wrapper's non-anonymous view ``info["reward_arrivals"]`` (who emitted each reward that
     arrives) and makes, for each transition, one textbook Q-learning update with that
-    transition's own reward, when the reward arrives (see the module docstring for the exact
+    transition's own reward, when the reward arrives (``docs/agents.md`` states the exact
     rule and the history kept). It never reads ``info["undelayed_reward"]``; the received reward
     itself is not used either (the arrivals carry the values). ``q_table`` has shape
     ``(|S|, 1, |A|)`` and acting is Q-learning's (ε-greedy, random tie-breaks), so

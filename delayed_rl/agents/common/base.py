@@ -2,27 +2,9 @@
 
 :class:`TabularAgent` owns everything that is not the learning rule: the env, argument checks,
 :meth:`~TabularAgent.learn` with SB3's callback protocol, logger and progress bar,
-:meth:`~TabularAgent.predict`, and model files (:mod:`~delayed_rl.agents.common.save_util`); envs are
-made and checked in :mod:`~delayed_rl.agents.common.env_util`. A subclass supplies the learning rule:
-
-- ``_setup_model()``: allocate the tables (hyper-parameters and spaces are set);
-- ``_choose(s, eps, uniform) -> (acting model index, action index)``: one behaviour choice,
-  ``uniform()`` drawing its random numbers (a stream, or ``learn()``'s bound ``stream.next``);
-- ``_learn_transition(s, a, r, s2, terminated, truncated)``: one learning step, shared by
-  ``learn()`` and ``update()``; it reads the step's place in its episode,
-  ``_episode_step`` (0 at an episode's first step), which the shell advances, as it advances
-  ``num_timesteps`` (a rule counts steps itself only for its own needs: the oracle numbers
-  the transitions that rewards arrive for);
-- ``_greedy_actions(states)``: the deterministic policy;
-- ``_end_episode()`` (optional): forget the rule's own history of the episode;
-- ``_get_state_arrays()`` / ``_set_state_arrays(arrays, where)``: what a model file holds
-  (optional, see :mod:`.persistence`: ``_state_array_specs``, ``_derived``, ``_rebuild_derived``);
-- ``n_models`` (default 1): how many delay models it acts from, for the acting counts;
-- :meth:`~TabularAgent.compiled_tables` (optional): the arrays of its compiled twin.
-
-Every subclass is registered by its module and qualified name when it is defined, so a model
-file names its class and :meth:`TabularAgent.load` (or :func:`load_agent`) rebuilds it, user
-subclasses included.
+:meth:`~TabularAgent.predict`, and model files; :func:`load_agent` loads any agent, whatever its
+class. What a subclass supplies (its learning rule, in a few methods) is on the docs' agents
+page (``docs/agents.md``, "Writing your own agent").
 """
 
 from __future__ import annotations

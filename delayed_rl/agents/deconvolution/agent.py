@@ -1,36 +1,10 @@
 """Deconvolution Q-learning: regress the received rewards on the past, then Q-learn on the estimate.
 
-Under rewards delayed independently by ``d ~ p`` (:class:`~delayed_rl.wrappers.RewardDelay`),
-the reward received at step ``t`` has expectation ``Σ_k p(k) · R(s_{t−k}, a_{t−k})``: a
-convolution of the delay pmf with the mean rewards ``R`` of the (state, action) pairs visited.
-:class:`DeconvolutionQLearning` undoes it:
-
-1. it keeps the sufficient statistics of that regression (:mod:`delayed_rl.agents.deconvolution.regression`:
-   ``O(K)`` per step, never the history) and, after 1000, 2000, 4000, ... steps and then every
-   ``solve_interval`` steps (the gaps double until they reach it), solves the least
-   squares for ``R̂`` — with the delay pmf known (``delay=``), or estimated with it (``delay=None``:
-   ``p`` on ``0..max_delay_estimate`` and ``R`` alternate, ``p`` kept a distribution);
-2. it runs Q-learning on the observed, undelayed transitions ``(s, a, s′)`` with reward
-   ``R̂(s, a)``: ``Q(s, a) += α (R̂(s, a) + γ (1 − terminated) max_a′ Q(s′, a′) − Q(s, a))``.
-
-It is anonymous: it reads only the reward delivered at each step, the observations, actions and
-episode ends — never ``info["undelayed_reward"]``, ``drawn_reward_delay`` or ``reward_arrivals``.
-
-**Sizes.** The statistics take ``(K + 1)·P²`` 4-byte counts for ``P`` (state, action) pairs
-while that fits 64 MiB (the grid worlds); above (Taxi's 3000 pairs), a hashed table holds only
-the couples of pairs that occurred within ``K`` steps of each other, so memory follows what the
-agent has seen (:mod:`delayed_rl.agents.deconvolution.regression`). Both paths run either layout; a
-compiled step costs about 1.4 MMQ(|Λ| = 51) steps and the solves bring a 1M-step run on
-GridWorld-9x9 to about 2.6 times MMQ's time, a known delay's to about MMQ's
-(``benchmarks/deconvolution_cost.py``).
-
-**When it helps.** Deconvolution removes the delay's bias at the price of variance: the
-estimate of a pair's mean reward improves as ``1/√visits``, and the noise of the delivered
-stream (every reward's arrival time is random) is amplified in the directions the agent's
-behaviour hardly excites. Where rewards are sparse (the grid worlds) it reaches the optimal
-policy in a few hundred thousand steps; where every step is rewarded and a policy's value
-hangs on small differences (Taxi, CliffWalking at γ = 0.9) it needs many visits per pair, and
-with too few steps it can do worse than plain Q-learning (``benchmarks/REPORT.md``).
+:class:`DeconvolutionQLearning` estimates each (state, action) pair's mean reward ``R̂`` by
+deconvolving the delayed reward stream (:mod:`delayed_rl.agents.deconvolution.regression`),
+with the delay known or learned, and runs Q-learning on the observed transitions with ``R̂``.
+It is anonymous: it reads only the rewards delivered. The rule, its sizes and when it helps are
+on the docs' agents page (``docs/agents.md``).
 """
 
 from __future__ import annotations
@@ -103,7 +77,7 @@ _OWN_NAMES = {  # this class's own constructor arguments, and their defaults
 class DeconvolutionQLearning(QAgent):
     """Q-learning on mean rewards estimated by deconvolving the delayed reward stream.
 
-    See the module docstring for the rule. The reward model ``R̂`` is 0 until the first solve, so
+    ``docs/agents.md`` states the rule. The reward model ``R̂`` is 0 until the first solve, so
     an optimistic ``q_init`` explores meanwhile, as for the other agents.
 
     **Episode ends.** How a reward-delay wrapper treats pending rewards at an episode's end

@@ -1,34 +1,10 @@
 """Regressing received rewards on the past: the estimator of deconvolution Q-learning.
 
-With each reward delayed independently by ``d ~ p``, the reward received at step ``t`` satisfies
-``E[y_t | history] = Σ_k p(k) · R(x_{t−k})``, with ``x_j`` the (state, action) pair of step ``j``
-and ``R`` the unknown mean rewards: a linear model in ``R`` for a known ``p``, and in ``p`` for a
-known ``R``. :class:`RewardRegression` keeps sufficient statistics of that regression
-(:mod:`delayed_rl.compiled.deconvolution_statistics`), so a least-squares solve never revisits the history:
-
-- ``cooc``: for each ordered couple of pairs, how often the earlier was followed ``m`` steps
-  later by the later one (``m`` in ``0..K``), within a segment (an episode, or the whole stream
-  when pending rewards carry over) — one row of ``K + 1`` counts per couple that occurred;
-- ``by_lag[k, i]``: the sum of the rewards received ``k`` steps after pair ``i``;
-- the last ``K + 1`` pairs of every segment that ended (its *window*), and under ``"flush"`` the
-  reward of its last step, which also carries every reward still pending (expected weight
-  ``P(D ≥ k)`` for the pair ``k`` steps back, instead of ``p(k)``).
-
-The normal equations follow: for rows ``φ_t = Σ_k p(k) e_{x_{t−k}}``,
-``A = Σ_t φ_t φ_tᵀ = Σ_m c(m) (C_m + C_mᵀ)`` (``C_m`` the lag-``m`` counts,
-``c(m) = Σ_k p(k) p(k + m)``, the lag-0 term once), less the rows after each segment's end that
-this sum counts but that never happened, and with each flushed last row replaced by its
-survival-weighted one; ``b = Σ_k p(k) by_lag[k]`` plus the flushed rows. For a learned ``p``, the
-same statistics give the Gram matrix of the regression on ``p`` for a given ``R``; the two
-least-squares problems alternate, ``p`` on the simplex (a delay distribution), ``R`` with a
-ridge that pulls pairs of little evidence towards a prior value.
-
-**Sizes.** Each step costs ``O(K)`` (``K + 1`` counts and sums). The counts take ``(K + 1)·P²``
-4-byte integers in the direct layout, used while that is at most :data:`DIRECT_LIMIT`; above it
-(envs with many pairs, e.g. Taxi's 3000) a hashed layout keeps a row only for the couples that
-occurred, so memory follows what the agent has seen, up to :data:`STATISTICS_LIMIT`. ``R`` is
-solved by a dense Cholesky factorization up to :data:`DENSE_SOLVE_PAIRS` pairs, and above by
-conjugate gradients on the sparse couplings, warm-started from the last estimate.
+:class:`RewardRegression` keeps the sufficient statistics of the regression of each received
+reward on the (state, action) pairs before it (:mod:`delayed_rl.compiled.deconvolution_statistics`),
+in a direct or a hashed layout, and solves the least squares for the mean rewards ``R̂`` and,
+when it is learned, the delay pmf. The statistics, the normal equations and the sizes are on the
+docs' agents page (``docs/agents.md``).
 """
 
 from __future__ import annotations
@@ -558,7 +534,7 @@ class RewardRegression:
 
     @property
     def layout(self) -> str:
-        """``"direct"`` or ``"hashed"`` (see the module docstring)."""
+        """``"direct"`` or ``"hashed"`` (see :mod:`delayed_rl.compiled.deconvolution_statistics`)."""
         return "hashed" if self.stats.keys.size else "direct"
 
     @property

@@ -1,28 +1,9 @@
 """Multiple Model Q-learning (Campbell 2015, section 3.2, Eq. 3.7 and Algorithm 1).
 
-The agent keeps one Q-table per delay hypothesis λ̂ ∈ Λ, stacked as ``q_table[s, λ̂, a]``.
-
-- **Acting** in ``s``: λ̂* = argmax over λ̂ of max_a Q(s, a, λ̂), ε-greedy (with probability ε a
-  uniformly random model); then a* = argmax_a Q(s, a, λ̂*), ε-greedy. Ties are broken uniformly
-  at random at both levels. With a single model (Q-learning, fixed-delay Q-learning) the first
-  level is skipped and draws no random numbers.
-- **Learning** at episode step ``t`` from the received reward ``r_t``: for every λ̂ whose step
-  ``t − λ̂`` is in this episode's history, with (s, a, s′, done) the transition of that step,
-  ``Q(s, a, λ̂) += α (w_t(λ̂) r_t + γ (1 − done) max_{λ̂′, a′} Q(s′, a′, λ̂′) − Q(s, a, λ̂))``. The
-  max spans all models, and all targets of a step are computed before any of its writes (the
-  parallel update of the thesis's Roulette walk-through, Tables 3.2–3.5). The thesis's rule has
-  ``w_t(λ̂) = 1``; the options multiply it, with λ̂*_t the acting model of step ``t``, by the
-  reward kernel ``exp(−(λ̂ − λ̂*_t)² / (2σ²))`` (``reward_kernel=σ``) and by the delay trace
-  ``e_t(λ̂)`` (``delay_trace=β``: ``e ← β e`` for every model, then ``e(λ̂*_t) ← 1``, each step).
-- **Greedy readout**: the deterministic policy reads the current table (the thesis), or, with
-  ``greedy_window=W``, an exponential moving average of it over about ``W`` training steps.
-- **Cost** O(|Λ|) per step: each state's max over (λ̂, a) is cached
-  (:class:`~delayed_rl.agents.common.q_table.QTable`); the |Λ| updates of a step are one
-  compiled call (:func:`~delayed_rl.agents.mmq.updates.update_models`) over the episode's
-  :class:`~delayed_rl.agents.common.transition_ring.TransitionRing`.
-
-The rule is written plainly, without caches, in :class:`delayed_rl.agents.reference.ReferenceMMQ`;
-both training paths are tested against it bit for bit.
+:class:`MultipleModelQLearning` keeps one Q-table per delay hypothesis λ̂ ∈ Λ, acts from the
+best and credits each received reward, in table λ̂, to the transition λ̂ steps back. The exact
+rule (acting, learning, the credit options, the greedy readout, the cost) is on the docs' agents
+page (``docs/agents.md``); :class:`delayed_rl.agents.reference.ReferenceMMQ` writes it plainly.
 """
 
 from __future__ import annotations
@@ -89,7 +70,7 @@ class MultipleModelQLearning(QAgent):
     :class:`~delayed_rl.wrappers.PoissonRewardDelay`), MMQ keeps one Q-table per delay estimate
     λ̂ ∈ Λ. Each step's reward is credited, in table λ̂, to the transition λ̂ steps back; the agent
     acts from the table whose best value is highest, so it learns which delay hypothesis pays
-    (see the module docstring for the exact rule). ``QLearning`` is the case Λ = {0} and
+    (``docs/agents.md`` states the exact rule). ``QLearning`` is the case Λ = {0} and
     ``FixedDelayQLearning(delay_estimate=k)`` the case Λ = {k}.
 
     Args:
