@@ -1,26 +1,16 @@
 """Deep RL under delays: reward models for SB3, and SAC for late observations and actions.
 
-A reward model learns ``R̂(s, a)`` from the rewards an env delivered (anonymously: it never
-reads when a reward was emitted), and a relabelling buffer hands stable-baselines3's algorithms
-``R̂`` in place of the delayed rewards:
+- reward models, ``R̂(s, a)`` learned from the delivered rewards alone:
+  :class:`DeconvolutionRewardModel`, :class:`ReturnDecompositionRewardModel` (RRD),
+  :class:`ReturnRegressionRewardModel`; :func:`load_reward_model`, :func:`make_reward_model`;
+- buffers that hand SB3's algorithms ``R̂``: :class:`RelabelingReplayBuffer`,
+  :class:`RelabelingNStepReplayBuffer`, :class:`RelabelingDictReplayBuffer` (off-policy),
+  :class:`RelabelingRolloutBuffer`, :class:`RelabelingDictRolloutBuffer` (on-policy, with
+  :class:`RewardModelCallback`), and :class:`IRCRReplayBuffer` (IRCR as published);
+- :class:`HindsightSAC`: SAC for late observations and actions.
 
-- :class:`DeconvolutionRewardModel`: ``R̂`` fitted so that its convolution with the delay's pmf
-  ``p`` explains the delivered rewards; ``p`` known or learned;
-- :class:`ReturnDecompositionRewardModel` (RRD) and :class:`ReturnRegressionRewardModel`
-  (IRCR's target, learned): delay-agnostic baselines that use only episode sums;
-- :class:`IRCRReplayBuffer`: IRCR as its authors wrote it, guidance rewards from episode
-  returns with no network, half of each batch from the best episodes (SAC, TD3, DQN);
-- :class:`RelabelingReplayBuffer` (SAC, TD3, DQN), :class:`RelabelingRolloutBuffer` (PPO, A2C,
-  with :class:`RewardModelCallback`), and their counterparts for ``Dict`` observations
-  (:class:`RelabelingDictReplayBuffer`, :class:`RelabelingDictRolloutBuffer`) and n-step returns
-  (:class:`RelabelingNStepReplayBuffer`);
-- :class:`HindsightSAC`: SAC for late observations and actions, its critic learning on
-  observations once they have arrived (on :class:`~delayed_rl.wrappers.DelayAwareObservation`);
-- :func:`load_reward_model`, and :func:`make_reward_model` (a model from a mapping, as a
-  hyperparameter file gives it).
-
-Everything here needs torch and stable-baselines3 (``pip install "delayed-rl[sb3]"``); they are
-imported when a name is first used, not by ``import delayed_rl.deep``.
+Everything here needs the ``sb3`` extra (torch and stable-baselines3), imported when a name is
+first used. ``docs/deep_rl.md`` has the wiring, the schedule and the measurements.
 
 Example:
     >>> import gymnasium as gym

@@ -1,25 +1,11 @@
 """A relabelling buffer and the algorithm that builds or loads it: one seed, one live model.
 
-SB3 hands a buffer no reference to its algorithm: it builds it in ``_setup_model`` and loads it
-in ``load_replay_buffer``. A relabelling buffer finds that algorithm as the ``self`` of those
-two methods on the call stack (:func:`calling_algorithm`), and nothing else reads the stack.
-With it, the buffer:
-
-- **seeds its reward model from the algorithm's seed.** A model the buffer makes from a mapping,
-  or one made with ``seed=None`` that has seen no step, is initialised again from
-  :func:`reward_model_seed` of the algorithm's ``seed`` (rl-zoo3's ``--seed`` included). The
-  derived seed feeds the model's own generators, never numpy's, torch's or Python's global ones,
-  so the algorithm's own draws are those of a run without a reward model. An unseeded algorithm
-  leaves such a model on fresh entropy, as SB3 leaves itself; an explicit model seed is kept.
-- **keeps one live model.** The buffer puts its model in the algorithm's
-  ``replay_buffer_kwargs`` / ``rollout_buffer_kwargs`` (a new dict: the user's is not changed),
-  so SB3's ``save`` writes the model that trains, in the object and the mapping forms alike.
-  When ``load_replay_buffer`` unpickles a buffer, the model it carries becomes the state of the
-  object the algorithm's kwargs hold, and the buffer trains that object: after SB3's resume flow
-  (``load``, ``load_replay_buffer``, ``learn``, ``save``) the files hold the live model.
-- **refuses n-step settings SB3 would ignore** (see :mod:`delayed_rl.deep.buffers`).
-
-A buffer built by hand, outside an algorithm, has none of this: its model keeps its own seed.
+SB3 hands a buffer no reference to its algorithm; a relabelling buffer finds it as the ``self``
+of ``_setup_model`` or ``load_replay_buffer`` on the call stack (:func:`calling_algorithm`).
+With it, the buffer seeds its reward model from the algorithm's seed
+(:func:`reward_model_seed`), keeps one live model in the algorithm's buffer kwargs across SB3's
+save and load, and refuses the n-step settings SB3 would ignore. The docs' deep RL page
+(``docs/deep_rl.md``, "The buffers, in full") says how.
 """
 
 from __future__ import annotations

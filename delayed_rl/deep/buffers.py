@@ -1,49 +1,13 @@
 """SB3 buffers that keep what they receive for a reward model and hand the algorithm ``R̂``.
 
-Each is SB3's own buffer with a reward model beside it, for any algorithm built on SB3's
-``OffPolicyAlgorithm`` or ``OnPolicyAlgorithm`` (SAC, TD3, DQN, PPO, A2C, sb3-contrib's TQC...):
-
-- :class:`RelabelingReplayBuffer`, the counterpart of SB3's ``ReplayBuffer`` (off-policy);
-- :class:`RelabelingNStepReplayBuffer`, of ``NStepReplayBuffer`` (off-policy n-step returns);
-- :class:`RelabelingDictReplayBuffer`, of ``DictReplayBuffer`` (off-policy, ``Dict``
-  observations);
-- :class:`RelabelingRolloutBuffer`, of ``RolloutBuffer`` (on-policy);
-- :class:`RelabelingDictRolloutBuffer`, of ``DictRolloutBuffer`` (on-policy, ``Dict``
-  observations).
-
-Pass one as ``replay_buffer_class`` / ``rollout_buffer_class`` with
-``{"reward_model": model}`` in its kwargs: a reward model, or a mapping
-``{"type": <class name>, <setting>: <value>, ...}`` the buffer makes it from, for its spaces.
-
-**Off-policy.** ``add()`` stores the transition as SB3 does and hands it to the model, which
-keeps it (no training there). When the algorithm samples a batch (in its ``train()``), the
-model first takes the updates its schedule owes (see :mod:`delayed_rl.deep.reward_model`); then,
-once it is :attr:`~delayed_rl.deep.reward_model.RewardModel.ready`, the batch's rewards are
-``R̂(s, a)`` by the model as it is (scaled by a ``VecNormalize``'s reward normalisation, as SB3
-scales rewards; the n-step buffer sums ``R̂`` over its steps). Before that they are the delivered
-rewards. The model sees what SB3 stores: under ``VecNormalize``, the original observations and
-rewards. ``delivered_rewards`` keeps what ``add()`` received.
-
-**On-policy.** The buffer needs :class:`~delayed_rl.deep.callbacks.RewardModelCallback` in
-``learn(callback=...)``, which hands it at every step what ``add()`` cannot see: the env's own
-rewards (at a truncation SB3 adds ``γ·V(terminal observation)`` before ``add()``), the
-observations and rewards before any ``VecNormalize`` (as the off-policy buffer has them) and the
-actions the env executed (clipped to the action space, where SB3 stores them unclipped). The
-model learns from those; before SB3 computes returns and advantages it takes its owed updates,
-and, once ready, the rollout's rewards become ``R̂`` (normalised as the env's were) plus the
-bootstrap SB3 added. The model keeps its history from one rollout to the next.
-
-**Refused at construction**, naming what is wrong: a ``Dict`` space given to a non-``Dict``
-buffer and the reverse; an off-policy algorithm's ``n_steps > 1`` with a buffer that is not the
-n-step one (SB3 would drop it with a warning), or an n-step buffer whose ``n_steps`` differs
-from the algorithm's; ``Dict`` observations with n-step returns (SB3 has no such buffer);
-``HerReplayBuffer``'s settings (HER recomputes rewards itself from the env's ``compute_reward``,
-which a reward model cannot relabel); a rollout longer than the model's history.
-
-Episode boundaries are the ``dones`` of SB3's vector envs (terminated or truncated; autoreset
-makes the next observation the next episode's), for any number of sub-envs. How a buffer finds
-its algorithm, seeds its model and keeps one live model across SB3's save and load:
-:mod:`delayed_rl.deep.binding`.
+Each is SB3's own buffer with a reward model beside it: :class:`RelabelingReplayBuffer`,
+:class:`RelabelingNStepReplayBuffer` and :class:`RelabelingDictReplayBuffer` (off-policy: the
+sampled batches are relabelled), :class:`RelabelingRolloutBuffer` and
+:class:`RelabelingDictRolloutBuffer` (on-policy, with
+:class:`~delayed_rl.deep.callbacks.RewardModelCallback`: the rollout is relabelled). Pass one as
+``replay_buffer_class`` / ``rollout_buffer_class`` with ``{"reward_model": model}`` in its
+kwargs. What each path hands the model, when it relabels and what is refused at construction:
+the docs' deep RL page (``docs/deep_rl.md``, "The buffers, in full").
 """
 
 from __future__ import annotations
@@ -262,7 +226,7 @@ class RelabelingReplayBuffer(_RelabelingOffPolicy, ReplayBuffer):
             :class:`~delayed_rl.deep.callbacks.RewardModelCallback`).
 
     Raises:
-        TypeError, ValueError: see the module docstring.
+        TypeError, ValueError: see ``docs/deep_rl.md`` ("Refused at construction").
     """
 
     counterpart = "RelabelingDictReplayBuffer"
@@ -448,7 +412,7 @@ class RelabelingRolloutBuffer(_RelabelingOnPolicy, RolloutBuffer):
     """SB3's ``RolloutBuffer`` whose rewards become ``R̂(s, a)`` (plus any bootstrap).
 
     The relabelling happens before returns and advantages are computed; it needs
-    :class:`~delayed_rl.deep.callbacks.RewardModelCallback` (see the module docstring).
+    :class:`~delayed_rl.deep.callbacks.RewardModelCallback` (see ``docs/deep_rl.md``).
 
     Args:
         buffer_size, observation_space, action_space, device: as SB3's ``RolloutBuffer``.
@@ -467,7 +431,7 @@ class RelabelingRolloutBuffer(_RelabelingOnPolicy, RolloutBuffer):
         watched: whether relabelled rollouts go to the model's diagnostics.
 
     Raises:
-        TypeError, ValueError: see the module docstring.
+        TypeError, ValueError: see ``docs/deep_rl.md`` ("Refused at construction").
     """
 
     counterpart = "RelabelingDictRolloutBuffer"

@@ -1,55 +1,11 @@
 """SAC for late observations and actions: an actor on what the agent knows, a critic in hindsight.
 
-Under observation and action delays the agent acts on the delay-aware view
-(:class:`~delayed_rl.wrappers.DelayAwareObservation`): the newest observation received, its age
-and the last ``K`` actions sent. Augmented SAC learns both its actor and its critic on that view,
-whose value depends on the whole spread of states the delayed observation leaves possible: a
-noisy target. :class:`HindsightSAC` keeps the actor on the view and learns the critic on the
-state it could not see at the time, once it has arrived: the critic's input for step ``τ`` is
-``z_τ = (o_τ, the last K actions sent before τ)``, the observation *made* at ``τ`` (received
-steps later) with the actions still in transit. That is BPQL's "beta" critic (Kim et al.,
-NeurIPS 2023, for constant delays), here for random observation and action delays and both
-arrival rules:
-
-- critic: ``Q(z_τ, a_τ) ← r_τ + γ (Q'(z_{τ+1}, a') − α log π(a' | x_{τ+1}))``, ``a' ~ π(· | x_{τ+1})``;
-- actor: minimises ``α log π(a | x_τ) − Q(z_τ, a)``, ``a ~ π(· | x_τ)``;
-
-with ``x_τ`` the view at ``τ``. SAC's own ``train()`` does both, unchanged: the replay buffer
-stores the view with the hindsight observation beside it (a ``Dict`` with the view's keys and
-``"hindsight"``), and the policy's actor reads the view's keys while its critic reads
-``"hindsight"`` and ``"actions"`` (:class:`HindsightPolicy`).
-
-**Nothing reaches the learner before the view has received it.** What the view received is
-read from its observations (the newest, made ``age`` steps ago) and from
-``info["received_observations"]`` (every observation received at that step, the older ones
-included). A step ``τ`` whose observation has arrived becomes a transition to the next step
-``τ'`` whose observation has arrived, once no observation in between can still arrive (the one
-made at ``m`` can arrive until the view's step ``m + D``, ``D`` the view's age bound): its
-reward is ``Σ_{k=τ}^{τ'−1} γ^{k−τ} r_k`` and its discount ``γ^{τ'−τ}``, a multi-step return over
-the actions taken in between, uncorrected, as SB3's n-step buffer's
-(:class:`HindsightReplayBuffer`). Under the network rule every observation arrives, and ``τ' =
-τ + 1``. A step that ends the episode by termination needs no next observation. So the critic
-learns late: a step waits at most ``D`` steps.
-
-**When an observation never arrives** (the stale-sensor rule skips some; observations in flight
-when an episode ends never arrive), a step whose own observation never arrives starts no
-transition (its reward is in the one before), and a truncated episode's last steps after its
-last received observation have nothing to bootstrap from: neither is learned from.
-:attr:`HindsightSAC.transitions_dropped` counts them beside
-:attr:`HindsightSAC.transitions_stored`.
-
-**Why this learner** (over DCAC's partial-trajectory resampling and a learned forward model):
-it needs no model of the dynamics and no resampling of action buffers (DCAC's needs the delays'
-values at every step, which a random link does not report); it is a small change to SAC. A
-prototype whose critic read the current state at once (not waiting for it) lifted SAC on
-Pendulum with random delays above augmented SAC. Measured as built (``delayed-rl bench
-late-observations``, 5 seeds, 20k steps), it is ahead of augmented SAC with the larger delays
-(gain 0.47 against 0.40, not resolved by 5 seeds) and behind it with the small ones (0.85
-against 0.98, two seeds drifting or stalling).
-
-Construct it as SAC: ``HindsightSAC("MultiInputPolicy", env, ...)``, ``env`` a Dict view (or a
-vector env of them; ``"MlpPolicy"`` names the same policy). Not supported: a custom
-``replay_buffer_class``, ``optimize_memory_usage``, ``VecNormalize``, ``n_steps > 1``.
+:class:`HindsightSAC` acts on the delay-aware view (:class:`~delayed_rl.wrappers.DelayAwareObservation`)
+and learns its critic on the observation made at each step, once it has arrived, with the
+actions then in transit (BPQL's "beta" critic, for random delays); :class:`HindsightReplayBuffer`
+stores a step only once the view has received what it needs, and :class:`HindsightPolicy` feeds
+the actor and the critic their inputs. The rule, what the learner may read and when, and why
+this learner: the docs' deep RL page (``docs/deep_rl.md``, "HindsightSAC").
 """
 
 from __future__ import annotations
@@ -208,7 +164,7 @@ class HindsightSAC(SAC):
         TypeError: an env that is not a view; a ``replay_buffer_class``.
         ValueError: ``optimize_memory_usage`` or ``n_steps > 1``.
 
-    See the module docstring for the rule, what the learner may read and when.
+    ``docs/deep_rl.md`` ("HindsightSAC") states the rule, what the learner may read and when.
     """
 
     policy_aliases: ClassVar[dict[str, type]] = {

@@ -1,46 +1,10 @@
 """What every reward model shares: its network, its history, its schedule, files and diagnostics.
 
-A reward model learns ``R̂(s, a)`` from the rewards an env *delivered*, and nothing else: it is
-anonymous. :meth:`RewardModel.add` takes one step of every sub-env (observations, actions,
-delivered rewards, episode ends and, optionally, the step's ``infos``) and keeps it in a
-:class:`~delayed_rl.deep.history.TransitionHistory`; it does not train. :meth:`RewardModel.predict`
-gives ``R̂`` for a batch. Each subclass states its loss (:meth:`RewardModel.loss`). The
-``infos`` serve diagnostics only (``info["undelayed_reward"]`` where present): learning is the
-same to the bit without them.
-
-**Schedule.** The model trains when the algorithm trains: the relabelling buffers call
-:meth:`~RewardModel.train_on_schedule` when SB3 samples a batch (off-policy) or before it
-computes a rollout's advantages (on-policy), never from ``add()``. The schedule has two
-settings, named so as not to be mistaken for the algorithm's ``learning_starts`` and
-``gradient_steps``:
-
-- ``updates_per_step``: Adam updates owed for each step added (a vector-env step: every
-  sub-env's transition); owed updates are taken at the next :meth:`train_on_schedule`;
-- ``warmup_updates``: updates taken on top, at once, the first time the loss can be computed
-  (the deconvolution needs a window of steps; RRD and IRCR a finished episode). The model is
-  :attr:`~RewardModel.ready` once it has taken them, and only then does a buffer relabel with
-  ``R̂``. Until then the algorithm learns from the delivered rewards, the stream the model
-  itself learns from (SB3 gives a buffer no way to hold a gradient step back, and an untrained
-  ``R̂`` is noise, where the delivered rewards at least sum to the returns).
-
-**Seeds.** A model's randomness (initial weights, the batches it samples) comes from its own
-``seed``: it draws nothing from numpy's or torch's global generators, so adding a reward model
-leaves the algorithm's own random draws unchanged. A model made with ``seed=None`` draws fresh
-entropy, unless a relabelling buffer of a seeded algorithm takes it before its first step: then
-it takes the seed :func:`~delayed_rl.deep.binding.reward_model_seed` derives from the
-algorithm's (and is initialised again from it).
-
-**Diagnostics.** While a :class:`~delayed_rl.deep.callbacks.RewardModelCallback` watches, the
-buffers hand :meth:`~RewardModel.watch` each relabelled batch beside its undelayed rewards
-(where ``info`` had them): the RMSE and correlation logged are over the last block of
-:data:`DIAGNOSTIC_PAIRS` such pairs, at the cost of a few sums a batch.
-
-**Files.** :meth:`~RewardModel.save` writes a zip of JSON (the class, its settings, spaces and
-counters), tensors (read back with ``torch.load(weights_only=True)``) and ``.npz`` arrays (read
-without pickle); :func:`~delayed_rl.deep.files.load_reward_model` checks every part before use.
-A reward model also pickles, which is how SB3's ``save_replay_buffer`` and ``model.save``
-(through the buffer's kwargs) keep it. Results are the same bits on one machine; torch's CPU
-kernels differ between CPUs, so across machines runs agree in distribution, not bit for bit.
+:class:`RewardModel` learns ``R̂(s, a)`` from the rewards an env *delivered*, and nothing else:
+:meth:`RewardModel.add` keeps a step, :meth:`RewardModel.train_on_schedule` takes the updates
+its schedule owes (``updates_per_step``, ``warmup_updates``), :meth:`RewardModel.predict` gives
+``R̂``; each subclass states its loss. Its schedule, seeds, diagnostics and files: the docs' deep
+RL page (``docs/deep_rl.md``, "What every reward model shares").
 """
 
 from __future__ import annotations
@@ -121,14 +85,14 @@ class RewardModel(ABC):
         hidden_sizes: the MLP's hidden layers.
         learning_rate: Adam's step size.
         batch_size: how many targets an update fits (a subclass says what a target is).
-        updates_per_step: Adam updates owed for each step added (see the module docstring).
+        updates_per_step: Adam updates owed for each step added (see ``docs/deep_rl.md``).
         warmup_updates: updates owed on top of those, taken at once when the loss first can be
             computed; the model is :attr:`ready` after them (and after at least one update:
             with ``updates_per_step=0`` and ``warmup_updates=0`` it only keeps the stream).
         capacity: steps of every sub-env the history keeps (its memory: ``capacity`` · n_envs
             transitions).
         seed: seeds the initial weights and the batches (``None``: fresh entropy, or the seed a
-            seeded algorithm's buffer derives for it; see the module docstring).
+            seeded algorithm's buffer derives for it; see ``docs/deep_rl.md``).
 
     Attributes:
         network: the :class:`~delayed_rl.deep.network.RewardNetwork`.
