@@ -261,30 +261,18 @@ class DelayAwareObservation(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstruc
     ``env`` is a stack holding an :class:`~delayed_rl.wrappers.ObservationDelay`, an
     :class:`~delayed_rl.wrappers.ActionDelay`, both or neither (at most one of each; wrap outside
     them and inside a reward delay, as :func:`~delayed_rl.wrappers.wrap_delays` does). The view
-    is built only from what the stack reports to the agent (the observations it returns, their
-    ``info["observation_age"]``, the actions sent), never from the undelayed state. Observations
-    are numbered from the reset's ``o_0``; step ``t`` makes ``o_{t+1}``. The observation is a
-    ``Dict``:
+    is built only from what the stack reports to the agent, never from the undelayed state. It
+    is a ``Dict``: ``"observation"``, the newest observation received so far (by the step it
+    was made at); ``"age"``, the steps since it was made, in ``Discrete(D + 1)``, ``D`` the
+    observation delay's bound; ``"actions"``, the last ``K`` actions sent, newest first. ``K``,
+    at least 1, is the observation delay's bound plus the action delay's: the actions that can
+    have changed the state since the observation was made. An unbounded delay needs
+    ``action_history``. Everything handed out is a copy; the wrapper draws nothing:
+    ``reset(seed=...)`` seeds the stack. The rules in full, the vector twins and the policies
+    that read the view: the late-observations page of the docs.
 
-    - ``"observation"``: the newest observation received so far, by the step it was made at (an
-      older one shown after a newer one changes nothing); the env's space.
-    - ``"age"``: the steps since it was made (0 at ``reset()``), in ``Discrete(D + 1)``, ``D``
-      the observation delay's bound (``action_history`` for an unbounded delay, where an older
-      age is reported as ``D`` with ``info["age_clipped"] = True``).
-    - ``"actions"``: the last ``K`` actions sent, newest first, padded before the episode's first
-      action with the ``ActionDelay``'s ``initial_action`` (else the neutral action); for
-      ``Discrete`` actions a ``MultiDiscrete``, else a space of the action space's kind and shape
-      ``(K, *action_shape)``.
-
-    ``K``, at least 1, is the observation delay's bound plus the action delay's (each the
-    wrapper's ``max_delay`` or the distribution's ``support_max``): the actions that can have
-    changed the state since the observation was made. An unbounded delay needs
-    ``action_history``.
-
-    ``info`` is the inner env's plus ``info["received_observations"]``, the ``(i, o_i)`` pairs
-    received at this step, and ``info["age_clipped"]``. Everything handed out is a copy. The
-    wrapper draws nothing: ``reset(seed=...)`` seeds the stack. The rules in full, the vector
-    twins and the policies that read the view: the late-observations page of the docs.
+    ``info`` adds ``received_observations``, the ``(i, o_i)`` pairs received at this step, and
+    ``age_clipped``, whether the age was clipped to ``D`` (an unbounded observation delay).
 
     Args:
         env: the stack to observe.

@@ -235,7 +235,7 @@ class PendingRewards:
         longest = int(delays.max(initial=0))
         if longest >= self.ring.shape[1]:
             self._make_room(delays)
-        mask = self.ring.shape[1] - 1
+        mask = self.ring.shape[1] - 1  # ring lengths are powers of two: ``& mask`` is ``% length``
         if every and longest <= mask:  # the common case: every env schedules into its ring
             rows, slots, added = self.rows, (self.clock + delays) & mask, rewards
         else:
@@ -248,8 +248,8 @@ class PendingRewards:
                 self._push_far(np.flatnonzero(far & (rewards != 0.0)), rewards, delays)
         old = self.ring[rows, slots]
         new = old + added
-        check = float(new.sum())
-        if check - check and not np.all(np.isfinite(new)):
+        check = float(new.sum())  # one scalar test for the batch: NaN or inf if any entry is
+        if check - check and not np.all(np.isfinite(new)):  # (x - x is 0 for every finite x)
             self._overflow(rows[~np.isfinite(new)], "the rewards due at one step")
         self.ring[rows, slots] = new
         if len(rows) == self.num_envs:
@@ -270,7 +270,7 @@ class PendingRewards:
         if self._far_envs:
             self._deliver_far(active, delivered)
         self._pending -= delivered
-        check = float(self._pending.sum())
+        check = float(self._pending.sum())  # as above: one scalar test before the exact check
         if check - check and not np.all(np.isfinite(self._pending)):
             for i in np.flatnonzero(~np.isfinite(self._pending)):
                 self._pending[i] = self._exact(i)
@@ -303,7 +303,7 @@ class PendingRewards:
             value = book.pop(int(self.clock[i]), None)
             if value is not None:
                 total = delivered[i] + value
-                if total - total:
+                if total - total:  # NaN: the sum passed float64's range
                     self._overflow([i], "the rewards due at one step")
                 delivered[i] = total
             if not book:

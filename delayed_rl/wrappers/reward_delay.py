@@ -433,7 +433,7 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
         if self.on_episode_end == "flush":
             flushed = exact_sum(self._due.values())
             total = delivered + flushed
-            if total - total:
+            if total - total:  # NaN: the sum passed float64's range
                 raise ValueError(
                     "the rewards delivered at the episode's last step (due then, plus the "
                     "flushed rest) sum to more than float64 can hold; rescale the env's rewards"
@@ -515,7 +515,7 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
             ValueError: the rewards due at ``when`` (``slot`` overflowed), or all those pending,
                 sum to more than float64 can hold.
         """
-        if slot - slot:
+        if slot - slot:  # NaN: this slot's sum passed float64's range
             raise ValueError(
                 f"the rewards due at episode step {when - self._episode_start} sum to more than "
                 "float64 can hold; rescale the env's rewards"
