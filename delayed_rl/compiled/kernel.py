@@ -7,7 +7,7 @@ arguments come in named groups (:mod:`delayed_rl.compiled.state`: ``QCache``, ``
 env's :class:`~delayed_rl.compiled.tabular.TabularModel`, ``DelayLine``, ``History``,
 ``StepLog``, ``Script``), which numba compiles as tuples.
 
-The update rule is the one of :mod:`delayed_rl.agents.mmq` (its module docstring states it
+The update rule is the one of :mod:`delayed_rl.agents.mmq` (``docs/agents.md`` states it
 exactly), options included (the reward kernel and the delay trace, :class:`~delayed_rl.compiled.state.Rule`); the exactness
 tests drive both on scripted transitions.
 """

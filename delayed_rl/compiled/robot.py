@@ -1,31 +1,11 @@
 """The e-puck line follower inside the compiled training loop.
 
-:class:`~delayed_rl.envs.linefollow.EPuckLineFollowEnv` with centroid observations and discrete
-actions is a tabular env to an agent (``Discrete(41)`` states, ``Discrete(7)`` actions) whose
-dynamics are a physics simulation rather than a table ``P``. Its step is already compiled piece
-by piece (the Chipmunk sub-steps, :func:`~delayed_rl.envs.linefollow._chipmunk.drive`; the
-camera and the track position, :func:`~delayed_rl.envs.linefollow._kernels.observe`); here the
-Python between the pieces is compiled too, so :func:`~delayed_rl.compiled.kernel.run_chunk` steps
-the robot itself (:func:`robot_step`) and a whole training chunk runs without returning to
-Python.
-
-The compiled step is :meth:`EPuckLineFollowEnv.step` to the last bit: the same C calls on the
-env's own pymunk space, the same camera and reward arithmetic, and every random number drawn
-from the env's own ``np_random`` (numba draws from a numpy ``Generator`` in place, the same
-stream) at the same point of the step. A seeded env therefore walks the same trajectory for the
-same actions on either path. Two rare events go back to Python, to the env's own code
-(``benchmarks/SPEED.md``): putting a lost robot back on the track
-(``lost_line="recover"``), which rebuilds its pymunk space, and the reset at an episode's end.
-
-What compiles (:class:`RobotLink` says why not, as
-:class:`~delayed_rl.compiled.tabular.NotCompilable`): ``observation_mode="centroid"``,
-``action_mode="discrete"``, no ``command_latency``, a fixed track (not ``track="random"``
-without a ``track_seed``), no ``render_mode``, and a platform where the env's own compiled
-physics and camera are in use. Motor lag, wheel slip, camera noise, line contrast, both
-``lost_line`` modes, ``max_steps`` and any control period compile.
-
-Between chunks the env object holds the run's state (pose, track position, lap progress,
-line-less steps, step count), so it describes the robot where the compiled run left it.
+:func:`robot_step` is :meth:`~delayed_rl.envs.linefollow.EPuckLineFollowEnv.step` compiled, to the last bit (the same C
+calls, arithmetic and random draws from the env's own ``np_random``), so that
+:func:`~delayed_rl.compiled.kernel.run_chunk` steps the robot itself and a whole training chunk
+runs without returning to Python; :class:`RobotLink` joins an env to a run, or says why it
+cannot. What compiles, what goes back to Python and what the env holds between chunks: the
+docs' compiled-path page (``docs/compiled.md``, "The e-puck line follower").
 """
 
 from __future__ import annotations

@@ -1,38 +1,11 @@
 """Read a tabular env's dynamics, and its reward delay, so the loop can run compiled.
 
-The protocol an env follows to be compiled (Gymnasium's toy-text envs already do):
-
-- ``env.P[s][a]`` is a list of ``(probability, next_state, reward, terminated)`` outcomes for every
-  state ``s`` of a ``Discrete`` observation space and action ``a`` of a ``Discrete`` action space;
-- ``env.initial_state_distrib``: the probabilities of the reset state;
-- ``env.max_steps`` (optional): the env truncates its own episodes after that many steps.
-
-The dynamics must be fully described by these tables (no hidden state). The stack above the env
-may hold Gymnasium's bookkeeping wrappers (``OrderEnforcing``, ``PassiveEnvChecker``), its
-``TimeLimit`` (what ``gym.make`` adds, e.g. 200 steps for ``Taxi-v4``) and at most one
-:class:`~delayed_rl.wrappers.RewardDelay`, with any delay distribution; anything else (a reward
-or observation wrapper) changes what the agent sees, and the stack runs on the Python path.
-
-Where a ``TimeLimit`` sits decides what its truncation does to the pending rewards, on both
-paths alike: *below* the ``RewardDelay`` (``RewardDelay(gym.make(id), ...)``) the delay wrapper
-sees the episode end and applies its ``on_episode_end`` (``max_steps``); *above* it
-(``TimeLimit(RewardDelay(env), n)``, or ``gym.make(id, max_episode_steps=n, reward_delay=...)``)
-the delay wrapper does not, and the reset that follows discards what is pending, except under
-``"carry"`` (``cut_steps``; the compiled run warns, as the wrapper's ``reset`` does).
-
-A user's own tabular env compiles when it follows the same protocol: give it ``P``,
-``initial_state_distrib`` and, if it ends its own episodes, ``max_steps`` (or wrap it in a
-``TimeLimit``). For example::
-
-    class Chain(gym.Env):  # two states; action 1 in state 1 pays 1 and goes back to 0
-        observation_space, action_space = gym.spaces.Discrete(2), gym.spaces.Discrete(2)
-        P = {0: {0: [(1.0, 0, 0.0, False)], 1: [(0.9, 1, 0.0, False), (0.1, 0, 0.0, False)]},
-             1: {0: [(1.0, 0, 0.0, False)], 1: [(1.0, 0, 1.0, False)]}}
-        initial_state_distrib = np.array([1.0, 0.0])
-        # reset() and step() as usual: the Python path, and the checks, use them
-
-``examples/own_tabular_env.py`` is that env, trained on both paths. (The e-puck line follower
-has no tables; the compiled loop steps it itself, :mod:`delayed_rl.compiled.robot`.)
+:func:`inspect_stack` reads an env that follows the protocol of Gymnasium's toy-text envs
+(``env.P[s][a]``, ``env.initial_state_distrib`` and optionally ``env.max_steps``), under
+Gymnasium's bookkeeping wrappers, a ``TimeLimit`` and at most one
+:class:`~delayed_rl.wrappers.RewardDelay`, into a :class:`TabularModel`; any other stack is
+:class:`NotCompilable`. The protocol, what a ``TimeLimit``'s place does to pending rewards and a
+user's own env: the docs' compiled-path page (``docs/compiled.md``, "Your own tabular env").
 """
 
 from __future__ import annotations
