@@ -1,30 +1,10 @@
 """exp, log, sin, cos and atan2 that give the same bits on every CPU.
 
-The library's seeded results must not depend on the machine, and the usual implementations of
-these functions do:
-
-- numpy's ``np.exp``, ``np.log``, ``np.arctan2``, ``np.angle`` (and its complex products and
-  absolute values) run SIMD loops chosen for the CPU at import (AVX2, AVX-512), each rounding
-  its own way;
-- the C library's ``exp``, ``log``, ``sin``, ``cos``, ``atan``, ``atan2`` (behind Python's
-  ``math``, numba's compiled ``math`` and numpy's scalar loops) pick, on x86-64 glibc, a
-  variant compiled for fused multiply-adds where the CPU has them, whose last bit differs from
-  the plain one on some arguments.
-
-The functions here are fdlibm's algorithms (Sun's freely distributable libm, the reference of
-Java's ``StrictMath``): an argument reduction and a polynomial, written with the four basic
-operations only, each rounded once (IEEE 754 guarantees their bits everywhere), in a fixed
-order. numba compiles them without reassociation or compiled operations (it never allows LLVM to
-contract ``a * b + c``), and without numba they run as plain Python on the same doubles, so a
-compiled call, a Python call and a call on another CPU return the same bits. Their error is
-below one unit in the last place on the arguments the library uses (tested against
-``math``); they are not correctly rounded, only reproducible.
-
-Domains: ``sin``, ``cos`` and ``sincos`` reduce exactly for ``|x| < 2**19 · π/2``
-(about 823,550 rad, a robot turning for days); beyond it they reduce modulo 2π in one exact
-``%`` by the double nearest 2π, still reproducible but less accurate. Infinite or NaN
-arguments give NaN. ``exp`` overflows to ``inf`` above 709.78 and underflows to 0 below
-−745.13; ``log`` gives ``-inf`` at 0 and NaN below.
+numpy's SIMD loops and the C library's fused multiply-add variants round these functions
+differently from one CPU to another. The functions here are fdlibm's algorithms written with the
+four basic operations in a fixed order, so a compiled call, a Python call and a call on another
+CPU return the same bits, within one unit in the last place. Why, how, and their domains: the
+docs' reproducibility page (``docs/reproducibility.md``, "Portable exp, log, sin, cos and atan2").
 """
 
 from __future__ import annotations
