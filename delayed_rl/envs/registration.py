@@ -1,34 +1,11 @@
 """Entry points that let ``gym.make(id, reward_delay=..., ...)`` return a delayed env.
 
-Every ``delayed_rl/...`` id is registered with a :class:`DelayableEntryPoint` instead of the bare
-env class. It builds the env from the remaining keyword arguments and wraps it for the delays
-given (:func:`~delayed_rl.wrappers.wrap_delays`), innermost first:
-
-1. ``action_delay``: :class:`~delayed_rl.wrappers.ActionDelay` (the env executes actions sent
-   earlier);
-2. ``observation_delay``: :class:`~delayed_rl.wrappers.ObservationDelay` (the agent sees older
-   observations), under the arrival rule ``observation_arrival`` (``"stale"``, the default, or
-   ``"network"``);
-3. ``delay_aware=True``: :class:`~delayed_rl.wrappers.DelayAwareObservation` (the agent observes
-   the newest observation received, its age and the last ``action_history`` actions sent),
-   outside the delays it reads;
-4. ``reward_delay``: :class:`~delayed_rl.wrappers.PoissonRewardDelay` for a number (the Poisson
-   mean λ) or :class:`~delayed_rl.wrappers.RewardDelay` for a distribution — outermost, so its
-   ``info["undelayed_reward"]`` and episode-end handling see the whole step.
-
-Each is a number (a Poisson mean), a :mod:`delayed_rl.delays` distribution or its ``to_dict()``
-description. Because they are ordinary keyword arguments, they are recorded in
-``env.spec.kwargs`` and ``gym.make(env.spec)`` rebuilds the same stack. A distribution is
-recorded there (by the delay wrappers' ``spec``,
-:func:`~delayed_rl.wrappers._spec.describe_delays`) as its JSON
-description, ``{"type": "Constant", "k": 2}`` (:meth:`~delayed_rl.delays.Delay.to_dict`), which
-the entry points accept back, so the spec also survives ``EnvSpec.to_json`` /
-``EnvSpec.from_json``.
-
-Gymnasium applies its own wrappers (``PassiveEnvChecker``, ``OrderEnforcing`` and, when
-``max_episode_steps`` is passed to ``gym.make``, ``TimeLimit``) *outside* the delay wrapper. The
-envs of this package therefore end their episodes themselves (``max_steps`` arguments, as Minigrid
-does), so the delay wrapper sees every episode end and can flush pending rewards.
+Every ``delayed_rl/...`` id is registered with a :class:`DelayableEntryPoint`, which builds the
+env and wraps it for the delays given (:func:`~delayed_rl.wrappers.wrap_delays`): the action
+delay innermost, then the observation delay, the delay-aware view and the reward delay
+outermost. The delays are ordinary keyword arguments, so ``env.spec`` records them and
+``gym.make(env.spec)`` rebuilds the same stack. The order, the spec's JSON and why the envs end
+their own episodes: the docs' environments page (``docs/envs.md``).
 """
 
 from __future__ import annotations
@@ -61,7 +38,7 @@ class DelayableEntryPoint:
 
     reads_delay_descriptions = True
     """Each delay may be a ``Delay.to_dict()`` description: the delay wrappers record a
-    distribution in the env spec's kwargs that way (see the module docstring)."""
+    distribution in the env spec's kwargs that way (see ``docs/envs.md``)."""
 
     def __init__(self, env_path: str, preset: str | None = None):
         for name, path in (("env_path", env_path), ("preset", preset)):

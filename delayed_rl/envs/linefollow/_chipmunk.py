@@ -1,25 +1,11 @@
 """The robot's calls into pymunk's Chipmunk, made as cheaply as possible, to the same bits.
 
-A physics sub-step of :class:`~delayed_rl.envs.linefollow.robot.EPuckRobot` reads the body's
-angle, sets the control body's velocity and angular velocity and steps the space: four
-Chipmunk functions. pymunk wraps each in Python (``__setattr__`` hooks, a ``Vec2d`` per read,
-``Space.step``'s bookkeeping for callbacks and deferred additions this space never has), which
-costs several times the C work behind it. Two cheaper routes reach the same C functions with
-the same arguments, so the physics stays pymunk's and the results stay the same to the last
-bit:
-
-- :func:`drive_python` on :func:`python_calls`: the functions of pymunk's cffi binding
-  (``pymunk._chipmunk_cffi``), called from Python on the Chipmunk pointers behind the pymunk
-  objects (where pymunk does not expose them, its wrappers themselves). The reference.
-- :func:`drive` on :func:`handles`: all the sub-steps of a robot step, and the pose read after
-  them, in one compiled (numba) loop that calls the C functions by address. The
-  differential-drive arithmetic between the calls is the same expressions, compiled without
-  reassociation or compiled operations, and the heading's sine and cosine are
-  ``delayed_rl._portable_math.sincos``'s on both routes (the same bits compiled or not, on
-  every CPU; the C library's ``sin`` and ``cos`` pick a variant by CPU). Only on platforms where a ``cpVect`` argument or result (a struct of two doubles)
-  is passed exactly like two doubles (the System V x86-64 and AArch64 conventions of Linux and
-  macOS), and only once :func:`enabled` has checked, on a space like the robot's, that it ends
-  in exactly the state :func:`drive_python` does.
+:func:`drive_python` (on :func:`python_calls`, the reference) calls pymunk's cffi binding from
+Python; :func:`drive` (on :func:`handles`) runs all the sub-steps of a robot step in one
+compiled loop that calls the C functions by address, where :func:`enabled` has checked that it
+ends in exactly :func:`drive_python`'s state. Both reach the same C functions with the same
+arguments, so the physics stays pymunk's. Why and where: the docs' environments page
+(``docs/envs.md``, "Its compiled pieces, equal to the last bit").
 """
 
 from __future__ import annotations

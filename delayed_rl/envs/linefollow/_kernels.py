@@ -1,23 +1,11 @@
 """Compiled (numba) twins of the track queries and the camera reading, equal to the last bit.
 
 The numpy code in :mod:`~delayed_rl.envs.linefollow.track` and
-:mod:`~delayed_rl.envs.linefollow.camera` is the reference; it spends most of an env step in
-numpy's per-call overhead on arrays of a few dozen elements. The functions here compute the
-same results element by element, with the same floating-point operations in the same order,
-so their results are identical bit for bit, not merely close.
-
-Both are written so that their bits do not depend on the CPU either: they use only additions,
-subtractions, multiplications, divisions, comparisons and square roots of real numbers, each
-rounded once as IEEE 754 requires of every CPU. No complex arithmetic (numpy's complex products
-and absolute values run SIMD loops chosen for the CPU, some with fused multiply-adds), no
-``hypot`` (a C library function) and no ``np.maximum`` (whose SIMD loops treat −0.0 their own
-way): a product of complex numbers is written out as ``ar·br − ai·bi``, ``ar·bi + ai·br``, a
-distance as ``sqrt(x·x + y·y)``, a clip as comparisons. numba compiles them without compiled
-operations or reassociation, for any target CPU. ``tests/envs/test_linefollow_kernels.py`` checks
-both paths against each other on random queries and ``tests/test_cpu_independence.py`` checks
-whole trajectories with numpy's SIMD loops and numba's host-CPU code turned off.
-
-Without numba the functions stay plain Python; the callers then use the numpy code.
+:mod:`~delayed_rl.envs.linefollow.camera` is the reference; the functions here compute the same
+results element by element, with the same operations in the same order, and only with
+operations IEEE 754 rounds the same on every CPU. Without numba they stay plain Python and the
+callers use the numpy code. The rules they keep, and the tests: the docs' environments page
+(``docs/envs.md``, "Its compiled pieces, equal to the last bit").
 """
 
 from __future__ import annotations

@@ -1,33 +1,12 @@
 """The e-puck's 1×40 line camera and the line-centroid state (thesis Eq. 5.6).
 
-Geometry (all documented defaults, in metres, robot frame: x forward, y to the robot's left)::
-
-               pixel 1 (left)                pixel 40 (right)
-                  o  o  o  o  ...  o  o  o  o        <- scanline, LOOK_AHEAD ahead
-                  |<------ FIELD_WIDTH ------>|
-                           ^
-                         robot (body centre), heading up
-
-- The scanline is perpendicular to the heading, centred ``LOOK_AHEAD`` = 0.05 m ahead of the body
-  centre (1.3 cm beyond the front of the 3.7 cm-radius body: "just in front of its body").
-- It is ``FIELD_WIDTH`` = 0.064 m wide and split into 40 pixels of 1.6 mm. Pixel i (1-based)
-  samples the floor at lateral offset (20.5 − i)·1.6 mm: **pixel 1 is on the robot's left**,
-  pixel 40 on its right, as in an image row seen from the robot.
-- The line (black tape) is ``LINE_WIDTH`` = 0.010 m wide. A pixel sees the line (1) when its sample
-  point is within 5 mm of the track's centreline. A robot centred on a straight line therefore
-  sees pixels 18–23 (offsets ±0.8, ±2.4, ±4.0 mm), the thesis's own worked example, whose
-  centroid 20.5 gives the state 20.
-
-Centroid: m = round(Σ f(i)·i / Σ f(i)) with ties rounded **down** (half-down: 20.5 → 20,
-19.5 → 19), so every state m covers the centroids (m − ½, m + ½]. That matches the thesis's
-example (pixels 18–23 → 20) and makes the centred robot read exactly ``p_centre`` = 20. (Python's
-``round`` would also give 20 here but rounds other ties unevenly, 21.5 → 22 and 19.5 → 20; MATLAB's
-``round`` and ``np.floor(x + 0.5)`` give 21.) The thesis's Eq. 5.6 prints the divisor as 40, which
-contradicts its own example; the divisor here is Σ f(i), the number of pixels that see the line.
-m = 0 when no pixel sees the line.
-
-:meth:`Camera.read` runs compiled where numba is installed
-(:mod:`~delayed_rl.envs.linefollow._kernels`), with the same pixels as its numpy code.
+:class:`Camera` reads 40 binary pixels on a scanline ``LOOK_AHEAD`` ahead of the robot, pixel 1
+on its left, each seeing the line within half its width; :func:`line_centroid` turns them into
+the state m, the centroid rounded half-down (0 when no pixel sees the line). The geometry, the
+rounding and where it departs from the thesis's printed Eq. 5.6: the docs' environments page
+(``docs/envs.md``, "The camera and the line-centroid state"). :meth:`Camera.read` runs
+compiled where numba is installed (:mod:`~delayed_rl.envs.linefollow._kernels`), to the same
+pixels.
 """
 
 from __future__ import annotations
@@ -99,7 +78,7 @@ def _round_half_down(total: Any, count: Any) -> Any:
 
 
 class Camera:
-    """A downward-looking scanline of 40 binary pixels (see the module docstring for the layout).
+    """A downward-looking scanline of 40 binary pixels (``docs/envs.md`` draws the layout).
 
     Args:
         look_ahead: distance (m) from the body centre to the scanline.

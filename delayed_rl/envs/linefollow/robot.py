@@ -1,34 +1,11 @@
 """A pymunk e-puck: a differential-drive disc on a floor with friction, seen from above.
 
-Top-down friction the pymunk way (its "tank" example): the robot is a dynamic body joined to a
-kinematic *control body* by a :class:`pymunk.PivotJoint` and a :class:`pymunk.GearJoint` whose
-``max_force`` emulate the tyres' grip (linear and angular) and whose ``max_bias = 0`` disable
-position correction, so only velocities are matched. Each physics sub-step the control body's
-velocity and angular velocity are set from the differential-drive kinematics of the current wheel
-speeds and the robot's heading::
-
-    v = (v_l + v_r) / 2 · k,     ω = (v_r − v_l) · k / AXLE_LENGTH,    k = 2π·WHEEL_RADIUS / 1000
-
-with wheel speeds in e-puck units (steps/s, 1000 steps per wheel turn). The joints then drag the
-robot towards that motion within the grip limits (μ = :data:`FRICTION`). At e-puck speeds the
-grip always suffices, so the body reaches the commanded velocity within one sub-step; since
-pymunk integrates positions before it solves the joints, that velocity moves the body from the
-next sub-step on (one sub-step of actuation latency).
-
-Wheel speeds follow an optional first-order motor lag (time constant ``motor_lag`` s); slip
-factors (from the env's generator) scale each wheel's ground speed. The robot itself draws no
-random numbers, so it is deterministic given its inputs.
-
-Speed: a sub-step is four Chipmunk calls (read the angle, set the control body's velocity and
-angular velocity, step the space). They go to pymunk's Chipmunk functions directly, past its
-Python wrappers, and where numba can call them by address all the sub-steps of a step run in
-one compiled loop (:mod:`~delayed_rl.envs.linefollow._chipmunk`): the same C calls with the
-same arguments, so the same results to the last bit.
-
-Pickling: pymunk's solver caches each joint's last impulse for warm-starting, which a pickled
-space cannot restore. A :class:`EPuckRobot` therefore pickles its plain state (poses,
-velocities, wheel speeds) and rebuilds its space on unpickling; pickling also rebuilds the
-original's space, so both copies continue bit-for-bit identically.
+:class:`EPuckRobot` turns wheel speeds (e-puck units, with an optional motor lag and the
+env's slip factors) into motion: a kinematic control body set from the differential-drive
+kinematics drags the robot within the tyres' grip (pymunk's "tank" example). It draws no random
+numbers, so it is deterministic given its inputs; its Chipmunk calls go past pymunk's Python
+wrappers (:mod:`~delayed_rl.envs.linefollow._chipmunk`) to the same bits. The physics in full:
+the docs' environments page (``docs/envs.md``, "The robot's physics").
 """
 
 from __future__ import annotations
@@ -134,8 +111,11 @@ class EPuckRobot:
         return state
 
     def __getstate__(self) -> dict[str, Any]:
+        # pymunk's solver caches each joint's last impulse for warm-starting, which a pickled
+        # space cannot restore: pickle the plain state, rebuild the space on unpickling, and
+        # rebuild the original's too, so that both copies continue bit-for-bit identically.
         state = self._state()
-        self._build(state)  # drop the solver's warm-start cache here too (see module docstring)
+        self._build(state)
         return {
             "physics": state,
             "physics_dt": self.physics_dt,

@@ -1,35 +1,11 @@
 """Track geometry for the e-puck line-following task.
 
-A :class:`Track` is a closed centreline (metres, y up), stored as a dense polyline whose
-segments are at most :data:`SAMPLE_SPACING` long, with a uniform spatial grid that answers the
-two questions the env asks every step quickly:
-
-- which of a handful of points (the camera's 40 samples) lie within ``half_width`` of the
-  centreline (:meth:`Track.near_line`), and
-- where is the nearest centreline point to the robot (:meth:`Track.locate`), with an arc-length
-  hint so a figure-eight's crossing does not make the robot jump to the other branch.
-
-Both queries run compiled (numba, :mod:`~delayed_rl.envs.linefollow._kernels`) where numba is
-installed: the same floating-point operations as their numpy code, which stays as the reference
-and the fallback, so the answers are the same to the last bit either way.
-
-Built-in tracks: :func:`make_track` with ``"oval"``, ``"racetrack"`` (long sweeping turns, like
-thesis Fig. 5.18), ``"figure8"`` and ``"random"`` (seeded, smooth, closed, simple). A user's own
-closed polyline goes through :meth:`Track.from_polyline`, which validates it.
-
-Every track must have a minimum turning radius of at least :data:`MIN_TURN_RADIUS` (0.1 m). The
-geometry behind that bound: with the camera's scanline 5 cm ahead and 6.4 cm wide, a robot centred
-and tangent on a circle of radius R still sees the line while R ≥ (0.05² + 0.032²) / (2·0.032)
-≈ 0.055 m, and the proportional controller's tightest turn (wheels 300 and 60) has radius 0.04 m.
-0.1 m leaves a margin for the controller's lag; random tracks use 0.2 m by default. A user's
-polyline is drawn straight between its vertices, so it must also not kink by more than
-:data:`MAX_CORNER_ANGLE` (60°) at any vertex.
-
-A track's memory is proportional to its length (about :data:`BYTES_PER_VERTEX` bytes per dense
-vertex, one every 5 mm; the spatial grid stores only the cells the line passes through), and no
-track may have more than :data:`MAX_TRACK_VERTICES` dense vertices (200 m of line, forty times
-the 5.1 m racetrack): a longer one (a circle of radius 1000 m, ``random_track(mean_radius=50)``)
-is refused at construction, before anything is allocated.
+A :class:`Track` is a closed centreline with a spatial grid that answers the env's two
+questions every step (:meth:`Track.near_line`, :meth:`Track.locate`), compiled where numba is
+installed (:mod:`~delayed_rl.envs.linefollow._kernels`) to the same bits. :func:`make_track`
+builds ``"oval"``, ``"racetrack"``, ``"figure8"`` and ``"random"``; :meth:`Track.from_polyline`
+validates a user's own. The turning-radius, corner and size limits and why: the docs'
+environments page (``docs/envs.md``, "The tracks").
 """
 
 from __future__ import annotations
