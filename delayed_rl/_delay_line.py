@@ -1,14 +1,9 @@
 """The delay line, written once: drawing clipped delays and the ring buffers that hold what is due.
 
-Every consumer of delays uses these: the wrappers (:class:`~delayed_rl.wrappers.RewardDelay`,
-:class:`~delayed_rl.wrappers.ObservationDelay`), the vector buffers, the agents' histories and the
-compiled training path.
-
-- :func:`draw_delays`: a block of delays from a distribution, clipped to ``max_delay``;
-- :func:`delay_bound`: how far back a delay can practically reach (for sizing histories);
-- :func:`ring_size`: the power-of-two length of a ring buffer (slots found with a bit mask);
-- :func:`regrow_ring`: a longer ring holding the same pending entries at the same due steps;
-- :func:`exact_sum`: a sum of rewards rounded once, or a clear error when float64 cannot hold it.
+The wrappers, the vector buffers, the agents' histories and the compiled path all use
+:func:`draw_delays` (a block of clipped delays), :func:`delay_bound` (how far back a delay can
+practically reach), :func:`ring_size` and :func:`regrow_ring` (power-of-two rings of what is
+pending) and :func:`exact_sum` (a sum of rewards rounded once, or a clear error).
 
 Example:
     >>> import numpy as np

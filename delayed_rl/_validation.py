@@ -1,15 +1,9 @@
 """Argument checks shared by the whole library: one policy for bad input.
 
-Every public argument is checked where it enters (a constructor, ``learn``, a CLI option), with
-the policy of Gymnasium's wrappers:
-
-- ``TypeError`` for a value of the wrong type (``"5"`` for an integer, ``True`` for a number:
-  ``bool`` is refused although Python counts it as an ``int``);
-- ``ValueError`` for a value of the right type outside what is allowed (a negative count, NaN,
-  an unknown mode).
-
-Messages name the argument, say what is allowed and show the value:
-``"gamma must be a number in [0, 1], got 1.5"``.
+Every public argument is checked where it enters (a constructor, ``learn``, a CLI option), as
+Gymnasium's wrappers do: ``TypeError`` for the wrong type (``bool`` is refused where a number is
+wanted, although Python counts it as an ``int``), ``ValueError`` for a value outside what is
+allowed. Messages name the argument, say what is allowed and show the value.
 
 Example:
     >>> check_int("seed", 3, low=0)

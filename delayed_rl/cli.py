@@ -8,15 +8,8 @@
 - ``delayed-rl sweep FILE``: your own agents × envs × delays × seeds, from a YAML or JSON file
   (:mod:`delayed_rl.sweep` documents the file), written to ``--out``.
 
-Exit codes: 0 success, 2 bad usage (unknown names, bad values, in options or in a sweep file's
-fields or syntax; argparse's usage and one ``error:`` line), 1 a failure while running (a
-missing, corrupt or oversized model file, a missing sweep file, an env the agent cannot use,
-tables over ``delayed_rl.agents.common.q_table.MAX_TABLE_BYTES``, a sweep's run that fails,
-running out of memory, ...), reported as one ``error: ...`` line on stderr, without a traceback; 130 after
-Ctrl-C (a second Ctrl-C quits at once, see :func:`console`).
-
-Option values are checked by :mod:`delayed_rl._validation`, the library's own checks, so the
-command line and the Python API refuse the same values with the same words.
+:func:`main` gives the exit codes; option values are checked by :mod:`delayed_rl._validation`,
+so the command line and the Python API refuse the same values with the same words.
 """
 
 from __future__ import annotations
@@ -640,7 +633,15 @@ def _check_agent_options(args: argparse.Namespace) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run ``delayed-rl`` with ``argv`` (default: the process's arguments); return the exit code."""
+    """Run ``delayed-rl`` with ``argv`` (default: the process's arguments); return the exit code.
+
+    0 success; 2 bad usage (unknown names, bad values, in options or in a sweep file's fields
+    or syntax: argparse's usage and one ``error:`` line); 1 a failure while running (a missing,
+    corrupt or oversized model file, a missing sweep file, an env the agent cannot use, tables
+    over ``delayed_rl.agents.common.q_table.MAX_TABLE_BYTES``, a sweep's run that fails,
+    running out of memory, ...), reported as one ``error: ...`` line on stderr, without a
+    traceback; 130 after Ctrl-C (a second Ctrl-C quits at once, see :func:`console`).
+    """
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command == "train":

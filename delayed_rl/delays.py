@@ -1,20 +1,9 @@
 """Delay distributions: how many steps late each reward (or observation) arrives.
 
-Every distribution draws non-negative integer delays and exposes the same small interface:
-
-- ``sample(rng, size)``: a batch of delays as an ``int64`` array (batched, so a wrapper draws many
-  at once instead of calling the generator every step);
-- ``pmf(k)``: the probability of delay ``k`` (vectorised over ``k``);
-- ``mean``: the expected delay;
-- ``support_max``: the largest delay it can produce (``None`` when unbounded, as for Poisson);
-- ``to_dict()``: a JSON-able description, ``{"type": "Constant", "k": 2}``, which :func:`as_delay`
-  reads back (so a delay survives an env spec's JSON round trip).
-
-Every delay fits ``int64``: parameters that would produce delays beyond :data:`MAX_DELAY`
-(``Constant(2**63)``, ``Poisson(1e19)``...) are refused at construction.
-
-The thesis assumes Poisson delays; its future work asks for other statistics, so the wrappers and
-agents accept any :class:`Delay`.
+Every distribution is a :class:`Delay` (``sample``, ``pmf``, ``mean``, ``support_max``,
+``to_dict``), and :func:`as_delay` turns a number (a Poisson mean) or a ``to_dict()``
+description back into one. The thesis assumes Poisson delays; its future work asks for other
+statistics, so the wrappers and agents accept any :class:`Delay`.
 
 Example:
     >>> import numpy as np
@@ -85,7 +74,17 @@ def _as_pmf(pmf: Any) -> np.ndarray:
 
 
 class Delay(ABC):
-    """A distribution over non-negative integer delays (in steps)."""
+    """A distribution over non-negative integer delays (in steps).
+
+    A subclass gives ``sample(rng, size)``, a batch of delays as an ``int64`` array (batched, so
+    a wrapper draws many at once instead of calling the generator every step); ``pmf(k)``, the
+    probability of delay ``k`` (vectorised over ``k``); ``mean``, the expected delay;
+    ``support_max``, the largest delay it can produce (``None`` when unbounded, as for Poisson);
+    and ``to_dict()``, a JSON-able description, ``{"type": "Constant", "k": 2}``, which
+    :func:`as_delay` reads back (so a delay survives an env spec's JSON round trip). Every delay
+    fits ``int64``: parameters that would produce delays beyond :data:`MAX_DELAY`
+    (``Constant(2**63)``, ``Poisson(1e19)``...) are refused at construction.
+    """
 
     @abstractmethod
     def sample(self, rng: np.random.Generator, size: int | None = None) -> np.ndarray | int:
