@@ -1,17 +1,12 @@
 """Sweeps of your own: agents × envs × delay distributions × seeds, defined in one file.
 
-``delayed-rl sweep FILE`` (or :func:`load_sweep` and :func:`run_sweep`) answers "which agent
-copes with which delay on my envs?": it trains every agent on every env under every delay for
-every seed, runs each trained agent's greedy policy, and writes into the output folder
-``results.csv`` (one row per run), ``summary.csv`` and ``summary.md`` (mean and 95 % confidence
-interval over the seeds) and one figure per env, ``eval_reward_<env>.png``.
-
-The file format (every key, its default and its limits), the results' columns, resuming, and
-determinism across backends are documented on the docs site's "Sweeps of your own" page
-(``docs/sweeps.md``). The parts: :mod:`~delayed_rl.sweep.reading` reads a file with limits,
-:mod:`~delayed_rl.sweep.schema` checks it into a :class:`~delayed_rl.sweep.schema.Sweep`,
+``delayed-rl sweep FILE`` (or :func:`load_sweep` and :func:`run_sweep`) trains every agent on
+every env under every delay for every seed, evaluates each greedily, and writes the runs, their
+summary and a figure per env. The parts: :mod:`~delayed_rl.sweep.reading` reads a file with
+limits, :mod:`~delayed_rl.sweep.schema` checks it into a :class:`~delayed_rl.sweep.schema.Sweep`,
 :mod:`~delayed_rl.sweep.runs` trains and evaluates one run, :mod:`~delayed_rl.sweep.results`
-reads, resumes and summarizes ``results.csv``.
+reads, resumes and summarizes ``results.csv``. The file format, the columns, resuming and
+determinism: the docs' sweeps page (``docs/sweeps.md``).
 """
 
 from __future__ import annotations

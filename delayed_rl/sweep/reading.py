@@ -1,19 +1,11 @@
 """Reading a sweep file, YAML or JSON, with limits on what a hostile file can make the reader do.
 
 A sweep file is a few dozen lines written by hand. :func:`read_sweep_file` refuses, before it
-builds the Python objects, anything far beyond that:
-
-- a file over :data:`MAX_FILE_BYTES`;
-- values nested over :data:`MAX_DEPTH` levels deep (a JSON or YAML ``[[[[...`` of any depth is a
-  ``ValueError``, never a ``RecursionError``);
-- over :data:`MAX_VALUES` values once YAML's aliases are expanded (``*a`` repeats the value of
-  ``&a``: nine nested anchors of nine aliases each stand for 9⁹ values, the "billion laughs"),
-  and an alias inside the value it names (a value that contains itself);
-- a key given twice in one mapping (YAML and JSON readers would keep the last one silently);
-  YAML's merge key ``<<`` still works as YAML defines it: a key given in the mapping overrides
-  the merged one.
-
-YAML is read with PyYAML's safe loader (no Python objects, no code): the ``sweep`` extra.
+builds the Python objects, anything far beyond that: a file over :data:`MAX_FILE_BYTES`, values
+nested over :data:`MAX_DEPTH` levels, over :data:`MAX_VALUES` values once YAML's aliases are
+expanded or an alias inside the value it names, and a key given twice in one mapping. YAML is
+read with PyYAML's safe loader (the ``sweep`` extra). The docs' sweeps page
+(``docs/sweeps.md``) has the limits in full.
 """
 
 from __future__ import annotations

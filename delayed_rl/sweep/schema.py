@@ -35,7 +35,7 @@ SB3_ON_POLICY = ("A2C", "PPO")
 SB3_PREFIX = "sb3:"
 #: What a delay entry may delay, in the order :func:`~delayed_rl.wrappers.wrap_delays` stacks.
 DELAY_KINDS = ("action", "observation", "reward")
-#: The ``kwargs`` values replaced by the run's reward delay (see the package docstring).
+#: The ``kwargs`` values replaced by the run's reward delay (see ``docs/sweeps.md``).
 PLACEHOLDERS = ("$delay", "$delay_mean", "$delay_steps")
 DEFAULT_SEEDS = 3
 DEFAULT_STEPS = 100_000
@@ -105,7 +105,7 @@ class SweepDelay:
 
 @dataclass(frozen=True)
 class Sweep:
-    """A checked sweep file (see the package docstring); :meth:`runs` lists its runs."""
+    """A checked sweep file (see ``docs/sweeps.md``); :meth:`runs` lists its runs."""
 
     name: str
     agents: tuple[SweepAgent, ...]
@@ -158,7 +158,7 @@ class Sweep:
 
 # ---------------------------------------------------------------------------------- checking
 def parse_sweep(data: Any, name: str = "sweep", source: str = "sweep") -> Sweep:
-    """Check a sweep file's content (a mapping, see the package docstring) and return its plan.
+    """Check a sweep file's content (a mapping, see ``docs/sweeps.md``) and return its plan.
 
     Args:
         data: what :func:`read_sweep_file` returned (or the same structure built in Python).
