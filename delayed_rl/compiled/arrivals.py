@@ -2,18 +2,8 @@
 
 :class:`~delayed_rl.agents.OracleQLearning` credits every delayed reward to the transition that
 emitted it. On the Python path it reads the wrapper's record; on the compiled path the loop
-(:func:`delayed_rl.compiled.kernel.run_chunk`) keeps the record itself, in :class:`Arrivals`:
-
-- a *pool* of the last ``P`` transitions, indexed by the run's clock ``e`` (slot ``e & (P − 1)``):
-  the transition ``(s, a, s′, terminated)``, its reward and the clock ``due`` of the step that
-  delivers it (``-1`` once delivered or dropped);
-- per slot of the delay ring, a list of the transitions due there, oldest first (``head`` and
-  ``tail`` hold clocks, ``link`` the next clock of the same list; ``-1`` ends a list).
-
-A transition is pending from its step to its due step, fewer steps than the delay ring's length
-``B``, so a pool of ``P ≥ B`` slots never overwrites a pending transition; ``P`` is also at least
-the oracle's history (``held``), so a transition it may still credit is always there.
-:func:`regrow` moves everything to a longer ring and pool.
+(:func:`delayed_rl.compiled.kernel.run_chunk`) keeps the record itself, in :class:`Arrivals`;
+:func:`regrow` moves it to a longer ring and pool.
 """
 
 from __future__ import annotations
@@ -30,6 +20,15 @@ __all__ = ["Arrivals", "regrow"]
 
 class Arrivals(NamedTuple):
     """The pending transitions and their rewards, by emission clock and by due slot.
+
+    A *pool* of the last ``P`` transitions, indexed by the run's clock ``e`` (slot
+    ``e & (P − 1)``), holds each transition ``(s, a, s′, terminated)``, its reward and the clock
+    ``due`` of the step that delivers it (``-1`` once delivered or dropped); per slot of the
+    delay ring, a list holds the transitions due there, oldest first (``head`` and ``tail`` hold
+    clocks, ``link`` the next clock of the same list; ``-1`` ends a list). A transition is
+    pending from its step to its due step, fewer steps than the delay ring's length ``B``, so a
+    pool of ``P ≥ B`` slots never overwrites a pending transition; ``P`` is also at least the
+    oracle's history (``held``), so a transition it may still credit is always there.
 
     Attributes:
         head: per slot of the delay ring, the clock of the oldest transition due there (``-1``).

@@ -1,21 +1,9 @@
 """The sufficient statistics of deconvolution Q-learning's regression, and their compiled step.
 
-:class:`~delayed_rl.agents.deconvolution.DeconvolutionQLearning` regresses each received reward
-on the (state, action) pairs of the steps before it (see :mod:`delayed_rl.agents.deconvolution.regression`
-for the model and the solves). :func:`observe` adds one step to the statistics; the Python path
-calls it once a step, and the compiled loop (:func:`delayed_rl.compiled.kernel.run_chunk`) inlines the
-same function, so both paths keep identical statistics.
-
-**Co-occurrence rows.** The counts of "pair ``i`` followed ``m`` steps later by pair ``j``" are
-kept as rows of ``K + 1`` lags, one row per ordered couple ``(j, i)`` — the later pair first, so
-that the ``K + 1`` counts a step adds all fall in the current pair's block of rows. Two layouts
-share one type:
-
-- *direct* (``keys`` empty): the row of ``(j, i)`` is ``j·P + i`` — ``P²`` rows, no lookups;
-- *hashed* (``keys`` of a power-of-two length): a row only for each couple that occurred, found
-  by open addressing (linear probing from the upper bits of a multiplicative hash of ``j·P + i``;
-  ``-1`` marks a free slot). Memory follows the couples seen, not ``P²``: the layout for envs with many pairs. The
-  caller keeps the table at most half full (:meth:`~delayed_rl.agents.deconvolution.regression.RewardRegression.reserve`).
+:class:`Statistics` holds them, in a direct or a hashed layout (the model and the solves are
+:mod:`delayed_rl.agents.deconvolution.regression`'s). :func:`observe` adds one step; the Python
+path calls it once a step, and the compiled loop (:func:`delayed_rl.compiled.kernel.run_chunk`)
+inlines the same function, so both paths keep identical statistics.
 """
 
 from __future__ import annotations
@@ -35,9 +23,19 @@ _SHIFT = np.uint64(32)  # the hash's upper half indexes the table (up to 2**32 r
 class Statistics(NamedTuple):
     """The regression's sufficient statistics, as arrays (updated in place by :func:`observe`).
 
+    The counts of "pair ``i`` followed ``m`` steps later by pair ``j``" are kept as rows of
+    ``K + 1`` lags, one row per ordered couple ``(j, i)`` — the later pair first, so that the
+    ``K + 1`` counts a step adds all fall in the current pair's block of rows. Two layouts share
+    this type: *direct* (``keys`` empty), where the row of ``(j, i)`` is ``j·P + i`` (``P²``
+    rows, no lookups); and *hashed* (``keys`` of a power-of-two length), a row only for each
+    couple that occurred, found by open addressing (linear probing from the upper bits of a
+    multiplicative hash of ``j·P + i``; ``-1`` marks a free slot), so memory follows the couples
+    seen, not ``P²``: the layout for envs with many pairs. The caller keeps the table at most
+    half full (:meth:`~delayed_rl.agents.deconvolution.regression.RewardRegression.reserve`).
+
     Attributes:
         cooc: ``cooc[row, m]``, how often the row's earlier pair was followed ``m`` steps later
-            by its later pair (int32; rows as the module docstring says).
+            by its later pair (int32; rows as above).
         keys: the hashed layout's keys (``j·P + i`` per row, ``-1`` free); empty: direct layout.
         by_lag: ``by_lag[k, i]``, the rewards received ``k`` steps after pair ``i``.
         window: the open segment's last pairs, the latest first.

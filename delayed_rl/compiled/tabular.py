@@ -134,8 +134,8 @@ def _check_tables(
 def inspect_stack(env: gym.Env, tables: bool = True) -> tuple[TabularModel, RewardDelay | None]:
     """Split ``env`` into its compiled model and its reward-delay wrapper (or ``None``).
 
-    The model's ``max_steps`` and ``cut_steps`` include the stack's ``TimeLimit`` wrappers (see the
-    module docstring). With ``tables=False`` the env's own tables are not read (an env the
+    The model's ``max_steps`` and ``cut_steps`` include the stack's ``TimeLimit`` wrappers (see
+    ``docs/compiled.md``). With ``tables=False`` the env's own tables are not read (an env the
     compiled loop steps itself, :mod:`delayed_rl.compiled.robot`): the model's are empty.
 
     Raises:
