@@ -1,62 +1,12 @@
 """``anonymous-delay`` (beyond the thesis): anonymous delayed-reward learners beside MMQ.
 
 The thesis's future work asks how MMQ fares against other ways of learning from anonymous,
-randomly delayed rewards, and under delays that are not Poisson. This experiment puts seven
-learners on the grid world, each with the thesis's hyper-parameters (α = 0.1, γ = 0.9, constant
-ε = 0.1, ``q_init`` = 25, see :mod:`~delayed_rl.experiments.framework.training`):
-
-- ``Q``: Q-learning on the delayed reward as it arrives;
-- ``MMQ``: Multiple Model Q-learning, Λ = {0, ..., 50} (the thesis's rule);
-- ``expected credit``: :class:`~delayed_rl.agents.ExpectedCreditQLearning` given the true delay
-  (its pmf clipped to 50 lags, the horizon every learner here has);
-- ``DeconvQ known``: :class:`~DeconvolutionQLearning` given the true delay (``max_delay_estimate`` 50);
-- ``DeconvQ learned``: :class:`~DeconvolutionQLearning` learning the delay on 0..50;
-- ``oracle``: :class:`~delayed_rl.agents.OracleQLearning`, which is told which transition each
-  reward came from (the non-anonymous upper bound);
-- ``Q undelayed``: Q-learning without any delay (the reference; one run per seed and world,
-  shared by its three delays: :func:`shared_run`).
-
-Settings: the 9×9 grid with mean delay λ = 13 (1M steps a run) and the 7×7 grid with λ = 8
-(300k steps), each under three delays of mean λ: Poisson(λ) (the thesis's), geometric
-(``Geometric(p)`` with ``p = 1 / (λ + 1)``, mean ``(1 − p) / p = λ``) and a bimodal one (mass ½
-at 0 and ½ at 2λ, an ``Empirical`` pmf). 20 seeds; a task is one (setting, agent, seed), 840 at
-full size. ``--quick``: 7×7 under Poisson only, 2 seeds, 30k steps.
-
-Per run, from the undelayed reward stream (``training_log["undelayed_reward"]``):
-
-- the learning curve (running average reward) and the training mean reward;
-- the greedy 1000-step average: the agent's deterministic greedy policy walked from the start
-  cell of the undelayed grid; the policy is *optimal* when that average is at least
-  ``LOOP_FRACTION`` = 0.95 of the optimum ``10 / (2(n − 1) + 1)``;
-- greedy snapshots (:mod:`~delayed_rl.experiments.framework.snapshot_runs`): the run learns in
-  ``SNAPSHOTS`` = 50 pieces and after each records whether the greedy policy is optimal: a
-  policy that settled, or one that keeps flipping;
-- the delay estimate: DeconvQ's ``delay_pmf`` and ``mean_delay``; MMQ's acting-delay share;
-- MMQ's runs also keep a greedy window (``greedy_window`` = ``steps // 10``), which changes
-  nothing of how MMQ learns; ``future-work`` reports its snapshots from the same runs;
-- ns/step: the wall time of ``learn`` over the steps, greedy evaluations excluded, after an
-  untimed warm-up run that loads the compiled kernels.
-
-``summary.json`` holds the full table (``table``: one row per setting and agent, every metric
-with its 95 % CI). The claims, per setting, with verdicts computed from the runs by
-:mod:`~delayed_rl.experiments.framework.claims`' rules (each row's ``criterion`` states its own):
-
-- DeconvQ learned walks the optimal loop on at least 95 % of the seeds: the count rule (the
-  Wilson 95 % interval inside [0.95, 1]; at 20 seeds at best ``inconclusive``);
-- DeconvQ learned's training reward within 5 % of the oracle's (per seed, relative to the
-  oracle's mean): the band 0 ± 0.05;
-- DeconvQ learned's mean delay: the band λ ± 10 %;
-- MMQ walks the optimal loop on at least 95 % of the seeds (the thesis's Fig. 5.9 and Table 5.1
-  result, here carried to other worlds and delays): the count rule, as DeconvQ's;
-- MMQ's greedy snapshots in the second half are optimal at least 90 % of the time (CI inside);
-- MMQ earns more than delayed Q-learning during learning (paired by seed, the direction rule).
-
-Figures, per setting: learning curves with 95 % bands, the delay estimates over the true pmf,
-and the share of seeds whose greedy policy is optimal at each snapshot.
-
-What ``future-work`` (MMQ variants on the same settings) shares with this experiment is in the
-framework: :mod:`~delayed_rl.experiments.framework.delay_settings` (settings, learners, the run)
-and :mod:`~delayed_rl.experiments.framework.setting_summaries` (tables, claims, figures).
+randomly delayed rewards, and under delays that are not Poisson. This experiment puts the
+learners of :data:`~.delay_settings.LEARNERS` on the grid worlds of
+:data:`~.delay_settings.SETTINGS` under each of :data:`~.delay_settings.DELAYS` (the framework's
+:mod:`~delayed_rl.experiments.framework.delay_settings`, shared with ``future-work``); the
+numbers are the constants ``EXPERIMENT.description`` is formatted from. What a run measures is
+:func:`~.snapshot_runs.measure`'s; the claims, fixed before the runs, are in :func:`summarize`.
 """
 
 from __future__ import annotations
@@ -76,6 +26,7 @@ from delayed_rl.experiments.framework.delay_settings import (
     run_agent,
     setting_label,
     setting_tasks,
+    world_texts,
 )
 from delayed_rl.experiments.framework.experiment import (
     Claim,
@@ -99,9 +50,13 @@ from delayed_rl.experiments.framework.setting_summaries import (
 from delayed_rl.experiments.framework.snapshot_runs import (
     LOOP_FRACTION,
     SNAPSHOTS,
+    WALK_STEPS,
     current_readout,
 )
+from delayed_rl.experiments.framework.training import hyperparameter_text
 
+#: The worlds of :data:`~.delay_settings.SETTINGS` as the description writes them.
+_WORLDS = world_texts()
 #: The band of DeconvQ learned's training reward relative to the oracle's: 0 ± this.
 REWARD_TOLERANCE = 0.05
 
@@ -175,7 +130,7 @@ def _setting_claims(
     averages: dict[str, dict[int, float]],
     fields: dict,
 ) -> list[Claim]:
-    """The claims of one setting (see the module docstring), for the agents it ran.
+    """The claims of one setting (see :func:`summarize`), for the agents it ran.
 
     Args:
         setting: the setting's label.
@@ -227,7 +182,40 @@ def _setting_claims(
 
 
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
-    """The claims per setting, the full table (``extra["table"]``) and the figures."""
+    """The claims per setting, the full table (``extra["table"]``) and the figures.
+
+    The learners, each with the thesis's hyper-parameters: ``Q`` (Q-learning on the delayed
+    reward as it arrives); ``MMQ`` (the thesis's rule, Λ = {0, ..., λ̂max}); ``expected credit``
+    (:class:`~delayed_rl.agents.ExpectedCreditQLearning` given the true delay, its pmf clipped
+    to λ̂max lags, the horizon every learner here has); ``DeconvQ known`` and ``DeconvQ
+    learned`` (:class:`~delayed_rl.agents.DeconvolutionQLearning` given the true delay, or
+    learning it on 0..λ̂max); ``oracle`` (:class:`~delayed_rl.agents.OracleQLearning`, told
+    which transition each reward came from: the non-anonymous upper bound); ``Q undelayed``
+    (the reference; one run per seed and world, shared by its three delays: :func:`shared_run`).
+    MMQ's runs also keep a greedy window, which changes nothing of how MMQ learns;
+    ``future-work`` reports its snapshots from the same runs.
+
+    ``summary.json`` holds the full table (``table``: one row per setting and agent, every
+    metric with its 95 % CI). The claims, per setting, with verdicts by
+    :mod:`~delayed_rl.experiments.framework.claims`' rules (each row's ``criterion`` states its
+    own):
+
+    - DeconvQ learned walks the optimal loop on at least
+      :data:`~.setting_summaries.SEED_SHARE` of the seeds: the count rule (the Wilson 95 %
+      interval inside [0.95, 1]; at 20 seeds at best ``inconclusive``);
+    - DeconvQ learned's training reward within :data:`REWARD_TOLERANCE` of the oracle's (per
+      seed, relative to the oracle's mean): the band 0 ± :data:`REWARD_TOLERANCE`;
+    - DeconvQ learned's mean delay: the band λ ± :data:`~.delay_estimates.DELAY_TOLERANCE`;
+    - MMQ walks the optimal loop on at least as many seeds (the thesis's Fig. 5.9 and Table 5.1
+      result, here carried to other worlds and delays): the count rule, as DeconvQ's;
+    - MMQ's greedy snapshots in the second half are optimal at least
+      :data:`~.setting_summaries.STABLE_SHARE` of the time (CI inside);
+    - MMQ earns more than delayed Q-learning during learning (paired by seed, the direction
+      rule).
+
+    Figures, per setting: learning curves with 95 % bands, the delay estimates over the true
+    pmf, and the share of seeds whose greedy policy is optimal at each snapshot.
+    """
     groups = pivot(task_list, results, by=("setting", "agent"), nested=True)
     averages = pivot(task_list, results, by=("setting", "agent"), value="average", nested=True)
     settings = setting_fields(task_list)
@@ -255,13 +243,14 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
 EXPERIMENT = Experiment(
     name="anonymous-delay",
     thesis="beyond the thesis (its future work; Figs. 5.9, Table 5.1 for MMQ)",
-    description="Q-learning, MMQ (Λ = {0..50}), expected-credit Q-learning and deconvolution "
-    "Q-learning (delay known or learned on 0..50) against the oracle (told each reward's "
-    "transition) and undelayed Q-learning, on the 9×9 grid (λ = 13, 1M steps) and the 7×7 grid "
-    "(λ = 8, 300k steps) under Poisson, geometric and bimodal (½ at 0, ½ at 2λ) delays of mean "
-    "λ; α = 0.1, γ = 0.9, ε = 0.1, q_init = 25. Greedy policies walked 1000 steps (optimal: ≥ "
-    "0.95 of the loop), snapshotted 50 times a run; delay estimates; ns/step. The full table "
-    "is summary.json's `table`.",
+    description="Q-learning, MMQ (Λ = {0.."
+    f"{LAMBDA_MAX}}}), expected-credit Q-learning and deconvolution Q-learning (delay known or "
+    f"learned on 0..{LAMBDA_MAX}) against the oracle (told each reward's transition) and "
+    f"undelayed Q-learning, on the {_WORLDS[0][0]} grid {_WORLDS[0][1]} and the {_WORLDS[1][0]} "
+    f"grid {_WORLDS[1][1]} under Poisson, geometric and bimodal (½ at 0, ½ at 2λ) delays of "
+    f"mean λ; {hyperparameter_text()}. Greedy policies walked {WALK_STEPS} steps (optimal: ≥ "
+    f"{LOOP_FRACTION} of the loop), snapshotted {SNAPSHOTS} times a run; delay estimates; "
+    "ns/step. The full table is summary.json's `table`.",
     tasks=tasks,
     run_task=run_agent,
     summarize=summarize,

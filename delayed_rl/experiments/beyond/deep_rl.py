@@ -1,53 +1,10 @@
 """``deep-rl`` (beyond the thesis): SB3's SAC and PPO on delayed rewards, with reward models.
 
-Each setting is an env, an algorithm with SB3's defaults and a reward delay flushed at each
-episode's end (:data:`SETTINGS`), with its own number of seeds:
-
-- ``pendulum-poisson5``, ``pendulum-poisson20``: SAC on Pendulum-v1 (200-step episodes) under
-  Poisson(5) and Poisson(20) delays, 10k steps, 5 seeds;
-- ``pendulum-episodic``: SAC on Pendulum-v1 with a constant delay of 200 steps, so all of an
-  episode's reward arrives at its last step, 5 seeds;
-- ``pendulum1000-poisson20``: SAC on Pendulum-v1 with 1000-step episodes under Poisson(20), the
-  setting that separates the reward models: 10k steps are 10 episodes, so a model fitted to
-  episode sums alone (RRD, IRCR) has 10 numbers to learn from, while the deconvolution fits each
-  step's arrival. 15 seeds: the earlier implementation's paired differences (sd ≈ 0.5 of the
-  gain over 5 seeds) needed about 12 to resolve a difference of 0.3;
-- ``pendulum1000-upright``: the same, with a sparse reward: 1 at each step the pendulum is within
-  about 26° of upright (``cos θ ≥ 0.9``), else 0: reaching a region, a reward episode sums
-  carry only as a count while arrival times place it. 10 seeds;
-- ``cartpole-poisson20``: PPO on CartPole-v1 with 4 sub-envs under Poisson(20), 100k steps, 5
-  seeds; the flush pays out at the pole's fall, so raw PPO is paid for falling.
-
-The methods (:mod:`~delayed_rl.experiments.framework.deep_training`, one warm-up for all: an
-off-policy algorithm starts learning after two episodes of steps): raw, the undelayed oracle,
-RRD (its authors' settings), IRCR as its authors wrote it (SAC settings only: its batches replay
-the best episodes), the return regression (IRCR's target learned by a network; in the two
-1000-step settings, where it must earn its row), and the deconvolution with ``p`` known and
-learned. The oracle (the undelayed env) is one run per seed for the three Pendulum settings of
-200-step episodes, and a random policy is scored on the same evaluation episodes. A score is the
-mean return of 10 deterministic episodes of the undelayed env; its *gain* is
-``(score − random) / (oracle − random)``, the random policy's and the oracle's mean scores of the
-setting, so 1 is the oracle's level.
-
-The claims, fixed before the run:
-
-- Pendulum, Poisson(20): deconvolution, with ``p`` known and learned, is within 10 % of the
-  oracle's gain (gain ≥ 0.9) on ≥ 4 of 5 seeds (a rule on the seeds, with the share's Wilson
-  interval); raw stays below half the gain (its mean gain's 95 % CI below 0.5);
-- episodic rewards: RRD and deconvolution with ``p`` learned reach ≥ 80 % of the gain (the
-  mean gain's CI above 0.8);
-- PPO on CartPole: deconvolution (``p`` known and learned) learns faster than raw: its mean
-  score over the learning curve's evaluations (the area under the curve over its length) minus
-  raw's, paired by seed, has its CI above 0;
-- the two 1000-step settings: deconvolution with ``p`` known above RRD and above IRCR (the gain
-  difference paired by seed, CI above 0); each row notes how many seeds its spread would need
-  to resolve.
-
-Every (setting, method) also has a reference row of its gain (a zero-width one says that all
-seeds gave the same value). ``summary.json``'s ``table`` holds the scores, gains, the curves'
-means, the reward models' RMSE against the true reward and the learned mean delays.
-``--quick``: ``pendulum-poisson20`` for 1000 steps and ``cartpole-poisson20`` for one PPO rollout
-(8192 steps), 2 seeds. Runs are kept as they finish (:attr:`~.experiment.Experiment.resumable`), so
+Each setting (:data:`SETTINGS`) is an env, an algorithm with SB3's defaults and a reward delay
+flushed at each episode's end, with its own number of seeds; the methods are
+:mod:`~delayed_rl.experiments.framework.deep_training`'s. The numbers are the constants
+``EXPERIMENT.description`` is formatted from; the claims, fixed before the runs, are in
+:func:`summarize`. Runs are kept as they finish (:attr:`~.experiment.Experiment.resumable`), so
 an interrupted run resumes. It needs the ``sb3`` extra.
 """
 
@@ -81,6 +38,11 @@ from delayed_rl.experiments.framework.gain_settings import (
 )
 from delayed_rl.experiments.framework.results import pivot
 
+#: The Poisson means of the short and the long delays, and the long episodes' steps.
+SHORT_LAM, LAM, LONG_EPISODE_STEPS = 5, 20, 1000
+#: CartPole's sub-envs.
+CARTPOLE_ENVS = 4
+
 
 def _pendulum(
     delay: Any, max_delay_estimate: int, seeds: int, episode_steps: int = 200, **fields: Any
@@ -92,19 +54,42 @@ def _pendulum(
             "warmup_episodes": WARMUP_EPISODES, "seeds": seeds, **fields}  # fmt: skip
 
 
-#: Each setting's run fields (see the module docstring); ``max_delay_estimate`` bounds a learned ``p``;
-#: ``seeds`` is the setting's number of seeds (``--seeds`` caps it).
 SETTINGS: dict[str, dict[str, Any]] = {
-    "pendulum-poisson5": _pendulum(Poisson(5), 20, 5),
-    "pendulum-poisson20": _pendulum(Poisson(20), 60, 5),
+    "pendulum-poisson5": _pendulum(Poisson(SHORT_LAM), 20, 5),
+    "pendulum-poisson20": _pendulum(Poisson(LAM), 60, 5),
     "pendulum-episodic": _pendulum(Constant(200), 200, 5),
-    "pendulum1000-poisson20": _pendulum(Poisson(20), 60, 15, episode_steps=1000),
-    "pendulum1000-upright": _pendulum(Poisson(20), 60, 10, episode_steps=1000, reward="upright"),
-    "cartpole-poisson20": {"env_id": "CartPole-v1", "algorithm": "PPO", "n_envs": 4,
-                           "episode_steps": 500, "delay": Poisson(20).to_dict(),
+    "pendulum1000-poisson20": _pendulum(Poisson(LAM), 60, 15, episode_steps=LONG_EPISODE_STEPS),
+    "pendulum1000-upright": _pendulum(
+        Poisson(LAM), 60, 10, episode_steps=LONG_EPISODE_STEPS, reward="upright"
+    ),
+    "cartpole-poisson20": {"env_id": "CartPole-v1", "algorithm": "PPO", "n_envs": CARTPOLE_ENVS,
+                           "episode_steps": 500, "delay": Poisson(LAM).to_dict(),
                            "max_delay_estimate": 60, "steps": 100_000, "eval_every": 10_000,
                            "seeds": 5},
 }  # fmt: skip
+"""Each setting's run fields; ``max_delay_estimate`` bounds a learned ``p``; ``seeds`` is the
+setting's number of seeds (``--seeds`` caps it).
+
+- ``pendulum-poisson5``, ``pendulum-poisson20``: SAC on Pendulum-v1 (200-step episodes) under
+  Poisson(5) and Poisson(20) delays, 10k steps, 5 seeds;
+- ``pendulum-episodic``: SAC on Pendulum-v1 with a constant delay of 200 steps, so all of an
+  episode's reward arrives at its last step, 5 seeds;
+- ``pendulum1000-poisson20``: SAC on Pendulum-v1 with 1000-step episodes under Poisson(20), the
+  setting that separates the reward models: 10k steps are 10 episodes, so a model fitted to
+  episode sums alone (RRD, IRCR) has 10 numbers to learn from, while the deconvolution fits each
+  step's arrival. 15 seeds: the earlier implementation's paired differences (sd ≈ 0.5 of the
+  gain over 5 seeds) needed about 12 to resolve a difference of 0.3;
+- ``pendulum1000-upright``: the same, with a sparse reward: 1 at each step the pendulum is within
+  about 26° of upright (``cos θ ≥ 0.9``), else 0: reaching a region, a reward episode sums
+  carry only as a count while arrival times place it. 10 seeds;
+- ``cartpole-poisson20``: PPO on CartPole-v1 with 4 sub-envs under Poisson(20), 100k steps, 5
+  seeds; the flush pays out at the pole's fall, so raw PPO is paid for falling.
+
+``--quick`` (:data:`QUICK`): ``pendulum-poisson20`` for 1000 steps and ``cartpole-poisson20``
+for one PPO rollout (8192 steps), 2 seeds.
+"""
+#: Each setting's number of seeds.
+_SEEDS = [setting["seeds"] for setting in SETTINGS.values()]
 LONG_EPISODES = ("pendulum1000-poisson20", "pendulum1000-upright")
 """The separating settings: there the return regression runs too."""
 
@@ -120,10 +105,11 @@ def _methods(name: str) -> tuple[str, ...]:
     )
 
 
-#: Each setting's methods (see the module docstring).
+#: Each setting's methods (see :func:`summarize`).
 SETTING_METHODS = {name: _methods(name) for name in SETTINGS}
 QUICK = {"pendulum-poisson20": (1000, 500), "cartpole-poisson20": (8192, 4096)}
 """The quick run's settings: their (steps, eval_every)."""
+#: Episodes that score a trained policy (their mean return is its score).
 EVAL_EPISODES = 10
 RANDOM_EPISODES = 100
 """Episodes that score the random policy (its mean is the gain's zero)."""
@@ -191,7 +177,7 @@ def _paired_claim(setting: str, ours: str, theirs: str, gains: dict) -> Claim:
 
 
 def _setting_claims(setting: str, gains: dict, curves: dict) -> list[Claim]:
-    """The target claims of ``setting`` (see the module docstring)."""
+    """The target claims of ``setting`` (see :func:`summarize`)."""
     out = []
     if setting == "pendulum-poisson20":
         for method in ("deconv-known", "deconv-learned"):
@@ -257,7 +243,37 @@ def _table_row(method: str, runs: dict[int, dict], gains: dict[int, float]) -> d
 
 
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
-    """The claims, reference rows of every gain, the table and a learning-curve figure a setting."""
+    """The claims, reference rows of every gain, the table and a learning-curve figure a setting.
+
+    The methods (:mod:`~delayed_rl.experiments.framework.deep_training`, one warm-up for all: an
+    off-policy algorithm starts learning after two episodes of steps): raw, the undelayed
+    oracle, RRD (its authors' settings), IRCR as its authors wrote it (SAC settings only: its
+    batches replay the best episodes), the return regression (IRCR's target learned by a
+    network; in :data:`LONG_EPISODES`, where it must earn its row), and the deconvolution with
+    ``p`` known and learned. The oracle (the undelayed env) is one run per seed for the three
+    Pendulum settings of 200-step episodes, and a random policy is scored on the same evaluation
+    episodes. A score is the mean return of :data:`EVAL_EPISODES` deterministic episodes of the
+    undelayed env; its *gain* is ``(score − random) / (oracle − random)``, the random policy's
+    and the oracle's mean scores of the setting, so 1 is the oracle's level.
+
+    The claims, fixed before the run:
+
+    - Pendulum, Poisson(20): deconvolution, with ``p`` known and learned, is within 10 % of the
+      oracle's gain (gain ≥ 0.9) on ≥ 4 of 5 seeds (a rule on the seeds, with the share's
+      Wilson interval); raw stays below half the gain (its mean gain's 95 % CI below 0.5);
+    - episodic rewards: RRD and deconvolution with ``p`` learned reach ≥ 80 % of the gain (the
+      mean gain's CI above 0.8);
+    - PPO on CartPole: deconvolution (``p`` known and learned) learns faster than raw: its mean
+      score over the learning curve's evaluations (the area under the curve over its length)
+      minus raw's, paired by seed, has its CI above 0;
+    - the two 1000-step settings: deconvolution with ``p`` known above RRD and above IRCR (the
+      gain difference paired by seed, CI above 0); each row notes how many seeds its spread
+      would need to resolve.
+
+    Every (setting, method) also has a reference row of its gain (a zero-width one says that
+    all seeds gave the same value). ``summary.json``'s ``table`` holds the scores, gains, the
+    curves' means, the reward models' RMSE against the true reward and the learned mean delays.
+    """
     grouped = pivot(task_list, results, by=("setting", "method"), nested=True)
     claims, curves, figures, table = [], [], {}, {}
     for setting, by_method in grouped.items():
@@ -290,17 +306,18 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
 EXPERIMENT = Experiment(
     name="deep-rl",
     thesis="beyond the thesis (deep RL)",
-    description="SB3's SAC on Pendulum-v1 (Poisson(5), Poisson(20), episodic, 1000-step "
-    "episodes, and 1000-step episodes with a sparse upright reward) and PPO on CartPole-v1 (4 "
-    "sub-envs, Poisson(20)), delayed rewards flushed at episode ends, one warm-up for every "
-    "method: raw, the undelayed oracle, RRD and IRCR as their authors wrote them, the return "
-    "regression and the deconvolution reward model with p known and learned, 5 to 15 seeds; "
-    "scores of 10 greedy episodes of the undelayed env, gains against a random policy and the "
-    "oracle. The full table is summary.json's `table`.",
+    description=f"SB3's SAC on Pendulum-v1 (Poisson({SHORT_LAM}), Poisson({LAM}), episodic, "
+    f"{LONG_EPISODE_STEPS}-step episodes, and {LONG_EPISODE_STEPS}-step episodes with a sparse "
+    f"upright reward) and PPO on CartPole-v1 ({CARTPOLE_ENVS} sub-envs, Poisson({LAM})), delayed "
+    "rewards flushed at episode ends, one warm-up for every method: raw, the undelayed oracle, "
+    "RRD and IRCR as their authors wrote them, the return regression and the deconvolution "
+    f"reward model with p known and learned, {min(_SEEDS)} to {max(_SEEDS)} seeds; scores of "
+    f"{EVAL_EPISODES} greedy episodes of the undelayed env, gains against a random policy and "
+    "the oracle. The full table is summary.json's `table`.",
     tasks=tasks,
     run_task=run_task,
     summarize=summarize,
-    default_seeds=max(setting["seeds"] for setting in SETTINGS.values()),
+    default_seeds=max(_SEEDS),
     shared_run=shared_run,
     cost=cost,
     resumable=True,

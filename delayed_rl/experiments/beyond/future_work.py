@@ -1,47 +1,12 @@
 """``future-work`` (beyond the thesis): variants of MMQ on the ``anonymous-delay`` settings.
 
-Each variant changes one piece of MMQ's rule (:class:`~MultipleModelQLearning`'s keyword
-arguments; ``None`` keeps the thesis's rule), all with Λ = {0, ..., 50} and the thesis's
-hyper-parameters (α = 0.1, γ = 0.9, constant ε = 0.1, ``q_init`` = 25):
-
-- ``MMQ (thesis)``: the thesis's rule;
-- ``MMQ kernel σ=2``, ``MMQ kernel σ=5``: ``reward_kernel=σ``, each reward credited to the
-  models λ̂ near the acting one with a Gaussian kernel of width σ over λ̂;
-- ``MMQ trace β=0.9``: ``delay_trace=0.9``, a replacing trace along λ̂;
-- ``MMQ Λ step 3``: ``delay_step=3``, Λ = {0, 3, ..., 48} (a third of the models);
-- ``MMQ greedy window 100k``: ``greedy_window=W``, the greedy policy read from an average of
-  the Q-table over the last W steps (``greedy_table``), W = ``steps // 10``: 100k at 1M steps,
-  30k at 300k, 3k in the quick run.
-
-The window changes only how the greedy policy is read, not how MMQ learns or acts, so the thesis
-rule and the greedy window are read off one run a seed: ``anonymous-delay``'s MMQ run, which
-keeps the averaged table beside the current one (:func:`shared_run`). Run together (``delayed-rl
-reproduce``), the two experiments share those runs; run alone, this one makes them itself.
-
-Settings, seeds, metrics, snapshots and figures are ``anonymous-delay``'s (the framework's
+Each variant (:data:`VARIANTS`) changes one piece of MMQ's rule; settings, seeds, metrics,
+snapshots and figures are ``anonymous-delay``'s (the framework's
 :mod:`~delayed_rl.experiments.framework.delay_settings`,
 :mod:`~delayed_rl.experiments.framework.snapshot_runs` and
-:mod:`~delayed_rl.experiments.framework.setting_summaries`, which both call): the 9×9 grid with
-λ = 13 (1M steps) and the 7×7 grid with λ = 8 (300k steps), each under Poisson, geometric and
-bimodal delays of mean λ, 20 seeds; 720 tasks at full size. ``--quick``: 7×7 under Poisson,
-2 seeds, 30k steps. The greedy policy of every variant is what its ``greedy_table`` (or
-``predict``) gives; the delay estimate is the acting-delay share (drawn per unit of λ̂ for the
-Λ-step-3 variant, so it is on the other curves' scale).
-
-The claims, per setting and variant, with verdicts computed from the runs by
-:mod:`~delayed_rl.experiments.framework.claims`' rules (each row's ``criterion`` states its
-own), as ``anonymous-delay``'s:
-
-- the variant walks the optimal loop on at least 95 % of the seeds: the Wilson 95 % interval
-  of the share of optimal seeds inside [0.95, 1] (at 20 seeds at best ``inconclusive``);
-- its greedy snapshots after half the run are optimal at least 90 % of the time (does the
-  variant stop the greedy policy flipping between routes?): the per-seed share's CI inside
-  [0.9, 1];
-- (the variants that act otherwise than the thesis's rule: all but the greedy window, which
-  learns and acts exactly as the thesis's rule) its training reward minus the thesis rule's,
-  paired by seed: the direction rule, above 0 (the variant earns more while learning).
-
-``summary.json``'s ``table`` holds every metric per (setting, variant).
+:mod:`~delayed_rl.experiments.framework.setting_summaries`). The thesis rule and the greedy
+window are read off ``anonymous-delay``'s MMQ runs (:func:`shared_run`). The numbers are the
+constants ``EXPERIMENT.description`` is formatted from; the claims are in :func:`summarize`.
 """
 
 from __future__ import annotations
@@ -61,15 +26,30 @@ from delayed_rl.experiments.framework.results import pivot
 from delayed_rl.experiments.framework.training import thesis_hyperparameters
 
 THESIS = "MMQ (thesis)"
+#: The kernel variants' widths σ, the trace variant's β and the coarse variant's step of Λ.
+KERNEL_WIDTHS, TRACE, DELAY_STEP = (2.0, 5.0), 0.9, 3
 VARIANTS: dict[str, dict[str, Any]] = {
     THESIS: {},
-    "MMQ kernel σ=2": {"reward_kernel": 2.0},
-    "MMQ kernel σ=5": {"reward_kernel": 5.0},
-    "MMQ trace β=0.9": {"delay_trace": 0.9},
-    "MMQ Λ step 3": {"delay_step": 3},
+    **{f"MMQ kernel σ={width:g}": {"reward_kernel": width} for width in KERNEL_WIDTHS},
+    f"MMQ trace β={TRACE}": {"delay_trace": TRACE},
+    f"MMQ Λ step {DELAY_STEP}": {"delay_step": DELAY_STEP},
     "MMQ greedy window 100k": {"greedy_window": None},  # steps // delay_settings.WINDOW_DIVISOR
 }
-"""Each variant's keyword arguments to ``MMQ`` (the greedy window's is set from the steps)."""
+"""Each variant's keyword arguments to ``MMQ`` (:class:`~delayed_rl.agents.MultipleModelQLearning`).
+
+All have Λ = {0, ..., λ̂max} and the thesis's hyper-parameters; ``{}`` keeps the thesis's rule:
+
+- ``MMQ kernel σ=...``: ``reward_kernel=σ``, each reward credited to the models λ̂ near the
+  acting one with a Gaussian kernel of width σ over λ̂;
+- ``MMQ trace β=...``: ``delay_trace=β``, a replacing trace along λ̂;
+- ``MMQ Λ step ...``: ``delay_step``, Λ in those steps (a third of the models at 3);
+- ``MMQ greedy window 100k``: ``greedy_window=W``, the greedy policy read from an average of
+  the Q-table over the last W steps (``greedy_table``), W = ``steps // WINDOW_DIVISOR`` (100k
+  at 1M steps; the name is the full run's). The window changes only how the greedy policy is
+  read, not how MMQ learns or acts.
+"""
+#: The settings' worlds as the description writes them.
+_WORLDS = delay_settings.world_texts()
 GREEDY_ONLY = ("MMQ greedy window 100k",)
 """Variants that act as the thesis's rule (only their greedy policy differs): no training-reward
 claim, and no curve of their own in the learning-curve and delay-estimate figures (they are the
@@ -190,7 +170,25 @@ def _setting_claims(
 
 
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
-    """The claims per setting and variant, the full table (``extra["table"]``), the figures."""
+    """The claims per setting and variant, the full table (``extra["table"]``), the figures.
+
+    The greedy policy of every variant is what its ``greedy_table`` (or ``predict``) gives; the
+    delay estimate is the acting-delay share (drawn per unit of λ̂ for the Λ-step variant, so it
+    is on the other curves' scale). The claims, per setting and variant, with verdicts by
+    :mod:`~delayed_rl.experiments.framework.claims`' rules, as ``anonymous-delay``'s:
+
+    - the variant walks the optimal loop on at least :data:`~.setting_summaries.SEED_SHARE` of
+      the seeds: the Wilson 95 % interval of the share of optimal seeds inside [0.95, 1] (at 20
+      seeds at best ``inconclusive``);
+    - its greedy snapshots after half the run are optimal at least
+      :data:`~.setting_summaries.STABLE_SHARE` of the time (does the variant stop the greedy
+      policy flipping between routes?): the per-seed share's CI inside [0.9, 1];
+    - (the variants that act otherwise than the thesis's rule: all but :data:`GREEDY_ONLY`)
+      its training reward minus the thesis rule's, paired by seed: the direction rule, above 0
+      (the variant earns more while learning).
+
+    ``summary.json``'s ``table`` holds every metric per (setting, variant).
+    """
     groups = pivot(task_list, results, by=("setting", "agent"), nested=True)
     averages = pivot(task_list, results, by=("setting", "agent"), value="average", nested=True)
     settings = setting_summaries.setting_fields(task_list)
@@ -224,12 +222,15 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
 EXPERIMENT = Experiment(
     name="future-work",
     thesis="beyond the thesis (its future work)",
-    description="MMQ (Λ = {0..50}) with the thesis's rule against five variants — a Gaussian "
-    "reward kernel over λ̂ (σ = 2, 5), a replacing trace along λ̂ (β = 0.9), Λ in steps of 3, "
-    "and a greedy policy read from the Q-table averaged over steps/10 — on anonymous-delay's "
-    "settings: 9×9 (λ = 13, 1M steps) and 7×7 (λ = 8, 300k steps) under Poisson, geometric and "
-    "bimodal delays of mean λ; greedy 1000-step walks, 50 greedy snapshots a run, acting-delay "
-    "shares, ns/step. The full table is summary.json's `table`.",
+    description=f"MMQ (Λ = {{0..{delay_settings.LAMBDA_MAX}}}) with the thesis's rule against "
+    "five variants — a Gaussian reward kernel over λ̂ "
+    f"(σ = {', '.join(f'{width:g}' for width in KERNEL_WIDTHS)}), a replacing trace along λ̂ "
+    f"(β = {TRACE}), Λ in steps of {DELAY_STEP}, and a greedy policy read from the Q-table "
+    f"averaged over steps/{delay_settings.WINDOW_DIVISOR} — on anonymous-delay's settings: "
+    f"{_WORLDS[0][0]} {_WORLDS[0][1]} and {_WORLDS[1][0]} {_WORLDS[1][1]} under Poisson, "
+    f"geometric and bimodal delays of mean λ; greedy {snapshot_runs.WALK_STEPS}-step walks, "
+    f"{snapshot_runs.SNAPSHOTS} greedy snapshots a run, acting-delay shares, ns/step. The full "
+    "table is summary.json's `table`.",
     tasks=tasks,
     run_task=run_task,
     summarize=summarize,

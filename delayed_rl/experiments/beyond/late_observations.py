@@ -1,42 +1,11 @@
 """``late-observations`` (beyond the thesis): SAC when observations and actions arrive late.
 
-The settings (:data:`SETTINGS`), observations arriving by the stale-sensor rule
-(:class:`~delayed_rl.wrappers.ObservationDelay`), SAC with SB3's defaults:
-
-- ``pendulum-small``: Pendulum-v1 (200-step episodes), observation delay U{0..3}, action delay
-  U{1..2} (the view keeps K = 5 actions), 20k steps;
-- ``pendulum-large``: U{0..6} and U{1..4} (K = 10), 20k steps;
-- ``pendulum-small-50k`` and ``pendulum-large-50k``: the same for 50k steps, with the oracle,
-  augmented SAC and HindsightSAC only (the follow-up where a 20k target is missed);
-- ``epuck``: the e-puck line follower (:class:`~delayed_rl.envs.linefollow.env.EPuckLineFollowEnv`: pixels,
-  continuous wheel speeds, put back on the track after 50 line-less steps, 1000-step episodes)
-  under the thesis's Poisson(90) observation delay (clipped at 150 steps, which bounds the view:
-  K = 150; the clip moves less than 10⁻⁸ of the draws) and no action delay, 20k steps. The
-  thesis's proportional controller runs on the undelayed env and, as its baseline, on the same
-  delayed observations as the learners. 3 seeds (a step costs about twice Pendulum's).
-
-The methods (:mod:`~delayed_rl.experiments.framework.late_training`): the undelayed oracle,
-naive SAC on the delayed stream, augmented SAC on the delay-aware view, and
-:class:`~delayed_rl.deep.HindsightSAC` (the delay-specific learner), 5 seeds each unless said
-otherwise, and a random
-policy. A score is the mean return of 10 deterministic episodes of the env the method acts in;
-its *gain* is ``(score − random) / (oracle − random)`` with the random policy's and the oracle's
-mean scores.
-
-The claims, fixed before the runs:
-
-- small setting: HindsightSAC reaches gain ≥ 0.9 on ≥ 4 of 5 seeds at 20k steps (a rule on the
-  seeds, with the share's Wilson interval beside it); the same at 50k;
-- large setting: HindsightSAC's gain minus augmented SAC's, paired by seed, has its 95 % CI above
-  0 at 20k steps; the same at 50k;
-- the moonshot, reported either way: HindsightSAC's mean gain in the large setting above 0.8, at
-  20k and at 50k steps;
-- e-puck: the learner with the best mean score beats the proportional controller fed the same
-  delayed observations (their scores' difference, paired by seed, has its 95 % CI above 0).
-
-Every (setting, method) also has a reference row of its gain. ``--quick``: the small setting
-for 1000 steps, 2 seeds. Runs are kept as they finish, so an interrupted run resumes. It needs
-the ``sb3`` extra.
+Each setting (:data:`SETTINGS`) delays a Pendulum's or the e-puck's observations by the
+stale-sensor rule (:class:`~delayed_rl.wrappers.ObservationDelay`) and, on Pendulum, its
+actions too; the methods are :mod:`~delayed_rl.experiments.framework.late_training`'s. The
+numbers are the constants ``EXPERIMENT.description`` is formatted from; the claims, fixed
+before the runs, are in :func:`summarize`. Runs are kept as they finish, so an interrupted run
+resumes. It needs the ``sb3`` extra.
 """
 
 from __future__ import annotations
@@ -47,7 +16,13 @@ from typing import Any
 from delayed_rl.delays import Poisson, Uniform
 from delayed_rl.experiments.framework import claims as rules
 from delayed_rl.experiments.framework.deep_training import require_sb3
-from delayed_rl.experiments.framework.experiment import Config, Experiment, SharedRun, Summary
+from delayed_rl.experiments.framework.experiment import (
+    Config,
+    Experiment,
+    SharedRun,
+    Summary,
+    step_count,
+)
 from delayed_rl.experiments.framework.gain_settings import (
     gain_tasks,
     learning_curves,
@@ -62,9 +37,18 @@ from delayed_rl.experiments.framework.late_training import (
 )
 from delayed_rl.experiments.framework.results import pivot
 
+#: The small and the large settings' (observation, action) delays, uniform on these bounds.
+SMALL, LARGE = ((0, 3), (1, 2)), ((0, 6), (1, 4))
+#: The steps of a run, and of the follow-up runs.
+STEPS, LONG_STEPS = 20_000, 50_000
+#: The e-puck's Poisson mean observation delay (the thesis's λ), and the clip of its draws.
+EPUCK_LAM, EPUCK_MAX_DELAY = 90, 150
+#: The seeds of every setting but the e-puck's.
+SEEDS = 5
+
 
 def _pendulum(
-    observation: tuple[int, int], action: tuple[int, int], steps: int = 20_000
+    observation: tuple[int, int], action: tuple[int, int], steps: int = STEPS
 ) -> dict[str, Any]:
     return {
         "env_id": "Pendulum-v1",
@@ -77,12 +61,11 @@ def _pendulum(
     }
 
 
-#: Each setting's run fields (see the module docstring).
 SETTINGS: dict[str, dict[str, Any]] = {
-    "pendulum-small": _pendulum((0, 3), (1, 2)),
-    "pendulum-large": _pendulum((0, 6), (1, 4)),
-    "pendulum-small-50k": _pendulum((0, 3), (1, 2), 50_000),
-    "pendulum-large-50k": _pendulum((0, 6), (1, 4), 50_000),
+    "pendulum-small": _pendulum(*SMALL),
+    "pendulum-large": _pendulum(*LARGE),
+    "pendulum-small-50k": _pendulum(*SMALL, LONG_STEPS),
+    "pendulum-large-50k": _pendulum(*LARGE, LONG_STEPS),
     "epuck": {
         "env_id": "delayed_rl/EPuckLineFollow-v0",
         "episode_steps": 1000,
@@ -92,15 +75,32 @@ SETTINGS: dict[str, dict[str, Any]] = {
             "lost_line": "recover",
             "max_steps": None,
         },
-        "observation_delay": Poisson(90).to_dict(),
-        "observation_max_delay": 150,
+        "observation_delay": Poisson(EPUCK_LAM).to_dict(),
+        "observation_max_delay": EPUCK_MAX_DELAY,
         "action_delay": None,
         "arrival": "stale",
-        "steps": 20_000,
+        "steps": STEPS,
         "eval_every": 2000,
         "seeds": 3,
     },
 }
+"""Each setting's run fields; SAC with SB3's defaults, observations by the stale-sensor rule.
+
+- ``pendulum-small``: Pendulum-v1 (200-step episodes), observation delay U{0..3}, action delay
+  U{1..2} (the view keeps K = 5 actions), 20k steps;
+- ``pendulum-large``: U{0..6} and U{1..4} (K = 10), 20k steps;
+- ``pendulum-small-50k`` and ``pendulum-large-50k``: the same for 50k steps, with the oracle,
+  augmented SAC and HindsightSAC only (the follow-up where a 20k target is missed);
+- ``epuck``: the e-puck line follower
+  (:class:`~delayed_rl.envs.linefollow.env.EPuckLineFollowEnv`: pixels, continuous wheel speeds,
+  put back on the track after 50 line-less steps, 1000-step episodes) under the thesis's
+  Poisson(90) observation delay (clipped at 150 steps, which bounds the view: K = 150; the clip
+  moves less than 10⁻⁸ of the draws) and no action delay, 20k steps. The thesis's proportional
+  controller runs on the undelayed env and, as its baseline, on the same delayed observations
+  as the learners. 3 seeds (a step costs about twice Pendulum's).
+
+``--quick`` (:data:`QUICK`): the small setting for 1000 steps, 2 seeds.
+"""
 #: Each setting's methods (the random policy's among them: the gain's zero).
 SETTING_METHODS: dict[str, tuple[str, ...]] = {
     "pendulum-small": (*METHODS, "random"),
@@ -111,6 +111,7 @@ SETTING_METHODS: dict[str, tuple[str, ...]] = {
 }
 QUICK = {"pendulum-small": (1000, 500)}
 """The quick run's settings: their (steps, eval_every)."""
+#: Episodes that score a trained policy (their mean return is its score).
 EVAL_EPISODES = 10
 RANDOM_EPISODES = 100
 """Episodes that score the random policy (its mean is the gain's zero)."""
@@ -179,7 +180,7 @@ def cost(task: dict) -> float:
 
 
 def _setting_claims(setting: str, gains: dict, scores: dict) -> list[rules.Claim]:
-    """The target claims of ``setting`` (see the module docstring)."""
+    """The target claims of ``setting`` (see :func:`summarize`)."""
     at = "50k" if setting.endswith("-50k") else "20k"
     if setting.startswith("pendulum-small"):
         return [
@@ -225,7 +226,30 @@ def _setting_claims(setting: str, gains: dict, scores: dict) -> list[rules.Claim
 
 
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
-    """The claims, reference rows of every gain, the table and a learning-curve figure a setting."""
+    """The claims, reference rows of every gain, the table and a learning-curve figure a setting.
+
+    The methods (:mod:`~delayed_rl.experiments.framework.late_training`): the undelayed oracle,
+    naive SAC on the delayed stream, augmented SAC on the delay-aware view, and
+    :class:`~delayed_rl.deep.HindsightSAC` (the delay-specific learner), :data:`SEEDS` seeds
+    each unless the setting says otherwise, and a random policy. A score is the mean return of
+    :data:`EVAL_EPISODES` deterministic episodes of the env the method acts in; its *gain* is
+    ``(score − random) / (oracle − random)`` with the random policy's and the oracle's mean
+    scores.
+
+    The claims, fixed before the runs:
+
+    - small setting: HindsightSAC reaches gain ≥ 0.9 on ≥ 4 of 5 seeds at 20k steps (a rule on
+      the seeds, with the share's Wilson interval beside it); the same at 50k;
+    - large setting: HindsightSAC's gain minus augmented SAC's, paired by seed, has its 95 % CI
+      above 0 at 20k steps; the same at 50k;
+    - the moonshot, reported either way: HindsightSAC's mean gain in the large setting above
+      0.8, at 20k and at 50k steps;
+    - e-puck: the learner with the best mean score beats the proportional controller fed the
+      same delayed observations (their scores' difference, paired by seed, has its 95 % CI
+      above 0).
+
+    Every (setting, method) also has a reference row of its gain.
+    """
     grouped = pivot(task_list, results, by=("setting", "method"), nested=True)
     all_scores = pivot(task_list, results, by=("setting", "method"), value="score", nested=True)
     claims, curves, figures, table = [], [], {}, {}
@@ -261,19 +285,25 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
     return Summary(claims, curves, figures, {"table": table, "settings": SETTINGS})
 
 
+def _uniform(setting: tuple[tuple[int, int], tuple[int, int]]) -> str:
+    """A setting's (observation, action) delays as the description writes them."""
+    return " and ".join(f"U{{{low}..{high}}}" for low, high in setting)
+
+
 EXPERIMENT = Experiment(
     name="late-observations",
     thesis="beyond the thesis (late observations and actions)",
-    description="SB3's SAC on Pendulum-v1 under random observation and action delays (U{0..3} "
-    "and U{1..2}; U{0..6} and U{1..4}; 20k and 50k steps) and on the e-puck under the thesis's "
-    "Poisson(90) observation delay, stale-sensor arrivals: the undelayed oracle, naive SAC, "
-    "augmented SAC on the delay-aware view and HindsightSAC, 5 seeds; the e-puck's proportional "
-    "controller on the same delayed observations; scores of 10 greedy episodes of the env each "
-    "acts in, gains against a random policy and the oracle.",
+    description="SB3's SAC on Pendulum-v1 under random observation and action delays "
+    f"({_uniform(SMALL)}; {_uniform(LARGE)}; {step_count(STEPS)} and {step_count(LONG_STEPS)} "
+    f"steps) and on the e-puck under the thesis's Poisson({EPUCK_LAM}) observation delay, "
+    "stale-sensor arrivals: the undelayed oracle, naive SAC, augmented SAC on the delay-aware "
+    f"view and HindsightSAC, {SEEDS} seeds; the e-puck's proportional controller on the same "
+    f"delayed observations; scores of {EVAL_EPISODES} greedy episodes of the env each acts in, "
+    "gains against a random policy and the oracle.",
     tasks=tasks,
     run_task=run_task,
     summarize=summarize,
-    default_seeds=5,
+    default_seeds=SEEDS,
     shared_run=shared_run,
     cost=cost,
     resumable=True,

@@ -1,49 +1,17 @@
 """``linefollow-deconv`` (beyond the thesis): deconvolution Q-learning on the e-puck line follower.
 
 A module of its own (not a setting of ``anonymous-delay``): the e-puck runs share nothing with
-the grid worlds but the agents. The setting is ``linefollow``'s (the framework's
-:mod:`~delayed_rl.experiments.framework.line_following`, whose env, learners, training run and
-metrics both use): ``delayed_rl/EPuckLineFollow-v0`` on the racetrack,
-discrete Table 5.2 actions, centroid states, put back on the track after 50 line-less steps,
-Poisson(90) reward delays, 150k steps a run, 5 seeds; α = 0.1, γ = 0.9, constant ε = 0.1,
-``q_init`` = 10. Three learners:
-
-- ``MMQ``: Λ = {0, ..., 150} (the thesis's λ̂max = 150);
-- ``DeconvQ learned``: :class:`~DeconvolutionQLearning` learning the delay on 0..150
-  (``max_delay_estimate`` = 150, the same horizon), never told it is Poisson;
-- ``Q``: Q-learning on the delayed reward.
-
-``--quick``: 2 seeds, 5k steps. 15 tasks at full size; MMQ's and Q's are ``linefollow``'s runs
-(the same env, settings and seeds), which ``delayed-rl reproduce`` runs once for both, and every
-learner's run is also the start of ``controllers``' and ``real-robot``'s longer training
-(:func:`~.line_following.training_run`: run together, each learner and seed trains once).
-
-Metrics, as ``linefollow``'s: the average reward during learning (the undelayed reward's
-running mean) and the accumulated error Σ|Δ| (an unseen line counted as |Δ| = 20), plus the
-delay estimate (DeconvQ's ``delay_pmf`` and ``mean_delay``, MMQ's acting-delay share and its
-mean) and ns/step (``learn``'s wall time over the steps, on the compiled path).
-
-The claims, with verdicts computed from the runs by :mod:`~.framework.claims`' rules (each row's
-``criterion`` states its own):
-
-- MMQ's and Q's average rewards against the thesis's ≈ 0.55 and ≈ 0.12 (Fig. 5.22), and
-  MMQ's accumulated error over Q's against ≈ 0.4 (Fig. 5.23): ``linefollow``'s bands
-  (:mod:`~delayed_rl.experiments.framework.line_claims`);
-- DeconvQ learned's average reward: a ``reference`` row (no thesis value; the next rows test it);
-- DeconvQ learned minus Q, and minus MMQ, average reward (paired by seed): the direction rule,
-  above 0;
-- DeconvQ learned's accumulated error over MMQ's (paired by seed): the direction rule, below 1
-  (DeconvQ keeps closer to the line);
-- DeconvQ learned's mean delay: the band λ ± 10 % (90 ± 9).
-
-Whichever way they fall, the numbers are in the report and in ``summary.json``.
+the grid worlds but the agents. The setting, training run and metrics are ``linefollow``'s (the
+framework's :mod:`~delayed_rl.experiments.framework.line_following`); MMQ's and Q's runs are
+``linefollow``'s, which ``delayed-rl reproduce`` runs once for both. The learners are
+:data:`LEARNERS`, the numbers the constants ``EXPERIMENT.description`` is formatted from
+(:data:`STEPS`, and the framework's); the claims, fixed before the runs, are in :func:`summarize`.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from delayed_rl._validation import check_choice
 from delayed_rl.experiments.framework import plotting
 from delayed_rl.experiments.framework.claims import (
     direction_claim,
@@ -56,9 +24,9 @@ from delayed_rl.experiments.framework.experiment import (
     Config,
     Curve,
     Experiment,
-    SharedRun,
     Summary,
     seed_tasks,
+    step_count,
 )
 from delayed_rl.experiments.framework.line_claims import (
     error_ratio_claim,
@@ -69,48 +37,35 @@ from delayed_rl.experiments.framework.line_claims import (
 from delayed_rl.experiments.framework.line_following import (
     LAM,
     LAMBDA_MAX,
+    Q_INIT,
+    TRACK,
     line_statistics,
-    logged_run,
-    training_cost,
+    logged_task_cost,
+    logged_task_run,
+    run_logged_task,
 )
 from delayed_rl.experiments.framework.results import pivot
+from delayed_rl.experiments.framework.training import hyperparameter_text
 
-#: The learners compared.
 LEARNERS = ("MMQ", "DeconvQ learned", "Q")
+"""The learners compared, with the thesis's hyper-parameters and ``q_init`` = 1 / (1 − γ).
+
+- ``MMQ``: Λ = {0, ..., λ̂max} (the thesis's λ̂max);
+- ``DeconvQ learned``: :class:`~delayed_rl.agents.DeconvolutionQLearning` learning the delay
+  on 0..λ̂max (``max_delay_estimate`` = λ̂max, the same horizon), never told it is Poisson;
+- ``Q``: Q-learning on the delayed reward.
+
+Every learner's run is also the start of ``controllers``' and ``real-robot``'s longer training
+(:func:`~.line_following.training_run`: run together, each learner and seed trains once).
+"""
+#: The steps of a quick run, and of a full one.
 QUICK_STEPS, STEPS = 5_000, 150_000
 
 
 def tasks(config: Config) -> list[dict]:
-    """Per seed, one run of each of :data:`LEARNERS`: 150k steps (5k with ``config.quick``)."""
-    steps = config.steps or (QUICK_STEPS if config.quick else STEPS)
+    """Per seed, one run of each of :data:`LEARNERS`: :data:`STEPS` (:data:`QUICK_STEPS` quick)."""
+    steps = config.run_steps(STEPS, QUICK_STEPS)
     return seed_tasks(config, LEARNERS, steps=steps)
-
-
-def run_task(task: dict) -> dict:
-    """Train one learner on the line follower; measure reward, error, delay estimate and cost.
-
-    Returns:
-        ``linefollow``'s results: :func:`~.line_following.run_metrics`' (``steps``,
-        ``curve``, ``error``, ``average``, ``total_error``, ``visible``), ``ns_per_step``,
-        ``path`` and the delay estimate.
-    """
-    return shared_run(task).alone()
-
-
-def shared_run(task: dict) -> SharedRun:
-    """Every task's training run, pooled with the other line-following experiments'.
-
-    MMQ's and Q's are ``linefollow``'s runs (the same env, settings and seeds); each learner's
-    is also the start of ``controllers``' and ``real-robot``'s
-    (:func:`~.line_following.logged_run`).
-    """
-    check_choice("agent", task["agent"], LEARNERS)
-    return logged_run(task["agent"], task["seed"], task["steps"])
-
-
-def cost(task: dict) -> float:
-    """A task's estimated core-seconds, for scheduling (:func:`~.line_following.training_cost`)."""
-    return training_cost(task["agent"], task["steps"])
 
 
 def _paired(runs: dict[str, dict[int, dict]], ours: str, theirs: str, how: str) -> tuple:
@@ -125,7 +80,28 @@ def _paired(runs: dict[str, dict[int, dict]], ours: str, theirs: str, how: str) 
 
 
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
-    """The claims of the module docstring, per-agent statistics in ``extra`` and the figures."""
+    """The claims, per-agent statistics in ``extra`` and the figures.
+
+    Metrics, as ``linefollow``'s (:func:`~.line_following.run_metrics`): the average reward
+    during learning and the accumulated error Σ|Δ|, plus the delay estimate (DeconvQ's
+    ``delay_pmf`` and ``mean_delay``, MMQ's acting-delay share and its mean) and ns/step
+    (``learn``'s wall time over the steps, on the compiled path). The claims, fixed before the
+    runs, with verdicts by :mod:`~.framework.claims`' rules (each row's ``criterion`` states
+    its own):
+
+    - MMQ's and Q's average rewards against the thesis's (Fig. 5.22), and MMQ's accumulated
+      error over Q's (Fig. 5.23): ``linefollow``'s bands
+      (:mod:`~delayed_rl.experiments.framework.line_claims`);
+    - DeconvQ learned's average reward: a ``reference`` row (no thesis value; the next rows
+      test it);
+    - DeconvQ learned minus Q, and minus MMQ, average reward (paired by seed): the direction
+      rule, above 0;
+    - DeconvQ learned's accumulated error over MMQ's (paired by seed): the direction rule,
+      below 1 (DeconvQ keeps closer to the line);
+    - DeconvQ learned's mean delay: the band λ ± 10 %.
+
+    Whichever way they fall, the numbers are in the report and in ``summary.json``.
+    """
     by_agent = pivot(task_list, results, by=("agent",))
     runs = {agent: by_agent.get(agent, {}) for agent in LEARNERS}
     curves = []
@@ -233,15 +209,15 @@ def _figures(by_seed: dict[str, dict[int, dict]]) -> dict:
 EXPERIMENT = Experiment(
     name="linefollow-deconv",
     thesis="beyond the thesis (Figs. 5.22–5.23's setting)",
-    description="MMQ (λ̂max = 150) against deconvolution Q-learning (delay learned on 0..150) "
-    "and Q-learning on the e-puck line follower (linefollow's setting: racetrack, discrete "
-    "actions, centroid states, Poisson(90) reward delays), 150k steps per run; α = 0.1, "
-    "γ = 0.9, ε = 0.1, q_init = 10. Average reward during learning and accumulated error "
-    "Σ|Δ|, paired by seed; delay estimates; ns/step.",
+    description=f"MMQ (λ̂max = {LAMBDA_MAX}) against deconvolution Q-learning (delay learned "
+    f"on 0..{LAMBDA_MAX}) and Q-learning on the e-puck line follower (linefollow's setting: "
+    f"{TRACK}, discrete actions, centroid states, Poisson({LAM}) reward delays), "
+    f"{step_count(STEPS)} steps per run; {hyperparameter_text(Q_INIT)}. Average reward during "
+    "learning and accumulated error Σ|Δ|, paired by seed; delay estimates; ns/step.",
     tasks=tasks,
-    run_task=run_task,
+    run_task=run_logged_task,
     summarize=summarize,
     default_seeds=5,
-    shared_run=shared_run,
-    cost=cost,
+    shared_run=logged_task_run,
+    cost=logged_task_cost,
 )

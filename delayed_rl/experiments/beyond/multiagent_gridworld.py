@@ -1,43 +1,12 @@
 """``multiagent-gridworld`` (beyond the thesis): independent learners, a shared delayed reward.
 
-The game is :class:`~delayed_rl.multiagent.CooperativeGridWorldEnv`: the thesis's 5×5 grid
-world walked by two agents, who are paid +10 (both of them, the same reward) only when both
-stand on the reward cell, then warp home; a wall costs the team −1. Each agent sees its own
-cell (``Discrete(25)``); episodes are 100 steps (optimum: 11 loops of 9 steps, 1.1 a step).
-Each agent's rewards are delayed by its own Poisson(λ) draws
-(:class:`~delayed_rl.multiagent.ParallelRewardDelay`, flushed at the episode's end), λ = 5
-and λ = 10, and each agent is an independent tabular learner — one agent object per PettingZoo
-agent, stepping the wrapped env through ``predict`` (ε-greedy) and ``update`` — with the
-thesis's hyper-parameters (α = 0.1, γ = 0.9, constant ε = 0.1, ``q_init`` = 25):
-
-- ``Q``: Q-learning on the delayed reward as it arrives;
-- ``DeconvQ known``: :class:`~delayed_rl.agents.DeconvolutionQLearning` given Poisson(λ)
-  (modelled on at most :data:`LAMBDA_MAX` = 50 lags);
-- ``DeconvQ learned``: the same learning the delay on 0..50;
-- ``Q undelayed``: Q-learning without any delay, the oracle (one run per seed, shared by both
-  delays: :func:`shared_run`).
-
-150k steps a run, 5 seeds: 40 tasks, 35 runs. ``--quick``: λ = 10 only, 10k steps, 2 seeds. Runs are kept
-as they finish, so an interrupted run resumes.
-
-The score: the mean (undelayed) reward per step of the greedy joint policy (each learner's
-``predict(obs, deterministic=True)``) over an evaluation episode of the undelayed game from
-the start; the game and the greedy policies are deterministic, so one episode is every
-episode. It is taken :data:`CHECKPOINTS` times a run (the learning curves); a run's score is
-the last. A joint policy is *optimal* when it scores at least :data:`OPTIMAL_FRACTION` of the
-optimum. The training curve is the running mean of the undelayed shared reward.
-
-The claims, fixed before the runs, per delay, with verdicts computed by
-:mod:`~delayed_rl.experiments.framework.claims`' rules:
-
-- DeconvQ known minus Q score, and DeconvQ learned minus Q, paired by seed: above 0;
-- DeconvQ known, and DeconvQ learned: optimal on at least 80 % of the seeds (4 of 5, a rule
-  on these seeds, the share's Wilson interval beside it);
-- Q minus Q undelayed score, paired by seed: below 0 (the delay costs Q-learning);
-- DeconvQ learned's mean delay (both agents' estimates averaged, per seed): λ ± 10 %;
-
-and once, the setting's check: Q undelayed optimal on at least 80 % of the seeds. Every
-learner's score also has a reference row. It needs the ``multiagent`` extra (PettingZoo).
+The game is :class:`~delayed_rl.multiagent.CooperativeGridWorldEnv`, the thesis's grid world
+walked by two agents paid together; each agent's rewards are delayed by its own Poisson draws
+(:class:`~delayed_rl.multiagent.ParallelRewardDelay`), and each agent is an independent tabular
+learner (:data:`LEARNERS`). The numbers are the constants ``EXPERIMENT.description`` is
+formatted from; the score is :func:`train_and_score`'s, the claims, fixed before the runs,
+:func:`summarize`'s. Runs are kept as they finish, so an interrupted run resumes. It needs the
+``multiagent`` extra (PettingZoo).
 """
 
 from __future__ import annotations
@@ -69,15 +38,28 @@ from delayed_rl.experiments.framework.experiment import (
     Summary,
     running_average,
     seed_tasks,
+    step_count,
 )
 from delayed_rl.experiments.framework.results import pivot
-from delayed_rl.experiments.framework.training import thesis_hyperparameters
+from delayed_rl.experiments.framework.training import hyperparameter_text, thesis_hyperparameters
+from delayed_rl.multiagent.gridworld import MEETING_REWARD
 
-#: The learners, in the tables' order.
 LEARNERS = ("Q", "DeconvQ known", "DeconvQ learned", "Q undelayed")
+"""The learners, in the tables' order; one agent object per PettingZoo agent, stepping the
+wrapped env through ``predict`` (ε-greedy) and ``update``, with the thesis's hyper-parameters:
+
+- ``Q``: Q-learning on the delayed reward as it arrives;
+- ``DeconvQ known``: :class:`~delayed_rl.agents.DeconvolutionQLearning` given Poisson(λ)
+  (modelled on at most :data:`LAMBDA_MAX` lags);
+- ``DeconvQ learned``: the same learning the delay on 0..:data:`LAMBDA_MAX`;
+- ``Q undelayed``: Q-learning without any delay, the oracle (one run per seed, shared by both
+  delays: :func:`shared_run`).
+"""
+#: The grid's side (each agent sees its own cell, ``Discrete(SIZE²)``) and the episodes' steps.
 SIZE, EPISODE_STEPS = 5, 100
 #: The mean delays λ of the full run, and of ``--quick``.
 LAMS, QUICK_LAM = (5, 10), 10
+#: The steps of a run, and of a quick run.
 STEPS, QUICK_STEPS = 150_000, 10_000
 CHECKPOINTS = 30
 """Greedy evaluations a run: the learning curve's points, every ``steps // CHECKPOINTS``."""
@@ -108,7 +90,7 @@ def tasks(config: Config) -> list[dict]:
         ImportError: PettingZoo is missing (the ``multiagent`` extra).
     """
     require_pettingzoo()
-    steps = config.steps or (QUICK_STEPS if config.quick else STEPS)
+    steps = config.run_steps(STEPS, QUICK_STEPS)
     lams = (QUICK_LAM,) if config.quick else LAMS
     fields = {"size": SIZE, "episode_steps": EPISODE_STEPS, "steps": steps}
     return [task for lam in lams for task in seed_tasks(config, LEARNERS, lam=lam, **fields)]
@@ -196,6 +178,10 @@ def greedy_score(learners: dict[Any, TabularAgent], size: int, episode_steps: in
 def train_and_score(task: dict) -> dict:
     """Train one independent learner per agent on the task's game; score the greedy policy.
 
+    The greedy joint policy is scored :data:`CHECKPOINTS` times a run (the learning curve) over
+    an episode of the undelayed game; the game and the greedy policies are deterministic, so one
+    episode is every episode.
+
     Returns:
         ``steps`` and ``greedy`` (the checkpoints and the greedy score at each), ``score`` (the
         last), ``curve_steps`` and ``curve`` (the running mean of the undelayed shared reward),
@@ -245,8 +231,8 @@ def train_and_score(task: dict) -> dict:
 
 
 def optimum(size: int = SIZE, episode_steps: int = EPISODE_STEPS) -> float:
-    """The best score: +10 every ``2(size − 1) + 1`` steps of the episode, per step."""
-    return 10.0 * (episode_steps // (2 * (size - 1) + 1)) / episode_steps
+    """The best score: the meeting's reward every ``2(size − 1) + 1`` steps, per step."""
+    return MEETING_REWARD * (episode_steps // (2 * (size - 1) + 1)) / episode_steps
 
 
 def setting_label(lam: float) -> str:
@@ -269,7 +255,7 @@ def _optimal_claim(quantity: str, thesis: str, scores: dict[int, float]) -> Clai
 def _setting_claims(
     lam: float, by_agent: dict[str, dict[int, dict]], scores: dict[str, dict[int, float]]
 ) -> list[Claim]:
-    """The claims of one delay (see the module docstring), then every learner's score.
+    """The claims of one delay (see :func:`summarize`), then every learner's score.
 
     Args:
         lam: the delay's mean.
@@ -392,7 +378,23 @@ def _figures(groups: dict[float, dict[str, dict]]) -> dict:
 
 
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
-    """The claims of the module docstring, the table (``extra["table"]``) and the figures."""
+    """The claims, the table (``extra["table"]``) and the figures.
+
+    A score is the mean (undelayed) reward per step of the greedy joint policy (each learner's
+    ``predict(obs, deterministic=True)``) over an evaluation episode of the undelayed game from
+    the start (:func:`train_and_score`); a joint policy is *optimal* when it scores at least
+    :data:`OPTIMAL_FRACTION` of the optimum (:func:`optimum`). The claims, fixed before the
+    runs, per delay, with verdicts by :mod:`~delayed_rl.experiments.framework.claims`' rules:
+
+    - DeconvQ known minus Q score, and DeconvQ learned minus Q, paired by seed: above 0;
+    - DeconvQ known, and DeconvQ learned: optimal on at least :data:`SEED_SHARE` of the seeds
+      (a rule on these seeds, the share's Wilson interval beside it);
+    - Q minus Q undelayed score, paired by seed: below 0 (the delay costs Q-learning);
+    - DeconvQ learned's mean delay (both agents' estimates averaged, per seed): λ ± 10 %;
+
+    and once, the setting's check: Q undelayed optimal on at least :data:`SEED_SHARE` of the
+    seeds. Every learner's score also has a reference row.
+    """
     groups = pivot(task_list, results, by=("lam", "agent"), nested=True)
     scores = pivot(task_list, results, by=("lam", "agent"), value=_score, nested=True)
     undelayed = next(iter(scores.values()))["Q undelayed"]
@@ -420,12 +422,14 @@ EXPERIMENT = Experiment(
     name="multiagent-gridworld",
     thesis="beyond the thesis (multi-agent, shared delayed reward)",
     description="Two independent tabular learners (one per PettingZoo agent, through predict and "
-    "update) on a cooperative two-agent 5×5 grid world (the thesis's world, +10 to both only when "
-    "both stand on the reward cell; each sees its own cell; 100-step episodes) under each agent's "
-    "Poisson(λ) reward delays, λ = 5 and 10, flushed at the episode's end: Q-learning, "
-    "deconvolution Q-learning (delay known, or learned on 0..50) and undelayed Q-learning, 150k "
-    "steps a run; α = 0.1, γ = 0.9, ε = 0.1, q_init = 25. Scored by the greedy joint policy's "
-    "reward per step over an undelayed episode (optimum 1.1), paired by seed.",
+    f"update) on a cooperative two-agent {SIZE}×{SIZE} grid world (the thesis's world, "
+    f"+{MEETING_REWARD:g} to both only when both stand on the reward cell; each sees its own cell; "
+    f"{EPISODE_STEPS}-step episodes) under each agent's Poisson(λ) reward delays, "
+    f"λ = {' and '.join(map(str, LAMS))}, flushed at the episode's end: Q-learning, "
+    f"deconvolution Q-learning (delay known, or learned on 0..{LAMBDA_MAX}) and undelayed "
+    f"Q-learning, {step_count(STEPS)} steps a run; {hyperparameter_text()}. Scored by the greedy "
+    f"joint policy's reward per step over an undelayed episode (optimum {optimum():g}), paired "
+    "by seed.",
     tasks=tasks,
     run_task=run_task,
     summarize=summarize,

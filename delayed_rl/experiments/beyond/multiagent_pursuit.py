@@ -1,37 +1,12 @@
 """``multiagent-pursuit`` (beyond the thesis): PPO with parameter sharing under delayed team rewards.
 
-The game is SISL's ``pursuit_v5`` made small enough to learn in minutes on a CPU: 4 pursuers
-and 6 evaders on an 8×8 grid, 200-step episodes, an evader caught when 2 pursuers tag it, and
-the team's reward shared by every pursuer (PettingZoo's default ``shared_reward``): +5 a catch
-and −0.1 a step. Each pursuer's rewards are delayed by its own Poisson(30) draws
-(:class:`~delayed_rl.multiagent.ParallelRewardDelay`, flushed at the episode's end).
-
-One SB3 PPO policy acts for every pursuer (parameter sharing, through SuperSuit's vector
-conversion: :mod:`~delayed_rl.experiments.framework.multiagent_training`), with SB3's defaults
-but for rollouts of 512 steps a pursuer (2048 a rollout, SB3's default for one env) and
-minibatches of 256, 300k pursuer-steps a run. The methods:
-
-- ``oracle``: on the undelayed rewards;
-- ``raw``: on the delayed rewards as they arrive;
-- ``deconv-known``: on ``R̂(s, a)`` of :class:`~delayed_rl.deep.DeconvolutionRewardModel`
-  given Poisson(30), through :class:`~delayed_rl.deep.RelabelingRolloutBuffer` (the
-  rollout-buffer route, on the stacked sub-envs: every pursuer's delivered rewards one stream);
-- ``deconv-learned``: the same learning the delay on 0..90;
-
-and a random policy. 5 seeds. A score is the mean per-pursuer return of 10 greedy episodes of
-the undelayed game; its *gain* is ``(score − random) / (oracle − random)``.
-
-The claims, fixed before the runs:
-
-- deconvolution (known delay) − raw PPO, score, paired by seed: above 0;
-- deconvolution (learned delay) − raw PPO, the same;
-- raw PPO − oracle, score, paired by seed: below 0 (the delay costs PPO);
-- the learned mean delay, averaged over the seeds: 30 ± 10 %;
-
-and a reference row of every method's gain. Each paired claim's note gives the seeds its spread
-would need to resolve it. Two reference rows, chosen after the first run (not claims): the
-reward models minus raw PPO in mean score over the learning curve (how early each learns). ``--quick``: 4000 steps, 2 seeds. Runs are kept as
-they finish, so an interrupted run resumes. It needs the ``sb3`` and ``multiagent`` extras.
+The game is SISL's ``pursuit_v5`` made small enough to learn in minutes on a CPU (:data:`SETTINGS`),
+each pursuer's rewards delayed by its own Poisson draws
+(:class:`~delayed_rl.multiagent.ParallelRewardDelay`); one SB3 PPO policy acts for every
+pursuer (:mod:`~delayed_rl.experiments.framework.multiagent_training`). The numbers are the
+constants ``EXPERIMENT.description`` is formatted from; the claims, fixed before the runs, are
+in :func:`summarize`. Runs are kept as they finish, so an interrupted run resumes. It needs the
+``sb3`` and ``multiagent`` extras.
 """
 
 from __future__ import annotations
@@ -57,10 +32,11 @@ from delayed_rl.experiments.framework.multiagent_training import (
 )
 from delayed_rl.experiments.framework.results import pivot
 
+#: The Poisson mean of every pursuer's reward delay.
 LAMBDA = 30
+#: The seeds of a full run.
 SEEDS = 5
 SETTING = f"pursuit-poisson{LAMBDA}"
-#: The setting's run fields (see the module docstring).
 SETTINGS: dict[str, dict[str, Any]] = {
     SETTING: {
         "env": "pursuit",
@@ -80,8 +56,19 @@ SETTINGS: dict[str, dict[str, Any]] = {
         "eval_every": 30_000,
     }
 }
+"""The setting's run fields.
+
+The game: 4 pursuers and 6 evaders on an 8×8 grid, 200-step episodes, an evader caught when 2
+pursuers tag it, and the team's reward shared by every pursuer (PettingZoo's default
+``shared_reward``): +5 a catch and −0.1 a step; each pursuer's rewards delayed by its own
+Poisson(:data:`LAMBDA`) draws, flushed at the episode's end. One SB3 PPO policy acts for every
+pursuer (parameter sharing, through SuperSuit's vector conversion), with SB3's defaults but for
+rollouts of 512 steps a pursuer (2048 a rollout, SB3's default for one env) and minibatches of
+256, 300k pursuer-steps a run. ``--quick`` (:data:`QUICK`): 4000 steps, 2 seeds.
+"""
 QUICK = {SETTING: (4000, 2000)}
 """The quick run's settings: their (steps, eval_every)."""
+#: Episodes that score a trained policy (their mean return is its score).
 EVAL_EPISODES = 10
 RANDOM_EPISODES = 100
 """Episodes that score the random policy (its mean is the gain's zero)."""
@@ -138,7 +125,7 @@ def cost(task: dict) -> float:
 
 
 def _setting_claims(setting: str, scores: dict, by_method: dict) -> list[rules.Claim]:
-    """The claims of ``setting`` (see the module docstring)."""
+    """The claims of ``setting`` (see :func:`summarize`)."""
     claims = [
         rules.paired_direction_claim(
             f"{setting}: {LABELS[method]} − {LABELS['raw']}, score",
@@ -176,7 +163,29 @@ def _setting_claims(setting: str, scores: dict, by_method: dict) -> list[rules.C
 
 
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
-    """The claims, a reference row of every gain, the table and the learning curves."""
+    """The claims, a reference row of every gain, the table and the learning curves.
+
+    The methods: ``oracle`` (PPO on the undelayed rewards), ``raw`` (on the delayed rewards as
+    they arrive), ``deconv-known`` (on ``R̂(s, a)`` of
+    :class:`~delayed_rl.deep.DeconvolutionRewardModel` given the delay, through
+    :class:`~delayed_rl.deep.RelabelingRolloutBuffer`: the rollout-buffer route, on the stacked
+    sub-envs, every pursuer's delivered rewards one stream), ``deconv-learned`` (the same,
+    learning the delay on 0..3λ), and a random policy; :data:`SEEDS` seeds. A score is the mean
+    per-pursuer return of :data:`EVAL_EPISODES` greedy episodes of the undelayed game; its
+    *gain* is ``(score − random) / (oracle − random)``.
+
+    The claims, fixed before the runs:
+
+    - deconvolution (known delay) − raw PPO, score, paired by seed: above 0;
+    - deconvolution (learned delay) − raw PPO, the same;
+    - raw PPO − oracle, score, paired by seed: below 0 (the delay costs PPO);
+    - the learned mean delay, averaged over the seeds: λ ± 10 %;
+
+    and a reference row of every method's gain. Each paired claim's note gives the seeds its
+    spread would need to resolve it. Two reference rows, chosen after the first run (not
+    claims): the reward models minus raw PPO in mean score over the learning curve (how early
+    each learns).
+    """
     grouped = pivot(task_list, results, by=("setting", "method"), nested=True)
     all_scores = pivot(task_list, results, by=("setting", "method"), value="score", nested=True)
     claims, curves, figures, table = [], [], {}, {}

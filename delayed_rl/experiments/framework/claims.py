@@ -1,26 +1,12 @@
 """The results' statistics and verdicts: 95 % intervals, and the rules that judge them.
 
 Every report row is built by one of the helpers below, which compute its verdict from the
-measurement's 95 % interval and the thesis's value by a stated rule, and write that rule into
-the row's ``criterion``:
-
-- :func:`band_claim` / :func:`range_claim`: a value against a band (the thesis's value ± a
-  tolerance, or a range such as "in (0, 1)"): ``agrees`` when the 95 % CI lies inside the band,
-  ``differs`` when it lies wholly outside, ``inconclusive`` when it straddles an edge;
-- :func:`direction_claim`: a sign or a side ("MMQ above Q", "a ratio below 1"): ``agrees``
-  when the CI lies wholly on the claimed side of the reference value, ``differs`` when it lies
-  wholly on the other side (the reference value itself counts as the other side),
-  ``inconclusive`` otherwise;
-- :func:`count_claim`: k of n seeds, against a band of the share: the rule of
-  :func:`range_claim` applied to the Wilson 95 % interval of k / n;
-- :func:`trend_claim`: a trend: :func:`direction_claim` on the least-squares slope fitted per
-  seed (:func:`per_seed_slopes`), its CI over the seeds;
-- :func:`reference_row`: a number shown for context with no thesis value to test (verdict
-  ``reference``, see :mod:`.experiment`).
-
-An interval that is NaN (no data, or a quantity that could not be formed) is ``inconclusive``.
-Differences and ratios of two conditions are formed per seed first (:func:`paired`), so their CI
-is over seeds too.
+measurement's 95 % interval and the thesis's value by a stated rule and write that rule into
+the row's ``criterion``: :func:`band_claim` / :func:`range_claim` (a value against a band),
+:func:`direction_claim` (a sign or a side), :func:`count_claim` (k of n seeds, by the share's
+Wilson interval), :func:`trend_claim` (a slope fitted per seed) and :func:`reference_row` (a
+number shown for context). An interval that is NaN is ``inconclusive``. Differences and ratios
+of two conditions are formed per seed first (:func:`paired`), so their CI is over seeds too.
 """
 
 from __future__ import annotations

@@ -1,42 +1,9 @@
 """One stable-baselines3 run on a delayed-reward env, scored on the undelayed env.
 
-A task names the env (``env_id``, its episode length ``episode_steps`` and, optionally, a
-``reward`` of :data:`REWARDS` in place of the env's), the algorithm (``SAC`` or ``PPO``, with
-SB3's defaults), the sub-envs (``n_envs``), the reward delay (``delay``, a
-:meth:`~delayed_rl.delays.Delay.to_dict` description, flushed at each episode's end), the
-off-policy warm-up (``warmup_episodes``, see below), the training ``steps``, the ``method`` and
-the ``seed``. The methods (:data:`METHODS`):
-
-- ``raw``: the algorithm on the delayed rewards as they arrive;
-- ``oracle``: the algorithm on the undelayed env (the delay plays no part);
-- ``rrd``: :class:`~delayed_rl.deep.ReturnDecompositionRewardModel` with the authors'
-  settings (its defaults);
-- ``ircr``: :class:`~delayed_rl.deep.IRCRReplayBuffer`, IRCR as its authors wrote it (off-policy
-  only: half of its batches replay the best episodes);
-- ``return-regression``: :class:`~delayed_rl.deep.ReturnRegressionRewardModel`, IRCR's target
-  learned by a network;
-- ``deconv-known``: :class:`~delayed_rl.deep.DeconvolutionRewardModel` with the delay's pmf;
-- ``deconv-learned``: the same with ``p`` learned on ``0..max_delay_estimate`` (the task's
-  ``max_delay_estimate``, a bound the user would choose, not the delay).
-
-The reward models have their defaults (an update a vector-env step and a warm-up of 1000
-updates before they relabel, trained when the algorithm trains) and the run's seed; off-policy
-algorithms get a :class:`~delayed_rl.deep.RelabelingReplayBuffer`, on-policy ones a
-:class:`~delayed_rl.deep.RelabelingRolloutBuffer` with its callback. Torch runs on one thread.
-
-**One warm-up for every method.** An off-policy algorithm takes its first update after
-``warmup_episodes`` episodes of steps (``learning_starts``; SB3's default, 100 steps, without
-it), whatever the method, raw and oracle included. With :data:`WARMUP_EPISODES`, two, by then every reward model can be fitted (RRD and the return regression need a
-finished episode, IRCR two distinct returns, as its authors' two exploration episodes), and at
-the first update each model takes the updates its schedule owes for those steps plus its
-warm-up, so the algorithm never learns from an untrained ``R̂`` nor from the raw rewards
-first. (SB3's default, 100 steps, gave the deconvolution a head start over the episode-sum
-baselines, which could only start after an episode.) On-policy algorithms learn from the first
-rollout, which holds many episodes; the models warm up before it is relabelled.
-
-The score is the mean return of ``eval_episodes`` deterministic episodes of the *undelayed* env
-(the same seeds for every method of a seed), read every ``eval_every`` steps and at the end: the
-learning curve. :func:`random_score` scores a uniformly random policy on the same episodes.
+:func:`train_and_score` trains a task's method (:data:`METHODS`) with a reward model or buffer
+of :mod:`delayed_rl.deep` where the method has one, after one warm-up for every method
+(:data:`WARMUP_EPISODES`), and scores it along the way; :func:`random_score` scores a random
+policy on the same episodes.
 """
 
 from __future__ import annotations
@@ -63,11 +30,40 @@ __all__ = [
 ]
 
 METHODS = ("raw", "oracle", "rrd", "ircr", "return-regression", "deconv-known", "deconv-learned")
-"""The methods a task can name (see the module docstring)."""
+"""The methods a task can name.
+
+- ``raw``: the algorithm on the delayed rewards as they arrive;
+- ``oracle``: the algorithm on the undelayed env (the delay plays no part);
+- ``rrd``: :class:`~delayed_rl.deep.ReturnDecompositionRewardModel` with the authors'
+  settings (its defaults);
+- ``ircr``: :class:`~delayed_rl.deep.IRCRReplayBuffer`, IRCR as its authors wrote it (off-policy
+  only: half of its batches replay the best episodes);
+- ``return-regression``: :class:`~delayed_rl.deep.ReturnRegressionRewardModel`, IRCR's target
+  learned by a network;
+- ``deconv-known``: :class:`~delayed_rl.deep.DeconvolutionRewardModel` with the delay's pmf;
+- ``deconv-learned``: the same with ``p`` learned on ``0..max_delay_estimate`` (the task's
+  ``max_delay_estimate``, a bound the user would choose, not the delay).
+
+The reward models have their defaults (an update a vector-env step and a warm-up of 1000
+updates before they relabel, trained when the algorithm trains) and the run's seed; off-policy
+algorithms get a :class:`~delayed_rl.deep.RelabelingReplayBuffer`, on-policy ones a
+:class:`~delayed_rl.deep.RelabelingRolloutBuffer` with its callback. Torch runs on one thread.
+"""
 MODEL_METHODS = ("rrd", "return-regression", "deconv-known", "deconv-learned")
 """The methods that train a reward model."""
 WARMUP_EPISODES = 2
-"""Episodes of steps before an off-policy algorithm's first update, for every method."""
+"""Episodes of steps before an off-policy algorithm's first update, for every method.
+
+**One warm-up for every method.** An off-policy algorithm takes its first update after
+``warmup_episodes`` episodes of steps (``learning_starts``; SB3's default, 100 steps, without
+it), whatever the method, raw and oracle included. With two, by then every reward model can be
+fitted (RRD and the return regression need a finished episode, IRCR two distinct returns, as its authors' two exploration episodes), and at
+the first update each model takes the updates its schedule owes for those steps plus its
+warm-up, so the algorithm never learns from an untrained ``R̂`` nor from the raw rewards
+first. (SB3's default, 100 steps, gave the deconvolution a head start over the episode-sum
+baselines, which could only start after an episode.) On-policy algorithms learn from the first
+rollout, which holds many episodes; the models warm up before it is relabelled.
+"""
 UPRIGHT_COS = 0.9
 """The ``"upright"`` reward's region: ``cos θ ≥ 0.9``, within about 26° of upright."""
 REWARDS = ("upright",)
@@ -243,7 +239,18 @@ def learn_and_score(
 
 
 def train_and_score(task: dict) -> dict:
-    """Train the task's method and score it (see the module docstring).
+    """Train the task's method and score it.
+
+    A task names the env (``env_id``, its episode length ``episode_steps`` and, optionally, a
+    ``reward`` of :data:`REWARDS` in place of the env's), the algorithm (``SAC`` or ``PPO``, with
+    SB3's defaults), the sub-envs (``n_envs``), the reward delay (``delay``, a
+    :meth:`~delayed_rl.delays.Delay.to_dict` description, flushed at each episode's end), the
+    off-policy warm-up (``warmup_episodes``, see below), the training ``steps``, the ``method`` and
+    the ``seed``. The methods are :data:`METHODS`.
+
+    The score is the mean return of ``eval_episodes`` deterministic episodes of the *undelayed* env
+    (the same seeds for every method of a seed), read every ``eval_every`` steps and at the end: the
+    learning curve. :func:`random_score` scores a uniformly random policy on the same episodes.
 
     Returns:
         ``{"steps", "scores"}`` (the learning curve, the step 0 score first and the last at

@@ -1,17 +1,11 @@
 """The grid worlds under anonymous delays, which ``anonymous-delay`` and ``future-work`` share.
 
-Settings: the 9×9 grid with mean delay λ = 13 (1M steps a run) and the 7×7 grid with λ = 8
-(300k steps), each under three delays of mean λ (:func:`make_delay`): Poisson(λ) (the
-thesis's), geometric (``Geometric(p)`` with ``p = 1 / (λ + 1)``, mean ``(1 − p) / p = λ``) and
-a bimodal one (mass ½ at 0 and ½ at 2λ, an ``Empirical`` pmf); the quick setting is 7×7 under
-Poisson only, 30k steps. :func:`setting_tasks` makes one task per (setting, agent, seed).
-
-The learners (:data:`LEARNERS`, :func:`make_agent`) have the thesis's hyper-parameters (α = 0.1,
-γ = 0.9, constant ε = 0.1, ``q_init`` = 25, :mod:`.training`) and model delays up to
-:data:`LAMBDA_MAX`. :func:`run_agent` trains one and measures it
-(:func:`~delayed_rl.experiments.framework.snapshot_runs.measure`): it is the run both
-experiments name when they share one (``future-work``'s thesis rule is ``anonymous-delay``'s
-MMQ run).
+The worlds are :data:`SETTINGS`, each under the delays :data:`DELAYS` (:func:`make_delay`);
+:func:`setting_tasks` makes one task per (setting, agent, seed). The learners
+(:data:`LEARNERS`, :func:`make_agent`) have the thesis's hyper-parameters (:mod:`.training`) and
+model delays up to :data:`LAMBDA_MAX`. :func:`run_agent` trains one and measures it: it is the
+run both experiments name when they share one (``future-work``'s thesis rule is
+``anonymous-delay``'s MMQ run).
 """
 
 from __future__ import annotations
@@ -24,14 +18,17 @@ import numpy as np
 
 from delayed_rl._validation import check_choice, check_int
 from delayed_rl.delays import Delay, Empirical, Geometric, Poisson
-from delayed_rl.experiments.framework.experiment import Config
+from delayed_rl.experiments.framework.experiment import Config, step_count
 from delayed_rl.experiments.framework.snapshot_runs import measure, warm_up
 from delayed_rl.experiments.framework.training import thesis_hyperparameters
 
 #: (side, mean delay λ, steps a run) of the two worlds.
 SETTINGS = ((9, 13, 1_000_000), (7, 8, 300_000))
+#: The quick setting: its side, mean delay and steps, under Poisson delays only.
 QUICK_SIZE, QUICK_LAM, QUICK_STEPS = 7, 8, 30_000
-#: The three delay distributions of each world, all of mean λ (:func:`make_delay`).
+#: The three delay distributions of each world, all of mean λ (:func:`make_delay`): Poisson(λ)
+#: (the thesis's), geometric (``Geometric(p)`` with ``p = 1 / (λ + 1)``, mean
+#: ``(1 − p) / p = λ``) and a bimodal one (mass ½ at 0 and ½ at 2λ, an ``Empirical`` pmf).
 DELAYS = ("Poisson", "geometric", "bimodal")
 LAMBDA_MAX = 50
 """The longest delay any learner models: MMQ's λ̂max, DeconvQ's ``max_delay_estimate``, expected credit's
@@ -54,6 +51,13 @@ _AGENTS: dict[str, tuple[str, dict[str, Any]]] = {
 }
 #: The seven learners, in the tables' order (:func:`make_agent`).
 LEARNERS = tuple(_AGENTS)
+
+
+def world_texts() -> list[tuple[str, str]]:
+    """Each world of :data:`SETTINGS` as the descriptions write it: ``("9×9", "(λ = 13, 1M steps)")``."""
+    return [(f"{n}×{n}", f"(λ = {lam}, {step_count(steps)} steps)") for n, lam, steps in SETTINGS]
+
+
 WINDOW_DIVISOR = 10
 """MMQ's runs keep a greedy window of ``steps // WINDOW_DIVISOR`` steps (100k of 1M): the
 averaged table ``future-work``'s greedy-window variant reads (:func:`make_agent`)."""

@@ -1,32 +1,13 @@
 """What an experiment is: its configuration, tasks, shared runs, claims, curves and summary.
 
-An experiment module defines an :class:`Experiment`: its name, the thesis figure it reproduces,
-``tasks(config)`` (one picklable task per (condition, seed)), ``run_task(task)`` (a dict of
-results, numbers or numpy arrays) and ``summarize(tasks, results, config)`` (the claims checked
-against the thesis, as :class:`Claim` rows, plus curves and figures).
-:func:`~delayed_rl.experiments.framework.pool.run_experiment` runs the tasks on a worker pool
-(:mod:`delayed_rl.parallel`: joblib's ``loky`` processes, Ray or Dask) and
-:func:`~delayed_rl.experiments.framework.report.write_outputs` writes
-``curves.csv``, ``summary.json``, the figures and ``report.md`` into the output folder. Tasks
-that need the same computation (of one experiment or several) name it as one
-:class:`SharedRun`, run once.
-
-Every task carries its own seed, so results do not depend on the number of workers.
-
-**Verdicts.** A claim's verdict is one of :data:`VERDICTS`, computed from the measurement's
-95 % interval and the thesis's value by the rule its ``criterion`` states (the helpers of
-:mod:`.claims` build every row and its criterion):
-
-- ``agrees``: the interval lies inside the thesis's band, or wholly on the claimed side;
-- ``differs``: it lies wholly outside the band, or wholly on the other side;
-- ``inconclusive``: it straddles an edge (too few seeds, or too much spread, to tell), or the
-  measurement could not be formed (NaN);
-- ``reference``: the row is a number shown for context (e.g. undelayed Q-learning's reward)
-  with no thesis value to test. Such rows stay in the report's table, beside the claims they
-  explain, and are never counted as agreeing.
-
-A deterministic measurement (e.g. ``roulette``'s hand-traced Q-tables, the same for every seed)
-has a CI of 0 and ``n`` = 1: its interval is a point, so it is never ``inconclusive``.
+An experiment module defines an :class:`Experiment`: ``tasks(config)`` (one picklable task per
+(condition, seed)), ``run_task(task)`` (a dict of results) and ``summarize(tasks, results,
+config)`` (the claims checked against the thesis, as :class:`Claim` rows, with curves and
+figures). :func:`~delayed_rl.experiments.framework.pool.run_experiment` runs the tasks on a
+worker pool, each with its own seed, and
+:func:`~delayed_rl.experiments.framework.report.write_outputs` writes the output folder; tasks
+that need the same computation name it as one :class:`SharedRun`, run once. A claim's verdict
+is one of :data:`VERDICTS`.
 """
 
 from __future__ import annotations
@@ -47,8 +28,23 @@ from delayed_rl.parallel.pools import BACKENDS, MAX_SEED_COUNT, check_workers
 AGREES, DIFFERS, INCONCLUSIVE, REFERENCE = "agrees", "differs", "inconclusive", "reference"
 
 
-#: A claim's possible verdicts (see the module docstring).
 VERDICTS = (AGREES, DIFFERS, INCONCLUSIVE, REFERENCE)
+"""A claim's possible verdicts.
+
+A verdict is computed from the measurement's 95 % interval and the thesis's value by the rule
+its ``criterion`` states (the helpers of :mod:`.claims` build every row and its criterion):
+
+- ``agrees``: the interval lies inside the thesis's band, or wholly on the claimed side;
+- ``differs``: it lies wholly outside the band, or wholly on the other side;
+- ``inconclusive``: it straddles an edge (too few seeds, or too much spread, to tell), or the
+  measurement could not be formed (NaN);
+- ``reference``: the row is a number shown for context (e.g. undelayed Q-learning's reward)
+  with no thesis value to test. Such rows stay in the report's table, beside the claims they
+  explain, and are never counted as agreeing.
+
+A deterministic measurement (e.g. ``roulette``'s hand-traced Q-tables, the same for every seed)
+has a CI of 0 and ``n`` = 1: its interval is a point, so it is never ``inconclusive``.
+"""
 
 
 @dataclass
@@ -92,6 +88,10 @@ class Config:
         self.base_seed = check_limit(
             "base_seed", check_int("base_seed", self.base_seed, 0), MAX_SEED_VALUE
         )
+
+    def run_steps(self, full: int, quick: int) -> int:
+        """The steps of a run: :attr:`steps` when set, else ``quick`` if :attr:`quick`, else ``full``."""
+        return self.steps or (quick if self.quick else full)
 
 
 @dataclass
@@ -206,7 +206,7 @@ def default_cost(task: dict) -> float:
 
 @dataclass
 class Experiment:
-    """An experiment, the thesis's or beyond it (see the module docstring).
+    """An experiment, the thesis's or beyond it.
 
     Attributes:
         name: the name ``delayed-rl bench NAME`` takes.
@@ -278,3 +278,12 @@ def running_average(rewards: np.ndarray, points: int = 200) -> tuple[np.ndarray,
     steps = np.unique(np.linspace(1, rewards.size, points).astype(np.int64))
     cumulative = np.cumsum(rewards)
     return steps, cumulative[steps - 1] / steps
+
+
+def step_count(steps: int) -> str:
+    """``steps`` as the experiments' descriptions write it: ``1M``, ``150k``, else ``1,500``."""
+    if steps % 1_000_000 == 0:
+        return f"{steps // 1_000_000}M"
+    if steps % 1_000 == 0:
+        return f"{steps // 1_000}k"
+    return f"{steps:,}"

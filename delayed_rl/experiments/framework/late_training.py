@@ -1,28 +1,9 @@
 """One SAC run under observation and action delays, scored in the env it acts in.
 
-A task names the env (``env_id``, its episode length ``episode_steps`` and, optionally, its
-``env_kwargs``), the delays (``observation_delay`` and ``action_delay``,
-:meth:`~delayed_rl.delays.Delay.to_dict` descriptions; ``action_delay`` may be ``None``, for
-none), how observations arrive (``arrival``: ``"stale"`` or ``"network"``, see
-:class:`~delayed_rl.wrappers.ObservationDelay`), the training ``steps``, the ``method`` and the
-``seed``. An unbounded observation delay needs ``observation_max_delay``, the wrapper's clip,
-which also bounds the view. The stack is ``ActionDelay`` inside ``ObservationDelay``. The
-methods (:data:`METHODS`), each SB3's SAC with its defaults on one thread:
-
-- ``oracle``: on the undelayed env;
-- ``naive``: on the delayed stack as it is (the newest observation the stale sensor shows);
-- ``augmented``: on the delay-aware view (:class:`~delayed_rl.wrappers.DelayAwareObservation`),
-  flattened, with ``MlpPolicy``;
-- ``hindsight``: :class:`~delayed_rl.deep.HindsightSAC` on the view.
-
-The score is the mean return of ``eval_episodes`` deterministic episodes of the env the method
-acts in (delays included; the oracle's is undelayed), reset with seeds fixed per seed and
-episode, read every ``eval_every`` steps and at the end: the learning curve.
-:func:`random_score` scores a uniformly random policy on the undelayed env, and
-:func:`controller_score` the thesis's proportional line follower
-(:class:`~delayed_rl.agents.ProportionalController`, e-puck envs only) on the undelayed env
-(method ``"p-undelayed"``) or on naive SAC's delayed stack (``"p-delayed"``, the thesis's
-baseline fed the same delayed observations as the learners).
+:func:`train_and_score` trains a task's method (:data:`METHODS`: SB3's SAC on the undelayed
+env, on the delayed stack, on the delay-aware view, or :class:`~delayed_rl.deep.HindsightSAC`)
+and scores it along the way; :func:`random_score` scores a random policy and
+:func:`controller_score` the thesis's proportional line follower.
 """
 
 from __future__ import annotations
@@ -38,7 +19,7 @@ from delayed_rl.experiments.framework.deep_training import learn_and_score, mean
 __all__ = ["CONTROLLERS", "METHODS", "controller_score", "random_score", "train_and_score"]
 
 METHODS = ("oracle", "naive", "augmented", "hindsight")
-"""The learners a task can name (see the module docstring)."""
+"""The learners a task can name (see :func:`train_and_score`)."""
 CONTROLLERS = ("p-undelayed", "p-delayed")
 """The fixed controllers a task can name (:func:`controller_score`)."""
 EVAL_SEED = 2_000_000
@@ -46,7 +27,7 @@ EVAL_SEED = 2_000_000
 
 
 def make_env(task: dict, method: str) -> gym.Env:
-    """The env ``method`` acts in (see the module docstring)."""
+    """The env ``method`` acts in (see :func:`train_and_score`)."""
     from gymnasium.wrappers import FlattenObservation
 
     from delayed_rl.wrappers import ActionDelay, DelayAwareObservation, ObservationDelay
@@ -84,7 +65,7 @@ def random_score(task: dict) -> dict:
 
 
 def controller_score(task: dict) -> dict:
-    """``{"score"}``: the proportional line follower's mean return (see the module docstring).
+    """``{"score"}``: the proportional line follower's mean return (see :func:`train_and_score`).
 
     Each evaluation episode starts with no last command (the controller's state), as
     :meth:`~delayed_rl.agents.ProportionalController.predict` does at an episode start.
@@ -109,7 +90,31 @@ def controller_score(task: dict) -> dict:
 
 
 def train_and_score(task: dict) -> dict:
-    """Train the task's method and score it along the way (see the module docstring).
+    """Train the task's method and score it along the way.
+
+    A task names the env (``env_id``, its episode length ``episode_steps`` and, optionally, its
+    ``env_kwargs``), the delays (``observation_delay`` and ``action_delay``,
+    :meth:`~delayed_rl.delays.Delay.to_dict` descriptions; ``action_delay`` may be ``None``, for
+    none), how observations arrive (``arrival``: ``"stale"`` or ``"network"``, see
+    :class:`~delayed_rl.wrappers.ObservationDelay`), the training ``steps``, the ``method`` and the
+    ``seed``. An unbounded observation delay needs ``observation_max_delay``, the wrapper's clip,
+    which also bounds the view. The stack is ``ActionDelay`` inside ``ObservationDelay``. The
+    methods (:data:`METHODS`), each SB3's SAC with its defaults on one thread:
+
+    - ``oracle``: on the undelayed env;
+    - ``naive``: on the delayed stack as it is (the newest observation the stale sensor shows);
+    - ``augmented``: on the delay-aware view (:class:`~delayed_rl.wrappers.DelayAwareObservation`),
+      flattened, with ``MlpPolicy``;
+    - ``hindsight``: :class:`~delayed_rl.deep.HindsightSAC` on the view.
+
+    The score is the mean return of ``eval_episodes`` deterministic episodes of the env the method
+    acts in (delays included; the oracle's is undelayed), reset with seeds fixed per seed and
+    episode, read every ``eval_every`` steps and at the end: the learning curve.
+    :func:`random_score` scores a uniformly random policy on the undelayed env, and
+    :func:`controller_score` the thesis's proportional line follower
+    (:class:`~delayed_rl.agents.ProportionalController`, e-puck envs only) on the undelayed env
+    (method ``"p-undelayed"``) or on naive SAC's delayed stack (``"p-delayed"``, the thesis's
+    baseline fed the same delayed observations as the learners).
 
     Returns:
         ``{"steps", "scores"}`` (the learning curve, from step 0 to ``steps``), ``"score"`` (the

@@ -1,21 +1,10 @@
 """The e-puck line follower in the thesis's setting: env, learners, the pooled training run, metrics.
 
-The setting (thesis section 5.2.4): ``delayed_rl/EPuckLineFollow-v0`` on the ``racetrack`` with
-the discrete Table 5.2 actions (|A| = 7) and the centroid state of Eq. 5.6 (|S| = 41, with 0 for
-"line not seen"), a Poisson(90) reward delay (:func:`line_env`); the robot is put back on the
-track after 50 line-less steps (``lost_line="recover"``, as the thesis's experimenters did by
-hand) and the task is continuing (``max_steps=None``). The learners (:func:`make_agent`) have
-the thesis's α, γ and ε (:mod:`.training`) and an optimistic ``q_init`` = 10 = 1 / (1 − γ).
-
+The setting (thesis section 5.2.4) is :func:`line_env`'s, the learners :func:`make_agent`'s.
 ``linefollow``, ``linefollow-deconv``, ``controllers`` and ``real-robot`` train the same learners
 there, so their tasks name one :func:`training_run` per learner and seed, read at the steps each
-needs (:func:`pooled_training`, :func:`logged_run`): run together, each trains once.
-
-Metrics (:func:`run_metrics`) come from the undelayed streams of ``training_log``: the average
-reward during learning, and the accumulated error Σ_t |Δ_t| with Δ_t = m_t − 20 for the centroid
-m_t of the state the agent acts in (:func:`line_error`; an unseen line, m_t = 0, counts
-|Δ| = 20, the largest offset a visible line can have, so losing the line is never cheaper than
-seeing it at the camera's edge).
+needs (:func:`pooled_training`, :func:`logged_run`): run together, each trains once. The
+metrics are :func:`run_metrics`'.
 """
 
 from __future__ import annotations
@@ -39,11 +28,17 @@ ENV_ID = "delayed_rl/EPuckLineFollow-v0"
 REAL_ENV_ID = "delayed_rl/EPuckLineFollowReal-v0"
 #: What a trained agent can continue on (:func:`training_run`): the clean simulation, the robot.
 SETTINGS = {"clean": ENV_ID, "real": REAL_ENV_ID}
+#: The track of every line-following run.
 TRACK = "racetrack"
+#: The Poisson mean λ of the reward delay, and MMQ's largest delay estimate λ̂max.
 LAM, LAMBDA_MAX = 90, 150
-#: The optimistic initial value, 1 / (1 − γ) (see the module docstring; α, γ and ε are the
-#: thesis's, :mod:`delayed_rl.experiments.framework.training`).
+#: The line-less steps after which the robot is put back on the track.
+LOST_LINE_STEPS = 50
+#: The optimistic initial value, 1 / (1 − γ), the largest discounted return when every reward is
+#: at most 1 (the thesis does not print its values for the e-puck; α, γ and ε are the thesis's,
+#: :mod:`delayed_rl.experiments.framework.training`).
 Q_INIT = 10.0
+#: The centroid of a centred line, and the error |Δ| an unseen line counts (:func:`line_error`).
 CENTRE, UNSEEN_ERROR = 20, 20
 #: The learners :func:`make_agent` makes (``linefollow``'s MMQ and Q, and DeconvQ learned): each
 #: one's agent in :data:`~delayed_rl.agents.registry.REGISTRY` and its arguments beyond the
@@ -60,6 +55,12 @@ LEARNERS = tuple(_AGENTS)
 def line_env(reward_delay: float | None = LAM, env_id: str = ENV_ID, **kwargs: Any) -> gym.Env:
     """The thesis's line-following env: racetrack, manual resets, continuing, reward delay λ.
 
+    ``delayed_rl/EPuckLineFollow-v0`` on the :data:`TRACK` with the discrete Table 5.2 actions
+    (|A| = 7) and the centroid state of Eq. 5.6 (|S| = 41, with 0 for "line not seen"), a
+    Poisson(:data:`LAM`) reward delay; the robot is put back on the track after
+    :data:`LOST_LINE_STEPS` line-less steps (``lost_line="recover"``, as the thesis's
+    experimenters did by hand) and the task is continuing (``max_steps=None``).
+
     Args:
         reward_delay: the Poisson mean λ of the reward delay (``None``: undelayed).
         env_id: the e-puck's id: the simulation (default) or :data:`REAL_ENV_ID`.
@@ -67,7 +68,13 @@ def line_env(reward_delay: float | None = LAM, env_id: str = ENV_ID, **kwargs: A
     """
     import delayed_rl  # noqa: F401  (registers the ids)
 
-    options = {"track": TRACK, "lost_line": "recover", "max_steps": None, **kwargs}
+    options = {
+        "track": TRACK,
+        "lost_line": "recover",
+        "lost_line_steps": LOST_LINE_STEPS,
+        "max_steps": None,
+        **kwargs,
+    }
     return gym.make(env_id, reward_delay=reward_delay, **options)
 
 
@@ -142,6 +149,36 @@ def pooled_training(
 def logged_run(agent: str, seed: int, steps: int) -> SharedRun:
     """The first ``steps`` steps of :func:`training_run`, read as its log (:func:`only_readout`)."""
     return pooled_training(agent, seed, [["log", steps]], only_readout)
+
+
+def logged_task_run(task: dict) -> SharedRun:
+    """The training run behind a ``{"agent", "seed", "steps"}`` task (:func:`logged_run`).
+
+    ``linefollow``'s and ``linefollow-deconv``'s tasks are such tasks: their runs of the same
+    learner and seed are one, and the start of ``controllers``' and ``real-robot``'s.
+
+    Raises:
+        ValueError: the task's agent is not one of :data:`LEARNERS`.
+    """
+    check_choice("agent", task["agent"], LEARNERS)
+    return logged_run(task["agent"], task["seed"], task["steps"])
+
+
+def run_logged_task(task: dict) -> dict:
+    """Train a :func:`logged_task_run` task's learner on the line follower and measure the run.
+
+    Returns:
+        :func:`run_metrics`' (``steps``, ``curve``, ``error``, ``average``, ``total_error``,
+        ``visible``), ``ns_per_step`` (``learn``'s wall time over the steps), ``path``
+        (``learn``'s) and the agent's delay estimate, if it holds one
+        (:func:`~.delay_estimates.delay_estimate`).
+    """
+    return logged_task_run(task).alone()
+
+
+def logged_task_cost(task: dict) -> float:
+    """A :func:`logged_task_run` task's estimated core-seconds, for scheduling."""
+    return training_cost(task["agent"], task["steps"])
 
 
 def training_run(task: dict) -> dict:
@@ -236,6 +273,13 @@ def _whole(value: Any) -> bool:
 
 def run_metrics(log: Any) -> dict:
     """A line-following run's metrics from its ``training_log``.
+
+    They come from its undelayed streams: the average reward during learning (the running mean
+    of the undelayed reward, Figs. 5.20, 5.22), and the accumulated error Σ_t |Δ_t| with
+    Δ_t = m_t − :data:`CENTRE` for the centroid m_t of the state the agent acts in
+    (:func:`line_error`; Figs. 5.21, 5.23). An unseen line, m_t = 0, counts
+    |Δ| = :data:`UNSEEN_ERROR`, the largest offset a visible line can have (m = 40), so losing
+    the line is never cheaper than seeing it at the camera's edge.
 
     Returns:
         ``steps`` and ``curve`` (the running average reward), ``error`` (the accumulated error

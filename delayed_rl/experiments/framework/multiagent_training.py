@@ -1,33 +1,9 @@
 """One PPO run with parameter sharing on a PettingZoo env whose agents' rewards arrive late.
 
-A task names the env (``env``, a name of :data:`ENVS`, built with ``env_kwargs``), the reward
-delay (``delay``, a :meth:`~delayed_rl.delays.Delay.to_dict` description: every agent draws its
-own delays, :class:`~delayed_rl.multiagent.ParallelRewardDelay`, flushed when its episode
-ends), the training ``steps``, PPO's settings beyond SB3's defaults (``ppo``), the ``method``
-and the ``seed``.
-
-**Parameter sharing.** SuperSuit's ``pettingzoo_env_to_vec_env_v1`` makes every agent a sub-env
-of one vector env, and ``concat_vec_envs_v1`` hands it to stable-baselines3: one PPO policy
-acts for every agent, on each agent's own observation, and learns from every agent's steps.
-``steps`` counts agent-steps, as SB3 counts sub-env steps (an env step of 4 agents is 4).
-The conversion is :func:`~delayed_rl.multiagent.sb3_vec_env`, whose ``seed()`` seeds the next
-reset (SuperSuit's own adapter has none).
-
-The methods (:data:`METHODS`):
-
-- ``oracle``: PPO on the undelayed env;
-- ``raw``: PPO on the delayed rewards as they arrive;
-- ``deconv-known``: :class:`~delayed_rl.deep.DeconvolutionRewardModel` given the delay, in a
-  :class:`~delayed_rl.deep.RelabelingRolloutBuffer` (PPO learns from ``R̂(s, a)`` in place of
-  the delivered rewards) with its callback; the model reads the stacked sub-envs as it reads
-  any vector env's, each agent's delivered rewards a stream of their own;
-- ``deconv-learned``: the same learning the delay's pmf on ``0..max_delay_estimate`` (the task's
-  ``max_delay_estimate``, a bound the user would choose, not the delay).
-
-The score is the mean per-agent return of ``eval_episodes`` episodes of the *undelayed* env,
-every agent acting greedily with the shared policy, reset with seeds fixed per seed and
-episode; it is read every ``eval_every`` steps and at the end (the learning curve).
-:func:`random_score` scores uniformly random actions on the same episodes.
+:func:`train_and_score` trains a task's method (:data:`METHODS`) with one PPO policy for every
+agent (SuperSuit's vector conversion, :func:`~delayed_rl.multiagent.sb3_vec_env`) and scores it
+along the way on the undelayed env; :func:`random_score` scores random actions on the same
+episodes.
 """
 
 from __future__ import annotations
@@ -48,7 +24,7 @@ from delayed_rl.experiments.framework.deep_training import (
 __all__ = ["ENVS", "METHODS", "make_env", "random_score", "train_and_score"]
 
 METHODS = ("oracle", "raw", "deconv-known", "deconv-learned")
-"""The methods a task can name (see the module docstring)."""
+"""The methods a task can name (see :func:`train_and_score`)."""
 EVAL_SEED = 3_000_000
 """Evaluation episode ``i`` of seed ``s`` resets with ``EVAL_SEED + 1000 * s + i``."""
 
@@ -111,7 +87,36 @@ def random_score(task: dict) -> dict:
 
 
 def train_and_score(task: dict) -> dict:
-    """Train the task's method and score it along the way (see the module docstring).
+    """Train the task's method and score it along the way.
+
+    A task names the env (``env``, a name of :data:`ENVS`, built with ``env_kwargs``), the reward
+    delay (``delay``, a :meth:`~delayed_rl.delays.Delay.to_dict` description: every agent draws its
+    own delays, :class:`~delayed_rl.multiagent.ParallelRewardDelay`, flushed when its episode
+    ends), the training ``steps``, PPO's settings beyond SB3's defaults (``ppo``), the ``method``
+    and the ``seed``.
+
+    **Parameter sharing.** SuperSuit's ``pettingzoo_env_to_vec_env_v1`` makes every agent a sub-env
+    of one vector env, and ``concat_vec_envs_v1`` hands it to stable-baselines3: one PPO policy
+    acts for every agent, on each agent's own observation, and learns from every agent's steps.
+    ``steps`` counts agent-steps, as SB3 counts sub-env steps (an env step of 4 agents is 4).
+    The conversion is :func:`~delayed_rl.multiagent.sb3_vec_env`, whose ``seed()`` seeds the next
+    reset (SuperSuit's own adapter has none).
+
+    The methods (:data:`METHODS`):
+
+    - ``oracle``: PPO on the undelayed env;
+    - ``raw``: PPO on the delayed rewards as they arrive;
+    - ``deconv-known``: :class:`~delayed_rl.deep.DeconvolutionRewardModel` given the delay, in a
+      :class:`~delayed_rl.deep.RelabelingRolloutBuffer` (PPO learns from ``R̂(s, a)`` in place of
+      the delivered rewards) with its callback; the model reads the stacked sub-envs as it reads
+      any vector env's, each agent's delivered rewards a stream of their own;
+    - ``deconv-learned``: the same learning the delay's pmf on ``0..max_delay_estimate`` (the task's
+      ``max_delay_estimate``, a bound the user would choose, not the delay).
+
+    The score is the mean per-agent return of ``eval_episodes`` episodes of the *undelayed* env,
+    every agent acting greedily with the shared policy, reset with seeds fixed per seed and
+    episode; it is read every ``eval_every`` steps and at the end (the learning curve).
+    :func:`random_score` scores uniformly random actions on the same episodes.
 
     Returns:
         ``{"steps", "scores"}`` (the learning curve, from step 0 to ``steps``), ``"score"`` (the

@@ -170,6 +170,13 @@ def learning_curves(
     if ylim == "robust":
         include = [line[0] for line in thesis] + [value for value, _ in levels]
         ylim = robust_ylim(drawn, include=include, skip=settle)
+    _finish_curves(fig, ax, ylim, path, title, xlabel, ylabel)
+
+
+def _finish_curves(
+    fig: Any, ax: Any, ylim: Any, path: Path, title: str, xlabel: str, ylabel: str
+) -> None:
+    """Set the y-limits (``None``: matplotlib's), put the legend outside and save the figure."""
     if ylim is not None:
         ax.set_ylim(*ylim)
     outside_legend(ax)
@@ -214,10 +221,7 @@ def band_plot(
         low = min(float(np.min(y)) for y in settled if y.size)
         high = max(reference[0], max(float(np.max(y)) for y in settled if y.size))
         ylim = (low - 0.05 * (high - low), high + 0.08 * (high - low))
-    if ylim is not None:
-        ax.set_ylim(*ylim)
-    outside_legend(ax)
-    finish(fig, ax, path, title, xlabel, ylabel)
+    _finish_curves(fig, ax, ylim, path, title, xlabel, ylabel)
 
 
 def estimate_plot(

@@ -1,40 +1,10 @@
 """Running experiments: each run once, on one pool of workers, the most costly first.
 
-:func:`run_experiments` (what ``delayed-rl reproduce`` calls) gathers the runs behind every task
-of the experiments it is given (:meth:`~.experiment.Experiment.run_of`) and runs each *distinct* run
-once: a :class:`~.experiment.SharedRun` that several tasks need, of one experiment or of several, is
-run once and its result handed to each of them (through its ``view``). Two runs are the same
-when they call the same function with the same task (compared in canonical JSON); runs that
-*pool* a list of their task (``SharedRun.pooled``, e.g. the steps at which a training run is
-read) are one run when their tasks differ only in that list, run on the union of its items.
-
-All runs go to one pool, ordered by their estimated cost (:attr:`~.experiment.Experiment.cost`),
-longest first, so the workers are never left idle behind one experiment's slowest run before the
-next experiment starts, and the last runs to start are short ones. Each experiment is
-summarized as soon as its last run is in, while the workers go on with the other experiments'
-runs; with several experiments and workers its files (figures take seconds) are written by a
-pool of as many background processes, so the experiments that finish last are drawn side by
-side. Results do not depend on the order or the number of workers: every task carries its own
-seed. With ``progress``, a bar on stderr counts the distinct runs as they finish, in whatever
-order the workers finish them.
-
-A *resumable* experiment (:attr:`~.experiment.Experiment.resumable`) keeps each run's result as it
-finishes, as ``OUT/runs/<hash>.json`` stating the run it holds (written whole or not at all), and
-a later call into the same folder reads those instead of running them: an experiment longer than
-a sitting runs in parts. A kept file that is not a run's result stops the call, naming it.
-
-Each summary's ``extra`` records what the experiment cost (a kept run counts its first time):
-
-- ``run_seconds``: the core-seconds of its runs, as timed in the workers (a run it shares with
-  another experiment counts in full in each, a pooled run too: an experiment whose run another
-  extends counts the longer run);
-- ``runs``: how many distinct runs it needed, ``shared_runs`` how many of them another of the
-  experiments run together also needed;
-- ``wall_time_s``: seconds from the start until its summary was made (run alone: the
-  experiment's wall time).
-
-Tasks that share a run receive the same result object (through their views): an experiment's
-``summarize`` reads its results and must not change them.
+:func:`run_experiments` (what ``delayed-rl reproduce`` calls) runs each *distinct* run behind
+the experiments' tasks once (a :class:`~.experiment.SharedRun` several tasks need is run once,
+its result handed to each), all on one pool, longest first; :func:`run_experiment` runs one
+experiment. A resumable experiment keeps each run's result as it finishes and reads it back.
+:func:`run_key` is a run's identity.
 """
 
 from __future__ import annotations
@@ -189,7 +159,7 @@ def run_experiment(
 
     Returns:
         The experiment's summary, with ``extra["wall_time_s"]`` the seconds it took (and the
-        other costs of the module docstring).
+        other costs :func:`run_experiments` lists).
     """
     check_bool("progress", progress)
     _default_seeds(experiment, config)
@@ -204,7 +174,43 @@ def run_experiments(
     progress: bool = True,
     on_done: Callable[[Experiment, Summary], None] | None = None,
 ) -> list[Summary]:
-    """Run ``experiments`` together (see the module docstring); write each into ``out/NAME``.
+    """Run ``experiments`` together; write each into ``out/NAME``.
+
+    :func:`run_experiments` (what ``delayed-rl reproduce`` calls) gathers the runs behind every task
+    of the experiments it is given (:meth:`~.experiment.Experiment.run_of`) and runs each *distinct* run
+    once: a :class:`~.experiment.SharedRun` that several tasks need, of one experiment or of several, is
+    run once and its result handed to each of them (through its ``view``). Two runs are the same
+    when they call the same function with the same task (compared in canonical JSON); runs that
+    *pool* a list of their task (``SharedRun.pooled``, e.g. the steps at which a training run is
+    read) are one run when their tasks differ only in that list, run on the union of its items.
+
+    All runs go to one pool, ordered by their estimated cost (:attr:`~.experiment.Experiment.cost`),
+    longest first, so the workers are never left idle behind one experiment's slowest run before the
+    next experiment starts, and the last runs to start are short ones. Each experiment is
+    summarized as soon as its last run is in, while the workers go on with the other experiments'
+    runs; with several experiments and workers its files (figures take seconds) are written by a
+    pool of as many background processes, so the experiments that finish last are drawn side by
+    side. Results do not depend on the order or the number of workers: every task carries its own
+    seed. With ``progress``, a bar on stderr counts the distinct runs as they finish, in whatever
+    order the workers finish them.
+
+    A *resumable* experiment (:attr:`~.experiment.Experiment.resumable`) keeps each run's result as it
+    finishes, as ``OUT/runs/<hash>.json`` stating the run it holds (written whole or not at all), and
+    a later call into the same folder reads those instead of running them: an experiment longer than
+    a sitting runs in parts. A kept file that is not a run's result stops the call, naming it.
+
+    Each summary's ``extra`` records what the experiment cost (a kept run counts its first time):
+
+    - ``run_seconds``: the core-seconds of its runs, as timed in the workers (a run it shares with
+      another experiment counts in full in each, a pooled run too: an experiment whose run another
+      extends counts the longer run);
+    - ``runs``: how many distinct runs it needed, ``shared_runs`` how many of them another of the
+      experiments run together also needed;
+    - ``wall_time_s``: seconds from the start until its summary was made (run alone: the
+      experiment's wall time).
+
+    Tasks that share a run receive the same result object (through their views): an experiment's
+    ``summarize`` reads its results and must not change them.
 
     Args:
         experiments: what to run.

@@ -2,16 +2,9 @@
 
 ``anonymous-delay`` and ``future-work`` run learners on the same settings
 (:mod:`.delay_settings`) and report them alike, from their results by setting, agent and seed
-(``{setting: {agent: {seed: result}}}``, a nested :func:`~.results.pivot`) and each setting's
-fields (:func:`setting_fields`): :func:`result_table` makes ``summary.json``'s ``table`` (one
-:func:`agent_stats` row per setting and agent), :func:`curves_of` the curves, and
-:func:`setting_figures` the figures of each setting. The claims they share, with their rules:
-
-- :func:`optimal_seeds_claim`: the seeds whose final greedy policy is optimal, the count rule
-  (the Wilson 95 % interval inside ``[SEED_SHARE, 1]``: at 20 seeds at best ``inconclusive``);
-- :func:`stability_claim`: the share of second-half greedy snapshots that are optimal, the
-  per-seed share's CI inside ``[STABLE_SHARE, 1]``;
-- :func:`paired_gap_claim`: one learner's training reward above another's, paired by seed.
+(a nested :func:`~.results.pivot`): :func:`result_table` makes ``summary.json``'s ``table``,
+:func:`curves_of` the curves and :func:`setting_figures` the figures; the claims they share are
+:func:`optimal_seeds_claim`, :func:`stability_claim` and :func:`paired_gap_claim`.
 """
 
 from __future__ import annotations

@@ -2,18 +2,10 @@
 
 The greedy policy of a learner under delays can keep flipping between the optimal loop and
 another route, so ``mmq-gridworld``, ``anonymous-delay`` and ``future-work`` look at it during
-learning, not only at the end: :func:`train_with_snapshots` trains a run in ``SNAPSHOTS``
-pieces (``learn(..., reset_num_timesteps=False)``, which trains exactly as one call does) and
-after each walks the agent's deterministic greedy policy (:func:`greedy_policy`) from the start
-cell of the undelayed grid (:func:`walk_average`). The policy is *optimal* when that average is
-at least ``LOOP_FRACTION`` of the optimal loop's (:func:`is_optimal`).
-
-:func:`measure` makes a run's result of that: the learning curve, the training reward, the
-final and the second-half greedy readouts (:func:`second_half_share`), ns/step (after an
-untimed :func:`warm_up`) and the delay estimate
-(:func:`~delayed_rl.experiments.framework.delay_estimates.delay_estimate`). An MMQ run with a
-``greedy_window`` also reads its averaged table: :func:`current_readout` and
-:func:`averaged_readout` pick one of the two readouts.
+learning: :func:`train_with_snapshots` trains a run in :data:`SNAPSHOTS` pieces (as one call
+does) and after each walks the greedy policy from the start cell (:func:`walk_average`,
+:func:`is_optimal`). :func:`measure` makes a run's result of that; :func:`current_readout` and
+:func:`averaged_readout` pick MMQ's current or averaged table's readout.
 """
 
 from __future__ import annotations
@@ -37,6 +29,7 @@ LOOP_FRACTION = 0.95
 SNAPSHOTS = 50
 """Greedy snapshots a run takes: one every ``max(1, steps // SNAPSHOTS)`` steps."""
 WALK_STEPS = 1000
+"""Steps of a greedy walk (:func:`walk_average`), from the start cell of the undelayed grid."""
 AVERAGED = "window_"
 """The prefix of :func:`measure`'s readouts of the averaged table (MMQ's ``greedy_window``)."""
 WARM_UP = 2000

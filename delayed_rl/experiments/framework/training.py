@@ -22,6 +22,11 @@ from delayed_rl.agents.common.q_table import greedy_actions
 ALPHA, GAMMA, EPSILON, Q_INIT = 0.1, 0.9, 0.1, 25.0
 
 
+def hyperparameter_text(q_init: float = Q_INIT) -> str:
+    """The thesis's hyper-parameters as the descriptions write them: ``α = 0.1, ..., q_init = 25``."""
+    return f"α = {ALPHA}, γ = {GAMMA}, ε = {EPSILON}, q_init = {q_init:g}"
+
+
 def grid_env(size: int, lam: float) -> gym.Env:
     """``delayed_rl/GridWorld-v0`` of side ``size`` with Poisson(``lam``) delays (none if 0)."""
     import delayed_rl  # noqa: F401  (registers the ids)

@@ -1,28 +1,11 @@
-"""``controllers`` (thesis Fig. 5.19): four line followers over 1700 steps of the racetrack, λ = 90.
+"""``controllers`` (thesis Fig. 5.19): the proportional controller against Q-learning and MMQ.
 
-The contestants, each run for 1700 steps on the env of :func:`~.line_following.line_env` (racetrack,
-put back on the track after 50 line-less steps, Poisson(90) reward delay), all starting from the
-same pose for a given seed:
-
-- **P undelayed**: the thesis's proportional controller (Eqs. 5.8–5.9, k_p = 6) on continuous
-  wheel speeds, seeing the camera undelayed. Its rewards still pass through the Poisson(90)
-  reward delay, as in the thesis; the controller ignores rewards and the metric uses the
-  undelayed stream, so this changes nothing.
-- **P delayed observations**: the same controller behind
-  :class:`~delayed_rl.wrappers.ObservationDelay` with Poisson(90) delays: at step t it sees
-  the camera of step t − d_t.
-- **Q** and **MMQ** (λ̂max = 150, as in Figs. 5.20–5.23): first "thoroughly trained" under the
-  Poisson(90) reward delay for ``steps`` steps (default 300k, twice the 150k of Figs. 5.20–5.23;
-  the learning curves are flat by then), then their Q-tables start the 1700-step run on a fresh
-  env, where they keep learning with ε = 0.1 as the thesis's did. The training is
-  :func:`~.line_following.training_run`'s: its first 150k steps are ``linefollow``'s run of the same
-  learner and seed, and ``real-robot`` continues it to 500k, so run together they train once.
-
-Metric: the running average of the undelayed reward over the 1700 steps (Fig. 5.19); the claim
-is its final value. Verdicts (:mod:`~.framework.claims`' rules): a controller's row is the
-band rule on the thesis's value ± 0.2; the thesis's order P > MMQ > Q > delayed P is three rows, one per
-neighbouring pair, each the pair's difference paired by seed (every seed's four runs start from
-the same pose), the direction rule (above 0).
+Four line followers run on the racetrack under Poisson reward delays, from the same pose for a
+given seed: the thesis's proportional controller, seeing the camera undelayed and behind an
+observation delay, and Q-learning and MMQ trained first under the reward delay. The numbers are
+the constants ``EXPERIMENT.description`` is formatted from (:data:`RUN_STEPS`,
+:data:`TRAIN_STEPS`, :data:`K_P`, :data:`THESIS`); the contestants are in :func:`tasks`, the
+claims in :func:`summarize`.
 """
 
 from __future__ import annotations
@@ -37,6 +20,7 @@ from delayed_rl.experiments.framework.experiment import (
     Experiment,
     SharedRun,
     Summary,
+    step_count,
 )
 from delayed_rl.experiments.framework.line_following import (
     LAM,
@@ -50,20 +34,40 @@ from delayed_rl.experiments.framework.line_following import (
 )
 from delayed_rl.experiments.framework.results import pivot
 
-RUN_STEPS = 1700
+#: The steps of every controller's run (Fig. 5.19), and of a quick run.
+RUN_STEPS, QUICK_RUN_STEPS = 1700, 300
+#: The learners' training steps before their run (``--steps``), and a quick run's.
+TRAIN_STEPS, QUICK_TRAIN_STEPS = 300_000, 2_000
+#: The proportional controller's gain k_p (the thesis's Eqs. 5.8–5.9).
+K_P = 6
 #: Thesis Fig. 5.19's final average rewards, in the thesis's order of performance.
 THESIS = {"P undelayed": 0.9, "MMQ": 0.6, "Q": 0.3, "P delayed observations": -0.6}
+#: The band of each controller's final average reward: the thesis's value ± this.
 TOLERANCE = 0.2
 
 
 def tasks(config: Config) -> list[dict]:
-    """Per seed, one run of each of the four controllers.
+    """Per seed, one run of each of the four controllers (:data:`THESIS`), all from one pose.
 
-    The learners train for 300k steps first (2k with ``config.quick``); every run lasts 1700
-    steps (300 with ``config.quick``).
+    - **P undelayed**: the thesis's proportional controller (Eqs. 5.8–5.9, gain :data:`K_P`) on
+      continuous wheel speeds, seeing the camera undelayed. Its rewards still pass through the
+      reward delay, as in the thesis; the controller ignores rewards and the metric uses the
+      undelayed stream, so this changes nothing.
+    - **P delayed observations**: the same controller behind
+      :class:`~delayed_rl.wrappers.ObservationDelay` with Poisson delays of the same mean: at
+      step t it sees the camera of step t − d_t.
+    - **Q** and **MMQ** (λ̂max as in Figs. 5.20–5.23): first "thoroughly trained" under the
+      reward delay for :data:`TRAIN_STEPS` (twice the training of Figs. 5.20–5.23; the learning
+      curves are flat by then), then their Q-tables start the run on a fresh env, where they
+      keep learning with ε = 0.1 as the thesis's did. The training is
+      :func:`~.line_following.training_run`'s: its first steps are ``linefollow``'s run of the
+      same learner and seed, and ``real-robot`` continues it, so run together they train once.
+
+    Every run lasts :data:`RUN_STEPS`; ``config.quick`` takes :data:`QUICK_TRAIN_STEPS` and
+    :data:`QUICK_RUN_STEPS`.
     """
-    train_steps = config.steps or (2_000 if config.quick else 300_000)
-    run_steps = 300 if config.quick else RUN_STEPS
+    train_steps = config.run_steps(TRAIN_STEPS, QUICK_TRAIN_STEPS)
+    run_steps = QUICK_RUN_STEPS if config.quick else RUN_STEPS
     return [
         {
             "controller": name,
@@ -85,7 +89,7 @@ def _run_proportional(delayed: bool, steps: int, seed: int) -> tuple[np.ndarray,
     env = line_env(action_mode="continuous")
     if delayed:
         env = ObservationDelay(env, Poisson(LAM))
-    controller = ProportionalController(env=env)
+    controller = ProportionalController(env=env, k_p=K_P)
     obs, info = env.reset(seed=seed)
     rewards, centroids = np.zeros(steps), np.zeros(steps, dtype=np.int64)
     state = None
@@ -150,7 +154,14 @@ def cost(task: dict) -> float:
 
 
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
-    """Fig. 5.19's claims: each controller's final average reward, and their order."""
+    """Fig. 5.19's claims: each controller's final average reward, and their order.
+
+    The metric is the running average of the undelayed reward over the run (Fig. 5.19); a
+    claim reads its final value. A controller's row is the band rule on the thesis's value
+    ± :data:`TOLERANCE`; the thesis's order P > MMQ > Q > delayed P is three rows, one per
+    neighbouring pair, each the pair's difference paired by seed (every seed's four runs start
+    from the same pose), the direction rule (above 0).
+    """
     by_controller = pivot(task_list, results, by=("controller",))
     runs = {name: by_controller[name] for name in THESIS}
     by_seed = pivot(task_list, results, by=("controller",), value="average")
@@ -208,10 +219,11 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
 EXPERIMENT = Experiment(
     name="controllers",
     thesis="Fig. 5.19",
-    description="1700 steps of the racetrack under Poisson(90) delays: the proportional "
-    "controller (k_p = 6) undelayed and with Poisson(90)-delayed observations, and Q-learning "
-    "and MMQ (λ̂max = 150) trained first for --steps steps (default 300k) under the reward delay "
-    "and still learning during the run. Average reward from the undelayed reward stream.",
+    description=f"{RUN_STEPS} steps of the racetrack under Poisson({LAM}) delays: the "
+    f"proportional controller (k_p = {K_P}) undelayed and with Poisson({LAM})-delayed "
+    f"observations, and Q-learning and MMQ (λ̂max = {LAMBDA_MAX}) trained first for --steps "
+    f"steps (default {step_count(TRAIN_STEPS)}) under the reward delay and still learning during "
+    "the run. Average reward from the undelayed reward stream.",
     tasks=tasks,
     run_task=run_task,
     summarize=summarize,

@@ -1,4 +1,7 @@
-"""``delay-sweep`` (thesis Fig. 5.2): Q-learning on the 3×3 grid under growing mean delays λ."""
+"""``delay-sweep`` (thesis Fig. 5.2): Q-learning on a grid world under growing mean delays λ.
+
+The settings are :data:`LAMS` on the :data:`SIZE` grid; the claim is in :func:`summarize`.
+"""
 
 from __future__ import annotations
 
@@ -22,22 +25,28 @@ from delayed_rl.experiments.framework.normalised_runs import (
     normalised_curves,
 )
 from delayed_rl.experiments.framework.results import common_seeds, pivot
+from delayed_rl.experiments.framework.training import ALPHA, EPSILON, GAMMA
 
-LAMS = (1, 2, 5, 10, 20, 50)
-QUICK_LAMS = (2, 10, 50)
+#: The grid world's side.
+SIZE = 3
+#: The Poisson mean delays λ, and a quick run's.
+LAMS, QUICK_LAMS = (1, 2, 5, 10, 20, 50), (2, 10, 50)
+#: The steps of a run, and of a quick run.
+STEPS, QUICK_STEPS = 150_000, 20_000
 #: What the thesis's Fig. 5.2 shows, in words: it prints no value per λ.
 THESIS_TREND = "the normalised reward falls as λ grows"
 
 
 def tasks(config: Config) -> list[dict]:
-    """Per seed: undelayed Q-learning on the 3×3 grid, then Q-learning under each mean delay λ.
+    """Per seed: undelayed Q-learning on the grid, then Q-learning under each mean delay λ.
 
-    150k steps a run (20k with ``config.quick``, which also keeps only λ ∈ {2, 10, 50}).
+    :data:`STEPS` a run (:data:`QUICK_STEPS` with ``config.quick``, which also keeps only
+    :data:`QUICK_LAMS`).
     """
-    steps = config.steps or (20_000 if config.quick else 150_000)
+    steps = config.run_steps(STEPS, QUICK_STEPS)
     lams = QUICK_LAMS if config.quick else LAMS
     runs = [
-        {"size": 3, "lam": lam, "delay_estimates": [0], "condition": f"lambda={lam}"}
+        {"size": SIZE, "lam": lam, "delay_estimates": [0], "condition": f"lambda={lam}"}
         for lam in lams
     ]
     return grid_tasks(config, steps, runs)
@@ -88,7 +97,7 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
         "fig5_2_delay_sweep": plotting.figure(
             plotting.learning_curves,
             {f"λ = {lam}": runs for lam, runs in learning_curve_groups(by_lam).items()},
-            "3×3 grid world: Q-learning under Poisson delays of mean λ (Fig. 5.2)\n"
+            f"{SIZE}×{SIZE} grid world: Q-learning under Poisson delays of mean λ (Fig. 5.2)\n"
             f"thesis: {THESIS_TREND} (it gives no value per λ)",
             "normalised average reward (Eq. 5.3)",
         )
@@ -100,8 +109,9 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
 EXPERIMENT = Experiment(
     name="delay-sweep",
     thesis="Fig. 5.2",
-    description="Q-learning (α = 0.1, γ = 0.9, ε = 0.1) on the 3×3 grid world for growing Poisson "
-    "mean delays λ; average reward normalised by undelayed Q-learning on the same seed (Eq. 5.3).",
+    description=f"Q-learning (α = {ALPHA}, γ = {GAMMA}, ε = {EPSILON}) on the {SIZE}×{SIZE} grid "
+    "world for growing Poisson mean delays λ; average reward normalised by undelayed Q-learning "
+    "on the same seed (Eq. 5.3).",
     tasks=tasks,
     run_task=grid_task,
     summarize=summarize,

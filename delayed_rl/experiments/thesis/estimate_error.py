@@ -1,4 +1,8 @@
-"""``estimate-error`` (thesis Fig. 5.6): fixed-delay Q-learning with estimates λ̂ = λ + i."""
+"""``estimate-error`` (thesis Fig. 5.6): fixed-delay Q-learning with a wrong delay estimate.
+
+Each learner assumes λ̂ = λ + i for an error i up to :data:`MAX_ERROR` either way; the claims,
+the shape of the thesis's peak, are in :func:`summarize`.
+"""
 
 from __future__ import annotations
 
@@ -6,7 +10,7 @@ import numpy as np
 
 from delayed_rl.experiments.framework import plotting
 from delayed_rl.experiments.framework.claims import band_claim, direction_claim, mean_ci_n, paired
-from delayed_rl.experiments.framework.experiment import Config, Experiment, Summary
+from delayed_rl.experiments.framework.experiment import Config, Experiment, Summary, step_count
 from delayed_rl.experiments.framework.normalised_runs import (
     condition_means,
     grid_task,
@@ -16,7 +20,12 @@ from delayed_rl.experiments.framework.normalised_runs import (
 )
 from delayed_rl.experiments.framework.results import common_seeds, pivot
 
-LAM = 17
+#: The grid world's side and the Poisson mean delay λ.
+SIZE, LAM = 9, 17
+#: The largest error i either way; a quick run takes every :data:`QUICK_ERROR_STEP`-th.
+MAX_ERROR, QUICK_ERROR_STEP = 15, 5
+#: The steps of a run, and of a quick run.
+STEPS, QUICK_STEPS = 150_000, 30_000
 #: The thesis's peak of Fig. 5.6: 60 % of the undelayed reward, at i = 0.
 THESIS_PEAK = 0.6
 PEAK_TOLERANCE = 0.15
@@ -26,15 +35,17 @@ PEAK_ERROR = 3
 
 
 def tasks(config: Config) -> list[dict]:
-    """Per seed: undelayed Q-learning on 9×9, then fixed-delay Q-learning with λ̂ = 17 + i.
+    """Per seed: undelayed Q-learning, then fixed-delay Q-learning with λ̂ = λ + i.
 
-    The errors are i ∈ {−15, ..., 15} (every fifth with ``config.quick``), 150k steps a run (30k
-    with ``config.quick``).
+    The errors are i ∈ {−:data:`MAX_ERROR`, ..., :data:`MAX_ERROR`} (every
+    :data:`QUICK_ERROR_STEP`-th with ``config.quick``), :data:`STEPS` a run
+    (:data:`QUICK_STEPS` with ``config.quick``).
     """
-    steps = config.steps or (30_000 if config.quick else 150_000)
-    errors = range(-15, 16, 5) if config.quick else range(-15, 16)
+    steps = config.run_steps(STEPS, QUICK_STEPS)
+    step = QUICK_ERROR_STEP if config.quick else 1
+    errors = range(-MAX_ERROR, MAX_ERROR + 1, step)
     runs = [
-        {"size": 9, "lam": LAM, "delay_estimates": [LAM + e], "condition": f"i={e}", "error": e}
+        {"size": SIZE, "lam": LAM, "delay_estimates": [LAM + e], "condition": f"i={e}", "error": e}
         for e in errors
     ]
     return grid_tasks(config, steps, runs)
@@ -93,7 +104,7 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
             errors,
             means,
             cis,
-            f"9×9, Poisson delays of mean λ = {LAM}: fixed-delay Q-learning assuming λ̂ = λ + i "
+            f"{SIZE}×{SIZE}, Poisson delays of mean λ = {LAM}: fixed-delay Q-learning assuming λ̂ = λ + i "
             "(Fig. 5.6)\nthesis: a Poisson-like peak at i = 0, far lower at both ends",
             "estimate error i = λ̂ − λ",
             "normalised average reward (Eq. 5.3)",
@@ -108,9 +119,10 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
 EXPERIMENT = Experiment(
     name="estimate-error",
     thesis="Fig. 5.6",
-    description="31 fixed-delay Q-learners assume a constant delay λ̂ = λ + i (i ∈ [−15, 15]) on "
-    "the 9×9 grid world with Poisson(17) delays, 150k steps each; normalised by undelayed "
-    "Q-learning on the same seed (Eq. 5.3).",
+    description=f"{2 * MAX_ERROR + 1} fixed-delay Q-learners assume a constant delay "
+    f"λ̂ = λ + i (i ∈ [−{MAX_ERROR}, {MAX_ERROR}]) on the {SIZE}×{SIZE} grid world with "
+    f"Poisson({LAM}) delays, {step_count(STEPS)} steps each; normalised by undelayed Q-learning "
+    "on the same seed (Eq. 5.3).",
     tasks=tasks,
     run_task=grid_task,
     summarize=summarize,

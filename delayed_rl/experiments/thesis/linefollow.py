@@ -1,30 +1,11 @@
-"""``linefollow`` (thesis Figs. 5.20–5.23): Q-learning vs MMQ on the e-puck line follower, λ = 90.
-
-The thesis's setting (section 5.2.4): ``delayed_rl/EPuckLineFollow-v0`` on the ``racetrack``
-with the discrete Table 5.2 actions (|A| = 7) and the centroid state of Eq. 5.6 (|S| = 41, with
-0 for "line not seen"), a Poisson(90) reward delay, 150k training steps, 5 runs; MMQ considers
-λ̂ ∈ {0, 1, ..., 150} (λ̂max = 150). The thesis's experimenters put the robot back on the track
-by hand when it was lost; here ``lost_line="recover"`` does that (after 50 line-less steps), and
-``max_steps=None`` makes the task continuing, as in the thesis.
+"""``linefollow`` (thesis Figs. 5.20–5.23): Q-learning against MMQ on the e-puck line follower.
 
 The setting, the learners, the training run (which ``linefollow-deconv``, ``controllers`` and
 ``real-robot`` pool with this experiment's) and the metrics are the framework's
 (:mod:`~delayed_rl.experiments.framework.line_following`); the thesis's values and their bands
-too (:mod:`~delayed_rl.experiments.framework.line_claims`).
-
-Hyper-parameters are the thesis's Algorithm 1 values, as in the grid-world experiments:
-α = 0.1, γ = 0.9, constant ε = 0.1, and an optimistic ``q_init`` = 10 = 1 / (1 − γ), the largest
-discounted return when every reward is at most 1 (the thesis does not print its values for
-the e-puck).
-
-Metrics come from the undelayed streams of ``training_log`` (``learn(..., record=True)``):
-
-- average reward during learning: the running mean of the undelayed reward (Figs. 5.20, 5.22);
-- accumulated error: Σ_t |Δ_t| with Δ_t = m_t − 20 for the centroid m_t of the state the agent
-  acts in at step t (Figs. 5.21, 5.23). When the line is not seen (m_t = 0) the step counts
-  |Δ| = 20, the largest offset a visible line can have (m = 40), so losing the line is never
-  cheaper than seeing it at the camera's edge. Observations are not delayed, so ``obs`` is the
-  undelayed observation stream.
+too (:mod:`~delayed_rl.experiments.framework.line_claims`). The numbers are the constants
+``EXPERIMENT.description`` is formatted from (:data:`STEPS`, and the framework's); the claims
+are in :func:`summarize`.
 """
 
 from __future__ import annotations
@@ -35,9 +16,9 @@ from delayed_rl.experiments.framework.experiment import (
     Config,
     Curve,
     Experiment,
-    SharedRun,
     Summary,
     seed_tasks,
+    step_count,
 )
 from delayed_rl.experiments.framework.line_claims import (
     REWARD_TOLERANCE,
@@ -47,48 +28,36 @@ from delayed_rl.experiments.framework.line_claims import (
     thesis_reward_lines,
 )
 from delayed_rl.experiments.framework.line_following import (
+    CENTRE,
     LAM,
     LAMBDA_MAX,
+    LOST_LINE_STEPS,
     Q_INIT,
     TRACK,
     UNSEEN_ERROR,
     line_statistics,
-    logged_run,
-    training_cost,
+    logged_task_cost,
+    logged_task_run,
+    run_logged_task,
 )
 from delayed_rl.experiments.framework.results import pivot
-from delayed_rl.experiments.framework.training import ALPHA, EPSILON, GAMMA
+from delayed_rl.experiments.framework.training import (
+    ALPHA,
+    EPSILON,
+    GAMMA,
+    hyperparameter_text,
+)
 
 #: The learners compared.
 LEARNERS = ("MMQ", "Q")
+#: The steps of a run (the thesis's), and of a quick run.
+STEPS, QUICK_STEPS = 150_000, 3_000
 
 
 def tasks(config: Config) -> list[dict]:
-    """Per seed: one Q-learning and one MMQ run, 150k steps each (3k with ``config.quick``)."""
-    steps = config.steps or (3_000 if config.quick else 150_000)
+    """Per seed: one Q-learning and one MMQ run, :data:`STEPS` each (:data:`QUICK_STEPS` quick)."""
+    steps = config.run_steps(STEPS, QUICK_STEPS)
     return seed_tasks(config, LEARNERS, steps=steps)
-
-
-def run_task(task: dict) -> dict:
-    """Train one learner on the line follower and measure the run (its :func:`shared_run`).
-
-    Returns:
-        :func:`~.line_following.run_metrics`' (``steps``, ``curve``, ``error``, ``average``,
-        ``total_error``, ``visible``), ``ns_per_step`` (``learn``'s wall time over the steps), ``path``
-        (``learn``'s) and the agent's delay estimate, if it holds one
-        (:func:`~.delay_estimates.delay_estimate`).
-    """
-    return shared_run(task).alone()
-
-
-def shared_run(task: dict) -> SharedRun:
-    """The task's training run, pooled with the other e-puck experiments' (:func:`~.logged_run`)."""
-    return logged_run(task["agent"], task["seed"], task["steps"])
-
-
-def cost(task: dict) -> float:
-    """A task's estimated core-seconds, for scheduling (:func:`~.line_following.training_cost`)."""
-    return training_cost(task["agent"], task["steps"])
 
 
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
@@ -186,15 +155,16 @@ def _figures(runs: dict[str, dict[int, dict]], seeds: int) -> dict:
 EXPERIMENT = Experiment(
     name="linefollow",
     thesis="Figs. 5.20–5.23",
-    description="Q-learning against MMQ (λ̂max = 150) on the e-puck line follower (racetrack, "
-    "discrete Table 5.2 actions, centroid states, put back on the track after 50 line-less "
-    "steps) with Poisson(90) reward delays, 150k steps per run; α = 0.1, γ = 0.9, ε = 0.1, "
-    "q_init = 10. Average reward from the undelayed reward stream; accumulated error Σ|Δ|, "
-    "Δ = m − 20, with an unseen line counted as |Δ| = 20.",
+    description=f"Q-learning against MMQ (λ̂max = {LAMBDA_MAX}) on the e-puck line follower "
+    f"({TRACK}, discrete Table 5.2 actions, centroid states, put back on the track after "
+    f"{LOST_LINE_STEPS} line-less steps) with Poisson({LAM}) reward delays, "
+    f"{step_count(STEPS)} steps per run; {hyperparameter_text(Q_INIT)}. Average reward from the "
+    f"undelayed reward stream; accumulated error Σ|Δ|, Δ = m − {CENTRE}, with an unseen line "
+    f"counted as |Δ| = {UNSEEN_ERROR}.",
     tasks=tasks,
-    run_task=run_task,
+    run_task=run_logged_task,
     summarize=summarize,
     default_seeds=5,
-    shared_run=shared_run,
-    cost=cost,
+    shared_run=logged_task_run,
+    cost=logged_task_cost,
 )

@@ -1,27 +1,10 @@
-"""``mmq-gridworld`` (thesis Figs. 5.9–5.15, Table 5.1): MMQ vs Q-learning on 9×9, λ = 13.
+"""``mmq-gridworld`` (thesis Figs. 5.9–5.15, Table 5.1): MMQ against Q-learning on a grid world.
 
-Three agents per seed (20 seeds): MMQ (Λ = {0..50}) and Q-learning under Poisson(13) reward
-delays, and undelayed Q-learning, 1M steps each with the thesis's hyper-parameters
-(:mod:`~delayed_rl.experiments.framework.training`). Each run learns in ``SNAPSHOTS`` pieces
-(:func:`~.snapshot_runs.train_with_snapshots`, which trains exactly as one ``learn`` call) and
-after each piece records whether the greedy policy is optimal (its 1000-step walk scores
-``LOOP_FRACTION`` of the optimal 17-step loop). The greedy policy of a learner under delays can
-keep flipping between the optimal loop and another route, so the final greedy policy is one
-draw of that: the report gives both the count of seeds whose final greedy policy is optimal
-(k of n) and, per seed, the share of second-half snapshots that are optimal.
-
-Claims (verdicts by :mod:`~.framework.claims`' rules; each row's ``criterion`` states its own):
-
-- MMQ's greedy average reward against the thesis's 0.59 ± 0.06; Q's against 0 ± 0.1;
-- MMQ's seeds whose final greedy policy is optimal, and MMQ's second-half snapshot share: more
-  than half ([0.5, 1]; the thesis's "near-optimal"); Q's: less than half ([0, 0.5]);
-- MMQ minus Q average reward during learning, paired by seed: above 0 (Fig. 5.9); Q's average
-  reward during learning against 0 ± 0.1;
-- Table 5.1: the mean over λ̂ of Q along the greedy route above twice the true ≈ 2.2 (the
-  thesis's ≈ 21.4 is inflated by the max over models; its size follows ``q_init``), and the
-  spread across λ̂ (std / mean) below 0.1 (the thesis's ≈ 0.04: the models agree);
-- ``reference`` rows: MMQ's average reward during learning, and undelayed Q-learning's greedy
-  and training rewards and snapshot share.
+MMQ and Q-learning under Poisson reward delays, and undelayed Q-learning, with the thesis's
+hyper-parameters (:mod:`~delayed_rl.experiments.framework.training`); each run records at
+snapshots whether its greedy policy is optimal. The numbers are the constants
+``EXPERIMENT.description`` is formatted from (:data:`SIZE`, :data:`LAM`, :data:`STEPS`, ...);
+what each run records is :func:`run_task`'s, the claims :func:`summarize`'s.
 """
 
 from __future__ import annotations
@@ -51,11 +34,13 @@ from delayed_rl.experiments.framework.experiment import (
     Experiment,
     Summary,
     running_average,
+    step_count,
 )
 from delayed_rl.experiments.framework.results import pivot
 from delayed_rl.experiments.framework.snapshot_runs import (
     LOOP_FRACTION,
     SNAPSHOTS,
+    WALK_STEPS,
     optimal_average,
     second_half_share,
     train_with_snapshots,
@@ -67,7 +52,12 @@ from delayed_rl.experiments.framework.training import (
     thesis_hyperparameters,
 )
 
+#: The grid world's side, the Poisson mean delay λ and MMQ's largest delay estimate λ̂max.
 SIZE, LAM, LAMBDA_MAX = 9, 13, 50
+#: The steps of a run, and of a quick run.
+STEPS, QUICK_STEPS = 1_000_000, 100_000
+#: The steps of the optimal loop: to the reward cell and back, +1.
+LOOP_STEPS = 2 * (SIZE - 1) + 1
 #: The bands of the claims: MMQ's greedy reward 0.59 ± this, "≈ 0" rewards 0 ± ``NEAR_ZERO``.
 GREEDY_TOLERANCE, NEAR_ZERO = 0.06, 0.1
 #: The true value of Q along the route (V* ≈ 2.2 on 9×9) and the spread Table 5.1 shows.
@@ -79,11 +69,11 @@ THESIS_ROUTE_Q = 21.4
 
 
 def tasks(config: Config) -> list[dict]:
-    """Per seed: MMQ (Λ = {0..50}) and Q-learning under Poisson(13) delays, and undelayed Q.
+    """Per seed: MMQ (Λ = {0..λ̂max}) and Q-learning under Poisson(λ) delays, and undelayed Q.
 
-    1M steps a run (100k with ``config.quick``).
+    :data:`STEPS` a run (:data:`QUICK_STEPS` with ``config.quick``).
     """
-    steps = config.steps or (100_000 if config.quick else 1_000_000)
+    steps = config.run_steps(STEPS, QUICK_STEPS)
     estimates = {"MMQ": list(range(LAMBDA_MAX + 1)), "Q": [0], "Q undelayed": [0]}
     return [
         {
@@ -135,8 +125,14 @@ def behaviour_policy(q: np.ndarray, epsilon: float = EPSILON) -> np.ndarray:
 def run_task(task: dict) -> dict:
     """Train one agent, then read off its curve, greedy score, visits, policies and Table 5.1 rows.
 
-    The agent learns in :data:`SNAPSHOTS` pieces
-    (:func:`~.snapshot_runs.train_with_snapshots`), as one run.
+    The agent learns in :data:`~.snapshot_runs.SNAPSHOTS` pieces
+    (:func:`~.snapshot_runs.train_with_snapshots`, which trains exactly as one ``learn`` call)
+    and after each piece records whether the greedy policy is optimal (its walk scores
+    :data:`~.snapshot_runs.LOOP_FRACTION` of the optimal loop). The greedy policy of a learner
+    under delays can keep flipping between the optimal loop and another route, so the final
+    greedy policy is one draw of that: the report gives both the count of seeds whose final
+    greedy policy is optimal (k of n) and, per seed, the share of second-half snapshots that
+    are optimal.
 
     Returns:
         ``steps`` and ``curve`` (the running average reward), ``average`` (over the run),
@@ -161,7 +157,7 @@ def run_task(task: dict) -> dict:
         (s, int(policy[s]), float(q[s, :, policy[s]].mean()), float(q[s, :, policy[s]].var()))
         for s in _greedy_route(policy)
     ]
-    greedy = greedy_average_reward(agent, SIZE, 1000)
+    greedy = greedy_average_reward(agent, SIZE, WALK_STEPS)
     return {
         "steps": steps,
         "curve": curve,
@@ -183,13 +179,30 @@ def run_task(task: dict) -> dict:
 
 #: The quantity of the second-half snapshot rows, and the note of the seed-count rows.
 _LATE = "share of second-half greedy snapshots optimal"
-_LOOP = f"optimal: a 1000-step greedy walk ≥ {LOOP_FRACTION} of the 17-step loop"
+_LOOP = f"optimal: a {WALK_STEPS}-step greedy walk ≥ {LOOP_FRACTION} of the {LOOP_STEPS}-step loop"
 #: The note of the second-half snapshot rows.
 _PER_SEED = "per seed, the share of its snapshots after half the steps"
 
 
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
-    """Fig. 5.9's and Table 5.1's claims (see the module docstring), curves and figures."""
+    """Fig. 5.9's and Table 5.1's claims, curves and figures.
+
+    The claims (verdicts by :mod:`~.framework.claims`' rules; each row's ``criterion`` states
+    its own):
+
+    - MMQ's greedy average reward against the thesis's (:data:`THESIS_GREEDY`)
+      ± :data:`GREEDY_TOLERANCE`; Q's against 0 ± :data:`NEAR_ZERO`;
+    - MMQ's seeds whose final greedy policy is optimal, and MMQ's second-half snapshot share:
+      more than half ([0.5, 1]; the thesis's "near-optimal"); Q's: less than half ([0, 0.5]);
+    - MMQ minus Q average reward during learning, paired by seed: above 0 (Fig. 5.9); Q's
+      average reward during learning against 0 ± :data:`NEAR_ZERO`;
+    - Table 5.1: the mean over λ̂ of Q along the greedy route above twice the true value
+      (:data:`TRUE_ROUTE_Q`; the thesis's :data:`THESIS_ROUTE_Q` is inflated by the max over
+      models; its size follows ``q_init``), and the spread across λ̂ (std / mean) below
+      :data:`SPREAD_LIMIT` (the thesis's ≈ 0.04: the models agree);
+    - ``reference`` rows: MMQ's average reward during learning, and undelayed Q-learning's
+      greedy and training rewards and snapshot share.
+    """
     by_agent = {
         agent: list(runs.values())
         for agent, runs in pivot(task_list, results, by=("agent",)).items()
@@ -234,7 +247,7 @@ def _greedy_claims(stat: dict, optimal_seeds: dict, seeds: dict[str, int]) -> li
     """
     return [
         band_claim(
-            "MMQ greedy average reward (1000 steps)",
+            f"MMQ greedy average reward ({WALK_STEPS} steps)",
             "0.59 (near-optimal; optimum 0.588)",
             stat["MMQ"]["greedy"],
             THESIS_GREEDY["MMQ"],
@@ -257,7 +270,7 @@ def _greedy_claims(stat: dict, optimal_seeds: dict, seeds: dict[str, int]) -> li
             note=_PER_SEED,
         ),
         band_claim(
-            "Q greedy average reward (1000 steps)",
+            f"Q greedy average reward ({WALK_STEPS} steps)",
             "0.00 (loops in the centre)",
             stat["Q"]["greedy"],
             THESIS_GREEDY["Q"],
@@ -308,7 +321,7 @@ def _undelayed_rows(stat: dict, optimal_seeds: dict, seeds: int) -> list[Claim]:
     return [
         reference_row("undelayed Q average reward during learning", undelayed["average"]),
         reference_row(
-            "undelayed Q greedy average reward (1000 steps)",
+            f"undelayed Q greedy average reward ({WALK_STEPS} steps)",
             undelayed["greedy"],
             note=f"{optimal_seeds['Q undelayed']} of {seeds} seeds optimal at the end",
         ),
@@ -481,9 +494,10 @@ def _setting_of(agent: str) -> str:
 EXPERIMENT = Experiment(
     name="mmq-gridworld",
     thesis="Figs. 5.9–5.15, Table 5.1",
-    description="Multiple Model Q-learning (Λ = {0..50}) against Q-learning on the 9×9 grid world "
-    "with Poisson(13) reward delays (and undelayed Q-learning), 1M steps; greedy evaluation over "
-    "1000 steps, at the end and at 50 snapshots during learning (optimal: ≥ 0.95 of the 17-step "
+    description=f"Multiple Model Q-learning (Λ = {{0..{LAMBDA_MAX}}}) against Q-learning on the "
+    f"{SIZE}×{SIZE} grid world with Poisson({LAM}) reward delays (and undelayed Q-learning), "
+    f"{step_count(STEPS)} steps; greedy evaluation over {WALK_STEPS} steps, at the end and at "
+    f"{SNAPSHOTS} snapshots during learning (optimal: ≥ {LOOP_FRACTION} of the {LOOP_STEPS}-step "
     "loop); Table 5.1's mean and variance of Q across λ̂ along the greedy route (summary.json).",
     tasks=tasks,
     run_task=run_task,

@@ -1,62 +1,12 @@
 """``real-robot`` (thesis section 5.3, Figs. 5.24–5.27): simulation-trained agents on a stand-in robot.
 
-The thesis's protocol: MMQ (Λ = {0, ..., 150}) and Q-learning are trained in simulation for
-500,000 steps with Poisson(90) reward delays, then put on a paper print of the racetrack with
-a real e-puck for 1,500 steps, learning on (two runs, Figs. 5.24–5.27). Here the "real robot"
-is ``delayed_rl/EPuckLineFollowReal-v0``
-(:class:`~delayed_rl.envs.linefollow.env.EPuckLineFollowEnv`, whose docstring gives every value
-and its source): 200 ms steps instead of the simulation's 64 ms, 0.1 s of command-link
-latency, wheel slip on paper, motor lag, camera noise and a grey printed line.
-
-Per seed and agent, one task:
-
-1. pretraining: ``linefollow``'s setting (:mod:`~delayed_rl.experiments.framework.line_following`):
-   the clean simulation on the racetrack, discrete Table 5.2 actions, centroid states, put back
-   on the track after 50 line-less steps, Poisson(90) reward delays, α = 0.1, γ = 0.9, constant
-   ε = 0.1, ``q_init`` = 10; 500k steps;
-2. the **real** run: a copy of the pretrained agent (``copy.deepcopy``) moved to the real
-   configuration (``set_env``), same Poisson(90) delay, learning on for 1,500 steps
-   (``learn(1500, reset_num_timesteps=False)``);
-3. the **control** run: another copy of the same pretrained agent, 1,500 steps on a fresh clean
-   simulation: the same protocol with no reality gap (the thesis's Fig. 5.19 runs pretrained
-   agents this way in simulation). Control minus real is what the gap costs; the control
-   against ``linefollow`` is what the delay costs.
-
-Both continuations start from the same agent state and the same env seed (the first reset
-after ``set_env`` uses the agent's seed), so their difference is paired by seed. (The control
-runs on the compiled path; the stand-in's command latency keeps the real run on the Python
-path, so their agents' random draws differ.) Agents: ``MMQ``, ``Q`` and, beyond the thesis,
-``DeconvQ learned`` (learning the delay on 0..150, as in ``linefollow-deconv``). Default 4
-seeds (the thesis's two runs are seeds ``base_seed`` and ``base_seed + 1``, drawn alone in the
-figures' first panels; all four give the 95 % CIs, with 3 degrees of freedom, a choice made
-when a seed cost minutes of pretraining; ``--seeds`` takes more); ``--steps`` sets the
-pretraining steps. ``--quick``: 2
-seeds, 5k pretraining steps, 300 steps per continuation.
-
-Metrics of each 1,500-step continuation, from its own ``training_log``: the average reward (the
-running mean of the undelayed reward, Figs. 5.24, 5.26) and the accumulated error Σ|Δ| (an
-unseen line counted as |Δ| = 20, :func:`~.line_following.line_error`; Figs. 5.25, 5.27).
-
-Claims, verdicts from the 95 % CIs over seeds (:mod:`~.framework.claims`' rules):
-
-- on the real configuration, MMQ's average reward against the thesis's ≈ 0.2 (run 1 just
-  over, run 2 just under) and Q's against ≈ −0.25 (−0.2 and just under −0.3), each
-  ± :data:`~.line_claims.REWARD_TOLERANCE`; MMQ above Q (paired by seed);
-- Q's accumulated error over MMQ's (paired by seed) against the thesis's 1.55–1.7 (run 2,
-  run 1), widened by :data:`ERROR_RATIO_TOLERANCE`;
-- the control runs' average rewards against Fig. 5.19's pretrained agents in simulation (MMQ
-  just over 0.6, Q ≈ 0.3), ± the same tolerance;
-- the gap's cost, control minus real average reward (paired by seed), above 0 for MMQ and for
-  Q (the thesis: both "performed worse in experiment than they did in simulation");
-- DeconvQ learned minus Q on the real configuration, above 0 (an extension), and DeconvQ's
-  average reward there as a reference row.
-
-Cost: pretraining dominates; it runs on the compiled path, the continuations on the real
-configuration on the Python path (its command latency does not compile);
-``benchmarks/SPEED.md`` has their cost, ``summary.json`` each pretraining's wall time
-(``pretrain_seconds``). The pretraining is :func:`~.line_following.training_run`'s, whose
-first steps are ``linefollow``'s, ``linefollow-deconv``'s and ``controllers``' training of the
-same learner and seed: run together (``delayed-rl reproduce``), each trains once.
+The thesis trained MMQ and Q-learning in simulation, then let them learn on with a real e-puck
+on a paper print of the racetrack. Here the "real robot" is ``delayed_rl/EPuckLineFollowReal-v0``
+(:data:`~delayed_rl.envs.linefollow.env.REAL_ROBOT`, whose class docstring gives every value and
+its source), and a control run continues the same agent in the clean simulation. The protocol
+is :func:`tasks`', the numbers the constants ``EXPERIMENT.description`` is formatted from
+(:data:`PRETRAIN_STEPS`, :data:`RUN_STEPS`, and the framework's); the claims are in
+:func:`summarize`.
 """
 
 from __future__ import annotations
@@ -67,6 +17,7 @@ import numpy as np
 
 from delayed_rl import figures
 from delayed_rl._validation import check_choice
+from delayed_rl.envs.linefollow.env import REAL_ROBOT
 from delayed_rl.experiments.framework import plotting
 from delayed_rl.experiments.framework.claims import (
     band_claim,
@@ -84,24 +35,30 @@ from delayed_rl.experiments.framework.experiment import (
     SharedRun,
     Summary,
     seed_tasks,
+    step_count,
 )
 from delayed_rl.experiments.framework.line_claims import REWARD_TOLERANCE
 from delayed_rl.experiments.framework.line_following import (
     LAM,
     LAMBDA_MAX,
+    Q_INIT,
     REAL_ENV_ID,
+    TRACK,
     UNSEEN_ERROR,
     pooled_training,
     training_cost,
 )
 from delayed_rl.experiments.framework.results import pivot
+from delayed_rl.experiments.framework.training import hyperparameter_text
 
 #: The learners compared.
 LEARNERS = ("MMQ", "Q", "DeconvQ learned")
 CONDITIONS = ("real", "control")
 #: The env each condition continues on (a key of :data:`~.line_following.SETTINGS`).
 SETTING = {"real": "real", "control": "clean"}
+#: The steps of the pretraining in simulation (``--steps``), and of a quick run's.
 PRETRAIN_STEPS, QUICK_PRETRAIN_STEPS = 500_000, 5_000
+#: The steps of each continuation (the thesis's robot runs), and of a quick run's.
 RUN_STEPS, QUICK_RUN_STEPS = 1_500, 300
 #: Thesis section 5.3: average reward of each agent in each of the two robot runs.
 THESIS_RUNS = {"run 1": {"MMQ": 0.2, "Q": -0.2}, "run 2": {"MMQ": 0.2, "Q": -0.3}}
@@ -117,8 +74,37 @@ _COLOURS = {"MMQ": "C0", "Q": "C1", "DeconvQ learned": "C2"}
 
 
 def tasks(config: Config) -> list[dict]:
-    """Per seed, one task per agent: pretraining, then the real and the control runs."""
-    pretrain = config.steps or (QUICK_PRETRAIN_STEPS if config.quick else PRETRAIN_STEPS)
+    """Per seed, one task per agent: pretraining, then the real and the control runs.
+
+    1. pretraining: ``linefollow``'s setting
+       (:mod:`~delayed_rl.experiments.framework.line_following`) in the clean simulation, for
+       :data:`PRETRAIN_STEPS`;
+    2. the **real** run: a copy of the pretrained agent (``copy.deepcopy``) moved to the real
+       configuration (``set_env``), same reward delay, learning on for :data:`RUN_STEPS`
+       (``learn(RUN_STEPS, reset_num_timesteps=False)``);
+    3. the **control** run: another copy of the same pretrained agent, as many steps on a fresh
+       clean simulation: the same protocol with no reality gap (the thesis's Fig. 5.19 runs
+       pretrained agents this way in simulation). Control minus real is what the gap costs;
+       the control against ``linefollow`` is what the delay costs.
+
+    Both continuations start from the same agent state and the same env seed (the first reset
+    after ``set_env`` uses the agent's seed), so their difference is paired by seed. (The control
+    runs on the compiled path; the stand-in's command latency keeps the real run on the Python
+    path, so their agents' random draws differ.) Agents: :data:`LEARNERS`, ``DeconvQ learned``
+    beyond the thesis (learning the delay on 0..λ̂max, as in ``linefollow-deconv``). The
+    default 4 seeds: the thesis's two runs are seeds ``base_seed`` and ``base_seed + 1``, drawn
+    alone in the figures' first panels; all four give the 95 % CIs, with 3 degrees of freedom, a
+    choice made when a seed cost minutes of pretraining. ``config.quick`` takes
+    :data:`QUICK_PRETRAIN_STEPS` and :data:`QUICK_RUN_STEPS`.
+
+    Cost: pretraining dominates; it runs on the compiled path, the continuations on the real
+    configuration on the Python path; ``benchmarks/SPEED.md`` has their cost, ``summary.json``
+    each pretraining's wall time (``pretrain_seconds``). The pretraining is
+    :func:`~.line_following.training_run`'s, whose first steps are ``linefollow``'s,
+    ``linefollow-deconv``'s and ``controllers``' training of the same learner and seed: run
+    together (``delayed-rl reproduce``), each trains once.
+    """
+    pretrain = config.run_steps(PRETRAIN_STEPS, QUICK_PRETRAIN_STEPS)
     run = QUICK_RUN_STEPS if config.quick else RUN_STEPS
     return seed_tasks(config, LEARNERS, pretrain_steps=pretrain, steps=run)
 
@@ -168,7 +154,25 @@ def _by_seed(runs: dict, agent: str, condition: str, key: str) -> dict[int, floa
 
 
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
-    """The claims of the module docstring, statistics in ``extra``, and the figures."""
+    """The claims, statistics in ``extra``, and the figures.
+
+    The metrics of each continuation come from its own ``training_log``
+    (:func:`~.line_following.run_metrics`): the average reward (Figs. 5.24, 5.26) and the
+    accumulated error Σ|Δ| (Figs. 5.25, 5.27). The claims, verdicts from the 95 % CIs over seeds
+    (:mod:`~.framework.claims`' rules):
+
+    - on the real configuration, MMQ's and Q's average rewards against the thesis's
+      (:data:`THESIS_REAL`, the mean of :data:`THESIS_RUNS`), each
+      ± :data:`~.line_claims.REWARD_TOLERANCE`; MMQ above Q (paired by seed);
+    - Q's accumulated error over MMQ's (paired by seed) against the thesis's range
+      (:data:`THESIS_ERROR_RATIOS`), widened by :data:`ERROR_RATIO_TOLERANCE`;
+    - the control runs' average rewards against Fig. 5.19's pretrained agents in simulation
+      (:data:`THESIS_SIM`), ± the same tolerance;
+    - the gap's cost, control minus real average reward (paired by seed), above 0 for MMQ and
+      for Q (the thesis: both "performed worse in experiment than they did in simulation");
+    - DeconvQ learned minus Q on the real configuration, above 0 (an extension), and DeconvQ's
+      average reward there as a reference row.
+    """
     by_agent = pivot(task_list, results, by=("agent",))
     runs = {agent: by_agent.get(agent, {}) for agent in LEARNERS}
     curves = []
@@ -459,14 +463,16 @@ def thesis_panels(path: Any, panels: list, title: str, ylabel: str, lines: str) 
 EXPERIMENT = Experiment(
     name="real-robot",
     thesis="section 5.3, Figs. 5.24–5.27",
-    description="MMQ (λ̂max = 150), Q-learning and DeconvQ learned, pretrained in the clean "
-    "e-puck simulation (linefollow's setting: racetrack, Poisson(90) reward delays, "
-    "α = 0.1, γ = 0.9, ε = 0.1, q_init = 10) for 500k steps (--steps), then 1,500 steps "
-    "learning on the stand-in real robot (EPuckLineFollowReal-v0: 200 ms steps, 0.1 s command "
-    "latency, wheel slip, motor lag, camera noise, grey line) and, as a control, on the clean "
-    "simulation; both continuations copy one pretrained agent. Average reward and accumulated "
-    "error Σ|Δ| of each continuation, paired by seed. --quick: 5k pretraining steps, 300 per "
-    "continuation; --steps sets the pretraining steps.",
+    description=f"MMQ (λ̂max = {LAMBDA_MAX}), Q-learning and DeconvQ learned, pretrained in "
+    f"the clean e-puck simulation (linefollow's setting: {TRACK}, Poisson({LAM}) reward delays, "
+    f"{hyperparameter_text(Q_INIT)}) for {step_count(PRETRAIN_STEPS)} steps (--steps), then "
+    f"{step_count(RUN_STEPS)} steps learning on the stand-in real robot (EPuckLineFollowReal-v0: "
+    f"{REAL_ROBOT['control_period'] * 1000:g} ms steps, {REAL_ROBOT['command_latency']:g} s "
+    "command latency, wheel slip, motor lag, camera noise, grey line) and, as a control, on the "
+    "clean simulation; both continuations copy one pretrained agent. Average reward and "
+    "accumulated error Σ|Δ| of each continuation, paired by seed. --quick: "
+    f"{step_count(QUICK_PRETRAIN_STEPS)} pretraining steps, {QUICK_RUN_STEPS} per continuation; "
+    "--steps sets the pretraining steps.",
     tasks=tasks,
     run_task=run_task,
     summarize=summarize,

@@ -1,14 +1,9 @@
 """``roulette`` (thesis section 3.2, Tables 3.2–3.5): MMQ's credit assignment traced by hand.
 
 A demonstration rather than a statistical experiment: the three rounds of the thesis's worked
-example are fed to :class:`~delayed_rl.agents.MultipleModelQLearning` through its public
-``update()`` (q_init = 50, α = 0.1, γ = 0.9, λ̂max = 2), and the Q-table after each round is
-compared with the thesis's tables, to the two decimals the thesis prints.
-
-The walk-through is deterministic (no random draw enters ``update()``), so each Q-value is one
-exact number: its CI is 0 with n = 1, and the verdict is the band rule on the thesis's printed
-value ± ``ROUNDING`` (half its last decimal): ``agrees`` when the value rounds to the thesis's,
-``differs`` otherwise, never ``inconclusive``.
+example (:data:`ROUNDS`) are fed to :class:`~delayed_rl.agents.MultipleModelQLearning` through
+its public ``update()``, and the Q-table after each round is compared with the thesis's tables
+(:data:`THESIS_TABLES`); the rule of the verdicts is :func:`summarize`'s.
 """
 
 from __future__ import annotations
@@ -18,16 +13,20 @@ import numpy as np
 from delayed_rl.experiments.framework import plotting
 from delayed_rl.experiments.framework.claims import band_claim
 from delayed_rl.experiments.framework.experiment import Config, Curve, Experiment, Summary
+from delayed_rl.experiments.framework.training import ALPHA, GAMMA
 
 EVEN, THIRTEEN = 0, 1
+#: The worked example's MMQ: its optimistic initial value and largest delay estimate λ̂max
+#: (α and γ are the thesis's, :mod:`~delayed_rl.experiments.framework.training`).
+Q_INIT, LAMBDA_MAX = 50.0, 2
 ROUNDING = 0.005
 """Half the last decimal the thesis prints: the band of each Q-value."""
 #: The wagers: (action, name in the report).
 WAGERS = ((EVEN, "even"), (THIRTEEN, "13"))
-# (wager, payout received that round): round 1 bets even (its loss arrives 2 rounds later), round
-# 2 bets 13 and wins 35 at once, round 3 bets even and receives round 1's −1.
+#: (wager, payout received that round): round 1 bets even (its loss arrives 2 rounds later), round
+#: 2 bets 13 and wins 35 at once, round 3 bets even and receives round 1's −1.
 ROUNDS = ((EVEN, 0.0), (THIRTEEN, 35.0), (EVEN, -1.0))
-# Thesis Tables 3.3–3.5, as Q[λ̂][a] with a = (even, 13).
+#: Thesis Tables 3.3–3.5, as Q[λ̂][a] with a = (even, 13).
 THESIS_TABLES = (
     ((49.50, 50.00), (50.00, 50.00), (50.00, 50.00)),
     ((49.50, 53.00), (53.00, 50.00), (50.00, 50.00)),
@@ -50,10 +49,10 @@ def run_task(task: dict) -> dict:
 
     agent = MultipleModelQLearning(
         "delayed_rl/Roulette-v0",
-        learning_rate=0.1,
-        gamma=0.9,
-        q_init=50.0,
-        max_delay_estimate=2,
+        learning_rate=ALPHA,
+        gamma=GAMMA,
+        q_init=Q_INIT,
+        max_delay_estimate=LAMBDA_MAX,
         seed=task["seed"],
     )
     tables = []
@@ -64,7 +63,13 @@ def run_task(task: dict) -> dict:
 
 
 def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
-    """One claim per Q-value of Tables 3.3–3.5: the thesis's value ± ``ROUNDING``."""
+    """One claim per Q-value of Tables 3.3–3.5: the thesis's value ± :data:`ROUNDING`.
+
+    The walk-through is deterministic (no random draw enters ``update()``), so each Q-value is one
+    exact number: its CI is 0 with n = 1, and the verdict is the band rule on the thesis's printed
+    value ± :data:`ROUNDING` (half its last decimal): ``agrees`` when the value rounds to the
+    thesis's, ``differs`` otherwise, never ``inconclusive``.
+    """
     measured = results[0]["tables"]
     entries = [(lam_hat, action, name) for lam_hat in range(3) for action, name in WAGERS]
     claims = [
@@ -108,9 +113,9 @@ EXPERIMENT = Experiment(
     name="roulette",
     thesis="Tables 3.2–3.5",
     description="The thesis's Roulette walk-through: three wagers with delayed, overlapping "
-    "payouts, credited by MMQ (q_init = 50, α = 0.1, γ = 0.9, λ̂max = 2) through update(). "
-    "Deterministic: each Q-value is one exact number (CI 0, n = 1), tested against the thesis's "
-    "printed value ± 0.005.",
+    f"payouts, credited by MMQ (q_init = {Q_INIT:g}, α = {ALPHA}, γ = {GAMMA}, "
+    f"λ̂max = {LAMBDA_MAX}) through update(). Deterministic: each Q-value is one exact number "
+    f"(CI 0, n = 1), tested against the thesis's printed value ± {ROUNDING}.",
     tasks=tasks,
     run_task=run_task,
     summarize=summarize,

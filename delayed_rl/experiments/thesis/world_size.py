@@ -1,4 +1,7 @@
-"""``world-size`` (thesis Figs. 5.3–5.5): Q-learning on 3×3, 5×5 and 9×9 grids, λ ∈ {5, 50, 150}."""
+"""``world-size`` (thesis Figs. 5.3–5.5): Q-learning on grid worlds of three sizes under delays.
+
+The settings are :data:`SIZES` and :data:`LAMS`; the claims are in :func:`summarize`.
+"""
 
 from __future__ import annotations
 
@@ -21,8 +24,12 @@ from delayed_rl.experiments.framework.normalised_runs import (
 )
 from delayed_rl.experiments.framework.results import pivot
 
+#: The grid worlds' sides.
 SIZES = (3, 5, 9)
-LAMS = (5, 50, 150)
+#: The Poisson mean delays λ, and a quick run's.
+LAMS, QUICK_LAMS = (5, 50, 150), (5, 50)
+#: The steps of a run, and of a quick run.
+STEPS, QUICK_STEPS = 250_000, 25_000
 #: The thesis's 9×9 normalised reward ("fell to 0 %", Figs. 5.3–5.5).
 THESIS_9X9 = 0.0
 NEAR_ZERO = 0.1
@@ -32,10 +39,11 @@ NEAR_ZERO = 0.1
 def tasks(config: Config) -> list[dict]:
     """Per seed and world size: undelayed Q-learning, then Q-learning under each mean delay λ.
 
-    250k steps a run (25k with ``config.quick``, which also leaves out λ = 150).
+    :data:`STEPS` a run (:data:`QUICK_STEPS` with ``config.quick``, which also keeps only
+    :data:`QUICK_LAMS`).
     """
-    steps = config.steps or (25_000 if config.quick else 250_000)
-    lams = (5, 50) if config.quick else LAMS
+    steps = config.run_steps(STEPS, QUICK_STEPS)
+    lams = QUICK_LAMS if config.quick else LAMS
     runs = [
         {
             "size": size,
@@ -100,8 +108,10 @@ SETTLE = 0.2
 EXPERIMENT = Experiment(
     name="world-size",
     thesis="Figs. 5.3–5.5",
-    description="Q-learning on the 3×3, 5×5 and 9×9 grid worlds under Poisson delays λ ∈ {5, 50, "
-    "150}, normalised by undelayed Q-learning in the same world and seed (Eq. 5.3).",
+    description=f"Q-learning on the {', '.join(f'{n}×{n}' for n in SIZES[:-1])} and "
+    f"{SIZES[-1]}×{SIZES[-1]} grid worlds under Poisson delays λ ∈ "
+    f"{{{', '.join(map(str, LAMS))}}}, normalised by undelayed Q-learning in the same world and "
+    "seed (Eq. 5.3).",
     tasks=tasks,
     run_task=grid_task,
     summarize=summarize,
