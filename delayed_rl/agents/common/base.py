@@ -181,6 +181,9 @@ class TabularAgent(persistence.CopyProtocol, ABC):
     def _end_episode(self) -> None:
         """Forget the rule's own history of the episode that ended (none by default)."""
 
+    def _before_update(self) -> None:
+        """Prepare the rule for a transition given to :meth:`update` (nothing by default)."""
+
     @abstractmethod
     def _get_state_arrays(self) -> dict[str, np.ndarray]: ...
     @abstractmethod
@@ -349,6 +352,7 @@ class TabularAgent(persistence.CopyProtocol, ABC):
         a = self._action_index.index(action, "action")
         r = check_value("reward", reward)
         ended = check_bool("terminated", terminated), check_bool("truncated", truncated)
+        self._before_update()
         self._learn_transition(s, a, r, s2, *ended)
         self.num_timesteps += 1
         self._episode_step = 0 if (ended[0] or ended[1]) else self._episode_step + 1

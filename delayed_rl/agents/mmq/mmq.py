@@ -238,22 +238,13 @@ class MultipleModelQLearning(QAgent):
         return greedy_actions(self._greedy_source(), states)
 
     # ------------------------------------------------------------------ learning
-    def update(
-        self,
-        obs: Any,
-        action: Any,
-        reward: float,
-        next_obs: Any,
-        terminated: bool = False,
-        truncated: bool = False,
-    ) -> None:
-        """One learning step from a transition you drove yourself (see ``TabularAgent.update``).
+    def _before_update(self) -> None:
+        """Clear the acting model: ``update()``'s transition was not chosen by ``learn()``.
 
-        The reward kernel and the delay trace take the greedy model of ``obs``
+        The reward kernel and the delay trace then take the greedy model of ``obs``
         (:meth:`preferred_delay`, before the update) as the acting model.
         """
         self._acting = None
-        super().update(obs, action, reward, next_obs, terminated, truncated)
 
     def _learn_transition(
         self, s: int, a: int, r: float, s2: int, terminated: bool, truncated: bool
