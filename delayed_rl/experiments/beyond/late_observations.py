@@ -64,7 +64,6 @@ def _pendulum(
 SETTINGS: dict[str, dict[str, Any]] = {
     "pendulum-small": _pendulum(*SMALL),
     "pendulum-large": _pendulum(*LARGE),
-    "pendulum-small-50k": _pendulum(*SMALL, LONG_STEPS),
     "pendulum-large-50k": _pendulum(*LARGE, LONG_STEPS),
     "epuck": {
         "env_id": "delayed_rl/EPuckLineFollow-v0",
@@ -89,8 +88,10 @@ SETTINGS: dict[str, dict[str, Any]] = {
 - ``pendulum-small``: Pendulum-v1 (200-step episodes), observation delay U{0..3}, action delay
   U{1..2} (the view keeps K = 5 actions), 20k steps;
 - ``pendulum-large``: U{0..6} and U{1..4} (K = 10), 20k steps;
-- ``pendulum-small-50k`` and ``pendulum-large-50k``: the same for 50k steps, with the oracle,
-  augmented SAC and HindsightSAC only (the follow-up where a 20k target is missed);
+- ``pendulum-large-50k``: the large setting for 50k steps, with the oracle, augmented SAC and
+  HindsightSAC only: the follow-up the claims provide where a 20k target is missed. The small
+  setting had one too (``pendulum-small-50k``) while its 20k target was missed; the re-run with
+  independent delays met it at 20k (5 of 5 seeds), so that follow-up is not run;
 - ``epuck``: the e-puck line follower
   (:class:`~delayed_rl.envs.linefollow.env.EPuckLineFollowEnv`: pixels, continuous wheel speeds,
   put back on the track after 50 line-less steps, 1000-step episodes) under the thesis's
@@ -105,7 +106,6 @@ SETTINGS: dict[str, dict[str, Any]] = {
 SETTING_METHODS: dict[str, tuple[str, ...]] = {
     "pendulum-small": (*METHODS, "random"),
     "pendulum-large": (*METHODS, "random"),
-    "pendulum-small-50k": ("oracle", "augmented", "hindsight", "random"),
     "pendulum-large-50k": ("oracle", "augmented", "hindsight", "random"),
     "epuck": (*METHODS, *CONTROLLERS, "random"),
 }
@@ -239,7 +239,8 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
     The claims, fixed before the runs:
 
     - small setting: HindsightSAC reaches gain ≥ 0.9 on ≥ 4 of 5 seeds at 20k steps (a rule on
-      the seeds, with the share's Wilson interval beside it); the same at 50k;
+      the seeds, with the share's Wilson interval beside it); the same at 50k where 20k misses
+      (it did not: see :data:`SETTINGS`);
     - large setting: HindsightSAC's gain minus augmented SAC's, paired by seed, has its 95 % CI
       above 0 at 20k steps; the same at 50k;
     - the moonshot, reported either way: HindsightSAC's mean gain in the large setting above
