@@ -11,6 +11,7 @@ numbers are the constants ``EXPERIMENT.description`` is formatted from. What a r
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 
@@ -22,6 +23,7 @@ from delayed_rl.experiments.framework.delay_settings import (
     DELAYS,
     LAMBDA_MAX,
     LEARNERS,
+    SettingTask,
     make_delay,
     run_agent,
     setting_label,
@@ -61,33 +63,33 @@ _WORLDS = world_texts()
 REWARD_TOLERANCE = 0.05
 
 
-def tasks(config: Config) -> list[dict]:
+def tasks(config: Config) -> list[SettingTask]:
     """Every (setting, agent, seed) of the seven learners (:func:`~.delay_settings.setting_tasks`)."""
     return setting_tasks(config, LEARNERS)
 
 
-def shared_run(task: dict) -> SharedRun | None:
+def shared_run(task: SettingTask) -> SharedRun | None:
     """The one run behind a world's undelayed Q-learning (the same under every delay kind).
 
     MMQ's tasks read its current table (:func:`~.snapshot_runs.current_readout`); every other
     task is its own run.
     """
-    if task["agent"] == "MMQ":
+    if task.agent == "MMQ":
         return SharedRun(run_agent, task, current_readout)
-    if task["agent"] != "Q undelayed":
+    if task.agent != "Q undelayed":
         return None
     kind = DELAYS[0]
-    label = setting_label(task["size"], kind, task["lam"])
-    return SharedRun(run_agent, {**task, "delay": kind, "setting": label})
+    label = setting_label(task.size, kind, task.lam)
+    return SharedRun(run_agent, dataclasses.replace(task, delay=kind, setting=label))
 
 
 #: Compiled training cost per step (µs) of each learner on these grids, for scheduling only.
 STEP_MICROSECONDS = {"DeconvQ learned": 1.8, "DeconvQ known": 0.9, "MMQ": 0.8}
 
 
-def cost(task: dict) -> float:
+def cost(task: SettingTask) -> float:
     """A task's estimated core-seconds (its steps at :data:`STEP_MICROSECONDS`, else 0.7 µs)."""
-    return 1e-6 * task["steps"] * STEP_MICROSECONDS.get(task["agent"], 0.7)
+    return 1e-6 * task.steps * STEP_MICROSECONDS.get(task.agent, 0.7)
 
 
 def relative_gap_claim(
@@ -114,12 +116,12 @@ def relative_gap_claim(
     )
 
 
-def delay_claim(quantity: str, runs: Mapping[int, dict], setting: dict) -> Claim:
+def delay_claim(quantity: str, runs: Mapping[int, dict], setting: SettingTask) -> Claim:
     """The estimated mean delay (``runs``: results by seed) against the true mean ± ``DELAY_TOLERANCE``.
 
     ``setting`` is the setting's fields (:func:`~.setting_summaries.setting_fields`).
     """
-    true = make_delay(setting["delay"], setting["lam"]).mean
+    true = make_delay(setting.delay, setting.lam).mean
     stats = mean_ci_n([result["mean_delay"] for result in runs.values()])
     return mean_delay_claim(quantity, stats, true)
 
@@ -128,7 +130,7 @@ def _setting_claims(
     setting: str,
     by_agent: dict[str, dict[int, dict]],
     averages: dict[str, dict[int, float]],
-    fields: dict,
+    fields: SettingTask,
 ) -> list[Claim]:
     """The claims of one setting (see :func:`summarize`), for the agents it ran.
 
@@ -181,7 +183,7 @@ def _setting_claims(
     return claims
 
 
-def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
+def summarize(task_list: list[SettingTask], results: list[dict], config: Config) -> Summary:
     """The claims per setting, the full table (``extra["table"]``) and the figures.
 
     The learners, each with the thesis's hyper-parameters: ``Q`` (Q-learning on the delayed

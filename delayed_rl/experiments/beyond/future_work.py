@@ -11,10 +11,12 @@ constants ``EXPERIMENT.description`` is formatted from; the claims are in :func:
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 from delayed_rl._validation import check_choice
 from delayed_rl.experiments.framework import delay_settings, setting_summaries, snapshot_runs
+from delayed_rl.experiments.framework.delay_settings import SettingTask
 from delayed_rl.experiments.framework.experiment import (
     Claim,
     Config,
@@ -82,36 +84,34 @@ def make_variant(variant: str, size: int, delay: Any, steps: int, seed: int) -> 
     )
 
 
-def shared_run(task: dict) -> SharedRun | None:
+def shared_run(task: SettingTask) -> SharedRun | None:
     """The thesis rule and the greedy window: ``anonymous-delay``'s MMQ run, read two ways.
 
     Its current table for ``MMQ (thesis)``, its averaged table for the greedy-window variant;
     every other variant is its own run.
     """
-    if task["agent"] not in (THESIS, *GREEDY_ONLY):
+    if task.agent not in (THESIS, *GREEDY_ONLY):
         return None
-    if task["agent"] == THESIS:
-        view = snapshot_runs.current_readout
-    else:
-        view = snapshot_runs.averaged_readout
-    return SharedRun(delay_settings.run_agent, {**task, "agent": "MMQ"}, view)
+    thesis = task.agent == THESIS
+    view = snapshot_runs.current_readout if thesis else snapshot_runs.averaged_readout
+    return SharedRun(delay_settings.run_agent, dataclasses.replace(task, agent="MMQ"), view)
 
 
 #: Compiled training cost per step (µs) of each variant on these grids, for scheduling only.
 STEP_MICROSECONDS = {"MMQ kernel σ=2": 1.2, "MMQ kernel σ=5": 1.1, "MMQ Λ step 3": 0.35}
 
 
-def cost(task: dict) -> float:
+def cost(task: SettingTask) -> float:
     """A task's estimated core-seconds (its steps at :data:`STEP_MICROSECONDS`, else 0.85 µs)."""
-    return 1e-6 * task["steps"] * STEP_MICROSECONDS.get(task["agent"], 0.85)
+    return 1e-6 * task.steps * STEP_MICROSECONDS.get(task.agent, 0.85)
 
 
-def tasks(config: Config) -> list[dict]:
+def tasks(config: Config) -> list[SettingTask]:
     """Every (setting, variant, seed), as ``anonymous-delay``'s (:func:`~.setting_tasks`)."""
     return delay_settings.setting_tasks(config, tuple(VARIANTS))
 
 
-def run_task(task: dict) -> dict:
+def run_task(task: SettingTask) -> dict:
     """Train one variant in its setting and measure it as ``anonymous-delay`` does.
 
     The thesis rule and the greedy window are its MMQ run, read as :func:`shared_run` says.
@@ -119,13 +119,13 @@ def run_task(task: dict) -> dict:
     run = shared_run(task)
     if run is not None:
         return run.alone()
-    delay = delay_settings.make_delay(task["delay"], task["lam"])
-    size, steps, seed = task["size"], task["steps"], task["seed"]
-    variant = task["agent"]
+    delay = delay_settings.make_delay(task.delay, task.lam)
+    size, steps, seed = task.size, task.steps, task.seed
+    variant = task.agent
     snapshot_runs.warm_up(
         lambda: make_variant(variant, size, delay, steps, seed + 1), steps, variant
     )
-    return snapshot_runs.measure(make_variant(task["agent"], size, delay, steps, seed), task)
+    return snapshot_runs.measure(make_variant(task.agent, size, delay, steps, seed), steps, size)
 
 
 def _setting_claims(
@@ -169,7 +169,7 @@ def _setting_claims(
     return claims
 
 
-def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
+def summarize(task_list: list[SettingTask], results: list[dict], config: Config) -> Summary:
     """The claims per setting and variant, the full table (``extra["table"]``), the figures.
 
     The greedy policy of every variant is what its ``greedy_table`` (or ``predict``) gives; the
@@ -200,7 +200,7 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
     extra = {
         "table": setting_summaries.result_table(groups, settings),
         "variants": {
-            name: options(name, task_list[0]["steps"]) if task_list else VARIANTS[name]
+            name: options(name, task_list[0].steps) if task_list else VARIANTS[name]
             for name in VARIANTS
         },
         "rules": {

@@ -39,6 +39,7 @@ from delayed_rl.experiments.framework.line_following import (
     LAMBDA_MAX,
     Q_INIT,
     TRACK,
+    LineTask,
     line_statistics,
     logged_task_cost,
     logged_task_run,
@@ -62,10 +63,10 @@ Every learner's run is also the start of ``controllers``' and ``real-robot``'s l
 QUICK_STEPS, STEPS = 5_000, 150_000
 
 
-def tasks(config: Config) -> list[dict]:
+def tasks(config: Config) -> list[LineTask]:
     """Per seed, one run of each of :data:`LEARNERS`: :data:`STEPS` (:data:`QUICK_STEPS` quick)."""
     steps = config.run_steps(STEPS, QUICK_STEPS)
-    return seed_tasks(config, LEARNERS, steps=steps)
+    return seed_tasks(config, LEARNERS, LineTask, steps=steps)
 
 
 def _paired(runs: dict[str, dict[int, dict]], ours: str, theirs: str, how: str) -> tuple:
@@ -79,7 +80,7 @@ def _paired(runs: dict[str, dict[int, dict]], ours: str, theirs: str, how: str) 
     return mean_ci_n(paired(*values, how=how))
 
 
-def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
+def summarize(task_list: list[LineTask], results: list[dict], config: Config) -> Summary:
     """The claims, per-agent statistics in ``extra`` and the figures.
 
     Metrics, as ``linefollow``'s (:func:`~.line_following.run_metrics`): the average reward
@@ -106,7 +107,7 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
     runs = {agent: by_agent.get(agent, {}) for agent in LEARNERS}
     curves = []
     for task, result in zip(task_list, results, strict=True):
-        agent, seed, steps = task["agent"], task["seed"], result["steps"]
+        agent, seed, steps = task.agent, task.seed, result["steps"]
         curves.append(Curve(agent, seed, steps, result["curve"]))
         curves.append(Curve(agent, seed, steps, result["error"], "accumulated_error"))
     return Summary(_claims(runs), curves, _figures(runs), _statistics(runs))

@@ -11,6 +11,7 @@ formatted from; the score is :func:`train_and_score`'s, the claims, fixed before
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any
 
@@ -41,6 +42,7 @@ from delayed_rl.experiments.framework.experiment import (
     step_count,
 )
 from delayed_rl.experiments.framework.results import pivot
+from delayed_rl.experiments.framework.task import Task, optional
 from delayed_rl.experiments.framework.training import hyperparameter_text, thesis_hyperparameters
 from delayed_rl.multiagent.gridworld import MEETING_REWARD
 
@@ -83,7 +85,27 @@ def require_pettingzoo() -> None:
         ) from error
 
 
-def tasks(config: Config) -> list[dict]:
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class MultiagentGridTask(Task):
+    """A learner's run of ``multiagent-gridworld``.
+
+    Attributes:
+        agent: the learners' kind, one of :data:`LEARNERS`.
+        size: the grid's side.
+        episode_steps: the steps of an episode.
+        steps: training steps.
+        lam: the Poisson mean delay λ of each agent's rewards (optional: ``None``, left out of
+            the task's JSON, in the run ``Q undelayed``'s tasks share, :func:`shared_run`).
+    """
+
+    agent: str
+    size: int
+    episode_steps: int
+    steps: int
+    lam: int | None = optional()
+
+
+def tasks(config: Config) -> list[MultiagentGridTask]:
     """Per delay λ of :data:`LAMS` (``--quick``: :data:`QUICK_LAM`), seed and learner, one task.
 
     Raises:
@@ -93,18 +115,22 @@ def tasks(config: Config) -> list[dict]:
     steps = config.run_steps(STEPS, QUICK_STEPS)
     lams = (QUICK_LAM,) if config.quick else LAMS
     fields = {"size": SIZE, "episode_steps": EPISODE_STEPS, "steps": steps}
-    return [task for lam in lams for task in seed_tasks(config, LEARNERS, lam=lam, **fields)]
+    return [
+        task
+        for lam in lams
+        for task in seed_tasks(config, LEARNERS, MultiagentGridTask, lam=lam, **fields)
+    ]
 
 
-def shared_run(task: dict) -> SharedRun:
+def shared_run(task: MultiagentGridTask) -> SharedRun:
     """The run behind a task: Q undelayed's has no λ, so both delays share it."""
-    check_choice("agent", task["agent"], LEARNERS)
-    if task["agent"] == "Q undelayed":
-        return SharedRun(train_and_score, {k: v for k, v in task.items() if k != "lam"})
+    check_choice("agent", task.agent, LEARNERS)
+    if task.agent == "Q undelayed":
+        return SharedRun(train_and_score, dataclasses.replace(task, lam=None))
     return SharedRun(train_and_score, task)
 
 
-def run_task(task: dict) -> dict:
+def run_task(task: MultiagentGridTask) -> dict:
     """A task's result, run on its own (:func:`shared_run`)."""
     return shared_run(task).alone()
 
@@ -113,9 +139,9 @@ def run_task(task: dict) -> dict:
 STEP_MICROSECONDS = {"Q undelayed": 40.0, "Q": 90.0, "DeconvQ known": 110.0}
 
 
-def cost(task: dict) -> float:
+def cost(task: MultiagentGridTask) -> float:
     """A task's estimated core-seconds (its steps at :data:`STEP_MICROSECONDS`, else 140 µs)."""
-    return 1e-6 * task["steps"] * STEP_MICROSECONDS.get(task["agent"], 140.0)
+    return 1e-6 * task.steps * STEP_MICROSECONDS.get(task.agent, 140.0)
 
 
 class AgentSpaces(gym.Env):
@@ -138,22 +164,22 @@ def learner_seed(seed: int, index: int) -> int:
     return int(state[0] >> np.uint64(1))
 
 
-def make_game(task: dict) -> Any:
+def make_game(task: MultiagentGridTask) -> Any:
     """The task's game, with each agent's Poisson(λ) reward delay (flushed) unless undelayed."""
     from delayed_rl.multiagent import CooperativeGridWorldEnv, ParallelRewardDelay
 
-    env = CooperativeGridWorldEnv(task["size"], max_steps=task["episode_steps"])
-    if task["agent"] == "Q undelayed":
+    env = CooperativeGridWorldEnv(task.size, max_steps=task.episode_steps)
+    if task.agent == "Q undelayed":
         return env
-    return ParallelRewardDelay(env, Poisson(task["lam"]), on_episode_end="flush")
+    return ParallelRewardDelay(env, Poisson(task.lam), on_episode_end="flush")
 
 
-def make_learner(task: dict, env: gym.Env, seed: int) -> TabularAgent:
-    """One independent learner of ``task["agent"]``'s kind, on ``env``'s spaces."""
+def make_learner(task: MultiagentGridTask, env: gym.Env, seed: int) -> TabularAgent:
+    """One independent learner of ``task.agent``'s kind, on ``env``'s spaces."""
     hyperparameters = thesis_hyperparameters(seed)
-    if task["agent"] in ("Q", "Q undelayed"):
+    if task.agent in ("Q", "Q undelayed"):
         return QLearning(env, **hyperparameters)
-    known = Poisson(task["lam"]) if task["agent"] == "DeconvQ known" else None
+    known = Poisson(task.lam) if task.agent == "DeconvQ known" else None
     return DeconvolutionQLearning(
         env, delay=known, max_delay_estimate=LAMBDA_MAX, on_episode_end="flush", **hyperparameters
     )
@@ -175,7 +201,7 @@ def greedy_score(learners: dict[Any, TabularAgent], size: int, episode_steps: in
     return total / episode_steps
 
 
-def train_and_score(task: dict) -> dict:
+def train_and_score(task: MultiagentGridTask) -> dict:
     """Train one independent learner per agent on the task's game; score the greedy policy.
 
     The greedy joint policy is scored :data:`CHECKPOINTS` times a run (the learning curve) over
@@ -190,13 +216,13 @@ def train_and_score(task: dict) -> dict:
     """
     env = make_game(task)
     learners = {
-        agent: make_learner(task, AgentSpaces(env, agent), learner_seed(task["seed"], i))
+        agent: make_learner(task, AgentSpaces(env, agent), learner_seed(task.seed, i))
         for i, agent in enumerate(env.possible_agents)
     }
-    steps, every = task["steps"], max(1, task["steps"] // CHECKPOINTS)
+    steps, every = task.steps, max(1, task.steps // CHECKPOINTS)
     undelayed = np.empty(steps)
     checkpoints, scores = [], []
-    observations, _ = env.reset(seed=task["seed"])
+    observations, _ = env.reset(seed=task.seed)
     for step in range(steps):
         actions = {agent: learners[agent].predict(observations[agent])[0] for agent in env.agents}
         following, rewards, terminated, truncated, infos = env.step(actions)
@@ -214,7 +240,7 @@ def train_and_score(task: dict) -> dict:
         observations = following if env.agents else env.reset()[0]
         if (step + 1) % every == 0 or step + 1 == steps:
             checkpoints.append(step + 1)
-            scores.append(greedy_score(learners, task["size"], task["episode_steps"]))
+            scores.append(greedy_score(learners, task.size, task.episode_steps))
     curve_steps, curve = running_average(undelayed)
     result = {
         "steps": checkpoints,
@@ -224,7 +250,7 @@ def train_and_score(task: dict) -> dict:
         "curve": curve.tolist(),
         "average": float(undelayed.mean()),
     }
-    if task["agent"] == "DeconvQ learned":
+    if task.agent == "DeconvQ learned":
         result["mean_delay"] = float(np.mean([agent.mean_delay for agent in learners.values()]))
         result["estimates"] = [agent.delay_pmf.tolist() for agent in learners.values()]
     return result
@@ -377,7 +403,7 @@ def _figures(groups: dict[float, dict[str, dict]]) -> dict:
     return figures
 
 
-def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
+def summarize(task_list: list[MultiagentGridTask], results: list[dict], config: Config) -> Summary:
     """The claims, the table (``extra["table"]``) and the figures.
 
     A score is the mean (undelayed) reward per step of the greedy joint policy (each learner's

@@ -10,6 +10,7 @@ run both experiments name when they share one (``future-work``'s thesis rule is
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from typing import Any
 
@@ -20,6 +21,7 @@ from delayed_rl._validation import check_choice, check_int
 from delayed_rl.delays import Delay, Empirical, Geometric, Poisson
 from delayed_rl.experiments.framework.experiment import Config, step_count
 from delayed_rl.experiments.framework.snapshot_runs import measure, warm_up
+from delayed_rl.experiments.framework.task import Task
 from delayed_rl.experiments.framework.training import thesis_hyperparameters
 
 #: (side, mean delay λ, steps a run) of the two worlds.
@@ -91,29 +93,46 @@ def setting_label(size: int, kind: str, lam: float) -> str:
     return f"{size}×{size} {names[kind]}"
 
 
-def setting_tasks(config: Config, agents: Sequence[str]) -> list[dict]:
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class SettingTask(Task):
+    """An agent's run in a grid world under an anonymous delay (:func:`setting_tasks`).
+
+    Attributes:
+        setting: the setting's label (:func:`setting_label`).
+        size: the grid's side.
+        lam: the delay's mean λ.
+        delay: the delay's kind, one of :data:`DELAYS`.
+        agent: the learner.
+        steps: training steps.
+    """
+
+    setting: str
+    size: int
+    lam: int
+    delay: str
+    agent: str
+    steps: int
+
+
+def setting_tasks(config: Config, agents: Sequence[str]) -> list[SettingTask]:
     """One task per (setting, agent, seed): :data:`SETTINGS` × :data:`DELAYS`, or the quick one.
 
     ``config.steps`` replaces every setting's own step count.
-
-    Returns:
-        Dicts with ``setting`` (its label), ``size``, ``lam``, ``delay`` (the kind), ``agent``,
-        ``steps`` and ``seed``.
     """
     if config.quick:
         worlds, kinds = [(QUICK_SIZE, QUICK_LAM, QUICK_STEPS)], ("Poisson",)
     else:
         worlds, kinds = SETTINGS, DELAYS
     return [
-        {
-            "setting": setting_label(size, kind, lam),
-            "size": size,
-            "lam": lam,
-            "delay": kind,
-            "agent": agent,
-            "steps": config.steps or steps,
-            "seed": config.base_seed + i,
-        }
+        SettingTask(
+            setting=setting_label(size, kind, lam),
+            size=size,
+            lam=lam,
+            delay=kind,
+            agent=agent,
+            steps=config.steps or steps,
+            seed=config.base_seed + i,
+        )
         for size, lam, steps in worlds
         for kind in kinds
         for agent in agents
@@ -171,13 +190,13 @@ def make_agent(name: str, size: int, delay: Delay, seed: int, steps: int | None 
     return agent_class(agent)(env, **options, **thesis_hyperparameters(seed))
 
 
-def run_agent(task: dict) -> dict:
+def run_agent(task: SettingTask) -> dict:
     """Train one agent of :data:`LEARNERS` in its setting (a task of :func:`setting_tasks`), measured.
 
     A throw-away agent is trained first, untimed (:func:`~.snapshot_runs.warm_up`); the run's
     result is :func:`~.snapshot_runs.measure`'s.
     """
-    delay = make_delay(task["delay"], task["lam"])
-    size, seed, steps = task["size"], task["seed"], task["steps"]
-    warm_up(lambda: make_agent(task["agent"], size, delay, seed + 1, steps), steps, task["agent"])
-    return measure(make_agent(task["agent"], size, delay, seed, steps), task)
+    delay = make_delay(task.delay, task.lam)
+    size, seed, steps = task.size, task.seed, task.steps
+    warm_up(lambda: make_agent(task.agent, size, delay, seed + 1, steps), steps, task.agent)
+    return measure(make_agent(task.agent, size, delay, seed, steps), steps, size)

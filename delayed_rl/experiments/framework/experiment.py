@@ -1,7 +1,8 @@
 """What an experiment is: its configuration, tasks, shared runs, claims, curves and summary.
 
-An experiment module defines an :class:`Experiment`: ``tasks(config)`` (one picklable task per
-(condition, seed)), ``run_task(task)`` (a dict of results) and ``summarize(tasks, results,
+An experiment module defines an :class:`Experiment`: ``tasks(config)`` (one task per
+(condition, seed), a frozen dataclass of its own :class:`~.task.Task` type), ``run_task(task)``
+(a dict of results) and ``summarize(tasks, results,
 config)`` (the claims checked against the thesis, as :class:`Claim` rows, with curves and
 figures). :func:`~delayed_rl.experiments.framework.pool.run_experiment` runs the tasks on a
 worker pool, each with its own seed, and
@@ -16,13 +17,14 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, TypeVar
 
 import numpy as np
 
 from delayed_rl._validation import check_bool, check_choice, check_int, check_limit
 from delayed_rl.agents.common.hyperparameters import MAX_SEED_VALUE
 from delayed_rl.agents.common.python_loop import MAX_TIMESTEPS
+from delayed_rl.experiments.framework.task import Task
 from delayed_rl.parallel.pools import BACKENDS, MAX_SEED_COUNT, check_workers
 
 AGREES, DIFFERS, INCONCLUSIVE, REFERENCE = "agrees", "differs", "inconclusive", "reference"
@@ -182,14 +184,16 @@ class SharedRun(NamedTuple):
 
     Attributes:
         run: a picklable top-level function of one task, returning the run's result.
-        task: what ``run`` is called with (JSON-like: its canonical form is the run's identity).
+        task: what ``run`` is called with: the experiment's :class:`~.task.Task` for a run of
+            its own, or a JSON-like dict for a run that tasks share (its canonical JSON is the
+            run's identity).
         view: picks the task's result out of the run's (``None``: the whole result); with
             ``pooled``, out of the task's own part of it.
         pooled: the name of the list in ``task`` whose items runs pool (``None``: none).
     """
 
-    run: Callable[[dict], dict]
-    task: dict
+    run: Callable[[Any], dict]
+    task: Task | dict[str, Any]
     view: Callable[[dict], dict] | None = None
     pooled: str | None = None
 
@@ -199,9 +203,9 @@ class SharedRun(NamedTuple):
         return result if self.view is None else self.view(result)
 
 
-def default_cost(task: dict) -> float:
+def default_cost(task: Task) -> float:
     """A task's estimated cost for scheduling: its ``steps`` (1 without), at a microsecond each."""
-    return 1e-6 * float(task.get("steps", 1))
+    return 1e-6 * float(getattr(task, "steps", 1))
 
 
 @dataclass
@@ -212,7 +216,8 @@ class Experiment:
         name: the name ``delayed-rl bench NAME`` takes.
         thesis: the thesis's figure or table it reproduces.
         description: the report's first paragraph.
-        tasks: one task per (condition, seed), from the :class:`Config`.
+        tasks: one task per (condition, seed), from the :class:`Config`: frozen dataclasses of
+            the experiment's :class:`~.task.Task` type.
         run_task: a picklable top-level function of one task, returning its result.
         summarize: the claims, curves and figures, from the tasks and their results.
         default_seeds: the seeds of a full run.
@@ -232,32 +237,37 @@ class Experiment:
     name: str
     thesis: str
     description: str
-    tasks: Callable[[Config], list[dict]]
-    run_task: Callable[[dict], dict]
-    summarize: Callable[[list[dict], list[dict], Config], Summary]
+    tasks: Callable[[Config], Sequence[Task]]
+    run_task: Callable[[Any], dict]
+    summarize: Callable[[Sequence[Any], list[dict], Config], Summary]
     default_seeds: int
     quick_seeds: int = 2
-    shared_run: Callable[[dict], SharedRun | None] | None = None
-    cost: Callable[[dict], float] | None = None
+    shared_run: Callable[[Any], SharedRun | None] | None = None
+    cost: Callable[[Any], float] | None = None
     resumable: bool = False
 
-    def run_of(self, task: dict) -> SharedRun:
+    def run_of(self, task: Task) -> SharedRun:
         """The run behind ``task``: its :attr:`shared_run`, else ``run_task`` on the task itself."""
         shared = None if self.shared_run is None else self.shared_run(task)
         return SharedRun(self.run_task, task) if shared is None else shared
 
-    def task_cost(self, task: dict) -> float:
+    def task_cost(self, task: Task) -> float:
         """``task``'s estimated core-seconds: its :attr:`cost`, else :func:`default_cost`."""
         return float((self.cost or default_cost)(task))
 
 
-def seed_tasks(config: Config, agents: Sequence[str], **fields: object) -> list[dict]:
-    """One task per (seed, agent): ``{"agent", "seed", **fields}``, seed-major.
+TaskType = TypeVar("TaskType", bound=Task)
+
+
+def seed_tasks(
+    config: Config, agents: Sequence[str], kind: type[TaskType], **fields: object
+) -> list[TaskType]:
+    """One task per (seed, agent): ``kind(agent=agent, seed=seed, **fields)``, seed-major.
 
     Seeds run from ``config.base_seed``, ``config.seeds`` of them.
     """
     return [
-        {"agent": agent, "seed": config.base_seed + i, **fields}
+        kind(agent=agent, seed=config.base_seed + i, **fields)
         for i in range(config.seeds)
         for agent in agents
     ]

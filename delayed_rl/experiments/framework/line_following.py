@@ -10,6 +10,7 @@ metrics are :func:`run_metrics`'.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import time
 from collections.abc import Callable
 from typing import Any
@@ -20,6 +21,7 @@ import numpy as np
 from delayed_rl._validation import check_choice
 from delayed_rl.experiments.framework.delay_estimates import delay_estimate
 from delayed_rl.experiments.framework.experiment import SharedRun, running_average
+from delayed_rl.experiments.framework.task import Task
 from delayed_rl.experiments.framework.training import thesis_hyperparameters
 from delayed_rl.parallel.intervals import mean_ci95
 
@@ -151,8 +153,21 @@ def logged_run(agent: str, seed: int, steps: int) -> SharedRun:
     return pooled_training(agent, seed, [["log", steps]], only_readout)
 
 
-def logged_task_run(task: dict) -> SharedRun:
-    """The training run behind a ``{"agent", "seed", "steps"}`` task (:func:`logged_run`).
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class LineTask(Task):
+    """A learner's run on the line follower: the first ``steps`` of its :func:`training_run`.
+
+    Attributes:
+        agent: the learner, one of :data:`LEARNERS`.
+        steps: training steps.
+    """
+
+    agent: str
+    steps: int
+
+
+def logged_task_run(task: LineTask) -> SharedRun:
+    """The training run behind a :class:`LineTask` (:func:`logged_run`).
 
     ``linefollow``'s and ``linefollow-deconv``'s tasks are such tasks: their runs of the same
     learner and seed are one, and the start of ``controllers``' and ``real-robot``'s.
@@ -160,11 +175,11 @@ def logged_task_run(task: dict) -> SharedRun:
     Raises:
         ValueError: the task's agent is not one of :data:`LEARNERS`.
     """
-    check_choice("agent", task["agent"], LEARNERS)
-    return logged_run(task["agent"], task["seed"], task["steps"])
+    check_choice("agent", task.agent, LEARNERS)
+    return logged_run(task.agent, task.seed, task.steps)
 
 
-def run_logged_task(task: dict) -> dict:
+def run_logged_task(task: LineTask) -> dict:
     """Train a :func:`logged_task_run` task's learner on the line follower and measure the run.
 
     Returns:
@@ -176,9 +191,9 @@ def run_logged_task(task: dict) -> dict:
     return logged_task_run(task).alone()
 
 
-def logged_task_cost(task: dict) -> float:
-    """A :func:`logged_task_run` task's estimated core-seconds, for scheduling."""
-    return training_cost(task["agent"], task["steps"])
+def logged_task_cost(task: LineTask) -> float:
+    """A :class:`LineTask`'s estimated core-seconds, for scheduling."""
+    return training_cost(task.agent, task.steps)
 
 
 def training_run(task: dict) -> dict:

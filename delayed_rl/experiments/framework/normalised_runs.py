@@ -10,17 +10,47 @@ fields (:func:`~.results.pivot`), into :func:`condition_means` and :func:`learni
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import dataclasses
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
 from delayed_rl.experiments.framework.claims import mean_ci_n
 from delayed_rl.experiments.framework.experiment import Config, Curve, running_average
 from delayed_rl.experiments.framework.results import pivot
+from delayed_rl.experiments.framework.task import Task, optional
 from delayed_rl.experiments.framework.training import grid_env, train
 
 
-def grid_tasks(config: Config, steps: int, runs: Sequence[dict]) -> list[dict]:
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class GridTask(Task):
+    """A run of a normalised grid-world experiment: Q-learning under Poisson reward delays.
+
+    Attributes:
+        condition: the run's label.
+        size: the world's side.
+        lam: the Poisson mean delay λ (0: undelayed).
+        delay_estimates: the delay estimates Λ the agent models (``(0,)``: Q-learning).
+        steps: training steps.
+        reference: whether it is the undelayed Q-learning run the others are normalised by
+            (optional: left out of the task's JSON when false).
+    """
+
+    condition: str
+    size: int
+    lam: int
+    delay_estimates: tuple[int, ...]
+    steps: int
+    reference: bool = optional(False)
+
+
+def grid_tasks(
+    config: Config,
+    steps: int,
+    runs: Sequence[Mapping[str, Any]],
+    kind: type[GridTask] = GridTask,
+) -> list[GridTask]:
     """The tasks of a normalised grid-world experiment, for every seed of ``config``.
 
     Per seed, and per world size in the order ``runs`` first name it: the undelayed Q-learning
@@ -29,45 +59,50 @@ def grid_tasks(config: Config, steps: int, runs: Sequence[dict]) -> list[dict]:
     Args:
         config: the seeds (``config.seeds`` of them, from ``config.base_seed``).
         steps: training steps of every run.
-        runs: one dict per delayed condition: ``size`` (the world's side), ``lam`` (the Poisson
-            mean delay), ``delay_estimates`` (Λ, ``[0]`` for Q-learning) and
-            ``condition`` (its label), plus any keys its experiment's ``summarize`` reads.
+        runs: the fields of each delayed condition's tasks (all but ``steps`` and ``seed``).
+        kind: the experiment's task type.
 
     Returns:
-        The task dicts :func:`grid_task` runs, each with its ``steps`` and ``seed``; reference
-        runs have ``reference=True``.
+        The tasks :func:`grid_task` runs; reference runs have ``reference=True``.
     """
     sizes = list(dict.fromkeys(run["size"] for run in runs))
     out = []
     for i in range(config.seeds):
         seed = config.base_seed + i
         for size in sizes:
-            reference = {"size": size, "lam": 0, "delay_estimates": [0], "condition": "undelayed"}
-            out.append({**reference, "steps": steps, "seed": seed, "reference": True})
-            out += [{**run, "steps": steps, "seed": seed} for run in runs if run["size"] == size]
+            out.append(
+                kind(
+                    condition="undelayed",
+                    size=size,
+                    lam=0,
+                    delay_estimates=(0,),
+                    steps=steps,
+                    seed=seed,
+                    reference=True,
+                )
+            )
+            out += [kind(**run, steps=steps, seed=seed) for run in runs if run["size"] == size]
     return out
 
 
-def grid_task(task: dict) -> dict:
+def grid_task(task: GridTask) -> dict:
     """Train on ``GridWorld(size)`` with Poisson(``lam``) delays and ``delay_estimates``.
 
     Returns:
         The learning curve (``steps``, ``curve``: the running average reward) and the
         ``average`` reward over the whole run, from the undelayed reward stream.
     """
-    agent = train(
-        grid_env(task["size"], task["lam"]), task["delay_estimates"], task["steps"], task["seed"]
-    )
+    agent = train(grid_env(task.size, task.lam), list(task.delay_estimates), task.steps, task.seed)
     rewards = agent.training_log["undelayed_reward"]
     steps, curve = running_average(rewards)
     return {"steps": steps, "curve": curve, "average": float(rewards.mean())}
 
 
-def _is_reference(task: dict) -> bool:
-    return bool(task.get("reference"))
+def _is_reference(task: GridTask) -> bool:
+    return task.reference
 
 
-def normalised(tasks: list[dict], results: list[dict]) -> tuple[list[dict], list[dict]]:
+def normalised(tasks: Sequence[GridTask], results: list[dict]) -> tuple[list[GridTask], list[dict]]:
     """Eq. 5.3 per delayed task: its average reward over that of the matching undelayed run.
 
     Each delayed task is matched with the reference run of its world size and seed. The curve
@@ -81,9 +116,9 @@ def normalised(tasks: list[dict], results: list[dict]) -> tuple[list[dict], list
     references = pivot(tasks, results, by=("size",), where=_is_reference)
     delayed, out = [], []
     for task, result in zip(tasks, results, strict=True):
-        if _is_reference(task):
+        if task.reference:
             continue
-        base = references[task["size"]][task["seed"]]
+        base = references[task.size][task.seed]
         with np.errstate(divide="ignore", invalid="ignore"):
             curve = np.where(base["curve"] > 0, result["curve"] / base["curve"], np.nan)
         delayed.append(task)
@@ -97,7 +132,7 @@ def normalised(tasks: list[dict], results: list[dict]) -> tuple[list[dict], list
     return delayed, out
 
 
-def normalised_curves(tasks: list[dict], normalised_results: list[dict]) -> list[Curve]:
+def normalised_curves(tasks: Sequence[GridTask], normalised_results: list[dict]) -> list[Curve]:
     """The normalised curves for the CSV, condition by condition (each task's ``condition``).
 
     Args:

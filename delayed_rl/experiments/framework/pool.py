@@ -15,7 +15,7 @@ import json
 import os
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from concurrent import futures
 from pathlib import Path
 from typing import Any
@@ -23,6 +23,7 @@ from typing import Any
 from delayed_rl._validation import check_bool
 from delayed_rl.experiments.framework.experiment import Config, Experiment, SharedRun, Summary
 from delayed_rl.experiments.framework.report import _json_default, write_outputs
+from delayed_rl.experiments.framework.task import Task
 from delayed_rl.parallel.pools import iter_tasks
 from delayed_rl.parallel.progress import RunProgress
 
@@ -30,8 +31,8 @@ from delayed_rl.parallel.progress import RunProgress
 def run_key(run: SharedRun) -> str:
     """A run's identity: its function's qualified name and its task in canonical JSON.
 
-    Tasks are compared as JSON: a tuple is the list of its items, an integer key the string of
-    it.
+    Tasks are compared as JSON: a :class:`~.task.Task` is its :meth:`~.task.Task.to_json`, a
+    tuple the list of its items, an integer key the string of it.
 
     Raises:
         TypeError: ``run.run`` is not a module-level function (a lambda, a closure, a bound
@@ -68,18 +69,24 @@ def pool_key(run: SharedRun) -> str:
     if run.pooled is None:
         return whole
     _items(run)
-    rest = {name: value for name, value in run.task.items() if name != run.pooled}
+    rest = {name: value for name, value in _entries(run.task).items() if name != run.pooled}
     return f"{run_key(run._replace(task=rest))} pooling {run.pooled}"
 
 
-def _items(run: SharedRun) -> list:
-    """``run.task[run.pooled]``, checked (see :func:`pool_key`)."""
+def _entries(task: Task | Mapping[str, Any]) -> Mapping[str, Any]:
+    """A task's entries by name: a :class:`~.task.Task`'s JSON fields, or the dict itself."""
+    return task.to_json() if isinstance(task, Task) else task
+
+
+def _items(run: SharedRun) -> Sequence[Any]:
+    """The task's entry ``run.pooled``, checked (see :func:`pool_key`)."""
     if not isinstance(run.pooled, str):
         raise TypeError(f"pooled must be None or a task entry's name, got {run.pooled!r}")
-    if run.pooled not in run.task:
+    entries = _entries(run.task)
+    if run.pooled not in entries:
         raise ValueError(f"the task {run.task!r} has no entry {run.pooled!r} to pool")
-    items = run.task[run.pooled]
-    if not isinstance(items, list):
+    items = entries[run.pooled]
+    if not isinstance(items, list | tuple):
         raise TypeError(f"the pooled entry {run.pooled!r} must be a list, got {items!r}")
     return items
 
@@ -96,7 +103,13 @@ def _pooled(runs: Sequence[SharedRun]) -> SharedRun:
         return first
     union = {_canonical(item): item for run in runs for item in _items(run)}
     items = [union[key] for key in sorted(union)]
-    return first._replace(task={**first.task, first.pooled: items}, view=None)
+    if isinstance(first.task, Task):
+        task: Task | Mapping[str, Any] = dataclasses.replace(
+            first.task, **{first.pooled: tuple(items)}
+        )
+    else:
+        task = {**first.task, first.pooled: items}
+    return first._replace(task=task, view=None)
 
 
 def _own_result(run: SharedRun, pooled: SharedRun, result: dict) -> dict:
@@ -107,7 +120,7 @@ def _own_result(run: SharedRun, pooled: SharedRun, result: dict) -> dict:
     """
     if run.pooled is None:
         return result
-    items = pooled.task[run.pooled]
+    items = _items(pooled)
     parts = result.get(run.pooled) if isinstance(result, dict) else result
     if not isinstance(result, dict) or not isinstance(parts, list) or len(parts) != len(items):
         got = f"{type(parts).__name__}" + (f" of {len(parts)}" if isinstance(parts, list) else "")
@@ -117,11 +130,11 @@ def _own_result(run: SharedRun, pooled: SharedRun, result: dict) -> dict:
             + (got if isinstance(result, dict) else f"a {type(result).__name__}, not a dict")
         )
     where = {_canonical(item): index for index, item in enumerate(items)}
-    own = [parts[where[_canonical(item)]] for item in run.task[run.pooled]]
+    own = [parts[where[_canonical(item)]] for item in _items(run)]
     return {**result, run.pooled: own}
 
 
-def _timed(job: tuple[Callable[[dict], dict], dict]) -> tuple[dict, float]:
+def _timed(job: tuple[Callable[[Any], dict], Any]) -> tuple[dict, float]:
     """``(run(task), seconds it took)`` of a ``(run, task)`` job, timed where it runs."""
     run, task = job
     started = time.perf_counter()
@@ -135,7 +148,7 @@ class _Plan:
 
     experiment: Experiment
     config: Config
-    tasks: list[dict]
+    tasks: list[Task]
     runs: list[SharedRun]
     keys: list[str]
     out: Path | None

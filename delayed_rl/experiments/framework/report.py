@@ -13,6 +13,7 @@ import numpy as np
 
 from delayed_rl._validation import check_real
 from delayed_rl.experiments.framework.experiment import VERDICTS, Config, Experiment, Summary
+from delayed_rl.experiments.framework.task import Task
 
 
 def write_outputs(experiment: Experiment, config: Config, summary: Summary, out: Path) -> None:
@@ -93,6 +94,9 @@ def write_index(
 
 
 def _json_default(value: Any) -> Any:
+    """What JSON writes for ``value``: a task's :meth:`~.task.Task.to_json`, an array's list."""
+    if isinstance(value, Task):
+        return value.to_json()
     if isinstance(value, np.ndarray):
         return value.tolist()
     if isinstance(value, np.generic):

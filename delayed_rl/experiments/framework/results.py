@@ -14,15 +14,17 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
+from delayed_rl.experiments.framework.task import Task
+
 __all__ = ["common_seeds", "pivot"]
 
 
 def pivot(
-    tasks: Sequence[Mapping[str, Any]],
+    tasks: Sequence[Task],
     results: Sequence[Any],
     by: Sequence[str] = ("method",),
     value: str | Callable[[Any], Any] | None = None,
-    where: Callable[[Mapping[str, Any]], bool] | None = None,
+    where: Callable[[Any], bool] | None = None,
     nested: bool = False,
 ) -> dict[Any, Any]:
     """The results by the tasks' fields ``by``, then by seed: ``{key: {seed: value}}``.
@@ -30,7 +32,7 @@ def pivot(
     Keys and seeds are in the order the tasks first name them.
 
     Args:
-        tasks: the experiment's tasks, each with a ``seed`` and the fields of ``by``.
+        tasks: the experiment's tasks (:class:`~.task.Task`), each with the fields of ``by``.
         results: one result per task, in the same order.
         by: the fields that tell the groups apart. With one field a group's key is that field's
             value (``{"MMQ": {0: ..., 1: ...}}``), with several the tuple of their values.
@@ -47,7 +49,11 @@ def pivot(
         ValueError: ``tasks`` and ``results`` differ in length, ``by`` names no field, or two
             of the kept tasks have the same key and seed.
 
-    >>> tasks = [{"agent": "Q", "seed": 0}, {"agent": "MMQ", "seed": 0}, {"agent": "Q", "seed": 1}]
+    >>> import dataclasses
+    >>> @dataclasses.dataclass(frozen=True)
+    ... class AgentTask(Task):
+    ...     agent: str
+    >>> tasks = [AgentTask(agent="Q", seed=0), AgentTask(agent="MMQ", seed=0), AgentTask(agent="Q", seed=1)]
     >>> pivot(tasks, [{"r": 1}, {"r": 2}, {"r": 3}], by=("agent",), value="r")
     {'Q': {0: 1, 1: 3}, 'MMQ': {0: 2}}
     """
@@ -69,14 +75,14 @@ def pivot(
     for task, result in zip(tasks, results, strict=True):
         if where is not None and not where(task):
             continue
-        keys = [task[field] for field in by]
+        keys = [getattr(task, field) for field in by]
         if nested:
             group = out
             for key in keys:
                 group = group.setdefault(key, {})
         else:
             group = out.setdefault(keys[0] if len(keys) == 1 else tuple(keys), {})
-        seed = task["seed"]
+        seed = task.seed
         if seed in group:
             raise ValueError(f"two tasks with {dict(zip(by, keys, strict=True))} and seed {seed}")
         group[seed] = pick(result)

@@ -24,7 +24,7 @@ from delayed_rl.experiments.framework.claims import (
     range_claim,
 )
 from delayed_rl.experiments.framework.delay_estimates import ESTIMATE_LABELS
-from delayed_rl.experiments.framework.delay_settings import LAMBDA_MAX, make_delay
+from delayed_rl.experiments.framework.delay_settings import LAMBDA_MAX, SettingTask, make_delay
 from delayed_rl.experiments.framework.experiment import Claim, Curve
 from delayed_rl.experiments.framework.snapshot_runs import LOOP_FRACTION, optimal_average
 
@@ -32,15 +32,15 @@ from delayed_rl.experiments.framework.snapshot_runs import LOOP_FRACTION, optima
 SEED_SHARE, STABLE_SHARE = 0.95, 0.90
 
 
-def setting_fields(task_list: list[dict]) -> dict[str, dict]:
+def setting_fields(task_list: Sequence[SettingTask]) -> dict[str, SettingTask]:
     """Each setting's first task, by its label: what the setting's ``size``, ``delay``, ``lam`` are."""
-    fields: dict[str, dict] = {}
+    fields: dict[str, SettingTask] = {}
     for task in task_list:
-        fields.setdefault(task["setting"], task)
+        fields.setdefault(task.setting, task)
     return fields
 
 
-def agent_stats(runs: Mapping[int, dict], setting: dict) -> dict[str, Any]:
+def agent_stats(runs: Mapping[int, dict], setting: SettingTask) -> dict[str, Any]:
     """One row of the table: one agent's metrics in one setting, over its seeds.
 
     Args:
@@ -61,13 +61,13 @@ def agent_stats(runs: Mapping[int, dict], setting: dict) -> dict[str, Any]:
         row[key] = mean_ci_n([r[key] for r in results])
     if all("mean_delay" in r for r in results):
         row["mean_delay"] = mean_ci_n([r["mean_delay"] for r in results])
-    row["true_mean_delay"] = make_delay(setting["delay"], setting["lam"]).mean
+    row["true_mean_delay"] = make_delay(setting.delay, setting.lam).mean
     row["paths"] = sorted({r["path"] for r in results})
     return row
 
 
 def result_table(
-    groups: dict[str, dict[str, dict[int, dict]]], settings: dict[str, dict]
+    groups: dict[str, dict[str, dict[int, dict]]], settings: dict[str, SettingTask]
 ) -> list[dict[str, Any]]:
     """The full table for ``summary.json``: one :func:`agent_stats` row per (setting, agent).
 
@@ -162,16 +162,16 @@ def stability_claim(
     )
 
 
-def curves_of(task_list: list[dict], results: list[dict]) -> list[Curve]:
+def curves_of(task_list: Sequence[SettingTask], results: list[dict]) -> list[Curve]:
     """The learning curves and the snapshot optimality of every run, for ``curves.csv``."""
     curves = []
     for task, result in zip(task_list, results, strict=True):
-        condition = f"{task['setting']} | {task['agent']}"
-        curves.append(Curve(condition, task["seed"], result["steps"], result["curve"]))
+        condition = f"{task.setting} | {task.agent}"
+        curves.append(Curve(condition, task.seed, result["steps"], result["curve"]))
         curves.append(
             Curve(
                 condition,
-                task["seed"],
+                task.seed,
                 result["snapshot_steps"],
                 result["snapshot_optimal"].astype(np.float64),
                 "greedy_optimal",
@@ -188,7 +188,7 @@ def slug(setting: str) -> str:
 
 def setting_figures(
     groups: dict[str, dict[str, dict[int, dict]]],
-    settings: dict[str, dict],
+    settings: dict[str, SettingTask],
     estimators: Sequence[str],
     same_curves: Sequence[str] = (),
 ) -> dict[str, Callable[[Path], None]]:
@@ -204,7 +204,7 @@ def setting_figures(
     figures = {}
     for setting, by_agent in groups.items():
         task0 = settings[setting]
-        size, name = task0["size"], slug(setting)
+        size, name = task0.size, slug(setting)
         optimum = (optimal_average(size), f"optimal loop ({optimal_average(size):.3f})")
         curves = {
             a: [(r["steps"], r["curve"]) for r in runs.values()]
@@ -244,7 +244,7 @@ def setting_figures(
             if a in by_agent and all("estimate" in r for r in by_agent[a].values())
         }
         if estimates:
-            delay = make_delay(task0["delay"], task0["lam"])
+            delay = make_delay(task0.delay, task0.lam)
             true_pmf = np.asarray(delay.pmf(np.arange(LAMBDA_MAX + 1)), dtype=float)
             estimates = {ESTIMATE_LABELS.get(a, a): runs for a, runs in estimates.items()}
             figures[f"delay_estimate_{name}"] = plotting.figure(

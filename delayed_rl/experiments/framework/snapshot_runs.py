@@ -170,8 +170,8 @@ def second_half_share(
     return float(np.asarray(snapshot_optimal)[late].mean())
 
 
-def measure(agent: Any, task: dict) -> dict[str, Any]:
-    """Train ``agent`` for ``task["steps"]`` on ``task["size"]``'s grid and measure the run.
+def measure(agent: Any, steps: int, size: int) -> dict[str, Any]:
+    """Train ``agent`` for ``steps`` steps on the grid of side ``size`` and measure the run.
 
     Returns:
         ``steps`` and ``curve`` (the running average reward), ``average`` (the training mean
@@ -182,14 +182,14 @@ def measure(agent: Any, task: dict) -> dict[str, Any]:
         ``greedy``, ``optimal``, ``second_half_optimal`` and the snapshot arrays prefixed
         :data:`AVERAGED` (:func:`averaged_readout` puts them in place of the others).
     """
-    run = train_with_snapshots(agent, task["steps"], task["size"])
+    run = train_with_snapshots(agent, steps, size)
     rewards = run.pop("rewards")
-    steps, curve = running_average(rewards)
+    points, curve = running_average(rewards)
     out = {
-        "steps": steps,
+        "steps": points,
         "curve": curve,
         "average": float(rewards.mean()),
-        "ns_per_step": 1e9 * run.pop("learn_seconds") / task["steps"],
+        "ns_per_step": 1e9 * run.pop("learn_seconds") / steps,
         **run,
         **delay_estimate(agent),
     }
@@ -199,7 +199,7 @@ def measure(agent: Any, task: dict) -> dict[str, Any]:
             out[f"{prefix}greedy"] = float(run[f"{prefix}snapshot_greedy"][-1])
             out[f"{prefix}optimal"] = bool(snapshots[-1])
             out[f"{prefix}second_half_optimal"] = second_half_share(
-                run["snapshot_steps"], snapshots, task["steps"]
+                run["snapshot_steps"], snapshots, steps
             )
     return out
 

@@ -10,6 +10,8 @@ claims in :func:`summarize`.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from delayed_rl.experiments.framework import plotting
@@ -33,6 +35,7 @@ from delayed_rl.experiments.framework.line_following import (
     training_cost,
 )
 from delayed_rl.experiments.framework.results import pivot
+from delayed_rl.experiments.framework.task import Task
 
 #: The steps of every controller's run (Fig. 5.19), and of a quick run.
 RUN_STEPS, QUICK_RUN_STEPS = 1700, 300
@@ -46,7 +49,23 @@ THESIS = {"P undelayed": 0.9, "MMQ": 0.6, "Q": 0.3, "P delayed observations": -0
 TOLERANCE = 0.2
 
 
-def tasks(config: Config) -> list[dict]:
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class ControllerTask(Task):
+    """A controller's run of ``controllers``.
+
+    Attributes:
+        controller: the contestant, a key of :data:`THESIS`.
+        train_steps: a learner's training steps before its run (a proportional controller
+            ignores them).
+        run_steps: the steps of the run.
+    """
+
+    controller: str
+    train_steps: int
+    run_steps: int
+
+
+def tasks(config: Config) -> list[ControllerTask]:
     """Per seed, one run of each of the four controllers (:data:`THESIS`), all from one pose.
 
     - **P undelayed**: the thesis's proportional controller (Eqs. 5.8–5.9, gain :data:`K_P`) on
@@ -69,12 +88,9 @@ def tasks(config: Config) -> list[dict]:
     train_steps = config.run_steps(TRAIN_STEPS, QUICK_TRAIN_STEPS)
     run_steps = QUICK_RUN_STEPS if config.quick else RUN_STEPS
     return [
-        {
-            "controller": name,
-            "train_steps": train_steps,
-            "run_steps": run_steps,
-            "seed": config.base_seed + i,
-        }
+        ControllerTask(
+            controller=name, train_steps=train_steps, run_steps=run_steps, seed=config.base_seed + i
+        )
         for i in range(config.seeds)
         for name in THESIS
     ]
@@ -102,7 +118,7 @@ def _run_proportional(delayed: bool, steps: int, seed: int) -> tuple[np.ndarray,
     return rewards, centroids
 
 
-def run_task(task: dict) -> dict:
+def run_task(task: ControllerTask) -> dict:
     """One controller's run: its running average reward, accumulated error and line visibility.
 
     Returns:
@@ -110,14 +126,14 @@ def run_task(task: dict) -> dict:
         final value), ``total_error`` (Σ|Δ| over the run) and ``visible`` (the fraction of
         steps whose camera saw the line).
     """
-    name, seed, steps = task["controller"], task["seed"], task["run_steps"]
+    name, seed, steps = task.controller, task.seed, task.run_steps
     if not name.startswith("P "):
         return shared_run(task).alone()
     rewards, centroids = _run_proportional(name != "P undelayed", steps, seed)
     return _metrics({"undelayed_reward": rewards, "obs": centroids})
 
 
-def shared_run(task: dict) -> SharedRun | None:
+def shared_run(task: ControllerTask) -> SharedRun | None:
     """A learner's run: its training, pooled with the other line-following experiments'.
 
     Trained for ``train_steps``, a copy of it goes on for ``run_steps`` on a fresh env
@@ -125,10 +141,10 @@ def shared_run(task: dict) -> SharedRun | None:
     learner and seed and whose training ``real-robot`` continues); the P controllers' runs are
     their own (``None``).
     """
-    if task["controller"].startswith("P "):
+    if task.controller.startswith("P "):
         return None
-    continuation = ["continue", task["train_steps"], "clean", task["run_steps"]]
-    return pooled_training(task["controller"], task["seed"], [continuation], _continuation_metrics)
+    continuation = ["continue", task.train_steps, "clean", task.run_steps]
+    return pooled_training(task.controller, task.seed, [continuation], _continuation_metrics)
 
 
 def _continuation_metrics(result: dict) -> dict:
@@ -146,14 +162,14 @@ def _pick(metrics: dict) -> dict:
     return {key: metrics[key] for key in ("steps", "curve", "average", "total_error", "visible")}
 
 
-def cost(task: dict) -> float:
+def cost(task: ControllerTask) -> float:
     """A task's estimated core-seconds, for scheduling: a learner's training and its run."""
-    learner = not task["controller"].startswith("P ")
-    steps = task["run_steps"] + (task["train_steps"] if learner else 0)
-    return training_cost(task["controller"], steps)
+    learner = not task.controller.startswith("P ")
+    steps = task.run_steps + (task.train_steps if learner else 0)
+    return training_cost(task.controller, steps)
 
 
-def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
+def summarize(task_list: list[ControllerTask], results: list[dict], config: Config) -> Summary:
     """Fig. 5.19's claims: each controller's final average reward, and their order.
 
     The metric is the running average of the undelayed reward over the run (Fig. 5.19); a
@@ -166,11 +182,11 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
     runs = {name: by_controller[name] for name in THESIS}
     by_seed = pivot(task_list, results, by=("controller",), value="average")
     curves = [
-        Curve(task["controller"], task["seed"], result["steps"], result["curve"])
+        Curve(task.controller, task.seed, result["steps"], result["curve"])
         for task, result in zip(task_list, results, strict=True)
     ]
     stat = {name: mean_ci_n([r["average"] for r in rs.values()]) for name, rs in runs.items()}
-    run_steps = task_list[0]["run_steps"]
+    run_steps = task_list[0].run_steps
     claims = [
         band_claim(
             f"{name}: average reward after {run_steps} steps",
@@ -208,7 +224,7 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
         )
     }
     extra = {
-        "train_steps": task_list[0]["train_steps"],
+        "train_steps": task_list[0].train_steps,
         "run_steps": run_steps,
         "lambda_max": LAMBDA_MAX,
         **line_statistics(runs),

@@ -17,6 +17,7 @@ from delayed_rl.experiments.framework.claims import (
 )
 from delayed_rl.experiments.framework.experiment import Config, Experiment, Summary
 from delayed_rl.experiments.framework.normalised_runs import (
+    GridTask,
     condition_means,
     grid_task,
     grid_tasks,
@@ -37,7 +38,7 @@ STEPS, QUICK_STEPS = 150_000, 20_000
 THESIS_TREND = "the normalised reward falls as λ grows"
 
 
-def tasks(config: Config) -> list[dict]:
+def tasks(config: Config) -> list[GridTask]:
     """Per seed: undelayed Q-learning on the grid, then Q-learning under each mean delay λ.
 
     :data:`STEPS` a run (:data:`QUICK_STEPS` with ``config.quick``, which also keeps only
@@ -46,13 +47,13 @@ def tasks(config: Config) -> list[dict]:
     steps = config.run_steps(STEPS, QUICK_STEPS)
     lams = QUICK_LAMS if config.quick else LAMS
     runs = [
-        {"size": SIZE, "lam": lam, "delay_estimates": [0], "condition": f"lambda={lam}"}
+        {"size": SIZE, "lam": lam, "delay_estimates": (0,), "condition": f"lambda={lam}"}
         for lam in lams
     ]
     return grid_tasks(config, steps, runs)
 
 
-def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
+def summarize(task_list: list[GridTask], results: list[dict], config: Config) -> Summary:
     """The trend of Fig. 5.2: the normalised reward falls as λ grows.
 
     Two claims, both per seed: the least-squares slope of the normalised reward against

@@ -6,12 +6,15 @@ the shape of the thesis's peak, are in :func:`summarize`.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from delayed_rl.experiments.framework import plotting
 from delayed_rl.experiments.framework.claims import band_claim, direction_claim, mean_ci_n, paired
 from delayed_rl.experiments.framework.experiment import Config, Experiment, Summary, step_count
 from delayed_rl.experiments.framework.normalised_runs import (
+    GridTask,
     condition_means,
     grid_task,
     grid_tasks,
@@ -19,6 +22,7 @@ from delayed_rl.experiments.framework.normalised_runs import (
     normalised_curves,
 )
 from delayed_rl.experiments.framework.results import common_seeds, pivot
+from delayed_rl.experiments.framework.task import optional
 
 #: The grid world's side and the Poisson mean delay λ.
 SIZE, LAM = 9, 17
@@ -34,7 +38,19 @@ PEAK_ERROR = 3
 """The band of the best estimate's error: 0 ± 3."""
 
 
-def tasks(config: Config) -> list[dict]:
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class EstimateErrorTask(GridTask):
+    """A run of ``estimate-error``.
+
+    Attributes:
+        error: the estimate's error i = λ̂ − λ (optional: ``None``, left out of the task's JSON,
+            for the undelayed reference run).
+    """
+
+    error: int | None = optional()
+
+
+def tasks(config: Config) -> list[EstimateErrorTask]:
     """Per seed: undelayed Q-learning, then fixed-delay Q-learning with λ̂ = λ + i.
 
     The errors are i ∈ {−:data:`MAX_ERROR`, ..., :data:`MAX_ERROR`} (every
@@ -45,13 +61,13 @@ def tasks(config: Config) -> list[dict]:
     step = QUICK_ERROR_STEP if config.quick else 1
     errors = range(-MAX_ERROR, MAX_ERROR + 1, step)
     runs = [
-        {"size": SIZE, "lam": LAM, "delay_estimates": [LAM + e], "condition": f"i={e}", "error": e}
+        {"size": SIZE, "lam": LAM, "delay_estimates": (LAM + e,), "condition": f"i={e}", "error": e}
         for e in errors
     ]
-    return grid_tasks(config, steps, runs)
+    return grid_tasks(config, steps, runs, EstimateErrorTask)
 
 
-def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
+def summarize(task_list: list[EstimateErrorTask], results: list[dict], config: Config) -> Summary:
     """Fig. 5.6's shape: a peak of ≈ 0.6 near i = 0, and much less at both ends of the errors.
 
     Every quantity is formed per seed, its CI over the seeds: the normalised reward at i = 0

@@ -35,6 +35,7 @@ from delayed_rl.experiments.framework.line_following import (
     Q_INIT,
     TRACK,
     UNSEEN_ERROR,
+    LineTask,
     line_statistics,
     logged_task_cost,
     logged_task_run,
@@ -54,13 +55,13 @@ LEARNERS = ("MMQ", "Q")
 STEPS, QUICK_STEPS = 150_000, 3_000
 
 
-def tasks(config: Config) -> list[dict]:
+def tasks(config: Config) -> list[LineTask]:
     """Per seed: one Q-learning and one MMQ run, :data:`STEPS` each (:data:`QUICK_STEPS` quick)."""
     steps = config.run_steps(STEPS, QUICK_STEPS)
-    return seed_tasks(config, LEARNERS, steps=steps)
+    return seed_tasks(config, LEARNERS, LineTask, steps=steps)
 
 
-def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
+def summarize(task_list: list[LineTask], results: list[dict], config: Config) -> Summary:
     """Figs. 5.22–5.23's claims: each agent's average reward, MMQ − Q, and the error ratio.
 
     The difference and the ratio are paired by seed (MMQ and Q of one seed start alike). The
@@ -72,7 +73,7 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
     runs = {agent: by_agent[agent] for agent in LEARNERS}
     curves = []
     for task, result in zip(task_list, results, strict=True):
-        agent, seed, steps = task["agent"], task["seed"], result["steps"]
+        agent, seed, steps = task.agent, task.seed, result["steps"]
         curves.append(Curve(agent, seed, steps, result["curve"]))
         curves.append(Curve(agent, seed, steps, result["error"], "accumulated_error"))
     stat = {agent: mean_ci_n([r["average"] for r in rs.values()]) for agent, rs in runs.items()}

@@ -9,6 +9,7 @@ what each run records is :func:`run_task`'s, the claims :func:`summarize`'s.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from pathlib import Path
 
@@ -45,6 +46,7 @@ from delayed_rl.experiments.framework.snapshot_runs import (
     second_half_share,
     train_with_snapshots,
 )
+from delayed_rl.experiments.framework.task import Task
 from delayed_rl.experiments.framework.training import (
     EPSILON,
     greedy_average_reward,
@@ -68,21 +70,38 @@ THESIS_GREEDY = {"MMQ": 0.59, "Q": 0.0}
 THESIS_ROUTE_Q = 21.4
 
 
-def tasks(config: Config) -> list[dict]:
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class MMQGridTask(Task):
+    """An agent's run of ``mmq-gridworld``.
+
+    Attributes:
+        agent: ``"MMQ"``, ``"Q"`` or ``"Q undelayed"``.
+        delay_estimates: the delay estimates Λ it models (``(0,)``: Q-learning).
+        lam: the Poisson mean delay λ (0: undelayed).
+        steps: training steps.
+    """
+
+    agent: str
+    delay_estimates: tuple[int, ...]
+    lam: int
+    steps: int
+
+
+def tasks(config: Config) -> list[MMQGridTask]:
     """Per seed: MMQ (Λ = {0..λ̂max}) and Q-learning under Poisson(λ) delays, and undelayed Q.
 
     :data:`STEPS` a run (:data:`QUICK_STEPS` with ``config.quick``).
     """
     steps = config.run_steps(STEPS, QUICK_STEPS)
-    estimates = {"MMQ": list(range(LAMBDA_MAX + 1)), "Q": [0], "Q undelayed": [0]}
+    estimates = {"MMQ": tuple(range(LAMBDA_MAX + 1)), "Q": (0,), "Q undelayed": (0,)}
     return [
-        {
-            "agent": agent,
-            "delay_estimates": estimates[agent],
-            "lam": 0 if agent == "Q undelayed" else LAM,
-            "steps": steps,
-            "seed": config.base_seed + i,
-        }
+        MMQGridTask(
+            agent=agent,
+            delay_estimates=estimates[agent],
+            lam=0 if agent == "Q undelayed" else LAM,
+            steps=steps,
+            seed=config.base_seed + i,
+        )
         for i in range(config.seeds)
         for agent in estimates
     ]
@@ -122,7 +141,7 @@ def behaviour_policy(q: np.ndarray, epsilon: float = EPSILON) -> np.ndarray:
     return (p_model[:, :, None] * p_action).sum(axis=1)  # Σ over models, in a fixed order
 
 
-def run_task(task: dict) -> dict:
+def run_task(task: MMQGridTask) -> dict:
     """Train one agent, then read off its curve, greedy score, visits, policies and Table 5.1 rows.
 
     The agent learns in :data:`~.snapshot_runs.SNAPSHOTS` pieces
@@ -145,11 +164,11 @@ def run_task(task: dict) -> dict:
         ``model_share`` (how often each λ̂ acted).
     """
     agent = MultipleModelQLearning(
-        grid_env(SIZE, task["lam"]),
-        delay_estimates=list(task["delay_estimates"]),
-        **thesis_hyperparameters(task["seed"]),
+        grid_env(SIZE, task.lam),
+        delay_estimates=list(task.delay_estimates),
+        **thesis_hyperparameters(task.seed),
     )
-    run = train_with_snapshots(agent, task["steps"], SIZE, keep_obs=True)
+    run = train_with_snapshots(agent, task.steps, SIZE, keep_obs=True)
     q = agent.q_table
     steps, curve = running_average(run["rewards"])
     policy = greedy_actions(q)
@@ -167,7 +186,7 @@ def run_task(task: dict) -> dict:
         "snapshot_steps": run["snapshot_steps"],
         "snapshot_optimal": run["snapshot_optimal"],
         "second_half_optimal": second_half_share(
-            run["snapshot_steps"], run["snapshot_optimal"], task["steps"]
+            run["snapshot_steps"], run["snapshot_optimal"], task.steps
         ),
         "visits": np.bincount(run["obs"], minlength=SIZE * SIZE).reshape(SIZE, SIZE),
         "policy": policy.reshape(SIZE, SIZE),
@@ -184,7 +203,7 @@ _LOOP = f"optimal: a {WALK_STEPS}-step greedy walk ≥ {LOOP_FRACTION} of the {L
 _PER_SEED = "per seed, the share of its snapshots after half the steps"
 
 
-def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
+def summarize(task_list: list[MMQGridTask], results: list[dict], config: Config) -> Summary:
     """Fig. 5.9's and Table 5.1's claims, curves and figures.
 
     The claims (verdicts by :mod:`~.framework.claims`' rules; each row's ``criterion`` states
@@ -210,7 +229,7 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
     training = pivot(task_list, results, by=("agent",), value="average")
     curves = []
     for task, result in zip(task_list, results, strict=True):
-        agent, seed = task["agent"], task["seed"]
+        agent, seed = task.agent, task.seed
         curves.append(Curve(agent, seed, result["steps"], result["curve"]))
         curves.append(
             Curve(

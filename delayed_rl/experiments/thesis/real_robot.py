@@ -11,6 +11,7 @@ is :func:`tasks`', the numbers the constants ``EXPERIMENT.description`` is forma
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import numpy as np
@@ -49,6 +50,7 @@ from delayed_rl.experiments.framework.line_following import (
     training_cost,
 )
 from delayed_rl.experiments.framework.results import pivot
+from delayed_rl.experiments.framework.task import Task
 from delayed_rl.experiments.framework.training import hyperparameter_text
 
 #: The learners compared.
@@ -73,7 +75,22 @@ ERROR_RATIO_TOLERANCE = 0.25
 _COLOURS = {"MMQ": "C0", "Q": "C1", "DeconvQ learned": "C2"}
 
 
-def tasks(config: Config) -> list[dict]:
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class RealRobotTask(Task):
+    """A learner's run of ``real-robot``: pretraining, then the real and the control runs.
+
+    Attributes:
+        agent: the learner, one of :data:`LEARNERS`.
+        pretrain_steps: steps of pretraining in the clean simulation.
+        steps: steps of each run after it.
+    """
+
+    agent: str
+    pretrain_steps: int
+    steps: int
+
+
+def tasks(config: Config) -> list[RealRobotTask]:
     """Per seed, one task per agent: pretraining, then the real and the control runs.
 
     1. pretraining: ``linefollow``'s setting
@@ -106,10 +123,10 @@ def tasks(config: Config) -> list[dict]:
     """
     pretrain = config.run_steps(PRETRAIN_STEPS, QUICK_PRETRAIN_STEPS)
     run = QUICK_RUN_STEPS if config.quick else RUN_STEPS
-    return seed_tasks(config, LEARNERS, pretrain_steps=pretrain, steps=run)
+    return seed_tasks(config, LEARNERS, RealRobotTask, pretrain_steps=pretrain, steps=run)
 
 
-def run_task(task: dict) -> dict:
+def run_task(task: RealRobotTask) -> dict:
     """Pretrain one agent in the clean simulation, then continue a copy on each condition.
 
     Returns:
@@ -119,19 +136,19 @@ def run_task(task: dict) -> dict:
     return shared_run(task).alone()
 
 
-def shared_run(task: dict) -> SharedRun:
+def shared_run(task: RealRobotTask) -> SharedRun:
     """The task's training run, pooled with the other line-following experiments'.
 
     Its first steps are ``linefollow``'s (or ``linefollow-deconv``'s) and ``controllers``' runs
     of the same learner and seed (:func:`~.line_following.training_run`): run together, each learner
     and seed trains once.
     """
-    check_choice("agent", task["agent"], LEARNERS)
+    check_choice("agent", task.agent, LEARNERS)
     continuations = [
-        ["continue", task["pretrain_steps"], SETTING[condition], task["steps"]]
+        ["continue", task.pretrain_steps, SETTING[condition], task.steps]
         for condition in CONDITIONS
     ]
-    return pooled_training(task["agent"], task["seed"], continuations, _by_condition)
+    return pooled_training(task.agent, task.seed, continuations, _by_condition)
 
 
 def _by_condition(result: dict) -> dict:
@@ -143,9 +160,9 @@ def _by_condition(result: dict) -> dict:
     return out
 
 
-def cost(task: dict) -> float:
+def cost(task: RealRobotTask) -> float:
     """A task's estimated core-seconds, for scheduling: its pretraining and two runs."""
-    return training_cost(task["agent"], task["pretrain_steps"] + 2 * task["steps"])
+    return training_cost(task.agent, task.pretrain_steps + 2 * task.steps)
 
 
 def _by_seed(runs: dict, agent: str, condition: str, key: str) -> dict[int, float]:
@@ -153,7 +170,7 @@ def _by_seed(runs: dict, agent: str, condition: str, key: str) -> dict[int, floa
     return {seed: result[condition][key] for seed, result in runs[agent].items()}
 
 
-def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
+def summarize(task_list: list[RealRobotTask], results: list[dict], config: Config) -> Summary:
     """The claims, statistics in ``extra``, and the figures.
 
     The metrics of each continuation come from its own ``training_log``
@@ -177,7 +194,7 @@ def summarize(task_list: list[dict], results: list[dict], config: Config) -> Sum
     runs = {agent: by_agent.get(agent, {}) for agent in LEARNERS}
     curves = []
     for task, result in zip(task_list, results, strict=True):
-        agent, seed = task["agent"], task["seed"]
+        agent, seed = task.agent, task.seed
         for condition in CONDITIONS:
             r = result[condition]
             name = f"{agent} {condition}"
@@ -327,11 +344,11 @@ def _statistics(runs: dict, seeds: list[int]) -> dict[str, Any]:
     }
 
 
-def _protocol(task_list: list[dict]) -> dict[str, Any]:
+def _protocol(task_list: list[RealRobotTask]) -> dict[str, Any]:
     """``summary.json``'s protocol: the steps, the delays and the real configuration."""
     return {
-        "pretrain_steps": task_list[0]["pretrain_steps"],
-        "run_steps": task_list[0]["steps"],
+        "pretrain_steps": task_list[0].pretrain_steps,
+        "run_steps": task_list[0].steps,
         "lambda": LAM,
         "lambda_max": LAMBDA_MAX,
         "real_env": REAL_ENV_ID,

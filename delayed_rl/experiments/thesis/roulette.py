@@ -13,6 +13,7 @@ import numpy as np
 from delayed_rl.experiments.framework import plotting
 from delayed_rl.experiments.framework.claims import band_claim
 from delayed_rl.experiments.framework.experiment import Config, Curve, Experiment, Summary
+from delayed_rl.experiments.framework.task import Task
 from delayed_rl.experiments.framework.training import ALPHA, GAMMA
 
 EVEN, THIRTEEN = 0, 1
@@ -34,12 +35,12 @@ THESIS_TABLES = (
 )
 
 
-def tasks(config: Config) -> list[dict]:
+def tasks(config: Config) -> list[Task]:
     """One task: the walk-through is deterministic, so one seed (``config.base_seed``) is enough."""
-    return [{"seed": config.base_seed}]
+    return [Task(seed=config.base_seed)]
 
 
-def run_task(task: dict) -> dict:
+def run_task(task: Task) -> dict:
     """Feed the three rounds to MMQ's ``update()``; return its Q-table after each round.
 
     Returns:
@@ -53,7 +54,7 @@ def run_task(task: dict) -> dict:
         gamma=GAMMA,
         q_init=Q_INIT,
         max_delay_estimate=LAMBDA_MAX,
-        seed=task["seed"],
+        seed=task.seed,
     )
     tables = []
     for wager, payout in ROUNDS:
@@ -62,7 +63,7 @@ def run_task(task: dict) -> dict:
     return {"tables": np.array(tables)}
 
 
-def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
+def summarize(task_list: list[Task], results: list[dict], config: Config) -> Summary:
     """One claim per Q-value of Tables 3.3–3.5: the thesis's value ± :data:`ROUNDING`.
 
     The walk-through is deterministic (no random draw enters ``update()``), so each Q-value is one

@@ -15,6 +15,7 @@ from delayed_rl.experiments.framework.claims import (
 )
 from delayed_rl.experiments.framework.experiment import Config, Experiment, Summary
 from delayed_rl.experiments.framework.normalised_runs import (
+    GridTask,
     condition_means,
     grid_task,
     grid_tasks,
@@ -36,7 +37,7 @@ NEAR_ZERO = 0.1
 """The tolerance of the 9×9 rows' "≈ 0 %": a normalised reward within 0 ± 0.1."""
 
 
-def tasks(config: Config) -> list[dict]:
+def tasks(config: Config) -> list[GridTask]:
     """Per seed and world size: undelayed Q-learning, then Q-learning under each mean delay λ.
 
     :data:`STEPS` a run (:data:`QUICK_STEPS` with ``config.quick``, which also keeps only
@@ -48,7 +49,7 @@ def tasks(config: Config) -> list[dict]:
         {
             "size": size,
             "lam": lam,
-            "delay_estimates": [0],
+            "delay_estimates": (0,),
             "condition": f"{size}x{size} lambda={lam}",
         }
         for size in SIZES
@@ -57,7 +58,7 @@ def tasks(config: Config) -> list[dict]:
     return grid_tasks(config, steps, runs)
 
 
-def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
+def summarize(task_list: list[GridTask], results: list[dict], config: Config) -> Summary:
     """Per λ: each world's normalised reward, and the 9×9 world below the 3×3 one.
 
     The 9×9 rows test the band 0 ± ``NEAR_ZERO`` ("≈ 0 %"), the 3×3 and 5×5 rows the range
