@@ -10,6 +10,7 @@ an interrupted run resumes. It needs the ``sb3`` extra.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any
 
@@ -30,6 +31,7 @@ from delayed_rl.experiments.framework.experiment import (
     Summary,
 )
 from delayed_rl.experiments.framework.gain_settings import (
+    RewardDelayTask,
     curve_means,
     delay_fields,
     gain_tasks,
@@ -37,6 +39,7 @@ from delayed_rl.experiments.framework.gain_settings import (
     method_gains,
 )
 from delayed_rl.experiments.framework.results import pivot
+from delayed_rl.experiments.framework.task import optional
 
 #: The Poisson means of the short and the long delays, and the long episodes' steps.
 SHORT_LAM, LAM, LONG_EPISODE_STEPS = 5, 20, 1000
@@ -127,43 +130,67 @@ _OPTIONAL_RUN_FIELDS = ("warmup_episodes", "reward")
 """Run fields only some settings have (a run without them keeps its key)."""
 
 
-def tasks(config: Config) -> list[dict]:
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class DeepTask(RewardDelayTask):
+    """A (setting, method, seed) of ``deep-rl``.
+
+    Attributes:
+        env_id: the Gymnasium env.
+        algorithm: ``"SAC"`` or ``"PPO"``.
+        n_envs: the sub-envs of a run.
+        episode_steps: the steps of an episode.
+        warmup_episodes: the episodes that warm a reward model up (optional: ``None``, left out
+            of the task's JSON, where the setting has none).
+        reward: the env's reward, where not its own (optional: ``None``, left out of the task's
+            JSON, for the env's own).
+    """
+
+    env_id: str
+    algorithm: str
+    n_envs: int
+    episode_steps: int
+    warmup_episodes: int | None = optional()
+    reward: str | None = optional()
+
+
+def tasks(config: Config) -> list[DeepTask]:
     """Every (setting, method, seed), and a ``random`` task per (setting, seed).
 
     Raises:
         ImportError: torch or stable-baselines3 is missing (the ``sb3`` extra).
     """
     require_sb3()
-    return gain_tasks(config, SETTINGS, QUICK, SETTING_METHODS)
+    return gain_tasks(config, SETTINGS, QUICK, SETTING_METHODS, DeepTask)
 
 
-def shared_run(task: dict) -> SharedRun:
+def shared_run(task: DeepTask) -> SharedRun:
     """The run behind a task, without what it does not depend on.
 
     The oracle's run has no delay (the 200-step Pendulum settings share it); the random policy's
     depends only on the env and the seed.
     """
-    if task["method"] == "random":
-        fields = {key: task[key] for key in ("env_id", "episode_steps", "seed")}
-        fields.update({key: task[key] for key in ("reward",) if key in task})
+    entries = task.to_json()
+    if task.method == "random":
+        fields = {key: entries[key] for key in ("env_id", "episode_steps", "seed")}
+        fields.update({key: entries[key] for key in ("reward",) if key in entries})
         return SharedRun(random_score, {**fields, "eval_episodes": RANDOM_EPISODES})
-    run = {key: task[key] for key in (*_RUN_FIELDS, "method", "seed")}
-    run.update({key: task[key] for key in _OPTIONAL_RUN_FIELDS if key in task})
+    run = {key: entries[key] for key in (*_RUN_FIELDS, "method", "seed")}
+    run.update({key: entries[key] for key in _OPTIONAL_RUN_FIELDS if key in entries})
     run["eval_episodes"] = EVAL_EPISODES
     return SharedRun(train_and_score, {**run, **delay_fields(task)})
 
 
-def run_task(task: dict) -> dict:
+def run_task(task: DeepTask) -> dict:
     """A task's result, run on its own (:func:`shared_run`)."""
     return shared_run(task).alone()
 
 
-def cost(task: dict) -> float:
+def cost(task: DeepTask) -> float:
     """Estimated core-seconds: SAC about 20 ms a step, PPO 1.5 ms (for scheduling only)."""
-    if task["method"] == "random":
+    if task.method == "random":
         return 1.0
-    per_step = 0.02 if task["algorithm"] == "SAC" else 0.0015
-    return per_step * task["steps"]
+    per_step = 0.02 if task.algorithm == "SAC" else 0.0015
+    return per_step * task.steps
 
 
 def _paired_claim(setting: str, ours: str, theirs: str, gains: dict) -> Claim:
@@ -242,7 +269,7 @@ def _table_row(method: str, runs: dict[int, dict], gains: dict[int, float]) -> d
     return row
 
 
-def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
+def summarize(task_list: list[DeepTask], results: list[dict], config: Config) -> Summary:
     """The claims, reference rows of every gain, the table and a learning-curve figure a setting.
 
     The methods (:mod:`~delayed_rl.experiments.framework.deep_training`, one warm-up for all: an

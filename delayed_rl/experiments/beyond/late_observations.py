@@ -10,6 +10,7 @@ resumes. It needs the ``sb3`` extra.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any
 
@@ -24,6 +25,7 @@ from delayed_rl.experiments.framework.experiment import (
     step_count,
 )
 from delayed_rl.experiments.framework.gain_settings import (
+    GainTask,
     gain_tasks,
     learning_curves,
     method_gains,
@@ -36,6 +38,7 @@ from delayed_rl.experiments.framework.late_training import (
     train_and_score,
 )
 from delayed_rl.experiments.framework.results import pivot
+from delayed_rl.experiments.framework.task import optional
 
 #: The small and the large settings' (observation, action) delays, uniform on these bounds.
 SMALL, LARGE = ((0, 3), (1, 2)), ((0, 6), (1, 4))
@@ -135,48 +138,74 @@ _RUN_FIELDS = (
 _OPTIONAL_RUN_FIELDS = ("env_kwargs", "observation_max_delay")
 
 
-def tasks(config: Config) -> list[dict]:
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class LateTask(GainTask):
+    """A (setting, method, seed) of ``late-observations``.
+
+    Attributes:
+        env_id: the Gymnasium env.
+        episode_steps: the steps of an episode.
+        observation_delay: the observation delay, as ``Delay.to_dict`` writes it.
+        action_delay: the action delay, likewise (``None``: none).
+        arrival: the rule of late observations' arrival (``"stale"``).
+        env_kwargs: the env's arguments (optional: ``None``, left out of the task's JSON, for
+            its defaults).
+        observation_max_delay: the clip on drawn observation delays (optional: ``None``, left
+            out of the task's JSON, for none).
+    """
+
+    env_id: str
+    episode_steps: int
+    observation_delay: dict[str, Any]
+    action_delay: dict[str, Any] | None
+    arrival: str
+    env_kwargs: dict[str, Any] | None = optional()
+    observation_max_delay: int | None = optional()
+
+
+def tasks(config: Config) -> list[LateTask]:
     """Every (setting, method, seed), and a ``random`` task per (setting, seed).
 
     Raises:
         ImportError: torch or stable-baselines3 is missing (the ``sb3`` extra).
     """
     require_sb3()
-    return gain_tasks(config, SETTINGS, QUICK, SETTING_METHODS)
+    return gain_tasks(config, SETTINGS, QUICK, SETTING_METHODS, LateTask)
 
 
-def shared_run(task: dict) -> SharedRun:
+def shared_run(task: LateTask) -> SharedRun:
     """The run behind a task, without what it does not depend on.
 
     The oracle's run has no delay (the settings share it); the random policy's depends only on
     the env and the seed.
     """
-    optional = {key: task[key] for key in _OPTIONAL_RUN_FIELDS if key in task}
-    if task["method"] in ("oracle", "random", "p-undelayed"):
-        fields = {key: task[key] for key in ("env_id", "episode_steps", "seed")}
-        fields.update({key: value for key, value in optional.items() if key == "env_kwargs"})
-        if task["method"] == "random":
+    entries = task.to_json()
+    given = {key: entries[key] for key in _OPTIONAL_RUN_FIELDS if key in entries}
+    if task.method in ("oracle", "random", "p-undelayed"):
+        fields = {key: entries[key] for key in ("env_id", "episode_steps", "seed")}
+        fields.update({key: value for key, value in given.items() if key == "env_kwargs"})
+        if task.method == "random":
             return SharedRun(random_score, {**fields, "eval_episodes": RANDOM_EPISODES})
-        if task["method"] == "p-undelayed":
+        if task.method == "p-undelayed":
             fields["method"] = "p-undelayed"
             return SharedRun(controller_score, {**fields, "eval_episodes": EVAL_EPISODES})
-        fields.update(method="oracle", steps=task["steps"], eval_every=task["eval_every"])
+        fields.update(method="oracle", steps=task.steps, eval_every=task.eval_every)
         return SharedRun(train_and_score, {**fields, "eval_episodes": EVAL_EPISODES})
-    run = {key: task[key] for key in (*_RUN_FIELDS, "method", "seed")}
-    run = {**run, **optional, "eval_episodes": EVAL_EPISODES}
-    return SharedRun(controller_score if task["method"] == "p-delayed" else train_and_score, run)
+    run = {key: entries[key] for key in (*_RUN_FIELDS, "method", "seed")}
+    run = {**run, **given, "eval_episodes": EVAL_EPISODES}
+    return SharedRun(controller_score if task.method == "p-delayed" else train_and_score, run)
 
 
-def run_task(task: dict) -> dict:
+def run_task(task: LateTask) -> dict:
     """A task's result, run on its own (:func:`shared_run`)."""
     return shared_run(task).alone()
 
 
-def cost(task: dict) -> float:
+def cost(task: LateTask) -> float:
     """Estimated core-seconds: SAC about 10 ms a step (for scheduling only)."""
-    if task["method"] in ("random", *CONTROLLERS):
+    if task.method in ("random", *CONTROLLERS):
         return 1.0
-    return 0.01 * task["steps"]
+    return 0.01 * task.steps
 
 
 def _setting_claims(setting: str, gains: dict, scores: dict) -> list[rules.Claim]:
@@ -225,7 +254,7 @@ def _setting_claims(setting: str, gains: dict, scores: dict) -> list[rules.Claim
     return []
 
 
-def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
+def summarize(task_list: list[LateTask], results: list[dict], config: Config) -> Summary:
     """The claims, reference rows of every gain, the table and a learning-curve figure a setting.
 
     The methods (:mod:`~delayed_rl.experiments.framework.late_training`): the undelayed oracle,

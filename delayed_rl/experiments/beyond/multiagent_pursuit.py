@@ -11,6 +11,7 @@ in :func:`summarize`. Runs are kept as they finish, so an interrupted run resume
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 from delayed_rl.delays import Poisson
@@ -19,6 +20,7 @@ from delayed_rl.experiments.framework.deep_training import require_sb3
 from delayed_rl.experiments.framework.delay_estimates import mean_delay_claim
 from delayed_rl.experiments.framework.experiment import Config, Experiment, SharedRun, Summary
 from delayed_rl.experiments.framework.gain_settings import (
+    RewardDelayTask,
     curve_means,
     delay_fields,
     gain_tasks,
@@ -94,34 +96,50 @@ def require_extras() -> None:
         ) from error
 
 
-def tasks(config: Config) -> list[dict]:
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class PursuitTask(RewardDelayTask):
+    """A (setting, method, seed) of ``multiagent-pursuit``.
+
+    Attributes:
+        env: the game, a name of :data:`~.multiagent_training.ENVS`.
+        env_kwargs: the game's arguments.
+        ppo: PPO's arguments beyond SB3's defaults.
+    """
+
+    env: str
+    env_kwargs: dict[str, Any]
+    ppo: dict[str, Any]
+
+
+def tasks(config: Config) -> list[PursuitTask]:
     """Every (setting, method, seed), and a ``random`` task per (setting, seed).
 
     Raises:
         ImportError: an extra is missing (``sb3`` or ``multiagent``).
     """
     require_extras()
-    return gain_tasks(config, SETTINGS, QUICK, (*METHODS, "random"))
+    return gain_tasks(config, SETTINGS, QUICK, (*METHODS, "random"), PursuitTask)
 
 
-def shared_run(task: dict) -> SharedRun:
+def shared_run(task: PursuitTask) -> SharedRun:
     """The run behind a task: the oracle's and the random policy's do not depend on the delay."""
-    fields = {key: task[key] for key in ("env", "env_kwargs", "seed")}
-    if task["method"] == "random":
+    entries = task.to_json()
+    fields = {key: entries[key] for key in ("env", "env_kwargs", "seed")}
+    if task.method == "random":
         return SharedRun(random_score, {**fields, "eval_episodes": RANDOM_EPISODES})
-    run = {key: task[key] for key in _RUN_FIELDS}
-    run.update(method=task["method"], eval_episodes=EVAL_EPISODES)
+    run = {key: entries[key] for key in _RUN_FIELDS}
+    run.update(method=task.method, eval_episodes=EVAL_EPISODES)
     return SharedRun(train_and_score, {**run, **delay_fields(task)})
 
 
-def run_task(task: dict) -> dict:
+def run_task(task: PursuitTask) -> dict:
     """A task's result, run on its own (:func:`shared_run`)."""
     return shared_run(task).alone()
 
 
-def cost(task: dict) -> float:
+def cost(task: PursuitTask) -> float:
     """Estimated core-seconds: about 0.6 ms a pursuer-step (for scheduling only)."""
-    return 1.0 if task["method"] == "random" else 6e-4 * task["steps"]
+    return 1.0 if task.method == "random" else 6e-4 * task.steps
 
 
 def _setting_claims(setting: str, scores: dict, by_method: dict) -> list[rules.Claim]:
@@ -162,7 +180,7 @@ def _setting_claims(setting: str, scores: dict, by_method: dict) -> list[rules.C
     return claims
 
 
-def summarize(task_list: list[dict], results: list[dict], config: Config) -> Summary:
+def summarize(task_list: list[PursuitTask], results: list[dict], config: Config) -> Summary:
     """The claims, a reference row of every gain, the table and the learning curves.
 
     The methods: ``oracle`` (PPO on the undelayed rewards), ``raw`` (on the delayed rewards as

@@ -1,6 +1,7 @@
 """What the experiments that score methods between a random policy and an oracle share.
 
-A *setting* is a dict of run fields; each (setting, method, seed) is a task. A method's *gain*
+A *setting* is a dict of run fields; each (setting, method, seed) is a task, a
+:class:`GainTask`. A method's *gain*
 in a setting is ``(score − random) / (oracle − random)``, with the mean scores of the random
 policy (method ``"random"``) and of the oracle (method ``"oracle"``) over the setting's seeds:
 0 is the random policy's level, 1 the oracle's. The experiments read their results by setting,
@@ -10,16 +11,20 @@ method and seed (``{setting: {method: {seed: result}}}``), a nested
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
 from delayed_rl.experiments.framework import claims as rules
 from delayed_rl.experiments.framework import plotting
 from delayed_rl.experiments.framework.experiment import Config, Curve
+from delayed_rl.experiments.framework.task import Task
 
 __all__ = [
+    "GainTask",
+    "RewardDelayTask",
     "curve_means",
     "delay_fields",
     "gain_tasks",
@@ -28,13 +33,47 @@ __all__ = [
 ]
 
 
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class GainTask(Task):
+    """A (setting, method, seed) of an experiment that scores methods by their gain.
+
+    Attributes:
+        setting: the setting's name.
+        method: the method (``"random"`` and ``"oracle"`` among them).
+        steps: training steps.
+        eval_every: the steps between two scorings of the policy.
+    """
+
+    setting: str
+    method: str
+    steps: int
+    eval_every: int
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class RewardDelayTask(GainTask):
+    """A :class:`GainTask` under a reward delay (what :func:`delay_fields` reads).
+
+    Attributes:
+        delay: the reward delay, as :meth:`~delayed_rl.delays.Delay.to_dict` writes it.
+        max_delay_estimate: the longest delay a learned delay pmf models.
+    """
+
+    delay: dict[str, Any]
+    max_delay_estimate: int
+
+
+TaskType = TypeVar("TaskType", bound=GainTask)
+
+
 def gain_tasks(
     config: Config,
     settings: dict[str, dict[str, Any]],
     quick: dict[str, tuple[int, int]],
     methods: tuple[str, ...] | dict[str, tuple[str, ...]],
-) -> list[dict]:
-    """Every (setting, method, seed) as a task, in that order of loops.
+    kind: type[TaskType],
+) -> list[TaskType]:
+    """Every (setting, method, seed) as a task of type ``kind``, in that order of loops.
 
     ``methods`` holds every setting's methods, or maps each setting to its own. A setting's
     ``"seeds"`` entry, where present, is its own number of seeds, capped by ``config.seeds``
@@ -55,7 +94,7 @@ def gain_tasks(
         for i in range(seeds):
             for method in methods[name] if isinstance(methods, dict) else methods:
                 seed = config.base_seed + i
-                out.append({"setting": name, "method": method, "seed": seed, **setting})
+                out.append(kind(setting=name, method=method, seed=seed, **setting))
     return out
 
 
@@ -72,15 +111,15 @@ def curve_means(by_method: dict[str, dict[int, dict]]) -> dict[str, dict[int, fl
     }
 
 
-def delay_fields(task: dict) -> dict[str, Any]:
+def delay_fields(task: RewardDelayTask) -> dict[str, Any]:
     """What a reward-delay method's run reads of ``task`` beyond the setting's own fields.
 
     The ``delay`` (not the oracle's, which is undelayed, so that settings that differ only by
     the delay share its run) and, for ``deconv-learned``, the bound ``max_delay_estimate`` it learns on.
     """
-    fields = {} if task["method"] == "oracle" else {"delay": task["delay"]}
-    if task["method"] == "deconv-learned":
-        fields["max_delay_estimate"] = task["max_delay_estimate"]
+    fields = {} if task.method == "oracle" else {"delay": task.delay}
+    if task.method == "deconv-learned":
+        fields["max_delay_estimate"] = task.max_delay_estimate
     return fields
 
 
