@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import gymnasium as gym
 import numpy as np
 import pytest
 
 from delayed_rl.delays import Delay
+
+if TYPE_CHECKING:
+    from delayed_rl.experiments.framework.delay_settings import SettingTask
 
 
 def examples(ci_count: int) -> int:
@@ -99,22 +104,24 @@ def fake_grid_run(
     average: float,
     mean_delay: float | None,
     late: float,
-) -> tuple[dict, dict]:
+) -> tuple[SettingTask, dict]:
     """A ``(task, result)`` pair shaped like ``delay_settings.run_agent``'s, for summaries.
 
     One 100-step run on the 7×7 grid under Poisson(8): its greedy policy ``optimal`` (or not) at
     the end, ``average`` its training reward, ``late`` the share of second-half snapshots
     optimal; with a delay estimate of mean ``mean_delay`` (``None``: the agent holds none).
     """
-    task = {
-        "setting": "7×7 Poisson(8)",
-        "size": 7,
-        "lam": 8,
-        "delay": "Poisson",
-        "agent": agent,
-        "steps": 100,
-        "seed": seed,
-    }
+    from delayed_rl.experiments.framework.delay_settings import SettingTask
+
+    task = SettingTask(
+        setting="7×7 Poisson(8)",
+        size=7,
+        lam=8,
+        delay="Poisson",
+        agent=agent,
+        steps=100,
+        seed=seed,
+    )
     greedy = 0.76 if optimal else 0.0
     result = {
         "steps": np.array([50, 100]),

@@ -27,14 +27,14 @@ def test_the_full_run_has_every_setting_method_and_seed_and_shares_the_oracle():
     assert "ircr" not in methods["cartpole-poisson20"]  # off-policy only
     assert set(methods["pendulum1000-upright"]) == {*METHODS, "random"}
     assert "return-regression" not in methods["pendulum-poisson5"]
-    sac = [t for t in tasks if t["algorithm"] == "SAC" and t["method"] != "random"]
+    sac = [t for t in tasks if t.algorithm == "SAC" and t.method != "random"]
     assert all(experiment.run_of(t).task["warmup_episodes"] == 2 for t in sac)
     keys = {pool_key(experiment.run_of(task)): task for task in tasks}
-    oracles = [t for t in tasks if t["method"] == "oracle" and t["seed"] == 0]
+    oracles = [t for t in tasks if t.method == "oracle" and t.seed == 0]
     shared = {pool_key(experiment.run_of(t)) for t in oracles}
     # the three 200-step Pendulum settings share one oracle run; the others do not
     assert len(oracles) == len(settings) and len(shared) == len(settings) - 2
-    delayed = [t for t in tasks if t["method"] == "raw" and t["seed"] == 0]
+    delayed = [t for t in tasks if t.method == "raw" and t.seed == 0]
     assert len({pool_key(experiment.run_of(t)) for t in delayed}) == len(settings)
     trained = sum((len(methods[name]) - 1) * seeds[name] for name in settings)  # but random
     # the 200-step settings share an oracle (5 seeds); random: one per env, reward and seed

@@ -17,6 +17,7 @@ from delayed_rl.experiments.framework import delay_settings as settings
 from delayed_rl.experiments.framework import setting_summaries as summaries
 from delayed_rl.experiments.framework import snapshot_runs as snapshots
 from delayed_rl.experiments.framework.experiment import VERDICTS
+from delayed_rl.experiments.framework.line_following import LineTask
 from delayed_rl.experiments.framework.results import pivot
 from delayed_rl.experiments.framework.training import greedy_average_reward
 
@@ -122,14 +123,14 @@ def test_task_counts_at_full_size_and_quick():
     assert len(ad.tasks(full)) == 2 * 3 * 7 * 20 == 840
     assert len(fw.tasks(full)) == 2 * 3 * 6 * 20 == 720
     assert len(lfd.tasks(Config(seeds=5))) == 15
-    steps = {(t["size"], t["lam"]): t["steps"] for t in ad.tasks(full)}
+    steps = {(t.size, t.lam): t.steps for t in ad.tasks(full)}
     assert steps == {(9, 13): 1_000_000, (7, 8): 300_000}
     quick = ad.tasks(Config(quick=True, seeds=2))
-    assert len(quick) == 14 and {(t["size"], t["delay"], t["steps"]) for t in quick} == {
+    assert len(quick) == 14 and {(t.size, t.delay, t.steps) for t in quick} == {
         (7, "Poisson", 30_000)
     }
-    assert {t["steps"] for t in lfd.tasks(Config(quick=True, seeds=2))} == {5_000}
-    assert {t["steps"] for t in ad.tasks(Config(seeds=1, steps=777))} == {777}
+    assert {t.steps for t in lfd.tasks(Config(quick=True, seeds=2))} == {5_000}
+    assert {t.steps for t in ad.tasks(Config(seeds=1, steps=777))} == {777}
     assert {get_experiment(n).default_seeds for n in ("anonymous-delay", "future-work")} == {20}
 
 
@@ -156,7 +157,7 @@ def test_bad_arguments():
     with pytest.raises(TypeError, match="averaged"):
         snapshots.greedy_policy(agent, averaged="yes")
     with pytest.raises(ValueError, match=r"agent must be one of \('MMQ', 'Q', 'DeconvQ learned'\)"):
-        lfd.EXPERIMENT.run_task({"agent": "SARSA", "seed": 0, "steps": 10})
+        lfd.EXPERIMENT.run_task(LineTask(agent="SARSA", seed=0, steps=10))
 
 
 def test_the_new_experiments_are_listed(capsys):
@@ -202,7 +203,7 @@ def test_future_work_small_run_has_a_row_and_claims_per_variant():
 
 
 def test_linefollow_deconv_run_measures_reward_error_and_the_delay_estimate():
-    result = lfd.EXPERIMENT.run_task({"agent": "DeconvQ learned", "steps": 1_200, "seed": 0})
+    result = lfd.EXPERIMENT.run_task(LineTask(agent="DeconvQ learned", steps=1_200, seed=0))
     assert result["steps"][-1] == 1_200 and result["error"][-1] == result["total_error"]
     assert result["curve"][-1] == pytest.approx(result["average"])
     assert result["estimate"].shape == (151,) and 0 <= result["mean_delay"] <= 150
@@ -258,12 +259,12 @@ def test_the_share_of_optimal_seeds_reads_its_wilson_interval():
         tasks.append(task)
         results.append(result)
     runs = pivot(tasks, results, by=("agent",))["DeconvQ learned"]
-    claim = summaries.optimal_seeds_claim(tasks[0]["setting"], "DeconvQ learned", runs, "")
+    claim = summaries.optimal_seeds_claim(tasks[0].setting, "DeconvQ learned", runs, "")
     # 19 of 20: Wilson [0.76, 0.99], neither inside nor wholly outside [0.95, 1]
     assert claim.verdict == "inconclusive" and claim.note.startswith("19 of 20 seeds")
     for result in results[1:9]:
         result["optimal"] = False
-    claim = summaries.optimal_seeds_claim(tasks[0]["setting"], "DeconvQ learned", runs, "")
+    claim = summaries.optimal_seeds_claim(tasks[0].setting, "DeconvQ learned", runs, "")
     assert claim.verdict == "differs" and claim.mean == pytest.approx(0.55)
 
 
@@ -283,7 +284,7 @@ def _lfd_verdicts(deconv_average: float, deconv_error: float, deconv_delay: floa
     }
     for seed in range(3):
         for agent, (average, error, delay) in values.items():
-            tasks.append({"agent": agent, "steps": 10, "seed": seed})
+            tasks.append(LineTask(agent=agent, steps=10, seed=seed))
             jitter = 0.01 * seed
             estimate_mean = None if delay is None else delay + jitter
             results.append(fake_line_run(average + jitter, error * (1 + jitter), estimate_mean))

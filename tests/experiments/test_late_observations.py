@@ -24,14 +24,14 @@ def test_the_full_run_has_every_setting_method_and_seed_and_shares_the_oracle():
     seeds = {name: min(5, setting.get("seeds", 5)) for name, setting in settings.items()}
     assert len(tasks) == sum(len(methods[name]) * seeds[name] for name in settings)
     assert seeds["epuck"] >= 3 and set(methods["epuck"]) >= {*METHODS, "p-delayed"}
-    oracles = [t for t in tasks if t["method"] == "oracle" and t["seed"] == 0]
-    keys = {t["setting"]: pool_key(experiment.run_of(t)) for t in oracles}
+    oracles = [t for t in tasks if t.method == "oracle" and t.seed == 0]
+    keys = {t.setting: pool_key(experiment.run_of(t)) for t in oracles}
     # one oracle for the 20k Pendulum settings, one for the 50k one, one for the e-puck
     assert keys["pendulum-small"] == keys["pendulum-large"] != keys["pendulum-large-50k"]
     assert len({keys["pendulum-small"], keys["pendulum-large-50k"], keys["epuck"]}) == 3
-    delayed = [t for t in tasks if t["method"] == "hindsight" and t["seed"] == 0]
+    delayed = [t for t in tasks if t.method == "hindsight" and t.seed == 0]
     assert len({pool_key(experiment.run_of(t)) for t in delayed}) == len(settings)
-    assert {t["steps"] for t in tasks if t["method"] != "random"} == {20_000, 50_000}
+    assert {t.steps for t in tasks if t.method != "random"} == {20_000, 50_000}
 
 
 def test_the_p_controller_is_scored_on_the_learners_delayed_observations():

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -22,24 +23,26 @@ def test_the_full_run_has_both_delays_every_learner_and_five_seeds_sharing_the_o
     tasks = experiment.tasks(Config(seeds=experiment.default_seeds))
     assert experiment.default_seeds >= 5
     assert len(tasks) == len(game.LAMS) * len(game.LEARNERS) * 5 == 40
-    assert {t["lam"] for t in tasks} == {5, 10} and {t["steps"] for t in tasks} == {150_000}
+    assert {t.lam for t in tasks} == {5, 10} and {t.steps for t in tasks} == {150_000}
     keys = {pool_key(experiment.run_of(t)) for t in tasks}
     assert len(keys) == 40 - 5  # Q undelayed: one run per seed, whatever the delay
-    oracle = [t for t in tasks if t["agent"] == "Q undelayed" and t["seed"] == 3]
+    oracle = [t for t in tasks if t.agent == "Q undelayed" and t.seed == 3]
     assert len({pool_key(experiment.run_of(t)) for t in oracle}) == 1
-    assert "lam" not in experiment.run_of(oracle[0]).task
-    deconv = [t for t in tasks if t["agent"] == "DeconvQ known" and t["seed"] == 3]
+    assert "lam" not in experiment.run_of(oracle[0]).task.to_json()
+    deconv = [t for t in tasks if t.agent == "DeconvQ known" and t.seed == 3]
     assert len({pool_key(experiment.run_of(t)) for t in deconv}) == 2
 
 
 def test_the_quick_run_is_one_delay_and_few_steps():
     tasks = get_experiment("multiagent-gridworld").tasks(Config(quick=True, seeds=2))
     assert len(tasks) == len(game.LEARNERS) * 2
-    assert {(t["lam"], t["steps"]) for t in tasks} == {(game.QUICK_LAM, game.QUICK_STEPS)}
+    assert {(t.lam, t.steps) for t in tasks} == {(game.QUICK_LAM, game.QUICK_STEPS)}
 
 
 def test_each_agent_gets_its_own_learner_of_the_tasks_kind():
-    task = {"agent": "DeconvQ known", "lam": 10, "size": 5, "episode_steps": 100, "seed": 0}
+    task = game.MultiagentGridTask(
+        agent="DeconvQ known", lam=10, size=5, episode_steps=100, steps=1, seed=0
+    )
     env = game.make_game(task)
     assert env.on_episode_end == "flush" and env.delays["agent_1"] == Poisson(10)
     spaces = game.AgentSpaces(env, "agent_0")
@@ -48,10 +51,10 @@ def test_each_agent_gets_its_own_learner_of_the_tasks_kind():
     assert isinstance(learner, DeconvolutionQLearning) and learner.on_episode_end == "flush"
     np.testing.assert_allclose(learner.delay_pmf[:20], Poisson(10).pmf(np.arange(20)), rtol=1e-6)
     assert (learner.learning_rate, learner.gamma, learner.q_init) == (0.1, 0.9, 25.0)
-    learned = game.make_learner({**task, "agent": "DeconvQ learned"}, spaces, 1)
+    learned = game.make_learner(dataclasses.replace(task, agent="DeconvQ learned"), spaces, 1)
     assert learned.delay is None and learned.delay_pmf.size == game.LAMBDA_MAX + 1
-    assert type(game.make_learner({**task, "agent": "Q"}, spaces, 1)) is QLearning
-    undelayed = game.make_game({**task, "agent": "Q undelayed"})
+    assert type(game.make_learner(dataclasses.replace(task, agent="Q"), spaces, 1)) is QLearning
+    undelayed = game.make_game(dataclasses.replace(task, agent="Q undelayed"))
     assert type(undelayed).__name__ == "CooperativeGridWorldEnv"  # no delay wrapper
     seeds = {game.learner_seed(s, i) for s in range(3) for i in range(2)}
     assert len(seeds) == 6 and all(0 <= s < 2**63 for s in seeds)
@@ -78,8 +81,9 @@ def test_the_greedy_score_is_the_optimum_for_the_optimal_joint_walk():
 
 
 def test_a_tiny_run_trains_both_learners_and_gives_json_results():
-    task = {"agent": "DeconvQ learned", "lam": 3, "size": 3, "episode_steps": 20}
-    task.update(steps=600, seed=1)
+    task = game.MultiagentGridTask(
+        agent="DeconvQ learned", lam=3, size=3, episode_steps=20, steps=600, seed=1
+    )
     result = game.train_and_score(task)
     assert result == json.loads(json.dumps(result))  # kept as JSON by a resumable run
     assert result["steps"] == list(range(20, 601, 20)) and len(result["greedy"]) == 30
@@ -88,7 +92,7 @@ def test_a_tiny_run_trains_both_learners_and_gives_json_results():
     assert result["average"] == pytest.approx(result["curve"][-1])
     assert len(result["estimates"]) == 2 and 0 <= result["mean_delay"] <= game.LAMBDA_MAX
     assert game.train_and_score(task) == result  # seeded: the same run again
-    other = game.train_and_score({**task, "seed": 2})
+    other = game.train_and_score(dataclasses.replace(task, seed=2))
     assert other["curve"] != result["curve"]
 
 
@@ -103,9 +107,9 @@ def _result(score, mean_delay=None):
 def _summary(scores, delays):
     """A summary of made-up results: ``scores[agent]`` per seed, at λ = 10."""
     config = Config(seeds=len(scores["Q"]))
-    tasks = [t for t in get_experiment("multiagent-gridworld").tasks(config) if t["lam"] == 10]
+    tasks = [t for t in get_experiment("multiagent-gridworld").tasks(config) if t.lam == 10]
     results = [
-        _result(scores[t["agent"]][t["seed"]], delays[t["seed"]]) for t in tasks
+        _result(scores[t.agent][t.seed], delays[t.seed]) for t in tasks
     ]  # every agent gets a mean delay: only DeconvQ learned's is read
     return game.summarize(tasks, results, config)
 

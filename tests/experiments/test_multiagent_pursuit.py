@@ -41,8 +41,8 @@ def test_the_full_run_has_every_method_five_seeds_and_the_oracle_ignores_the_del
     tasks = experiment.tasks(Config(seeds=experiment.default_seeds))
     assert experiment.default_seeds >= 5
     assert len(tasks) == (len(training.METHODS) + 1) * 5
-    assert {t["steps"] for t in tasks} == {300_000}
-    runs = {t["method"]: experiment.run_of(t).task for t in tasks if t["seed"] == 2}
+    assert {t.steps for t in tasks} == {300_000}
+    runs = {t.method: experiment.run_of(t).task for t in tasks if t.seed == 2}
     assert "delay" not in runs["oracle"] and runs["raw"]["delay"] == Poisson(30).to_dict()
     assert (
         "max_delay_estimate" in runs["deconv-learned"]
@@ -55,7 +55,7 @@ def test_the_full_run_has_every_method_five_seeds_and_the_oracle_ignores_the_del
 def test_the_quick_run_is_two_seeds_of_few_steps():
     tasks = get_experiment("multiagent-pursuit").tasks(Config(quick=True, seeds=2))
     assert len(tasks) == (len(training.METHODS) + 1) * 2
-    assert {(t["steps"], t["eval_every"]) for t in tasks} == {pursuit.QUICK[SETTING]}
+    assert {(t.steps, t.eval_every) for t in tasks} == {pursuit.QUICK[SETTING]}
 
 
 @pytest.mark.sb3
@@ -112,9 +112,9 @@ def test_a_tiny_quick_run_writes_its_files_and_resumes(tmp_path):
     full = get_experiment("multiagent-pursuit")
     short = {**pursuit.SETTINGS[SETTING]["env_kwargs"], "max_cycles": 40}
 
-    def tiny_tasks(config: Config) -> list[dict]:  # 40-step episodes, two 256-step rollouts
+    def tiny_tasks(config: Config) -> list[pursuit.PursuitTask]:  # 40-step episodes, two rollouts
         tiny = {"env_kwargs": short, "ppo": {"n_steps": 64, "batch_size": 64}, "steps": 512}
-        return [{**t, **tiny, "eval_every": 512} for t in full.tasks(config)]
+        return [dataclasses.replace(t, **tiny, eval_every=512) for t in full.tasks(config)]
 
     experiment = dataclasses.replace(full, tasks=tiny_tasks)
     config = Config(quick=True, seeds=2)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 
 import numpy as np
@@ -221,9 +222,9 @@ def _quick_task(agent: str) -> dict:
 def test_the_greedy_window_changes_nothing_of_how_mmq_learns():
     """MMQ's shared run (with the averaged table) trains as the thesis rule alone does."""
     task = _quick_task(fw.THESIS)
-    delay = settings.make_delay(task["delay"], task["lam"])
+    delay = settings.make_delay(task.delay, task.lam)
     alone = snapshots.measure(
-        fw.make_variant(fw.THESIS, task["size"], delay, task["steps"], 0), task
+        fw.make_variant(fw.THESIS, task.size, delay, task.steps, 0), task.steps, task.size
     )
     shared = fw.run_task(task)
     np.testing.assert_array_equal(shared["curve"], alone["curve"])
@@ -233,16 +234,19 @@ def test_the_greedy_window_changes_nothing_of_how_mmq_learns():
 
 
 def test_the_greedy_window_variant_reads_the_averaged_table_of_the_same_run():
-    task = {**_quick_task(fw.GREEDY_ONLY[0]), "agent": fw.GREEDY_ONLY[0]}
-    delay = settings.make_delay(task["delay"], task["lam"])
-    agent = fw.make_variant(task["agent"], task["size"], delay, task["steps"], task["seed"])
-    own = snapshots.train_with_snapshots(agent, task["steps"], task["size"])
+    task = dataclasses.replace(_quick_task(fw.GREEDY_ONLY[0]), agent=fw.GREEDY_ONLY[0])
+    delay = settings.make_delay(task.delay, task.lam)
+    agent = fw.make_variant(task.agent, task.size, delay, task.steps, task.seed)
+    own = snapshots.train_with_snapshots(agent, task.steps, task.size)
     window = fw.run_task(task)
     np.testing.assert_array_equal(window["snapshot_greedy"], own["window_snapshot_greedy"])
     assert window["greedy"] == snapshots.walk_average(
         snapshots.greedy_policy(agent, averaged=True), 7
     )
-    assert window["curve"].tolist() == fw.run_task({**task, "agent": fw.THESIS})["curve"].tolist()
+    assert (
+        window["curve"].tolist()
+        == fw.run_task(dataclasses.replace(task, agent=fw.THESIS))["curve"].tolist()
+    )
     with pytest.raises(ValueError, match="no averaged table"):
         snapshots.averaged_readout(snapshots.current_readout(window))
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 
 import numpy as np
@@ -11,7 +12,9 @@ import pytest
 from delayed_rl.cli import main
 from delayed_rl.experiments import DEFAULT_NAMES, Config, get_experiment, run_experiment
 from delayed_rl.experiments.framework.experiment import VERDICTS, running_average
+from delayed_rl.experiments.framework.line_following import LineTask
 from delayed_rl.experiments.framework.training import greedy_average_reward, grid_env, train
+from delayed_rl.experiments.thesis.controllers import ControllerTask
 from delayed_rl.parallel.intervals import mean_ci95
 from delayed_rl.parallel.pools import run_tasks
 
@@ -24,7 +27,7 @@ def test_quick_run_writes_every_file(name, tmp_path):
     with open(tmp_path / "curves.csv") as handle:
         rows = list(csv.DictReader(handle))
     assert rows and set(rows[0]) == {"experiment", "condition", "seed", "metric", "step", "value"}
-    assert {row["seed"] for row in rows} == {str(task["seed"]) for task in experiment.tasks(config)}
+    assert {row["seed"] for row in rows} == {str(task.seed) for task in experiment.tasks(config)}
     values = np.array([float(row["value"]) for row in rows])
     assert np.isfinite(values).mean() > 0.5  # normalised curves are NaN only before any reward
     payload = json.loads((tmp_path / "summary.json").read_text())
@@ -60,17 +63,11 @@ def test_mmq_gridworld_quick_separates_the_agents(tmp_path):
 
 
 def test_mmq_gridworld_learns_in_pieces_as_in_one_run():
-    from delayed_rl.experiments.thesis.mmq_gridworld import SIZE, run_task
+    from delayed_rl.experiments.thesis.mmq_gridworld import SIZE, MMQGridTask, run_task
 
-    task = {
-        "agent": "MMQ",
-        "delay_estimates": list(range(51)),
-        "lam": 13,
-        "steps": 20_000,
-        "seed": 3,
-    }
+    task = MMQGridTask(agent="MMQ", delay_estimates=tuple(range(51)), lam=13, steps=20_000, seed=3)
     pieces = run_task(task)
-    whole = train(grid_env(SIZE, 13), task["delay_estimates"], task["steps"], task["seed"])
+    whole = train(grid_env(SIZE, 13), list(task.delay_estimates), task.steps, task.seed)
     log = whole.training_log
     assert pieces["average"] == float(log["undelayed_reward"].mean())
     assert pieces["greedy"] == greedy_average_reward(whole, SIZE)
@@ -151,16 +148,15 @@ def test_grid_tasks_pair_every_delayed_run_with_a_reference_of_its_world_and_see
     from delayed_rl.experiments.thesis import world_size
 
     tasks = world_size.tasks(Config(quick=True, seeds=2, base_seed=5))
-    references = [(t["size"], t["seed"]) for t in tasks if t.get("reference")]
+    references = [(t.size, t.seed) for t in tasks if t.reference]
     assert references == [(size, seed) for seed in (5, 6) for size in (3, 5, 9)]
-    delayed = [t for t in tasks if not t.get("reference")]
-    assert sorted((t["size"], t["lam"], t["seed"]) for t in delayed) == sorted(
+    delayed = [t for t in tasks if not t.reference]
+    assert sorted((t.size, t.lam, t.seed) for t in delayed) == sorted(
         (size, lam, seed) for size in (3, 5, 9) for lam in (5, 50) for seed in (5, 6)
     )
-    assert {t["steps"] for t in tasks} == {25_000}
+    assert {t.steps for t in tasks} == {25_000}
     assert all(
-        t["delay_estimates"] == [0] and t["condition"].endswith(f"lambda={t['lam']}")
-        for t in delayed
+        t.delay_estimates == (0,) and t.condition.endswith(f"lambda={t.lam}") for t in delayed
     )
 
 
@@ -181,23 +177,23 @@ def test_line_following_tasks_follow_the_thesis_scale_and_seeds():
     from delayed_rl.experiments.thesis import controllers, linefollow
 
     full = linefollow.tasks(Config(seeds=5, base_seed=7))
-    assert sorted((t["agent"], t["seed"]) for t in full) == sorted(
+    assert sorted((t.agent, t.seed) for t in full) == sorted(
         (agent, seed) for agent in ("MMQ", "Q") for seed in range(7, 12)
     )
-    assert {t["steps"] for t in full} == {150_000}
+    assert {t.steps for t in full} == {150_000}
     runs = controllers.tasks(Config(seeds=2, base_seed=3))
-    assert {t["controller"] for t in runs} == {"P undelayed", "P delayed observations", "Q", "MMQ"}
-    assert {t["seed"] for t in runs} == {3, 4}
-    assert {(t["train_steps"], t["run_steps"]) for t in runs} == {(300_000, 1700)}
-    assert {t["steps"] for t in linefollow.tasks(Config(quick=True, seeds=1, steps=123))} == {123}
+    assert {t.controller for t in runs} == {"P undelayed", "P delayed observations", "Q", "MMQ"}
+    assert {t.seed for t in runs} == {3, 4}
+    assert {(t.train_steps, t.run_steps) for t in runs} == {(300_000, 1700)}
+    assert {t.steps for t in linefollow.tasks(Config(quick=True, seeds=1, steps=123))} == {123}
 
 
 def test_delayed_observations_break_the_proportional_controller():
     from delayed_rl.experiments.thesis.controllers import run_task
 
-    task = {"train_steps": 0, "run_steps": 1700, "seed": 0}
-    undelayed = run_task({**task, "controller": "P undelayed"})
-    delayed = run_task({**task, "controller": "P delayed observations"})
+    task = ControllerTask(controller="P undelayed", train_steps=0, run_steps=1700, seed=0)
+    undelayed = run_task(task)
+    delayed = run_task(dataclasses.replace(task, controller="P delayed observations"))
     # Fig. 5.19: ≈ 0.9 undelayed; the Poisson(90)-late camera loses the line most of the time.
     assert undelayed["average"] > 0.75 and undelayed["visible"] > 0.95
     assert delayed["average"] < 0.3 and delayed["visible"] < 0.8
@@ -208,7 +204,7 @@ def test_delayed_observations_break_the_proportional_controller():
 def test_learners_keep_learning_through_the_controllers_run():
     from delayed_rl.experiments.thesis.controllers import run_task
 
-    result = run_task({"controller": "Q", "train_steps": 500, "run_steps": 200, "seed": 1})
+    result = run_task(ControllerTask(controller="Q", train_steps=500, run_steps=200, seed=1))
     assert result["steps"][-1] == 200 and result["curve"][-1] == pytest.approx(result["average"])
     assert -1.0 <= result["average"] <= 1.0
 
@@ -216,7 +212,7 @@ def test_learners_keep_learning_through_the_controllers_run():
 def test_linefollow_run_records_reward_and_accumulated_error():
     from delayed_rl.experiments.thesis.linefollow import EXPERIMENT
 
-    result = EXPERIMENT.run_task({"agent": "MMQ", "steps": 1000, "seed": 0})
+    result = EXPERIMENT.run_task(LineTask(agent="MMQ", steps=1000, seed=0))
     assert result["steps"][-1] == 1000 and result["error"][-1] == result["total_error"]
     assert np.all(np.diff(result["error"]) >= 0)  # an accumulated sum of |Δ| ≥ 0
     assert np.all(np.diff(result["error"]) <= 20 * np.diff(result["steps"]))  # |Δ| ≤ 20 a step
@@ -229,7 +225,7 @@ def _fake_linefollow(mmq: tuple[float, float], q: tuple[float, float], seeds: in
     tasks, results = [], []
     for seed in range(seeds):
         for agent, (average, error) in (("MMQ", mmq), ("Q", q)):
-            tasks.append({"agent": agent, "steps": 10, "seed": seed})
+            tasks.append(LineTask(agent=agent, steps=10, seed=seed))
             steps = np.array([5, 10])
             jitter = 0.01 * seed
             result = {

@@ -20,6 +20,7 @@ from delayed_rl.envs.linefollow.env import (
 from delayed_rl.envs.linefollow.robot import METRES_PER_STEP
 from delayed_rl.envs.registration import DelayableEntryPoint
 from delayed_rl.experiments import Config, get_experiment, run_experiment
+from delayed_rl.experiments.thesis.real_robot import RealRobotTask
 from delayed_rl.wrappers import PoissonRewardDelay
 
 REAL_ID = "delayed_rl/EPuckLineFollowReal-v0"
@@ -224,16 +225,16 @@ def test_tasks_follow_the_thesis_protocol():
     experiment = get_experiment("real-robot")
     tasks = experiment.tasks(Config(seeds=experiment.default_seeds))
     assert experiment.default_seeds == 4 and len(tasks) == 12
-    assert {(t["pretrain_steps"], t["steps"]) for t in tasks} == {(500_000, 1_500)}
-    assert {t["agent"] for t in tasks} == {"MMQ", "Q", "DeconvQ learned"}
+    assert {(t.pretrain_steps, t.steps) for t in tasks} == {(500_000, 1_500)}
+    assert {t.agent for t in tasks} == {"MMQ", "Q", "DeconvQ learned"}
     quick = experiment.tasks(Config(quick=True, seeds=2))
-    assert {(t["pretrain_steps"], t["steps"]) for t in quick} == {(5_000, 300)}
+    assert {(t.pretrain_steps, t.steps) for t in quick} == {(5_000, 300)}
 
 
 def test_a_task_continues_one_pretrained_agent_on_both_conditions():
     from delayed_rl.experiments.thesis.real_robot import run_task
 
-    result = run_task({"agent": "MMQ", "seed": 0, "pretrain_steps": 300, "steps": 200})
+    result = run_task(RealRobotTask(agent="MMQ", seed=0, pretrain_steps=300, steps=200))
     for condition in ("real", "control"):
         r = result[condition]
         assert r["steps"][-1] == 200 and r["error"][-1] == r["total_error"]
@@ -271,7 +272,7 @@ def _fake(mmq: float, q: float, error_ratio: float, control: float, seeds: int =
     for seed in range(seeds):
         jitter = 0.01 * (seed - seeds / 2)
         for agent in values:
-            tasks.append({"agent": agent, "seed": seed, "pretrain_steps": 10, "steps": 10})
+            tasks.append(RealRobotTask(agent=agent, seed=seed, pretrain_steps=10, steps=10))
             out = {"pretrain_seconds": 1.0}
             for condition, shift in (("real", 0.0), ("control", control)):
                 average = values[agent] + shift + jitter

@@ -2,15 +2,27 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 
 from delayed_rl.experiments.framework.results import common_seeds, pivot
+from delayed_rl.experiments.framework.task import Task
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class MethodTask(Task):
+    """A (setting, method, seed)."""
+
+    setting: str
+    method: str
+
 
 TASKS = [
-    {"setting": "a", "method": "x", "seed": 1},
-    {"setting": "a", "method": "y", "seed": 1},
-    {"setting": "b", "method": "x", "seed": 1},
-    {"setting": "a", "method": "x", "seed": 0},
+    MethodTask(setting="a", method="x", seed=1),
+    MethodTask(setting="a", method="y", seed=1),
+    MethodTask(setting="b", method="x", seed=1),
+    MethodTask(setting="a", method="x", seed=0),
 ]
 RESULTS = [{"score": 1.0}, {"score": 2.0}, {"score": 3.0}, {"score": 4.0}]
 
@@ -21,8 +33,8 @@ def test_pivot_keeps_the_order_of_the_tasks():
     assert list(by_method["x"]) == [1, 0]
 
 
-def _in_a(task: dict) -> bool:
-    return task["setting"] == "a"
+def _in_a(task: MethodTask) -> bool:
+    return task.setting == "a"
 
 
 def test_pivot_by_several_fields_keys_by_tuples_or_nests():

@@ -2,27 +2,37 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import pytest
 
 from delayed_rl.experiments import LONG_NAMES, NAMES, Config, run_experiment, run_experiments
 from delayed_rl.experiments.framework.experiment import Claim, Experiment, Summary, seed_tasks
+from delayed_rl.experiments.framework.task import Task
 
-CALLS: list[dict] = []
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class ToyTask(Task):
+    """A toy experiment's task."""
+
+    agent: str
 
 
-def square_run(task: dict) -> dict:
+CALLS: list[ToyTask] = []
+
+
+def square_run(task: ToyTask) -> dict:
     """A run that records that it ran."""
     CALLS.append(task)
-    return {"value": task["seed"] ** 2 + 0.5, "curve": [1.0, 2.5]}
+    return {"value": task.seed**2 + 0.5, "curve": [1.0, 2.5]}
 
 
-def _tasks(config: Config) -> list[dict]:
-    return seed_tasks(config, ["a", "b"])
+def _tasks(config: Config) -> list[ToyTask]:
+    return seed_tasks(config, ["a", "b"], ToyTask)
 
 
-def _summarize(tasks: list[dict], results: list[dict], config: Config) -> Summary:
+def _summarize(tasks: list[ToyTask], results: list[dict], config: Config) -> Summary:
     total = sum(result["value"] for result in results)
     return Summary([Claim("total", "none", total, 0.0, len(results), "reference")], [])
 
@@ -50,7 +60,7 @@ def test_a_resumed_experiment_reads_its_kept_runs_instead_of_running_them(tmp_pa
     assert again.claims[0].mean == first.claims[0].mean == 2 * (0 + 1 + 4 + 1.5)
     CALLS.clear()  # more seeds: only the new runs run
     run_experiment(_experiment(True), Config(seeds=4), tmp_path, False)
-    assert [task["seed"] for task in CALLS] == [3, 3]
+    assert [task.seed for task in CALLS] == [3, 3]
 
 
 def test_an_experiment_that_is_not_resumable_keeps_nothing(tmp_path):
@@ -65,7 +75,7 @@ def test_a_kept_run_is_found_by_its_task_so_a_changed_task_runs_again(tmp_path):
     run_experiment(_experiment(True), Config(seeds=1), tmp_path, False)
     CALLS.clear()
     run_experiment(_experiment(True), Config(seeds=1, base_seed=1), tmp_path, False)
-    assert [task["seed"] for task in CALLS] == [1, 1]
+    assert [task.seed for task in CALLS] == [1, 1]
 
 
 @pytest.mark.parametrize(

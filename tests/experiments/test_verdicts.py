@@ -28,7 +28,9 @@ from delayed_rl.experiments.framework.claims import (
     wilson_interval,
 )
 from delayed_rl.experiments.framework.experiment import VERDICTS, Claim, Config, Experiment, Summary
+from delayed_rl.experiments.framework.line_following import LineTask
 from delayed_rl.experiments.framework.report import write_outputs
+from delayed_rl.experiments.framework.task import Task
 from delayed_rl.experiments.thesis import (
     controllers,
     delay_sweep,
@@ -38,6 +40,8 @@ from delayed_rl.experiments.thesis import (
     roulette,
     world_size,
 )
+from delayed_rl.experiments.thesis.controllers import ControllerTask
+from delayed_rl.experiments.thesis.mmq_gridworld import MMQGridTask
 
 
 # ---------------------------------------------------------------------- the rules
@@ -170,7 +174,7 @@ def _grid_summary(module, value, seeds: int = 4):
     tasks = module.tasks(Config(quick=True, seeds=seeds))
     results = []
     for task in tasks:
-        average = 1.0 if task.get("reference") else value(task)
+        average = 1.0 if task.reference else value(task)
         results.append(
             {"steps": np.array([1, 2]), "curve": np.full(2, average), "average": average}
         )
@@ -179,10 +183,10 @@ def _grid_summary(module, value, seeds: int = 4):
 
 def test_delay_sweep_trend_flips():
     def falling(task):
-        return 0.8 - 0.1 * np.log10(task["lam"]) + 0.01 * task["seed"]
+        return 0.8 - 0.1 * np.log10(task.lam) + 0.01 * task.seed
 
     def rising(task):
-        return 0.5 + 0.1 * np.log10(task["lam"]) + 0.01 * task["seed"]
+        return 0.5 + 0.1 * np.log10(task.lam) + 0.01 * task.seed
 
     good, bad = _grid_summary(delay_sweep, falling), _grid_summary(delay_sweep, rising)
     tested = [q for q in good if "slope" in q or "minus" in q]
@@ -193,10 +197,10 @@ def test_delay_sweep_trend_flips():
 
 def test_world_size_rows_flip():
     def thesis_like(task):
-        return {3: 0.6, 5: 0.3, 9: 0.0}[task["size"]] + 0.001 * task["seed"]
+        return {3: 0.6, 5: 0.3, 9: 0.0}[task.size] + 0.001 * task.seed
 
     def unlike(task):  # the 9×9 world earns as much as the 3×3 one
-        return {3: 0.6, 5: 0.3, 9: 0.6}[task["size"]] + 0.001 * task["seed"]
+        return {3: 0.6, 5: 0.3, 9: 0.6}[task.size] + 0.001 * task.seed
 
     good, bad = _grid_summary(world_size, thesis_like), _grid_summary(world_size, unlike)
     assert set(good.values()) == {"agrees"}
@@ -207,7 +211,7 @@ def test_world_size_rows_flip():
 
 def test_estimate_error_rows_flip():
     def peak_at(centre):
-        return lambda task: 0.6 - 0.03 * abs(task["error"] - centre) + 0.001 * task["seed"]
+        return lambda task: 0.6 - 0.03 * abs(task.error - centre) + 0.001 * task.seed
 
     good, bad = (
         _grid_summary(estimate_error, peak_at(0)),
@@ -222,11 +226,11 @@ def test_estimate_error_rows_flip():
 
 def test_roulette_rows_flip():
     tables = np.array(roulette.THESIS_TABLES, dtype=float)
-    good = _verdicts(roulette.summarize([{"seed": 0}], [{"tables": tables}], Config(seeds=1)))
+    good = _verdicts(roulette.summarize([Task(seed=0)], [{"tables": tables}], Config(seeds=1)))
     assert set(good.values()) == {"agrees"} and len(good) == 18
     off = tables.copy()
     off[2, 0, 0] += 0.01  # Table 3.5's 49.22 read as 49.23
-    bad = _verdicts(roulette.summarize([{"seed": 0}], [{"tables": off}], Config(seeds=1)))
+    bad = _verdicts(roulette.summarize([Task(seed=0)], [{"tables": off}], Config(seeds=1)))
     assert bad["round 3: Q(bet even, λ̂ = 0)"] == "differs"
     assert sum(v == "differs" for v in bad.values()) == 1
 
@@ -259,7 +263,7 @@ def _mmq_summary(mmq_greedy: float, mmq_average: float, mmq_late: float, seeds: 
     }
     for seed in range(seeds):
         for agent, (greedy, average, late) in values.items():
-            tasks.append({"agent": agent, "seed": seed})
+            tasks.append(MMQGridTask(agent=agent, delay_estimates=(0,), lam=0, steps=1, seed=seed))
             results.append(_mmq_result(greedy, average + 0.001 * seed, late, seed))
     return _verdicts(mmq_gridworld.summarize(tasks, results, Config(seeds=seeds)))
 
@@ -289,7 +293,7 @@ def _controllers_summary(values: dict[str, float], seeds: int = 4):
     tasks, results = [], []
     for seed in range(seeds):
         for name, value in values.items():
-            tasks.append({"controller": name, "train_steps": 1, "run_steps": 10, "seed": seed})
+            tasks.append(ControllerTask(controller=name, train_steps=1, run_steps=10, seed=seed))
             average = value + 0.005 * seed
             results.append(
                 {
@@ -316,7 +320,7 @@ def _linefollow_summary(mmq: float, q: float, seeds: int = 5):
     tasks, results = [], []
     for seed in range(seeds):
         for agent, average in (("MMQ", mmq + 0.002 * seed), ("Q", q)):
-            tasks.append({"agent": agent, "steps": 10, "seed": seed})
+            tasks.append(LineTask(agent=agent, steps=10, seed=seed))
             results.append(
                 {
                     "steps": np.array([5, 10]),
@@ -395,7 +399,7 @@ def _deconv_summary(deconv_average: float, deconv_delay: float, seeds: int = 4):
     }
     for seed in range(seeds):
         for agent, (average, error, delay) in values.items():
-            tasks.append({"agent": agent, "steps": 10, "seed": seed})
+            tasks.append(LineTask(agent=agent, steps=10, seed=seed))
             estimate_mean = None if delay is None else delay + 0.1 * seed
             results.append(fake_line_run(average + 0.01 * seed, error, estimate_mean))
     return _verdicts(linefollow_deconv.summarize(tasks, results, Config(seeds=seeds)))
