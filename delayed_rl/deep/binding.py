@@ -55,6 +55,27 @@ def calling_algorithm(*methods: str) -> Any:
     return None
 
 
+def env_was_reset(buffer: Any) -> bool:
+    """Whether the off-policy algorithm adding to ``buffer`` reset its env since the last ask.
+
+    SB3's ``_setup_learn`` resets the env when ``learn()`` starts with
+    ``reset_num_timesteps=True`` (the default) or with no last observation, and then, only
+    then, gives the algorithm a new ``_last_episode_starts`` array (an off-policy algorithm
+    never replaces it otherwise). The buffer keeps the array it last saw: a different one means
+    a reset. A buffer just unpickled (``load_replay_buffer``) holds a copy, so its next step
+    counts as after a reset, as it is when ``learn()`` follows a load. Outside an algorithm's
+    ``collect_rollouts`` (a buffer filled by hand) it is ``False``.
+    """
+    algorithm = calling_algorithm("collect_rollouts")
+    if algorithm is None:
+        return False
+    starts = algorithm._last_episode_starts
+    if starts is getattr(buffer, "_episode_starts_seen", None):
+        return False
+    buffer._episode_starts_seen = starts
+    return True
+
+
 def kwargs_attribute(buffer: Any) -> str:
     """The algorithm's attribute that holds ``buffer``'s keyword arguments."""
     from stable_baselines3.common.buffers import RolloutBuffer

@@ -26,7 +26,7 @@ from stable_baselines3.common.buffers import (
 )
 
 from delayed_rl._validation import check_int, check_probability
-from delayed_rl.deep.binding import adopt, bind, calling_algorithm
+from delayed_rl.deep.binding import adopt, bind, calling_algorithm, env_was_reset
 from delayed_rl.deep.files import make_reward_model
 from delayed_rl.deep.reward_model import RewardModel
 
@@ -164,7 +164,13 @@ class _RelabelingOffPolicy(_Relabeling):
             adopt(self, algorithm)
 
     def add(self, obs, next_obs, action, reward, done, infos) -> None:  # noqa: D417
-        """Store the transition as SB3 does, and hand it to the reward model."""
+        """Store the transition as SB3 does, and hand it to the reward model.
+
+        When the algorithm reset its env since the last step (:func:`~.binding.env_was_reset`),
+        the model's open episodes are cut first (:meth:`~.reward_model.RewardModel.cut_episodes`).
+        """
+        if env_was_reset(self):
+            self.reward_model.cut_episodes(np.arange(self.n_envs))
         self.delivered_rewards[self.pos] = np.asarray(reward).reshape(self.n_envs)
         self.undelayed_rewards[self.pos] = [
             info.get("undelayed_reward", np.nan) if isinstance(info, dict) else np.nan
@@ -363,6 +369,10 @@ class _RelabelingOnPolicy(_Relabeling):
     def add(self, obs, action, reward, episode_start, value, log_prob) -> None:  # noqa: D417
         """Store the step as SB3 does; hand the model what the env did; keep the bootstrap.
 
+        A sub-env whose ``episode_start`` is set while its episode in the model's history is
+        open was reset by the algorithm (SB3's ``learn()`` does when it starts again): that
+        episode is cut first (:meth:`~.reward_model.RewardModel.cut_episodes`).
+
         Raises:
             RuntimeError: the callback did not hand over this step.
         """
@@ -378,6 +388,7 @@ class _RelabelingOnPolicy(_Relabeling):
         self.delivered_rewards[self.pos] = delivered.reshape(self.n_envs)
         reward = np.asarray(reward, dtype=np.float32).reshape(self.n_envs)
         self.bootstraps[self.pos] = reward - self.delivered_rewards[self.pos]
+        self.reward_model.cut_episodes(np.flatnonzero(np.asarray(episode_start, dtype=bool)))
         self.reward_model.add(
             observations, actions, env_rewards, dones, infos, next_observations=following
         )

@@ -10,6 +10,10 @@ mode (``on_episode_end``, as :class:`~delayed_rl.wrappers.RewardDelay` takes it)
 - ``"drop"``: lags stay inside an episode and the tail is lost;
 - ``"carry"``: lags cross episode boundaries (pending rewards arrive in the next episode).
 
+An episode cut short by a reset (:meth:`~delayed_rl.deep.history.TransitionHistory.cut`) ends
+there under ``"flush"`` and ``"drop"`` with no tail collected: the reset discarded what was
+pending.
+
 ``delay``: a known distribution (its pmf clipped to ``0..K``, the last lag holding the tail, as
 :func:`~delayed_rl.agents.expected_credit.credit_weights` makes it), or ``None`` to learn ``p``
 jointly, as a softmax over ``0..max_delay_estimate`` started uniform (``delay_pmf``, ``mean_delay``).
@@ -191,6 +195,7 @@ class DeconvolutionRewardModel(RewardModel):
         rows = np.where(valid, steps, 0) % history.capacity
         columns = envs[:, None]
         ends = history.episode_end[rows, columns] & valid
+        cuts = history.episode_cut[rows, columns] & valid  # reset mid-episode: nothing flushed
         obs = history.observations_at(rows, columns)
         action = history.actions_at(rows, columns)
         rewards = self.network(as_tensors(obs), as_tensors(action))
@@ -199,7 +204,7 @@ class DeconvolutionRewardModel(RewardModel):
         allowed = sliding_window_view(valid, k + 1, axis=1)
         if self.on_episode_end != "carry":
             episode = np.concatenate(
-                (np.zeros((count, 1), np.int64), np.cumsum(ends, 1)[:, :-1]), 1
+                (np.zeros((count, 1), np.int64), np.cumsum(ends | cuts, 1)[:, :-1]), 1
             )
             allowed = allowed & (
                 sliding_window_view(episode, k + 1, axis=1) == episode[:, k:, None]

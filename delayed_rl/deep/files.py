@@ -292,3 +292,4 @@ def _replay(
             loaded["undelayed"][row],
             None if next_obs is None else model.observations.take(next_obs, row),
         )
+        history.cut(np.flatnonzero(loaded["episode_cut"][row]))

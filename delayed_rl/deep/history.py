@@ -7,6 +7,11 @@ and whether the episode ended there. It also keeps the finished episodes still w
 episode-sum baselines sample. Steps are counted from the first one added (``steps_added``);
 the history holds steps ``max(0, steps_added − capacity) .. steps_added − 1``.
 
+An episode the algorithm cut short by resetting its env mid-episode (SB3's ``learn()`` does, by
+default, when it starts again) ends at its last step added (:meth:`TransitionHistory.cut`). It
+is marked in ``episode_cut`` and is not a finished episode: under a reward delay the rewards
+still pending at the reset were lost, so its delivered sum is not its return.
+
 With ``keep_next`` it also keeps each step's next observation (``next_obs``: the one the step
 led to, the terminal one at an episode's end), for models that read ``s′``.
 
@@ -41,7 +46,7 @@ class TransitionHistory:
         keep_next: also keep each step's next observation.
 
     Attributes:
-        obs, action, reward, episode_end, undelayed: the ring's arrays, indexed
+        obs, action, reward, episode_end, episode_cut, undelayed: the ring's arrays, indexed
             ``[step % capacity, env]`` (``obs`` and ``action`` are dicts of arrays for a ``Dict``
             space: read them with :meth:`observations_at` and :meth:`actions_at`).
         next_obs: the next observations, likewise (``None`` without ``keep_next``).
@@ -61,7 +66,7 @@ class TransitionHistory:
         self.n_envs = check_int("n_envs", n_envs, 1)
         self.capacity = check_int("capacity", capacity, 1)
         obs_bytes = observations.value_bytes * (2 if keep_next else 1)
-        per_step = n_envs * (obs_bytes + actions.value_bytes + 8 + 1 + 8)
+        per_step = n_envs * (obs_bytes + actions.value_bytes + 8 + 1 + 1 + 8)
         if per_step * self.capacity > MAX_HISTORY_BYTES:
             raise ValueError(
                 f"capacity must keep the history within MAX_HISTORY_BYTES = 2**34 bytes, got "
@@ -74,6 +79,7 @@ class TransitionHistory:
         self.action = actions.empty(self.capacity, n_envs)
         self.reward = np.zeros((self.capacity, n_envs))
         self.episode_end = np.zeros((self.capacity, n_envs), dtype=bool)
+        self.episode_cut = np.zeros((self.capacity, n_envs), dtype=bool)
         self.undelayed = np.full((self.capacity, n_envs), np.nan)
         self.episodes: deque[tuple[int, int, int, float]] = deque()
         self.steps_added = 0
@@ -106,6 +112,7 @@ class TransitionHistory:
         self.actions.put(self.action, row, action)
         self.reward[row] = reward
         self.episode_end[row] = episode_end
+        self.episode_cut[row] = False
         self.undelayed[row] = undelayed
         self._episode_sum += reward
         self.steps_added = step + 1
@@ -123,6 +130,21 @@ class TransitionHistory:
             self._episode_sum[env] = 0.0
         while episodes and episodes[0][1] < self.first_whole:
             episodes.popleft()
+
+    def cut(self, envs: np.ndarray) -> None:
+        """End the open episodes of sub-envs ``envs`` at the last step added: they were reset.
+
+        A sub-env whose last step ended its episode (or that has no step) has nothing to cut.
+        The cut episode is marked in ``episode_cut`` and left out of :attr:`episodes`.
+        """
+        if not self.steps_added:
+            return
+        last = self.steps_added - 1
+        for env in np.asarray(envs, dtype=np.int64).reshape(-1).tolist():
+            if self._episode_first[env] <= last:
+                self.episode_cut[last % self.capacity, env] = True
+                self._episode_first[env] = self.steps_added
+                self._episode_sum[env] = 0.0
 
     @property
     def first_whole(self) -> int:
@@ -151,6 +173,10 @@ class TransitionHistory:
         return self.actions.flat(self.actions.take(self.action, (rows, envs)))
 
     def episode_ids(self, env: int, first: int, stop: int) -> np.ndarray:
-        """An id per step ``first .. stop − 1`` of sub-env ``env``: equal within an episode."""
-        ends = self.episode_end[self.rows(first, stop), env]
+        """An id per step ``first .. stop − 1`` of sub-env ``env``: equal within an episode.
+
+        An episode cut short (:meth:`cut`) is an episode of its own.
+        """
+        rows = self.rows(first, stop)
+        ends = self.episode_end[rows, env] | self.episode_cut[rows, env]
         return np.concatenate(([0], np.cumsum(ends[:-1])))

@@ -23,6 +23,7 @@ from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.type_aliases import ReplayBufferSamples
 
 from delayed_rl._validation import check_choice, check_int
+from delayed_rl.deep.binding import env_was_reset
 
 __all__ = ["CREDITS", "IRCRReplayBuffer"]
 
@@ -51,7 +52,10 @@ class IRCRReplayBuffer(ReplayBuffer):
     sampled. When an episode ends, its *credit* is fixed: its mean delivered reward (``credit=
     "mean"``, the authors' code) or their sum (``"return"``, the paper's episodic return and the
     port in Stilwell-Git/Randomized-Return-Decomposition); the two agree up to scale when all
-    episodes have one length. Its return (the sum) is its priority for the heap.
+    episodes have one length. Its return (the sum) is its priority for the heap. An episode the
+    algorithm cuts short by resetting its env (SB3's ``learn()`` does when it starts again with
+    ``reset_num_timesteps=True``) never becomes sampleable: the rewards pending at the reset are
+    lost to it, so its sum is not its return.
 
     **The heap** keeps the ``heap_episodes`` episodes with the highest returns seen (copies: the
     ring may overwrite them). A finished episode enters when the heap has room, or replaces the
@@ -150,6 +154,7 @@ class IRCRReplayBuffer(ReplayBuffer):
         self.heap: list[_HeapEpisode] = []
         self._episode_first = np.zeros(self.n_envs, dtype=np.int64)
         self._episode_sum = np.zeros(self.n_envs)
+        self._cut_spans: list[deque[tuple[int, int]]] = [deque() for _ in range(self.n_envs)]
         self._heap_arrays: tuple[np.ndarray, ...] | None = None
         self._bounds: tuple[float, float] | None = None
         self.distinct_credits_seen = False
@@ -161,7 +166,13 @@ class IRCRReplayBuffer(ReplayBuffer):
         return max(0, self.steps_added - self.buffer_size)
 
     def add(self, obs, next_obs, action, reward, done, infos) -> None:  # noqa: D417
-        """Store the transition as SB3 does; an episode that ends here gets its credit."""
+        """Store the transition as SB3 does; an episode that ends here gets its credit.
+
+        When the algorithm reset its env since the last step (:func:`~.binding.env_was_reset`),
+        the open episodes are cut first: their transitions are never sampled.
+        """
+        if env_was_reset(self):
+            self._cut_open_episodes()
         super().add(obs, next_obs, action, reward, done, infos)
         step = self.steps_added
         self.steps_added = step + 1
@@ -173,6 +184,17 @@ class IRCRReplayBuffer(ReplayBuffer):
         while self.episodes and self.episodes[0][2] <= self.oldest:
             self.episodes.popleft()
             self._bounds = None
+        for spans in self._cut_spans:
+            while spans and spans[0][1] <= self.oldest:
+                spans.popleft()
+
+    def _cut_open_episodes(self) -> None:
+        """Leave each sub-env's open episode unfinished for good: it was reset mid-way."""
+        for env, first in enumerate(self._episode_first.tolist()):
+            if first < self.steps_added:
+                self._cut_spans[env].append((first, self.steps_added))
+                self._episode_first[env] = self.steps_added
+                self._episode_sum[env] = 0.0
 
     def _finish(self, env: int, first: int, stop: int) -> None:
         """Give the episode of sub-env ``env`` over steps ``first .. stop − 1`` its credit."""
@@ -241,7 +263,9 @@ class IRCRReplayBuffer(ReplayBuffer):
     def _ring_draw(self, count: int) -> tuple[np.ndarray, np.ndarray]:
         """``count`` (row, sub-env) pairs drawn uniformly from the finished transitions."""
         oldest = self.oldest
-        finished = np.maximum(0, self._episode_first - oldest)
+        spans = [[(max(first, oldest), stop) for first, stop in cut] for cut in self._cut_spans]
+        holes = np.array([sum(stop - first for first, stop in cut) for cut in spans], np.int64)
+        finished = np.maximum(0, self._episode_first - oldest) - holes
         cumulative = np.cumsum(finished)
         if cumulative[-1] == 0:
             raise RuntimeError(
@@ -251,8 +275,12 @@ class IRCRReplayBuffer(ReplayBuffer):
         # NumPy's global generator, as SB3's buffers draw: the algorithm's seed seeds it
         draws = np.random.randint(0, cumulative[-1], size=count)  # noqa: NPY002
         envs = np.searchsorted(cumulative, draws, side="right")
-        offsets = draws - (cumulative[envs] - finished[envs])
-        return (oldest + offsets) % self.buffer_size, envs
+        steps = oldest + draws - (cumulative[envs] - finished[envs])
+        for env in np.flatnonzero(holes).tolist():  # skip the cut episodes' steps, in order
+            mine = envs == env
+            for first, stop in spans[env]:
+                steps[mine] += np.where(steps[mine] >= first, stop - first, 0)
+        return steps % self.buffer_size, envs
 
     def _heap_draw(self, count: int) -> tuple[np.ndarray, ...]:
         """``count`` heap transitions: without replacement when it holds enough."""

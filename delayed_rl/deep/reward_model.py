@@ -29,7 +29,7 @@ from delayed_rl.deep.network import RewardNetwork, as_tensors, check_hidden_size
 
 __all__ = ["DIAGNOSTIC_PAIRS", "FORMAT", "RewardModel"]
 
-FORMAT = "delayed-rl reward model 2"
+FORMAT = "delayed-rl reward model 3"
 """The ``format`` a reward model file declares."""
 
 MAX_FILE_BYTES = 2**34
@@ -38,7 +38,7 @@ MAX_FILE_BYTES = 2**34
 DIAGNOSTIC_PAIRS = 4096
 """The relabelled rewards a logged RMSE and correlation are computed over (at least)."""
 
-HISTORY_ARRAYS = ("reward", "episode_end", "undelayed")
+HISTORY_ARRAYS = ("reward", "episode_end", "episode_cut", "undelayed")
 """The history's arrays a file holds beside its observations and actions."""
 
 
@@ -256,6 +256,28 @@ class RewardModel(ABC):
             )
             self.takes_algorithm_seed = False
         self.history.add(obs, action, reward, ends, undelayed, next_obs)
+
+    def cut_episodes(self, envs: Any) -> None:
+        """End the open episodes of sub-envs ``envs``, reset in the middle of them.
+
+        The relabelling buffers call it when the algorithm resets its env (SB3's ``learn()``
+        does when it starts with ``reset_num_timesteps=True``, the default): the cut episodes
+        are not finished ones (:class:`~delayed_rl.deep.history.TransitionHistory`). Before the
+        first step it does nothing.
+
+        Raises:
+            TypeError: ``envs`` are not integers.
+            ValueError: a sub-env index outside ``0..n_envs − 1``.
+        """
+        indices = np.asarray(envs).reshape(-1)
+        if indices.size and indices.dtype.kind not in "iu":
+            raise TypeError(f"envs must be sub-env indices (integers), got {envs!r}")
+        if self.history is None:
+            return
+        n_envs = self.history.n_envs
+        if not np.all((indices >= 0) & (indices < n_envs)):
+            raise ValueError(f"envs must be sub-env indices in 0..{n_envs - 1}, got {envs!r}")
+        self.history.cut(indices.astype(np.int64))
 
     @property
     def updates_due(self) -> int:

@@ -374,6 +374,76 @@ def test_each_sub_envs_episodes_are_its_own(algorithm):
 
 
 # ---------------------------------------------------------------------- SB3's files
+# ---------------------------------------------------------------------- learn() again
+def episode_sums(env, bounds):
+    """The sums of what ``env`` delivered over the ``(first, length)`` step ranges."""
+    return [pytest.approx(sum(env.rewards[first : first + length])) for first, length in bounds]
+
+
+@pytest.mark.parametrize("reset", [True, False])
+def test_learning_again_cuts_the_episode_the_reset_left_open(reset):
+    from delayed_rl.deep import RewardModelCallback
+
+    env = pendulum()  # episodes of 50 steps: the first learn() ends 25 steps into the second
+    model = deconvolution(env)
+    agent = sac(env, model)
+    agent.learn(75, callback=RewardModelCallback())
+    agent.learn(75, callback=RewardModelCallback(), reset_num_timesteps=reset)
+    history = model.history
+    assert history.steps_added == 150 == len(env.rewards)
+    # a reset (SB3's default) ends the open episode at step 74, cut; without one it goes on
+    assert np.flatnonzero(history.episode_cut[:150, 0]).tolist() == ([74] if reset else [])
+    bounds = [(0, 50), (75, 50)] if reset else [(0, 50), (50, 50), (100, 50)]
+    assert [(first, length) for _, first, length, _ in history.episodes] == bounds
+    assert [total for *_, total in history.episodes] == episode_sums(env, bounds)
+    assert history.episode_ids(0, 0, 150).tolist() == (
+        [0] * 50 + [1] * 25 + [2] * 50 + [3] * 25 if reset else [0] * 50 + [1] * 50 + [2] * 50
+    )
+
+
+def test_ppo_learning_again_cuts_the_episode_the_reset_left_open():
+    from stable_baselines3 import PPO
+
+    from delayed_rl.deep import RelabelingRolloutBuffer, RewardModelCallback
+
+    env = pendulum(steps=10)  # rollouts of 32 steps: each learn() leaves 2 steps open
+    model = deconvolution(env, max_delay_estimate=6, window=4, warmup_updates=16)
+    agent = PPO(
+        "MlpPolicy",
+        env,
+        n_steps=32,
+        batch_size=32,
+        n_epochs=1,
+        policy_kwargs={"net_arch": [8]},
+        rollout_buffer_class=RelabelingRolloutBuffer,
+        rollout_buffer_kwargs={"reward_model": model},
+        seed=0,
+        device="cpu",
+    )
+    agent.learn(32, callback=RewardModelCallback())
+    agent.learn(32, callback=RewardModelCallback())
+    history = model.history
+    assert np.flatnonzero(history.episode_cut[:64, 0]).tolist() == [31]
+    bounds = [(0, 10), (10, 10), (20, 10), (32, 10), (42, 10), (52, 10)]
+    assert [(first, length) for _, first, length, _ in history.episodes] == bounds
+    assert [total for *_, total in history.episodes] == episode_sums(env, bounds)
+
+
+def test_a_loaded_replay_buffer_cuts_the_episode_its_new_env_does_not_go_on_with(tmp_path):
+    env = pendulum()
+    agent = sac(env, deconvolution(env))
+    agent.learn(75)
+    agent.save_replay_buffer(tmp_path / "buffer.pkl")
+    fresh_env = pendulum()
+    fresh = sac(fresh_env, deconvolution(fresh_env, seed=9))
+    fresh.load_replay_buffer(tmp_path / "buffer.pkl")
+    fresh.learn(50, reset_num_timesteps=False)  # a new algorithm resets its env all the same
+    history = fresh.replay_buffer.reward_model.history
+    assert np.flatnonzero(history.episode_cut[:125, 0]).tolist() == [74]
+    bounds = [(first, length) for _, first, length, _ in history.episodes]
+    assert bounds == [(0, 50), (75, 50)]
+
+
 def test_replay_buffer_and_algorithm_files_keep_a_working_model(tmp_path):
     from stable_baselines3 import SAC
 

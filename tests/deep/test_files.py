@@ -140,7 +140,10 @@ def history_arrays(model):
     return {
         **model.observations.arrays(history.obs, "obs"),
         **model.actions.arrays(history.action, "action"),
-        **{name: getattr(history, name) for name in ("reward", "episode_end", "undelayed")},
+        **{
+            name: getattr(history, name)
+            for name in ("reward", "episode_end", "episode_cut", "undelayed")
+        },
     }
 
 
@@ -175,10 +178,14 @@ def test_the_episode_index_is_rebuilt_at_any_step(tmp_path):
     model = ReturnRegressionRewardModel(OBS, ACT, hidden_sizes=(4,), capacity=6, seed=0)
     ends = [[0, 0, 1, 0, 1, 0, 0, 0, 1, 1, 0, 0, 1, 0, 0, 1, 0, 1, 1, 0, 0, 0, 1, 0, 1, 0],
             [1, 0, 0, 0, 1, 0, 1, 1, 0, 0, 0, 1, 0, 1, 0, 0, 1, 0, 0, 0, 1, 1, 0, 1, 0, 0]]  # fmt: skip
+    resets = {4: [0, 1], 7: [1], 14: [0], 20: [0, 1]}  # episodes cut short before these steps
     for step, end in enumerate(zip(*ends, strict=True)):
+        model.cut_episodes(resets.get(step, []))
         model.add(np.zeros((2, 3)), [0, 1], [step, -step], list(end))
         loaded = load_reward_model(model.save(tmp_path / "model.zip"))
         assert list(loaded.history.episodes) == list(model.history.episodes), step
+        held = model.history.rows(model.history.oldest, step + 1)
+        assert np.array_equal(loaded.history.episode_cut[held], model.history.episode_cut[held])
         assert np.array_equal(loaded.history._episode_first, model.history._episode_first) or (
             model.history.oldest > 0
         )
@@ -367,7 +374,13 @@ def test_every_space_round_trips_and_trains_on_to_the_same_bits(tmp_path, name, 
     path = model.save(tmp_path / f"{pair}.zip")
     with zipfile.ZipFile(path) as archive, np.load(io.BytesIO(archive.read("history.npz"))) as data:
         stored = {name: data[name].dtype for name in data.files}
-    expected = {**STORED[pair], "reward": np.float64, "episode_end": bool, "undelayed": np.float64}
+    expected = {
+        **STORED[pair],
+        "reward": np.float64,
+        "episode_end": bool,
+        "episode_cut": bool,
+        "undelayed": np.float64,
+    }
     assert stored == {name: np.dtype(dtype) for name, dtype in expected.items()}
     loaded = load_reward_model(path)
     assert loaded.observations.space == observation_space
@@ -538,8 +551,8 @@ def _drop(*keys):
 @pytest.mark.parametrize(
     ("change", "match"),
     [
-        (_set("format", value="delayed-rl reward model 1"), "does not declare format"),
-        (_set("format", value="delayed-rl reward model 3"), "does not declare format"),
+        (_set("format", value="delayed-rl reward model 2"), "does not declare format"),
+        (_set("format", value="delayed-rl reward model 4"), "does not declare format"),
         (_drop("format"), "does not declare format"),
         (_set("class", value="RewardModel"), "unknown reward model class 'RewardModel'"),
         (_set("class", value="os.system"), "unknown reward model class"),
@@ -679,6 +692,11 @@ def _held(value):
             _array("episode_end", lambda a: a.astype(np.int8)),
             "history array episode_end must be bool",
         ),
+        (
+            _array("episode_cut", lambda a: a.astype(np.int8)),
+            "history array episode_cut must be bool",
+        ),
+        (lambda a: a.pop("episode_cut"), r"history.npz misses arrays \['episode_cut'\]"),
         (_array("undelayed", lambda a: a.ravel()), "history array undelayed must be"),
         (lambda a: a.pop("reward"), "history.npz misses arrays"),
         (lambda a: a.update(extra=np.zeros(3)), r"history.npz holds unknown arrays \['extra'\]"),

@@ -161,6 +161,60 @@ def test_open_episodes_are_never_sampled():
     assert (rewards <= 1).all()
 
 
+@pytest.mark.parametrize("buffer_size", [100, 12])  # the cut episode whole / partly overwritten
+def test_an_episode_cut_by_a_reset_is_never_sampled(buffer_size):
+    buffer = make(buffer_size=buffer_size)
+    # episodes 0 (steps 0-1) and 1 (2-5), then episode 2 (6-8) open when the env is reset
+    fill(buffer, [[1.0, 1.0], [0.0, 0.0, 0.0, 2.0]], open_steps=3)
+    buffer._cut_open_episodes()  # what add() does first after the algorithm reset its env
+    buffer._cut_open_episodes()  # a second reset with no step between: nothing more to cut
+    # episodes 3 (step 9), 4 (10-11) and 5 (12-16), then 2 open steps of episode 6
+    fill(buffer, [[2.0], [0.0, 1.0], [0.5] * 5], first=3, open_steps=2)
+    assert [(first, stop) for _, first, stop, _ in buffer.episodes] == (
+        [(0, 2), (2, 6), (9, 10), (10, 12), (12, 17)]
+        if buffer_size == 100
+        else [(9, 10), (10, 12), (12, 17)]
+    )
+    episodes, steps, rewards, _ = draws(buffer, 10, 300)
+    # at size 12 the ring holds steps 7..18: the cut episode's steps 7 and 8 are still in it
+    later = {(3, 0), (4, 0), (4, 1)} | {(5, step) for step in range(5)}
+    earlier = {(0, 0), (0, 1)} | {(1, step) for step in range(4)}
+    drawn = set(zip(episodes[:, :5].ravel().tolist(), steps[:, :5].ravel().tolist(), strict=True))
+    assert drawn == (earlier | later if buffer_size == 100 else later)  # 1,500 draws of 14 or 8
+    assert 2 not in set(episodes[:, 5:].ravel().tolist())
+    assert (rewards <= 1).all() and (rewards >= 0).all()
+
+
+def test_sac_learning_again_cuts_the_episode_the_reset_left_open():
+    from stable_baselines3 import SAC
+
+    from delayed_rl.deep import IRCRReplayBuffer
+
+    env = RewardDelay(gym.make("Pendulum-v1", max_episode_steps=20), 3)
+    agent = SAC(
+        "MlpPolicy",
+        env,
+        replay_buffer_class=IRCRReplayBuffer,
+        learning_starts=200,  # never trains: only what the buffer keeps is checked
+        buffer_size=500,
+        policy_kwargs={"net_arch": [8]},
+        seed=0,
+        device="cpu",
+    )
+    agent.learn(50)  # episodes 0-19 and 20-39, then 40-49 open
+    agent.learn(50)  # a reset: episodes 50-69 and 70-89, then 90-99 open
+    buffer = agent.replay_buffer
+    assert [(first, stop) for _, first, stop, _ in buffer.episodes] == [
+        (0, 20),
+        (20, 40),
+        (50, 70),
+        (70, 90),
+    ]
+    np.random.seed(0)  # noqa: NPY002
+    rows, _ = buffer._ring_draw(2000)
+    assert set(rows.tolist()) == set(range(40)) | set(range(50, 90))
+
+
 def test_sample_refuses_before_a_finished_episode():
     buffer = make()
     with pytest.raises(RuntimeError, match="learning_starts"):

@@ -92,17 +92,23 @@ def feed(model, env, steps, seed, strip=False):
 class Stream:
     """Hand-made episodes of ``n_envs`` sub-envs, added to a model and kept here as lists."""
 
-    def __init__(self, model, observation_space, action_space, n_envs, steps, seed):
+    def __init__(self, model, observation_space, action_space, n_envs, steps, seed, cuts=0.0):
         rng = np.random.default_rng(seed)
         observation_space.seed(seed)
         action_space.seed(seed + 1)
         self.obs, self.action, self.reward, self.end = [], [], [], []
+        self.cut = []  # [t][env]: sub-env env's open episode was cut after step t (a reset)
         for _ in range(steps):
             obs = np.stack([observation_space.sample() for _ in range(n_envs)])
             action = np.stack([action_space.sample() for _ in range(n_envs)])
             reward = rng.normal(size=n_envs)
             end = rng.random(n_envs) < 0.2  # episodes of 1 step to a dozen or more
+            reset = rng.random(n_envs) < cuts
+            if self.end:
+                model.cut_episodes(np.flatnonzero(reset))
+                self.cut[-1] = reset & ~self.end[-1]  # an episode just ended has nothing to cut
             model.add(obs, action, reward, end)
+            self.cut.append(np.zeros(n_envs, bool))
             self.obs.append(obs)
             self.action.append(action)
             self.reward.append(reward)
@@ -113,8 +119,9 @@ def direct_loss(model, stream, starts, envs, pmf, mode):
     """The deconvolution loss over the windows at ``starts`` (sub-envs ``envs``), by a plain loop.
 
     ``y_t`` is predicted as ``Σ_k w_t(k)·R̂(s_{t−k}, a_{t−k})`` with ``w_t(k) = p(k)``, or
-    ``P(D ≥ k)`` at an episode's last step under ``"flush"``; a lag that crosses an episode's start
-    (``"flush"``, ``"drop"``) or reaches before the stream counts 0.
+    ``P(D ≥ k)`` at an episode's last step under ``"flush"`` (not at the last step of an episode
+    cut by a reset, which flushes nothing); a lag that crosses an episode's start, a cut's
+    included (``"flush"``, ``"drop"``), or reaches before the stream counts 0.
     """
     K = pmf.size - 1
     errors = []
@@ -126,7 +133,9 @@ def direct_loss(model, stream, starts, envs, pmf, mode):
                 if s < 0:
                     continue
                 assert s >= model.history.oldest, "a window reaches overwritten steps"
-                if mode != "carry" and any(stream.end[j][env] for j in range(s, t)):
+                if mode != "carry" and any(
+                    stream.end[j][env] or stream.cut[j][env] for j in range(s, t)
+                ):
                     continue
                 weight = pmf[k:].sum() if mode == "flush" and stream.end[t][env] else pmf[k]
                 r_hat = model.predict(stream.obs[s][env][None], stream.action[s][env][None])[0]
@@ -194,6 +203,68 @@ def test_known_delay_loss_is_the_direct_sum(mode, spaces_name, capacity):
     }
     for other, value in others.items():
         assert value != pytest.approx(expected, rel=1e-3), other
+
+
+@pytest.mark.parametrize("mode", ["flush", "drop", "carry"])
+@pytest.mark.parametrize("capacity", [1000, 40])
+def test_an_episode_cut_by_a_reset_ends_there_and_flushes_nothing(mode, capacity):
+    from delayed_rl.deep import DeconvolutionRewardModel
+
+    observation_space, action_space = SPACES["box-discrete"]
+    model = DeconvolutionRewardModel(
+        observation_space,
+        action_space,
+        delay=Empirical([0.4, 0.3, 0.2, 0.1]),
+        max_delay_estimate=3,
+        on_episode_end=mode,
+        window=4,
+        hidden_sizes=(8,),
+        batch_size=64,
+        capacity=capacity,
+        seed=3,
+    )
+    stream = Stream(model, observation_space, action_space, n_envs=2, steps=100, seed=7, cuts=0.1)
+    assert sum(map(np.sum, stream.cut)) >= 10  # the stream has cuts (a seeded count)
+    starts, envs = drawn_windows(model)
+    expected = direct_loss(model, stream, starts, envs, model.delay_pmf, mode)
+    assert float(model.loss().detach()) == pytest.approx(expected, rel=1e-5)
+    if mode != "carry":  # reading a cut as no boundary, or as an end that flushes, differs
+        as_ends = copy.copy(stream)
+        as_ends.end = [e | c for e, c in zip(stream.end, stream.cut, strict=True)]
+        as_ends.cut = [np.zeros_like(c) for c in stream.cut]
+        ignored = copy.copy(stream)
+        ignored.cut = as_ends.cut
+        for wrong in (as_ends, ignored) if mode == "flush" else (ignored,):
+            value = direct_loss(model, wrong, starts, envs, model.delay_pmf, mode)
+            assert value != pytest.approx(expected, rel=1e-3)
+
+
+def test_cut_episodes_are_left_out_of_the_finished_ones():
+    from delayed_rl.deep import ReturnRegressionRewardModel
+
+    model = ReturnRegressionRewardModel(spaces.Discrete(2), spaces.Discrete(2), capacity=100)
+    model.cut_episodes([0, 1])  # before any step: nothing to cut
+    ends = [[0, 0, 1, 0, 0, 0, 0, 1], [0, 1, 0, 0, 0, 1, 0, 1]]
+    for step, end in enumerate(zip(*ends, strict=True)):
+        if step == 4:  # a reset after step 3: sub-env 0's episode 3..3 and sub-env 1's 2..3
+            model.cut_episodes(np.array([0, 1]))
+        model.add([0, 0], [1, 1], [10.0**step, -(10.0**step)], list(end))
+    history = model.history
+    assert history.episode_cut[:8].tolist() == [[0, 0]] * 3 + [[1, 1]] + [[0, 0]] * 4
+    assert sorted(history.episodes) == [
+        (0, 0, 3, 111.0),
+        (0, 4, 4, 11110000.0),
+        (1, 0, 2, -11.0),
+        (1, 4, 2, -110000.0),
+        (1, 6, 2, -11000000.0),
+    ]
+    assert history.episode_ids(0, 0, 8).tolist() == [0, 0, 0, 1, 2, 2, 2, 2]
+    model.cut_episodes([0])  # an episode that just ended has nothing to cut
+    assert not history.episode_cut[7].any()
+    with pytest.raises(TypeError, match="envs must be sub-env indices"):
+        model.cut_episodes([0.5])
+    with pytest.raises(ValueError, match=r"0\.\.1, got \[2\]"):
+        model.cut_episodes([2])
 
 
 def test_clipped_poisson_pmf_is_credit_weights():
