@@ -184,9 +184,9 @@ class SharedRun(NamedTuple):
 
     Attributes:
         run: a picklable top-level function of one task, returning the run's result.
-        task: what ``run`` is called with: the experiment's :class:`~.task.Task` for a run of
-            its own, or a JSON-like dict for a run that tasks share (its canonical JSON is the
-            run's identity).
+        task: what ``run`` is called with: a task of the experiment's :class:`~.task.Task`
+            type, or a JSON-like dict for a run whose task has another shape (the line
+            follower's training run, say); its canonical JSON is the run's identity.
         view: picks the task's result out of the run's (``None``: the whole result); with
             ``pooled``, out of the task's own part of it.
         pooled: the name of the list in ``task`` whose items runs pool (``None``: none).
