@@ -228,3 +228,90 @@ def test_what_is_not_a_view_or_sacs_own_buffer_is_refused():
         HindsightSAC("MultiInputPolicy", env, n_steps=3)
     with pytest.raises(ValueError, match="optimize_memory_usage"):
         HindsightSAC("MultiInputPolicy", env, optimize_memory_usage=True)
+
+
+# ---------------------------------------------------------------------- the belief
+def belief_view():
+    return view(Uniform(1, 3), Uniform(0, 1), length=15)[0]
+
+
+def belief_learner(seed=0):
+    env = belief_view()
+    agent = learner(env, seed=seed, policy_kwargs={"net_arch": [8], "belief_net_arch": [8]})
+    agent.learn(60)
+    return agent
+
+
+def test_the_belief_is_regressed_on_the_observation_made_at_the_step():
+    import torch
+
+    from delayed_rl.deep.hindsight import BeliefActor
+
+    agent = belief_learner()
+    actor = agent.actor
+    assert isinstance(actor, BeliefActor) and agent.transitions_stored > 20
+    batch = agent.replay_buffer.sample(32)
+    obs = batch.observations
+    with torch.no_grad():
+        predicted = actor.belief(actor.view_features(obs)).numpy()
+        loss = float(actor.belief_loss(obs))
+    made = obs["hindsight"].numpy()
+    assert loss == pytest.approx(float(np.mean((predicted - made) ** 2)), rel=1e-6)
+    # the target is the observation made at the step, not the delayed one the view shows
+    shown = obs["observation"].numpy()
+    assert (shown < made).any()
+    assert loss != pytest.approx(float(np.mean((predicted - shown) ** 2)), rel=1e-3)
+
+
+def test_the_actor_reads_its_belief_detached():
+    agent = belief_learner()
+    actor = agent.actor
+    obs = agent.replay_buffer.sample(16).observations
+    view_features = actor.view_features(obs)
+    features = actor.extract_features(obs, actor.features_extractor)
+    assert features.shape[1] == view_features.shape[1] + 1 == actor.latent_pi[0].in_features
+    np.testing.assert_array_equal(
+        features[:, -1:].detach().numpy(), actor.belief(view_features).detach().numpy()
+    )
+    actor.zero_grad(set_to_none=True)
+    actor(obs).sum().backward()  # the actor's output: no gradient reaches the belief
+    assert all(p.grad is None for p in actor.belief.parameters())
+    assert all(p.grad is not None for p in actor.latent_pi.parameters())
+
+
+def test_training_steps_the_belief_by_its_own_optimizer_and_repeats_bit_for_bit():
+    import torch
+
+    first, second = belief_learner(seed=4), belief_learner(seed=4)
+    pairs = zip(
+        first.policy.state_dict().values(), second.policy.state_dict().values(), strict=True
+    )
+    for a, b in pairs:
+        assert torch.equal(a, b)
+    before = [p.detach().clone() for p in first.actor.belief.parameters()]
+    first.train(gradient_steps=1, batch_size=8)
+    after = list(first.actor.belief.parameters())
+    assert any(not torch.equal(a, b) for a, b in zip(before, after, strict=True))
+    optimized = {
+        id(p) for group in first.policy.belief_optimizer.param_groups for p in group["params"]
+    }
+    assert optimized == {id(p) for p in first.actor.belief.parameters()}
+
+
+def test_without_a_belief_the_actor_is_the_views(tmp_path):
+    from delayed_rl.deep import HindsightSAC
+    from delayed_rl.deep.hindsight import BeliefActor, ViewActor
+
+    env, _ = view(Constant(1))
+    plain = learner(env)
+    assert type(plain.actor) is ViewActor and not hasattr(plain.policy, "belief_optimizer")
+    agent = belief_learner()
+    agent.save(tmp_path / "belief.zip")
+    loaded = HindsightSAC.load(tmp_path / "belief.zip", env=belief_view(), device="cpu")
+    assert isinstance(loaded.actor, BeliefActor) and loaded.policy.belief_net_arch == [8]
+    obs = agent.replay_buffer.sample(8).observations
+    view_obs = {key: obs[key].numpy() for key in ("observation", "age", "actions")}
+    np.testing.assert_array_equal(
+        loaded.predict(view_obs, deterministic=True)[0],
+        agent.predict(view_obs, deterministic=True)[0],
+    )
