@@ -34,8 +34,9 @@ from delayed_rl.experiments.framework.gain_settings import (
     RewardDelayTask,
     curve_means,
     delay_fields,
+    gain_rows,
+    gain_summary,
     gain_tasks,
-    learning_curves,
     method_gains,
 )
 from delayed_rl.experiments.framework.results import pivot
@@ -269,6 +270,15 @@ def _table_row(method: str, runs: dict[int, dict], gains: dict[int, float]) -> d
     return row
 
 
+def _zero_width_notes(gains: dict, by_method: dict[str, dict[int, dict]]) -> dict[str, str]:
+    """Why a method's gain row has zero width, where it has: all seeds gave the same score."""
+    return {
+        method: rules.identical_note(list(gains[method].values()))
+        and rules.identical_note([r["score"] for r in by_method[method].values()])
+        for method in gains
+    }
+
+
 def summarize(task_list: list[DeepTask], results: list[dict], config: Config) -> Summary:
     """The claims, reference rows of every gain, the table and a learning-curve figure a setting.
 
@@ -302,32 +312,20 @@ def summarize(task_list: list[DeepTask], results: list[dict], config: Config) ->
     curves' means, the reward models' RMSE against the true reward and the learned mean delays.
     """
     grouped = pivot(task_list, results, by=("setting", "method"), nested=True)
-    claims, curves, figures, table = [], [], {}, {}
+    claims, table = [], {}
     for setting, by_method in grouped.items():
-        gains, low, high = method_gains(by_method)
+        gains = method_gains(by_method)[0]
         curves_mean = curve_means(by_method)
         for method, runs in by_method.items():
             for seed, run in runs.items():
                 if method in curves_mean:
                     run["curve_mean"] = curves_mean[method][seed]
         claims += _setting_claims(setting, gains, curves_mean)
-        methods = [method for method in METHODS if method in by_method]
-        for method in methods:
-            values = list(gains[method].values())
-            scores = [r["score"] for r in by_method[method].values()]
-            note = rules.identical_note(values) and rules.identical_note(scores)
-            claims.append(
-                rules.reference_row(
-                    f"{setting}: {LABELS[method]} gain", rules.mean_ci_n(values), note=note
-                )
-            )
+        labels = {method: LABELS[method] for method in METHODS if method in by_method}
+        claims += gain_rows(setting, gains, labels, _zero_width_notes(gains, by_method))
         table[setting] = {m: _table_row(m, runs, gains) for m, runs in by_method.items()}
-        labels = {method: LABELS[method] for method in methods}
-        runs_curves, figures[f"curves_{setting}"] = learning_curves(
-            setting, by_method, labels, low, "the undelayed env"
-        )
-        curves += runs_curves
-    return Summary(claims, curves, figures, {"table": table, "settings": SETTINGS})
+    extra = {"table": table, "settings": SETTINGS}
+    return gain_summary(grouped, LABELS, "the undelayed env", claims, extra)
 
 
 EXPERIMENT = Experiment(

@@ -23,8 +23,9 @@ from delayed_rl.experiments.framework.gain_settings import (
     RewardDelayTask,
     curve_means,
     delay_fields,
+    gain_rows,
+    gain_summary,
     gain_tasks,
-    learning_curves,
     method_gains,
 )
 from delayed_rl.experiments.framework.multiagent_training import (
@@ -180,6 +181,19 @@ def _setting_claims(setting: str, scores: dict, by_method: dict) -> list[rules.C
     return claims
 
 
+def _table_row(method: str, runs: dict[int, dict], scores: dict[int, float], gains: dict) -> dict:
+    """One (setting, method) row of ``summary.json``'s table: per-seed scores and gains."""
+    row: dict[str, Any] = {
+        "seeds": sorted(scores),
+        "scores": list(scores.values()),
+        "gains": list(gains[method].values()),
+    }
+    if method.startswith("deconv"):
+        for key in ("rmse", "mean_delay"):
+            row[key] = [r[key] for r in runs.values()]
+    return row
+
+
 def summarize(task_list: list[PursuitTask], results: list[dict], config: Config) -> Summary:
     """The claims, a reference row of every gain, the table and the learning curves.
 
@@ -206,31 +220,17 @@ def summarize(task_list: list[PursuitTask], results: list[dict], config: Config)
     """
     grouped = pivot(task_list, results, by=("setting", "method"), nested=True)
     all_scores = pivot(task_list, results, by=("setting", "method"), value="score", nested=True)
-    claims, curves, figures, table = [], [], {}, {}
+    claims, table = [], {}
     for setting, by_method in grouped.items():
         gains, low, _ = method_gains(by_method)
         scores = all_scores[setting]
         claims += _setting_claims(setting, scores, by_method)
+        claims += gain_rows(setting, gains, LABELS)
         table[setting] = {"random": {"score": low}}
         for method in METHODS:
-            values = list(gains[method].values())
-            claims.append(
-                rules.reference_row(f"{setting}: {LABELS[method]} gain", rules.mean_ci_n(values))
-            )
-            row: dict[str, Any] = {
-                "seeds": sorted(scores[method]),
-                "scores": list(scores[method].values()),
-                "gains": values,
-            }
-            if method.startswith("deconv"):
-                for key in ("rmse", "mean_delay"):
-                    row[key] = [r[key] for r in by_method[method].values()]
-            table[setting][method] = row
-        runs_curves, figures[f"curves_{setting}"] = learning_curves(
-            setting, by_method, LABELS, low, "the undelayed game (per pursuer)"
-        )
-        curves += runs_curves
-    return Summary(claims, curves, figures, {"table": table, "settings": SETTINGS})
+            table[setting][method] = _table_row(method, by_method[method], scores[method], gains)
+    extra = {"table": table, "settings": SETTINGS}
+    return gain_summary(grouped, LABELS, "the undelayed game (per pursuer)", claims, extra)
 
 
 EXPERIMENT = Experiment(

@@ -13,13 +13,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Mapping
 from typing import Any, TypeVar
 
 import numpy as np
 
 from delayed_rl.experiments.framework import claims as rules
 from delayed_rl.experiments.framework import plotting
-from delayed_rl.experiments.framework.experiment import Config, Curve
+from delayed_rl.experiments.framework.experiment import Claim, Config, Curve, Summary
 from delayed_rl.experiments.framework.task import Task
 
 __all__ = [
@@ -27,6 +28,8 @@ __all__ = [
     "RewardDelayTask",
     "curve_means",
     "delay_fields",
+    "gain_rows",
+    "gain_summary",
     "gain_tasks",
     "learning_curves",
     "method_gains",
@@ -123,12 +126,16 @@ def delay_fields(task: RewardDelayTask) -> dict[str, Any]:
     return fields
 
 
+def _mean_score(runs: dict[int, dict]) -> float:
+    """The mean ``score`` of a method's runs over its seeds."""
+    return rules.mean_ci_n([r["score"] for r in runs.values()])[0]
+
+
 def method_gains(
     by_method: dict[str, dict[int, dict]],
 ) -> tuple[dict[str, dict[int, float]], float, float]:
     """Each method's gain per seed (the random policy's left out), and the random and oracle means."""
-    low = rules.mean_ci_n([r["score"] for r in by_method["random"].values()])[0]
-    high = rules.mean_ci_n([r["score"] for r in by_method["oracle"].values()])[0]
+    low, high = _mean_score(by_method["random"]), _mean_score(by_method["oracle"])
     span = high - low
     out = {
         method: {seed: (r["score"] - low) / span if span else math.nan for seed, r in runs.items()}
@@ -174,3 +181,59 @@ def learning_curves(
         xlabel="training step",
     )
     return curves, figure
+
+
+def gain_rows(
+    setting: str,
+    gains: dict[str, dict[int, float]],
+    labels: Mapping[str, str],
+    notes: Mapping[str, str] | None = None,
+) -> list[Claim]:
+    """A reference row of each method's gain in ``setting``: its mean and 95 % CI over the seeds.
+
+    Args:
+        setting: the setting's name.
+        gains: each method's gain per seed (:func:`method_gains`).
+        labels: the methods to report, by name, with their labels (in row order).
+        notes: a note for a method's row, where it has one.
+    """
+    notes = notes or {}
+    return [
+        rules.reference_row(
+            f"{setting}: {label} gain",
+            rules.mean_ci_n(list(gains[method].values())),
+            note=notes.get(method, ""),
+        )
+        for method, label in labels.items()
+    ]
+
+
+def gain_summary(
+    grouped: dict[str, dict[str, dict[int, dict]]],
+    labels: Mapping[str, str],
+    scored_in: str,
+    claims: list[Claim],
+    extra: dict[str, Any],
+) -> Summary:
+    """A gain experiment's summary: its claims and extra, and each setting's learning curves.
+
+    Every run's learning curve goes to ``curves.csv``, and each setting has a figure of its
+    curves, ``curves_<setting>`` (:func:`learning_curves`).
+
+    Args:
+        grouped: the results, ``{setting: {method: {seed: result}}}``.
+        labels: the methods to draw, by name, with their labels (in drawing order); each setting
+            draws those it has.
+        scored_in: the env the scores come from, for the figures' titles.
+        claims: the experiment's claims.
+        extra: what ``summary.json`` holds beside them.
+    """
+    curves, figures = [], {}
+    for setting, by_method in grouped.items():
+        drawn = {method: label for method, label in labels.items() if method in by_method}
+        random_mean = _mean_score(by_method["random"])
+        setting_curves, figures[f"curves_{setting}"] = learning_curves(
+            setting, by_method, drawn, random_mean, scored_in
+        )
+        curves += setting_curves
+    return Summary(claims, curves, figures, extra)
