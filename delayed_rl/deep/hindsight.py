@@ -14,19 +14,15 @@ import math
 from typing import Any, ClassVar
 
 import numpy as np
-import torch
 from gymnasium import spaces
 from stable_baselines3 import SAC
 from stable_baselines3.common.buffers import DictReplayBuffer
-from stable_baselines3.common.preprocessing import get_flattened_obs_dim, preprocess_obs
-from stable_baselines3.common.torch_layers import CombinedExtractor, create_mlp
+from stable_baselines3.common.torch_layers import CombinedExtractor
 from stable_baselines3.sac.policies import Actor, ContinuousCritic, MultiInputPolicy
-from torch import nn
 
 __all__ = [
     "HINDSIGHT_KEY",
     "VIEW_KEYS",
-    "BeliefActor",
     "HindsightPolicy",
     "HindsightReplayBuffer",
     "HindsightSAC",
@@ -74,58 +70,6 @@ class ViewActor(Actor):
         return super().extract_features(view, features_extractor)
 
 
-class BeliefActor(ViewActor):
-    """:class:`ViewActor` that also reads its *belief*: the observation made now, predicted.
-
-    The belief is an MLP from the view's features to the current observation (flattened as SB3
-    preprocesses it: a ``Discrete`` one-hot). The policy's network reads the view's features and
-    the belief, detached: the belief learns only by regression on the observations once they have
-    arrived (:meth:`HindsightSAC.train`), never from the actor's loss.
-
-    Args:
-        *args, **kwargs: SAC's ``Actor``'s (``features_dim`` the view's features').
-        belief_net_arch: the belief MLP's hidden layer sizes.
-    """
-
-    def __init__(self, *args: Any, belief_net_arch: list[int], **kwargs: Any):
-        view_dim = kwargs["features_dim"]
-        observed = kwargs["observation_space"]["observation"]
-        super().__init__(
-            *args, **{**kwargs, "features_dim": view_dim + get_flattened_obs_dim(observed)}
-        )
-        self.view_dim = view_dim
-        self.belief_net_arch = list(belief_net_arch)
-        self.belief = nn.Sequential(
-            *create_mlp(view_dim, get_flattened_obs_dim(observed), self.belief_net_arch, nn.ReLU)
-        )
-
-    def view_features(self, obs: Any) -> torch.Tensor:
-        """The features of the view's keys, as :class:`ViewActor` extracts them."""
-        return super().extract_features(obs, self.features_extractor)
-
-    def extract_features(self, obs: Any, features_extractor: Any) -> torch.Tensor:
-        """The view's features and the belief (detached), side by side."""
-        features = super().extract_features(obs, features_extractor)
-        return torch.cat([features, self.belief(features).detach()], dim=1)
-
-    def belief_loss(self, obs: dict) -> torch.Tensor:
-        """The belief's mean squared error against the observation made at each step of ``obs``.
-
-        ``obs`` is a replay batch: the view's keys and :data:`HINDSIGHT_KEY`, the observation made
-        at the transition's step (received later).
-        """
-        observed = self.observation_space["observation"]
-        target = preprocess_obs(obs[HINDSIGHT_KEY], observed).float().flatten(1)
-        return nn.functional.mse_loss(self.belief(self.view_features(obs)), target)
-
-    def _get_constructor_parameters(self) -> dict[str, Any]:
-        return {
-            **super()._get_constructor_parameters(),
-            "features_dim": self.view_dim,
-            "belief_net_arch": self.belief_net_arch,
-        }
-
-
 class HindsightPolicy(MultiInputPolicy):
     """SAC's ``MultiInputPolicy`` whose critic reads ``"hindsight"`` and ``"actions"``.
 
@@ -133,33 +77,11 @@ class HindsightPolicy(MultiInputPolicy):
     the age one-hot). The critics (and their targets) are SAC's ``ContinuousCritic`` on the
     observation made at the transition's step and the actions sent before it, through their own
     ``CombinedExtractor``; they are given the buffer's whole ``Dict`` and read those two keys.
-
-    Args:
-        *args, **kwargs: SAC's ``MultiInputPolicy``'s.
-        belief_net_arch: ``None`` (the default): the actor reads the view; hidden layer sizes
-            (``[64, 64]``): the actor is a :class:`BeliefActor` with a belief MLP of those sizes,
-            trained by its own Adam (``belief_optimizer``, the policy's optimizer settings).
     """
 
-    def __init__(self, *args: Any, belief_net_arch: list[int] | None = None, **kwargs: Any):
-        self.belief_net_arch = None if belief_net_arch is None else list(belief_net_arch)
-        super().__init__(*args, **kwargs)
-
-    def _build(self, lr_schedule: Any) -> None:
-        super()._build(lr_schedule)
-        if self.belief_net_arch is not None:
-            self.belief_optimizer = self.optimizer_class(
-                self.actor.belief.parameters(), lr=lr_schedule(1), **self.optimizer_kwargs
-            )
-
-    def _get_constructor_parameters(self) -> dict[str, Any]:
-        return {**super()._get_constructor_parameters(), "belief_net_arch": self.belief_net_arch}
-
     def make_actor(self, features_extractor: Any = None) -> ViewActor:
-        """SAC's actor on the view (:class:`ViewActor`, or :class:`BeliefActor` with a belief)."""
+        """SAC's actor on the view (:class:`ViewActor`)."""
         kwargs = self._update_features_extractor(self.actor_kwargs, features_extractor)
-        if self.belief_net_arch is not None:
-            return BeliefActor(**kwargs, belief_net_arch=self.belief_net_arch).to(self.device)
         return ViewActor(**kwargs).to(self.device)
 
     def make_critic(self, features_extractor: Any = None) -> ContinuousCritic:
@@ -292,25 +214,9 @@ class HindsightSAC(SAC):
         return result
 
     def train(self, gradient_steps: int, batch_size: int = 64) -> None:
-        """SAC's training, once a transition has entered the replay buffer; then the belief's.
-
-        With a :class:`BeliefActor`, each gradient step is followed by one of the belief on a
-        batch of its own (logged as ``train/belief_loss``).
-        """
-        if self.replay_buffer.size() == 0:
-            return
-        super().train(gradient_steps, batch_size)
-        if not isinstance(self.actor, BeliefActor):
-            return
-        losses = []
-        for _ in range(gradient_steps):
-            batch = self.replay_buffer.sample(batch_size, env=self._vec_normalize_env)
-            loss = self.actor.belief_loss(batch.observations)
-            self.policy.belief_optimizer.zero_grad()
-            loss.backward()
-            self.policy.belief_optimizer.step()
-            losses.append(loss.item())
-        self.logger.record("train/belief_loss", float(np.mean(losses)))
+        """SAC's training, once a transition has entered the replay buffer."""
+        if self.replay_buffer.size() > 0:
+            super().train(gradient_steps, batch_size)
 
     def _store_transition(self, replay_buffer, buffer_action, new_obs, reward, dones, infos):
         """Keep each sub-env's step; store what the observations received so far allow."""

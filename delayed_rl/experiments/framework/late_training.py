@@ -18,12 +18,10 @@ from delayed_rl.experiments.framework.deep_training import learn_and_score, mean
 
 __all__ = ["CONTROLLERS", "METHODS", "controller_score", "random_score", "train_and_score"]
 
-METHODS = ("oracle", "naive", "augmented", "hindsight", "hindsight-belief")
+METHODS = ("oracle", "naive", "augmented", "hindsight")
 """The learners a task can name (see :func:`train_and_score`)."""
 CONTROLLERS = ("p-undelayed", "p-delayed")
 """The fixed controllers a task can name (:func:`controller_score`)."""
-BELIEF_NET_ARCH = (256, 256)
-"""The belief MLP's hidden layers for ``hindsight-belief`` (SAC's default network's)."""
 EVAL_SEED = 2_000_000
 """Evaluation episode ``i`` of seed ``s`` resets with ``EVAL_SEED + 1000 * s + i``."""
 
@@ -107,10 +105,7 @@ def train_and_score(task: dict) -> dict:
     - ``naive``: on the delayed stack as it is (the newest observation the stale sensor shows);
     - ``augmented``: on the delay-aware view (:class:`~delayed_rl.wrappers.DelayAwareObservation`),
       flattened, with ``MlpPolicy``;
-    - ``hindsight``: :class:`~delayed_rl.deep.HindsightSAC` on the view;
-    - ``hindsight-belief``: :class:`~delayed_rl.deep.HindsightSAC` whose actor also reads its
-      belief, the current observation predicted from the view (``belief_net_arch``
-      :data:`BELIEF_NET_ARCH`, SAC's own network sizes).
+    - ``hindsight``: :class:`~delayed_rl.deep.HindsightSAC` on the view.
 
     The score is the mean return of ``eval_episodes`` deterministic episodes of the env the method
     acts in (delays included; the oracle's is undelayed), reset with seeds fixed per seed and
@@ -133,15 +128,13 @@ def train_and_score(task: dict) -> dict:
     torch.set_num_threads(1)
     method, seed = task["method"], task["seed"]
     env, evaluation = make_env(task, method), make_env(task, method)
-    if method == "hindsight-belief":
-        kwargs = {"policy_kwargs": {"belief_net_arch": list(BELIEF_NET_ARCH)}}
-        agent = HindsightSAC("MultiInputPolicy", env, seed=seed, device="cpu", **kwargs)
-    elif method == "hindsight":
-        agent = HindsightSAC("MultiInputPolicy", env, seed=seed, device="cpu")
+    if method == "hindsight":
+        algorithm, policy = HindsightSAC, "MultiInputPolicy"
     else:
-        agent = SAC("MlpPolicy", env, seed=seed, device="cpu")
+        algorithm, policy = SAC, "MlpPolicy"
+    agent = algorithm(policy, env, seed=seed, device="cpu")
     result = learn_and_score(agent, task, lambda policy: _score(policy, evaluation, task))
-    if method.startswith("hindsight"):
+    if method == "hindsight":
         result["transitions_stored"] = agent.transitions_stored
         result["transitions_dropped"] = agent.transitions_dropped
     return result
