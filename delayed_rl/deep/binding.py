@@ -4,7 +4,9 @@ SB3 hands a buffer no reference to its algorithm; a relabelling buffer finds it 
 of ``_setup_model`` or ``load_replay_buffer`` on the call stack (:func:`calling_algorithm`).
 With it, the buffer seeds its reward model from the algorithm's seed
 (:func:`reward_model_seed`), keeps one live model in the algorithm's buffer kwargs across SB3's
-save and load, and refuses the n-step settings SB3 would ignore. The docs' deep RL page
+save and load, and refuses the n-step settings SB3 would ignore. An off-policy buffer also reads
+the ``collect_rollouts`` that calls its ``add()``, to see when the algorithm reset its env in
+the middle of episodes (:func:`env_was_reset`). The docs' deep RL page
 (``docs/deep_rl.md``, "The buffers, in full") says how.
 """
 
@@ -15,7 +17,13 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["REWARD_MODEL_STREAM", "calling_algorithm", "reward_model_seed"]
+__all__ = [
+    "REWARD_MODEL_STREAM",
+    "calling_algorithm",
+    "env_was_reset",
+    "remember_episode_starts",
+    "reward_model_seed",
+]
 
 REWARD_MODEL_STREAM = 0x52574D
 """The spawn key that sets a reward model's seed apart from its algorithm's."""
@@ -55,15 +63,23 @@ def calling_algorithm(*methods: str) -> Any:
     return None
 
 
+def remember_episode_starts(buffer: Any, algorithm: Any) -> None:
+    """Note ``algorithm``'s episode-start array as the one ``buffer`` has seen (no reset yet).
+
+    Called when an algorithm builds or loads the buffer (:func:`env_was_reset`).
+    """
+    buffer._episode_starts_seen = algorithm._last_episode_starts
+
+
 def env_was_reset(buffer: Any) -> bool:
-    """Whether the off-policy algorithm adding to ``buffer`` reset its env since the last ask.
+    """Whether the off-policy algorithm adding to ``buffer`` reset its env since the buffer's last call.
 
     SB3's ``_setup_learn`` resets the env when ``learn()`` starts with
-    ``reset_num_timesteps=True`` (the default) or with no last observation, and then, only
-    then, gives the algorithm a new ``_last_episode_starts`` array (an off-policy algorithm
-    never replaces it otherwise). The buffer keeps the array it last saw: a different one means
-    a reset. A buffer just unpickled (``load_replay_buffer``) holds a copy, so its next step
-    counts as after a reset, as it is when ``learn()`` follows a load. Outside an algorithm's
+    ``reset_num_timesteps=True`` (the default) or with no last observation (after ``load`` with
+    ``force_reset=True``, the default, or ``set_env``), and then, only then, gives the
+    algorithm a new ``_last_episode_starts`` array (an off-policy algorithm never replaces it
+    otherwise). The buffer keeps the array it last saw (:func:`remember_episode_starts` when
+    an algorithm builds or loads it): a different one means a reset. Outside an algorithm's
     ``collect_rollouts`` (a buffer filled by hand) it is ``False``.
     """
     algorithm = calling_algorithm("collect_rollouts")

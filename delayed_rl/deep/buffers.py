@@ -26,7 +26,13 @@ from stable_baselines3.common.buffers import (
 )
 
 from delayed_rl._validation import check_int, check_probability
-from delayed_rl.deep.binding import adopt, bind, calling_algorithm, env_was_reset
+from delayed_rl.deep.binding import (
+    adopt,
+    bind,
+    calling_algorithm,
+    env_was_reset,
+    remember_episode_starts,
+)
 from delayed_rl.deep.files import make_reward_model
 from delayed_rl.deep.reward_model import RewardModel
 
@@ -98,6 +104,7 @@ class _Relabeling:
         if algorithm is not None:
             self._check_algorithm(algorithm)
             bind(self, algorithm)
+            remember_episode_starts(self, algorithm)
 
     def _check_algorithm(self, algorithm: Any) -> None:
         """Refuse an algorithm whose settings the buffer cannot serve (none here)."""
@@ -162,22 +169,37 @@ class _RelabelingOffPolicy(_Relabeling):
         algorithm = calling_algorithm("load_replay_buffer")
         if algorithm is not None:
             adopt(self, algorithm)
+            remember_episode_starts(self, algorithm)
 
     def add(self, obs, next_obs, action, reward, done, infos) -> None:  # noqa: D417
         """Store the transition as SB3 does, and hand it to the reward model.
 
         When the algorithm reset its env since the last step (:func:`~.binding.env_was_reset`),
-        the model's open episodes are cut first (:meth:`~.reward_model.RewardModel.cut_episodes`).
+        the episodes it left open are cut first: in the model's history (``episode_starts`` of
+        :meth:`~.reward_model.RewardModel.add`), and in the buffer, whose last row of each
+        becomes a truncation (so that an n-step return stops there and bootstraps from that
+        row's next observation; a one-step target reads no truncation but a terminal one's).
         """
+        starts = None
         if env_was_reset(self):
-            self.reward_model.cut_episodes(np.arange(self.n_envs))
+            starts = np.ones(self.n_envs, dtype=bool)
+            self._truncate_open_episodes()
         self.delivered_rewards[self.pos] = np.asarray(reward).reshape(self.n_envs)
         self.undelayed_rewards[self.pos] = [
             info.get("undelayed_reward", np.nan) if isinstance(info, dict) else np.nan
             for info in infos
         ]
-        self.reward_model.add(obs, action, reward, done, infos, next_observations=next_obs)
+        self.reward_model.add(
+            obs, action, reward, done, infos, next_observations=next_obs, episode_starts=starts
+        )
         super().add(obs, next_obs, action, reward, done, infos)
+
+    def _truncate_open_episodes(self) -> None:
+        """Mark the last row of each sub-env whose episode it did not end as a time-limit one."""
+        if self.pos == 0 and not self.full:
+            return
+        last = (self.pos - 1) % self.buffer_size
+        self.timeouts[last] = np.logical_or(self.timeouts[last], ~self.dones[last].astype(bool))
 
     def sample(self, batch_size: int, env: Any = None) -> Any:
         """SB3's sample, after the reward model takes the updates its schedule owes."""
@@ -371,7 +393,7 @@ class _RelabelingOnPolicy(_Relabeling):
 
         A sub-env whose ``episode_start`` is set while its episode in the model's history is
         open was reset by the algorithm (SB3's ``learn()`` does when it starts again): that
-        episode is cut first (:meth:`~.reward_model.RewardModel.cut_episodes`).
+        episode is cut first (``episode_starts`` of :meth:`~.reward_model.RewardModel.add`).
 
         Raises:
             RuntimeError: the callback did not hand over this step.
@@ -388,9 +410,14 @@ class _RelabelingOnPolicy(_Relabeling):
         self.delivered_rewards[self.pos] = delivered.reshape(self.n_envs)
         reward = np.asarray(reward, dtype=np.float32).reshape(self.n_envs)
         self.bootstraps[self.pos] = reward - self.delivered_rewards[self.pos]
-        self.reward_model.cut_episodes(np.flatnonzero(np.asarray(episode_start, dtype=bool)))
         self.reward_model.add(
-            observations, actions, env_rewards, dones, infos, next_observations=following
+            observations,
+            actions,
+            env_rewards,
+            dones,
+            infos,
+            next_observations=following,
+            episode_starts=episode_start,
         )
         super().add(obs, action, reward, episode_start, value, log_prob)
 

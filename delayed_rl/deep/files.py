@@ -125,7 +125,12 @@ def load_reward_model(path: str | Path) -> RewardModel:
     except (UnicodeDecodeError, json.JSONDecodeError) as error:
         raise ValueError(f"{path}: reward_model.json is not JSON: {error}") from None
     if not isinstance(header, dict) or header.get("format") != FORMAT:
-        raise ValueError(f"{path}: reward_model.json does not declare format {FORMAT!r}")
+        declared = header.get("format") if isinstance(header, dict) else None
+        raise ValueError(
+            f"{path}: reward_model.json does not declare format {FORMAT!r}, got {declared!r} "
+            "(earlier formats were written by earlier versions of delayed-rl; this one reads "
+            "its own only)"
+        )
     name = header.get("class")
     kind = _classes().get(name) if isinstance(name, str) else None
     if kind is None:

@@ -131,6 +131,11 @@ class TransitionHistory:
         while episodes and episodes[0][1] < self.first_whole:
             episodes.popleft()
 
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        # a history pickled before cuts were kept (in an SB3 buffer or algorithm file) had none
+        state.setdefault("episode_cut", np.zeros_like(state["episode_end"]))
+        self.__dict__.update(state)
+
     def cut(self, envs: np.ndarray) -> None:
         """End the open episodes of sub-envs ``envs`` at the last step added: they were reset.
 

@@ -23,7 +23,7 @@ from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.type_aliases import ReplayBufferSamples
 
 from delayed_rl._validation import check_choice, check_int
-from delayed_rl.deep.binding import env_was_reset
+from delayed_rl.deep.binding import calling_algorithm, env_was_reset, remember_episode_starts
 
 __all__ = ["CREDITS", "IRCRReplayBuffer"]
 
@@ -158,6 +158,17 @@ class IRCRReplayBuffer(ReplayBuffer):
         self._heap_arrays: tuple[np.ndarray, ...] | None = None
         self._bounds: tuple[float, float] | None = None
         self.distinct_credits_seen = False
+        algorithm = calling_algorithm("_setup_model")
+        if algorithm is not None:
+            remember_episode_starts(self, algorithm)
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        # a buffer pickled before cuts were kept had none
+        state.setdefault("_cut_spans", [deque() for _ in range(state["n_envs"])])
+        self.__dict__.update(state)
+        algorithm = calling_algorithm("load_replay_buffer")
+        if algorithm is not None:
+            remember_episode_starts(self, algorithm)
 
     # ------------------------------------------------------------------ storing
     @property

@@ -206,6 +206,7 @@ class RewardModel(ABC):
         episode_ends: Any,
         infos: Sequence[dict] | None = None,
         next_observations: Any = None,
+        episode_starts: Any = None,
     ) -> None:
         """Keep one step of every sub-env (it trains only when asked: :meth:`train_on_schedule`).
 
@@ -220,6 +221,12 @@ class RewardModel(ABC):
             next_observations: the observations each sub-env's step led to (at an episode's
                 end, its terminal observation), needed by a model that
                 :attr:`reads_next_observation` and ignored by the others.
+            episode_starts: whether each sub-env starts an episode at this step (``None``: as the
+                last step's ``episode_ends`` say). A sub-env that starts one though its last step
+                ended none was reset in the middle of an episode (SB3's ``learn()`` resets its
+                env when it starts with ``reset_num_timesteps=True``, the default): that episode
+                is cut at its last step (:meth:`~delayed_rl.deep.history.TransitionHistory.cut`),
+                and is not a finished episode.
 
         Raises:
             TypeError, ValueError: an argument that does not hold one value a sub-env of the
@@ -237,6 +244,7 @@ class RewardModel(ABC):
         if not np.all(np.isfinite(reward)):
             raise ValueError(f"rewards must be finite, got {reward}")
         ends = _pair("episode_ends", episode_ends, count).astype(bool)
+        starts = None if episode_starts is None else _pair("episode_starts", episode_starts, count)
         obs = self.observations.batch(observations, count)
         next_obs = self._next_batch("add()", next_observations, count)
         action = self.actions.batch(actions, count)
@@ -255,29 +263,9 @@ class RewardModel(ABC):
                 keep_next=self.reads_next_observation,
             )
             self.takes_algorithm_seed = False
+        if starts is not None:
+            self.history.cut(np.flatnonzero(starts))
         self.history.add(obs, action, reward, ends, undelayed, next_obs)
-
-    def cut_episodes(self, envs: Any) -> None:
-        """End the open episodes of sub-envs ``envs``, reset in the middle of them.
-
-        The relabelling buffers call it when the algorithm resets its env (SB3's ``learn()``
-        does when it starts with ``reset_num_timesteps=True``, the default): the cut episodes
-        are not finished ones (:class:`~delayed_rl.deep.history.TransitionHistory`). Before the
-        first step it does nothing.
-
-        Raises:
-            TypeError: ``envs`` are not integers.
-            ValueError: a sub-env index outside ``0..n_envs − 1``.
-        """
-        indices = np.asarray(envs).reshape(-1)
-        if indices.size and indices.dtype.kind not in "iu":
-            raise TypeError(f"envs must be sub-env indices (integers), got {envs!r}")
-        if self.history is None:
-            return
-        n_envs = self.history.n_envs
-        if not np.all((indices >= 0) & (indices < n_envs)):
-            raise ValueError(f"envs must be sub-env indices in 0..{n_envs - 1}, got {envs!r}")
-        self.history.cut(indices.astype(np.int64))
 
     @property
     def updates_due(self) -> int:

@@ -444,6 +444,51 @@ def test_a_loaded_replay_buffer_cuts_the_episode_its_new_env_does_not_go_on_with
     assert bounds == [(0, 50), (75, 50)]
 
 
+def test_a_buffer_reloaded_into_its_own_algorithm_goes_on_without_a_cut(tmp_path):
+    env = pendulum()
+    agent = sac(env, deconvolution(env))
+    agent.learn(75)
+    agent.save_replay_buffer(tmp_path / "buffer.pkl")
+    agent.load_replay_buffer(tmp_path / "buffer.pkl")
+    agent.learn(50, reset_num_timesteps=False)  # no reset: the episode of steps 50-99 goes on
+    history = agent.replay_buffer.reward_model.history
+    assert not history.episode_cut[:125].any()
+    assert [(first, length) for _, first, length, _ in history.episodes] == [(0, 50), (50, 50)]
+
+
+def test_sub_envs_are_cut_together_and_an_n_step_sum_stops_at_the_cut():
+    from stable_baselines3 import SAC
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from delayed_rl.deep import RelabelingNStepReplayBuffer
+
+    envs = [pendulum(steps=50), pendulum(steps=30)]
+    venv = DummyVecEnv([lambda env=env: env for env in envs])
+    model = deconvolution(envs[0])
+    agent = SAC(
+        "MlpPolicy",
+        venv,
+        learning_starts=50,
+        batch_size=32,
+        buffer_size=2000,
+        policy_kwargs={"net_arch": [16]},
+        replay_buffer_class=RelabelingNStepReplayBuffer,
+        replay_buffer_kwargs={"reward_model": model, "n_steps": 3},
+        seed=0,
+        device="cpu",
+    )
+    agent.learn(2 * 40)  # 40 steps of each: sub-env 1's first episode ends at its step 29
+    agent.learn(2 * 10)
+    history, buffer = model.history, agent.replay_buffer
+    assert np.flatnonzero(history.episode_cut[:50, 0]).tolist() == [39]
+    assert np.flatnonzero(history.episode_cut[:50, 1]).tolist() == [39]
+    # the cut rows become truncations (their next observations are bootstrapped from), and
+    # nothing else does: sub-env 1's row 29 ended its episode by SB3's time limit already
+    assert np.flatnonzero(buffer.timeouts[:50, 0]).tolist() == [39]
+    assert np.flatnonzero(buffer.timeouts[:50, 1]).tolist() == [29, 39]
+    assert not buffer.dones[39].any()
+
+
 def test_replay_buffer_and_algorithm_files_keep_a_working_model(tmp_path):
     from stable_baselines3 import SAC
 

@@ -180,8 +180,8 @@ def test_the_episode_index_is_rebuilt_at_any_step(tmp_path):
             [1, 0, 0, 0, 1, 0, 1, 1, 0, 0, 0, 1, 0, 1, 0, 0, 1, 0, 0, 0, 1, 1, 0, 1, 0, 0]]  # fmt: skip
     resets = {4: [0, 1], 7: [1], 14: [0], 20: [0, 1]}  # episodes cut short before these steps
     for step, end in enumerate(zip(*ends, strict=True)):
-        model.cut_episodes(resets.get(step, []))
-        model.add(np.zeros((2, 3)), [0, 1], [step, -step], list(end))
+        starts = np.isin([0, 1], resets.get(step, []))
+        model.add(np.zeros((2, 3)), [0, 1], [step, -step], list(end), episode_starts=starts)
         loaded = load_reward_model(model.save(tmp_path / "model.zip"))
         assert list(loaded.history.episodes) == list(model.history.episodes), step
         held = model.history.rows(model.history.oldest, step + 1)
@@ -551,7 +551,10 @@ def _drop(*keys):
 @pytest.mark.parametrize(
     ("change", "match"),
     [
-        (_set("format", value="delayed-rl reward model 2"), "does not declare format"),
+        (
+            _set("format", value="delayed-rl reward model 2"),
+            r"does not declare format 'delayed-rl reward model 3', got 'delayed-rl reward model 2'",
+        ),
         (_set("format", value="delayed-rl reward model 4"), "does not declare format"),
         (_drop("format"), "does not declare format"),
         (_set("class", value="RewardModel"), "unknown reward model class 'RewardModel'"),

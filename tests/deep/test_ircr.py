@@ -185,22 +185,26 @@ def test_an_episode_cut_by_a_reset_is_never_sampled(buffer_size):
     assert (rewards <= 1).all() and (rewards >= 0).all()
 
 
-def test_sac_learning_again_cuts_the_episode_the_reset_left_open():
+def ircr_sac():
+    """SAC with IRCR on a Pendulum of 20-step episodes that never trains (until step 200)."""
     from stable_baselines3 import SAC
 
     from delayed_rl.deep import IRCRReplayBuffer
 
-    env = RewardDelay(gym.make("Pendulum-v1", max_episode_steps=20), 3)
-    agent = SAC(
+    return SAC(
         "MlpPolicy",
-        env,
+        RewardDelay(gym.make("Pendulum-v1", max_episode_steps=20), 3),
         replay_buffer_class=IRCRReplayBuffer,
-        learning_starts=200,  # never trains: only what the buffer keeps is checked
+        learning_starts=200,
         buffer_size=500,
         policy_kwargs={"net_arch": [8]},
         seed=0,
         device="cpu",
     )
+
+
+def test_sac_learning_again_cuts_the_episode_the_reset_left_open():
+    agent = ircr_sac()
     agent.learn(50)  # episodes 0-19 and 20-39, then 40-49 open
     agent.learn(50)  # a reset: episodes 50-69 and 70-89, then 90-99 open
     buffer = agent.replay_buffer
@@ -213,6 +217,23 @@ def test_sac_learning_again_cuts_the_episode_the_reset_left_open():
     np.random.seed(0)  # noqa: NPY002
     rows, _ = buffer._ring_draw(2000)
     assert set(rows.tolist()) == set(range(40)) | set(range(50, 90))
+
+
+def test_a_buffer_reloaded_into_its_own_algorithm_goes_on_without_a_cut(tmp_path):
+    import pickle
+
+    agent = ircr_sac()
+    agent.learn(50)  # episodes 0-19 and 20-39, then 40-49 open
+    agent.save_replay_buffer(tmp_path / "buffer.pkl")
+    agent.load_replay_buffer(tmp_path / "buffer.pkl")
+    agent.learn(30, reset_num_timesteps=False)  # to step 80, with no reset: 40-59 goes on
+    buffer = agent.replay_buffer
+    bounds = [(first, stop) for _, first, stop, _ in buffer.episodes]
+    assert bounds == [(0, 20), (20, 40), (40, 60), (60, 80)]
+    assert not any(buffer._cut_spans)
+    del buffer._cut_spans  # the state an earlier version pickled: no cuts
+    restored = pickle.loads(pickle.dumps(buffer))
+    assert [list(spans) for spans in restored._cut_spans] == [[]]
 
 
 def test_sample_refuses_before_a_finished_episode():

@@ -105,9 +105,8 @@ class Stream:
             end = rng.random(n_envs) < 0.2  # episodes of 1 step to a dozen or more
             reset = rng.random(n_envs) < cuts
             if self.end:
-                model.cut_episodes(np.flatnonzero(reset))
                 self.cut[-1] = reset & ~self.end[-1]  # an episode just ended has nothing to cut
-            model.add(obs, action, reward, end)
+            model.add(obs, action, reward, end, episode_starts=reset)
             self.cut.append(np.zeros(n_envs, bool))
             self.obs.append(obs)
             self.action.append(action)
@@ -239,16 +238,16 @@ def test_an_episode_cut_by_a_reset_ends_there_and_flushes_nothing(mode, capacity
             assert value != pytest.approx(expected, rel=1e-3)
 
 
-def test_cut_episodes_are_left_out_of_the_finished_ones():
+def test_an_episode_reset_midway_is_cut_and_left_out_of_the_finished_ones():
     from delayed_rl.deep import ReturnRegressionRewardModel
 
     model = ReturnRegressionRewardModel(spaces.Discrete(2), spaces.Discrete(2), capacity=100)
-    model.cut_episodes([0, 1])  # before any step: nothing to cut
     ends = [[0, 0, 1, 0, 0, 0, 0, 1], [0, 1, 0, 0, 0, 1, 0, 1]]
     for step, end in enumerate(zip(*ends, strict=True)):
-        if step == 4:  # a reset after step 3: sub-env 0's episode 3..3 and sub-env 1's 2..3
-            model.cut_episodes(np.array([0, 1]))
-        model.add([0, 0], [1, 1], [10.0**step, -(10.0**step)], list(end))
+        # starts at steps 0 (the first: nothing to cut), 3 (after ends: nothing), 4 (a reset
+        # after step 3: sub-env 0's episode 3..3 and sub-env 1's 2..3 are cut)
+        starts = [1, 1] if step in (0, 4) else [1, 0] if step == 3 else [0, 0]
+        model.add([0, 0], [1, 1], [10.0**step, -(10.0**step)], list(end), episode_starts=starts)
     history = model.history
     assert history.episode_cut[:8].tolist() == [[0, 0]] * 3 + [[1, 1]] + [[0, 0]] * 4
     assert sorted(history.episodes) == [
@@ -259,12 +258,27 @@ def test_cut_episodes_are_left_out_of_the_finished_ones():
         (1, 6, 2, -11000000.0),
     ]
     assert history.episode_ids(0, 0, 8).tolist() == [0, 0, 0, 1, 2, 2, 2, 2]
-    model.cut_episodes([0])  # an episode that just ended has nothing to cut
-    assert not history.episode_cut[7].any()
-    with pytest.raises(TypeError, match="envs must be sub-env indices"):
-        model.cut_episodes([0.5])
-    with pytest.raises(ValueError, match=r"0\.\.1, got \[2\]"):
-        model.cut_episodes([2])
+    model.add([0, 0], [1, 1], [0.0, 0.0], [0, 0], episode_starts=[True, False])
+    assert not history.episode_cut[7].any()  # an episode that just ended has nothing to cut
+    with pytest.raises(TypeError, match="episode_starts must be numbers"):
+        model.add([0, 0], [1, 1], [0.0, 0.0], [0, 0], episode_starts=["yes", "no"])
+    with pytest.raises(ValueError, match="episode_starts must hold 2 values"):
+        model.add([0, 0], [1, 1], [0.0, 0.0], [0, 0], episode_starts=[True])
+
+
+def test_a_history_pickled_before_cuts_were_kept_unpickles_with_none():
+    import pickle
+
+    from delayed_rl.deep import ReturnRegressionRewardModel
+
+    model = ReturnRegressionRewardModel(spaces.Discrete(2), spaces.Discrete(2), capacity=10)
+    for step in range(4):
+        model.add([0], [1], [float(step)], [step == 1])
+    del model.history.episode_cut  # the state an earlier version pickled
+    loaded = pickle.loads(pickle.dumps(model))
+    assert loaded.history.episode_cut.shape == (10, 1) and not loaded.history.episode_cut.any()
+    loaded.add([0], [1], [1.0], [False], episode_starts=[True])
+    assert np.flatnonzero(loaded.history.episode_cut[:, 0]).tolist() == [3]
 
 
 def test_clipped_poisson_pmf_is_credit_weights():

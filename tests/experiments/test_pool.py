@@ -143,7 +143,7 @@ def test_pool_key_ignores_only_the_pooled_items():
     assert key({"x": 1, "powers": [1]}, None) == run_key(SharedRun(powers, {"x": 1, "powers": [1]}))
     with pytest.raises(ValueError, match="has no entry 'powers' to pool"):
         key({"x": 1})
-    with pytest.raises(TypeError, match="pooled entry 'powers' must be a list, got 3"):
+    with pytest.raises(TypeError, match="pooled entry 'powers' must be a list or a tuple, got 3"):
         key({"x": 1, "powers": 3})
     with pytest.raises(TypeError, match="pooled must be None or a task entry's name, got 1"):
         key({"x": 1, "powers": [1]}, 1)

@@ -62,7 +62,7 @@ def pool_key(run: SharedRun) -> str:
 
     Raises:
         TypeError: as :func:`run_key`; or ``run.pooled`` is not a string, or the task's entry
-            of that name is not a list.
+            of that name is not a list or a tuple.
         ValueError: as :func:`run_key`; or the task has no entry named ``run.pooled``.
     """
     whole = run_key(run)  # the items too must be JSON-like
@@ -87,7 +87,7 @@ def _items(run: SharedRun) -> Sequence[Any]:
         raise ValueError(f"the task {run.task!r} has no entry {run.pooled!r} to pool")
     items = entries[run.pooled]
     if not isinstance(items, list | tuple):
-        raise TypeError(f"the pooled entry {run.pooled!r} must be a list, got {items!r}")
+        raise TypeError(f"the pooled entry {run.pooled!r} must be a list or a tuple, got {items!r}")
     return items
 
 

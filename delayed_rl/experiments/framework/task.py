@@ -19,7 +19,8 @@ class Task:
 
     A task's JSON is its fields by name, except an :func:`optional` field at its default, which
     is left out: a setting only some of an experiment's tasks have. Sequences are tuples (JSON
-    lists), so that a task is immutable.
+    lists); a mapping field (a delay's description, an env's arguments) stays a dict, so such a
+    task is not hashable, and its dict is not to be changed.
 
     Attributes:
         seed: the seed of the run.
