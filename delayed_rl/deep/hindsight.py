@@ -20,7 +20,11 @@ from stable_baselines3.common.buffers import DictReplayBuffer
 from stable_baselines3.common.torch_layers import CombinedExtractor
 from stable_baselines3.sac.policies import Actor, ContinuousCritic, MultiInputPolicy
 
+from delayed_rl._validation import check_choice
+
 __all__ = [
+    "CRITIC_INPUTS",
+    "HINDSIGHT_AGE_KEY",
     "HINDSIGHT_KEY",
     "VIEW_KEYS",
     "HindsightPolicy",
@@ -33,7 +37,11 @@ __all__ = [
 VIEW_KEYS = ("observation", "age", "actions")
 """The delay-aware view's keys."""
 HINDSIGHT_KEY = "hindsight"
-"""The stored observation made at the transition's step (received later)."""
+"""The stored observation the critic reads for the transition's step (received later)."""
+HINDSIGHT_AGE_KEY = "hindsight_age"
+"""With ``critic_input="newest"``: how many steps before the transition's step it was made."""
+CRITIC_INPUTS = ("made", "newest")
+"""The values of :class:`HindsightSAC`'s ``critic_input``."""
 
 
 def check_view_space(space: Any, name: str = "observation_space") -> spaces.Dict:
@@ -51,14 +59,20 @@ def check_view_space(space: Any, name: str = "observation_space") -> spaces.Dict
     return space
 
 
-def hindsight_space(view: spaces.Dict) -> spaces.Dict:
-    """The replay buffer's space: the view's keys and :data:`HINDSIGHT_KEY`."""
-    return spaces.Dict({**view.spaces, HINDSIGHT_KEY: view.spaces["observation"]})
+def critic_space(view: spaces.Dict, critic_input: str = "made") -> spaces.Dict:
+    """What the critic reads: the hindsight observation (its age too, for ``"newest"``), actions.
+
+    ``"actions"`` are the view's: the last ``K`` actions sent before the transition's step.
+    """
+    hindsight = {HINDSIGHT_KEY: view.spaces["observation"], "actions": view["actions"]}
+    if critic_input == "newest":
+        hindsight[HINDSIGHT_AGE_KEY] = view["age"]
+    return spaces.Dict(hindsight)
 
 
-def critic_space(view: spaces.Dict) -> spaces.Dict:
-    """What the critic reads: the hindsight observation and the actions sent before it."""
-    return spaces.Dict({HINDSIGHT_KEY: view.spaces["observation"], "actions": view["actions"]})
+def hindsight_space(view: spaces.Dict, critic_input: str = "made") -> spaces.Dict:
+    """The replay buffer's space: the view's keys and the critic's hindsight keys."""
+    return spaces.Dict({**critic_space(view, critic_input).spaces, **view.spaces})
 
 
 class ViewActor(Actor):
@@ -75,9 +89,21 @@ class HindsightPolicy(MultiInputPolicy):
 
     The actor is SAC's, on the view's ``Dict`` (SB3's ``CombinedExtractor``: each key flattened,
     the age one-hot). The critics (and their targets) are SAC's ``ContinuousCritic`` on the
-    observation made at the transition's step and the actions sent before it, through their own
-    ``CombinedExtractor``; they are given the buffer's whole ``Dict`` and read those two keys.
+    hindsight observation of the transition's step (with its age, for ``critic_input=
+    "newest"``) and the actions sent before it, through their own ``CombinedExtractor``; they
+    are given the buffer's whole ``Dict`` and read those keys (:func:`critic_space`).
+
+    Args:
+        *args, **kwargs: SAC's ``MultiInputPolicy``'s.
+        critic_input: ``"made"`` or ``"newest"`` (set by :class:`HindsightSAC`).
     """
+
+    def __init__(self, *args: Any, critic_input: str = "made", **kwargs: Any):
+        self.critic_input = check_choice("critic_input", critic_input, CRITIC_INPUTS)
+        super().__init__(*args, **kwargs)
+
+    def _get_constructor_parameters(self) -> dict[str, Any]:
+        return {**super()._get_constructor_parameters(), "critic_input": self.critic_input}
 
     def make_actor(self, features_extractor: Any = None) -> ViewActor:
         """SAC's actor on the view (:class:`ViewActor`)."""
@@ -86,9 +112,9 @@ class HindsightPolicy(MultiInputPolicy):
 
     def make_critic(self, features_extractor: Any = None) -> ContinuousCritic:
         """SAC's critic, on :func:`critic_space` (its own extractor: never the actor's)."""
-        space = critic_space(self.observation_space)
+        space = critic_space(self.observation_space, self.critic_input)
         kwargs = self._update_features_extractor(self.critic_kwargs, CombinedExtractor(space))
-        kwargs["observation_space"] = hindsight_space(self.observation_space)
+        kwargs["observation_space"] = hindsight_space(self.observation_space, self.critic_input)
         return ContinuousCritic(**kwargs).to(self.device)
 
 
@@ -154,15 +180,23 @@ class HindsightSAC(SAC):
             the class.
         env: a :class:`~delayed_rl.wrappers.DelayAwareObservation` env (its ``Dict``, not
             flattened), or a vector env of them.
+        critic_input: what the critic reads for a step ``τ`` (beside the actions sent before it):
+            ``"made"`` (the default), the observation made at ``τ``, once it has arrived; a step
+            whose observation never arrives starts no transition, and a transition spans the
+            steps to the next one whose observation arrived. ``"newest"``: the newest
+            observation made at or before ``τ`` that arrived by the time nothing newer can, and
+            its age at ``τ`` (``"hindsight_age"``); every step is a one-step transition.
         **kwargs: SAC's (``learning_rate``, ``buffer_size``, ``learning_starts``, ``seed``...).
 
     Attributes:
         transitions_stored: the transitions that entered the replay buffer.
-        transitions_dropped: those that never could (an observation they need never arrived).
+        transitions_dropped: those that never could (an observation they need never arrived;
+            none with ``critic_input="newest"``).
 
     Raises:
-        TypeError: an env that is not a view; a ``replay_buffer_class``.
-        ValueError: ``optimize_memory_usage`` or ``n_steps > 1``.
+        TypeError: an env that is not a view; a ``replay_buffer_class``; a ``critic_input``
+            that is not a string.
+        ValueError: ``optimize_memory_usage``, ``n_steps > 1``, an unknown ``critic_input``.
 
     ``docs/deep_rl.md`` ("HindsightSAC") states the rule, what the learner may read and when.
     """
@@ -172,7 +206,8 @@ class HindsightSAC(SAC):
         "MlpPolicy": HindsightPolicy,
     }
 
-    def __init__(self, policy: Any, env: Any, **kwargs: Any):
+    def __init__(self, policy: Any, env: Any, critic_input: str = "made", **kwargs: Any):
+        self.critic_input = check_choice("critic_input", critic_input, CRITIC_INPUTS)
         if kwargs.get("replay_buffer_class") is not None:
             raise TypeError(
                 "HindsightSAC keeps its own replay buffer (the view with the hindsight "
@@ -189,10 +224,11 @@ class HindsightSAC(SAC):
 
     def _setup_model(self) -> None:
         view = check_view_space(self.observation_space)
+        self.policy_kwargs = {**self.policy_kwargs, "critic_input": self.critic_input}
         if self.replay_buffer is None:
             self.replay_buffer = HindsightReplayBuffer(
                 self.buffer_size,
-                hindsight_space(view),
+                hindsight_space(view, self.critic_input),
                 self.action_space,
                 device=self.device,
                 handle_timeout_termination=False,  # the transitions carry their own ends
@@ -236,7 +272,10 @@ class HindsightSAC(SAC):
             if done:
                 episode.ended = True
                 episode.terminated = not infos[i].get("TimeLimit.truncated", False)
-            self._store_settled(episode)
+            if self.critic_input == "newest":
+                self._store_settled_newest(episode)
+            else:
+                self._store_settled(episode)
             if done:
                 self._episodes[i] = _Episode()
                 self._episodes[i].receive_view({k: np.array(v[i]) for k, v in new_obs.items()})
@@ -272,6 +311,41 @@ class HindsightSAC(SAC):
                 table.pop(start, None)
             for made in [m for m in received if m < episode.first]:
                 del received[made]
+
+    def _store_settled_newest(self, episode: _Episode) -> None:
+        """Store each step, in order, once its critic input and the next step's are settled.
+
+        The input of step ``τ`` is the newest observation made at or before ``τ`` that arrived:
+        settled once no observation made by ``τ`` can still arrive (at the view's step
+        ``τ + D``), or once the episode ended. The reset's observation always arrives, so every
+        step has one.
+        """
+        settled = math.inf if episode.ended else episode.steps - self._max_age
+        received = episode.received
+        while episode.first < episode.steps and episode.first + 1 <= settled:
+            start = episode.first
+            done = episode.ended and episode.terminated and start + 1 == episode.steps
+            self.replay_buffer.add_transition(
+                {**episode.views[start], **self._newest_before(episode, start)},
+                {**episode.views[start + 1], **self._newest_before(episode, start + 1)},
+                episode.actions[start],
+                episode.rewards[start],
+                done,
+                self.gamma,
+            )
+            self.transitions_stored += 1
+            episode.first = start + 1
+            for table in (episode.views, episode.actions, episode.rewards):
+                table.pop(start, None)
+            kept = max(m for m in received if m <= episode.first)  # the next input's, or newer
+            for made in [m for m in received if m < kept]:
+                del received[made]
+
+    @staticmethod
+    def _newest_before(episode: _Episode, step: int) -> dict[str, Any]:
+        """The critic's hindsight keys for ``step``: the newest observation made by then, its age."""
+        made = max(m for m in episode.received if m <= step)
+        return {HINDSIGHT_KEY: episode.received[made], HINDSIGHT_AGE_KEY: np.int64(step - made)}
 
     def _store(self, episode: _Episode, start: int, end: int, done: bool) -> None:
         """One transition from ``start`` to ``end``: the discounted rewards between them."""

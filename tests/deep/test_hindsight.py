@@ -228,3 +228,52 @@ def test_what_is_not_a_view_or_sacs_own_buffer_is_refused():
         HindsightSAC("MultiInputPolicy", env, n_steps=3)
     with pytest.raises(ValueError, match="optimize_memory_usage"):
         HindsightSAC("MultiInputPolicy", env, optimize_memory_usage=True)
+
+
+# ---------------------------------------------------------------------- critic_input="newest"
+@pytest.mark.parametrize("arrival", ["stale", "network"])
+@pytest.mark.parametrize("terminate", [False, True])
+def test_newest_inputs_make_every_step_a_one_step_transition(arrival, terminate):
+    env, record = view(Uniform(0, 3), Uniform(1, 2), arrival, length=20, terminate=terminate)
+    agent = learner(env, critic_input="newest")
+    stored, original = [], agent.replay_buffer.add_transition
+
+    def add(obs, next_obs, action, reward, done, discount):
+        episode = agent._episodes[0]
+        made, age = int(obs["hindsight"][0]), int(obs["hindsight_age"])
+        then, later = int(next_obs["hindsight"][0]), int(next_obs["hindsight_age"])
+        stored.append((made + age, made, then + later, reward, done, discount))
+        # nothing newer made by the step can still arrive, and none arrived: it is the newest
+        assert episode.steps >= made + age + 1 + agent._max_age or episode.ended
+        assert not [m for m in episode.received if made < m <= made + age]
+        original(obs, next_obs, action, reward, done, discount)
+
+    agent.replay_buffer.add_transition = add
+    agent.learn(40)  # two episodes of 20 steps
+    assert agent.transitions_stored == 40 and agent.transitions_dropped == 0
+    assert [step for step, *_ in stored] == [*range(20), *range(20)]
+    for index, (step, made, following, reward, done, discount) in enumerate(stored):
+        assert 0 <= step - made <= agent._max_age and following == step + 1
+        assert reward == pytest.approx(record.episodes[index // 20][step])
+        assert discount == pytest.approx(GAMMA)
+        assert done == (terminate and step == 19)
+    if arrival == "stale":  # some steps' own observations never arrive: an older one stands in
+        assert any(step != made for step, made, *_ in stored)
+    critic = agent.policy.critic.features_extractor.extractors
+    assert set(critic) == {"hindsight", "hindsight_age", "actions"}
+
+
+def test_critic_input_is_checked_and_kept_in_files(tmp_path):
+    from delayed_rl.deep import HindsightSAC
+
+    env, _ = view(Constant(1))
+    with pytest.raises(ValueError, match="critic_input"):
+        HindsightSAC("MultiInputPolicy", env, critic_input="oldest")
+    with pytest.raises(TypeError, match="critic_input"):
+        HindsightSAC("MultiInputPolicy", env, critic_input=1)
+    agent = learner(env, critic_input="newest")
+    agent.learn(30)
+    agent.save(tmp_path / "newest.zip")
+    loaded = HindsightSAC.load(tmp_path / "newest.zip", env=view(Constant(1))[0], device="cpu")
+    assert loaded.critic_input == loaded.policy.critic_input == "newest"
+    assert set(loaded.replay_buffer.observation_space.spaces) >= {"hindsight_age"}
