@@ -68,7 +68,9 @@ def test_a_tiny_quick_run_scores_every_method_and_resumes(tmp_path):
         assert claim["verdict"] in VERDICTS and claim["criterion"]
         assert math.isfinite(claim["mean"]) or claim["verdict"] == "inconclusive"
     targets = [c for c in summary.claims if c.thesis.startswith("target")]
-    assert len(targets) == 1 and targets[0].low is not None  # the seeds' rule, with its interval
+    # the seeds' rule of each delay-specific learner, with its interval
+    assert len(targets) == len(late_observations.LEARNERS)
+    assert all(target.low is not None for target in targets)
     assert (tmp_path / "curves_pendulum-small.png").exists()
     again = run_experiment(get_experiment("late-observations"), config, tmp_path, False)
     assert [c.mean for c in again.claims] == [c.mean for c in summary.claims]

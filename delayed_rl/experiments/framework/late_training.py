@@ -18,7 +18,7 @@ from delayed_rl.experiments.framework.deep_training import learn_and_score, mean
 
 __all__ = ["CONTROLLERS", "METHODS", "controller_score", "random_score", "train_and_score"]
 
-METHODS = ("oracle", "naive", "augmented", "hindsight")
+METHODS = ("oracle", "naive", "augmented", "hindsight", "hindsight-newest")
 """The learners a task can name (see :func:`train_and_score`)."""
 CONTROLLERS = ("p-undelayed", "p-delayed")
 """The fixed controllers a task can name (:func:`controller_score`)."""
@@ -105,7 +105,9 @@ def train_and_score(task: dict) -> dict:
     - ``naive``: on the delayed stack as it is (the newest observation the stale sensor shows);
     - ``augmented``: on the delay-aware view (:class:`~delayed_rl.wrappers.DelayAwareObservation`),
       flattened, with ``MlpPolicy``;
-    - ``hindsight``: :class:`~delayed_rl.deep.HindsightSAC` on the view.
+    - ``hindsight``: :class:`~delayed_rl.deep.HindsightSAC` on the view;
+    - ``hindsight-newest``: the same with ``critic_input="newest"`` (its critic reads the newest
+      observation made by each step that arrived, with its age: every step a transition).
 
     The score is the mean return of ``eval_episodes`` deterministic episodes of the env the method
     acts in (delays included; the oracle's is undelayed), reset with seeds fixed per seed and
@@ -118,7 +120,8 @@ def train_and_score(task: dict) -> dict:
 
     Returns:
         ``{"steps", "scores"}`` (the learning curve, from step 0 to ``steps``), ``"score"`` (the
-        last), ``"train_seconds"``, and for ``hindsight`` the transitions it stored and dropped.
+        last), ``"train_seconds"``, and for the ``hindsight`` methods the transitions they
+        stored and dropped.
     """
     import torch
     from stable_baselines3 import SAC
@@ -128,13 +131,15 @@ def train_and_score(task: dict) -> dict:
     torch.set_num_threads(1)
     method, seed = task["method"], task["seed"]
     env, evaluation = make_env(task, method), make_env(task, method)
-    if method == "hindsight":
-        algorithm, policy = HindsightSAC, "MultiInputPolicy"
+    if method.startswith("hindsight"):
+        critic_input = "newest" if method == "hindsight-newest" else "made"
+        agent = HindsightSAC(
+            "MultiInputPolicy", env, critic_input=critic_input, seed=seed, device="cpu"
+        )
     else:
-        algorithm, policy = SAC, "MlpPolicy"
-    agent = algorithm(policy, env, seed=seed, device="cpu")
+        agent = SAC("MlpPolicy", env, seed=seed, device="cpu")
     result = learn_and_score(agent, task, lambda policy: _score(policy, evaluation, task))
-    if method == "hindsight":
+    if method.startswith("hindsight"):
         result["transitions_stored"] = agent.transitions_stored
         result["transitions_dropped"] = agent.transitions_dropped
     return result
