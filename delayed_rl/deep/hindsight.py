@@ -94,8 +94,9 @@ class HindsightPolicy(MultiInputPolicy):
     are given the buffer's whole ``Dict`` and read those keys (:func:`critic_space`).
 
     Args:
-        *args, **kwargs: SAC's ``MultiInputPolicy``'s.
+        *args: SAC's ``MultiInputPolicy``'s positional arguments.
         critic_input: ``"made"`` or ``"newest"`` (set by :class:`HindsightSAC`).
+        **kwargs: SAC's ``MultiInputPolicy``'s keyword arguments.
     """
 
     def __init__(self, *args: Any, critic_input: str = "made", **kwargs: Any):
