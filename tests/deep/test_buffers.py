@@ -86,11 +86,13 @@ def deconvolution(env, **kwargs):
     return DeconvolutionRewardModel(env.observation_space, env.action_space, **settings)
 
 
-def sac(env, model, **kwargs):
+def sac(env, model, n_steps=None):
+    """SAC on ``env`` with ``model`` in a relabelling buffer (an n-step one with ``n_steps``)."""
     from stable_baselines3 import SAC
 
-    from delayed_rl.deep import RelabelingReplayBuffer
+    from delayed_rl.deep import RelabelingNStepReplayBuffer, RelabelingReplayBuffer
 
+    n_step = {} if n_steps is None else {"n_steps": n_steps}
     return SAC(
         "MlpPolicy",
         env,
@@ -98,11 +100,31 @@ def sac(env, model, **kwargs):
         batch_size=32,
         buffer_size=2000,
         policy_kwargs={"net_arch": [16]},
-        replay_buffer_class=RelabelingReplayBuffer,
-        replay_buffer_kwargs={"reward_model": model},
+        replay_buffer_class=RelabelingReplayBuffer
+        if n_steps is None
+        else RelabelingNStepReplayBuffer,
+        replay_buffer_kwargs={"reward_model": model, **n_step},
         seed=0,
         device="cpu",
-        **kwargs,
+    )
+
+
+def ppo(env, model, n_steps):
+    from stable_baselines3 import PPO
+
+    from delayed_rl.deep import RelabelingRolloutBuffer
+
+    return PPO(
+        "MlpPolicy",
+        env,
+        n_steps=n_steps,
+        batch_size=n_steps,
+        n_epochs=1,
+        policy_kwargs={"net_arch": [8]},
+        rollout_buffer_class=RelabelingRolloutBuffer,
+        rollout_buffer_kwargs={"reward_model": model},
+        seed=0,
+        device="cpu",
     )
 
 
@@ -187,10 +209,9 @@ def test_dqn_samples_are_relabelled_with_the_model():
 # ---------------------------------------------------------------------- on-policy
 def test_ppo_learns_env_rewards_and_keeps_the_truncation_bootstrap():
     import torch
-    from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import BaseCallback
 
-    from delayed_rl.deep import RelabelingRolloutBuffer, RewardModelCallback
+    from delayed_rl.deep import RewardModelCallback
 
     class Check(BaseCallback):
         """At each rollout's end, what SB3 added at truncations, by the unchanged policy."""
@@ -234,18 +255,7 @@ def test_ppo_learns_env_rewards_and_keeps_the_truncation_bootstrap():
 
     env = pendulum(steps=10, lam=2.0)
     model = deconvolution(env, max_delay_estimate=6, window=4, warmup_updates=16)
-    agent = PPO(
-        "MlpPolicy",
-        env,
-        n_steps=32,
-        batch_size=32,
-        n_epochs=1,
-        policy_kwargs={"net_arch": [8]},
-        rollout_buffer_class=RelabelingRolloutBuffer,
-        rollout_buffer_kwargs={"reward_model": model},
-        seed=0,
-        device="cpu",
-    )
+    agent = ppo(env, model, n_steps=32)
     agent.learn(96, callback=[RewardModelCallback(), Check()])
     assert agent.checked == 3
     assert model.updates_taken > 0
@@ -402,24 +412,12 @@ def test_learning_again_cuts_the_episode_the_reset_left_open(reset):
 
 
 def test_ppo_learning_again_cuts_the_episode_the_reset_left_open():
-    from stable_baselines3 import PPO
 
-    from delayed_rl.deep import RelabelingRolloutBuffer, RewardModelCallback
+    from delayed_rl.deep import RewardModelCallback
 
     env = pendulum(steps=10)  # rollouts of 32 steps: each learn() leaves 2 steps open
     model = deconvolution(env, max_delay_estimate=6, window=4, warmup_updates=16)
-    agent = PPO(
-        "MlpPolicy",
-        env,
-        n_steps=32,
-        batch_size=32,
-        n_epochs=1,
-        policy_kwargs={"net_arch": [8]},
-        rollout_buffer_class=RelabelingRolloutBuffer,
-        rollout_buffer_kwargs={"reward_model": model},
-        seed=0,
-        device="cpu",
-    )
+    agent = ppo(env, model, n_steps=32)
     agent.learn(32, callback=RewardModelCallback())
     agent.learn(32, callback=RewardModelCallback())
     history = model.history
@@ -457,26 +455,12 @@ def test_a_buffer_reloaded_into_its_own_algorithm_goes_on_without_a_cut(tmp_path
 
 
 def test_sub_envs_are_cut_together_and_an_n_step_sum_stops_at_the_cut():
-    from stable_baselines3 import SAC
     from stable_baselines3.common.vec_env import DummyVecEnv
-
-    from delayed_rl.deep import RelabelingNStepReplayBuffer
 
     envs = [pendulum(steps=50), pendulum(steps=30)]
     venv = DummyVecEnv([lambda env=env: env for env in envs])
     model = deconvolution(envs[0])
-    agent = SAC(
-        "MlpPolicy",
-        venv,
-        learning_starts=50,
-        batch_size=32,
-        buffer_size=2000,
-        policy_kwargs={"net_arch": [16]},
-        replay_buffer_class=RelabelingNStepReplayBuffer,
-        replay_buffer_kwargs={"reward_model": model, "n_steps": 3},
-        seed=0,
-        device="cpu",
-    )
+    agent = sac(venv, model, n_steps=3)
     agent.learn(2 * 40)  # 40 steps of each: sub-env 1's first episode ends at its step 29
     agent.learn(2 * 10)
     history, buffer = model.history, agent.replay_buffer
@@ -534,22 +518,11 @@ def test_replay_buffer_and_algorithm_files_keep_a_working_model(tmp_path):
 def test_ppo_file_keeps_its_rollout_model(tmp_path):
     from stable_baselines3 import PPO
 
-    from delayed_rl.deep import RelabelingRolloutBuffer, RewardModelCallback
+    from delayed_rl.deep import RewardModelCallback
 
     env = pendulum(steps=10)
     model = deconvolution(env, warmup_updates=8)
-    agent = PPO(
-        "MlpPolicy",
-        env,
-        n_steps=16,
-        batch_size=16,
-        n_epochs=1,
-        policy_kwargs={"net_arch": [8]},
-        rollout_buffer_class=RelabelingRolloutBuffer,
-        rollout_buffer_kwargs={"reward_model": model},
-        seed=0,
-        device="cpu",
-    )
+    agent = ppo(env, model, n_steps=16)
     agent.learn(32, callback=RewardModelCallback())
     agent.save(tmp_path / "ppo.zip")
     restored = PPO.load(tmp_path / "ppo.zip", env=pendulum(steps=10), device="cpu")
