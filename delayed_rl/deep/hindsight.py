@@ -323,24 +323,28 @@ class HindsightSAC(SAC):
         """
         settled = math.inf if episode.ended else episode.steps - self._max_age
         received = episode.received
+        if episode.first >= episode.steps or episode.first + 1 > settled:
+            return
+        current = self._newest_before(episode, episode.first)
         while episode.first < episode.steps and episode.first + 1 <= settled:
             start = episode.first
             done = episode.ended and episode.terminated and start + 1 == episode.steps
+            following = self._newest_before(episode, start + 1)
             self.replay_buffer.add_transition(
-                {**episode.views[start], **self._newest_before(episode, start)},
-                {**episode.views[start + 1], **self._newest_before(episode, start + 1)},
+                {**episode.views[start], **current},
+                {**episode.views[start + 1], **following},
                 episode.actions[start],
                 episode.rewards[start],
                 done,
                 self.gamma,
             )
             self.transitions_stored += 1
-            episode.first = start + 1
+            episode.first, current = start + 1, following
             for table in (episode.views, episode.actions, episode.rewards):
                 table.pop(start, None)
-            kept = max(m for m in received if m <= episode.first)  # the next input's, or newer
-            for made in [m for m in received if m < kept]:
-                del received[made]
+        kept = max(m for m in received if m <= episode.first)  # the next input's, or newer
+        for made in [m for m in received if m < kept]:
+            del received[made]
 
     @staticmethod
     def _newest_before(episode: _Episode, step: int) -> dict[str, Any]:
