@@ -74,7 +74,18 @@ class Evaluation:
 
 @dataclass(frozen=True)
 class SweepAgent:
-    """One entry of ``agents``: a library agent's name or ``sb3:ALGO``, and its arguments."""
+    """One entry of ``agents``: a library agent's name or ``sb3:ALGO``, and its arguments.
+
+    Attributes:
+        name: the agent registry's name, or ``sb3:ALGO`` for a stable-baselines3 algorithm.
+        label: its name in the results rows.
+        kwargs: the agent's constructor arguments, placeholders such as ``$delay_mean`` filled
+            in per delay.
+        steps: its training steps (``None``: the env's, else the sweep's).
+        envs: the labels of the envs it runs on (``None``: every env).
+        reward_model: an SB3 agent's reward model from :mod:`delayed_rl.deep`, as the mapping
+            the sweep file gives (``None``: the delivered rewards, raw).
+    """
 
     name: str
     label: str
@@ -86,7 +97,16 @@ class SweepAgent:
 
 @dataclass(frozen=True)
 class SweepEnv:
-    """One entry of ``envs``: a Gymnasium id, ``gym.make``'s arguments and its overrides."""
+    """One entry of ``envs``: a Gymnasium id, ``gym.make``'s arguments and its overrides.
+
+    Attributes:
+        id: the Gymnasium id, e.g. ``"delayed_rl/GridWorld-5x5-v0"``.
+        label: its name in the results rows.
+        kwargs: ``gym.make``'s arguments (the sweep's delays are added to them).
+        steps: the training steps of its runs (``None``: the sweep's), unless an agent sets its
+            own.
+        evaluation: how its runs are evaluated (``None``: the sweep's).
+    """
 
     id: str
     label: str

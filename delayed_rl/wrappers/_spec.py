@@ -14,7 +14,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-__all__ = ["DELAY_KWARGS", "JsonSpecMixin", "describe_delays", "json_safe"]
+__all__ = ["DELAY_KWARGS", "JsonSpecMixin", "describe_delays", "json_safe", "record_arguments"]
 
 DELAY_KWARGS = ("action_delay", "observation_delay", "reward_delay")
 """The delay arguments of every ``delayed_rl/`` id, in the order their wrappers stack
@@ -55,6 +55,21 @@ def json_safe(value: Any) -> Any:
     if isinstance(value, tuple | list):
         return [json_safe(entry) for entry in value]
     return value
+
+
+def record_arguments(wrapper: gym.utils.RecordConstructorArgs, **arguments: Any) -> None:
+    """Record a delay wrapper's constructor ``arguments`` for its env spec, in JSON form.
+
+    A ``delay`` argument is recorded as :func:`~delayed_rl.delays.delay_spec` describes it, and
+    every argument through :func:`json_safe`, so ``EnvSpec.to_json`` writes the spec and
+    ``gym.make`` reads it back. Call it first in ``__init__``: the first call records.
+    """
+    from delayed_rl.delays import delay_spec
+
+    if "delay" in arguments:
+        arguments["delay"] = delay_spec(arguments["delay"])
+    recorded = {name: json_safe(value) for name, value in arguments.items()}
+    gym.utils.RecordConstructorArgs.__init__(wrapper, **recorded)
 
 
 def describe_delays(spec: Any) -> None:

@@ -15,10 +15,10 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from delayed_rl.delays import Delay, as_delay, delay_spec
+from delayed_rl.delays import Delay, as_delay
 from delayed_rl.wrappers._in_transit import InTransit
 from delayed_rl.wrappers._samples import as_action, copy_sample
-from delayed_rl.wrappers._spec import JsonSpecMixin, json_safe
+from delayed_rl.wrappers._spec import JsonSpecMixin, record_arguments
 from delayed_rl.wrappers.reward_delay import DelaySampler, check_max_delay
 
 __all__ = [
@@ -183,12 +183,7 @@ class ActionDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
         initial_action: Any = None,
         max_delay: int | None = None,
     ):
-        gym.utils.RecordConstructorArgs.__init__(
-            self,
-            delay=delay_spec(delay),
-            initial_action=json_safe(initial_action),
-            max_delay=json_safe(max_delay),
-        )
+        record_arguments(self, delay=delay, initial_action=initial_action, max_delay=max_delay)
         gym.Wrapper.__init__(self, env)
         self.delay = as_delay(delay)
         self.max_delay = check_max_delay(max_delay)

@@ -22,7 +22,7 @@ from gymnasium.vector import VectorEnv
 
 from delayed_rl._validation import check_int
 from delayed_rl.wrappers._samples import as_action, copy_sample
-from delayed_rl.wrappers._spec import JsonSpecMixin, json_safe
+from delayed_rl.wrappers._spec import JsonSpecMixin, record_arguments
 from delayed_rl.wrappers.action_delay import ActionDelay, neutral_action
 from delayed_rl.wrappers.discrete_observation import DiscreteObservation
 from delayed_rl.wrappers.observation_delay import ObservationDelay
@@ -307,7 +307,7 @@ class DelayAwareObservation(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstruc
     """
 
     def __init__(self, env: gym.Env, action_history: int | None = None):
-        gym.utils.RecordConstructorArgs.__init__(self, action_history=json_safe(action_history))
+        record_arguments(self, action_history=action_history)
         gym.Wrapper.__init__(self, env)
         action_history = check_int(
             "action_history", action_history, 1, MAX_ACTION_HISTORY, optional=True

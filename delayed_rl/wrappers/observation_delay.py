@@ -15,10 +15,10 @@ import gymnasium as gym
 
 from delayed_rl._delay_line import delay_bound
 from delayed_rl._validation import check_choice
-from delayed_rl.delays import MAX_DELAY, Delay, as_delay, delay_spec
+from delayed_rl.delays import MAX_DELAY, Delay, as_delay
 from delayed_rl.wrappers._in_transit import InTransit
 from delayed_rl.wrappers._samples import copy_sample
-from delayed_rl.wrappers._spec import JsonSpecMixin, json_safe
+from delayed_rl.wrappers._spec import JsonSpecMixin, record_arguments
 from delayed_rl.wrappers.reward_delay import DelaySampler, check_max_delay
 
 __all__ = [
@@ -194,9 +194,7 @@ class ObservationDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorAr
         max_delay: int | None = None,
         arrival: str = "stale",
     ):
-        gym.utils.RecordConstructorArgs.__init__(
-            self, delay=delay_spec(delay), max_delay=json_safe(max_delay), arrival=arrival
-        )
+        record_arguments(self, delay=delay, max_delay=max_delay, arrival=arrival)
         gym.Wrapper.__init__(self, env)
         self.delay, self.max_delay, self.arrival, self.history = _settings(
             delay, max_delay, arrival

@@ -13,8 +13,8 @@ import numpy as np
 
 from delayed_rl._delay_line import draw_delays, exact_sum
 from delayed_rl._validation import check_bool, check_choice, check_int, check_reward
-from delayed_rl.delays import MAX_DELAY, Delay, Poisson, as_delay, delay_spec
-from delayed_rl.wrappers._spec import JsonSpecMixin, json_safe
+from delayed_rl.delays import MAX_DELAY, Delay, Poisson, as_delay
+from delayed_rl.wrappers._spec import JsonSpecMixin, record_arguments
 
 __all__ = [
     "EPISODE_END_MODES",
@@ -267,12 +267,12 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
         on_episode_end: str = "flush",
         record_arrivals: bool = False,
     ):
-        gym.utils.RecordConstructorArgs.__init__(
+        record_arguments(
             self,
-            delay=delay_spec(delay),
-            max_delay=json_safe(max_delay),
+            delay=delay,
+            max_delay=max_delay,
             on_episode_end=on_episode_end,
-            record_arrivals=json_safe(record_arrivals),
+            record_arrivals=record_arrivals,
         )
         gym.Wrapper.__init__(self, env)
         self.delay = as_delay(delay)
@@ -578,14 +578,11 @@ class PoissonRewardDelay(RewardDelay):
         on_episode_end: str = "flush",
         record_arrivals: bool = False,
     ):
-        gym.utils.RecordConstructorArgs.__init__(
-            self,
-            lam=json_safe(lam),
-            max_delay=json_safe(max_delay),
-            on_episode_end=on_episode_end,
-            record_arrivals=json_safe(record_arrivals),
+        options = dict(
+            max_delay=max_delay, on_episode_end=on_episode_end, record_arrivals=record_arrivals
         )
-        super().__init__(env, Poisson(lam), max_delay, on_episode_end, record_arrivals)
+        record_arguments(self, lam=lam, **options)
+        super().__init__(env, Poisson(lam), **options)
         self.lam = self.delay.lam
 
 

@@ -29,7 +29,7 @@ def _summary(name: str, **config):
     config = Config(quick=True, **config)
     config.seeds = config.seeds or experiment.quick_seeds
     tasks = experiment.tasks(config)
-    return experiment.summarize(tasks, [experiment.run_task(t) for t in tasks], config)
+    return experiment.summarize(tasks, [experiment.run_alone(t) for t in tasks], config)
 
 
 def _draw(summary, name, tmp_path, kept):

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import re
+import sys
 
 import numpy as np
 import pytest
@@ -342,3 +344,42 @@ def test_a_summary_that_cannot_be_sent_is_written_here(tmp_path):
     run_experiments(experiments, Config(workers=2), tmp_path, progress=False)
     assert (tmp_path / "a" / "plot.png").read_text() == "drawn here"
     assert (tmp_path / "b" / "plot.png").read_text() == "drawn here"
+
+
+def test_an_experiment_without_run_task_runs_each_task_through_its_shared_run():
+    experiment = dataclasses.replace(_experiment("shared only", [2, 3], _by_x), run_task=None)
+    summary = run_experiment(experiment, Config(seeds=1))
+    assert summary.extra["values"] == [4, 9]
+    assert experiment.run_alone({"name": "shared only", "x": 5})["value"] == 25
+    with pytest.raises(TypeError, match="the none experiment needs a run_task or a shared_run"):
+        dataclasses.replace(experiment, name="none", shared_run=None)
+    gives_none = dataclasses.replace(experiment, name="gaps", shared_run=lambda task: None)
+    with pytest.raises(ValueError, match="the gaps experiment's shared_run gave no run"):
+        gives_none.run_of({"x": 1})
+
+
+@pytest.mark.parametrize(
+    ("extras", "missing", "needs"),
+    [
+        (
+            ("sb3",),
+            "stable_baselines3",
+            'torch and stable-baselines3: pip install "delayed-rl[sb3]"',
+        ),
+        (
+            ("sb3", "multiagent"),
+            "supersuit",
+            "torch, stable-baselines3, pettingzoo and supersuit: "
+            'pip install "delayed-rl[sb3,multiagent]"',
+        ),
+    ],
+)
+def test_a_missing_extra_is_named_before_any_task_is_made(monkeypatch, extras, missing, needs):
+    made = []
+    experiment = dataclasses.replace(
+        _experiment("needy", [1]), extras=extras, tasks=lambda config: made.append(config) or []
+    )
+    monkeypatch.setitem(sys.modules, missing, None)  # what a missing package looks like
+    with pytest.raises(ImportError, match=re.escape(f"the needy experiment needs {needs}")):
+        run_experiment(experiment, Config(seeds=1))
+    assert made == []

@@ -20,7 +20,6 @@ from delayed_rl.experiments.framework.deep_training import (
     METHODS,
     WARMUP_EPISODES,
     random_score,
-    require_sb3,
     train_and_score,
 )
 from delayed_rl.experiments.framework.experiment import (
@@ -155,12 +154,7 @@ class DeepTask(RewardDelayTask):
 
 
 def tasks(config: Config) -> list[DeepTask]:
-    """Every (setting, method, seed), and a ``random`` task per (setting, seed).
-
-    Raises:
-        ImportError: torch or stable-baselines3 is missing (the ``sb3`` extra).
-    """
-    require_sb3()
+    """Every (setting, method, seed), and a ``random`` task per (setting, seed)."""
     return gain_tasks(config, SETTINGS, QUICK, SETTING_METHODS, DeepTask)
 
 
@@ -179,11 +173,6 @@ def shared_run(task: DeepTask) -> SharedRun:
     run.update({key: entries[key] for key in _OPTIONAL_RUN_FIELDS if key in entries})
     run["eval_episodes"] = EVAL_EPISODES
     return SharedRun(train_and_score, {**run, **delay_fields(task)})
-
-
-def run_task(task: DeepTask) -> dict:
-    """A task's result, run on its own (:func:`shared_run`)."""
-    return shared_run(task).alone()
 
 
 def cost(task: DeepTask) -> float:
@@ -340,10 +329,10 @@ EXPERIMENT = Experiment(
     f"{EVAL_EPISODES} greedy episodes of the undelayed env, gains against a random policy and "
     "the oracle. The full table is summary.json's `table`.",
     tasks=tasks,
-    run_task=run_task,
     summarize=summarize,
     default_seeds=max(_SEEDS),
     shared_run=shared_run,
     cost=cost,
     resumable=True,
+    extras=("sb3",),
 )

@@ -16,7 +16,6 @@ from typing import Any
 
 from delayed_rl.delays import Poisson, Uniform
 from delayed_rl.experiments.framework import claims as rules
-from delayed_rl.experiments.framework.deep_training import require_sb3
 from delayed_rl.experiments.framework.experiment import (
     Config,
     Experiment,
@@ -167,12 +166,7 @@ class LateTask(GainTask):
 
 
 def tasks(config: Config) -> list[LateTask]:
-    """Every (setting, method, seed), and a ``random`` task per (setting, seed).
-
-    Raises:
-        ImportError: torch or stable-baselines3 is missing (the ``sb3`` extra).
-    """
-    require_sb3()
+    """Every (setting, method, seed), and a ``random`` task per (setting, seed)."""
     return gain_tasks(config, SETTINGS, QUICK, SETTING_METHODS, LateTask)
 
 
@@ -197,11 +191,6 @@ def shared_run(task: LateTask) -> SharedRun:
     run = {key: entries[key] for key in (*_RUN_FIELDS, "method", "seed")}
     run = {**run, **given, "eval_episodes": EVAL_EPISODES}
     return SharedRun(controller_score if task.method == "p-delayed" else train_and_score, run)
-
-
-def run_task(task: LateTask) -> dict:
-    """A task's result, run on its own (:func:`shared_run`)."""
-    return shared_run(task).alone()
 
 
 def cost(task: LateTask) -> float:
@@ -343,10 +332,10 @@ EXPERIMENT = Experiment(
     f"delayed observations; scores of {EVAL_EPISODES} greedy episodes of the env each acts in, "
     "gains against a random policy and the oracle.",
     tasks=tasks,
-    run_task=run_task,
     summarize=summarize,
     default_seeds=SEEDS,
     shared_run=shared_run,
     cost=cost,
     resumable=True,
+    extras=("sb3",),
 )

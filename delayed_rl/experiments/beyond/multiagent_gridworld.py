@@ -75,16 +75,6 @@ LEARNER_STREAM = 0x1EA52
 """The spawn key of the learners' seeds (:func:`learner_seed`)."""
 
 
-def require_pettingzoo() -> None:
-    """Raise an ImportError naming the ``multiagent`` extra when PettingZoo is missing."""
-    try:
-        import pettingzoo  # noqa: F401
-    except ImportError as error:
-        raise ImportError(
-            'the multiagent-gridworld experiment needs PettingZoo: pip install "delayed-rl[multiagent]"'
-        ) from error
-
-
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class MultiagentGridTask(Task):
     """A learner's run of ``multiagent-gridworld``.
@@ -106,12 +96,7 @@ class MultiagentGridTask(Task):
 
 
 def tasks(config: Config) -> list[MultiagentGridTask]:
-    """Per delay λ of :data:`LAMS` (``--quick``: :data:`QUICK_LAM`), seed and learner, one task.
-
-    Raises:
-        ImportError: PettingZoo is missing (the ``multiagent`` extra).
-    """
-    require_pettingzoo()
+    """Per delay λ of :data:`LAMS` (``--quick``: :data:`QUICK_LAM`), seed and learner, one task."""
     steps = config.run_steps(STEPS, QUICK_STEPS)
     lams = (QUICK_LAM,) if config.quick else LAMS
     fields = {"size": SIZE, "episode_steps": EPISODE_STEPS, "steps": steps}
@@ -128,11 +113,6 @@ def shared_run(task: MultiagentGridTask) -> SharedRun:
     if task.agent == "Q undelayed":
         return SharedRun(train_and_score, dataclasses.replace(task, lam=None))
     return SharedRun(train_and_score, task)
-
-
-def run_task(task: MultiagentGridTask) -> dict:
-    """A task's result, run on its own (:func:`shared_run`)."""
-    return shared_run(task).alone()
 
 
 #: Rough cost of one joint step (µs, both learners and the env), for scheduling only.
@@ -457,10 +437,10 @@ EXPERIMENT = Experiment(
     f"joint policy's reward per step over an undelayed episode (optimum {optimum():g}), paired "
     "by seed.",
     tasks=tasks,
-    run_task=run_task,
     summarize=summarize,
     default_seeds=5,
     shared_run=shared_run,
     cost=cost,
     resumable=True,
+    extras=("multiagent",),
 )

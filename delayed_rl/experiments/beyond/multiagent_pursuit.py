@@ -16,18 +16,9 @@ from typing import Any
 
 from delayed_rl.delays import Poisson
 from delayed_rl.experiments.framework import claims as rules
-from delayed_rl.experiments.framework.deep_training import require_sb3
+from delayed_rl.experiments.framework import gain_settings
 from delayed_rl.experiments.framework.delay_estimates import mean_delay_claim
 from delayed_rl.experiments.framework.experiment import Config, Experiment, SharedRun, Summary
-from delayed_rl.experiments.framework.gain_settings import (
-    RewardDelayTask,
-    curve_means,
-    delay_fields,
-    gain_rows,
-    gain_summary,
-    gain_tasks,
-    method_gains,
-)
 from delayed_rl.experiments.framework.multiagent_training import (
     METHODS,
     random_score,
@@ -84,21 +75,8 @@ LABELS = {
 _RUN_FIELDS = ("env", "env_kwargs", "ppo", "steps", "eval_every", "seed")
 
 
-def require_extras() -> None:
-    """Raise an ImportError naming the extra when stable-baselines3 or PettingZoo is missing."""
-    require_sb3()
-    try:
-        import pettingzoo  # noqa: F401
-        import supersuit  # noqa: F401
-    except ImportError as error:
-        raise ImportError(
-            "the multiagent-pursuit experiment needs PettingZoo and SuperSuit: "
-            'pip install "delayed-rl[multiagent]"'
-        ) from error
-
-
 @dataclasses.dataclass(frozen=True, kw_only=True)
-class PursuitTask(RewardDelayTask):
+class PursuitTask(gain_settings.RewardDelayTask):
     """A (setting, method, seed) of ``multiagent-pursuit``.
 
     Attributes:
@@ -113,13 +91,8 @@ class PursuitTask(RewardDelayTask):
 
 
 def tasks(config: Config) -> list[PursuitTask]:
-    """Every (setting, method, seed), and a ``random`` task per (setting, seed).
-
-    Raises:
-        ImportError: an extra is missing (``sb3`` or ``multiagent``).
-    """
-    require_extras()
-    return gain_tasks(config, SETTINGS, QUICK, (*METHODS, "random"), PursuitTask)
+    """Every (setting, method, seed), and a ``random`` task per (setting, seed)."""
+    return gain_settings.gain_tasks(config, SETTINGS, QUICK, (*METHODS, "random"), PursuitTask)
 
 
 def shared_run(task: PursuitTask) -> SharedRun:
@@ -130,12 +103,7 @@ def shared_run(task: PursuitTask) -> SharedRun:
         return SharedRun(random_score, {**fields, "eval_episodes": RANDOM_EPISODES})
     run = {key: entries[key] for key in _RUN_FIELDS}
     run.update(method=task.method, eval_episodes=EVAL_EPISODES)
-    return SharedRun(train_and_score, {**run, **delay_fields(task)})
-
-
-def run_task(task: PursuitTask) -> dict:
-    """A task's result, run on its own (:func:`shared_run`)."""
-    return shared_run(task).alone()
+    return SharedRun(train_and_score, {**run, **gain_settings.delay_fields(task)})
 
 
 def cost(task: PursuitTask) -> float:
@@ -163,7 +131,7 @@ def _setting_claims(setting: str, scores: dict, by_method: dict) -> list[rules.C
             "below",
         )
     )
-    curves = curve_means(by_method)
+    curves = gain_settings.curve_means(by_method)
     claims += [
         rules.reference_row(
             f"{setting}: {LABELS[method]} − {LABELS['raw']}, mean score over the learning curve",
@@ -222,15 +190,17 @@ def summarize(task_list: list[PursuitTask], results: list[dict], config: Config)
     all_scores = pivot(task_list, results, by=("setting", "method"), value="score", nested=True)
     claims, table = [], {}
     for setting, by_method in grouped.items():
-        gains, low, _ = method_gains(by_method)
+        gains, low, _ = gain_settings.method_gains(by_method)
         scores = all_scores[setting]
         claims += _setting_claims(setting, scores, by_method)
-        claims += gain_rows(setting, gains, LABELS)
+        claims += gain_settings.gain_rows(setting, gains, LABELS)
         table[setting] = {"random": {"score": low}}
         for method in METHODS:
             table[setting][method] = _table_row(method, by_method[method], scores[method], gains)
     extra = {"table": table, "settings": SETTINGS}
-    return gain_summary(grouped, LABELS, "the undelayed game (per pursuer)", claims, extra)
+    return gain_settings.gain_summary(
+        grouped, LABELS, "the undelayed game (per pursuer)", claims, extra
+    )
 
 
 EXPERIMENT = Experiment(
@@ -251,10 +221,10 @@ EXPERIMENT = Experiment(
         episodes=EVAL_EPISODES,
     ),
     tasks=tasks,
-    run_task=run_task,
     summarize=summarize,
     default_seeds=SEEDS,
     shared_run=shared_run,
     cost=cost,
     resumable=True,
+    extras=("sb3", "multiagent"),
 )

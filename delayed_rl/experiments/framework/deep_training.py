@@ -24,7 +24,6 @@ __all__ = [
     "learn_and_score",
     "relabeling_options",
     "random_score",
-    "require_sb3",
     "task_reward_model",
     "train_and_score",
 ]
@@ -82,18 +81,6 @@ class UprightReward(gym.Wrapper):
 
 EVAL_SEED = 1_000_000
 """Evaluation episode ``i`` of seed ``s`` resets with ``EVAL_SEED + 1000 * s + i``."""
-
-
-def require_sb3() -> None:
-    """Raise an ImportError naming the ``sb3`` extra when torch or stable-baselines3 is missing."""
-    try:
-        import stable_baselines3  # noqa: F401
-        import torch  # noqa: F401
-    except ImportError as error:
-        raise ImportError(
-            "the deep-rl experiment needs torch and stable-baselines3: "
-            'pip install "delayed-rl[sb3]"'
-        ) from error
 
 
 def _env(task: dict, delayed: bool) -> gym.Env:
@@ -258,7 +245,6 @@ def train_and_score(task: dict) -> dict:
         reward model's ``"rmse"`` against the true reward over its last 10 000 steps, its
         ``"updates"`` and, for the deconvolution, its ``"mean_delay"``.
     """
-    require_sb3()
     import torch
     from stable_baselines3 import PPO, SAC
     from stable_baselines3.common.env_util import make_vec_env

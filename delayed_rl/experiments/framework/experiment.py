@@ -2,9 +2,9 @@
 
 An experiment module defines an :class:`Experiment`: ``tasks(config)`` (one task per
 (condition, seed), a frozen dataclass of its own :class:`~.task.Task` type), ``run_task(task)``
-(a dict of results) and ``summarize(tasks, results,
-config)`` (the claims checked against the thesis, as :class:`Claim` rows, with curves and
-figures). :func:`~delayed_rl.experiments.framework.pool.run_experiment` runs the tasks on a
+or ``shared_run(task)`` (a task's dict of results, or the run that gives it) and
+``summarize(tasks, results, config)`` (the claims checked against the thesis, as :class:`Claim`
+rows, with curves and figures). :func:`~delayed_rl.experiments.framework.pool.run_experiment` runs the tasks on a
 worker pool, each with its own seed, and
 :func:`~delayed_rl.experiments.framework.report.write_outputs` writes the output folder; tasks
 that need the same computation name it as one :class:`SharedRun`, run once. A claim's verdict
@@ -13,6 +13,7 @@ is one of :data:`VERDICTS`.
 
 from __future__ import annotations
 
+import importlib
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -203,6 +204,13 @@ class SharedRun(NamedTuple):
         return result if self.view is None else self.view(result)
 
 
+EXTRA_PACKAGES = {
+    "sb3": ("torch", "stable-baselines3"),
+    "multiagent": ("pettingzoo", "supersuit"),
+}
+"""The packages of each extra an experiment may need (:attr:`Experiment.extras`)."""
+
+
 def default_cost(task: Task) -> float:
     """A task's estimated cost for scheduling: its ``steps`` (1 without), at a microsecond each."""
     return 1e-6 * float(getattr(task, "steps", 1))
@@ -218,7 +226,8 @@ class Experiment:
         description: the report's first paragraph.
         tasks: one task per (condition, seed), from the :class:`Config`: frozen dataclasses of
             the experiment's :class:`~.task.Task` type.
-        run_task: a picklable top-level function of one task, returning its result.
+        run_task: a picklable top-level function of one task, returning its result (``None``:
+            every task's run is its :attr:`shared_run`, which must then give one).
         summarize: the claims, curves and figures, from the tasks and their results.
         default_seeds: the seeds of a full run.
         quick_seeds: the seeds of a ``quick`` run.
@@ -232,24 +241,52 @@ class Experiment:
             run into the same folder (its results must be JSON: dicts, lists, numbers, text).
             A run is found by its function and task, so a changed setting runs afresh; delete
             ``OUT/runs/`` to run everything again.
+        extras: the install extras it needs beyond the core (keys of :data:`EXTRA_PACKAGES`),
+            checked by :meth:`check_extras` before its tasks are made.
     """
 
     name: str
     thesis: str
     description: str
     tasks: Callable[[Config], Sequence[Task]]
-    run_task: Callable[[Any], dict]
     summarize: Callable[[Sequence[Any], list[dict], Config], Summary]
     default_seeds: int
+    run_task: Callable[[Any], dict] | None = None
     quick_seeds: int = 2
     shared_run: Callable[[Any], SharedRun | None] | None = None
     cost: Callable[[Any], float] | None = None
     resumable: bool = False
+    extras: tuple[str, ...] = ()
+
+    def check_extras(self) -> None:
+        """Raise an ImportError naming the extras when a package of :attr:`extras` is missing."""
+        packages = [package for extra in self.extras for package in EXTRA_PACKAGES[extra]]
+        for package in packages:
+            try:
+                importlib.import_module(package.replace("-", "_"))
+            except ImportError as error:
+                listed = ", ".join(packages[:-1]) + " and " + packages[-1]
+                raise ImportError(
+                    f"the {self.name} experiment needs {listed}: "
+                    f'pip install "delayed-rl[{",".join(self.extras)}]"'
+                ) from error
+
+    def __post_init__(self) -> None:
+        if self.run_task is None and self.shared_run is None:
+            raise TypeError(f"the {self.name} experiment needs a run_task or a shared_run")
 
     def run_of(self, task: Task) -> SharedRun:
         """The run behind ``task``: its :attr:`shared_run`, else ``run_task`` on the task itself."""
         shared = None if self.shared_run is None else self.shared_run(task)
-        return SharedRun(self.run_task, task) if shared is None else shared
+        if shared is not None:
+            return shared
+        if self.run_task is None:
+            raise ValueError(f"the {self.name} experiment's shared_run gave no run for {task!r}")
+        return SharedRun(self.run_task, task)
+
+    def run_alone(self, task: Task) -> dict:
+        """``task``'s result from a run of its own, in this process (:meth:`run_of`)."""
+        return self.run_of(task).alone()
 
     def task_cost(self, task: Task) -> float:
         """``task``'s estimated core-seconds: its :attr:`cost`, else :func:`default_cost`."""

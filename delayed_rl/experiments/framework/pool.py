@@ -261,6 +261,7 @@ def _default_seeds(experiment: Experiment, config: Config) -> None:
 
 
 def _plan(experiment: Experiment, config: Config, out: Path | None) -> _Plan:
+    experiment.check_extras()
     tasks = experiment.tasks(config)
     runs = [experiment.run_of(task) for task in tasks]
     return _Plan(experiment, config, tasks, runs, [pool_key(run) for run in runs], out)

@@ -9,9 +9,9 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import concatenate, create_empty_array
 
-from delayed_rl.delays import Delay, as_delay, delay_spec
+from delayed_rl.delays import Delay, as_delay
 from delayed_rl.wrappers._samples import as_action, copy_sample
-from delayed_rl.wrappers._spec import json_safe
+from delayed_rl.wrappers._spec import record_arguments
 from delayed_rl.wrappers.action_delay import ActionLine, _check_action, neutral_action
 from delayed_rl.wrappers.reward_delay import DelaySampler, check_max_delay
 from delayed_rl.wrappers.vector._sub_envs import (
@@ -68,12 +68,7 @@ class VectorActionDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
         initial_action: Any = None,
         max_delay: int | None = None,
     ):
-        gym.utils.RecordConstructorArgs.__init__(
-            self,
-            delay=delay_spec(delay),
-            initial_action=json_safe(initial_action),
-            max_delay=json_safe(max_delay),
-        )
+        record_arguments(self, delay=delay, initial_action=initial_action, max_delay=max_delay)
         gym.vector.VectorWrapper.__init__(self, env)
         self.delay = as_delay(delay)
         self.max_delay = check_max_delay(max_delay)

@@ -11,7 +11,7 @@ from gymnasium.vector.utils import batch_space, concatenate, create_empty_array,
 
 from delayed_rl._validation import check_int
 from delayed_rl.wrappers._samples import as_action, copy_sample
-from delayed_rl.wrappers._spec import json_safe
+from delayed_rl.wrappers._spec import record_arguments
 from delayed_rl.wrappers.delay_aware import (
     MAX_ACTION_HISTORY,
     ViewState,
@@ -69,7 +69,7 @@ class VectorDelayAwareObservation(gym.vector.VectorWrapper, gym.utils.RecordCons
     """
 
     def __init__(self, env: VectorEnv, action_history: int | None = None):
-        gym.utils.RecordConstructorArgs.__init__(self, action_history=json_safe(action_history))
+        record_arguments(self, action_history=action_history)
         gym.vector.VectorWrapper.__init__(self, env)
         action_history = check_int(
             "action_history", action_history, 1, MAX_ACTION_HISTORY, optional=True

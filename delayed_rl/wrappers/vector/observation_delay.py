@@ -9,9 +9,9 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import iterate
 
-from delayed_rl.delays import Delay, delay_spec
+from delayed_rl.delays import Delay
 from delayed_rl.wrappers._samples import batch_of_copies, copy_sample
-from delayed_rl.wrappers._spec import json_safe
+from delayed_rl.wrappers._spec import record_arguments
 from delayed_rl.wrappers.observation_delay import (
     _new_rule,
     _settings,
@@ -69,9 +69,7 @@ class VectorObservationDelay(gym.vector.VectorWrapper, gym.utils.RecordConstruct
         max_delay: int | None = None,
         arrival: str = "stale",
     ):
-        gym.utils.RecordConstructorArgs.__init__(
-            self, delay=delay_spec(delay), max_delay=json_safe(max_delay), arrival=arrival
-        )
+        record_arguments(self, delay=delay, max_delay=max_delay, arrival=arrival)
         gym.vector.VectorWrapper.__init__(self, env)
         self.delay, self.max_delay, self.arrival, self.history = _settings(
             delay, max_delay, arrival

@@ -8,7 +8,8 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 
-from delayed_rl.delays import Delay, as_delay, delay_spec
+from delayed_rl.delays import Delay, as_delay
+from delayed_rl.wrappers._spec import record_arguments
 from delayed_rl.wrappers.pending_rewards import PendingRewards
 from delayed_rl.wrappers.reward_delay import check_episode_end, check_max_delay, flush_watch
 from delayed_rl.wrappers.vector._sub_envs import (
@@ -75,9 +76,7 @@ class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
         max_delay: int | None = None,
         on_episode_end: str = "flush",
     ):
-        gym.utils.RecordConstructorArgs.__init__(
-            self, delay=delay_spec(delay), max_delay=max_delay, on_episode_end=on_episode_end
-        )
+        record_arguments(self, delay=delay, max_delay=max_delay, on_episode_end=on_episode_end)
         gym.vector.VectorWrapper.__init__(self, env)
         self.delay = as_delay(delay)
         self.max_delay = check_max_delay(max_delay)
