@@ -74,6 +74,33 @@ def test_learning_curves_limits_leave_the_spike_out_and_the_thesis_in(tmp_path, 
     assert "9×9: mean, 95 % CI over 2 seeds" in _labels(kept[-1])
 
 
+def test_a_method_keeps_its_colour_in_every_figure_and_a_level_takes_a_colour_no_curve_has(
+    tmp_path, kept
+):
+    from matplotlib.colors import to_hex
+
+    from delayed_rl.experiments.framework.gain_settings import method_colours
+
+    steps = np.arange(1, 11)
+    labels = {"a": "first", "b": "second", "c": "third", "d": "fourth", "e": "fifth"}
+    colours = method_colours(labels)
+    run = [(steps, np.ones(10)), (steps, np.zeros(10))]
+    seen = {}
+    for drawn in (("first", "third", "fifth"), ("third", "fifth"), ("fifth",)):
+        groups = {label: run for label in drawn}
+        level = (0.5, "a controller")
+        plotting.learning_curves(
+            tmp_path / "c.png", groups, "t", "y", levels=[level], colours=colours
+        )
+        lines = {line.get_label(): to_hex(line.get_color()) for line in kept[-1].axes[0].lines}
+        for label in drawn:
+            key = f"{label}: mean, 95 % CI over 2 seeds"
+            assert seen.setdefault(label, lines[key]) == lines[key] == to_hex(colours[label])
+        curve_colours = {lines[f"{label}: mean, 95 % CI over 2 seeds"] for label in drawn}
+        assert lines["a controller"] not in curve_colours
+    assert len(set(seen.values())) == 3
+
+
 @pytest.mark.experiment
 def test_heatmaps_have_one_labelled_colourbar(tmp_path, kept):
     summary = _summary("mmq-gridworld", seeds=1, steps=3000)

@@ -27,6 +27,7 @@ from delayed_rl.experiments.framework.gain_settings import (
     GainTask,
     gain_tasks,
     learning_curves,
+    method_colours,
     method_gains,
 )
 from delayed_rl.experiments.framework.late_training import (
@@ -305,15 +306,26 @@ def summarize(task_list: list[LateTask], results: list[dict], config: Config) ->
         table[setting]["random"] = {"score": low}
         learners = {m: label for m, label in LABELS.items() if m in by_method and m in METHODS}
         controllers = tuple(
-            (table[setting][method]["score"]["mean"], f"{LABELS[method]}: mean")
+            (table[setting][method]["score"]["mean"], _level_label(method))
             for method in CONTROLLERS
             if method in by_method
         )
         runs_curves, figures[f"curves_{setting}"] = learning_curves(
-            setting, by_method, learners, low, "the env each method acts in", controllers
+            setting, by_method, learners, low, "the env each method acts in", controllers, COLOURS
         )
         curves += runs_curves
     return Summary(claims, curves, figures, {"table": table, "settings": SETTINGS})
+
+
+def _level_label(controller: str) -> str:
+    """A fixed controller's level in the figures: its mean score."""
+    return f"{LABELS[controller]}: mean"
+
+
+COLOURS = method_colours(LABELS) | {
+    _level_label(method): method_colours(LABELS)[LABELS[method]] for method in CONTROLLERS
+}
+"""Each method's colour in every figure, the controllers' levels in their methods' colours."""
 
 
 def _uniform(setting: tuple[tuple[int, int], tuple[int, int]]) -> str:

@@ -33,6 +33,7 @@ __all__ = [
     "gain_tasks",
     "learning_curves",
     "method_gains",
+    "method_colours",
 ]
 
 
@@ -152,6 +153,7 @@ def learning_curves(
     random_mean: float,
     scored_in: str,
     references: tuple[tuple[float, str], ...] = (),
+    colours: Mapping[str, str] | None = None,
 ) -> tuple[list[Curve], Any]:
     """Each run's learning curve, and the setting's figure of them, method by method.
 
@@ -162,6 +164,7 @@ def learning_curves(
         random_mean: the random policy's mean score, drawn as a line.
         scored_in: the env the scores come from, for the title (``"the undelayed env"``).
         references: other ``(score, label)`` levels to draw as lines (fixed controllers).
+        colours: the colours of the curves and levels, by label (:func:`method_colours`).
     """
     curves, groups = [], {}
     for method, label in labels.items():
@@ -177,10 +180,22 @@ def learning_curves(
         ylabel="return",
         thesis=[(random_mean, "random policy")],
         levels=references,
+        colours=colours,
         ylim=None,
         xlabel="training step",
     )
     return curves, figure
+
+
+def method_colours(labels: Mapping[str, str]) -> dict[str, str]:
+    """A colour per label, by its method's place among all of an experiment's ``labels``.
+
+    A method keeps its colour in every setting's figure, whichever methods the setting has.
+
+    >>> method_colours({"raw": "raw", "oracle": "oracle (undelayed)"})
+    {'raw': 'C0', 'oracle (undelayed)': 'C1'}
+    """
+    return {label: f"C{i % 10}" for i, label in enumerate(labels.values())}
 
 
 def gain_rows(
@@ -233,7 +248,7 @@ def gain_summary(
         drawn = {method: label for method, label in labels.items() if method in by_method}
         random_mean = _mean_score(by_method["random"])
         setting_curves, figures[f"curves_{setting}"] = learning_curves(
-            setting, by_method, drawn, random_mean, scored_in
+            setting, by_method, drawn, random_mean, scored_in, colours=method_colours(labels)
         )
         curves += setting_curves
     return Summary(claims, curves, figures, extra)

@@ -13,7 +13,7 @@ Conventions every figure follows:
 from __future__ import annotations
 
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -118,6 +118,7 @@ def learning_curves(
     thesis_ratios: Sequence[tuple[str, float, str, str]] = (),
     settle: float = 0.05,
     levels: Sequence[tuple[float, str]] = (),
+    colours: Mapping[str, str] | None = None,
 ) -> None:
     """Mean curve with a 95 % band per group, the thesis's values dashed.
 
@@ -137,10 +138,17 @@ def learning_curves(
             the curves' settled range (:func:`robust_ylim`'s ``skip``).
         levels: other levels, each ``(value, label)`` (a fixed controller's score), drawn as
             dotted lines in colours of their own.
+        colours: the colour of a group or a level, by its label, so that one method has one
+            colour in every figure of an experiment (``None``, or a label not in it: the next
+            of matplotlib's colours; a level's, the next of purple, brown and grey that no group
+            has).
     """
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(9.5, 4.4))
     means = {}
+    from matplotlib.colors import to_hex
+
+    fixed = dict(colours or {})
     colours, drawn = {}, []
     for label, runs in groups.items():
         steps = runs[0][0]
@@ -149,7 +157,7 @@ def learning_curves(
             warnings.simplefilter("ignore", RuntimeWarning)
             mean = np.nanmean(values, axis=0)
             std = np.nanstd(values, axis=0, ddof=1) if len(runs) > 1 else None
-        (line,) = ax.plot(steps, mean, label=band_label(label, len(runs)))
+        (line,) = ax.plot(steps, mean, label=band_label(label, len(runs)), color=fixed.get(label))
         colours[label] = line.get_color()
         means[label] = (steps, mean)
         drawn.append((steps, mean))
@@ -158,9 +166,10 @@ def learning_curves(
             ax.fill_between(steps, mean - half, mean + half, alpha=0.18, color=line.get_color())
             drawn += [(steps, mean - half), (steps, mean + half)]
     _thesis_lines(ax, thesis, colours)
-    for (value, label), colour in zip(
-        levels, ("tab:purple", "tab:brown", "tab:gray"), strict=False
-    ):
+    used = {to_hex(colour) for colour in colours.values()}
+    spare = iter(c for c in ("tab:purple", "tab:brown", "tab:gray") if to_hex(c) not in used)
+    for value, label in levels:
+        colour = fixed.get(label) or next(spare, "black")
         ax.axhline(value, color=colour, linestyle=":", linewidth=1.6, label=label)
     for base, factor, label, group in thesis_ratios:
         steps, mean = means[base]
