@@ -59,7 +59,7 @@ def check_view_space(space: Any, name: str = "observation_space") -> spaces.Dict
     return space
 
 
-def critic_space(view: spaces.Dict, critic_input: str = "made") -> spaces.Dict:
+def critic_space(view: spaces.Dict, critic_input: str = "newest") -> spaces.Dict:
     """What the critic reads: the hindsight observation (its age too, for ``"newest"``), actions.
 
     ``"actions"`` are the view's: the last ``K`` actions sent before the transition's step.
@@ -70,7 +70,7 @@ def critic_space(view: spaces.Dict, critic_input: str = "made") -> spaces.Dict:
     return spaces.Dict(hindsight)
 
 
-def hindsight_space(view: spaces.Dict, critic_input: str = "made") -> spaces.Dict:
+def hindsight_space(view: spaces.Dict, critic_input: str = "newest") -> spaces.Dict:
     """The replay buffer's space: the view's keys and the critic's hindsight keys."""
     return spaces.Dict({**critic_space(view, critic_input).spaces, **view.spaces})
 
@@ -95,11 +95,11 @@ class HindsightPolicy(MultiInputPolicy):
 
     Args:
         *args: SAC's ``MultiInputPolicy``'s positional arguments.
-        critic_input: ``"made"`` or ``"newest"`` (set by :class:`HindsightSAC`).
+        critic_input: ``"newest"`` or ``"made"`` (set by :class:`HindsightSAC`).
         **kwargs: SAC's ``MultiInputPolicy``'s keyword arguments.
     """
 
-    def __init__(self, *args: Any, critic_input: str = "made", **kwargs: Any):
+    def __init__(self, *args: Any, critic_input: str = "newest", **kwargs: Any):
         self.critic_input = check_choice("critic_input", critic_input, CRITIC_INPUTS)
         super().__init__(*args, **kwargs)
 
@@ -182,11 +182,13 @@ class HindsightSAC(SAC):
         env: a :class:`~delayed_rl.wrappers.DelayAwareObservation` env (its ``Dict``, not
             flattened), or a vector env of them.
         critic_input: what the critic reads for a step ``τ`` (beside the actions sent before it):
-            ``"made"`` (the default), the observation made at ``τ``, once it has arrived; a step
-            whose observation never arrives starts no transition, and a transition spans the
-            steps to the next one whose observation arrived. ``"newest"``: the newest
-            observation made at or before ``τ`` that arrived by the time nothing newer can, and
-            its age at ``τ`` (``"hindsight_age"``); every step is a one-step transition.
+            ``"newest"`` (the default), the newest observation made at or before ``τ`` that
+            arrived by the time nothing newer can, and its age at ``τ`` (``"hindsight_age"``);
+            every step is a one-step transition. ``"made"``: the observation made at ``τ``, once
+            it has arrived; a step whose observation never arrives starts no transition, and a
+            transition spans the steps to the next one whose observation arrived. ``"newest"``
+            learned faster in the measurements (``docs/late_observations.md``). A file saved
+            before ``critic_input`` existed loads as ``"made"``, the only input then.
         **kwargs: SAC's (``learning_rate``, ``buffer_size``, ``learning_starts``, ``seed``...).
 
     Attributes:
@@ -207,8 +209,10 @@ class HindsightSAC(SAC):
         "MlpPolicy": HindsightPolicy,
     }
 
-    def __init__(self, policy: Any, env: Any, critic_input: str = "made", **kwargs: Any):
+    def __init__(self, policy: Any, env: Any, critic_input: str = "newest", **kwargs: Any):
         self.critic_input = check_choice("critic_input", critic_input, CRITIC_INPUTS)
+        # SB3's load() constructs without setting up, then sets the saved attributes
+        self._loading = not kwargs.get("_init_setup_model", True)
         if kwargs.get("replay_buffer_class") is not None:
             raise TypeError(
                 "HindsightSAC keeps its own replay buffer (the view with the hindsight "
@@ -225,6 +229,9 @@ class HindsightSAC(SAC):
 
     def _setup_model(self) -> None:
         view = check_view_space(self.observation_space)
+        if self._loading and "critic_input" not in self.policy_kwargs:
+            self.critic_input = "made"  # a file from before critic_input: its critic read "made"
+        self._loading = False
         self.policy_kwargs = {**self.policy_kwargs, "critic_input": self.critic_input}
         if self.replay_buffer is None:
             self.replay_buffer = HindsightReplayBuffer(
@@ -238,7 +245,7 @@ class HindsightSAC(SAC):
         super()._setup_model()
 
     def _excluded_save_params(self) -> list[str]:
-        return [*super()._excluded_save_params(), "_episodes"]
+        return [*super()._excluded_save_params(), "_episodes", "_loading"]
 
     def _setup_learn(
         self, total_timesteps: int, callback: Any = None, reset_num_timesteps: bool = True, *args

@@ -81,6 +81,7 @@ def learner(env, **kwargs):
     from delayed_rl.deep import HindsightSAC
 
     settings = {
+        "critic_input": "made",  # the tests below the newest-input section are of "made"
         "learning_starts": 20,
         "batch_size": 8,
         "gamma": GAMMA,
@@ -277,3 +278,34 @@ def test_critic_input_is_checked_and_kept_in_files(tmp_path):
     loaded = HindsightSAC.load(tmp_path / "newest.zip", env=view(Constant(1))[0], device="cpu")
     assert loaded.critic_input == loaded.policy.critic_input == "newest"
     assert set(loaded.replay_buffer.observation_space.spaces) >= {"hindsight_age"}
+
+
+def test_newest_is_the_default_and_a_file_from_before_critic_input_loads_as_made(tmp_path):
+    import json
+    import zipfile
+
+    from delayed_rl.deep import HindsightSAC
+
+    env, _ = view(Constant(1))
+    assert HindsightSAC("MultiInputPolicy", env, device="cpu").critic_input == "newest"
+    agent = learner(env, critic_input="made")
+    agent.learn(30)
+    agent.save(tmp_path / "made.zip")
+    # the same file as the code before critic_input wrote it: no attribute, no policy argument
+    with zipfile.ZipFile(tmp_path / "made.zip") as saved:
+        members = {name: saved.read(name) for name in saved.namelist()}
+    data = json.loads(members["data"])
+    del data["critic_input"]
+    del data["policy_kwargs"]["critic_input"]
+    members["data"] = json.dumps(data).encode()
+    with zipfile.ZipFile(tmp_path / "old.zip", "w") as old:
+        for name, content in members.items():
+            old.writestr(name, content)
+    loaded = HindsightSAC.load(tmp_path / "old.zip", env=view(Constant(1))[0], device="cpu")
+    assert loaded.critic_input == loaded.policy.critic_input == "made"
+    obs = {key: np.asarray(value)[None] for key, value in env.observation_space.sample().items()}
+    np.testing.assert_array_equal(
+        loaded.predict(obs, deterministic=True)[0], agent.predict(obs, deterministic=True)[0]
+    )
+    newest = HindsightSAC.load(tmp_path / "made.zip", env=view(Constant(1))[0], device="cpu")
+    assert newest.critic_input == "made"  # a file that says its input keeps it

@@ -105,9 +105,12 @@ def train_and_score(task: dict) -> dict:
     - ``naive``: on the delayed stack as it is (the newest observation the stale sensor shows);
     - ``augmented``: on the delay-aware view (:class:`~delayed_rl.wrappers.DelayAwareObservation`),
       flattened, with ``MlpPolicy``;
-    - ``hindsight``: :class:`~delayed_rl.deep.HindsightSAC` on the view;
-    - ``hindsight-newest``: the same with ``critic_input="newest"`` (its critic reads the newest
-      observation made by each step that arrived, with its age: every step a transition).
+    - ``hindsight``: :class:`~delayed_rl.deep.HindsightSAC` on the view with
+      ``critic_input="made"`` (its critic reads the observation made at each step, once it
+      arrived);
+    - ``hindsight-newest``: the same with ``critic_input="newest"``, the default (its critic
+      reads the newest observation made by each step that arrived, with its age: every step a
+      transition).
 
     The score is the mean return of ``eval_episodes`` deterministic episodes of the env the method
     acts in (delays included; the oracle's is undelayed), reset with seeds fixed per seed and
