@@ -2,7 +2,8 @@
 
 The grid-world experiments ``delay-sweep``, ``world-size`` and ``estimate-error`` share one
 design: for every seed and world size, an undelayed Q-learning *reference* run, and delayed
-runs whose average reward is divided by the reference's. :func:`grid_tasks` builds those tasks,
+runs whose average reward is divided by the reference's. :func:`grid_tasks` builds those tasks
+(:func:`delay_grid_tasks` for a sweep of mean delays),
 :func:`grid_task` runs one (it is those experiments' ``run_task``), and :func:`normalised`
 pairs each delayed run with its reference; the experiments pivot its results by their own
 fields (:func:`~.results.pivot`), into :func:`condition_means` and :func:`learning_curve_groups`.
@@ -11,7 +12,7 @@ fields (:func:`~.results.pivot`), into :func:`condition_means` and :func:`learni
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -83,6 +84,30 @@ def grid_tasks(
             )
             out += [kind(**run, steps=steps, seed=seed) for run in runs if run["size"] == size]
     return out
+
+
+def delay_grid_tasks(
+    config: Config,
+    sizes: Sequence[int],
+    lams: tuple[Sequence[int], Sequence[int]],
+    steps: tuple[int, int],
+    condition: Callable[[int, int], str],
+) -> list[GridTask]:
+    """Q-learning under each Poisson mean delay λ in each world, with :func:`grid_tasks`' references.
+
+    Args:
+        config: the seeds, and whether the run is quick.
+        sizes: the worlds' sides.
+        lams: the mean delays λ of a full run and of a quick one.
+        steps: the steps of a run, full and quick (:meth:`~.experiment.Config.run_steps`).
+        condition: a run's label from its world's side and its λ.
+    """
+    runs = [
+        {"size": size, "lam": lam, "delay_estimates": (0,), "condition": condition(size, lam)}
+        for size in sizes
+        for lam in (lams[1] if config.quick else lams[0])
+    ]
+    return grid_tasks(config, config.run_steps(*steps), runs)
 
 
 def grid_task(task: GridTask) -> dict:

@@ -19,8 +19,8 @@ from delayed_rl.experiments.framework.experiment import Config, Experiment, Summ
 from delayed_rl.experiments.framework.normalised_runs import (
     GridTask,
     condition_means,
+    delay_grid_tasks,
     grid_task,
-    grid_tasks,
     learning_curve_groups,
     normalised,
     normalised_curves,
@@ -39,18 +39,10 @@ THESIS_TREND = "the normalised reward falls as λ grows"
 
 
 def tasks(config: Config) -> list[GridTask]:
-    """Per seed: undelayed Q-learning on the grid, then Q-learning under each mean delay λ.
-
-    :data:`STEPS` a run (:data:`QUICK_STEPS` with ``config.quick``, which also keeps only
-    :data:`QUICK_LAMS`).
-    """
-    steps = config.run_steps(STEPS, QUICK_STEPS)
-    lams = QUICK_LAMS if config.quick else LAMS
-    runs = [
-        {"size": SIZE, "lam": lam, "delay_estimates": (0,), "condition": f"lambda={lam}"}
-        for lam in lams
-    ]
-    return grid_tasks(config, steps, runs)
+    """Per seed: undelayed Q-learning on the grid, then Q-learning under each mean delay λ."""
+    return delay_grid_tasks(
+        config, (SIZE,), (LAMS, QUICK_LAMS), (STEPS, QUICK_STEPS), lambda _, lam: f"lambda={lam}"
+    )
 
 
 def summarize(task_list: list[GridTask], results: list[dict], config: Config) -> Summary:

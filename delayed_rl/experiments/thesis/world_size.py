@@ -17,8 +17,8 @@ from delayed_rl.experiments.framework.experiment import Config, Experiment, Summ
 from delayed_rl.experiments.framework.normalised_runs import (
     GridTask,
     condition_means,
+    delay_grid_tasks,
     grid_task,
-    grid_tasks,
     learning_curve_groups,
     normalised,
     normalised_curves,
@@ -38,24 +38,13 @@ NEAR_ZERO = 0.1
 
 
 def tasks(config: Config) -> list[GridTask]:
-    """Per seed and world size: undelayed Q-learning, then Q-learning under each mean delay λ.
+    """Per seed and world size: undelayed Q-learning, then Q-learning under each mean delay λ."""
+    return delay_grid_tasks(config, SIZES, (LAMS, QUICK_LAMS), (STEPS, QUICK_STEPS), _condition)
 
-    :data:`STEPS` a run (:data:`QUICK_STEPS` with ``config.quick``, which also keeps only
-    :data:`QUICK_LAMS`).
-    """
-    steps = config.run_steps(STEPS, QUICK_STEPS)
-    lams = QUICK_LAMS if config.quick else LAMS
-    runs = [
-        {
-            "size": size,
-            "lam": lam,
-            "delay_estimates": (0,),
-            "condition": f"{size}x{size} lambda={lam}",
-        }
-        for size in SIZES
-        for lam in lams
-    ]
-    return grid_tasks(config, steps, runs)
+
+def _condition(size: int, lam: int) -> str:
+    """A run's label: its world and its mean delay."""
+    return f"{size}x{size} lambda={lam}"
 
 
 def summarize(task_list: list[GridTask], results: list[dict], config: Config) -> Summary:
