@@ -5,7 +5,7 @@ Poisson(``--lam``) reward delays from :class:`~delayed_rl.wrappers.PoissonReward
 rewards flushed at episode ends, the wrapper's default). Per seed it trains:
 
 - ``Q``: Q-learning on the delayed reward;
-- ``DeconvQ``: deconvolution Q-learning, the delay learned on ``0..--max-delay``;
+- ``DeconvQ``: deconvolution Q-learning, the delay learned on ``0..--max-delay-estimate``;
 - ``Q undelayed``: Q-learning without delays (the reference).
 
 All with the library's default hyper-parameters (α = 0.1, γ = 0.9, ε = 0.1, ``q_init`` = 0) and
@@ -15,7 +15,7 @@ env, each cut at 200 steps (CliffWalking has no time limit of its own; a policy 
 scores −200 there). Reported: the mean over seeds with its 95 % CI (Student t), each seed's
 score, and seconds per run.
 
-    python benchmarks/deconvolution_third_party.py [--seeds 3] [--lam 5] [--max-delay 20]
+    python benchmarks/deconvolution_third_party.py [--seeds 3] [--lam 5] [--max-delay-estimate 20]
         [--env Taxi-v4:1000000 --env CliffWalking-v1:500000 --env FrozenLake-v1:200000]
 """
 

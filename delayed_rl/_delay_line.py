@@ -1,6 +1,6 @@
-"""The delay line, written once: drawing clipped delays and the ring buffers that hold what is due.
+"""The delay line, written once: drawing clipped delays and the rings that hold what is due.
 
-The wrappers, the vector buffers, the agents' histories and the compiled path all use
+The wrappers, the vector twins' pending rewards, the agents' histories and the compiled path all use
 :func:`draw_delays` (a block of clipped delays), :func:`delay_bound` (how far back a delay can
 practically reach), :func:`ring_size` and :func:`regrow_ring` (power-of-two rings of what is
 pending) and :func:`exact_sum` (a sum of rewards rounded once, or a clear error).

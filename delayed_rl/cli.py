@@ -470,7 +470,7 @@ def _add_agent_options(train: argparse.ArgumentParser) -> None:
     train.add_argument(
         "--delay-estimate",
         type=_non_negative_int,
-        metavar="K",
+        metavar="STEPS",
         help="--agent fixed: the constant delay in steps that it assumes (required for it)",
     )
     train.add_argument(

@@ -1,4 +1,4 @@
-"""The compiled training loop: env step, reward-delay buffer, ε-greedy MMQ choice and update.
+"""The compiled training loop: env step, reward-delay ring, ε-greedy MMQ choice and update.
 
 One function, :func:`run_chunk`, advances a whole training run by a chunk of steps. All state
 (Q-table, cached maxima, history ring, delay ring, clocks) lives in arrays owned by the caller,
@@ -394,7 +394,7 @@ def _loop(
     out_cdf, out_next, out_reward = env.out_cdf, env.out_next, env.out_reward
     out_term = env.out_term
     init_cdf, max_steps, cut_steps = env.init_cdf, env.max_steps, env.cut_steps
-    delays, buffer, episode_end_mode = line.delays, line.ring, line.episode_end_mode
+    delays, ring, episode_end_mode = line.delays, line.ring, line.episode_end_mode
     hist_s, hist_a, hist_s2, hist_term, state = history
     n_lags = estimates.shape[0]
     n_models = q.shape[1]  # one table per lag (MMQ), or one for every lag (expected credit)
@@ -405,7 +405,7 @@ def _loop(
     v_second = np.empty(v_max.shape[0])  # the others' bound (see _write), made afresh each call
     _prime_cache(qf, v_max, v_cell, row_size, v_ties, v_second)
     hmask = hist_s.shape[0] - 1
-    bmask = buffer.shape[0] - 1
+    bmask = ring.shape[0] - 1
     targets = np.zeros(n_lags)
     states = np.zeros(n_lags, dtype=np.uint64)
     cells = np.zeros(n_lags, dtype=np.uint64)
@@ -477,9 +477,9 @@ def _loop(
             cut = not ended and cut_steps > 0 and episode_steps >= cut_steps  # unseen by the delay
             # the reward delay: the rule of wrappers.reference.ReferenceRewardDelay, inlined
             due = clock + delays[t]
-            buffer[due & bmask] += reward
-            delivered = buffer[clock & bmask]
-            buffer[clock & bmask] = 0.0
+            ring[due & bmask] += reward
+            delivered = ring[clock & bmask]
+            ring[clock & bmask] = 0.0
             if oracle:  # record who emitted the reward; collect this step's arrivals
                 record_arrival(arrivals, clock, due, s, action, s2, terminated, reward)
                 if not (ended and episode_end_mode == FLUSH):
@@ -487,9 +487,9 @@ def _loop(
             if (ended or cut) and episode_end_mode != CARRY:
                 flush = ended and episode_end_mode == FLUSH
                 total = 0.0
-                for i in range(buffer.shape[0]):
-                    total += buffer[i]
-                    buffer[i] = 0.0
+                for i in range(ring.shape[0]):
+                    total += ring[i]
+                    ring[i] = 0.0
                 if flush:
                     delivered += total
                 elif cut:  # the reset after a cut discards it, as RewardDelay.reset does

@@ -20,7 +20,7 @@ RING_LIMIT = 1 << 22
 
 A compiled run holds its pending rewards in a ring as long as the longest delay it can draw. A
 delay distribution that can reach further (e.g. ``Uniform(0, 2**27)`` on a continuing env) runs on
-the Python path instead, whose buffer holds only the rewards actually pending.
+the Python path instead, whose ring holds only the rewards actually pending.
 """
 
 DELAY_BLOCK = 4096

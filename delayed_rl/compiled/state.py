@@ -17,7 +17,7 @@ import numpy as np
 from delayed_rl import _portable_math as portable_math
 from delayed_rl._delay_line import ring_size
 
-#: Episode-end modes of the reward buffer, as integers for the compiled code.
+#: Episode-end modes of the reward delay, as integers for the compiled code.
 FLUSH, DROP, CARRY = 0, 1, 2
 
 

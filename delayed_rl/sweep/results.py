@@ -21,7 +21,7 @@ from typing import Any
 from delayed_rl.agents.common.hyperparameters import MAX_ABS_VALUE
 from delayed_rl.agents.common.python_loop import MAX_TIMESTEPS
 from delayed_rl.parallel.intervals import mean_ci95
-from delayed_rl.sweep.schema import MAX_SWEEP_SEED, Sweep
+from delayed_rl.sweep.schema import MAX_SWEEP_SEED_VALUE, Sweep
 
 #: The columns of ``results.csv`` that every sweep writes, in this order.
 RESULT_COLUMNS = ("agent", "env", "delay", "seed", "steps", "train_reward", "eval_reward", "wall_s")
@@ -127,7 +127,7 @@ def check_result_row(row: Mapping[str, Any]) -> dict[str, str]:
 
     Every column of :data:`RESULT_COLUMNS` and :data:`EXTRA_COLUMNS` holds a value and no more:
     non-empty labels (``agent``, ``env``, ``delay``); ``seed`` an integer in
-    ``[0, MAX_SWEEP_SEED]``; ``steps`` an integer in ``[1, MAX_TIMESTEPS]``; ``train_reward``,
+    ``[0, MAX_SWEEP_SEED_VALUE]``; ``steps`` an integer in ``[1, MAX_TIMESTEPS]``; ``train_reward``,
     ``eval_reward`` and ``wall_s`` decimal numbers of magnitude at most ``MAX_ABS_VALUE``
     (2**200, so that their means and intervals stay finite), ``wall_s >= 0``; ``eval_unit``
     ``episode`` or ``step``; ``run_id`` 16 hexadecimal digits, as :meth:`Sweep.runs` makes it.
@@ -142,7 +142,7 @@ def check_result_row(row: Mapping[str, Any]) -> dict[str, str]:
     for column in ("agent", "env", "delay"):
         if not row[column]:
             raise ValueError(f"{column} must be a non-empty label, got ''")
-    _integer(row, "seed", 0, MAX_SWEEP_SEED)
+    _integer(row, "seed", 0, MAX_SWEEP_SEED_VALUE)
     _integer(row, "steps", 1, MAX_TIMESTEPS)
     for column in ("train_reward", "eval_reward", "wall_s"):
         value = _number(row, column)

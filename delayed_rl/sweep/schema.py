@@ -4,7 +4,7 @@
 :func:`parse_sweep` checks what it holds, field by field, and returns the plan, a :class:`Sweep`,
 whose :meth:`Sweep.runs` lists the runs. Every size a file sets is bounded by a stated limit
 (``learn()``'s ``MAX_TIMESTEPS``, :data:`MAX_EVAL_STEPS`, :data:`MAX_EVAL_EPISODES`, :data:`~delayed_rl.parallel.pools.MAX_SEED_COUNT`,
-:data:`MAX_SWEEP_SEED`, :data:`MAX_RUNS`), checked before anything is built or run.
+:data:`MAX_SWEEP_SEED_VALUE`, :data:`MAX_RUNS`), checked before anything is built or run.
 :mod:`delayed_rl.sweep` documents the format.
 """
 
@@ -46,10 +46,10 @@ MAX_EVAL_STEPS = Limit(10**9, "MAX_EVAL_STEPS", __name__, "10**9")
 MAX_EVAL_EPISODES = Limit(10**6, "MAX_EVAL_EPISODES", __name__, "10**6")
 """The most evaluation episodes of a run (``eval_episodes``; each at most
 :data:`~delayed_rl.sweep.runs.MAX_EVAL_EPISODE_STEPS` steps)."""
-MAX_SWEEP_SEED = Limit(2**32 - 1, "MAX_SWEEP_SEED", __name__, "2**32 - 1")
+MAX_SWEEP_SEED_VALUE = Limit(2**32 - 1, "MAX_SWEEP_SEED_VALUE", __name__, "2**32 - 1")
 """The largest seed: what every agent accepts (stable-baselines3 seeds numpy's legacy generator,
 which takes 32 bits)."""
-MAX_TEXT = 1000
+MAX_LABEL_CHARS = 1000
 """The longest name, label or env id in a sweep file (they are written in every row)."""
 MAX_RUNS = 100_000
 """The most runs (agents × envs × delays × seeds) in one sweep."""
@@ -261,7 +261,7 @@ def _named_entry(
 
 
 def _text(where: str, value: Any) -> str:
-    """A name, label or id: a non-empty string of at most :data:`MAX_TEXT` characters.
+    """A name, label or id: a non-empty string of at most :data:`MAX_LABEL_CHARS` characters.
 
     It must be encodable as UTF-8 (no lone surrogate, which a JSON escape can make): it is
     written to ``results.csv`` and ``summary.md``.
@@ -270,9 +270,9 @@ def _text(where: str, value: Any) -> str:
         raise TypeError(f"{where} must be a string, got {value!r} ({type(value).__name__})")
     if not value.strip():
         raise ValueError(f"{where} must be a non-empty string, got {value!r}")
-    if len(value) > MAX_TEXT:
+    if len(value) > MAX_LABEL_CHARS:
         raise ValueError(
-            f"{where} must be at most MAX_TEXT = {MAX_TEXT} characters ({_HERE}), got "
+            f"{where} must be at most MAX_LABEL_CHARS = {MAX_LABEL_CHARS} characters ({_HERE}), got "
             f"{len(value):,}: {value[:40]!r}..."
         )
     try:
@@ -512,7 +512,7 @@ def _parse_delay(where: str, entry: Any) -> SweepDelay:
 def _parse_seeds(value: Any) -> tuple[int, ...]:
     """``seeds``: a count in ``[1, MAX_SEED_COUNT]``, or up to that many distinct seeds in a list.
 
-    Each seed of a list lies in ``[0, MAX_SWEEP_SEED]``.
+    Each seed of a list lies in ``[0, MAX_SWEEP_SEED_VALUE]``.
     """
     if not isinstance(value, list):
         count = check_int("seeds", value, 1, note=" (a count), or a list of seeds")
@@ -522,7 +522,7 @@ def _parse_seeds(value: Any) -> tuple[int, ...]:
     if len(value) > MAX_SEED_COUNT:
         raise ValueError(f"seeds must list at most {MAX_SEED_COUNT.text}, got {len(value):,} seeds")
     seeds = tuple(
-        check_limit(f"seeds[{i}]", check_int(f"seeds[{i}]", seed, 0), MAX_SWEEP_SEED)
+        check_limit(f"seeds[{i}]", check_int(f"seeds[{i}]", seed, 0), MAX_SWEEP_SEED_VALUE)
         for i, seed in enumerate(value)
     )
     first: dict[int, int] = {}

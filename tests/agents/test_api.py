@@ -406,12 +406,12 @@ class HugeEnv(gym.Env):
             r"delay_estimate must keep the tables within MAX_TABLE_BYTES = 1 GiB .*got 1000000000",
         ),
         (
-            lambda: MultipleModelQLearning(GRID5, max_delay_estimate=10**7),
-            r"max_delay_estimate must keep the tables .*got 10000000: 10000001 delay model",
+            lambda: MultipleModelQLearning(GRID5, max_delay_estimate=1025),
+            r"max_delay_estimate must be at most MAX_DELAY_ESTIMATE = 1024 .*got 1025",
         ),
-        (
+        (  # the same limit as every agent's, however coarse Λ's step
             lambda: MultipleModelQLearning(GRID5, max_delay_estimate=10**30, delay_step=10**29),
-            r"max_delay_estimate must keep the tables .* GiB",
+            r"max_delay_estimate must be at most MAX_DELAY_ESTIMATE = 1024 .*got 10{30}",
         ),
         (
             lambda: MultipleModelQLearning(GRID5, delay_estimates=[0, 10**30]),

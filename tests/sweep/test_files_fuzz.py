@@ -223,7 +223,7 @@ def plan(**changes) -> dict:
             r"^seeds must be at most MAX_SEED_COUNT = 10,000 \(delayed_rl.parallel.pools\)",
         ),
         ({"seeds": 10**30}, r"^seeds must be at most MAX_SEED_COUNT"),
-        ({"seeds": [0, 2**40]}, r"^seeds\[1\] must be at most MAX_SWEEP_SEED = 2\*\*32 - 1"),
+        ({"seeds": [0, 2**40]}, r"^seeds\[1\] must be at most MAX_SWEEP_SEED_VALUE = 2\*\*32 - 1"),
         (
             {"seeds": list(range(10_001))},
             r"^seeds must list at most MAX_SEED_COUNT = 10,000 \(.*\), got 10,001 seeds",
@@ -580,11 +580,15 @@ def test_yaml_types_that_are_not_json_are_refused_naming_the_field(tmp_path, tag
 @pytest.mark.parametrize(
     ("changes", "exc", "message"),
     [
-        ({"name": "x" * 1001}, ValueError, r"^name must be at most MAX_TEXT = 1000 characters"),
+        (
+            {"name": "x" * 1001},
+            ValueError,
+            r"^name must be at most MAX_LABEL_CHARS = 1000 characters",
+        ),
         (
             {"envs": [{"id": GRID, "label": "y" * 900_000, "eval_steps": 20}]},
             ValueError,
-            r"^envs\[0\]\.label must be at most MAX_TEXT",
+            r"^envs\[0\]\.label must be at most MAX_LABEL_CHARS",
         ),
         ({"name": "\ud800"}, ValueError, r"^name must be text UTF-8 can write"),
         ({"agents": [{"name": "q", "label": "a\udfffb"}]}, ValueError, r"agents\[0\]\.label"),

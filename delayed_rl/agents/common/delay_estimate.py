@@ -26,7 +26,8 @@ MAX_DELAY_ESTIMATE = Limit(1024, "MAX_DELAY_ESTIMATE", __name__, "1024")
 The tabular deconvolution binds it: a solve builds ``(K + 1)²`` matrices (24 MiB at the limit)
 and costs ``O(K³)``, and its statistics take ``(K + 1)·|S|·|A|`` sums; the deep deconvolution
 evaluates ``R̂`` on ``window + K`` steps per window, and expected credit costs ``O(K)`` a step.
-The experiments model at most 150 steps. MMQ's λ̂max is bounded by its tables' memory instead
+The experiments model at most 150 steps. MMQ's ``max_delay_estimate`` (λ̂max) has the same
+limit; a Λ given as its ``delay_estimates`` list is bounded by its tables' memory instead
 (:data:`~delayed_rl.agents.common.q_table.MAX_TABLE_BYTES`: a table per estimate, no solve).
 """
 

@@ -45,10 +45,6 @@ delay models × 10 actions, 0.8 GiB. A request above (``FixedDelayQLearning(dela
 before anything is allocated; a model file declaring such tables is refused the same way. Raise
 it (with ``save_util.MAX_MODEL_BYTES``, so files load back) for larger tables.
 """
-_LIMIT_TEXT = (
-    f"MAX_TABLE_BYTES = {MAX_TABLE_BYTES / 2**30:g} GiB "
-    "(delayed_rl.agents.common.q_table.MAX_TABLE_BYTES)"
-)
 _SMALL_ROW = 16  # rows up to this many entries are scanned in Python (cheaper than numpy calls)
 
 
@@ -110,16 +106,18 @@ def check_table_size(
     size = table_bytes(n_states, n_actions, n_models, largest, **options)
     if size <= MAX_TABLE_BYTES:
         return
+    # the value read now, so that a raised MAX_TABLE_BYTES is the one the message names
+    limit = f"MAX_TABLE_BYTES = {MAX_TABLE_BYTES / 2**30:g} GiB ({__name__}.MAX_TABLE_BYTES)"
     models = f"{n_models} delay model(s) up to {largest} steps"
     if env is None:
         raise ValueError(
-            f"{name} must keep the tables within {_LIMIT_TEXT}, got {value}: {models} would "
+            f"{name} must keep the tables within {limit}, got {value}: {models} would "
             f"take {size / 2**30:.3g} GiB"
         )
     agent = env[0].__name__ + ("" if name is None else f"({name}={value})")
     raise ValueError(
         f"{agent} on an env of {n_states} states and {n_actions} actions needs "
-        f"{size / 2**30:.3g} GiB of tables ({models}), over {_LIMIT_TEXT}: use fewer delay "
+        f"{size / 2**30:.3g} GiB of tables ({models}), over {limit}: use fewer delay "
         "estimates or a smaller state space"
     )
 

@@ -16,7 +16,10 @@ import numpy as np
 
 from delayed_rl._validation import check_int
 from delayed_rl.agents.common.compiled_loop import CompiledTables
-from delayed_rl.agents.common.delay_estimate import DEFAULT_MAX_DELAY_ESTIMATE
+from delayed_rl.agents.common.delay_estimate import (
+    DEFAULT_MAX_DELAY_ESTIMATE,
+    check_max_delay_estimate,
+)
 from delayed_rl.agents.common.hyperparameters import shares_hyperparameters
 from delayed_rl.agents.common.q_agent import QAgent, check_delay_estimates, shown
 from delayed_rl.agents.common.q_table import check_table_size, greedy_actions
@@ -56,7 +59,7 @@ def delay_estimates_from(
         max_delay_estimate = DEFAULT_MAX_DELAY_ESTIMATE
     if delay_step is None:
         delay_step = 1
-    max_delay_estimate = check_int("max_delay_estimate", max_delay_estimate, 0)
+    max_delay_estimate = check_max_delay_estimate(max_delay_estimate)
     delay_step = check_int("delay_step", delay_step, 1)
     largest = max_delay_estimate - max_delay_estimate % delay_step
     check_table_size("max_delay_estimate", max_delay_estimate, largest // delay_step + 1, largest)
@@ -76,7 +79,9 @@ class MultipleModelQLearning(QAgent):
     Args:
         env: the training env (``Discrete`` observation and action spaces) or an env id.
         max_delay_estimate: λ̂max; Λ = {0, delay_step, 2·delay_step, ...} up to λ̂max
-            (default 50, the thesis's grid-world setting).
+            (default 50, the thesis's grid-world setting; at most
+            :data:`~delayed_rl.agents.common.delay_estimate.MAX_DELAY_ESTIMATE`, 1024, as for
+            every agent).
         delay_step: the resolution of Λ (default 1).
         delay_estimates: Λ given explicitly (distinct integers ≥ 0; stored sorted), instead of
             ``max_delay_estimate``/``delay_step``.

@@ -33,8 +33,7 @@ QUICK_SIZE, QUICK_LAM, QUICK_STEPS = 7, 8, 30_000
 #: ``(1 − p) / p = λ``) and a bimodal one (mass ½ at 0 and ½ at 2λ, an ``Empirical`` pmf).
 DELAYS = ("Poisson", "geometric", "bimodal")
 LAMBDA_MAX = 50
-"""The longest delay any learner models: MMQ's λ̂max, DeconvQ's ``max_delay_estimate``, expected credit's
-last lag."""
+"""The longest delay any learner models, their ``max_delay_estimate`` (MMQ's λ̂max)."""
 #: Where :func:`make_agent` puts the run's true delay among a learner's arguments.
 _TRUE_DELAY = object()
 #: Each learner: its agent in :data:`~delayed_rl.agents.registry.REGISTRY`, and its arguments

@@ -4,7 +4,8 @@ As Gymnasium lays out ``gymnasium.wrappers.vector``, each family's twin is in th
 same name as its single-env family (``wrappers/reward_delay.py`` and
 ``wrappers/vector/reward_delay.py``). The stable-baselines3 twin of the reward delay,
 :class:`~delayed_rl.wrappers.sb3.VecRewardDelay`, is in ``wrappers/sb3.py`` (it imports
-stable-baselines3). :mod:`delayed_rl.wrappers` exports them all.
+stable-baselines3) and is imported from there; :mod:`delayed_rl.wrappers` exports the
+``gymnasium.vector`` twins.
 """
 
 from delayed_rl.wrappers.vector.action_delay import VectorActionDelay

@@ -71,7 +71,7 @@ def reset_mask(options: dict[str, Any] | None, num_envs: int) -> np.ndarray:
 def checked_rewards(rewards: Any, num_envs: int, wrapper: str) -> np.ndarray:
     """A vector env's ``rewards`` as float64, checked (:func:`~delayed_rl._validation.check_rewards`).
 
-    Infinite and NaN rewards pass (the buffers refuse them with their own message).
+    Infinite and NaN rewards pass (the pending rewards refuse them with their own message).
 
     Raises:
         TypeError: ``rewards`` is not a batch of real scalars (the message names ``rewards[i]``,

@@ -130,7 +130,7 @@ def test_per_sub_env_conservation(autoreset, on_episode_end, delay) -> None:
 
 
 @pytest.mark.parametrize("autoreset", MODES, ids=[m.name for m in MODES])
-def test_large_delays_grow_the_buffers(autoreset) -> None:
+def test_large_delays_grow_the_rings(autoreset) -> None:
     run_vector(autoreset, "carry", Poisson(90), steps=500)
 
 
@@ -317,14 +317,14 @@ def test_pending_sum_beyond_float64_is_a_clear_error_not_inf(on_episode_end) -> 
         env.step(np.zeros(2, dtype=int))
 
 
-def test_huge_rewards_whose_sum_fits_are_exact_in_the_vector_buffers() -> None:
+def test_huge_rewards_whose_sum_fits_are_exact_in_the_pending_rewards() -> None:
     from delayed_rl.wrappers.pending_rewards import PendingRewards
 
-    buffers = PendingRewards(1, Constant(20), None)
+    pending = PendingRewards(1, Constant(20), None)
     for reward in (1e308, 1.0, -1e308, 1e308):
-        delivered, _, _ = buffers.step(np.array([reward]), [True], [False], "flush")
-        assert delivered[0] == 0.0 and np.isfinite(buffers.pending).all()
-    np.testing.assert_array_equal(buffers.clear(np.array([True])), [1e308])
+        delivered, _, _ = pending.step(np.array([reward]), [True], [False], "flush")
+        assert delivered[0] == 0.0 and np.isfinite(pending.pending).all()
+    np.testing.assert_array_equal(pending.clear(np.array([True])), [1e308])
 
 
 # ---------------------------------------------------------------------- the flush trap
