@@ -6,11 +6,12 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium import spaces
-from multiagent_envs import ScriptedParallelEnv
 
 from delayed_rl.delays import Constant, Poisson, Uniform
 from delayed_rl.multiagent import ParallelActionDelay, agent_seed
 from delayed_rl.wrappers import ActionDelay
+
+from .envs import ScriptedParallelEnv
 
 ENDS = {
     "a": (4, "terminated"),

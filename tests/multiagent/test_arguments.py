@@ -9,7 +9,6 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium import spaces
-from multiagent_envs import ScriptedParallelEnv, pettingzoo_env
 
 import delayed_rl.multiagent as multiagent
 from delayed_rl.delays import Constant, Poisson, Uniform
@@ -19,6 +18,8 @@ from delayed_rl.multiagent import (
     ParallelRewardDelay,
     agent_seed,
 )
+
+from .envs import ScriptedParallelEnv, pettingzoo_env
 
 ENDS = {"a": (5, "terminated"), "b": (7, "truncated")}
 WRAPPERS = [ParallelRewardDelay, ParallelObservationDelay, ParallelActionDelay]

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from multiagent_envs import AgentReplay, ScriptedParallelEnv, pettingzoo_env, policy, record
 
 from delayed_rl.delays import Constant, Poisson, Uniform
 from delayed_rl.multiagent import ParallelObservationDelay, agent_seed
 from delayed_rl.wrappers import ObservationDelay
+
+from .envs import AgentReplay, ScriptedParallelEnv, pettingzoo_env, policy, record
 
 ENDS = {
     "a": (4, "terminated"),

@@ -7,10 +7,11 @@ import warnings
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import data_equivalence
-from multiagent_envs import pettingzoo_env
 
 from delayed_rl.delays import Constant, Poisson, Uniform
 from delayed_rl.multiagent import ParallelActionDelay, ParallelObservationDelay, ParallelRewardDelay
+
+from .envs import pettingzoo_env
 
 #: Small settings, for speed: PettingZoo ids and their arguments.
 ENVS = {

@@ -7,7 +7,12 @@ import warnings
 
 import numpy as np
 import pytest
-from multiagent_envs import (
+
+from delayed_rl.delays import Constant, Poisson, Uniform
+from delayed_rl.multiagent import ParallelRewardDelay, agent_seed
+from delayed_rl.wrappers import RewardDelay
+
+from .envs import (
     AgentReplay,
     ScriptedParallelEnv,
     pettingzoo_env,
@@ -15,10 +20,6 @@ from multiagent_envs import (
     record,
     scripted_reward,
 )
-
-from delayed_rl.delays import Constant, Poisson, Uniform
-from delayed_rl.multiagent import ParallelRewardDelay, agent_seed
-from delayed_rl.wrappers import RewardDelay
 
 #: Four agents leaving at different steps, one truncated, one joining late.
 ENDS = {
@@ -41,7 +42,7 @@ SEED = 11
 
 
 def run(env, schedule, seed=SEED, on_step=None, on_reset=None):
-    """Run ``env`` over ``schedule`` (as :func:`multiagent_envs.record`), calling back each step."""
+    """Run ``env`` over ``schedule`` (as :func:`envs.record`), calling back each step."""
     t = 0
     for episode, cut in enumerate(schedule):
         obs, infos = env.reset(seed=seed if episode == 0 else None)
