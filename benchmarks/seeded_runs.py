@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.metadata
+import inspect
 import json
 import sys
 import tempfile
@@ -67,8 +68,16 @@ AGENTS: list[tuple[str, str, dict]] = [
         {"delay": Poisson(3.0), "max_delay_estimate": 20},
     ),
     ("oracle", "OracleQLearning", {}),
-    ("deconv-known", "DeconvolutionQLearning", {"delay": Poisson(3.0), "max_delay_estimate": 20}),
-    ("deconv-learned", "DeconvolutionQLearning", {"max_delay_estimate": 20}),
+    (
+        "deconv-known",
+        "DeconvolutionQLearning",
+        {"delay": Poisson(3.0), "max_delay_estimate": 20, "solve_interval": 1000},
+    ),
+    (
+        "deconv-learned",
+        "DeconvolutionQLearning",
+        {"max_delay_estimate": 20, "solve_interval": 1000},
+    ),
 ]
 #: A registered agent without a row above runs with its defaults, under its registry name (so
 #: a new agent needs no row here, only ``--write`` to record its fingerprints).
@@ -120,10 +129,11 @@ def agent_run(name: str, env_name: str, compiled: bool) -> str:
     """Train one agent on one env on one path; hash everything it learned and recorded."""
     _, class_name, kwargs = next(entry for entry in AGENTS if entry[0] == name)
     cls = getattr(agents, class_name)
-    env = ENVS[env_name](env_name, class_name == "OracleQLearning")
-    extra = {"on_episode_end": env.on_episode_end} if class_name == "DeconvolutionQLearning" else {}
-    if class_name == "DeconvolutionQLearning":
-        extra["solve_interval"] = 1000
+    entry = next(entry for entry in REGISTRY.values() if entry.class_name == class_name)
+    env = ENVS[env_name](env_name, entry.needs_arrivals)
+    # an agent that models the delay is told the env's episode-end mode
+    takes_mode = "on_episode_end" in inspect.signature(cls).parameters
+    extra = {"on_episode_end": env.on_episode_end} if takes_mode else {}
     agent = cls(env, q_init=2.0, seed=7, **kwargs, **extra)
     agent.learn(STEPS, compiled=compiled, record=True, log_interval=None)
     digest = cpu_probe.Digest()

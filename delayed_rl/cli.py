@@ -150,9 +150,10 @@ def _list(args: argparse.Namespace) -> int:
     print("Environments (gymnasium.make(id, reward_delay=λ) adds a Poisson reward delay):")
     for env_id in env_ids():
         print(f"  {env_id}")
-    print("Agents (delayed-rl train --agent KEY):")
-    for key, name in AGENTS.items():
-        print(f"  {key}: {name}")
+    print("Agents (delayed-rl train --agent KEY, or a sweep file's agents[].name):")
+    for key, entry in REGISTRY.items():
+        where = "" if key in AGENTS else " (sweeps and Python; not train)"
+        print(f"  {key}: {entry.class_name}, {entry.label}{where}")
     print("Experiments (delayed-rl bench NAME):")
     for name in NAMES:
         print(f"  {name}")
@@ -398,9 +399,9 @@ def _add_train_command(commands: Any) -> None:
     train = commands.add_parser(
         "train",
         help="train a tabular agent and save it",
-        description="Train a tabular agent (--agent: Q-learning, fixed-delay Q-learning, Multiple "
-        "Model Q-learning or deconvolution Q-learning) on a Gymnasium env with Discrete spaces (optionally behind a Poisson reward delay), save the "
-        "agent and print its average undelayed reward per step during training.",
+        description="Train a tabular agent (--agent) on a Gymnasium env with Discrete spaces "
+        "(optionally behind a Poisson reward delay), save the agent and print its average "
+        "undelayed reward per step during training.",
     )
     train.add_argument(
         "--env",
@@ -412,9 +413,7 @@ def _add_train_command(commands: Any) -> None:
         "--agent",
         required=True,
         choices=AGENTS,
-        help="q: Q-learning; fixed: Q-learning assuming --delay-estimate; mmq: Multiple "
-        "Model Q-learning over delays 0..--max-delay-estimate; deconv: deconvolution "
-        "Q-learning, the delay learned on 0..--max-delay-estimate",
+        help="; ".join(f"{key}: {REGISTRY[key].label}" for key in AGENTS),
     )
     train.add_argument(
         "--reward-delay",
@@ -471,14 +470,14 @@ def _add_agent_options(train: argparse.ArgumentParser) -> None:
         "--delay-estimate",
         type=_non_negative_int,
         metavar="STEPS",
-        help="--agent fixed: the constant delay in steps that it assumes (required for it)",
+        help=f"--agent {_takers('delay_estimate')}: the constant delay in steps that it assumes",
     )
     train.add_argument(
         "--max-delay-estimate",
         type=_non_negative_int,
         metavar="N",
-        help="--agent mmq: the largest delay estimate λ̂max; --agent deconv: the longest delay "
-        "its learned pmf covers (default 50 for both)",
+        help=f"--agent {_takers('max_delay_estimate')}: the longest delay the agent models "
+        "(MMQ's λ̂max, the end of a learned pmf; default 50)",
     )
 
 
@@ -621,13 +620,20 @@ def _check_train_arguments(args: argparse.Namespace) -> None:
         args.parser.error(f"argument --save: {str(error).removeprefix('path ')}")
 
 
+def _takers(option: str) -> str:
+    """The ``train`` agents that take ``option``, as ``"mmq or deconv"``."""
+    return " or ".join(key for key in AGENTS if option in REGISTRY[key].train_options)
+
+
 def _check_agent_options(args: argparse.Namespace) -> None:
-    """Refuse an agent option given to an agent that does not take it (a usage error)."""
+    """Refuse an agent option given to an agent that does not take it, or one missing (usage)."""
+    for option in REGISTRY[args.agent].train_required:
+        if getattr(args, option) is None:
+            args.parser.error(f"--agent {args.agent} needs --{option.replace('_', '-')}")
     for option in sorted({o for key in AGENTS for o in REGISTRY[key].train_options}):
-        takers = [key for key in AGENTS if option in REGISTRY[key].train_options]
-        if getattr(args, option) is not None and args.agent not in takers:
+        if getattr(args, option) is not None and option not in REGISTRY[args.agent].train_options:
             args.parser.error(
-                f"--{option.replace('_', '-')} is for --agent {' or '.join(takers)}, "
+                f"--{option.replace('_', '-')} is for --agent {_takers(option)}, "
                 f"not --agent {args.agent}"
             )
 
@@ -645,8 +651,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command == "train":
-        if args.agent == "fixed" and args.delay_estimate is None:
-            args.parser.error("--agent fixed needs --delay-estimate K (the delay it assumes)")
         _check_agent_options(args)
         _check_train_arguments(args)
     level, gym.logger.min_level = gym.logger.min_level, 40  # Gymnasium's warnings stay out

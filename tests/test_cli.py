@@ -132,7 +132,7 @@ def test_evaluate_with_episodes_on_a_continuing_env_fails_clearly(tmp_path, caps
         (f"evaluate m.npz --env {GRID} --reward-delay 1e20", "--reward-delay: must be a number in"),
         (TRAIN + "--q-init nan", "argument --q-init: must be a finite number, got nan"),
         (TRAIN + "--seed -1", "argument --seed: must be an integer >= 0, got -1"),
-        (f"train --env {GRID} --agent fixed --save x", "--agent fixed needs --delay-estimate K"),
+        (f"train --env {GRID} --agent fixed --save x", "--agent fixed needs --delay-estimate"),
         (TRAIN + "--delay-estimate 2", "--delay-estimate is for --agent fixed, not --agent q"),
         (TRAIN + "--delay 2", "--delay-estimate is for --agent fixed, not --agent q"),  # a prefix
         (TRAIN + "--max-delay-estimate 9", "--max-delay-estimate is for --agent mmq or deconv"),
@@ -262,11 +262,18 @@ def test_a_corrupt_model_file_exits_1_with_one_line(tmp_path, capsys):
     assert str(bad) in _one_error_line(capsys)
 
 
+@pytest.mark.parametrize("agent", ["mmq", "deconv"])
+def test_max_delay_estimate_has_one_limit_whatever_the_agent(tmp_path, capsys, agent):
+    code = main(_train(tmp_path, "--agent", agent, "--max-delay-estimate", "1025"))
+    limit = "max_delay_estimate must be at most MAX_DELAY_ESTIMATE = 1024"
+    assert code == 1 and limit in _one_error_line(capsys)
+    assert not (tmp_path / "agent.npz").exists()
+
+
 @pytest.mark.parametrize(
     ("options", "message"),
     [
         ("--agent fixed --delay-estimate 1000000000", "delay_estimate must keep the tables"),
-        ("--agent mmq --max-delay-estimate 10000000", "max_delay_estimate must keep the tables"),
     ],
 )
 def test_tables_too_large_are_refused_before_allocating(tmp_path, capsys, options, message):

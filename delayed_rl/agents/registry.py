@@ -21,18 +21,21 @@ class AgentEntry:
 
     Attributes:
         entry_point: where its class is defined, ``"module:ClassName"``.
-        label: how tables and figures name it (``"MMQ"``).
+        label: what it is, in words, as ``delayed-rl list`` and ``train --help`` name it
+            (``"Multiple Model Q-learning"``).
         needs_arrivals: its env must record which transition emitted each reward
             (``RewardDelay(..., record_arrivals=True)``: the oracle).
         train_options: the constructor arguments ``delayed-rl train`` sets from its options of
             the same name (``max_delay_estimate`` from ``--max-delay-estimate``; ``None``:
             ``train`` does not take this agent).
+        train_required: those of ``train_options`` that ``train`` must be given.
     """
 
     entry_point: str
     label: str
     needs_arrivals: bool = False
     train_options: tuple[str, ...] | None = None
+    train_required: tuple[str, ...] = ()
 
     @property
     def class_name(self) -> str:
@@ -42,25 +45,31 @@ class AgentEntry:
 
 #: The library's agents by the names the command line and sweep files use.
 REGISTRY: dict[str, AgentEntry] = {
-    "q": AgentEntry("delayed_rl.agents.qlearning:QLearning", "Q", train_options=()),
+    "q": AgentEntry("delayed_rl.agents.qlearning:QLearning", "Q-learning", train_options=()),
     "fixed": AgentEntry(
         "delayed_rl.agents.qlearning:FixedDelayQLearning",
-        "fixed-delay Q",
+        "Q-learning assuming a constant delay",
         train_options=("delay_estimate",),
+        train_required=("delay_estimate",),
     ),
     "mmq": AgentEntry(
-        "delayed_rl.agents.mmq:MultipleModelQLearning", "MMQ", train_options=("max_delay_estimate",)
+        "delayed_rl.agents.mmq:MultipleModelQLearning",
+        "Multiple Model Q-learning, over delays 0..max_delay_estimate",
+        train_options=("max_delay_estimate",),
     ),
     "deconv": AgentEntry(
         "delayed_rl.agents.deconvolution:DeconvolutionQLearning",
-        "DeconvQ",
+        "deconvolution Q-learning, the delay learned on 0..max_delay_estimate",
         train_options=("max_delay_estimate",),
     ),
     "oracle": AgentEntry(
-        "delayed_rl.agents.oracle:OracleQLearning", "oracle Q", needs_arrivals=True
+        "delayed_rl.agents.oracle:OracleQLearning",
+        "Q-learning crediting each reward to its own transition (the upper bound)",
+        needs_arrivals=True,
     ),
     "expected-credit": AgentEntry(
-        "delayed_rl.agents.expected_credit:ExpectedCreditQLearning", "expected credit"
+        "delayed_rl.agents.expected_credit:ExpectedCreditQLearning",
+        "Q-learning crediting each reward over the past by a known delay's pmf",
     ),
 }
 #: Each agent's class name, by its short name.

@@ -683,6 +683,15 @@ KINDS = {
         hashed=True,
     ),
 }
+
+
+def test_the_corpus_has_a_file_of_every_registered_agent():
+    from delayed_rl.agents.registry import AGENTS
+
+    built = {type(kind.make(kind.env())).__name__ for kind in KINDS.values()}
+    assert set(AGENTS.values()) <= built, set(AGENTS.values()) - built
+
+
 TRAINED = 900
 """Steps before saving: DeconvQ's first solve (at 1000) comes 100 steps into the 300 after."""
 FIELD_VALUES: list[Any] = [None, "x", [1], {"a": 1}, True, -1, 0, 10**12, 10**30, 1.5, 1e308]

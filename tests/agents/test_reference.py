@@ -175,6 +175,13 @@ AGENTS = {
 }
 
 
+def test_every_registered_agent_has_a_reference_test_here():
+    """A new agent's rule gets a reference and a test in this module (its class imported here)."""
+    from delayed_rl.agents.registry import AGENTS as REGISTERED
+
+    assert set(REGISTERED.values()) <= set(globals()), set(REGISTERED.values()) - set(globals())
+
+
 def _reference_for(agent):
     if isinstance(agent, ExpectedCreditQLearning):
         return ReferenceExpectedCredit(
