@@ -5,7 +5,7 @@ both the Python and the compiled path, on several envs and under every episode-e
 prints one SHA-256 per run of everything the run produced: the Q-table, every learned array
 (delay estimates, pmfs, reward models), the training record (``learn(..., record=True)``), the
 greedy actions, and the arrays a saved model file holds. It adds the runs of
-``tests/cpu_probe.py`` (the e-puck, DeconvQ on Taxi, ``reproduce --quick``).
+``tests/cpu_probe.py`` (the e-puck, DeconvQ on Taxi, ``bench all --quick``).
 
 ``--write`` stores them in ``benchmarks/seeded_runs.json`` with the package versions;
 ``--check`` compares against that file and lists every run that changed. A run whose output

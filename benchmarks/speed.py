@@ -11,10 +11,10 @@
 - the e-puck: random-action steps/s beside pymunk's bare solver (the floor), and the
   line-following training loop (env + MMQ |Λ| = 151) compiled and on the Python path, beside
   the env's own Python steps alone;
-- with ``--reproduce``, the wall time of ``delayed-rl reproduce`` at full scale (numba's cache
-  warmed first by ``reproduce --quick``), and each experiment's cost.
+- with ``--bench-all``, the wall time of ``delayed-rl bench all`` at full scale (numba's cache
+  warmed first by ``bench all --quick``), and each experiment's cost.
 
-    python benchmarks/speed.py [--quick] [--reproduce [--reproduce-out DIR]] [--markdown FILE]
+    python benchmarks/speed.py [--quick] [--bench-all [--bench-all-out DIR]] [--markdown FILE]
 
 Targets: delay-wrapper overhead ≤ 1.5 × RecordEpisodeStatistics' (each beside the bare env, its
 floor); Q-learning's Python-path ``learn()`` ≤ 2 × a minimal Q-learning loop on the same env;
@@ -91,10 +91,10 @@ def one_million_mmq_seconds() -> tuple[float, float]:
     return learn, imports
 
 
-def reproduce_seconds(out: Path) -> tuple[float, float, list[str]]:
-    """Wall time of ``delayed-rl reproduce --workers 2`` at full scale, and its index's rows.
+def bench_all_seconds(out: Path) -> tuple[float, float, list[str]]:
+    """Wall time of ``delayed-rl bench all --workers 2`` at full scale, and its index's rows.
 
-    numba's cache is warmed first by ``reproduce --quick`` (the same agents on the same envs,
+    numba's cache is warmed first by ``bench all --quick`` (the same agents on the same envs,
     so every compiled signature the full run needs), whose wall time is returned too: what a
     first run after installing also spends compiling, about. The results are written into
     ``out`` (``index.md`` lists each experiment's runs and their core-seconds).
@@ -103,18 +103,18 @@ def reproduce_seconds(out: Path) -> tuple[float, float, list[str]]:
         ``(seconds, warm-up seconds, rows)``.
     """
 
-    def reproduce(*options: str) -> float:
+    def bench_all(*options: str) -> float:
         start = time.perf_counter()
         subprocess.run(
-            [sys.executable, "-m", "delayed_rl.cli", "reproduce", "--workers", "2", *options],
+            [sys.executable, "-m", "delayed_rl.cli", "bench", "all", "--workers", "2", *options],
             check=True,
             capture_output=True,
         )
         return time.perf_counter() - start
 
     with tempfile.TemporaryDirectory() as scratch:
-        warm_up = reproduce("--quick", "--out", scratch)
-    seconds = reproduce("--out", str(out))
+        warm_up = bench_all("--quick", "--out", scratch)
+    seconds = bench_all("--out", str(out))
     rows = [line for line in (out / "index.md").read_text().splitlines() if line.startswith("|")]
     return seconds, warm_up, rows
 
@@ -259,10 +259,10 @@ def main() -> None:
     """Measure everything, print the report and, with ``--markdown``, write it to a file."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer steps (noisier)")
-    parser.add_argument("--reproduce", action="store_true", help="also time the full reproduction")
+    parser.add_argument("--bench-all", action="store_true", help="also time the full reproduction")
     parser.add_argument("--markdown", type=Path, help="also write the report to this file")
     parser.add_argument(
-        "--reproduce-out", type=Path, help="with --reproduce: keep its results in this folder"
+        "--bench-all-out", type=Path, help="with --bench-all: keep its results in this folder"
     )
     args = parser.parse_args()
     scale = 5 if args.quick else 1
@@ -369,14 +369,14 @@ def main() -> None:
         f"importing the library took a further {imports:.2f} s.",
         "",
     ]
-    if args.reproduce:
+    if args.bench_all:
         with tempfile.TemporaryDirectory() as scratch:
-            seconds, warm_up, rows = reproduce_seconds(args.reproduce_out or Path(scratch))
+            seconds, warm_up, rows = bench_all_seconds(args.bench_all_out or Path(scratch))
         lines += [
-            f"## `delayed-rl reproduce --workers 2` at full scale: **{seconds:.0f} s** "
+            f"## `delayed-rl bench all --workers 2` at full scale: **{seconds:.0f} s** "
             f"({seconds / 60:.1f} min)",
             "",
-            f"With numba's cache warm (target ≤ 5 min); warming it, `reproduce --quick`, took "
+            f"With numba's cache warm (target ≤ 5 min); warming it, `bench all --quick`, took "
             f"{warm_up:.0f} s, about what a first run after installing spends compiling.",
             "",
             "What each experiment cost (its `index.md`: the runs it needed, how many of them "
@@ -390,7 +390,7 @@ def main() -> None:
     report = "\n".join(lines)
     print(report)
     if args.markdown:
-        command = "python benchmarks/speed.py" + (" --reproduce" if args.reproduce else "")
+        command = "python benchmarks/speed.py" + (" --bench-all" if args.bench_all else "")
         kept = _kept_section(args.markdown)
         args.markdown.write_text(f"# Speed\n\nGenerated by `{command}`.\n\n{report}{kept}")
 

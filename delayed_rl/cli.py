@@ -3,8 +3,8 @@
 - ``delayed-rl list``: the envs, agents and experiments;
 - ``delayed-rl train``: train a tabular agent on an env (optionally reward-delayed) and save it;
 - ``delayed-rl evaluate``: run a saved agent greedily and report its average reward;
-- ``delayed-rl bench NAME``: one experiment over seeds, written to ``--out/NAME``;
-- ``delayed-rl reproduce``: every experiment;
+- ``delayed-rl bench NAME [NAME ...]``: experiments over seeds, each written to ``--out/NAME``
+  (``all``: every experiment but the long ones; ``--long`` adds them);
 - ``delayed-rl sweep FILE``: your own agents × envs × delays × seeds, from a YAML or JSON file
   (:mod:`delayed_rl.sweep` documents the file), written to ``--out``.
 
@@ -261,16 +261,22 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 
 def _bench(args: argparse.Namespace) -> int:
-    """``delayed-rl bench NAME`` and ``reproduce``: run experiments, write and print reports.
+    """``delayed-rl bench NAME [NAME ...]``: run experiments, write and print their reports.
 
-    ``reproduce`` runs every experiment together on one pool of workers
+    The experiments run together on one pool of workers
     (:func:`~delayed_rl.experiments.run_experiments`): each prints its report as it finishes.
-    It leaves out the long experiments (:data:`~delayed_rl.experiments.LONG_NAMES`) unless
-    given ``--all``.
+    ``all`` names every experiment but the long ones
+    (:data:`~delayed_rl.experiments.LONG_NAMES`), which ``--long`` adds. With more than one
+    experiment, an index of them all is written to ``--out/index.md``.
     """
     from delayed_rl.experiments import Config, get_experiment, run_experiments
 
-    names = [args.name] if args.name != "all" else list(NAMES if args.all else DEFAULT_NAMES)
+    if args.long and "all" not in args.names:
+        args.parser.error("--long adds the long experiments to 'all': name 'all' with it")
+    every = list(NAMES if args.long else DEFAULT_NAMES)
+    names = list(
+        dict.fromkeys(n for name in args.names for n in (every if name == "all" else [name]))
+    )
     config = Config(
         seeds=args.seeds,
         steps=args.steps,
@@ -291,17 +297,17 @@ def _bench(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     experiments = [get_experiment(name) for name in names]
     summaries = run_experiments(experiments, config, out, _bench_progress(args), report)
-    if args.name == "all":
+    if len(experiments) > 1:
         from delayed_rl.experiments.framework.report import write_index
 
         ran = list(zip(experiments, summaries, strict=True))
         index = write_index(out, ran, time.perf_counter() - started)
-        print(f"[reproduce] wrote {index}")
+        print(f"[bench] wrote {index}")
     return 0
 
 
 def _bench_progress(args: argparse.Namespace) -> bool:
-    """Whether ``bench`` and ``reproduce`` show their progress (``--progress``/``--no-progress``).
+    """Whether ``bench`` shows its progress (``--progress``/``--no-progress``).
 
     By default, when stderr is a terminal and tqdm (optional: the ``dev`` extra) can draw the
     bar; an explicit ``--progress`` without tqdm shows a plain count instead (as ``train``
@@ -336,7 +342,7 @@ def _sweep(args: argparse.Namespace) -> int:
 
 
 def _add_bench_options(parser: argparse.ArgumentParser, default_out: str) -> None:
-    """The options ``bench`` and ``reproduce`` share: seeds, steps, workers, output, progress."""
+    """``bench``'s options: seeds, steps, workers, output, progress."""
     parser.add_argument(
         "--seeds",
         type=_seeds,
@@ -381,7 +387,6 @@ def build_parser() -> argparse.ArgumentParser:
     _add_train_command(commands)
     _add_evaluate_command(commands)
     _add_bench_command(commands)
-    _add_reproduce_command(commands)
     _add_sweep_command(commands)
     return parser
 
@@ -534,26 +539,26 @@ def _add_bench_command(commands: Any) -> None:
     """The ``bench`` sub-command's parser."""
     bench = commands.add_parser(
         "bench",
-        help="run one experiment (the thesis's or beyond it, `delayed-rl list` names them) over seeds",
+        help="run experiments (the thesis's or beyond it, `delayed-rl list` names them) over seeds",
+        description="Run the named experiments over seeds on one pool of workers, write each "
+        "one's report, curves, summary and figures to --out/NAME and print its report. 'all' "
+        "names every experiment but the long ones, which --long adds.",
     )
-    bench.add_argument("name", choices=NAMES, help="the experiment")
+    bench.add_argument(
+        "names",
+        nargs="+",
+        choices=(*NAMES, "all"),
+        metavar="NAME",
+        help=f"an experiment ({', '.join(NAMES)}), or all",
+    )
     _add_bench_options(bench, "runs")
-    bench.set_defaults(run=_bench)
-
-
-def _add_reproduce_command(commands: Any) -> None:
-    """The ``reproduce`` sub-command's parser."""
-    reproduce = commands.add_parser(
-        "reproduce", help="run every experiment (the long ones too with --all) over seeds"
-    )
-    _add_bench_options(reproduce, "runs")
-    reproduce.add_argument(
-        "--all",
+    bench.add_argument(
+        "--long",
         action="store_true",
-        help=f"also run the long experiments ({', '.join(LONG_NAMES)}; they need the sb3 and "
-        "multiagent extras)",
+        help=f"with all: the long experiments too ({', '.join(LONG_NAMES)}; they need the sb3 "
+        "and multiagent extras)",
     )
-    reproduce.set_defaults(run=_bench, name="all")
+    bench.set_defaults(run=_bench, parser=bench)
 
 
 def _add_sweep_command(commands: Any) -> None:

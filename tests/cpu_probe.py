@@ -184,12 +184,12 @@ def _without_timings(value):
 
 
 def experiments_run() -> str:
-    """``delayed-rl reproduce --quick``: every experiment's curves and summary, less timings."""
+    """``delayed-rl bench all --quick``: every experiment's curves and summary, less timings."""
     from delayed_rl.cli import main
 
     digest = Digest()
     with tempfile.TemporaryDirectory() as out, contextlib.redirect_stdout(io.StringIO()):
-        assert main(["reproduce", "--quick", "--workers", "1", "--out", out]) == 0
+        assert main(["bench", "all", "--quick", "--workers", "1", "--out", out]) == 0
         for path in sorted(Path(out).glob("*/curves.csv")) + sorted(Path(out).glob("*/*.json")):
             digest.add(path.relative_to(out).as_posix())
             if path.suffix == ".json":

@@ -1,6 +1,6 @@
 """The ``delayed-rl`` commands: the train/evaluate round trip, exit codes and messages.
 
-``bench`` and ``reproduce`` runs are tested with the experiments (``test_experiments.py``), their
+``bench`` runs are tested with the experiments (``tests/experiments/``), their
 progress bar here.
 """
 
@@ -139,12 +139,12 @@ def test_evaluate_with_episodes_on_a_continuing_env_fails_clearly(tmp_path, caps
         ("evaluate m.npz --env Nope-v9", "unknown env id 'Nope-v9'"),
         (f"evaluate m.npz --env {GRID} --steps 5 --episodes 2", "not allowed with argument"),
         (f"evaluate m.npz --env {GRID} --episodes 0", "--episodes: must be an integer >= 1, got 0"),
-        ("bench nope", "argument name: invalid choice: 'nope'"),
+        ("bench nope", "argument NAME: invalid choice: 'nope'"),
         ("bench delay-sweep --seeds 0", "argument --seeds: must be an integer >= 1, got 0"),
         ("bench delay-sweep --workers 0", "argument --workers: must be an integer >= 1, got 0"),
         ("bench delay-sweep --workers two", "--workers: must be an integer >= 1, got 'two' (str)"),
         ("bench delay-sweep --backend spark", "argument --backend: invalid choice: 'spark'"),
-        ("reproduce --seed -3", "argument --seed: must be an integer >= 0, got -3"),
+        ("bench all --seed -3", "argument --seed: must be an integer >= 0, got -3"),
         ("bench delay-sweep --seed -5", "argument --seed: must be an integer >= 0, got -5"),
         # sizes beyond the stated limits, refused before anything starts
         (
@@ -155,7 +155,7 @@ def test_evaluate_with_episodes_on_a_continuing_env_fails_clearly(tmp_path, caps
             "bench mmq-gridworld --steps 1099511627777",
             "--steps: must be at most MAX_TIMESTEPS = 2**40",
         ),
-        ("reproduce --steps 100000000000000000000", "--steps: must be at most MAX_TIMESTEPS"),
+        ("bench all --steps 100000000000000000000", "--steps: must be at most MAX_TIMESTEPS"),
         (
             "bench roulette --seed 9223372036854775808",
             "--seed: must be at most MAX_SEED_VALUE = 2**63 - 1",
@@ -194,7 +194,7 @@ def test_list_names_the_envs_agents_and_experiments(capsys):
 
 
 def test_every_command_has_help(capsys):
-    for command in ("list", "train", "evaluate", "bench", "reproduce"):
+    for command in ("list", "train", "evaluate", "bench"):
         with pytest.raises(SystemExit) as exit_info:
             main([command, "--help"])
         assert exit_info.value.code == 0
@@ -409,7 +409,7 @@ def test_two_ctrl_c_during_a_parallel_run_exit_at_once_leaving_no_worker(tmp_pat
     command = (  # Ctrl-C as a terminal has it (a test runner may start us with it ignored)
         "import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
         "from delayed_rl.cli import console; "
-        f"sys.argv = ['delayed-rl', 'reproduce', '--quick', '--workers', '2', '--out', "
+        f"sys.argv = ['delayed-rl', 'bench', 'all', '--quick', '--workers', '2', '--out', "
         f"{str(tmp_path)!r}]; sys.exit(console())"
     )
     env = {**os.environ, mark.split("=")[0]: mark.split("=")[1]}
@@ -497,11 +497,33 @@ def test_bench_without_tqdm_counts_in_lines_when_asked_and_stays_silent_by_defau
     assert err == ""
 
 
-@pytest.mark.parametrize("command", ["bench", "reproduce"])
-def test_bench_and_reproduce_take_progress_flags(command, capsys):
+def test_bench_takes_progress_flags(capsys):
     with pytest.raises(SystemExit):
-        main([command, "--help"])
+        main(["bench", "--help"])
     assert "--progress, --no-progress" in capsys.readouterr().out
+
+
+def test_bench_names_several_experiments_once_each_and_long_needs_all(monkeypatch, capsys):
+    import delayed_rl.experiments as experiments
+
+    seen = []
+
+    def record(chosen, *args, **kwargs):
+        seen.extend(experiment.name for experiment in chosen)
+        raise _Stop
+
+    monkeypatch.setattr(experiments, "get_experiment", lambda name: SimpleNamespace(name=name))
+    monkeypatch.setattr(experiments, "run_experiments", record)
+    with pytest.raises(_Stop):
+        main(["bench", "roulette", "delay-sweep", "roulette"])
+    assert seen == ["roulette", "delay-sweep"]
+    with pytest.raises(SystemExit) as exit_info:
+        main(["bench", "roulette", "--long"])
+    assert exit_info.value.code == 2
+    assert "--long adds the long experiments to 'all'" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["bench", "reproduce"])
+    assert "invalid choice: 'reproduce'" in capsys.readouterr().err
 
 
 def _edited_copy(path, target, arrays=None, **hyperparameters):
@@ -572,9 +594,9 @@ class _Stop(Exception):
 
 
 @pytest.mark.parametrize(
-    ("argv", "has_long"), [(["reproduce"], False), (["reproduce", "--all"], True)]
+    ("argv", "has_long"), [(["bench", "all"], False), (["bench", "all", "--long"], True)]
 )
-def test_reproduce_leaves_the_long_experiments_to_all(monkeypatch, argv, has_long):
+def test_bench_all_leaves_the_long_experiments_to_long(monkeypatch, argv, has_long):
     import delayed_rl.experiments as experiments
 
     seen = []

@@ -33,9 +33,9 @@ _MODULES = {
 }
 #: The experiments' names, as ``delayed-rl bench NAME`` takes them.
 NAMES = tuple(_MODULES)
-#: Experiments too long for the default ``delayed-rl reproduce`` (``reproduce --all`` runs them).
+#: Experiments too long for the default ``delayed-rl bench all`` (``bench all --long`` runs them).
 LONG_NAMES = ("deep-rl", "late-observations", "multiagent-gridworld", "multiagent-pursuit")
-#: What ``delayed-rl reproduce`` runs: every experiment but :data:`LONG_NAMES`.
+#: What ``delayed-rl bench all`` runs: every experiment but :data:`LONG_NAMES`.
 DEFAULT_NAMES = tuple(name for name in NAMES if name not in LONG_NAMES)
 
 

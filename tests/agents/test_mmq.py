@@ -336,7 +336,9 @@ def test_delay_estimate_arguments():
         MultipleModelQLearning(env, delay_estimates=[-1, 2])
     with pytest.raises(TypeError, match="delay_estimates"):
         MultipleModelQLearning(env, delay_estimates="012")
-    with pytest.raises(ValueError, match="max_delay_estimate must be None or an integer >= 0, got -1"):
+    with pytest.raises(
+        ValueError, match="max_delay_estimate must be None or an integer >= 0, got -1"
+    ):
         MultipleModelQLearning(env, max_delay_estimate=-1)
     with pytest.raises(ValueError, match="delay_step must be an integer >= 1, got 0"):
         MultipleModelQLearning(env, delay_step=0)

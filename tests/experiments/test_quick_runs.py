@@ -317,7 +317,7 @@ def _action(env, state: int, target: int) -> int:
     return next(a for a in env.P[state] if env.P[state][a][0][1] == target)
 
 
-def test_reproduce_writes_an_index_of_every_experiment(tmp_path):
+def test_bench_all_writes_an_index_of_every_experiment(tmp_path):
     from delayed_rl.experiments.framework.experiment import Claim, Summary
     from delayed_rl.experiments.framework.report import write_index
 

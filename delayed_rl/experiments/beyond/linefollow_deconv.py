@@ -3,7 +3,7 @@
 A module of its own (not a setting of ``anonymous-delay``): the e-puck runs share nothing with
 the grid worlds but the agents. The setting, training run and metrics are ``linefollow``'s (the
 framework's :mod:`~delayed_rl.experiments.framework.line_following`); MMQ's and Q's runs are
-``linefollow``'s, which ``delayed-rl reproduce`` runs once for both. The learners are
+``linefollow``'s, which ``delayed-rl bench all`` runs once for both. The learners are
 :data:`LEARNERS`, the numbers the constants ``EXPERIMENT.description`` is formatted from
 (:data:`STEPS`, and the framework's); the claims, fixed before the runs, are in :func:`summarize`.
 """

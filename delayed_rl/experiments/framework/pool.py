@@ -1,6 +1,6 @@
 """Running experiments: each run once, on one pool of workers, the most costly first.
 
-:func:`run_experiments` (what ``delayed-rl reproduce`` calls) runs each *distinct* run behind
+:func:`run_experiments` (what ``delayed-rl bench all`` calls) runs each *distinct* run behind
 the experiments' tasks once (a :class:`~.experiment.SharedRun` several tasks need is run once,
 its result handed to each), all on one pool, longest first; :func:`run_experiment` runs one
 experiment. A resumable experiment keeps each run's result as it finishes and reads it back.
@@ -189,7 +189,7 @@ def run_experiments(
 ) -> list[Summary]:
     """Run ``experiments`` together; write each into ``out/NAME``.
 
-    :func:`run_experiments` (what ``delayed-rl reproduce`` calls) gathers the runs behind every task
+    :func:`run_experiments` (what ``delayed-rl bench all`` calls) gathers the runs behind every task
     of the experiments it is given (:meth:`~.experiment.Experiment.run_of`) and runs each *distinct* run
     once: a :class:`~.experiment.SharedRun` that several tasks need, of one experiment or of several, is
     run once and its result handed to each of them (through its ``view``). Two runs are the same

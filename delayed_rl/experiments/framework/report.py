@@ -50,7 +50,7 @@ def write_index(
 ) -> Path:
     """Write ``out/index.md``: every experiment run, what it cost, its verdicts and its report.
 
-    ``delayed-rl reproduce`` writes it after the last experiment: one table of every
+    ``delayed-rl bench all`` writes it after the last experiment: one table of every
     experiment's verdict counts and cost, each linking to its ``NAME/report.md``. The cost is
     the core-seconds of the experiment's runs (``extra["run_seconds"]``, a run shared between
     experiments counted in each, marked in the ``shared runs`` column), as they ran together on

@@ -119,7 +119,7 @@ def tasks(config: Config) -> list[RealRobotTask]:
     each pretraining's wall time (``pretrain_seconds``). The pretraining is
     :func:`~.line_following.training_run`'s, whose first steps are ``linefollow``'s,
     ``linefollow-deconv``'s and ``controllers``' training of the same learner and seed: run
-    together (``delayed-rl reproduce``), each trains once.
+    together (``delayed-rl bench all``), each trains once.
     """
     pretrain = config.run_steps(PRETRAIN_STEPS, QUICK_PRETRAIN_STEPS)
     run = QUICK_RUN_STEPS if config.quick else RUN_STEPS
