@@ -2,10 +2,10 @@
 
 - :mod:`.pools`: worker pools (joblib's ``loky`` processes, Ray, Dask), results as tasks finish;
 - :mod:`.progress`: the runs' progress on the terminal;
-- :mod:`.intervals`: means with their 95 % intervals.
+- :mod:`.intervals`: 95 % intervals of means and of shares.
 """
 
-from delayed_rl.parallel.intervals import mean_ci95, t975
+from delayed_rl.parallel.intervals import mean_ci95, t975, wilson_interval
 from delayed_rl.parallel.pools import (
     BACKENDS,
     MAX_SEED_COUNT,
@@ -27,4 +27,5 @@ __all__ = [
     "run_tasks",
     "t975",
     "tqdm_installed",
+    "wilson_interval",
 ]

@@ -36,6 +36,18 @@ def check_workers(name: str, workers: Any) -> int:
     return check_limit(name, check_int(name, workers, 1), MAX_WORKERS)
 
 
+def process_pool(processes: int) -> Any:
+    """A pool of ``processes`` local processes for calls made one by one (``submit``).
+
+    loky's ``ProcessPoolExecutor``, which carries closures to its processes (cloudpickle);
+    ``shutdown(wait=..., kill_workers=...)`` ends it. The experiments write their files with it
+    while the runs go on.
+    """
+    from joblib.externals.loky import ProcessPoolExecutor
+
+    return ProcessPoolExecutor(max_workers=check_workers("processes", processes))
+
+
 def run_tasks(
     run_task: Callable[[dict], dict],
     tasks: list[dict],

@@ -23,10 +23,7 @@ from delayed_rl.experiments.framework.experiment import (
     REFERENCE,
     Claim,
 )
-from delayed_rl.parallel.intervals import mean_ci95, t975
-
-#: The standard normal 0.975 quantile, of the Wilson interval.
-_Z975 = 1.959964
+from delayed_rl.parallel.intervals import mean_ci95, t975, wilson_interval
 
 
 def mean_ci_n(values: Sequence[float]) -> tuple[float, float, int]:
@@ -182,20 +179,6 @@ def direction_claim(
         f"wholly {side} it"
     )
     return Claim(quantity, thesis, mean, ci, n, verdict, criterion, note, low, high)
-
-
-def wilson_interval(k: int, n: int) -> tuple[float, float]:
-    """The Wilson score 95 % interval of a binomial share ``k / n`` (NaN for ``n = 0``).
-
-    >>> [round(x, 3) for x in wilson_interval(19, 20)]
-    [0.764, 0.991]
-    """
-    if n == 0:
-        return math.nan, math.nan
-    z2 = _Z975**2
-    centre = (k + z2 / 2) / (n + z2)
-    half = _Z975 / (n + z2) * math.sqrt(k * (n - k) / n + z2 / 4)
-    return max(0.0, centre - half), min(1.0, centre + half)
 
 
 def count_claim(

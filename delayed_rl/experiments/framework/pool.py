@@ -24,7 +24,7 @@ from delayed_rl._validation import check_bool
 from delayed_rl.experiments.framework.experiment import Config, Experiment, SharedRun, Summary
 from delayed_rl.experiments.framework.report import _json_default, write_outputs
 from delayed_rl.experiments.framework.task import Task
-from delayed_rl.parallel.pools import iter_tasks
+from delayed_rl.parallel.pools import iter_tasks, process_pool
 from delayed_rl.parallel.progress import RunProgress
 
 
@@ -419,9 +419,7 @@ class _Writer:
         self.on_done = on_done
         self.pool: Any = None
         if processes > 1:
-            from joblib.externals.loky import ProcessPoolExecutor
-
-            self.pool = ProcessPoolExecutor(max_workers=processes)
+            self.pool = process_pool(processes)
         self.writing: list[tuple[Any, _Plan, Summary]] = []
 
     def __enter__(self) -> _Writer:
