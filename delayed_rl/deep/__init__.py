@@ -11,17 +11,6 @@
 
 Everything here needs the ``sb3`` extra (torch and stable-baselines3), imported when a name is
 first used. ``docs/deep_rl.md`` has the wiring, the schedule and the measurements.
-
-Example:
-    >>> import gymnasium as gym
-    >>> from stable_baselines3 import SAC
-    >>> from delayed_rl.deep import DeconvolutionRewardModel, RelabelingReplayBuffer
-    >>> from delayed_rl.wrappers import RewardDelay
-    >>> env = RewardDelay(gym.make("Pendulum-v1"), 20)  # Poisson(20) delays, flushed
-    >>> model = DeconvolutionRewardModel(env.observation_space, env.action_space, delay=None,
-    ...                                  max_delay_estimate=60, seed=0)
-    >>> agent = SAC("MlpPolicy", env, replay_buffer_class=RelabelingReplayBuffer,
-    ...             replay_buffer_kwargs={"reward_model": model}, seed=0)
 """
 
 from __future__ import annotations

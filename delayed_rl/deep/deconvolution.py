@@ -1,25 +1,6 @@
 """The deconvolution reward model: ``R̂(s, a)`` fitted so that ``p ∗ R̂`` explains what arrived.
 
-With i.i.d. delays ``d ~ p``, the reward delivered at step ``t`` has the mean
-``E[y_t] = Σ_k p(k)·R(s_{t−k}, a_{t−k})``. :class:`DeconvolutionRewardModel` fits ``R̂`` by least
-squares on that sum, over windows of the history, with the weights of the wrapper's episode-end
-mode (``on_episode_end``, as :class:`~delayed_rl.wrappers.RewardDelay` takes it):
-
-- ``"flush"`` (the default): lags stay inside an episode, and the last step of an episode
-  collects the survival ``P(D ≥ k)`` of each earlier step's reward (all that was pending);
-- ``"drop"``: lags stay inside an episode and the tail is lost;
-- ``"carry"``: lags cross episode boundaries (pending rewards arrive in the next episode).
-
-An episode cut short by a reset (:meth:`~delayed_rl.deep.history.TransitionHistory.cut`) ends
-there under ``"flush"`` and ``"drop"`` with no tail collected: the reset discarded what was
-pending.
-
-``delay``: a known distribution (its pmf clipped to ``0..K``, the last lag holding the tail, as
-:func:`~delayed_rl.agents.expected_credit.credit_weights` makes it), or ``None`` to learn ``p``
-jointly, as a softmax over ``0..max_delay_estimate`` started uniform (``delay_pmf``, ``mean_delay``).
-A batch is ``ceil(batch_size / window)`` windows of ``window`` consecutive targets of one
-sub-env, drawn uniformly, each with the ``K`` steps before it: ``R̂`` is evaluated once a step and
-passed through the causal convolution with ``p``.
+:class:`DeconvolutionRewardModel` states the fit, its episode-end modes and its batches.
 """
 
 from __future__ import annotations
@@ -44,6 +25,27 @@ __all__ = ["DeconvolutionRewardModel"]
 
 class DeconvolutionRewardModel(RewardModel):
     """``R̂(s, a)`` learned by deconvolving the delivered rewards, with ``p`` known or learned.
+
+    With i.i.d. delays ``d ~ p``, the reward delivered at step ``t`` has the mean
+    ``E[y_t] = Σ_k p(k)·R(s_{t−k}, a_{t−k})``. :class:`DeconvolutionRewardModel` fits ``R̂`` by least
+    squares on that sum, over windows of the history, with the weights of the wrapper's episode-end
+    mode (``on_episode_end``, as :class:`~delayed_rl.wrappers.RewardDelay` takes it):
+
+    - ``"flush"`` (the default): lags stay inside an episode, and the last step of an episode
+      collects the survival ``P(D ≥ k)`` of each earlier step's reward (all that was pending);
+    - ``"drop"``: lags stay inside an episode and the tail is lost;
+    - ``"carry"``: lags cross episode boundaries (pending rewards arrive in the next episode).
+
+    An episode cut short by a reset (:meth:`~delayed_rl.deep.history.TransitionHistory.cut`) ends
+    there under ``"flush"`` and ``"drop"`` with no tail collected: the reset discarded what was
+    pending.
+
+    ``delay``: a known distribution (its pmf clipped to ``0..K``, the last lag holding the tail, as
+    :func:`~delayed_rl.agents.expected_credit.credit_weights` makes it), or ``None`` to learn ``p``
+    jointly, as a softmax over ``0..max_delay_estimate`` started uniform (``delay_pmf``, ``mean_delay``).
+    A batch is ``ceil(batch_size / window)`` windows of ``window`` consecutive targets of one
+    sub-env, drawn uniformly, each with the ``K`` steps before it: ``R̂`` is evaluated once a step and
+    passed through the causal convolution with ``p``.
 
     Args:
         observation_space: the env's observation space (any the base class takes).

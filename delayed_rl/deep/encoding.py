@@ -1,19 +1,6 @@
 """How a reward model stores the values of a Gymnasium space, and describes the space as JSON.
 
-A :class:`SpaceEncoding` is made from one space that SB3's algorithms take:
-
-- ``Box``: stored in its own shape, ``float32`` (an image, a ``uint8`` ``Box`` with bounds 0 and
-  255 as SB3's ``is_image_space`` tells, keeps ``uint8``: a quarter of the memory);
-- ``Discrete(n, start)``: one ``int64`` a value, shape ``(1,)`` (as SB3 stores it);
-- ``MultiDiscrete(nvec, start)``: ``int64``, the shape of ``nvec``;
-- ``MultiBinary(n)``: ``int8``, its shape;
-- ``Dict`` of those (not nested, as SB3's ``MultiInputPolicy``): a store per key.
-
-Any other space (``Tuple``, ``Graph``, ``Text``, ``Sequence``, a nested ``Dict``) is refused
-with a ``TypeError`` that names the argument, the space and what is supported. What the network
-reads from a stored value is :mod:`delayed_rl.deep.network`'s job. The encoding describes its
-space as JSON (:meth:`SpaceEncoding.to_dict`), so that a reward model file records its spaces
-without pickling them.
+:class:`SpaceEncoding` states the spaces it takes and how it stores each.
 """
 
 from __future__ import annotations
@@ -66,7 +53,22 @@ def _leaf_layout(name: str, space: Any) -> tuple[tuple[int, ...], np.dtype, int]
 
 
 class SpaceEncoding:
-    """How the values of one space are checked and stored (see the module docstring).
+    """How the values of one space are checked and stored.
+
+    A :class:`SpaceEncoding` is made from one space that SB3's algorithms take:
+
+    - ``Box``: stored in its own shape, ``float32`` (an image, a ``uint8`` ``Box`` with bounds 0 and
+      255 as SB3's ``is_image_space`` tells, keeps ``uint8``: a quarter of the memory);
+    - ``Discrete(n, start)``: one ``int64`` a value, shape ``(1,)`` (as SB3 stores it);
+    - ``MultiDiscrete(nvec, start)``: ``int64``, the shape of ``nvec``;
+    - ``MultiBinary(n)``: ``int8``, its shape;
+    - ``Dict`` of those (not nested, as SB3's ``MultiInputPolicy``): a store per key.
+
+    Any other space (``Tuple``, ``Graph``, ``Text``, ``Sequence``, a nested ``Dict``) is refused
+    with a ``TypeError`` that names the argument, the space and what is supported. What the network
+    reads from a stored value is :mod:`delayed_rl.deep.network`'s job. The encoding describes its
+    space as JSON (:meth:`SpaceEncoding.to_dict`), so that a reward model file records its spaces
+    without pickling them.
 
     Args:
         name: the argument the space came from (``"observation_space"``...), for messages.

@@ -1,22 +1,6 @@
 """The stream a reward model learns from: each sub-env's recent transitions, in order.
 
-A :class:`TransitionHistory` keeps the last ``capacity`` steps of ``n_envs`` sub-envs that step
-together (a vector env): per step and sub-env the observation, the action, the reward delivered
-and whether the episode ended there. It also keeps the finished episodes still wholly inside it
-(their sub-env, first step and length, and the sum of their delivered rewards), which the
-episode-sum baselines sample. Steps are counted from the first one added (``steps_added``);
-the history holds steps ``max(0, steps_added − capacity) .. steps_added − 1``.
-
-An episode the algorithm cut short by resetting its env mid-episode (SB3's ``learn()`` does, by
-default, when it starts again) ends at its last step added (:meth:`TransitionHistory.cut`). It
-is marked in ``episode_cut`` and is not a finished episode: under a reward delay the rewards
-still pending at the reset were lost, so its delivered sum is not its return.
-
-With ``keep_next`` it also keeps each step's next observation (``next_obs``: the one the step
-led to, the terminal one at an episode's end), for models that read ``s′``.
-
-``undelayed`` holds ``info["undelayed_reward"]`` where a step's ``info`` had it (NaN where not),
-for diagnostics only: nothing a model learns from reads it.
+:class:`TransitionHistory` keeps them, with the finished and the cut episodes.
 """
 
 from __future__ import annotations
@@ -37,6 +21,24 @@ MAX_HISTORY_BYTES = 2**34
 
 class TransitionHistory:
     """The last ``capacity`` steps of ``n_envs`` sub-envs, oldest overwritten first.
+
+    A :class:`TransitionHistory` keeps the last ``capacity`` steps of ``n_envs`` sub-envs that step
+    together (a vector env): per step and sub-env the observation, the action, the reward delivered
+    and whether the episode ended there. It also keeps the finished episodes still wholly inside it
+    (their sub-env, first step and length, and the sum of their delivered rewards), which the
+    episode-sum baselines sample. Steps are counted from the first one added (``steps_added``);
+    the history holds steps ``max(0, steps_added − capacity) .. steps_added − 1``.
+
+    An episode the algorithm cut short by resetting its env mid-episode (SB3's ``learn()`` does, by
+    default, when it starts again) ends at its last step added (:meth:`TransitionHistory.cut`). It
+    is marked in ``episode_cut`` and is not a finished episode: under a reward delay the rewards
+    still pending at the reset were lost, so its delivered sum is not its return.
+
+    With ``keep_next`` it also keeps each step's next observation (``next_obs``: the one the step
+    led to, the terminal one at an episode's end), for models that read ``s′``.
+
+    ``undelayed`` holds ``info["undelayed_reward"]`` where a step's ``info`` had it (NaN where not),
+    for diagnostics only: nothing a model learns from reads it.
 
     Args:
         observations: the observation space's encoding.

@@ -1,21 +1,7 @@
 """The default reward network: an MLP on an observation's and an action's features.
 
-What the network reads from a stored value (:class:`SpaceFeatures`), as SB3's default policies
-read it:
-
-- a non-image ``Box``: its entries, flattened, as floats;
-- an image (SB3's ``is_image_space``: a 3-d ``uint8`` ``Box`` on 0..255): divided by 255 and
-  passed through SB3's ``NatureCNN`` (``features_dim`` :data:`IMAGE_FEATURES`), as ``CnnPolicy``
-  and ``MultiInputPolicy`` do; channels-last images (the smallest axis last) are transposed
-  first. An image smaller than the CNN takes (:data:`MIN_CNN_SIDE` pixels a side) is flattened
-  like any ``Box``;
-- ``Discrete``: one-hot (from its ``start``); ``MultiDiscrete``: one one-hot an entry,
-  concatenated; ``MultiBinary``: its bits as floats;
-- ``Dict``: each key's features, concatenated in the space's key order (SB3's
-  ``CombinedExtractor``).
-
-The observation's and the action's features are concatenated and go through the MLP
-(``hidden_sizes``, ReLU between layers, one linear output).
+:class:`SpaceFeatures` reads a stored value as SB3's default policies do; :class:`RewardNetwork`
+concatenates the two and applies the MLP.
 """
 
 from __future__ import annotations
@@ -81,7 +67,20 @@ def _uses_cnn(encoding: SpaceEncoding) -> bool:
 
 
 class SpaceFeatures(nn.Module):
-    """The float features of a batch of stored values of one space (see the module docstring).
+    """The float features of a batch of stored values of one space.
+
+    It reads a stored value as SB3's default policies do:
+
+    - a non-image ``Box``: its entries, flattened, as floats;
+    - an image (SB3's ``is_image_space``: a 3-d ``uint8`` ``Box`` on 0..255): divided by 255 and
+      passed through SB3's ``NatureCNN`` (``features_dim`` :data:`IMAGE_FEATURES`), as ``CnnPolicy``
+      and ``MultiInputPolicy`` do; channels-last images (the smallest axis last) are transposed
+      first. An image smaller than the CNN takes (:data:`MIN_CNN_SIDE` pixels a side) is flattened
+      like any ``Box``;
+    - ``Discrete``: one-hot (from its ``start``); ``MultiDiscrete``: one one-hot an entry,
+      concatenated; ``MultiBinary``: its bits as floats;
+    - ``Dict``: each key's features, concatenated in the space's key order (SB3's
+      ``CombinedExtractor``).
 
     Args:
         encoding: the space's encoding.

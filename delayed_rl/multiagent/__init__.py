@@ -5,16 +5,6 @@ apply their single-agent namesakes' rules to every agent on its own; :func:`sb3_
 them to stable-baselines3, and :class:`CooperativeGridWorldEnv` is a small game to learn on.
 PettingZoo is imported when a wrapper is first used (the ``multiagent`` extra).
 ``docs/multiagent.md`` has the rules.
-
-Example:
-    >>> from pettingzoo.classic.rps.rps import parallel_env  # rock-paper-scissors
-    >>> from delayed_rl.delays import Constant
-    >>> from delayed_rl.multiagent import ParallelRewardDelay
-    >>> env = ParallelRewardDelay(parallel_env(), {"player_0": 0, "player_1": Constant(1)})
-    >>> _ = env.reset(seed=0)
-    >>> rewards = env.step({"player_0": 1, "player_1": 0})[1]  # paper beats rock
-    >>> rewards, env.step({"player_0": 0, "player_1": 0})[1]
-    ({'player_0': 1.0, 'player_1': 0.0}, {'player_0': 0.0, 'player_1': -1.0})
 """
 
 from __future__ import annotations
