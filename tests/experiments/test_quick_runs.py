@@ -15,8 +15,6 @@ from delayed_rl.experiments.framework.experiment import VERDICTS, running_averag
 from delayed_rl.experiments.framework.line_following import LineTask
 from delayed_rl.experiments.framework.training import greedy_average_reward, grid_env, train
 from delayed_rl.experiments.thesis.controllers import ControllerTask
-from delayed_rl.parallel.intervals import mean_ci95
-from delayed_rl.parallel.pools import run_tasks
 
 
 @pytest.mark.experiment
@@ -77,23 +75,6 @@ def test_mmq_gridworld_learns_in_pieces_as_in_one_run():
     assert pieces["optimal"] == bool(pieces["snapshot_optimal"][-1])
 
 
-@pytest.mark.cold_cache
-def test_results_do_not_depend_on_the_number_of_workers():
-    experiment = get_experiment("delay-sweep")
-    tasks = experiment.tasks(Config(quick=True, seeds=2, steps=3000))
-    one = run_tasks(experiment.run_task, tasks, 1, "loky")
-    two = run_tasks(experiment.run_task, tasks, 2, "loky")
-    for a, b in zip(one, two, strict=True):
-        np.testing.assert_array_equal(a["curve"], b["curve"])
-
-
-def test_mean_ci95_matches_the_t_interval():
-    mean, half = mean_ci95([1.0, 2.0, 3.0, 4.0])
-    assert mean == 2.5
-    assert half == pytest.approx(3.182 * np.std([1, 2, 3, 4], ddof=1) / 2, rel=0.02)
-    assert mean_ci95([5.0]) == (5.0, 0.0)
-
-
 def test_running_average_is_the_cumulative_mean():
     steps, values = running_average(np.array([1.0, 0.0, 2.0, 1.0]), points=4)
     np.testing.assert_array_equal(steps, [1, 2, 3, 4])
@@ -103,10 +84,6 @@ def test_running_average_is_the_cumulative_mean():
 @pytest.mark.parametrize(
     ("call", "error", "message"),
     [
-        (lambda: run_tasks(len, [], 1, "spark"), ValueError, "backend must be one of ('loky'"),
-        (lambda: run_tasks(len, [], 1, 3), TypeError, "backend must be one of"),
-        (lambda: run_tasks(len, [], 0, "loky"), ValueError, "workers must be an integer >= 1"),
-        (lambda: run_tasks(len, [], 2.0, "loky"), TypeError, "workers must be an integer >= 1"),
         (lambda: get_experiment("nope"), ValueError, "experiment must be one of ('delay-sweep'"),
         (lambda: get_experiment(None), TypeError, "experiment must be one of"),
         (lambda: running_average(np.ones(3), 0), ValueError, "points must be an integer >= 1"),
@@ -121,7 +98,6 @@ def test_running_average_is_the_cumulative_mean():
         (lambda: Config(steps=2**40 + 1), ValueError, "steps must be at most MAX_TIMESTEPS"),
         (lambda: Config(workers=10**6), ValueError, "workers must be at most MAX_WORKERS = 1024"),
         (lambda: Config(base_seed=2**63), ValueError, "base_seed must be at most MAX_SEED_VALUE"),
-        (lambda: run_tasks(len, [], 2000, "loky"), ValueError, "workers must be at most"),
     ],
 )
 def test_bad_runner_arguments(call, error, message):

@@ -107,14 +107,6 @@ def test_count_rule_reads_the_wilson_interval(k, n, verdict):
         assert claim.note.startswith(f"{k} of {n} seeds") and "Wilson" in claim.criterion
 
 
-def test_wilson_interval_values():
-    assert wilson_interval(19, 20) == pytest.approx((0.7639, 0.9911), abs=1e-4)
-    assert wilson_interval(0, 5) == pytest.approx((0.0, 0.4345), abs=1e-4)
-    assert wilson_interval(5, 5)[1] == 1.0
-    # 20 of 20 cannot show a share ≥ 0.95 at 95 % confidence
-    assert count_claim("q", "t", 20, 20, 0.95).verdict == "inconclusive"
-
-
 def _trend(slopes, noise):
     rng = np.random.default_rng(0)
     x = np.log10([1, 2, 5, 10, 20, 50])

@@ -1,0 +1,1 @@
+"""Tests of :mod:`delayed_rl.parallel`."""
