@@ -25,7 +25,6 @@ from delayed_rl.experiments.framework.claims import (
     range_claim,
     reference_row,
     trend_claim,
-    wilson_interval,
 )
 from delayed_rl.experiments.framework.experiment import VERDICTS, Claim, Config, Experiment, Summary
 from delayed_rl.experiments.framework.line_following import LineTask
@@ -42,6 +41,7 @@ from delayed_rl.experiments.thesis import (
 )
 from delayed_rl.experiments.thesis.controllers import ControllerTask
 from delayed_rl.experiments.thesis.mmq_gridworld import MMQGridTask
+from delayed_rl.parallel.intervals import wilson_interval
 
 
 # ---------------------------------------------------------------------- the rules

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from delayed_rl.experiments.framework.claims import count_claim
-from delayed_rl.parallel.intervals import mean_ci95, wilson_interval
+from delayed_rl.parallel.intervals import mean_ci95, t975, wilson_interval
 
 
 def test_mean_ci95_matches_the_t_interval():
@@ -22,3 +22,12 @@ def test_wilson_interval_values():
     assert wilson_interval(5, 5)[1] == 1.0
     # 20 of 20 cannot show a share ≥ 0.95 at 95 % confidence
     assert count_claim("q", "t", 20, 20, 0.95).verdict == "inconclusive"
+
+
+@pytest.mark.parametrize(
+    ("df", "quantile"),
+    [(1, 12.7062), (2, 4.3027), (10, 2.2281), (30, 2.0423), (31, 2.0395), (60, 2.0003),
+     (120, 1.9799), (10**6, 1.9600)],
+)  # fmt: skip
+def test_t975_is_students_quantile_in_the_table_and_beyond_it(df, quantile):
+    assert t975(df) == pytest.approx(quantile, abs=1.5e-3)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from delayed_rl.experiments import Config, get_experiment
-from delayed_rl.parallel.pools import run_tasks
+from delayed_rl.parallel.pools import MAX_WORKERS, check_workers, process_pool, run_tasks
 
 
 @pytest.mark.cold_cache
@@ -33,3 +33,30 @@ def test_bad_runner_arguments(call, error, message):
     with pytest.raises(error) as raised:
         call()
     assert str(raised.value).startswith(message)
+
+
+def test_check_workers_takes_1_to_max_workers_and_names_the_argument():
+    assert check_workers("workers", 1) == 1 and check_workers("workers", MAX_WORKERS) == 1024
+    with pytest.raises(ValueError, match="workers must be an integer >= 1, got 0"):
+        check_workers("workers", 0)
+    with pytest.raises(ValueError, match="workers must be at most MAX_WORKERS = 1024"):
+        check_workers("workers", 1025)
+    with pytest.raises(TypeError, match="workers"):
+        check_workers("workers", 2.0)
+
+
+@pytest.mark.cold_cache
+def test_a_process_pool_runs_closures_in_other_processes():
+    import os
+
+    offset = 5
+    pool = process_pool(2)
+    try:
+        done = [pool.submit(lambda x: (x + offset, os.getpid()), x) for x in range(4)]
+        results = [future.result(timeout=120) for future in done]
+    finally:
+        pool.shutdown(wait=True)
+    assert [value for value, _ in results] == [5, 6, 7, 8]
+    assert os.getpid() not in {pid for _, pid in results}
+    with pytest.raises(ValueError, match="processes must be an integer >= 1"):
+        process_pool(0)
