@@ -12,6 +12,7 @@ from delayed_rl import envs as _envs  # noqa: F401  (registers the env ids)
 from delayed_rl._version import __version__
 
 __all__ = ["FixedDelayQLearning", "MultipleModelQLearning", "QLearning", "__version__"]
+#: The thesis's agents, as shortcuts (every agent is in :mod:`delayed_rl.agents`, from its registry).
 _AGENTS = ("FixedDelayQLearning", "MultipleModelQLearning", "QLearning")
 
 

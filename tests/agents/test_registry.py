@@ -54,3 +54,13 @@ def test_the_command_line_and_the_sweeps_derive_from_it():
 def test_every_registered_agent_has_a_seeded_run():
     rows = _seeded_runs().AGENTS
     assert {class_name for _, class_name, _ in rows} == set(AGENTS.values())
+
+
+def test_the_packages_top_level_agents_are_registered_classes():
+    import delayed_rl
+
+    top = [name for name in delayed_rl.__all__ if name != "__version__"]
+    by_class = {class_name: key for key, class_name in AGENTS.items()}
+    assert top and set(top) <= set(by_class)
+    for name in top:
+        assert getattr(delayed_rl, name) is agent_class(by_class[name])
