@@ -26,7 +26,9 @@ class ParallelObservationDelay(ParallelDelayWrapper):
     ``docs/multiagent.md`` has the rules in full.
 
     ``info[agent]`` holds ``observation_age`` (the age of the observation shown, 0 for the
-    first) and ``arrived_observations`` (the ``(i, o_i)`` received at this step).
+    first) and ``arrived_observations`` (the ``(i, o_i)`` received at this step). An entry of
+    the observations that names no agent of ``possible_agents`` (PettingZoo allows extra keys,
+    such as a shared ``"common"`` one) is passed on as it is, undelayed.
 
     Args:
         env: a ``pettingzoo.ParallelEnv`` with ``possible_agents``.
@@ -39,8 +41,7 @@ class ParallelObservationDelay(ParallelDelayWrapper):
 
     Raises:
         TypeError, ValueError: for an invalid argument, as :class:`~delayed_rl.wrappers.ObservationDelay`
-            (the message names it); ``ValueError`` at a step where the env names an agent not
-            in ``possible_agents``.
+            (the message names it).
 
     Attributes:
         delays: each agent's distribution.
@@ -95,8 +96,7 @@ class ParallelObservationDelay(ParallelDelayWrapper):
         self._live.clear()
         shown = {}
         for agent, first in obs.items():
-            self.position(agent, "the env's observations")
-            shown[agent] = self._start(agent, first, infos)
+            shown[agent] = self._start(agent, first, infos) if agent in self.agent_index else first
         return shown, infos
 
     def step(self, actions: dict[Any, Any]):
@@ -105,8 +105,10 @@ class ParallelObservationDelay(ParallelDelayWrapper):
         infos = self.own_infos(infos)
         shown = {}
         for agent, made in obs.items():
+            if agent not in self.agent_index:  # not an agent's: shown as it is
+                shown[agent] = made
+                continue
             if agent not in self._live:  # joins the episode: its o_0
-                self.position(agent, "the env's observations")
                 shown[agent] = self._start(agent, made, infos)
                 continue
             age, seen, arrived = self.rules[agent].receive(

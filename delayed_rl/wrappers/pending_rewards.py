@@ -70,7 +70,8 @@ class PendingRewards:
         self._magnitude = np.zeros(num_envs)  # >= the sum of |r| pending: bounds every sum
         self.far: list[dict[int, float]] = [{} for _ in range(num_envs)]  # beyond the ring
         self._far_envs: set[int] = set()  # the envs whose ``far`` dict is not empty
-        self.rngs = [delay_rng(None) for _ in range(num_envs)]
+        # unseeded streams take their entropy at their first draw (:meth:`_stream`)
+        self.rngs: list[np.random.Generator | None] = [None] * num_envs
         self._block = np.zeros((_BLOCK, num_envs), dtype=np.int64)  # column i: env i's delays
         self._next = np.full(num_envs, _BLOCK, dtype=np.int64)  # _BLOCK: draw a new block
         self._sync: int | None = _BLOCK  # while every env is at the same ``_next``: that index
@@ -104,13 +105,19 @@ class PendingRewards:
         if self.num_envs and (self._next == self._next[0]).all():
             self._sync = int(self._next[0])
 
+    def _stream(self, i: int) -> np.random.Generator:
+        """Env ``i``'s delay generator; an unseeded one takes fresh entropy at its first draw."""
+        if self.rngs[i] is None:
+            self.rngs[i] = delay_rng(None)
+        return self.rngs[i]
+
     def _draw(self, active: np.ndarray, every: bool) -> np.ndarray:
         """This step's delays: the next of each active env's stream, 0 for the others."""
         if every and self._sync is not None:  # the common case: one row of the block
             if self._sync == _BLOCK:  # once every 1024 steps
                 for i in range(self.num_envs):
                     self._block[:, i] = draw_delays(
-                        self.delay, self.rngs[i], _BLOCK, self.max_delay
+                        self.delay, self._stream(i), _BLOCK, self.max_delay
                     )
                 self._sync = 0
             delays = self._block[self._sync].copy()
@@ -120,7 +127,7 @@ class PendingRewards:
         empty = active & (self._next == _BLOCK)
         if empty.any():  # once every 1024 steps of each env
             for i in np.flatnonzero(empty):
-                self._block[:, i] = draw_delays(self.delay, self.rngs[i], _BLOCK, self.max_delay)
+                self._block[:, i] = draw_delays(self.delay, self._stream(i), _BLOCK, self.max_delay)
             self._next[empty] = 0
         delays = np.where(active, self._block[np.minimum(self._next, _BLOCK - 1), self.rows], 0)
         self._next += active
@@ -200,7 +207,7 @@ class PendingRewards:
             self._block.copy(),
             self._next.copy(),
             self._sync,
-            [rng.bit_generator.state for rng in self.rngs],
+            [self._stream(i).bit_generator.state for i in range(self.num_envs)],
         )
 
     def _restore(self, saved: tuple) -> None:

@@ -99,12 +99,20 @@ class DelaySampler:
         self.seed(None)
 
     def seed(self, seed: int | None) -> None:
-        """Restart the delay stream from ``seed`` and discard delays drawn ahead."""
-        self.rng = delay_rng(seed, self.signal)
+        """Restart the delay stream from ``seed`` and discard delays drawn ahead.
+
+        ``None``: fresh entropy, taken when the first delay is drawn (as Gymnasium makes an
+        env's ``np_random`` at its first use), so that copies of an unseeded wrapper made before
+        it drew (SuperSuit's vector conversion pickles one env into every sub-env) draw
+        different delays.
+        """
+        self.rng = None if seed is None else delay_rng(seed, self.signal)
         self.block.clear()
 
     def refill(self) -> list[int]:
         """Draw the next block of delays into ``block`` (the same list, reversed for ``pop()``)."""
+        if self.rng is None:
+            self.rng = delay_rng(None, self.signal)
         self.block[:] = draw_delays(self.delay, self.rng, _BLOCK, self.max_delay)[::-1].tolist()
         return self.block
 

@@ -167,14 +167,28 @@ def test_the_delays_come_from_each_agents_own_seeded_stream():
     assert first["a"] != first["b"] != first["c"] != first["a"]
 
 
-def test_an_observation_from_an_unknown_agent_is_refused():
-    class Stranger(ScriptedParallelEnv):
+def test_an_observation_entry_that_names_no_agent_passes_undelayed():
+    """PettingZoo allows extra keys (a shared ``"common"`` entry): shown as they come."""
+
+    class Common(ScriptedParallelEnv):
+        def reset(self, seed=None, options=None):
+            obs, infos = super().reset(seed=seed, options=options)
+            self.shared = 0
+            return {**obs, "common": np.full(3, -1.0)}, infos
+
         def step(self, actions):
             out = super().step(actions)
-            out[0]["zed"] = np.zeros(3)
+            self.shared += 1
+            out[0]["common"] = np.full(3, float(self.shared))
             return out
 
-    env = ParallelObservationDelay(Stranger(ENDS), Poisson(1))
-    env.reset(seed=0)
-    with pytest.raises(ValueError, match="names agent 'zed', which is not one of possible_agents"):
-        env.step(dict.fromkeys(env.agents, 0))
+    env = ParallelObservationDelay(Common(ENDS), Poisson(5))
+    plain = ParallelObservationDelay(ScriptedParallelEnv(ENDS), Poisson(5))
+    obs, infos = env.reset(seed=0)
+    twin, _ = plain.reset(seed=0)
+    assert obs["common"].tolist() == [-1.0] * 3 and "common" not in infos
+    for t in range(1, 4):
+        obs, _, _, _, infos = env.step(dict.fromkeys(env.agents, 0))
+        twin = plain.step(dict.fromkeys(plain.agents, 0))[0]
+        assert obs["common"].tolist() == [float(t)] * 3 and "common" not in infos
+        assert all(np.array_equal(obs[a], twin[a]) for a in twin)  # the agents' are delayed

@@ -29,7 +29,7 @@ ENDS = {
     "d": (11, "terminated"),
 }
 JOINS = {"d": 3}
-#: "a" and "d" share a distribution (one buffer between them), the others have their own.
+#: "a" and "d" share a distribution (one line between them), the others have their own.
 DELAYS = {"a": Poisson(2.5), "b": Constant(3), "c": Uniform(0, 6), "d": Poisson(2.5)}
 KEYS = (
     "undelayed_reward",
@@ -224,6 +224,16 @@ def test_the_same_seed_gives_the_same_delays_and_another_seed_others():
         assert not np.array_equal(first[agent], other[agent])
     twin = ParallelRewardDelay(ScriptedParallelEnv(LONG), Poisson(3))
     assert all(np.array_equal(_delays(twin, 7, 200)[a], first[a]) for a in LONG)
+
+
+def test_copies_of_an_unseeded_wrapper_draw_their_own_delays():
+    """SuperSuit's vector conversion pickles one env into each sub-env, then resets unseeded."""
+    import pickle
+
+    original = ParallelRewardDelay(ScriptedParallelEnv(LONG), Poisson(3))
+    copies = [pickle.loads(pickle.dumps(original)) for _ in range(2)]
+    drawn = [_delays(copy, None, 100) for copy in copies]
+    assert all(not np.array_equal(drawn[0][a], drawn[1][a]) for a in LONG)
 
 
 def test_the_agents_streams_are_independent_and_follow_the_distribution():

@@ -867,3 +867,26 @@ def test_carry_and_drop_never_watch(mode):
 def test_a_delay_clipped_to_zero_is_not_watched():
     assert RewardDelay(_TerminalReward(), Poisson(5.0), max_delay=0)._watch is None
     assert RewardDelay(_TerminalReward(), Poisson(5.0), max_delay=1)._watch is not None
+
+
+def test_copies_of_an_unseeded_wrapper_draw_their_own_delays():
+    """Entropy is taken at the first draw, so copies made before it (SuperSuit's) differ."""
+    import copy
+
+    original = RewardDelay(gym.make("CartPole-v1"), Poisson(20.0))
+    twin = copy.deepcopy(original)
+    drawn = []
+    for env in (original, twin):
+        env.reset()
+        env.action_space.seed(0)
+        delays = []
+        for _ in range(30):
+            info = env.step(env.action_space.sample())[4]
+            delays.append(info["drawn_reward_delay"])
+        drawn.append(delays)
+    assert drawn[0] != drawn[1]
+    seeded = [copy.deepcopy(original) for _ in range(2)]
+    for env in seeded:
+        env.reset(seed=3)
+    steps = [[e.step(0)[4]["drawn_reward_delay"] for _ in range(30)] for e in seeded]
+    assert steps[0] == steps[1]  # a seed still gives the same delays

@@ -439,3 +439,16 @@ def test_carry_and_drop_never_watch_sub_envs(on_episode_end) -> None:
         for _ in range(200):
             env.step(env.action_space.sample())
     assert _trap_warnings(caught) == []
+
+
+def test_copies_of_an_unseeded_vector_wrapper_draw_their_own_delays() -> None:
+    import copy
+
+    original = VectorRewardDelay(make_vec(2, AutoresetMode.NEXT_STEP, p_end=0.0), Poisson(20.0))
+    twin = copy.deepcopy(original)
+    drawn = []
+    for env in (original, twin):
+        env.reset()
+        drawn.append([env.step(np.zeros(2, dtype=np.int64))[4]["drawn_reward_delay"].tolist()
+                      for _ in range(20)])  # fmt: skip
+    assert drawn[0] != drawn[1]
