@@ -14,7 +14,6 @@ says so.
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
@@ -98,8 +97,9 @@ def _state_change(state_change: bool | None, observation_space: Any) -> bool:
 class ReturnDecompositionRewardModel(RewardModel):
     """RRD: ``mean_{i ∈ I} R̂(s_i, a_i) ≈ G / T`` for random subsets ``I`` of episodes.
 
-    A batch is ``ceil(batch_size / subset_size)`` finished episodes (drawn as ``episode_draw``
-    says); from each of ``T`` steps, ``n = subset_size`` steps are drawn, without replacement
+    A batch is ``batch_size // subset_size`` finished episodes, at least one (the authors'
+    floor; below one they would draw none), drawn as ``episode_draw`` says; from each of ``T``
+    steps, ``n = subset_size`` steps are drawn, without replacement
     when ``n ≤ T`` and with replacement otherwise (as the authors draw). The loss is the mean
     over the batch's episodes of ``(mean_I R̂ − G / T)²`` (the *biased* loss: the squared error
     of a subset's mean also holds its sampling variance). With ``unbiased=True`` each episode's
@@ -116,7 +116,11 @@ class ReturnDecompositionRewardModel(RewardModel):
     Where it still differs from the authors' code: their reward network trains once per critic
     update and their SAC starts after 10k steps; here the model follows the
     :class:`~delayed_rl.deep.reward_model.RewardModel` schedule (``updates_per_step``,
-    ``warmup_updates``) and the algorithm its own ``learning_starts``.
+    ``warmup_updates``) and the algorithm its own ``learning_starts``. Their network learns from
+    SAC's whole buffer (10⁶ steps); this one from its own history, ``capacity`` steps (10⁵ by
+    default: pass ``capacity=1_000_000`` for theirs). Once the history has overwritten steps, an
+    episode that began at its oldest step is no longer drawn (its start is not known to be one),
+    where theirs keeps whole episodes until they are overwritten: one episode at the boundary.
 
     Args:
         observation_space: the env's observation space (any the base class takes).
@@ -206,7 +210,7 @@ class ReturnDecompositionRewardModel(RewardModel):
     def loss(self) -> torch.Tensor | None:
         """The mean over a batch's episodes of ``(mean_I R̂ − G / T)²`` (minus the variance term)."""
         history = self.history
-        count = math.ceil(self.batch_size / self.subset_size)
+        count = max(1, self.batch_size // self.subset_size)
         episodes = sample_episodes(self, count, self.episode_draw)
         if episodes is None:
             return None

@@ -160,38 +160,42 @@ class PendingRewards:
                 than float64 can hold.
         """
         rewards = np.asarray(rewards, dtype=np.float64)
-        if not np.all(np.isfinite(rewards)):
-            bad = np.flatnonzero(~np.isfinite(rewards)).tolist()
-            raise ValueError(
-                f"sub-envs {bad} returned non-finite rewards {rewards[bad].tolist()}; "
-                "the reward delay refuses to keep them"
-            )
         active = np.asarray(active, dtype=bool)
-        ended = np.asarray(ended, dtype=bool) & active
-        # Only sums of magnitudes near float64's range can overflow: then, and only then, the
-        # state is saved, to be put back if the step is refused.
-        magnitude = np.abs(rewards)
-        with np.errstate(over="ignore"):  # an infinite bound is risky too
+        every = bool(active.all())
+        ended = np.asarray(ended, dtype=bool)
+        if not every:
+            ended = ended & active
+        with np.errstate(over="ignore", invalid="ignore"):  # overflows are checked here
+            check = float(rewards.sum())  # one scalar test: NaN or inf if a reward is
+            if check - check and not np.isfinite(rewards).all():  # (x − x is 0 if x is finite)
+                bad = np.flatnonzero(~np.isfinite(rewards)).tolist()
+                raise ValueError(
+                    f"sub-envs {bad} returned non-finite rewards {rewards[bad].tolist()}; "
+                    "the reward delay refuses to keep them"
+                )
+            # Only sums of magnitudes near float64's range can overflow: then, and only then,
+            # the state is saved, to be put back if the step is refused (an infinite bound is
+            # risky too).
+            magnitude = np.abs(rewards)
             risky = float((self._magnitude + magnitude).max(initial=0.0)) >= _SAFE_MAGNITUDE
-        saved = self._save() if risky else None
-        try:
-            with np.errstate(over="ignore", invalid="ignore"):  # overflows are checked here
-                delivered, delays = self._push(rewards, active, magnitude)
+            saved = self._save() if risky else None
+            try:
+                delivered, delays = self._push(rewards, active, magnitude, every)
                 settled = None
-                if ended.any() and on_episode_end != "carry":
+                if on_episode_end != "carry" and ended.any():
                     settled = self.clear(ended)
                     if on_episode_end == "flush":
                         delivered = delivered + settled
-                        if not np.all(np.isfinite(delivered)):
+                        if not np.isfinite(delivered).all():
                             self._overflow(
                                 np.flatnonzero(~np.isfinite(delivered)),
                                 "the rewards delivered at the episode's last step (due then, "
                                 "plus the flushed rest)",
                             )
-        except ValueError:
-            if saved is not None:
-                self._restore(saved)
-            raise
+            except ValueError:
+                if saved is not None:
+                    self._restore(saved)
+                raise
         return delivered, delays, settled
 
     def _save(self) -> tuple:
@@ -229,13 +233,13 @@ class PendingRewards:
             rng.bit_generator.state = state
 
     def _push(
-        self, rewards: np.ndarray, active: np.ndarray, magnitude: np.ndarray
+        self, rewards: np.ndarray, active: np.ndarray, magnitude: np.ndarray, every: bool
     ) -> tuple[np.ndarray, np.ndarray]:
         """Schedule and deliver (:meth:`step`), the rewards known to be finite.
 
-        ``magnitude`` is ``|rewards|``, which :meth:`step` computed for its risk check.
+        ``magnitude`` is ``|rewards|``, which :meth:`step` computed for its risk check, and
+        ``every`` whether every env is active.
         """
-        every = bool(active.all())
         if not every:
             rewards = np.where(active, rewards, 0.0)
         delays = self._draw(active, every)

@@ -50,6 +50,26 @@ def _expected_terms(model, n, episodes_drawn):
     return terms
 
 
+@pytest.mark.parametrize(("batch_size", "n", "count"), [(5, 2, 2), (8, 2, 4), (3, 4, 1)])
+def test_a_batch_is_the_authors_floor_of_episodes_and_at_least_one(
+    monkeypatch, batch_size, n, count
+):
+    from delayed_rl.deep import return_decomposition
+
+    asked = []
+    real = return_decomposition.sample_episodes
+
+    def recorded(model, episodes, draw):
+        asked.append(episodes)
+        return real(model, episodes, draw)
+
+    monkeypatch.setattr(return_decomposition, "sample_episodes", recorded)
+    model = _model(subset_size=n, batch_size=batch_size)
+    _two_episodes(model)
+    model.loss()
+    assert asked == [count]
+
+
 @pytest.mark.parametrize("n", [2, 3])  # 3 > the 2-step episode: drawn with replacement there
 def test_the_biased_loss_is_the_subsets_mean_squared_error(n):
     model = _model(subset_size=n, batch_size=2 * n)
