@@ -15,11 +15,13 @@ are min–median–max over the repeats, beside the floor measured in the same r
 warms up.
 
 ``--env pursuit`` (the default) is SISL's ``pursuit_v5`` at its default size (8 pursuers, 16×16
-grid, 7×7×3 observations); ``--env light`` is a pure-Python env of 8 agents whose step costs a
-few µs, where the wrappers' own work is nearly all of the time (reported for information: the
-target is stated on pursuit, where an env does work).
+grid, 7×7×3 observations); ``--env rps`` is PettingZoo's rock-paper-scissors (2 agents, a step
+of tens of µs, most of it PettingZoo's own AEC-to-parallel conversion); ``--env light`` is a
+pure-Python env of 8 agents whose step costs a few µs, where the wrappers' own work is nearly
+all of the time (rps and light are reported for information: the target is stated on pursuit,
+where an env does work).
 
-    python benchmarks/multiagent_overhead.py [--env pursuit|light] [--steps 300] [--rounds 5]
+    python benchmarks/multiagent_overhead.py [--env pursuit|rps|light] [--steps 300] [--rounds 5]
         [--repeats 7] [--quick]
 """
 
@@ -97,7 +99,16 @@ def pursuit() -> ParallelEnv:
     return importlib.import_module("pettingzoo.sisl.pursuit_v5").parallel_env(max_cycles=500)
 
 
-ENVS: dict[str, Callable[[], ParallelEnv]] = {"pursuit": pursuit, "light": LightParallelEnv}
+def rps() -> ParallelEnv:
+    """PettingZoo's rock-paper-scissors (two agents): a cheap step behind PettingZoo's own wrappers."""
+    return importlib.import_module("pettingzoo.classic.rps_v2").parallel_env(max_cycles=500)
+
+
+ENVS: dict[str, Callable[[], ParallelEnv]] = {
+    "pursuit": pursuit,
+    "rps": rps,
+    "light": LightParallelEnv,
+}
 
 
 def make_stacks(make_env: Callable[[], ParallelEnv]) -> dict[str, ParallelEnv]:

@@ -66,6 +66,14 @@ def _check_action(space: gym.Space, action: Any, name: str) -> Any:
     Raises:
         ValueError: ``action`` is not in ``space``.
     """
+    # the common case, quickly: an int in a Discrete's range (what Discrete.contains tests;
+    # an int is immutable, so there is nothing to copy)
+    if (
+        type(action) is int
+        and type(space) is spaces.Discrete
+        and space.start <= action < space.start + space.n
+    ):
+        return action
     action = copy_sample(action)
     if not space.contains(action):
         raise ValueError(f"{name} must be an action of {space}, got {action!r}")
