@@ -503,20 +503,10 @@ def test_bench_takes_progress_flags(capsys):
     assert "--progress, --no-progress" in capsys.readouterr().out
 
 
-def test_bench_names_several_experiments_once_each_and_long_needs_all(monkeypatch, capsys):
-    import delayed_rl.experiments as experiments
-
-    seen = []
-
-    def record(chosen, *args, **kwargs):
-        seen.extend(experiment.name for experiment in chosen)
-        raise _Stop
-
-    monkeypatch.setattr(experiments, "get_experiment", lambda name: SimpleNamespace(name=name))
-    monkeypatch.setattr(experiments, "run_experiments", record)
+def test_bench_names_several_experiments_once_each_and_long_needs_all(chosen, capsys):
     with pytest.raises(_Stop):
         main(["bench", "roulette", "delay-sweep", "roulette"])
-    assert seen == ["roulette", "delay-sweep"]
+    assert chosen == ["roulette", "delay-sweep"]
     with pytest.raises(SystemExit) as exit_info:
         main(["bench", "roulette", "--long"])
     assert exit_info.value.code == 2
@@ -593,10 +583,9 @@ class _Stop(Exception):
     """Raised by a stand-in for ``run_experiments`` once it has seen what it was given."""
 
 
-@pytest.mark.parametrize(
-    ("argv", "has_long"), [(["bench", "all"], False), (["bench", "all", "--long"], True)]
-)
-def test_bench_all_leaves_the_long_experiments_to_long(monkeypatch, argv, has_long):
+@pytest.fixture
+def chosen(monkeypatch):
+    """The names of the experiments ``main`` hands to ``run_experiments``, which then stops."""
     import delayed_rl.experiments as experiments
 
     seen = []
@@ -607,10 +596,19 @@ def test_bench_all_leaves_the_long_experiments_to_long(monkeypatch, argv, has_lo
 
     monkeypatch.setattr(experiments, "get_experiment", lambda name: SimpleNamespace(name=name))
     monkeypatch.setattr(experiments, "run_experiments", record)
+    return seen
+
+
+@pytest.mark.parametrize(
+    ("argv", "has_long"), [(["bench", "all"], False), (["bench", "all", "--long"], True)]
+)
+def test_bench_all_leaves_the_long_experiments_to_long(chosen, argv, has_long):
+    import delayed_rl.experiments as experiments
+
     with pytest.raises(_Stop):
         main(argv)
-    assert set(seen) == set(experiments.NAMES if has_long else experiments.DEFAULT_NAMES)
-    assert ("deep-rl" in seen) is has_long
+    assert set(chosen) == set(experiments.NAMES if has_long else experiments.DEFAULT_NAMES)
+    assert ("deep-rl" in chosen) is has_long
 
 
 @pytest.mark.cold_cache
