@@ -92,6 +92,8 @@ class ParallelRewardDelay(ParallelDelayWrapper):
         return {agent: float(pending[i]) for i, agent in enumerate(self.agent_order)}
 
     def _pending(self) -> np.ndarray:
+        if len(self._groups) == 1:  # one distribution for every agent: its rows are in order
+            return self._groups[0][1].pending
         pending = np.zeros(len(self.agent_order))
         for rows, queue in self._groups:
             pending[rows] = queue.pending
@@ -150,18 +152,21 @@ class ParallelRewardDelay(ParallelDelayWrapper):
             sum(int(queue.clock.sum()) for _, queue in self._groups), emitted, ended
         ):
             self._watch = None
-        self._in_episode = (self._in_episode | active) & ~ended
-        pending = self._pending()
+        self._in_episode |= active
+        self._in_episode &= ~ended
+        # Python numbers once, read agent by agent below
+        delivered, delays, pending = delivered.tolist(), delays.tolist(), self._pending().tolist()
+        undelayed = emitted.tolist()
         key = _SETTLED_KEYS.get(self.on_episode_end)
         infos = self.own_infos(infos)
         delivered_rewards = {}
         for agent in rewards:
             i = self.agent_index[agent]
-            delivered_rewards[agent] = float(delivered[i])
+            delivered_rewards[agent] = delivered[i]
             info = infos.setdefault(agent, {})
-            info["undelayed_reward"] = float(emitted[i])
-            info["drawn_reward_delay"] = int(delays[i])
-            info["pending_reward"] = float(pending[i])
+            info["undelayed_reward"] = undelayed[i]
+            info["drawn_reward_delay"] = delays[i]
+            info["pending_reward"] = pending[i]
             if key is not None and ended[i]:
                 info[key] = float(settled[i])
         return obs, delivered_rewards, terminated, truncated, infos
