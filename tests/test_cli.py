@@ -599,6 +599,23 @@ def chosen(monkeypatch):
     return seen
 
 
+def test_bench_of_several_experiments_writes_their_index(monkeypatch, tmp_path, capsys):
+    import delayed_rl.experiments as experiments
+    from delayed_rl.experiments.framework.experiment import Claim, Summary
+
+    def summaries(chosen, config, out, progress, on_done):
+        costs = {"runs": 1, "shared_runs": 0, "run_seconds": 1.0}
+        return [Summary([Claim("q", "t", 0.0, 0.1, 2, "agrees")], [], extra=costs) for _ in chosen]
+
+    monkeypatch.setattr(experiments, "run_experiments", summaries)
+    assert main(["bench", "roulette", "delay-sweep", "--out", str(tmp_path)]) == 0
+    index = (tmp_path / "index.md").read_text()
+    assert "`roulette`" in index and "`delay-sweep`" in index
+    assert f"[bench] wrote {tmp_path / 'index.md'}" in capsys.readouterr().out
+    assert main(["bench", "roulette", "--out", str(tmp_path / "one")]) == 0
+    assert not (tmp_path / "one" / "index.md").exists()  # one experiment: no index
+
+
 @pytest.mark.parametrize(
     ("argv", "has_long"), [(["bench", "all"], False), (["bench", "all", "--long"], True)]
 )

@@ -95,11 +95,13 @@ class HindsightPolicy(MultiInputPolicy):
 
     Args:
         *args: SAC's ``MultiInputPolicy``'s positional arguments.
-        critic_input: ``"newest"`` or ``"made"`` (set by :class:`HindsightSAC`).
+        critic_input: ``"newest"`` or ``"made"``, set by :class:`HindsightSAC` (whose default
+            is ``"newest"``); ``"made"`` by default here, what a policy file saved before
+            ``critic_input`` existed holds.
         **kwargs: SAC's ``MultiInputPolicy``'s keyword arguments.
     """
 
-    def __init__(self, *args: Any, critic_input: str = "newest", **kwargs: Any):
+    def __init__(self, *args: Any, critic_input: str = "made", **kwargs: Any):
         self.critic_input = check_choice("critic_input", critic_input, CRITIC_INPUTS)
         super().__init__(*args, **kwargs)
 
@@ -173,6 +175,17 @@ class _Episode:
         self.received.setdefault(int(made), np.array(observation))
 
 
+def _saved_critic_input(path: Any, custom_objects: dict[str, Any] | None) -> bool:
+    """Whether the SB3 file at ``path`` records a ``critic_input`` (a file object is rewound)."""
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    start = path.tell() if hasattr(path, "tell") else None
+    data, _, _ = load_from_zip_file(path, custom_objects=custom_objects, device="cpu")
+    if start is not None:
+        path.seek(start)
+    return "critic_input" in (data or {})
+
+
 class HindsightSAC(SAC):
     """SAC with its actor on the delay-aware view and its critic on observations in hindsight.
 
@@ -211,8 +224,6 @@ class HindsightSAC(SAC):
 
     def __init__(self, policy: Any, env: Any, critic_input: str = "newest", **kwargs: Any):
         self.critic_input = check_choice("critic_input", critic_input, CRITIC_INPUTS)
-        # SB3's load() constructs without setting up, then sets the saved attributes
-        self._loading = not kwargs.get("_init_setup_model", True)
         if kwargs.get("replay_buffer_class") is not None:
             raise TypeError(
                 "HindsightSAC keeps its own replay buffer (the view with the hindsight "
@@ -229,9 +240,6 @@ class HindsightSAC(SAC):
 
     def _setup_model(self) -> None:
         view = check_view_space(self.observation_space)
-        if self._loading and "critic_input" not in self.policy_kwargs:
-            self.critic_input = "made"  # a file from before critic_input: its critic read "made"
-        self._loading = False
         self.policy_kwargs = {**self.policy_kwargs, "critic_input": self.critic_input}
         if self.replay_buffer is None:
             self.replay_buffer = HindsightReplayBuffer(
@@ -244,8 +252,29 @@ class HindsightSAC(SAC):
         self._max_age = int(view["age"].n) - 1
         super()._setup_model()
 
+    @classmethod
+    def load(  # noqa: D417 (SB3's arguments)
+        cls,
+        path: Any,
+        env: Any = None,
+        device: Any = "auto",
+        custom_objects: dict[str, Any] | None = None,
+        print_system_info: bool = False,
+        force_reset: bool = True,
+        **kwargs: Any,
+    ) -> HindsightSAC:
+        """SAC's ``load``; a file saved before ``critic_input`` existed loads as ``"made"``.
+
+        That file's critic read the observation made at each step, the only input then.
+        """
+        if "critic_input" not in kwargs and not _saved_critic_input(path, custom_objects):
+            kwargs["critic_input"] = "made"
+        return super().load(
+            path, env, device, custom_objects, print_system_info, force_reset, **kwargs
+        )
+
     def _excluded_save_params(self) -> list[str]:
-        return [*super()._excluded_save_params(), "_episodes", "_loading"]
+        return [*super()._excluded_save_params(), "_episodes"]
 
     def _setup_learn(
         self, total_timesteps: int, callback: Any = None, reset_num_timesteps: bool = True, *args

@@ -28,7 +28,7 @@ class ParallelObservationDelay(ParallelDelayWrapper):
     ``info[agent]`` holds ``observation_age`` (the age of the observation shown, 0 for the
     first) and ``arrived_observations`` (the ``(i, o_i)`` received at this step). An entry of
     the observations that names no agent of ``possible_agents`` (PettingZoo allows extra keys,
-    such as a shared ``"common"`` one) is passed on as it is, undelayed.
+    such as a shared ``"common"`` one) is passed on undelayed, copied.
 
     Args:
         env: a ``pettingzoo.ParallelEnv`` with ``possible_agents``.
@@ -96,7 +96,10 @@ class ParallelObservationDelay(ParallelDelayWrapper):
         self._live.clear()
         shown = {}
         for agent, first in obs.items():
-            shown[agent] = self._start(agent, first, infos) if agent in self.agent_index else first
+            if agent in self.agent_index:
+                shown[agent] = self._start(agent, first, infos)
+            else:  # not an agent's: shown as it is (a copy)
+                shown[agent] = copy_sample(first)
         return shown, infos
 
     def step(self, actions: dict[Any, Any]):
@@ -105,8 +108,8 @@ class ParallelObservationDelay(ParallelDelayWrapper):
         infos = self.own_infos(infos)
         shown = {}
         for agent, made in obs.items():
-            if agent not in self.agent_index:  # not an agent's: shown as it is
-                shown[agent] = made
+            if agent not in self.agent_index:  # not an agent's: shown as it is (a copy)
+                shown[agent] = copy_sample(made)
                 continue
             if agent not in self._live:  # joins the episode: its o_0
                 shown[agent] = self._start(agent, made, infos)

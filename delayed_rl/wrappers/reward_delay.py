@@ -546,7 +546,7 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
         return arrivals
 
     def _clear_pending(self) -> float:
-        """Empty the ring and return the exact sum that was in it (rounded once).
+        """Empty the pending rewards and return their exact sum (rounded once).
 
         Raises:
             ValueError: the sum is beyond float64's range.
@@ -556,7 +556,7 @@ class RewardDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
         return total
 
     def _empty(self) -> None:
-        """Empty the ring (its sum already taken, or not wanted)."""
+        """Empty the pending rewards (their sum already taken, or not wanted)."""
         self._due.clear()
         self._pending = 0.0
 

@@ -309,3 +309,10 @@ def test_newest_is_the_default_and_a_file_from_before_critic_input_loads_as_made
     )
     newest = HindsightSAC.load(tmp_path / "made.zip", env=view(Constant(1))[0], device="cpu")
     assert newest.critic_input == "made"  # a file that says its input keeps it
+    import io
+
+    stream = io.BytesIO((tmp_path / "old.zip").read_bytes())  # a file object, read twice
+    assert HindsightSAC.load(stream, env=view(Constant(1))[0], device="cpu").critic_input == "made"
+    deferred = HindsightSAC("MultiInputPolicy", env, critic_input="newest", _init_setup_model=False)
+    deferred._setup_model()  # set up later, as SB3 allows: the input given is kept
+    assert deferred.critic_input == deferred.policy.critic_input == "newest"

@@ -18,7 +18,7 @@ pytestmark = pytest.mark.sb3
 
 def test_the_full_run_has_every_setting_method_and_seed_and_shares_the_oracle():
     experiment = get_experiment("late-observations")
-    assert "late-observations" in LONG_NAMES  # reproduce --all, not the default reproduce
+    assert "late-observations" in LONG_NAMES  # bench all --long, not the default bench all
     tasks = experiment.tasks(Config(seeds=5))
     settings, methods = late_observations.SETTINGS, late_observations.SETTING_METHODS
     seeds = {name: min(5, setting.get("seeds", 5)) for name, setting in settings.items()}

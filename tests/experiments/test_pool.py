@@ -361,20 +361,20 @@ def test_an_experiment_without_run_task_runs_each_task_through_its_shared_run():
 @pytest.mark.parametrize(
     ("extras", "missing", "needs"),
     [
-        (
-            ("sb3",),
-            "stable_baselines3",
-            'torch and stable-baselines3: pip install "delayed-rl[sb3]"',
-        ),
-        (
-            ("sb3", "multiagent"),
-            "supersuit",
-            "torch, stable-baselines3, pettingzoo and supersuit: "
-            'pip install "delayed-rl[sb3,multiagent]"',
-        ),
+        (("one",), "fake_b", 'json and fake-b: pip install "delayed-rl[one]"'),
+        (("one", "two"), "fake_c", 'json, fake-b and fake-c: pip install "delayed-rl[one,two]"'),
+        (("two",), "fake_c", 'fake-c: pip install "delayed-rl[two]"'),
     ],
 )
 def test_a_missing_extra_is_named_before_any_task_is_made(monkeypatch, extras, missing, needs):
+    from delayed_rl.experiments.framework import experiment as framework
+
+    # stand-in extras, so that no real package is imported: json is there, fake-b and fake-c
+    # are made present below, and then the one that is missing
+    extra_packages = {"one": ("json", "fake-b"), "two": ("fake-c",)}
+    monkeypatch.setattr(framework, "EXTRA_PACKAGES", extra_packages)
+    for name in ("fake_b", "fake_c"):
+        monkeypatch.setitem(sys.modules, name, object())
     made = []
     experiment = dataclasses.replace(
         _experiment("needy", [1]), extras=extras, tasks=lambda config: made.append(config) or []
@@ -383,3 +383,8 @@ def test_a_missing_extra_is_named_before_any_task_is_made(monkeypatch, extras, m
     with pytest.raises(ImportError, match=re.escape(f"the needy experiment needs {needs}")):
         run_experiment(experiment, Config(seeds=1))
     assert made == []
+
+
+def test_an_unknown_extra_is_refused_by_name():
+    with pytest.raises(ValueError, match="extras.*must be one of .*'sb3'.*got 'sb4'"):
+        dataclasses.replace(_experiment("typo", [1]), extras=("sb4",))

@@ -140,7 +140,15 @@ def test_reference_rows_and_bad_verdicts():
 
 
 def test_criterion_lands_in_summary_json_and_report_md(tmp_path):
-    experiment = Experiment("fake", "Fig. 0", "a fake", lambda c: [], lambda t: {}, None, 1)
+    experiment = Experiment(
+        name="fake",
+        thesis="Fig. 0",
+        description="a fake",
+        tasks=lambda c: [],
+        run_task=lambda t: {},
+        summarize=lambda tasks, results, config: Summary([], []),
+        default_seeds=1,
+    )
     claims = [
         band_claim("value", "≈ 1", (1.0, 0.1, 3), 1.0, 0.5),
         count_claim("seeds", "most", 3, 4, 0.5),

@@ -17,6 +17,8 @@ from support import ScriptedDelay
 from delayed_rl.delays import Constant, Empirical, Geometric, Poisson, Uniform
 from delayed_rl.wrappers import (
     EPISODE_END_MODES,
+    ActionDelay,
+    ObservationDelay,
     PoissonRewardDelay,
     RewardDelay,
     reward_delay,
@@ -308,8 +310,8 @@ def test_carry_value_by_value() -> None:
     assert total == sum(rewards)
 
 
-def test_buffer_growth_keeps_pending_rewards_in_place() -> None:
-    """Delays far beyond the initial ring size (grown mid-stream) still land value by value."""
+def test_a_grown_schedule_keeps_pending_rewards_in_place() -> None:
+    """Delays far beyond the first schedule's reach (grown mid-stream) still land value by value."""
     delays = [100, 3, 300, 0, 1, 40, 5]
     rewards = [1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0]
     env = RewardDelay(ScriptedEnv(rewards), ScriptedDelay(delays, then=0, mean=0.0))
@@ -869,24 +871,25 @@ def test_a_delay_clipped_to_zero_is_not_watched():
     assert RewardDelay(_TerminalReward(), Poisson(5.0), max_delay=1)._watch is not None
 
 
-def test_copies_of_an_unseeded_wrapper_draw_their_own_delays():
+@pytest.mark.parametrize(
+    ("wrap", "key"),
+    [
+        (lambda env: RewardDelay(env, Poisson(20.0)), "drawn_reward_delay"),
+        (lambda env: ActionDelay(env, Poisson(20.0)), "drawn_action_delay"),
+        (lambda env: ObservationDelay(env, Poisson(20.0)), "observation_age"),
+    ],
+)
+def test_copies_of_an_unseeded_wrapper_draw_their_own_delays(wrap, key):
     """Entropy is taken at the first draw, so copies made before it (SuperSuit's) differ."""
     import copy
 
-    original = RewardDelay(gym.make("CartPole-v1"), Poisson(20.0))
-    twin = copy.deepcopy(original)
-    drawn = []
-    for env in (original, twin):
-        env.reset()
-        env.action_space.seed(0)
-        delays = []
-        for _ in range(30):
-            info = env.step(env.action_space.sample())[4]
-            delays.append(info["drawn_reward_delay"])
-        drawn.append(delays)
-    assert drawn[0] != drawn[1]
-    seeded = [copy.deepcopy(original) for _ in range(2)]
-    for env in seeded:
-        env.reset(seed=3)
-    steps = [[e.step(0)[4]["drawn_reward_delay"] for _ in range(30)] for e in seeded]
-    assert steps[0] == steps[1]  # a seed still gives the same delays
+    original = wrap(gym.make("delayed_rl/GridWorld-5x5-v0"))  # a continuing env: never ends
+
+    def delays(env, seed):
+        env.reset(seed=seed)
+        return [env.step(0)[4][key] for _ in range(40)]
+
+    first, second = (delays(copy.deepcopy(original), None) for _ in range(2))
+    assert first != second
+    again = [delays(copy.deepcopy(original), 3) for _ in range(2)]
+    assert again[0] == again[1]  # a seed still gives the same delays

@@ -68,7 +68,7 @@ def test_a_reward_that_is_not_a_real_scalar_is_a_type_error_naming_it(wrapper, r
     env.unwrapped.reward = reward
     with pytest.raises(TypeError, match=r"^reward must be a real scalar .*got .*episode step 1"):
         env.step(0)
-    env.unwrapped.reward = 2.0  # nothing was buffered for the refused step, no clock step taken
+    env.unwrapped.reward = 2.0  # nothing was scheduled for the refused step, no clock step taken
     _, second, _, _, info = env.step(0)
     assert first + second + info["pending_reward"] == 3.0
 

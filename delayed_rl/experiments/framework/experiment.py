@@ -216,7 +216,7 @@ def default_cost(task: Task) -> float:
     return 1e-6 * float(getattr(task, "steps", 1))
 
 
-@dataclass
+@dataclass(kw_only=True)
 class Experiment:
     """An experiment, the thesis's or beyond it.
 
@@ -265,7 +265,9 @@ class Experiment:
             try:
                 importlib.import_module(package.replace("-", "_"))
             except ImportError as error:
-                listed = ", ".join(packages[:-1]) + " and " + packages[-1]
+                listed = " and ".join(
+                    [", ".join(packages[:-1]), packages[-1]] if packages[1:] else packages
+                )
                 raise ImportError(
                     f"the {self.name} experiment needs {listed}: "
                     f'pip install "delayed-rl[{",".join(self.extras)}]"'
@@ -274,6 +276,8 @@ class Experiment:
     def __post_init__(self) -> None:
         if self.run_task is None and self.shared_run is None:
             raise TypeError(f"the {self.name} experiment needs a run_task or a shared_run")
+        for extra in self.extras:
+            check_choice("extras[]", extra, tuple(EXTRA_PACKAGES))
 
     def run_of(self, task: Task) -> SharedRun:
         """The run behind ``task``: its :attr:`shared_run`, else ``run_task`` on the task itself."""
