@@ -175,11 +175,27 @@ AGENTS = {
 }
 
 
+REFERENCE_TESTS = {
+    "QLearning": "test_q_learning_is_the_reference",
+    "FixedDelayQLearning": "test_fixed_delay_q_learning_is_the_reference",
+    "MultipleModelQLearning": "test_mmq_is_the_reference",
+    "ExpectedCreditQLearning": "test_expected_credit_is_the_reference",
+    "OracleQLearning": "test_oracle_is_the_reference",
+    "DeconvolutionQLearning": "test_deconvolution_is_q_learning_on_its_reward_model",
+}
+"""Each agent class's test against its rule in :mod:`delayed_rl.agents.reference`."""
+
+
 def test_every_registered_agent_has_a_reference_test_here():
-    """A new agent's rule gets a reference and a test in this module (its class imported here)."""
+    """A new agent's rule gets a reference and a test in this module, named here."""
+    import inspect
+
     from delayed_rl.agents.registry import AGENTS as REGISTERED
 
-    assert set(REGISTERED.values()) <= set(globals()), set(REGISTERED.values()) - set(globals())
+    assert set(REGISTERED.values()) <= set(REFERENCE_TESTS)
+    for class_name, test_name in REFERENCE_TESTS.items():
+        source = inspect.getsource(globals()[test_name])
+        assert class_name in source and "Reference" in source, test_name
 
 
 def _reference_for(agent):
