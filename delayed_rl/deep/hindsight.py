@@ -10,13 +10,16 @@ this learner: the docs' deep RL page (``docs/deep_rl.md``, "HindsightSAC").
 
 from __future__ import annotations
 
+import json
 import math
+import zipfile
 from typing import Any, ClassVar
 
 import numpy as np
 from gymnasium import spaces
 from stable_baselines3 import SAC
 from stable_baselines3.common.buffers import DictReplayBuffer
+from stable_baselines3.common.save_util import open_path
 from stable_baselines3.common.torch_layers import CombinedExtractor
 from stable_baselines3.sac.policies import Actor, ContinuousCritic, MultiInputPolicy
 
@@ -175,15 +178,21 @@ class _Episode:
         self.received.setdefault(int(made), np.array(observation))
 
 
-def _saved_critic_input(path: Any, custom_objects: dict[str, Any] | None) -> bool:
-    """Whether the SB3 file at ``path`` records a ``critic_input`` (a file object is rewound)."""
-    from stable_baselines3.common.save_util import load_from_zip_file
+def _saved_critic_input(path: Any) -> bool:
+    """Whether the SB3 file at ``path`` records a ``critic_input`` (a file object is rewound).
 
-    start = path.tell() if hasattr(path, "tell") else None
-    data, _, _ = load_from_zip_file(path, custom_objects=custom_objects, device="cpu")
-    if start is not None:
-        path.seek(start)
-    return "critic_input" in (data or {})
+    Only the file's ``data`` entry (SB3's JSON of the saved attributes) is read, not its tensors.
+    """
+    file = open_path(path, "r", verbose=0, suffix="zip")  # ``path`` itself when a file object
+    start = file.tell()
+    try:
+        with zipfile.ZipFile(file) as archive:
+            return "critic_input" in json.loads(archive.read("data"))
+    finally:
+        if file is path:
+            file.seek(start)
+        else:
+            file.close()
 
 
 class HindsightSAC(SAC):
@@ -267,7 +276,7 @@ class HindsightSAC(SAC):
 
         That file's critic read the observation made at each step, the only input then.
         """
-        if "critic_input" not in kwargs and not _saved_critic_input(path, custom_objects):
+        if "critic_input" not in kwargs and not _saved_critic_input(path):
             kwargs["critic_input"] = "made"
         return super().load(
             path, env, device, custom_objects, print_system_info, force_reset, **kwargs

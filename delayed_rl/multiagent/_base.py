@@ -11,7 +11,7 @@ from pettingzoo.utils import BaseParallelWrapper
 from delayed_rl._validation import check_int
 from delayed_rl.delays import Delay
 from delayed_rl.multiagent._agents import agent_seed, delay_record, per_agent_delays
-from delayed_rl.wrappers._spec import json_safe
+from delayed_rl.wrappers._spec import record_arguments
 from delayed_rl.wrappers.reward_delay import DelaySampler, check_max_delay
 
 __all__ = ["ParallelDelayWrapper", "check_parallel_env"]
@@ -78,10 +78,9 @@ class ParallelDelayWrapper(BaseParallelWrapper, gym.utils.RecordConstructorArgs)
         record: dict[str, Any],
     ):
         named = getattr(env, "possible_agents", None) or ()
-        record = {"delay": delay_record(delay, named), "max_delay": json_safe(max_delay), **record}
         agents = check_parallel_env(env)
         # first: the first call records (BaseParallelWrapper's own super().__init__() is another)
-        gym.utils.RecordConstructorArgs.__init__(self, **record)
+        record_arguments(self, delay=delay_record(delay, named), max_delay=max_delay, **record)
         BaseParallelWrapper.__init__(self, env)
         self.agent_order = agents
         self.agent_index = {agent: i for i, agent in enumerate(agents)}

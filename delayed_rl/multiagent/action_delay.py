@@ -11,7 +11,6 @@ from delayed_rl.delays import Delay
 from delayed_rl.multiagent._agents import per_agent_actions
 from delayed_rl.multiagent._base import ParallelDelayWrapper
 from delayed_rl.wrappers._samples import as_action, copy_sample
-from delayed_rl.wrappers._spec import json_safe
 from delayed_rl.wrappers.action_delay import ActionLine, _check_action, neutral_action
 
 __all__ = ["ParallelActionDelay"]
@@ -86,7 +85,7 @@ class ParallelActionDelay(ParallelDelayWrapper):
         initial_action: Any = None,
         max_delay: int | None = None,
     ):
-        super().__init__(env, delay, max_delay, {"initial_action": json_safe(initial_action)})
+        super().__init__(env, delay, max_delay, {"initial_action": initial_action})
         self.initial_actions = per_agent_actions(
             initial_action, self.agent_order, self.env.action_space, _initial_action
         )

@@ -60,8 +60,9 @@ def json_safe(value: Any) -> Any:
 def record_arguments(wrapper: gym.utils.RecordConstructorArgs, **arguments: Any) -> None:
     """Record a delay wrapper's constructor ``arguments`` for its env spec, in JSON form.
 
-    A ``delay`` argument is recorded as :func:`~delayed_rl.delays.delay_spec` describes it, and
-    every argument through :func:`json_safe`, so ``EnvSpec.to_json`` writes the spec and
+    A ``delay`` argument is recorded as :func:`~delayed_rl.delays.delay_spec` describes it (a
+    description, or a mapping of them per agent, stays as it is), and every argument through
+    :func:`json_safe`, so ``EnvSpec.to_json`` writes the spec and
     ``gym.make`` reads it back. Call it first in ``__init__``: the first call records.
     """
     from delayed_rl.delays import delay_spec

@@ -64,3 +64,8 @@ def test_the_packages_top_level_agents_are_registered_classes():
     assert top and set(top) <= set(by_class)
     for name in top:
         assert getattr(delayed_rl, name) is agent_class(by_class[name])
+
+
+def test_the_options_train_requires_are_options_it_takes():
+    for key, entry in REGISTRY.items():
+        assert set(entry.train_required) <= set(entry.train_options or ()), key

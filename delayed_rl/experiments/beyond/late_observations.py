@@ -322,8 +322,9 @@ def _level_label(controller: str) -> str:
     return f"{LABELS[controller]}: mean"
 
 
-COLOURS = method_colours(LABELS) | {
-    _level_label(method): method_colours(LABELS)[LABELS[method]] for method in CONTROLLERS
+_METHOD_COLOURS = method_colours(LABELS)
+COLOURS = _METHOD_COLOURS | {
+    _level_label(method): _METHOD_COLOURS[LABELS[method]] for method in CONTROLLERS
 }
 """Each method's colour in every figure, the controllers' levels in their methods' colours."""
 

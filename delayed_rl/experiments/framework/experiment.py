@@ -265,9 +265,9 @@ class Experiment:
             try:
                 importlib.import_module(package.replace("-", "_"))
             except ImportError as error:
-                listed = " and ".join(
-                    [", ".join(packages[:-1]), packages[-1]] if packages[1:] else packages
-                )
+                listed = packages[-1]
+                if len(packages) > 1:
+                    listed = f"{', '.join(packages[:-1])} and {listed}"
                 raise ImportError(
                     f"the {self.name} experiment needs {listed}: "
                     f'pip install "delayed-rl[{",".join(self.extras)}]"'
