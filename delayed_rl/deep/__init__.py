@@ -18,6 +18,7 @@ from __future__ import annotations
 from delayed_rl._lazy import lazy_attributes
 
 __all__ = [
+    "GUIDANCE_BUFFERS",
     "REWARD_MODELS",
     "DeconvolutionRewardModel",
     "HindsightSAC",
@@ -41,6 +42,9 @@ REWARD_MODELS = (
     "ReturnRegressionRewardModel",
 )
 """The reward model classes a mapping's ``type`` names (known without importing torch)."""
+
+GUIDANCE_BUFFERS = ("IRCRReplayBuffer",)
+"""The replay buffers that compute the rewards they hand out themselves, with no reward model."""
 
 _HOMES = {
     "DeconvolutionRewardModel": "deconvolution",

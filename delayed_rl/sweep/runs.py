@@ -106,14 +106,18 @@ def make_model(config: Mapping[str, Any], env: gym.Env) -> Any:
 def relabeling_buffer(
     name: str, observation_space: Any, model: dict[str, Any], kwargs: Mapping[str, Any]
 ) -> dict[str, Any]:
-    """The SB3 arguments that give algorithm ``name`` a relabelling buffer with ``model``.
+    """The SB3 arguments that give algorithm ``name`` the buffer that relabels with ``model``.
 
     On-policy algorithms (:data:`~delayed_rl.sweep.schema.SB3_ON_POLICY`) get a rollout
     buffer, the others a replay buffer; each the ``Dict`` kind for a ``Dict`` observation space.
+    A ``model`` whose ``type`` is a guidance buffer (:data:`~delayed_rl.deep.GUIDANCE_BUFFERS`)
+    is that replay buffer, its other keys the buffer's arguments.
 
     Raises:
         ValueError: ``kwargs`` already choose the buffer.
     """
+    from delayed_rl import deep
+
     on_policy = name.removeprefix(SB3_PREFIX) in SB3_ON_POLICY
     kind = "rollout" if on_policy else "replay"
     for key in (f"{kind}_buffer_class", f"{kind}_buffer_kwargs"):
@@ -122,8 +126,12 @@ def relabeling_buffer(
                 f"an agent with a reward_model must not set {key}: the reward model brings its "
                 "own buffer"
             )
-    from delayed_rl import deep
-
+    if model["type"] in deep.GUIDANCE_BUFFERS:
+        settings = {key: value for key, value in model.items() if key != "type"}
+        return {
+            f"{kind}_buffer_class": getattr(deep, model["type"]),
+            f"{kind}_buffer_kwargs": settings,
+        }
     prefix = "RelabelingDict" if isinstance(observation_space, gym.spaces.Dict) else "Relabeling"
     buffer = getattr(deep, f"{prefix}{'Rollout' if on_policy else 'Replay'}Buffer")
     return {f"{kind}_buffer_class": buffer, f"{kind}_buffer_kwargs": {"reward_model": model}}
@@ -200,10 +208,12 @@ def train(config: Mapping[str, Any]) -> tuple[Any, float]:
         tally = UndelayedRewardTally(make_env(config))
         model = make_model(config, tally)
         callback = None
-        if "reward_model" in config["agent"]:
-            from delayed_rl.deep import RewardModelCallback
+        reward_model = config["agent"].get("reward_model")
+        if reward_model is not None:
+            from delayed_rl.deep import GUIDANCE_BUFFERS, RewardModelCallback
 
-            callback = RewardModelCallback()
+            if reward_model["type"] not in GUIDANCE_BUFFERS:
+                callback = RewardModelCallback()
         model.learn(total_timesteps=config["steps"], callback=callback)
         return model, tally.mean
     model = make_model(config, make_env(config))

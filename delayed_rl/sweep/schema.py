@@ -83,8 +83,9 @@ class SweepAgent:
             in per delay.
         steps: its training steps (``None``: the env's, else the sweep's).
         envs: the labels of the envs it runs on (``None``: every env).
-        reward_model: an SB3 agent's reward model from :mod:`delayed_rl.deep`, as the mapping
-            the sweep file gives (``None``: the delivered rewards, raw).
+        reward_model: an SB3 agent's reward model from :mod:`delayed_rl.deep`, or a replay
+            buffer that computes its own rewards, as the mapping the sweep file gives
+            (``None``: the delivered rewards, raw).
     """
 
     name: str
@@ -387,9 +388,11 @@ def _parse_agent(where: str, entry: Any) -> SweepAgent:
 def _reward_model(where: str, name: str, value: Any) -> dict[str, Any] | None:
     """An SB3 agent's ``reward_model`` mapping, checked as far as it can be without torch.
 
-    Its settings are checked when :func:`~delayed_rl.sweep.runs.check_sweep` builds the agent.
+    ``type`` names a reward model class, or a replay buffer that computes its own rewards
+    (:data:`~delayed_rl.deep.GUIDANCE_BUFFERS`, for off-policy algorithms only). Its settings
+    are checked when :func:`~delayed_rl.sweep.runs.check_sweep` builds the agent.
     """
-    from delayed_rl.deep import REWARD_MODELS
+    from delayed_rl.deep import GUIDANCE_BUFFERS, REWARD_MODELS
 
     if value is None:
         return None
@@ -398,14 +401,22 @@ def _reward_model(where: str, name: str, value: Any) -> dict[str, Any] | None:
             f"{where} is for stable-baselines3 agents (sb3:...): the library's agent {name!r} "
             "learns from the delayed rewards itself"
         )
+    kinds = (*REWARD_MODELS, *GUIDANCE_BUFFERS)
     model = dict(_plain(where, _mapping(where, value, "a mapping with 'type'")))
     if "type" not in model:
-        raise ValueError(f"{where} must name the model's class in 'type', one of {REWARD_MODELS}")
+        raise ValueError(f"{where} must name the model's class in 'type', one of {kinds}")
     kind = _text(f"{where}.type", model["type"])
-    if kind not in REWARD_MODELS:
-        close = difflib.get_close_matches(kind, REWARD_MODELS, n=1)
+    if kind not in kinds:
+        close = difflib.get_close_matches(kind, kinds, n=1)
+        close = close or [k for k in kinds if k.lower().startswith(kind.lower())]  # "IRCR"
         hint = f"; did you mean {close[0]!r}?" if close else ""
-        raise ValueError(f"{where}.type must be one of {REWARD_MODELS}, got {kind!r}{hint}")
+        raise ValueError(f"{where}.type must be one of {kinds}, got {kind!r}{hint}")
+    if kind in GUIDANCE_BUFFERS and name.removeprefix(SB3_PREFIX) in SB3_ON_POLICY:
+        off_policy = [SB3_PREFIX + a for a in SB3_ALGORITHMS if a not in SB3_ON_POLICY]
+        raise ValueError(
+            f"{where}.type {kind!r} is a replay buffer, for the off-policy algorithms "
+            f"({', '.join(off_policy)}), got the on-policy {name!r}"
+        )
     if "seed" in model:
         raise ValueError(f"{where} must not set 'seed': the run's seed seeds the model")
     _check_agent_kwargs(where, name, {k: v for k, v in model.items() if k != "type"})

@@ -848,6 +848,7 @@ def test_importing_the_package_imports_no_torch():
     assert found["names"] == sorted(
         [
             "DeconvolutionRewardModel",
+            "GUIDANCE_BUFFERS",
             "HindsightSAC",
             "IRCRReplayBuffer",
             "REWARD_MODELS",

@@ -511,6 +511,11 @@ REWARD_MODEL_SWEEP = {
             "kwargs": {"n_steps": 64, "batch_size": 32, "n_epochs": 1},
             "reward_model": {"type": "ReturnDecompositionRewardModel", "hidden_sizes": [8]},
         },
+        {
+            "name": "sb3:SAC",
+            "kwargs": {"learning_starts": 90, "batch_size": 16},  # two episodes first
+            "reward_model": {"type": "IRCRReplayBuffer", "heap_episodes": 2},
+        },
     ],
     "envs": [{"id": "Pendulum-v1", "kwargs": {"max_episode_steps": 40}}],
     "delays": [3],
@@ -527,10 +532,11 @@ def test_a_reward_model_is_checked_and_named_in_the_labels():
         "sb3:SAC",
         "sb3:SAC+DeconvolutionRewardModel",
         "sb3:PPO+ReturnDecompositionRewardModel",
+        "sb3:SAC+IRCRReplayBuffer",
     ]
     assert "reward_model" not in runs[0]["config"]["agent"]  # a plain run keeps its run_id
     assert runs[1]["config"]["agent"]["reward_model"]["delay"] == "$delay"
-    assert len({r["run_id"] for r in runs}) == 3
+    assert len({r["run_id"] for r in runs}) == 4
 
 
 @pytest.mark.parametrize(
@@ -541,11 +547,24 @@ def test_a_reward_model_is_checked_and_named_in_the_labels():
         ({"type": "DeconvolutionRewardModel", "seed": 1}, ValueError, "must not set 'seed'"),
         ({"type": "DeconvolutionRewardModel", "delay": "$lag"}, ValueError, "placeholders"),
         ("DeconvolutionRewardModel", TypeError, r"agents\[0\].reward_model"),
+        ({"type": "IRCR"}, ValueError, "did you mean 'IRCRReplayBuffer'"),
+        ({"type": "IRCRReplayBuffer", "seed": 1}, ValueError, "must not set 'seed'"),
     ],
 )
 def test_a_bad_reward_model_is_refused_by_field(model, error, match):
     data = {**REWARD_MODEL_SWEEP, "agents": [{"name": "sb3:SAC", "reward_model": model}]}
     with pytest.raises(error, match=match):
+        parse_sweep(data)
+
+
+@pytest.mark.parametrize("algorithm", ["sb3:PPO", "sb3:A2C"])
+def test_a_guidance_buffer_is_for_off_policy_algorithms_only(algorithm):
+    data = tiny(agents=[{"name": algorithm, "reward_model": {"type": "IRCRReplayBuffer"}}])
+    message = (
+        r"agents\[0\].reward_model.type 'IRCRReplayBuffer' is a replay buffer, for the off-policy "
+        rf"algorithms \(sb3:DDPG, sb3:DQN, sb3:SAC, sb3:TD3\), got the on-policy '{algorithm}'"
+    )
+    with pytest.raises(ValueError, match=message):
         parse_sweep(data)
 
 
@@ -575,6 +594,11 @@ def test_a_sweep_with_reward_models_runs_and_repeats(tmp_path):
     taken["agents"][1]["kwargs"]["replay_buffer_kwargs"] = {}
     with pytest.raises(ValueError, match="must not set replay_buffer_kwargs"):
         check_sweep(parse_sweep(taken))
+    # a guidance buffer's settings are its own arguments, checked alike
+    bad = copy.deepcopy(REWARD_MODEL_SWEEP)
+    bad["agents"][3]["reward_model"]["heap_episodes"] = 0
+    with pytest.raises(ValueError, match="heap_episodes must be an integer in"):
+        check_sweep(parse_sweep(bad))
 
 
 # ---------------------------------------------------------------------------------- the CLI
