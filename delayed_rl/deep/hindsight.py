@@ -199,7 +199,7 @@ class HindsightSAC(SAC):
     """SAC with its actor on the delay-aware view and its critic on observations in hindsight.
 
     Args:
-        policy: ``"MultiInputPolicy"`` or ``"MlpPolicy"`` (both :class:`HindsightPolicy`), or
+        policy: ``"MultiInputPolicy"`` (:class:`HindsightPolicy`: the view is a ``Dict``), or
             the class.
         env: a :class:`~delayed_rl.wrappers.DelayAwareObservation` env (its ``Dict``, not
             flattened), or a vector env of them.
@@ -221,18 +221,23 @@ class HindsightSAC(SAC):
     Raises:
         TypeError: an env that is not a view; a ``replay_buffer_class``; a ``critic_input``
             that is not a string.
-        ValueError: ``optimize_memory_usage``, ``n_steps > 1``, an unknown ``critic_input``.
+        ValueError: a policy name but ``"MultiInputPolicy"``, ``optimize_memory_usage``,
+            ``n_steps > 1``, an unknown ``critic_input``.
 
     ``docs/deep_rl.md`` ("HindsightSAC") states the rule, what the learner may read and when.
     """
 
     policy_aliases: ClassVar[dict[str, type]] = {
         "MultiInputPolicy": HindsightPolicy,
-        "MlpPolicy": HindsightPolicy,
     }
 
     def __init__(self, policy: Any, env: Any, critic_input: str = "newest", **kwargs: Any):
         self.critic_input = check_choice("critic_input", critic_input, CRITIC_INPUTS)
+        if isinstance(policy, str) and policy not in self.policy_aliases:
+            raise ValueError(
+                f"policy must be 'MultiInputPolicy' (HindsightPolicy: the view is a Dict) or a "
+                f"policy class, got {policy!r}"
+            )
         if kwargs.get("replay_buffer_class") is not None:
             raise TypeError(
                 "HindsightSAC keeps its own replay buffer (the view with the hindsight "

@@ -221,7 +221,7 @@ def test_what_is_not_a_view_or_sacs_own_buffer_is_refused():
     from delayed_rl.deep import HindsightSAC
 
     with pytest.raises(TypeError, match="DelayAwareObservation"):
-        HindsightSAC("MlpPolicy", gym.make("Pendulum-v1"), device="cpu")
+        HindsightSAC("MultiInputPolicy", gym.make("Pendulum-v1"), device="cpu")
     env, _ = view(Constant(1))
     with pytest.raises(TypeError, match="replay_buffer_class"):
         HindsightSAC("MultiInputPolicy", env, replay_buffer_class=ReplayBuffer)
@@ -229,6 +229,8 @@ def test_what_is_not_a_view_or_sacs_own_buffer_is_refused():
         HindsightSAC("MultiInputPolicy", env, n_steps=3)
     with pytest.raises(ValueError, match="optimize_memory_usage"):
         HindsightSAC("MultiInputPolicy", env, optimize_memory_usage=True)
+    with pytest.raises(ValueError, match="policy must be 'MultiInputPolicy'.*got 'MlpPolicy'"):
+        HindsightSAC("MlpPolicy", env, device="cpu")
 
 
 # ---------------------------------------------------------------------- critic_input="newest"
