@@ -30,7 +30,7 @@ def _env() -> gym.Env:
     return gym.make("delayed_rl/GridWorld-9x9-v0", reward_delay=LAMBDA)
 
 
-AGENTS: dict[str, Callable[[], TabularAgent]] = {
+FACTORIES: dict[str, Callable[[], TabularAgent]] = {
     "MMQ, 51 models": lambda: MultipleModelQLearning(
         _env(), max_delay_estimate=50, q_init=25.0, seed=1
     ),
@@ -63,11 +63,11 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=1_000_000)
     parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args()
-    for make in AGENTS.values():  # load the compiled code once before timing
+    for make in FACTORIES.values():  # load the compiled code once before timing
         make().learn(5_000)
-    seconds: dict[str, list[float]] = {name: [] for name in AGENTS}
+    seconds: dict[str, list[float]] = {name: [] for name in FACTORIES}
     for _ in range(args.repeats):
-        for name, make in AGENTS.items():
+        for name, make in FACTORIES.items():
             seconds[name].append(time_run(make, args.steps))
     reference = seconds["MMQ, 51 models"]
     print(f"GridWorld-9x9, Poisson({LAMBDA}), {args.steps:,} steps, {args.repeats} repeats")

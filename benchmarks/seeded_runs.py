@@ -7,7 +7,9 @@ prints one SHA-256 per run of everything the run produced: the Q-table, every le
 greedy actions, and the arrays a saved model file holds. It adds the runs of
 ``tests/cpu_probe.py`` (the e-puck, DeconvQ on Taxi, ``bench all --quick``).
 
-``--write`` stores them in ``benchmarks/seeded_runs.json`` with the package versions;
+``--write`` stores them in ``benchmarks/seeded_runs.json`` with the package versions (``--write
+NAME ...`` adds or replaces those runs' fingerprints and keeps the others); an agent class with
+no compiled rule (``compiled_tables`` returns ``None``) runs on the Python path only;
 ``--check`` compares against that file and lists every run that changed. A run whose output
 changed on purpose (a renamed label in a summary, say) is re-recorded with a ``history`` entry
 saying what changed and why. A change that must
@@ -53,7 +55,7 @@ RECORDED_NAMES: dict[str, dict[str, str]] = {
 }
 
 #: Every agent with its options: (name, class name, keyword arguments).
-AGENTS: list[tuple[str, str, dict]] = [
+AGENT_RUNS: list[tuple[str, str, dict]] = [
     ("q", "QLearning", {}),
     ("q-decay", "QLearning", {"exploration_initial_eps": 1.0, "exploration_final_eps": 0.05}),
     ("fixed", "FixedDelayQLearning", {"delay_estimate": 3}),
@@ -81,10 +83,10 @@ AGENTS: list[tuple[str, str, dict]] = [
 ]
 #: A registered agent without a row above runs with its defaults, under its registry name (so
 #: a new agent needs no row here, only ``--write`` to record its fingerprints).
-AGENTS += [
+AGENT_RUNS += [
     (name, entry.class_name, {})
     for name, entry in REGISTRY.items()
-    if entry.class_name not in {class_name for _, class_name, _ in AGENTS}
+    if entry.class_name not in {class_name for _, class_name, _ in AGENT_RUNS}
 ]
 
 
@@ -127,7 +129,7 @@ def _file_arrays(agent) -> dict:
 
 def agent_run(name: str, env_name: str, compiled: bool) -> str:
     """Train one agent on one env on one path; hash everything it learned and recorded."""
-    _, class_name, kwargs = next(entry for entry in AGENTS if entry[0] == name)
+    _, class_name, kwargs = next(entry for entry in AGENT_RUNS if entry[0] == name)
     cls = getattr(agents, class_name)
     entry = next(entry for entry in REGISTRY.values() if entry.class_name == class_name)
     env = ENVS[env_name](env_name, entry.needs_arrivals)
@@ -149,12 +151,18 @@ def agent_run(name: str, env_name: str, compiled: bool) -> str:
     return digest.hexdigest()
 
 
+def paths(cls: type) -> tuple[bool, ...]:
+    """The training paths of agent class ``cls``: ``compiled`` False, and True if it has that rule."""
+    python_only = cls.compiled_tables is agents.TabularAgent.compiled_tables
+    return (False,) if python_only else (False, True)
+
+
 def runs() -> dict[str, Callable[[], str]]:
-    """Every run by name: the agents' grid, then the CPU probe's."""
+    """Every run by name: the agents' grid (each on its paths), then the CPU probe's."""
     table: dict[str, Callable[[], str]] = {}
-    for name, *_ in AGENTS:
+    for name, class_name, _ in AGENT_RUNS:
         for env_name in ENVS:
-            for compiled in (False, True):
+            for compiled in paths(getattr(agents, class_name)):
                 path = "compiled" if compiled else "python"
                 key = f"{name}/{env_name}/{path}"
                 table[key] = lambda n=name, e=env_name, c=compiled: agent_run(n, e, c)
@@ -178,7 +186,12 @@ def main() -> int:
         print(f"{key}: {hashes[key]}", file=sys.stderr)
     versions = {name: importlib.metadata.version(name) for name in PACKAGES}
     if args.write:  # (the history of deliberate changes, if any, is kept)
-        history = json.loads(RESULTS.read_text()).get("history", []) if RESULTS.exists() else []
+        stored = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
+        if args.names:  # the named runs join (or replace theirs in) the stored ones
+            if stored.get("versions", versions) != versions:
+                print(f"note: the others were recorded with {stored['versions']}")
+            hashes = {**stored.get("hashes", {}), **hashes}
+        history = stored.get("history", [])
         payload = {"versions": versions, "steps": STEPS, "hashes": hashes, "history": history}
         RESULTS.write_text(json.dumps(payload, indent=1) + "\n")
         return 0

@@ -13,12 +13,12 @@ from delayed_rl._version import __version__
 
 __all__ = ["FixedDelayQLearning", "MultipleModelQLearning", "QLearning", "__version__"]
 #: The thesis's agents, as shortcuts (every agent is in :mod:`delayed_rl.agents`, from its registry).
-_AGENTS = ("FixedDelayQLearning", "MultipleModelQLearning", "QLearning")
+_SHORTCUTS = ("FixedDelayQLearning", "MultipleModelQLearning", "QLearning")
 
 
 def __getattr__(name: str) -> Any:
     """The agents of :data:`__all__`, imported from :mod:`delayed_rl.agents` on first use."""
-    if name in _AGENTS:
+    if name in _SHORTCUTS:
         from delayed_rl import agents
 
         return getattr(agents, name)

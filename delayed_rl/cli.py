@@ -109,7 +109,7 @@ _eval_episodes = _limited(1, MAX_EVAL_EPISODES)
 
 #: ``--agent`` choices: the agent class for each (the registry's agents whose options ``train``
 #: has: :attr:`~delayed_rl.agents.registry.AgentEntry.train_options`).
-AGENTS = {key: e.class_name for key, e in REGISTRY.items() if e.train_options is not None}
+TRAIN_AGENTS = {key: e.class_name for key, e in REGISTRY.items() if e.train_options is not None}
 #: What ``--episodes`` waits for an episode to end before calling the env continuing.
 MAX_EPISODE_STEPS = 100_000
 #: How many episodes ``evaluate`` runs when given neither ``--episodes`` nor ``--steps``.
@@ -152,7 +152,7 @@ def _list(args: argparse.Namespace) -> int:
         print(f"  {env_id}")
     print("Agents (delayed-rl train --agent KEY, or a sweep file's agents[].name):")
     for key, entry in REGISTRY.items():
-        where = "" if key in AGENTS else " (sweeps and Python; not train)"
+        where = "" if key in TRAIN_AGENTS else " (sweeps and Python; not train)"
         print(f"  {key}: {entry.class_name}, {entry.label}{where}")
     print("Experiments (delayed-rl bench NAME):")
     for name in NAMES:
@@ -207,9 +207,11 @@ def _train(args: argparse.Namespace) -> int:
     except OSError as error:
         raise CommandError(f"cannot create the folder of --save {save}: {error}") from None
     try:
-        agent = getattr(agents, AGENTS[args.agent])(env, **options)
+        agent = getattr(agents, TRAIN_AGENTS[args.agent])(env, **options)
     except (TypeError, ValueError) as error:
-        raise CommandError(f"cannot train {AGENTS[args.agent]} on {args.env}: {error}") from None
+        raise CommandError(
+            f"cannot train {TRAIN_AGENTS[args.agent]} on {args.env}: {error}"
+        ) from None
     progress = sys.stderr.isatty() if args.progress is None else args.progress
     started = time.perf_counter()
     agent.learn(args.steps, log_interval=None, progress_bar=progress)
@@ -220,7 +222,7 @@ def _train(args: argparse.Namespace) -> int:
     except OSError as error:
         raise CommandError(f"cannot save the model to {save}: {error}") from None
     print(
-        f"trained {AGENTS[args.agent]} on {args.env} ({_delay_text(args.reward_delay)}) for "
+        f"trained {TRAIN_AGENTS[args.agent]} on {args.env} ({_delay_text(args.reward_delay)}) for "
         f"{args.steps} steps in {seconds:.1f} s: average undelayed reward {average:.4f} per "
         f"step; saved to {written}"
     )
@@ -417,8 +419,8 @@ def _add_train_command(commands: Any) -> None:
     train.add_argument(
         "--agent",
         required=True,
-        choices=AGENTS,
-        help="; ".join(f"{key}: {REGISTRY[key].label}" for key in AGENTS),
+        choices=TRAIN_AGENTS,
+        help="; ".join(f"{key}: {REGISTRY[key].label}" for key in TRAIN_AGENTS),
     )
     train.add_argument(
         "--reward-delay",
@@ -627,7 +629,7 @@ def _check_train_arguments(args: argparse.Namespace) -> None:
 
 def _takers(option: str) -> str:
     """The ``train`` agents that take ``option``, as ``"mmq or deconv"``."""
-    return " or ".join(key for key in AGENTS if option in REGISTRY[key].train_options)
+    return " or ".join(key for key in TRAIN_AGENTS if option in REGISTRY[key].train_options)
 
 
 def _check_agent_options(args: argparse.Namespace) -> None:
@@ -635,7 +637,7 @@ def _check_agent_options(args: argparse.Namespace) -> None:
     for option in REGISTRY[args.agent].train_required:
         if getattr(args, option) is None:
             args.parser.error(f"--agent {args.agent} needs --{option.replace('_', '-')}")
-    for option in sorted({o for key in AGENTS for o in REGISTRY[key].train_options}):
+    for option in sorted({o for key in TRAIN_AGENTS for o in REGISTRY[key].train_options}):
         if getattr(args, option) is not None and option not in REGISTRY[args.agent].train_options:
             args.parser.error(
                 f"--{option.replace('_', '-')} is for --agent {_takers(option)}, "

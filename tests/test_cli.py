@@ -118,7 +118,7 @@ def test_evaluate_with_episodes_on_a_continuing_env_fails_clearly(tmp_path, caps
             "train --env delayed_rl/GridWorld-3x3 --agent q --save x",
             "unknown env id 'delayed_rl/GridWorld-3x3'; did you mean delayed_rl/GridWorld-3x3-v0",
         ),
-        (f"train --env {GRID} --agent sarsa --save x", "invalid choice: 'sarsa'"),
+        (f"train --env {GRID} --agent no-such-agent --save x", "invalid choice: 'no-such-agent'"),
         (f"train --env {GRID} --agent q", "the following arguments are required: --save"),
         # a value of the wrong type (the checks' TypeError) and one out of range (ValueError)
         (TRAIN + "--steps abc", "argument --steps: must be an integer >= 1, got 'abc' (str)"),

@@ -203,7 +203,7 @@ class ExpectedCreditQLearning(QAgent):
         The compiled loop credits the lags into the one table, TD errors first and increments
         in lag order, as :meth:`_credit_many` does.
         """
-        tables = super().compiled_tables()
+        tables = self._q_tables()
         rates = self._alpha * self._lag_weights
         return tables._replace(delay_estimates=self._lags, lag_rates=rates)
 

@@ -99,7 +99,7 @@ class OracleQLearning(QAgent):
 
     def compiled_tables(self) -> CompiledTables:
         """The Q-table and its cache, and how many recent transitions the oracle credits."""
-        return super().compiled_tables()._replace(held_transitions=self.history_length)
+        return self._q_tables()._replace(held_transitions=self.history_length)
 
     # ------------------------------------------------------------------ env
     def set_env(self, env: gym.Env | str) -> None:
@@ -232,9 +232,7 @@ class OracleQLearning(QAgent):
         self._past_terminated[j] = terminated
         if arrivals:
             self._credit(sorted(arrivals) if len(arrivals) > 1 else arrivals)
-        self._clock = clock + 1
-        if terminated or truncated:
-            self._episode_start = self._clock
+        self._clock = clock + 1  # (an episode's end starts the next one: _end_episode)
 
     def _credit(self, arrivals: Sequence[tuple[int, float]]) -> None:
         """The update of each arrival's transition, one after the other (see the module)."""

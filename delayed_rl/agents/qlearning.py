@@ -17,6 +17,7 @@ import gymnasium as gym
 import numpy as np
 
 from delayed_rl._validation import check_int
+from delayed_rl.agents.common.compiled_loop import CompiledTables
 from delayed_rl.agents.common.hyperparameters import shares_hyperparameters
 from delayed_rl.agents.common.q_agent import QAgent, check_delay_estimates
 from delayed_rl.agents.common.transition_ring import TransitionRing
@@ -47,6 +48,10 @@ class QLearning(QAgent):
     @shares_hyperparameters
     def __init__(self, env: gym.Env | str, **hyperparameters: Any):
         super().__init__(env, **hyperparameters)
+
+    def compiled_tables(self) -> CompiledTables:
+        """The Q-table and its cache: the compiled loop runs MMQ's rule, with Λ = {0} this rule."""
+        return self._q_tables()
 
     def _learn_transition(
         self, s: int, a: int, r: float, s2: int, terminated: bool, truncated: bool
@@ -106,6 +111,10 @@ class FixedDelayQLearning(QAgent):
     def _setup_model(self) -> None:
         super()._setup_model()
         self._history = TransitionRing(self.delay_estimate)
+
+    def compiled_tables(self) -> CompiledTables:
+        """The Q-table, its cache and Λ: the compiled loop runs MMQ's rule, with one λ̂ this rule."""
+        return self._q_tables()
 
     def _learn_transition(
         self, s: int, a: int, r: float, s2: int, terminated: bool, truncated: bool

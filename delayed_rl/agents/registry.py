@@ -12,7 +12,7 @@ from __future__ import annotations
 import importlib
 from dataclasses import dataclass
 
-__all__ = ["AGENTS", "ARRIVAL_AGENTS", "REGISTRY", "AgentEntry", "agent_class"]
+__all__ = ["CLASS_NAMES", "ARRIVAL_AGENTS", "REGISTRY", "AgentEntry", "agent_class"]
 
 
 @dataclass(frozen=True)
@@ -73,7 +73,7 @@ REGISTRY: dict[str, AgentEntry] = {
     ),
 }
 #: Each agent's class name, by its short name.
-AGENTS = {name: entry.class_name for name, entry in REGISTRY.items()}
+CLASS_NAMES = {name: entry.class_name for name, entry in REGISTRY.items()}
 #: The agents whose env must record which transition emitted each reward.
 ARRIVAL_AGENTS = tuple(name for name, entry in REGISTRY.items() if entry.needs_arrivals)
 

@@ -24,7 +24,7 @@ import gymnasium as gym
 import delayed_rl  # noqa: F401  (registers the env ids)
 from delayed_rl._validation import Limit, check_choice, check_int, check_limit, check_real
 from delayed_rl.agents.common.python_loop import MAX_TIMESTEPS
-from delayed_rl.agents.registry import AGENTS, agent_class
+from delayed_rl.agents.registry import CLASS_NAMES, agent_class
 from delayed_rl.delays import as_delay
 from delayed_rl.parallel.pools import MAX_SEED_COUNT
 
@@ -330,7 +330,7 @@ def _kwargs(where: str, value: Any, refused: Sequence[str], why: str) -> dict[st
 
 def _agent_name(where: str, value: Any) -> str:
     name = _text(where, value)
-    allowed = (*AGENTS, *(SB3_PREFIX + algorithm for algorithm in SB3_ALGORITHMS))
+    allowed = (*CLASS_NAMES, *(SB3_PREFIX + algorithm for algorithm in SB3_ALGORITHMS))
     if name not in allowed:
         close = difflib.get_close_matches(name, allowed, n=1)
         hint = f"; did you mean {close[0]!r}?" if close else ""

@@ -163,7 +163,7 @@ def _replay_record(agent, reference) -> None:
             reference.update(*args)
 
 
-AGENTS = {
+LEARN_PATH_CASES = {
     "q": (QLearning, {}),
     "fixed": (FixedDelayQLearning, {"delay_estimate": 3}),
     "mmq": (MultipleModelQLearning, {"max_delay_estimate": 6}),
@@ -190,12 +190,37 @@ def test_every_registered_agent_has_a_reference_test_here():
     """A new agent's rule gets a reference and a test in this module, named here."""
     import inspect
 
-    from delayed_rl.agents.registry import AGENTS as REGISTERED
+    from delayed_rl.agents.registry import CLASS_NAMES
 
-    assert set(REGISTERED.values()) <= set(REFERENCE_TESTS)
+    assert set(CLASS_NAMES.values()) <= set(REFERENCE_TESTS)
     for class_name, test_name in REFERENCE_TESTS.items():
         source = inspect.getsource(globals()[test_name])
         assert class_name in source and "Reference" in source, test_name
+
+
+COMPILED_PATH_TESTS = {
+    "OracleQLearning": "tests/agents/test_oracle.py::test_without_delay_it_is_q_learning_update_"
+    "for_update (and ::test_under_a_constant_delay_it_is_fixed_delay_q_learning)",
+    "DeconvolutionQLearning": "tests/agents/test_deconvolution.py::test_the_compiled_and_python_"
+    "paths_learn_the_same_from_the_same_steps",
+}
+"""Agents with a compiled rule whose compiled path is checked by a test elsewhere, by class."""
+
+
+def test_every_compiled_rule_is_checked_on_both_paths():
+    """A registered agent that returns ``compiled_tables`` has its compiled path tested.
+
+    Here (:data:`LEARN_PATH_CASES`, replayed into its reference) or in a test named in
+    :data:`COMPILED_PATH_TESTS`; an agent without a compiled rule trains on the Python path only.
+    """
+    from delayed_rl.agents import TabularAgent
+    from delayed_rl.agents.registry import REGISTRY, agent_class
+
+    here = {cls for cls, _ in LEARN_PATH_CASES.values()}
+    for name in REGISTRY:
+        cls = agent_class(name)
+        if cls.compiled_tables is not TabularAgent.compiled_tables:
+            assert cls in here or cls.__name__ in COMPILED_PATH_TESTS, cls.__name__
 
 
 def _reference_for(agent):
@@ -210,10 +235,10 @@ def _reference_for(agent):
 
 
 @pytest.mark.parametrize("compiled", [True, False])
-@pytest.mark.parametrize("name", list(AGENTS))
+@pytest.mark.parametrize("name", list(LEARN_PATH_CASES))
 @pytest.mark.parametrize(("seed", "mode"), [(0, "flush"), (1, "carry"), (2, "drop")])
 def test_both_learn_loops_are_the_reference(name, compiled, seed, mode):
-    cls, kwargs = AGENTS[name]
+    cls, kwargs = LEARN_PATH_CASES[name]
     env = RewardDelay(FrozenLakeEnv(is_slippery=True), Poisson(2.0), on_episode_end=mode)
     agent = cls(env, q_init=0.5, learning_rate=ALPHA, gamma=GAMMA, seed=seed, **kwargs)
     agent.learn(3_000, compiled=compiled, record=True)

@@ -6,11 +6,14 @@ import importlib.util
 import sys
 from pathlib import Path
 
+import numpy as np
+import pytest
+
 from delayed_rl import agents
+from delayed_rl.agents import QLearning
 from delayed_rl.agents.common.q_agent import QAgent
-from delayed_rl.agents.registry import AGENTS, ARRIVAL_AGENTS, REGISTRY, agent_class
-from delayed_rl.cli import AGENTS as TRAIN_AGENTS
-from delayed_rl.cli import build_parser
+from delayed_rl.agents.registry import ARRIVAL_AGENTS, CLASS_NAMES, REGISTRY, agent_class
+from delayed_rl.cli import TRAIN_AGENTS, build_parser
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -27,7 +30,7 @@ def _seeded_runs():
 def test_every_entry_is_a_public_agent_class_with_a_label():
     for name, entry in REGISTRY.items():
         cls = agent_class(name)
-        assert cls.__name__ == entry.class_name == AGENTS[name]
+        assert cls.__name__ == entry.class_name == CLASS_NAMES[name]
         assert cls.__name__ in agents.__all__ and issubclass(cls, QAgent) and entry.label
 
 
@@ -52,15 +55,36 @@ def test_the_command_line_and_the_sweeps_derive_from_it():
 
 
 def test_every_registered_agent_has_a_seeded_run():
-    rows = _seeded_runs().AGENTS
-    assert {class_name for _, class_name, _ in rows} == set(AGENTS.values())
+    rows = _seeded_runs().AGENT_RUNS
+    assert {class_name for _, class_name, _ in rows} == set(CLASS_NAMES.values())
+
+
+def test_a_new_rule_trains_on_the_python_path_until_it_compiles():
+    """A ``QAgent`` subclass with its own rule inherits no compiled rule (none would be its own)."""
+    from delayed_rl.agents.common import persistence
+    from delayed_rl.compiled import NotCompilable
+
+    class HalfRewardQ(QAgent):  # a rule of its own: Q-learning on half the reward
+        def _learn_transition(self, s, a, r, s2, terminated, truncated):
+            self._q_learning_update(s, a, 0.5 * r, s2, terminated)
+
+    env = "delayed_rl/GridWorld-3x3-v0"
+    agent = HalfRewardQ(env, seed=0).learn(500)
+    assert agent.last_learn_path == "python" and agent.compiled_tables() is None
+    with pytest.raises(NotCompilable, match="HalfRewardQ has no compiled learning rule"):
+        HalfRewardQ(env, seed=0).learn(10, compiled=True)
+    q = QLearning(env, seed=0).learn(500, compiled=False)
+    assert not np.array_equal(agent.q_table, q.q_table)  # its own rule ran, not Q-learning's
+    assert _seeded_runs().paths(HalfRewardQ) == (False,)
+    assert _seeded_runs().paths(QLearning) == (False, True)
+    del persistence.AGENT_CLASSES[persistence.class_key(HalfRewardQ)]  # (model files' classes)
 
 
 def test_the_packages_top_level_agents_are_registered_classes():
     import delayed_rl
 
     top = [name for name in delayed_rl.__all__ if name != "__version__"]
-    by_class = {class_name: key for key, class_name in AGENTS.items()}
+    by_class = {class_name: key for key, class_name in CLASS_NAMES.items()}
     assert top and set(top) <= set(by_class)
     for name in top:
         assert getattr(delayed_rl, name) is agent_class(by_class[name])
@@ -69,3 +93,26 @@ def test_the_packages_top_level_agents_are_registered_classes():
 def test_the_options_train_requires_are_options_it_takes():
     for key, entry in REGISTRY.items():
         assert set(entry.train_required) <= set(entry.train_options or ()), key
+
+
+def _passage(path: str, start: str, stop: str) -> str:
+    """The text of ``path`` (from the repository's root) from ``start`` to the next ``stop``."""
+    text = (ROOT / path).read_text(encoding="utf-8")
+    begin = text.index(start)
+    return text[begin : text.index(stop, begin + len(start))]
+
+
+def test_the_hand_written_lists_of_agents_name_every_agent():
+    """The prose that lists agents (for readers, in words) names each one the registry holds."""
+    train = _passage("README.md", "`train` takes", "; `evaluate`")
+    for key in TRAIN_AGENTS:
+        assert f"`{key}`" in train or f"`--agent {key}`" in train, ("README.md", key)
+    sweeps = _passage("docs/sweeps.md", "``name`` (required)", "``kwargs``")
+    for key, entry in REGISTRY.items():
+        assert f"``{key}``" in sweeps and entry.class_name in sweeps, ("docs/sweeps.md", key)
+    for entry in REGISTRY.values():
+        assert f":class:`{entry.class_name}`" in agents.__doc__, ("delayed_rl.agents", entry)
+    algorithms = _passage("ARCHITECTURE.md", "**The algorithms**", "\n- ")
+    for entry in REGISTRY.values():
+        module = entry.entry_point.partition(":")[0].split(".")[-1]
+        assert f"`{module}.py`" in algorithms or f"`{module}/`" in algorithms, module

@@ -103,7 +103,11 @@ def joblib_table(tmp_path_factory) -> list[dict[str, str]]:
         (lambda d: d.update(agents="q"), TypeError, "agents must be a list, got 'q' (str)"),
         (lambda d: d.update(agents=[]), ValueError, "agents must be a non-empty list, got []"),
         (lambda d: d.update(agents=[3]), TypeError, "agents[0] must be an agent's name or a"),
-        (lambda d: d.update(agents=["sarsa"]), ValueError, "agents[0].name must be one of ('q',"),
+        (
+            lambda d: d.update(agents=["no-such-agent"]),
+            ValueError,
+            "agents[0].name must be one of ('q',",
+        ),
         (lambda d: d.update(agents=["sb3:PPO2"]), ValueError, "did you mean 'sb3:PPO'?"),
         (lambda d: d.update(agents=[{"kwargs": {}}]), ValueError, "agents[0] must have the key"),
         (

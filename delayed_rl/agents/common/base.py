@@ -179,7 +179,11 @@ class TabularAgent(persistence.CopyProtocol, ABC):
     @abstractmethod
     def _greedy_actions(self, states: np.ndarray) -> np.ndarray: ...
     def _end_episode(self) -> None:
-        """Forget the rule's own history of the episode that ended (none by default)."""
+        """Forget the rule's own history of the episode that ended (none by default).
+
+        Called when an episode ends: by ``learn()`` as it resets the env, by :meth:`update`
+        after a terminated or truncated step, and by :meth:`set_env`.
+        """
 
     def _before_update(self) -> None:
         """Prepare the rule for a transition given to :meth:`update` (nothing by default)."""
@@ -355,7 +359,10 @@ class TabularAgent(persistence.CopyProtocol, ABC):
         self._before_update()
         self._learn_transition(s, a, r, s2, *ended)
         self.num_timesteps += 1
-        self._episode_step = 0 if (ended[0] or ended[1]) else self._episode_step + 1
+        self._episode_step += 1
+        if ended[0] or ended[1]:  # as learn() at the env's reset
+            self._episode_step = 0
+            self._end_episode()
 
     def learn(
         self,

@@ -1,4 +1,4 @@
-"""An agent's state to and from a model file's contents, copies and pickles; the class registry.
+"""An agent's state to and from a model file's contents, copies and pickles; the model-file class table.
 
 :mod:`~delayed_rl.agents.common.save_util` reads and writes the files; this module decides what an
 agent puts in them (hyper-parameters, spaces, learned arrays, random streams, training clock) and

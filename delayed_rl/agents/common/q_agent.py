@@ -79,7 +79,9 @@ class QAgent(TabularAgent):
             :class:`~delayed_rl.agents.common.base.TabularAgent`.
 
     A subclass implements ``_learn_transition`` (its rule: :meth:`_q_learning_update` is the
-    textbook one) and, to keep more state than the table, extends ``_setup_model``,
+    textbook one); it trains on the Python path unless it also returns its tables from
+    ``compiled_tables`` (:meth:`_q_tables`), for a rule the compiled loop runs. To keep more
+    state than the table, it extends ``_setup_model``,
     ``_get_state_arrays``, ``_state_array_specs`` and ``_set_extra_state_arrays``. The
     ``q_table`` has shape ``(|S|, |Λ|, |A|)``.
     """
@@ -152,8 +154,13 @@ class QAgent(TabularAgent):
         self.n_models = n_models
         self._table = QTable(self.n_states, n_models, self.n_actions, self.q_init)
 
-    def compiled_tables(self) -> CompiledTables:
-        """The Q-table, its cache and Λ, which the compiled loop trains in place."""
+    def _q_tables(self) -> CompiledTables:
+        """The Q-table, its cache and Λ, for a subclass's :meth:`compiled_tables`.
+
+        ``QAgent`` has no compiled rule of its own (a subclass's rule may be anything): a
+        subclass whose rule the compiled loop runs returns these, with its options, from
+        ``compiled_tables``.
+        """
         table = self._table
         return CompiledTables(table.values, table.v_max, table.v_cell, self._delay_estimates)
 

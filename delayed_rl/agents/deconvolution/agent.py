@@ -299,7 +299,7 @@ class DeconvolutionQLearning(QAgent):
         until_solve = min(self._solve_after - self._since_solve, chunk)
         self._regression.reserve(until_solve)  # room for what every step may add
         model = RewardEstimates(self._reward_model, self._regression.stats)
-        tables = super().compiled_tables()
+        tables = self._q_tables()
         return tables._replace(
             reward_model=model, chunk_limit=until_solve, after_chunk=self._after_chunk
         )

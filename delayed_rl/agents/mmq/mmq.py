@@ -216,7 +216,7 @@ class MultipleModelQLearning(QAgent):
         With ``greedy_window``, the compiled loop keeps the averaged table itself, at the same
         training steps and with the same arithmetic as on the Python path.
         """
-        tables = super().compiled_tables()
+        tables = self._q_tables()
         credit = self._credit
         if credit.on:
             tables = tables._replace(

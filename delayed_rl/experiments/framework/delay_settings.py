@@ -38,7 +38,7 @@ LAMBDA_MAX = 50
 _TRUE_DELAY = object()
 #: Each learner: its agent in :data:`~delayed_rl.agents.registry.REGISTRY`, and its arguments
 #: beyond the thesis's hyper-parameters (:func:`make_agent`).
-_AGENTS: dict[str, tuple[str, dict[str, Any]]] = {
+_LEARNER_AGENTS: dict[str, tuple[str, dict[str, Any]]] = {
     "Q": ("q", {}),
     "MMQ": ("mmq", {"max_delay_estimate": LAMBDA_MAX}),
     "expected credit": (
@@ -51,7 +51,7 @@ _AGENTS: dict[str, tuple[str, dict[str, Any]]] = {
     "Q undelayed": ("q", {}),
 }
 #: The seven learners, in the tables' order (:func:`make_agent`).
-LEARNERS = tuple(_AGENTS)
+LEARNERS = tuple(_LEARNER_AGENTS)
 
 
 def world_texts() -> list[tuple[str, str]]:
@@ -178,7 +178,7 @@ def make_agent(name: str, size: int, delay: Delay, seed: int, steps: int | None 
 
     check_choice("agent", name, LEARNERS)
     steps = check_int("steps", steps, 1, optional=True)
-    agent, extra = _AGENTS[name]
+    agent, extra = _LEARNER_AGENTS[name]
     options = {key: delay if value is _TRUE_DELAY else value for key, value in extra.items()}
     if name == "MMQ":
         options["greedy_window"] = None if steps is None else max(1, steps // WINDOW_DIVISOR)

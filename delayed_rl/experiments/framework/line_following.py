@@ -45,13 +45,13 @@ CENTRE, UNSEEN_ERROR = 20, 20
 #: The learners :func:`make_agent` makes (``linefollow``'s MMQ and Q, and DeconvQ learned): each
 #: one's agent in :data:`~delayed_rl.agents.registry.REGISTRY` and its arguments beyond the
 #: thesis's hyper-parameters.
-_AGENTS: dict[str, tuple[str, dict[str, Any]]] = {
+_LEARNER_AGENTS: dict[str, tuple[str, dict[str, Any]]] = {
     "MMQ": ("mmq", {"max_delay_estimate": LAMBDA_MAX}),
     "Q": ("q", {}),
     "DeconvQ learned": ("deconv", {"delay": None, "max_delay_estimate": LAMBDA_MAX}),
 }
 #: The learners :func:`make_agent` makes: ``linefollow``'s MMQ and Q, and DeconvQ learned.
-LEARNERS = tuple(_AGENTS)
+LEARNERS = tuple(_LEARNER_AGENTS)
 
 
 def line_env(reward_delay: float | None = LAM, env_id: str = ENV_ID, **kwargs: Any) -> gym.Env:
@@ -94,7 +94,7 @@ def make_agent(kind: str, env: gym.Env, seed: int) -> Any:
     from delayed_rl.agents.registry import agent_class
 
     check_choice("kind", kind, LEARNERS)
-    agent, options = _AGENTS[kind]
+    agent, options = _LEARNER_AGENTS[kind]
     return agent_class(agent)(env, **options, **thesis_hyperparameters(seed, q_init=Q_INIT))
 
 
