@@ -110,6 +110,9 @@ def test_the_hand_written_lists_of_agents_name_every_agent():
     sweeps = _passage("docs/sweeps.md", "``name`` (required)", "``kwargs``")
     for key, entry in REGISTRY.items():
         assert f"``{key}``" in sweeps and entry.class_name in sweeps, ("docs/sweeps.md", key)
+    names = _passage("docs/agents.md", "Each agent has one short name", "and its class's")
+    for key in REGISTRY:
+        assert f"`{key}`" in names, ("docs/agents.md", key)
     for entry in REGISTRY.values():
         assert f":class:`{entry.class_name}`" in agents.__doc__, ("delayed_rl.agents", entry)
     algorithms = _passage("ARCHITECTURE.md", "**The algorithms**", "\n- ")
