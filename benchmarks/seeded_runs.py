@@ -8,7 +8,8 @@ greedy actions, and the arrays a saved model file holds. It adds the runs of
 ``tests/cpu_probe.py`` (the e-puck, DeconvQ on Taxi, ``bench all --quick``).
 
 ``--write`` stores them in ``benchmarks/seeded_runs.json`` with the package versions (``--write
-NAME ...`` adds or replaces those runs' fingerprints and keeps the others); an agent class with
+NAME ...`` adds or replaces those runs' fingerprints, all of an agent's for its name, and keeps
+the others, on the same package versions); an agent class with
 no compiled rule (``compiled_tables`` returns ``None``) runs on the Python path only;
 ``--check`` compares against that file and lists every run that changed. A run whose output
 changed on purpose (a renamed label in a summary, say) is re-recorded with a ``history`` entry
@@ -177,11 +178,20 @@ def main() -> int:
     action = parser.add_mutually_exclusive_group()
     action.add_argument("--write", action="store_true", help=f"store them in {RESULTS.name}")
     action.add_argument("--check", action="store_true", help=f"compare with {RESULTS.name}")
-    parser.add_argument("names", nargs="*", help="runs to do (default: all)")
+    parser.add_argument(
+        "names", nargs="*", help="runs to do, or an agent's name for all of its runs (default: all)"
+    )
     args = parser.parse_args()
     table = runs()
+    keys = []
+    for name in args.names:
+        found = [key for key in table if key == name or key.startswith(f"{name}/")]
+        if not found:
+            agents_and_probes = sorted({key.partition("/")[0] for key in table})
+            parser.error(f"no run is named {name!r}: give a run or one of {agents_and_probes}")
+        keys += found
     hashes = {}
-    for key in args.names or table:
+    for key in keys or table:
         hashes[key] = table[key]()
         print(f"{key}: {hashes[key]}", file=sys.stderr)
     versions = {name: importlib.metadata.version(name) for name in PACKAGES}
@@ -189,7 +199,10 @@ def main() -> int:
         stored = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
         if args.names:  # the named runs join (or replace theirs in) the stored ones
             if stored.get("versions", versions) != versions:
-                print(f"note: the others were recorded with {stored['versions']}")
+                parser.error(
+                    f"the stored runs were recorded with {stored['versions']}, these with "
+                    f"{versions}: record them all (--write with no names) on one set"
+                )
             hashes = {**stored.get("hashes", {}), **hashes}
         history = stored.get("history", [])
         payload = {"versions": versions, "steps": STEPS, "hashes": hashes, "history": history}

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.metadata
 import importlib.util
 import sys
 from pathlib import Path
@@ -119,3 +120,46 @@ def test_the_hand_written_lists_of_agents_name_every_agent():
     for entry in REGISTRY.values():
         module = entry.entry_point.partition(":")[0].split(".")[-1]
         assert f"`{module}.py`" in algorithms or f"`{module}/`" in algorithms, module
+
+
+def test_a_rule_over_several_delay_estimates_acts_as_mmq_does():
+    """``QAgent`` with several tables acts from the one holding the state's max (MMQ's choice)."""
+    from delayed_rl.agents.common import persistence
+
+    class FirstTableQ(QAgent):  # learns in table 0 only; table 1 keeps q_init
+        def __init__(self, env, **hyperparameters):
+            super().__init__(env, delay_estimates=np.array([0, 2]), **hyperparameters)
+
+        def _learn_transition(self, s, a, r, s2, terminated, truncated):
+            self._q_learning_update(s, a, r, s2, terminated)
+
+    agent = FirstTableQ("delayed_rl/GridWorld-3x3-v0", q_init=1.0, seed=0).learn(3_000)
+    del persistence.AGENT_CLASSES[persistence.class_key(FirstTableQ)]
+    share = agent.acting_delay_share
+    assert agent.last_learn_path == "python" and share.shape == (2,)
+    assert share[0] > 0 and share[1] > 0  # both tables acted: the max is in either
+
+
+def test_writing_named_fingerprints_keeps_the_others(tmp_path, monkeypatch):
+    import json
+
+    seeded = _seeded_runs()
+    versions = {name: importlib.metadata.version(name) for name in seeded.PACKAGES}
+    stored = {"versions": versions, "steps": 1, "hashes": {"a/x/python": "old", "b/x/python": "b"}}
+    monkeypatch.setattr(seeded, "RESULTS", tmp_path / "runs.json")
+    seeded.RESULTS.write_text(json.dumps({**stored, "history": ["kept"]}))
+    table = {"a/x/python": lambda: "new", "a/x/compiled": lambda: "c", "b/x/python": lambda: "b"}
+    monkeypatch.setattr(seeded, "runs", lambda: table)
+    monkeypatch.setattr(sys, "argv", ["seeded_runs.py", "--write", "a"])  # an agent: all its runs
+    assert seeded.main() == 0
+    written = json.loads(seeded.RESULTS.read_text())
+    assert written["hashes"] == {"a/x/python": "new", "a/x/compiled": "c", "b/x/python": "b"}
+    assert written["history"] == ["kept"]
+    monkeypatch.setattr(sys, "argv", ["seeded_runs.py", "--write", "c"])
+    with pytest.raises(SystemExit):  # no such run: refused, naming the agents
+        seeded.main()
+    seeded.RESULTS.write_text(json.dumps({**stored, "versions": {"numpy": "0.1"}}))
+    monkeypatch.setattr(sys, "argv", ["seeded_runs.py", "--write", "a"])
+    with pytest.raises(SystemExit):  # other versions: one set, written whole
+        seeded.main()
+    assert json.loads(seeded.RESULTS.read_text())["hashes"] == stored["hashes"]

@@ -166,8 +166,19 @@ class QAgent(TabularAgent):
 
     # ------------------------------------------------------------------ acting
     def _choose(self, s: int, eps: float, uniform: Callable[[], float]) -> tuple[int, int]:
-        """ε-greedy on the one table, ties broken at random (the acting model is 0)."""
-        return 0, self._table.choose_action(s, eps, uniform)
+        """The acting model, then its ε-greedy action, ties broken at random.
+
+        One table: model 0. Several (MMQ's acting): with probability ε a model drawn uniformly,
+        else the one whose table holds the state's max; then ε-greedy on that model's table.
+        """
+        table, explored = self._table, False
+        if self.n_models == 1:
+            model = 0
+        elif uniform() < eps:
+            model, explored = int(uniform() * self.n_models), True
+        else:
+            model = table.greedy_model(s, uniform)
+        return model, table.choose_action(s, eps, uniform, model, explored)
 
     def _greedy_actions(self, states: np.ndarray) -> np.ndarray:
         return greedy_actions(self._table.values, states)

@@ -228,16 +228,10 @@ class MultipleModelQLearning(QAgent):
 
     # ------------------------------------------------------------------ acting
     def _choose(self, s: int, eps: float, uniform: Callable[[], float]) -> tuple[int, int]:
-        """The behaviour policy at ``s``: the acting model, then its action (see the module)."""
-        table, explored = self._table, False
-        if self.n_models == 1:
-            model = 0
-        elif uniform() < eps:
-            model, explored = int(uniform() * self.n_models), True
-        else:
-            model = table.greedy_model(s, uniform)
+        """The behaviour policy at ``s`` (``QAgent``'s), remembering the acting model."""
+        model, action = super()._choose(s, eps, uniform)
         self._acting = model
-        return model, table.choose_action(s, eps, uniform, model, explored)
+        return model, action
 
     def _greedy_actions(self, states: np.ndarray) -> np.ndarray:
         return greedy_actions(self._greedy_source(), states)
