@@ -179,13 +179,18 @@ def main() -> int:
     action.add_argument("--write", action="store_true", help=f"store them in {RESULTS.name}")
     action.add_argument("--check", action="store_true", help=f"compare with {RESULTS.name}")
     parser.add_argument(
-        "names", nargs="*", help="runs to do, or an agent's name for all of its runs (default: all)"
+        "names",
+        nargs="*",
+        help="runs to do: a run's name, a row of AGENT_RUNS or a registered agent's name, for all "
+        "of its runs (default: all)",
     )
     args = parser.parse_args()
     table = runs()
     keys = []
-    for name in args.names:
-        found = [key for key in table if key == name or key.startswith(f"{name}/")]
+    for name in args.names:  # a run, a row of AGENT_RUNS or a registered agent (all its rows)
+        entry = REGISTRY.get(name)
+        rows = {row for row, cls, _ in AGENT_RUNS if entry and cls == entry.class_name} | {name}
+        found = [key for key in table if key == name or key.partition("/")[0] in rows]
         if not found:
             agents_and_probes = sorted({key.partition("/")[0] for key in table})
             parser.error(f"no run is named {name!r}: give a run or one of {agents_and_probes}")

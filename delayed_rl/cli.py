@@ -153,7 +153,7 @@ def _list(args: argparse.Namespace) -> int:
     print("Agents (delayed-rl train --agent KEY, or a sweep file's agents[].name):")
     for key, entry in REGISTRY.items():
         where = "" if key in TRAIN_AGENTS else " (sweeps and Python; not train)"
-        print(f"  {key}: {entry.class_name}, {entry.label}{where}")
+        print(f"  {key}: {entry.class_name}, {entry.description}{where}")
     print("Experiments (delayed-rl bench NAME):")
     for name in NAMES:
         print(f"  {name}")
@@ -285,7 +285,7 @@ def _bench(args: argparse.Namespace) -> int:
         quick=args.quick,
         workers=args.workers,
         backend=args.backend,
-        base_seed=args.seed,
+        base_seed=args.base_seed,
     )
     out = Path(args.out)
 
@@ -364,7 +364,12 @@ def _add_bench_options(parser: argparse.ArgumentParser, default_out: str) -> Non
         default="loky",
         help="joblib backend: loky (default), ray or dask",
     )
-    parser.add_argument("--seed", type=_seed, default=0, help="first seed, >= 0 (default 0)")
+    parser.add_argument(
+        "--base-seed",
+        type=_seed,
+        default=0,
+        help="the first run's seed, >= 0; the others count up from it (default 0)",
+    )
     parser.add_argument("--out", default=default_out, help=f"output folder (default {default_out})")
     parser.add_argument("--quick", action="store_true", help="a scaled-down run, in seconds")
     parser.add_argument(
@@ -420,7 +425,7 @@ def _add_train_command(commands: Any) -> None:
         "--agent",
         required=True,
         choices=TRAIN_AGENTS,
-        help="; ".join(f"{key}: {REGISTRY[key].label}" for key in TRAIN_AGENTS),
+        help="; ".join(f"{key}: {REGISTRY[key].description}" for key in TRAIN_AGENTS),
     )
     train.add_argument(
         "--reward-delay",

@@ -24,6 +24,7 @@ from delayed_rl.agents import (
     QLearning,
     load_agent,
 )
+from delayed_rl.agents.registry import REGISTRY
 from delayed_rl.cli import main
 
 GRID = "delayed_rl/GridWorld-3x3-v0"
@@ -144,8 +145,11 @@ def test_evaluate_with_episodes_on_a_continuing_env_fails_clearly(tmp_path, caps
         ("bench delay-sweep --workers 0", "argument --workers: must be an integer >= 1, got 0"),
         ("bench delay-sweep --workers two", "--workers: must be an integer >= 1, got 'two' (str)"),
         ("bench delay-sweep --backend spark", "argument --backend: invalid choice: 'spark'"),
-        ("bench all --seed -3", "argument --seed: must be an integer >= 0, got -3"),
-        ("bench delay-sweep --seed -5", "argument --seed: must be an integer >= 0, got -5"),
+        ("bench all --base-seed -3", "argument --base-seed: must be an integer >= 0, got -3"),
+        (
+            "bench delay-sweep --base-seed -5",
+            "argument --base-seed: must be an integer >= 0, got -5",
+        ),
         # sizes beyond the stated limits, refused before anything starts
         (
             "bench mmq-gridworld --seeds 10001",
@@ -157,8 +161,8 @@ def test_evaluate_with_episodes_on_a_continuing_env_fails_clearly(tmp_path, caps
         ),
         ("bench all --steps 100000000000000000000", "--steps: must be at most MAX_TIMESTEPS"),
         (
-            "bench roulette --seed 9223372036854775808",
-            "--seed: must be at most MAX_SEED_VALUE = 2**63 - 1",
+            "bench roulette --base-seed 9223372036854775808",
+            "--base-seed: must be at most MAX_SEED_VALUE = 2**63 - 1",
         ),
         ("bench roulette --workers 1025", "--workers: must be at most MAX_WORKERS = 1024"),
         (
@@ -173,7 +177,10 @@ def test_evaluate_with_episodes_on_a_continuing_env_fails_clearly(tmp_path, caps
         (f"evaluate m.npz --env {GRID} --episodes 1000001", "must be at most MAX_EVAL_EPISODES"),
         (f"evaluate m.npz --env {GRID} --max-episode-steps 10000000000", "at most MAX_EVAL_STEPS"),
         ("sweep s.yaml --workers 5000", "argument --workers: must be at most MAX_WORKERS = 1024"),
-        ("bench --seed -5 delay-sweep", "argument --seed: must be an integer >= 0, got -5"),
+        (
+            "bench --base-seed -5 delay-sweep",
+            "argument --base-seed: must be an integer >= 0, got -5",
+        ),
     ],
 )
 def test_bad_usage_exits_with_code_2(command, message, capsys):
@@ -262,7 +269,9 @@ def test_a_corrupt_model_file_exits_1_with_one_line(tmp_path, capsys):
     assert str(bad) in _one_error_line(capsys)
 
 
-@pytest.mark.parametrize("agent", ["mmq", "deconv"])
+@pytest.mark.parametrize(
+    "agent", [k for k, e in REGISTRY.items() if "max_delay_estimate" in (e.train_options or ())]
+)
 def test_max_delay_estimate_has_one_limit_whatever_the_agent(tmp_path, capsys, agent):
     code = main(_train(tmp_path, "--agent", agent, "--max-delay-estimate", "1025"))
     limit = "max_delay_estimate must be at most MAX_DELAY_ESTIMATE = 1024"

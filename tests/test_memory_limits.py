@@ -85,11 +85,11 @@ def test_vector_ring_grows_with_the_delays_drawn_and_stops_at_its_limit() -> Non
     vec = SyncVectorEnv([NeverEndingEnv] * 4, autoreset_mode=AutoresetMode.NEXT_STEP)
     env = VectorRewardDelay(vec, Poisson(1e6))
     env.reset(seed=0)
-    assert env.rewards_in_transit.ring.size <= 4 * 64  # small at first
+    assert env.pending_rewards.ring.size <= 4 * 64  # small at first
     for _ in range(50):
         env.step(np.zeros(4, dtype=int))
-    assert env.rewards_in_transit.ring.size <= MAX_RING_ENTRIES
-    np.testing.assert_array_equal(env.rewards_in_transit.pending, [50.0] * 4)
+    assert env.pending_rewards.ring.size <= MAX_RING_ENTRIES
+    np.testing.assert_array_equal(env.pending_rewards.pending, [50.0] * 4)
 
 
 @pytest.mark.sb3

@@ -21,7 +21,7 @@ class AgentEntry:
 
     Attributes:
         entry_point: where its class is defined, ``"module:ClassName"``.
-        label: what it is, in words, as ``delayed-rl list`` and ``train --help`` name it
+        description: what it is, in words, as ``delayed-rl list`` and ``train --help`` say it
             (``"Multiple Model Q-learning"``).
         needs_arrivals: its env must record which transition emitted each reward
             (``RewardDelay(..., record_arrivals=True)``: the oracle).
@@ -32,7 +32,7 @@ class AgentEntry:
     """
 
     entry_point: str
-    label: str
+    description: str
     needs_arrivals: bool = False
     train_options: tuple[str, ...] | None = None
     train_required: tuple[str, ...] = ()

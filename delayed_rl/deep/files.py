@@ -23,7 +23,7 @@ import torch
 
 from delayed_rl.deep.encoding import SpaceEncoding
 from delayed_rl.deep.history import TransitionHistory
-from delayed_rl.deep.reward_model import FORMAT, HISTORY_ARRAYS, MAX_FILE_BYTES, RewardModel
+from delayed_rl.deep.reward_model import FORMAT, HISTORY_ARRAYS, MAX_MEMBER_BYTES, RewardModel
 
 __all__ = ["load_reward_model", "make_reward_model"]
 
@@ -97,8 +97,8 @@ def _member(archive: zipfile.ZipFile, name: str, path: Path) -> bytes | None:
         info = archive.getinfo(name)
     except KeyError:
         return None
-    if info.file_size > MAX_FILE_BYTES:
-        raise ValueError(f"{path}: {name} is {info.file_size} bytes, over MAX_FILE_BYTES = 2**34")
+    if info.file_size > MAX_MEMBER_BYTES:
+        raise ValueError(f"{path}: {name} is {info.file_size} bytes, over MAX_MEMBER_BYTES = 2**34")
     return archive.read(name)
 
 

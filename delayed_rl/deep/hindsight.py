@@ -24,12 +24,12 @@ from stable_baselines3.common.torch_layers import CombinedExtractor
 from stable_baselines3.sac.policies import Actor, ContinuousCritic, MultiInputPolicy
 
 from delayed_rl._validation import check_choice
+from delayed_rl.wrappers.delay_aware import VIEW_KEYS
 
 __all__ = [
     "CRITIC_INPUTS",
     "HINDSIGHT_AGE_KEY",
     "HINDSIGHT_KEY",
-    "VIEW_KEYS",
     "HindsightPolicy",
     "HindsightReplayBuffer",
     "HindsightSAC",
@@ -37,8 +37,6 @@ __all__ = [
     "hindsight_space",
 ]
 
-VIEW_KEYS = ("observation", "age", "actions")
-"""The delay-aware view's keys."""
 HINDSIGHT_KEY = "hindsight"
 """The stored observation the critic reads for the transition's step (received later)."""
 HINDSIGHT_AGE_KEY = "hindsight_age"
@@ -318,7 +316,7 @@ class HindsightSAC(SAC):
             terminal = infos[i].get("terminal_observation") if done else None
             source = terminal if terminal is not None else {k: v[i] for k, v in new_obs.items()}
             episode.receive_view({key: np.array(value) for key, value in source.items()})
-            for made, observation in infos[i].get("received_observations", ()):
+            for made, observation in infos[i].get("arrived_observations", ()):
                 episode.receive(made, observation)
             if done:
                 episode.ended = True

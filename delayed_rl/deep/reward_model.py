@@ -32,7 +32,7 @@ __all__ = ["DIAGNOSTIC_PAIRS", "FORMAT", "RewardModel"]
 FORMAT = "delayed-rl reward model 3"
 """The ``format`` a reward model file declares."""
 
-MAX_FILE_BYTES = 2**34
+MAX_MEMBER_BYTES = 2**34
 """The largest member of a reward model file that is read."""
 
 DIAGNOSTIC_PAIRS = 4096

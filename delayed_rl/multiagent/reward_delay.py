@@ -95,8 +95,8 @@ class ParallelRewardDelay(ParallelDelayWrapper):
         if len(self._groups) == 1:  # one distribution for every agent: its rows are in order
             return self._groups[0][1].pending
         pending = np.zeros(len(self.agent_order))
-        for rows, queue in self._groups:
-            pending[rows] = queue.pending
+        for rows, group in self._groups:
+            pending[rows] = group.pending
         return pending
 
     def reset(self, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -110,13 +110,13 @@ class ParallelRewardDelay(ParallelDelayWrapper):
         """
         obs, infos, seeds = self.reset_env(seed, options)
         if seeds is not None:
-            for rows, queue in self._groups:
-                queue.seed([seeds[i] for i in rows.tolist()])
+            for rows, group in self._groups:
+                group.seed([seeds[i] for i in rows.tolist()])
         cut_short = self._in_episode
         if self.on_episode_end != "carry" and cut_short.any():
             lost = np.zeros(len(self.agent_order))
-            for rows, queue in self._groups:
-                lost[rows] = queue.clear(cut_short[rows])
+            for rows, group in self._groups:
+                lost[rows] = group.clear(cut_short[rows])
             for i in np.flatnonzero(cut_short).tolist():
                 agent = self.agent_order[i]
                 if agent in infos:
@@ -149,7 +149,7 @@ class ParallelRewardDelay(ParallelDelayWrapper):
         emitted, active, ended = self._read(rewards, terminated, truncated)
         delivered, delays, settled = self._advance(emitted, active, ended)
         if self._watch is not None and self._watch.see_envs(
-            sum(int(queue.clock.sum()) for _, queue in self._groups), emitted, ended
+            sum(int(group.clock.sum()) for _, group in self._groups), emitted, ended
         ):
             self._watch = None
         self._in_episode |= active
@@ -217,7 +217,7 @@ class ParallelRewardDelay(ParallelDelayWrapper):
     def _advance(
         self, emitted: np.ndarray, active: np.ndarray, ended: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """One step of every agent's rewards in transit: what each receives, its delay, what it settled.
+        """One step of every agent's pending rewards: what each receives, its delay, what it settled.
 
         Returns:
             ``(delivered, delays, settled)``, by agent position; ``settled`` is what an agent
@@ -230,8 +230,8 @@ class ParallelRewardDelay(ParallelDelayWrapper):
             )
             return delivered, delays, np.zeros(count) if settled is None else settled
         delivered, delays, settled = np.zeros(count), np.zeros(count, dtype=np.int64), None
-        for rows, queue in self._groups:
-            got, drawn, amounts = queue.step(
+        for rows, group in self._groups:
+            got, drawn, amounts = group.step(
                 emitted[rows], active[rows], ended[rows], self.on_episode_end
             )
             delivered[rows], delays[rows] = got, drawn

@@ -1,7 +1,7 @@
 """Reading a sweep file, YAML or JSON, with limits on what a hostile file can make the reader do.
 
 A sweep file is a few dozen lines written by hand. :func:`read_sweep_file` refuses, before it
-builds the Python objects, anything far beyond that: a file over :data:`MAX_FILE_BYTES`, values
+builds the Python objects, anything far beyond that: a file over :data:`MAX_SWEEP_FILE_BYTES`, values
 nested over :data:`MAX_DEPTH` levels, over :data:`MAX_VALUES` values once YAML's aliases are
 expanded or an alias inside the value it names, and a key given twice in one mapping. YAML is
 read with PyYAML's safe loader (the ``sweep`` extra). The docs' sweeps page
@@ -15,9 +15,9 @@ import json
 from pathlib import Path
 from typing import Any
 
-__all__ = ["MAX_DEPTH", "MAX_FILE_BYTES", "MAX_VALUES", "read_sweep_file"]
+__all__ = ["MAX_DEPTH", "MAX_SWEEP_FILE_BYTES", "MAX_VALUES", "read_sweep_file"]
 
-MAX_FILE_BYTES = 1_000_000
+MAX_SWEEP_FILE_BYTES = 1_000_000
 """The largest sweep file read (1 MB; the example sweep is under 2 kB)."""
 MAX_DEPTH = 32
 """The deepest nesting of lists and mappings in a sweep file (the format itself needs 5)."""
@@ -32,7 +32,7 @@ def read_sweep_file(path: str | Path) -> Any:
 
     Raises:
         OSError: the file cannot be read (e.g. there is none).
-        ValueError: its suffix is none of those, it is larger than :data:`MAX_FILE_BYTES`, its
+        ValueError: its suffix is none of those, it is larger than :data:`MAX_SWEEP_FILE_BYTES`, its
             text is not valid YAML or JSON, a mapping repeats a key, or it is nested deeper
             than :data:`MAX_DEPTH` or holds more than :data:`MAX_VALUES` values (aliases
             expanded); the message starts with the path and names the limit.
@@ -43,10 +43,10 @@ def read_sweep_file(path: str | Path) -> Any:
     if suffix not in (".yaml", ".yml", ".json"):
         raise ValueError(f"a sweep file must end in .yaml, .yml or .json, got {str(path)!r}")
     with open(path, "rb") as handle:
-        raw = handle.read(MAX_FILE_BYTES + 1)
-    if len(raw) > MAX_FILE_BYTES:
+        raw = handle.read(MAX_SWEEP_FILE_BYTES + 1)
+    if len(raw) > MAX_SWEEP_FILE_BYTES:
         raise ValueError(
-            f"{path} is larger than MAX_FILE_BYTES = {MAX_FILE_BYTES:,} bytes "
+            f"{path} is larger than MAX_SWEEP_FILE_BYTES = {MAX_SWEEP_FILE_BYTES:,} bytes "
             "(delayed_rl.sweep.reading): a sweep file is a few dozen lines"
         )
     try:
@@ -182,7 +182,7 @@ def _loader_class() -> type:
 def _check_expansion(path: Path, root: Any, yaml: Any) -> None:
     """Refuse a node graph that stands for too much once its aliases are expanded.
 
-    Too much is over :data:`MAX_VALUES` values, or scalars of over :data:`MAX_FILE_BYTES`
+    Too much is over :data:`MAX_VALUES` values, or scalars of over :data:`MAX_SWEEP_FILE_BYTES`
     characters in all (a long string repeated by aliases is as large as a long file once
     written out, as a run's configuration is), or a value that contains itself. Aliases make
     the composed graph a DAG whose nodes may be shared; a post-order walk without recursion
@@ -199,10 +199,10 @@ def _check_expansion(path: Path, root: Any, yaml: Any) -> None:
             values, chars = 1, len(node.value) if isinstance(node, yaml.ScalarNode) else 0
             for child in _children(node, yaml):
                 values, chars = values + sizes[id(child)][0], chars + sizes[id(child)][1]
-            if values > MAX_VALUES or chars > MAX_FILE_BYTES:
+            if values > MAX_VALUES or chars > MAX_SWEEP_FILE_BYTES:
                 raise ValueError(
                     f"{path} stands for more than MAX_VALUES = {MAX_VALUES:,} values, or "
-                    f"MAX_FILE_BYTES = {MAX_FILE_BYTES:,} characters, once its aliases are "
+                    f"MAX_SWEEP_FILE_BYTES = {MAX_SWEEP_FILE_BYTES:,} characters, once its aliases are "
                     f"expanded (delayed_rl.sweep.reading): {_where(node)}"
                 )
             sizes[key] = (values, chars)

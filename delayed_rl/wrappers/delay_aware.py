@@ -208,7 +208,7 @@ class ViewState:
                 observation delay.
 
         Returns:
-            The ``info`` entries ``received_observations`` and ``age_clipped``.
+            The ``info`` entries ``arrived_observations`` and ``age_clipped``.
         """
         self.steps = 0
         self.newest, self.newest_index = copy_sample(first), 0
@@ -230,7 +230,7 @@ class ViewState:
                 observation delay.
 
         Returns:
-            The ``info`` entries ``received_observations`` and ``age_clipped``.
+            The ``info`` entries ``arrived_observations`` and ``age_clipped``.
         """
         self.steps += 1
         self.actions[1:] = self.actions[:-1]
@@ -250,9 +250,9 @@ class ViewState:
         }
 
     def _report(self, obs: Any, arrived: Any) -> dict[str, Any]:
-        """This step's ``received_observations`` (copies) and ``age_clipped``."""
+        """This step's ``arrived_observations`` (copies) and ``age_clipped``."""
         received = ((self.steps, copy_sample(obs)),) if arrived is None else copy_sample(arrived)
-        return {"received_observations": received, "age_clipped": self.age > self.max_age}
+        return {"arrived_observations": received, "age_clipped": self.age > self.max_age}
 
 
 class DelayAwareObservation(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
@@ -271,7 +271,8 @@ class DelayAwareObservation(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstruc
     ``reset(seed=...)`` seeds the stack. The rules in full, the vector twins and the policies
     that read the view: the late-observations page of the docs.
 
-    ``info`` adds ``received_observations``, the ``(i, o_i)`` pairs received at this step, and
+    ``info`` holds ``arrived_observations``, the ``(i, o_i)`` pairs received at this step (the
+    observation delay's own entry, or the step's observation when the stack delays none), and
     ``age_clipped``, whether the age was clipped to ``D`` (an unbounded observation delay).
 
     Args:
@@ -302,7 +303,7 @@ class DelayAwareObservation(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstruc
         (Discrete(3), MultiDiscrete([2 2 2]))
         >>> view, info = env.reset(seed=0)
         >>> view, reward, terminated, truncated, info = env.step(1)
-        >>> int(view["age"]), view["actions"].tolist(), info["received_observations"]
+        >>> int(view["age"]), view["actions"].tolist(), info["arrived_observations"]
         (1, [1, 0, 0], ())
     """
 

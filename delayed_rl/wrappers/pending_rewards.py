@@ -1,4 +1,4 @@
-"""The rewards in transit of many envs at once, for the vector twins of :class:`~delayed_rl.wrappers.RewardDelay`."""
+"""The pending rewards of many envs at once, for the vector twins of :class:`~delayed_rl.wrappers.RewardDelay`."""
 
 from __future__ import annotations
 
@@ -35,7 +35,7 @@ about 100: past this the dict is the cheaper of the two."""
 
 
 class PendingRewards:
-    """The rewards in transit of ``num_envs`` independent reward delays, advanced together with numpy.
+    """The pending rewards of ``num_envs`` independent reward delays, advanced together with numpy.
 
     Each env has its own clock (it advances only on the steps that env really takes), its own
     delay generator (one stream per env, seeded by :meth:`seed`) and its own ring of

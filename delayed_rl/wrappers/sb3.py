@@ -76,12 +76,12 @@ class VecRewardDelay(VecEnvWrapper):
         self.delay = as_delay(delay)
         self.max_delay = check_max_delay(max_delay)
         self.on_episode_end = check_episode_end(on_episode_end)
-        self.rewards_in_transit = PendingRewards(self.num_envs, self.delay, self.max_delay)
+        self.pending_rewards = PendingRewards(self.num_envs, self.delay, self.max_delay)
         # (called as VecEnv.step -> step_wait -> FlushWatch.see_envs -> see)
         self._watch = flush_watch(self.on_episode_end, self.delay, self.max_delay, stacklevel=4)
         seed = check_int("seed", seed, 0, optional=True)
         if seed is not None:
-            self.rewards_in_transit.seed(self._seeds_from(seed))
+            self.pending_rewards.seed(self._seeds_from(seed))
         self._pending_seeds: list[int] | None = None
         self._started = False  # True from the first reset: the sub-envs are in episodes
         self._all = np.ones(self.num_envs, dtype=bool)
@@ -110,11 +110,11 @@ class VecRewardDelay(VecEnvWrapper):
         """
         obs = self.venv.reset()
         if self._pending_seeds is not None:
-            self.rewards_in_transit.seed(self._pending_seeds)
+            self.pending_rewards.seed(self._pending_seeds)
             self._pending_seeds = None
         infos = [dict(info) for info in self.venv.reset_infos]
         if self.on_episode_end != "carry":
-            dropped = self.rewards_in_transit.clear(self._all)
+            dropped = self.pending_rewards.clear(self._all)
             if self._started:
                 for info, lost in zip(infos, dropped, strict=True):
                     info["dropped_reward"] = float(lost)
@@ -128,7 +128,7 @@ class VecRewardDelay(VecEnvWrapper):
                         "have them flushed",
                         stacklevel=2,
                     )
-        for info, pending in zip(infos, self.rewards_in_transit.pending, strict=True):
+        for info, pending in zip(infos, self.pending_rewards.pending, strict=True):
             info["pending_reward"] = float(pending)
         self.reset_infos = infos
         self._started = True
@@ -139,14 +139,14 @@ class VecRewardDelay(VecEnvWrapper):
         obs, raw, dones, infos = self.venv.step_wait()
         rewards = checked_rewards(raw, self.num_envs, type(self).__name__)
         ended = np.asarray(dones, dtype=bool)
-        delivered, delays, amounts = self.rewards_in_transit.step(
+        delivered, delays, amounts = self.pending_rewards.step(
             rewards, self._all, ended, self.on_episode_end
         )
         if self._watch is not None and self._watch.see_envs(
-            int(self.rewards_in_transit.clock.sum()), rewards, ended
+            int(self.pending_rewards.clock.sum()), rewards, ended
         ):
             self._watch = None
-        pending = self.rewards_in_transit.pending
+        pending = self.pending_rewards.pending
         key = "flushed_reward" if self.on_episode_end == "flush" else "dropped_reward"
         for i, info in enumerate(infos):
             info["undelayed_reward"] = float(rewards[i])

@@ -31,9 +31,13 @@ MODELLERS = {
 
 
 def test_every_agent_that_models_a_delay_takes_max_delay_estimate_and_no_max_delay():
-    for cls in (DeconvolutionQLearning, ExpectedCreditQLearning, MultipleModelQLearning):
-        parameters = inspect.signature(cls).parameters
-        assert "max_delay_estimate" in parameters and "max_delay" not in parameters, cls
+    from delayed_rl.agents.registry import REGISTRY, agent_class
+
+    modellers = [DeconvolutionQLearning, ExpectedCreditQLearning, MultipleModelQLearning]
+    for name in REGISTRY:  # no registered agent takes the wrappers' clip
+        assert "max_delay" not in inspect.signature(agent_class(name)).parameters, name
+    for cls in modellers:
+        assert "max_delay_estimate" in inspect.signature(cls).parameters, cls
 
 
 @pytest.mark.parametrize("name", sorted(MODELLERS))

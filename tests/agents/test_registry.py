@@ -32,7 +32,7 @@ def test_every_entry_is_a_public_agent_class_with_a_label():
     for name, entry in REGISTRY.items():
         cls = agent_class(name)
         assert cls.__name__ == entry.class_name == CLASS_NAMES[name]
-        assert cls.__name__ in agents.__all__ and issubclass(cls, QAgent) and entry.label
+        assert cls.__name__ in agents.__all__ and issubclass(cls, QAgent) and entry.description
 
 
 def test_every_q_agent_of_the_package_is_registered():

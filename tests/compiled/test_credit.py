@@ -57,12 +57,13 @@ class LoggedGrid(gym.Env):
 
 @pytest.mark.parametrize("mode", ["flush", "drop", "carry"])
 @pytest.mark.parametrize(
-    "delay, max_delay",
+    "delay, bound",
     [(Poisson(3.0), 8), (Geometric(0.2), None), (Empirical([0.5, 0, 0, 0.5]), None)],
 )
-def test_compiled_expected_credit_is_the_python_rule(mode, delay, max_delay):
-    env = RewardDelay(grid(), delay, max_delay=max_delay, on_episode_end=mode)
-    make = {"delay": delay, "max_delay_estimate": max_delay, **SETTINGS}
+def test_compiled_expected_credit_is_the_python_rule(mode, delay, bound):
+    """The wrapper's clip and the agent's modelled bound set alike (``None``: the pmf's own)."""
+    env = RewardDelay(grid(), delay, max_delay=bound, on_episode_end=mode)
+    make = {"delay": delay, "max_delay_estimate": bound, **SETTINGS}
     compiled = ExpectedCreditQLearning(env, seed=3, **make)
     compiled.learn(STEPS, compiled=True, record=True)
     assert compiled.last_learn_path == "compiled"

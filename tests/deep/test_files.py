@@ -511,8 +511,8 @@ def test_a_missing_member_is_refused(tmp_path, saved, member):
 def test_a_member_over_the_size_limit_is_refused(tmp_path, saved, monkeypatch):
     import delayed_rl.deep.files as files
 
-    monkeypatch.setattr(files, "MAX_FILE_BYTES", len(saved["weights.pt"]) - 1)
-    refused(tmp_path, saved, "weights.pt is .* bytes, over MAX_FILE_BYTES")
+    monkeypatch.setattr(files, "MAX_MEMBER_BYTES", len(saved["weights.pt"]) - 1)
+    refused(tmp_path, saved, "weights.pt is .* bytes, over MAX_MEMBER_BYTES")
 
 
 @pytest.mark.parametrize(

@@ -132,15 +132,17 @@ def test_nesting_within_the_limit_reads(tmp_path):
 
 
 def test_a_file_over_the_size_limit_is_refused_without_reading_it_all(tmp_path, monkeypatch):
-    monkeypatch.setattr(reading, "MAX_FILE_BYTES", 1000)
+    monkeypatch.setattr(reading, "MAX_SWEEP_FILE_BYTES", 1000)
     path = write(tmp_path, "big.yaml", VALID_YAML + "#" * 2000 + "\n")
-    with pytest.raises(ValueError, match=r"big.yaml is larger than MAX_FILE_BYTES = 1,000 bytes"):
+    with pytest.raises(
+        ValueError, match=r"big.yaml is larger than MAX_SWEEP_FILE_BYTES = 1,000 bytes"
+    ):
         read_sweep_file(path)
 
 
 def test_the_real_size_limit_holds_for_a_padded_valid_file(tmp_path):
     path = write(tmp_path, "big.json", json.dumps({"agents": ["q"], "pad": "x" * 1_000_001}))
-    with pytest.raises(ValueError, match=r"larger than MAX_FILE_BYTES = 1,000,000 bytes"):
+    with pytest.raises(ValueError, match=r"larger than MAX_SWEEP_FILE_BYTES = 1,000,000 bytes"):
         read_sweep_file(path)
 
 
@@ -550,7 +552,7 @@ def test_a_long_string_repeated_by_aliases_is_refused(tmp_path):
         "envs_extra: [" + ", ".join(["*big"] * 20) + "]\n"
     )
     with pytest.raises(
-        ValueError, match=r"MAX_FILE_BYTES = 1,000,000 characters, once its aliases"
+        ValueError, match=r"MAX_SWEEP_FILE_BYTES = 1,000,000 characters, once its aliases"
     ):
         read_sweep_file(write(tmp_path, "s.yaml", text))
 

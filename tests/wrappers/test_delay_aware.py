@@ -130,16 +130,16 @@ def reference_run(bare, actions, seed, initial, k, max_age):
 
 
 def view_run(env, actions, seed):
-    """The view's ``(observation, received_observations, age_clipped)`` at the reset and each step."""
+    """The view's ``(observation, arrived_observations, age_clipped)`` at the reset and each step."""
     obs, info = env.reset(seed=seed)
-    out = [(obs, info["received_observations"], info["age_clipped"])]
+    out = [(obs, info["arrived_observations"], info["age_clipped"])]
     for action in actions:
         obs, _, terminated, truncated, info = env.step(action)
         assert env.observation_space.contains(obs)
-        out.append((obs, info["received_observations"], info["age_clipped"]))
+        out.append((obs, info["arrived_observations"], info["age_clipped"]))
         if terminated or truncated:
             obs, info = env.reset()
-            out.append((obs, info["received_observations"], info["age_clipped"]))
+            out.append((obs, info["arrived_observations"], info["age_clipped"]))
     return out
 
 
@@ -211,8 +211,8 @@ def test_an_observation_not_yet_received_changes_nothing(
     for change in (None, altered):
         env = DelayAwareObservation(stack(kind, observation, action, rule, altered=change))
         obs, info = env.reset(seed=seed)
-        run = [(obs, info["received_observations"])]
-        run += [(s[0], s[1], s[-1]["received_observations"]) for s in map(env.step, actions)]
+        run = [(obs, info["arrived_observations"])]
+        run += [(s[0], s[1], s[-1]["arrived_observations"]) for s in map(env.step, actions)]
         runs.append(run)
     arrival = next(
         (t for t, row in enumerate(runs[1]) if any(i == altered for i, _ in row[-1])), None
@@ -229,9 +229,9 @@ def test_an_older_observation_received_later_does_not_replace_the_view() -> None
     )
     env.reset(seed=0)
     steps = [env.step(0) for _ in range(5)]  # the stale rule shows o1, o0, o3, o1, o4
-    received = [[i for i, _ in s[-1]["received_observations"]] for s in steps]
+    received = [[i for i, _ in s[-1]["arrived_observations"]] for s in steps]
     assert received == [[1], [0], [3], [1], [4]]
-    made = {i: o for s in steps for i, o in s[-1]["received_observations"]}
+    made = {i: o for s in steps for i, o in s[-1]["arrived_observations"]}
     assert [s[0]["observation"] for s in steps] == [made[i] for i in (1, 1, 3, 3, 4)]
     assert [int(s[0]["age"]) for s in steps] == [0, 1, 0, 1, 1]
     assert [s[-1]["observation_age"] for s in steps] == [0, 2, 0, 3, 1]  # the stack's own
@@ -330,10 +330,10 @@ def test_the_rows_before_the_first_action_hold_the_initial_action() -> None:
 def test_without_an_observation_delay_every_observation_is_received_at_once() -> None:
     env = DelayAwareObservation(ActionDelay(Walk(), Constant(1)))
     obs, info = env.reset(seed=0)
-    assert info["received_observations"] == ((0, obs["observation"]),)
+    assert info["arrived_observations"] == ((0, obs["observation"]),)
     for t in range(1, 6):
         obs, *_, info = env.step(1)
-        assert info["received_observations"] == ((t, obs["observation"]),)
+        assert info["arrived_observations"] == ((t, obs["observation"]),)
         assert obs["age"] == 0 and "observation_age" not in info and info["t"] == t
 
 
@@ -342,15 +342,15 @@ def test_everything_handed_out_is_a_copy(rule: str) -> None:
     def run(scribbling: bool):
         env = DelayAwareObservation(stack("box", (Uniform(0, 3), None), (Constant(1), None), rule))
         obs, info = env.reset(seed=3)
-        out = [copy.deepcopy((obs, info["received_observations"]))]
+        out = [copy.deepcopy((obs, info["arrived_observations"]))]
         for action in actions_for("box", 3, 20):
             if scribbling:
                 scribble(obs)  # the caller writes into the view returned
-                scribble(info["received_observations"])  # and into what info reports
+                scribble(info["arrived_observations"])  # and into what info reports
             obs, *_, info = env.step(action)
             if scribbling:
                 scribble(action)  # and reuses its action array
-            out.append(copy.deepcopy((obs, info["received_observations"])))
+            out.append(copy.deepcopy((obs, info["arrived_observations"])))
         return out
 
     assert same(tuple(run(False)), tuple(run(True)))
@@ -404,10 +404,10 @@ def trajectory(env: gym.Env, seed: int, n: int = 100) -> tuple:
     """The observations, rewards and received observations of ``n`` seeded random steps."""
     obs, info = env.reset(seed=seed)
     env.action_space.seed(seed)
-    rows = [(obs, info["received_observations"])]
+    rows = [(obs, info["arrived_observations"])]
     for _ in range(n):
         obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
-        rows.append((obs, reward, info["received_observations"]))
+        rows.append((obs, reward, info["arrived_observations"]))
         if terminated or truncated:
             rows.append(env.reset()[0])
     return tuple(rows)
@@ -434,7 +434,7 @@ def test_gym_make_builds_the_view_inside_the_reward_delay() -> None:
     assert env.observation_space["actions"] == spaces.MultiDiscrete([4] * 3)
     obs, info = env.reset(seed=0)
     *_, info = env.step(0)
-    assert {"received_observations", "drawn_reward_delay", "executed_action"} <= set(info)
+    assert {"arrived_observations", "drawn_reward_delay", "executed_action"} <= set(info)
     unbounded = gym.make(
         "delayed_rl/Roulette-v0", action_delay=2.0, delay_aware=True, action_history=5
     )
@@ -551,7 +551,7 @@ def test_a_vector_env_of_views_is_one_view_per_sub_env(rule: str) -> None:
     )  # fmt: skip
     assert made.single_observation_space["age"] == spaces.Discrete(3)
     _, info = made.reset(seed=0)
-    assert info["_received_observations"].all()
+    assert info["_arrived_observations"].all()
 
 
 # --------------------------------------------------------------------------- the Discrete index

@@ -472,12 +472,12 @@ def test_a_vector_step_refused_for_a_sum_beyond_float64_changes_nothing(
         warnings.simplefilter("ignore")
         env.reset(seed=seed)
         for _ in range(max(map(len, scripts))):
-            before = env.rewards_in_transit._save()
+            before = env.pending_rewards._save()
             try:
                 _, rewards, _, _, info = env.step(np.zeros(n, dtype=np.int64))
             except ValueError as error:
                 assert "float64" in str(error)
-                assert _same(env.rewards_in_transit._save(), before)
+                assert _same(env.pending_rewards._save(), before)
                 continue
             emitted += units(np.where(info["_undelayed_reward"], info["undelayed_reward"], 0.0))
             delivered += units(rewards)

@@ -39,7 +39,7 @@ from delayed_rl.agents.deconvolution.regression import (
 from delayed_rl.agents.expected_credit import credit_weights
 from delayed_rl.compiled.state import RewardEstimates
 from delayed_rl.delays import Delay, Empirical
-from delayed_rl.wrappers.reward_delay import find_reward_delay
+from delayed_rl.wrappers.reward_delay import EPISODE_END_MODES, find_reward_delay
 
 __all__ = [
     "MAX_DELAY_ITERATIONS",
@@ -48,7 +48,6 @@ __all__ = [
     "DeconvolutionQLearning",
 ]
 
-EPISODE_END_MODES = ("flush", "drop", "carry")
 MAX_DELAY_ITERATIONS = 100
 """The most ``delay_iterations`` (alternations of the ``R`` and ``p`` solves at each solve).
 
@@ -402,7 +401,7 @@ class DeconvolutionQLearning(QAgent):
         """Check the deconvolution state against this agent, then set it.
 
         Beyond Q-learning's arrays: ``assumed_episode_end`` an index of
-        :data:`EPISODE_END_MODES` (the ``on_episode_end`` given, if one was); the statistics as
+        :data:`~delayed_rl.wrappers.EPISODE_END_MODES` (the ``on_episode_end`` given, if one was); the statistics as
         :meth:`~delayed_rl.agents.deconvolution.regression.RewardRegression.restore` checks them;
         ``reward_model`` one mean reward per pair within ±``MAX_ABS_VALUE``; ``delay_pmf`` on
         the simplex (finite, ``>= 0``, summing to 1 within :data:`PMF_TOLERANCE`) and, for a

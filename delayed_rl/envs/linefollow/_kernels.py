@@ -42,7 +42,7 @@ class TrackArrays(NamedTuple):
     ``(ix, iy)`` has the key ``ix * ny + iy`` and holds the segments
     ``cell_segs[cell_starts[c]:cell_starts[c + 1]]`` where ``cell_keys[c]`` is that key
     (``cell_keys`` sorted; cells not listed hold none). A compiled function takes the two
-    buffers of :func:`pack_track` (numba passes a few arrays far faster than a tuple) and
+    arrays of :func:`pack_track` (numba passes a few arrays far faster than a tuple) and
     unpacks them into this tuple of views with :func:`unpack_track`.
     """
 
@@ -73,10 +73,10 @@ class CameraArrays(NamedTuple):
     offsets: NDArray[np.float64]
 
 
-#: Scalars heading a packed track's float buffer (origin x, y, cell size, length); then come
+#: Scalars heading a packed track's float array (origin x, y, cell size, length); then come
 #: its seven per-segment arrays (a.real, a.imag, d.real, d.imag, inv_len2, s0, seg_len).
 _FLOAT_HEADER = 4
-#: Scalars heading its int buffer (n, nx, ny, window, K cells, M entries); then come
+#: Scalars heading its int array (n, nx, ny, window, K cells, M entries); then come
 #: cell_keys (K), cell_starts (K + 1) and cell_segs (M).
 _INT_HEADER = 6
 
@@ -96,9 +96,9 @@ def pack_track(
     length: float,
     window: int,
 ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-    """A track's geometry in one float64 and its grid in one int64 buffer (copies).
+    """A track's geometry in one float64 and its grid in one int64 array (copies).
 
-    The buffers stay writeable, as copies and unpickled arrays are: numba compiles a function
+    The arrays stay writeable, as copies and unpickled arrays are: numba compiles a function
     anew for read-only arrays.
 
     Args:
@@ -128,7 +128,7 @@ def pack_track(
 def pack_camera(
     look_ahead: float, half_width: float, offsets: NDArray[np.float64]
 ) -> NDArray[np.float64]:
-    """A camera's geometry in one float64 buffer (see :class:`CameraArrays`, :func:`pack_track`)."""
+    """A camera's geometry in one float64 array (see :class:`CameraArrays`, :func:`pack_track`)."""
     return np.concatenate([[look_ahead, half_width], offsets])
 
 
@@ -142,7 +142,7 @@ def distance(x, y):
 # ---------------------------------------------------------------------- unpacking
 @jit
 def unpack_track(floats, ints):
-    """The :class:`TrackArrays` views of :func:`pack_track`'s two buffers."""
+    """The :class:`TrackArrays` views of :func:`pack_track`'s two arrays."""
     n, nx, ny, window, cells, entries = ints[0], ints[1], ints[2], ints[3], ints[4], ints[5]
     f, i = _FLOAT_HEADER, _INT_HEADER
     return TrackArrays(
@@ -168,7 +168,7 @@ def unpack_track(floats, ints):
 
 @jit
 def unpack_camera(packed):
-    """The :class:`CameraArrays` view of :func:`pack_camera`'s buffer."""
+    """The :class:`CameraArrays` view of :func:`pack_camera`'s array."""
     return CameraArrays(packed[0], packed[1], packed[2:])
 
 

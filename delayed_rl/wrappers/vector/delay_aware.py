@@ -37,7 +37,7 @@ class VectorDelayAwareObservation(gym.vector.VectorWrapper, gym.utils.RecordCons
     ``reset(seed=...)`` seeds the stack. The rules in full: the late-observations page of the
     docs.
 
-    ``info`` holds, with Gymnasium's ``_key`` masks, ``received_observations`` (an object array
+    ``info`` holds, with Gymnasium's ``_key`` masks, ``arrived_observations`` (an object array
     of each sub-env's ``(i, o_i)`` received at this step) and ``age_clipped`` (a ``bool``
     array); under ``SAME_STEP``, the ending step's are in ``info["final_info"]``.
 
@@ -183,9 +183,9 @@ class VectorDelayAwareObservation(gym.vector.VectorWrapper, gym.utils.RecordCons
             )
 
     def _entries(self) -> dict[str, np.ndarray]:
-        """Empty ``received_observations`` and ``age_clipped`` arrays, one entry per sub-env."""
+        """Empty ``arrived_observations`` and ``age_clipped`` arrays, one entry per sub-env."""
         return {
-            "received_observations": np.full(self.num_envs, None, dtype=object),
+            "arrived_observations": np.full(self.num_envs, None, dtype=object),
             "age_clipped": np.zeros(self.num_envs, dtype=bool),
         }
 

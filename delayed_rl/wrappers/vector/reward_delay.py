@@ -28,7 +28,7 @@ def _with_mask(info: dict[str, Any], key: str, values: np.ndarray, mask: np.ndar
 class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArgs):
     """Delays each sub-env's rewards independently, with the semantics of :class:`~delayed_rl.wrappers.RewardDelay`.
 
-    Every sub-env has its own rewards in transit, clock and delay stream; ``on_episode_end``
+    Every sub-env has its own pending rewards, clock and delay stream; ``on_episode_end``
     applies to a sub-env when its episode ends, under each autoreset mode of
     ``gymnasium.vector`` (under ``NEXT_STEP`` the reset step emits and delivers nothing).
     ``reset(seed=s)`` seeds sub-env ``i`` with ``s + i`` (``reset(seed=[s0, s1, ...])`` with its
@@ -82,7 +82,7 @@ class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
         self.max_delay = check_max_delay(max_delay)
         self.on_episode_end = check_episode_end(on_episode_end)
         self.autoreset_mode = autoreset_mode(env)
-        self.rewards_in_transit = PendingRewards(self.num_envs, self.delay, self.max_delay)
+        self.pending_rewards = PendingRewards(self.num_envs, self.delay, self.max_delay)
         # (called as step -> FlushWatch.see_envs -> see)
         self._watch = flush_watch(self.on_episode_end, self.delay, self.max_delay, stacklevel=3)
         self._resetting = np.zeros(self.num_envs, dtype=bool)
@@ -102,12 +102,12 @@ class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
                 ``num_envs`` of them (or ``None``).
         """
         seeds, envs, obs, info = reset_inner(self.env, seed, options)
-        self.rewards_in_transit.seed(
+        self.pending_rewards.seed(
             [s if reset else None for s, reset in zip(seeds, envs, strict=True)]
         )
         cut_short = envs & ~self._episode_ended
         if self.on_episode_end != "carry" and cut_short.any():
-            _with_mask(info, "dropped_reward", self.rewards_in_transit.clear(cut_short), cut_short)
+            _with_mask(info, "dropped_reward", self.pending_rewards.clear(cut_short), cut_short)
         self._episode_ended[envs] = False
         self._resetting[envs] = False
         return obs, info
@@ -118,7 +118,7 @@ class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
         rewards = checked_rewards(rewards, self.num_envs, type(self).__name__)
         active = ~self._resetting
         ended = (np.asarray(terminated) | np.asarray(truncated)) & active
-        delivered, delays, settled = self.rewards_in_transit.step(
+        delivered, delays, settled = self.pending_rewards.step(
             rewards, active, ended, self.on_episode_end
         )
         if settled is not None:
@@ -126,7 +126,7 @@ class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
             _with_mask(info, key, settled, ended)
         emitted = np.where(active, rewards, 0.0)
         if self._watch is not None and self._watch.see_envs(
-            int(self.rewards_in_transit.clock.sum()), emitted, ended
+            int(self.pending_rewards.clock.sum()), emitted, ended
         ):
             self._watch = None
         if self.autoreset_mode == AutoresetMode.NEXT_STEP:
@@ -139,6 +139,6 @@ class VectorRewardDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
         _with_mask(info, "undelayed_reward", emitted, active)
         _with_mask(info, "drawn_reward_delay", delays, active)
         _with_mask(
-            info, "pending_reward", self.rewards_in_transit.pending, np.ones(self.num_envs, bool)
+            info, "pending_reward", self.pending_rewards.pending, np.ones(self.num_envs, bool)
         )
         return obs, delivered, terminated, truncated, info

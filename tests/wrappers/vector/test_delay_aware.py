@@ -40,8 +40,8 @@ STACKS = {  # name: (observation delay, its max_delay, arrival, action delay, it
     "unbounded, ages clipped": (Poisson(3.0), None, "network", Constant(1), None, 2, 3),
     "no delay": (None, None, None, None, None, None, 2),
 }
-VIEW_KEYS = ("received_observations", "age_clipped")
-DELAY_KEYS = ("observation_age", "arrived_observations")
+VIEW_KEYS = ("arrived_observations", "age_clipped")
+DELAY_KEYS = ("observation_age",)  # (the view rewrites arrived_observations, the same pairs)
 
 
 def make_pair(env_id, stack, mode, wrappers=()):
@@ -155,7 +155,7 @@ def test_under_disabled_autoreset_a_reset_mask_restarts_only_its_views(stack) ->
             mask = {"reset_mask": ended}
             reset = twin.reset(options=dict(mask))
             compare_step(reset, reference.reset(options=dict(mask)), f"reset {t}")
-            assert np.array_equal(reset[1]["_received_observations"], ended)
+            assert np.array_equal(reset[1]["_arrived_observations"], ended)
             masked += 1
     assert masked > 0
 
@@ -167,7 +167,7 @@ def test_the_view_reads_the_bounds_and_the_initial_action_of_the_vector_delays()
     assert (env.action_history, env.max_age, env.initial_action) == (5, 3, 1)
     views, info = env.reset(seed=0)
     assert views["actions"].tolist() == [[1] * 5] * 2
-    assert views["age"].tolist() == [0, 0] and info["_received_observations"].all()
+    assert views["age"].tolist() == [0, 0] and info["_arrived_observations"].all()
     rebuilt = VectorDelayAwareObservation(env.env, **env._saved_kwargs)
     assert rebuilt.action_history == 5
 
@@ -189,7 +189,7 @@ def test_nothing_handed_out_is_kept_or_shared(stack) -> None:
         compare_step(got, expected, t)
         info = got[-1]
         scribble(got[0])
-        for entries in info["received_observations"]:
+        for entries in info["arrived_observations"]:
             scribble(entries)
         if "final_obs" in info:
             finals += 1
