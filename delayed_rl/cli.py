@@ -43,7 +43,7 @@ from delayed_rl.delays import Poisson
 from delayed_rl.envs import env_ids
 from delayed_rl.experiments import DEFAULT_NAMES, LONG_NAMES, NAMES
 from delayed_rl.parallel.pools import BACKENDS, MAX_SEED_COUNT, check_workers
-from delayed_rl.sweep.runs import EpisodeTooLong, greedy_rollout
+from delayed_rl.sweep.runs import MAX_EVAL_EPISODE_STEPS, EpisodeTooLong, greedy_rollout
 from delayed_rl.sweep.schema import (
     MAX_EVAL_EPISODES,
     MAX_EVAL_STEPS,
@@ -111,7 +111,6 @@ _eval_episodes = _limited(1, MAX_EVAL_EPISODES)
 #: has: :attr:`~delayed_rl.agents.registry.AgentEntry.train_options`).
 TRAIN_AGENTS = {key: e.class_name for key, e in REGISTRY.items() if e.train_options is not None}
 #: What ``--episodes`` waits for an episode to end before calling the env continuing.
-MAX_EPISODE_STEPS = 100_000
 #: How many episodes ``evaluate`` runs when given neither ``--episodes`` nor ``--steps``.
 EPISODES = 10
 
@@ -241,10 +240,10 @@ def _evaluate(args: argparse.Namespace) -> int:
     else:
         length = Evaluation("episode", EPISODES if args.episodes is None else args.episodes)
     try:
-        run = greedy_rollout(agent, env, obs, length, args.max_episode_steps)
+        run = greedy_rollout(agent, env, obs, length, args.max_eval_episode_steps)
     except EpisodeTooLong:
         raise CommandError(
-            f"no episode of {args.env} ended within {args.max_episode_steps} steps: it looks "
+            f"no episode of {args.env} ended within {args.max_eval_episode_steps} steps: it looks "
             "like a continuing task; evaluate it with --steps N"
         ) from None
     env.close()
@@ -527,11 +526,11 @@ def _add_evaluate_command(commands: Any) -> None:
         help="run this many steps (for continuing envs)",
     )
     evaluate.add_argument(
-        "--max-episode-steps",
+        "--max-eval-episode-steps",
         type=_eval_steps,
-        default=MAX_EPISODE_STEPS,
-        help="with --episodes: fail when an episode runs longer than this "
-        f"(default {MAX_EPISODE_STEPS})",
+        default=MAX_EVAL_EPISODE_STEPS,
+        help="with --episodes: fail when an episode runs longer than this, as a continuing "
+        f"env's would (default {MAX_EVAL_EPISODE_STEPS}; not a time limit on the env)",
     )
     evaluate.add_argument(
         "--seed",

@@ -105,7 +105,14 @@ def test_evaluate_counts_episodes_on_an_episodic_env(tmp_path, capsys):
 def test_evaluate_with_episodes_on_a_continuing_env_fails_clearly(tmp_path, capsys):
     assert main(_train(tmp_path, "--agent", "q", "--steps", "100")) == 0
     capsys.readouterr()
-    argv = ["evaluate", str(tmp_path / "agent.npz"), "--env", GRID, "--max-episode-steps", "50"]
+    argv = [
+        "evaluate",
+        str(tmp_path / "agent.npz"),
+        "--env",
+        GRID,
+        "--max-eval-episode-steps",
+        "50",
+    ]
     assert main(argv) == 1
     err = capsys.readouterr().err
     assert err.startswith("error: no episode") and "--steps" in err and "Traceback" not in err
@@ -175,7 +182,10 @@ def test_evaluate_with_episodes_on_a_continuing_env_fails_clearly(tmp_path, caps
             "--steps: must be at most MAX_EVAL_STEPS",
         ),
         (f"evaluate m.npz --env {GRID} --episodes 1000001", "must be at most MAX_EVAL_EPISODES"),
-        (f"evaluate m.npz --env {GRID} --max-episode-steps 10000000000", "at most MAX_EVAL_STEPS"),
+        (
+            f"evaluate m.npz --env {GRID} --max-eval-episode-steps 10000000000",
+            "at most MAX_EVAL_STEPS",
+        ),
         ("sweep s.yaml --workers 5000", "argument --workers: must be at most MAX_WORKERS = 1024"),
         (
             "bench --base-seed -5 delay-sweep",

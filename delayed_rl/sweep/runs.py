@@ -250,7 +250,7 @@ class GreedyRollout:
 
 
 def greedy_rollout(
-    model: Any, env: gym.Env, obs: Any, length: Evaluation, max_episode_steps: int
+    model: Any, env: gym.Env, obs: Any, length: Evaluation, max_eval_episode_steps: int
 ) -> GreedyRollout:
     """Run ``model``'s greedy policy on ``env``, without learning, for ``length``.
 
@@ -262,17 +262,17 @@ def greedy_rollout(
         env: the env, already reset.
         obs: the observation of that reset.
         length: ``count`` whole episodes (``unit="episode"``) or ``count`` steps (``"step"``).
-        max_episode_steps: with episodes, the steps an episode may take at the most.
+        max_eval_episode_steps: with episodes, the steps an episode may take at the most.
 
     Raises:
-        EpisodeTooLong: with episodes, one took ``max_episode_steps`` steps without ending.
+        EpisodeTooLong: with episodes, one took ``max_eval_episode_steps`` steps without ending.
     """
     run = GreedyRollout()
     episode_steps, episode_return = 0, 0.0
     by_steps = length.unit == "step"
     while run.steps < length.count if by_steps else len(run.returns) < length.count:
-        if not by_steps and episode_steps == max_episode_steps:
-            raise EpisodeTooLong(f"no episode ended within {max_episode_steps} steps")
+        if not by_steps and episode_steps == max_eval_episode_steps:
+            raise EpisodeTooLong(f"no episode ended within {max_eval_episode_steps} steps")
         obs, reward, ended = _greedy_step(model, env, obs)
         run.steps, run.total = run.steps + 1, run.total + reward
         episode_steps, episode_return = episode_steps + 1, episode_return + reward
