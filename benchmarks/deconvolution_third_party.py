@@ -1,7 +1,7 @@
 """Deconvolution Q-learning on Gymnasium's own tabular envs, beside Q-learning, Python path.
 
 Each env (``Taxi-v4``, ``CliffWalking-v1``, ``FrozenLake-v1``, as ``gym.make`` builds them) gets
-Poisson(``--lam``) reward delays from :class:`~delayed_rl.wrappers.PoissonRewardDelay` (pending
+Poisson(``--reward-delay``) reward delays from :class:`~delayed_rl.wrappers.PoissonRewardDelay` (pending
 rewards flushed at episode ends, the wrapper's default). Per seed it trains:
 
 - ``Q``: Q-learning on the delayed reward;
@@ -15,7 +15,7 @@ env, each cut at 200 steps (CliffWalking has no time limit of its own; a policy 
 scores −200 there). Reported: the mean over seeds with its 95 % CI (Student t), each seed's
 score, and seconds per run.
 
-    python benchmarks/deconvolution_third_party.py [--seeds 3] [--lam 5] [--max-delay-estimate 20]
+    python benchmarks/deconvolution_third_party.py [--seeds 3] [--reward-delay 5] [--max-delay-estimate 20]
         [--env Taxi-v4:1000000 --env CliffWalking-v1:500000 --env FrozenLake-v1:200000]
 """
 
@@ -68,20 +68,20 @@ def main() -> None:
     """Train every agent on every env and seed; print one table per env."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=3)
-    parser.add_argument("--lam", type=float, default=5.0)
+    parser.add_argument("--reward-delay", type=float, default=5.0, metavar="λ")
     parser.add_argument("--max-delay-estimate", type=int, default=20)
     parser.add_argument("--env", action="append", help="ENV_ID:STEPS (repeatable)")
     args = parser.parse_args()
     for spec in args.env or DEFAULT_ENVS:
         env_id, steps = spec.split(":")
-        print(f"\n{env_id}, Poisson({args.lam:g}) delays, {int(steps):,} steps, "
+        print(f"\n{env_id}, Poisson({args.reward_delay:g}) delays, {int(steps):,} steps, "
               f"seeds 0..{args.seeds - 1}, greedy return over {EPISODES} episodes")  # fmt: skip
         print("| agent | mean ± 95% CI | per seed | seconds per run |")
         print("|---|---|---|---|")
         for name in ("Q", "DeconvQ", "Q undelayed"):
             scores, seconds = [], []
             for seed in range(args.seeds):
-                agent = make_agent(name, env_id, args.lam, args.max_delay_estimate, seed)
+                agent = make_agent(name, env_id, args.reward_delay, args.max_delay_estimate, seed)
                 started = time.perf_counter()
                 agent.learn(int(steps), log_interval=None, compiled=False)
                 seconds.append(time.perf_counter() - started)

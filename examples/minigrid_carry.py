@@ -7,7 +7,7 @@ later, in the next episode, as a delayed reward should. Needs the ``examples`` e
 
 Run::
 
-    python examples/minigrid_carry.py [--episodes 30] [--lam 10]
+    python examples/minigrid_carry.py [--episodes 30] [--reward-delay 10]
 """
 
 from __future__ import annotations
@@ -46,11 +46,13 @@ def main() -> None:
     """Count where the rewards arrive under each mode."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=30)
-    parser.add_argument("--lam", type=float, default=10.0, help="Poisson mean delay (steps)")
+    parser.add_argument(
+        "--reward-delay", type=float, default=10.0, metavar="λ", help="Poisson mean delay (steps)"
+    )
     args = parser.parse_args()
     for mode in ("flush", "carry"):
         env = PoissonRewardDelay(
-            ImgObsWrapper(gym.make("MiniGrid-Empty-5x5-v0")), args.lam, on_episode_end=mode
+            ImgObsWrapper(gym.make("MiniGrid-Empty-5x5-v0")), args.reward_delay, on_episode_end=mode
         )
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")

@@ -6,7 +6,7 @@ the ``sb3`` extra (stable-baselines3; install ``torch==2.13.0`` first for the CP
 
 Run::
 
-    python examples/sb3_delayed_rewards.py [--steps 50000] [--lam 5]
+    python examples/sb3_delayed_rewards.py [--steps 50000] [--reward-delay 5]
 """
 
 from __future__ import annotations
@@ -33,12 +33,18 @@ def main() -> None:
     """Train both, print their undelayed returns."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=50_000)
-    parser.add_argument("--lam", type=float, default=5.0, help="Poisson mean delay (steps)")
+    parser.add_argument(
+        "--reward-delay", type=float, default=5.0, metavar="λ", help="Poisson mean delay (steps)"
+    )
     args = parser.parse_args()
-    mean, std = train(PPO, "CartPole-v1", args.steps, args.lam, n_steps=256)
-    print(f"PPO, CartPole-v1, Poisson({args.lam}) reward delays: return {mean:.1f} ± {std:.1f}")
-    mean, std = train(DQN, "Taxi-v4", args.steps, args.lam, learning_starts=500)
-    print(f"DQN, Taxi-v4, Poisson({args.lam}) reward delays: return {mean:.1f} ± {std:.1f}")
+    mean, std = train(PPO, "CartPole-v1", args.steps, args.reward_delay, n_steps=256)
+    print(
+        f"PPO, CartPole-v1, Poisson({args.reward_delay}) reward delays: return {mean:.1f} ± {std:.1f}"
+    )
+    mean, std = train(DQN, "Taxi-v4", args.steps, args.reward_delay, learning_starts=500)
+    print(
+        f"DQN, Taxi-v4, Poisson({args.reward_delay}) reward delays: return {mean:.1f} ± {std:.1f}"
+    )
 
 
 if __name__ == "__main__":
