@@ -9,9 +9,10 @@ greedy actions, and the arrays a saved model file holds. It adds the runs of
 
 ``--write`` stores them in ``benchmarks/seeded_runs.json`` with the package versions (``--write
 NAME ...`` adds or replaces those runs' fingerprints, all of an agent's for its name, and keeps
-the others, on the same package versions); an agent class with
-no compiled rule (``compiled_tables`` returns ``None``) runs on the Python path only;
-``--check`` compares against that file and lists every run that changed. A run whose output
+the others, on the same package versions and steps); an agent class that does not override
+``compiled_tables`` (no compiled rule) runs on the Python path only; ``--check`` compares
+against that file and lists every run that changed, and, run whole, every stored run it no
+longer runs. A run whose output
 changed on purpose (a renamed label in a summary, say) is re-recorded with a ``history`` entry
 saying what changed and why. A change that must
 keep behaviour (a re-layering, a rename) is checked with ``--check`` on the same package
@@ -203,10 +204,12 @@ def main() -> int:
     if args.write:  # (the history of deliberate changes, if any, is kept)
         stored = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
         if args.names:  # the named runs join (or replace theirs in) the stored ones
-            if stored.get("versions", versions) != versions:
+            recorded = (stored.get("versions", versions), stored.get("steps", STEPS))
+            if recorded != (versions, STEPS):
                 parser.error(
-                    f"the stored runs were recorded with {stored['versions']}, these with "
-                    f"{versions}: record them all (--write with no names) on one set"
+                    f"the stored runs were recorded with {recorded[0]} and {recorded[1]} steps, "
+                    f"these with {versions} and {STEPS}: record them all (--write with no "
+                    "names) on one set"
                 )
             hashes = {**stored.get("hashes", {}), **hashes}
         history = stored.get("history", [])
@@ -220,8 +223,11 @@ def main() -> int:
         changed = [k for k in hashes if stored["hashes"].get(k) != hashes[k]]
         for key in changed:
             print(f"changed: {key}")
+        missing = [] if args.names else sorted(stored["hashes"].keys() - hashes.keys())
+        for key in missing:  # a stored run the table no longer holds (a path lost, say)
+            print(f"missing: {key}")
         print(f"{len(hashes) - len(changed)} of {len(hashes)} runs unchanged")
-        return 1 if changed else 0
+        return 1 if changed or missing else 0
     json.dump(hashes, sys.stdout, indent=1)
     return 0
 

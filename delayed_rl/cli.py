@@ -110,7 +110,6 @@ _eval_episodes = _limited(1, MAX_EVAL_EPISODES)
 #: ``--agent`` choices: the agent class for each (the registry's agents whose options ``train``
 #: has: :attr:`~delayed_rl.agents.registry.AgentEntry.train_options`).
 TRAIN_AGENTS = {key: e.class_name for key, e in REGISTRY.items() if e.train_options is not None}
-#: What ``--episodes`` waits for an episode to end before calling the env continuing.
 #: How many episodes ``evaluate`` runs when given neither ``--episodes`` nor ``--steps``.
 EPISODES = 10
 

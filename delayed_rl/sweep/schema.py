@@ -418,7 +418,8 @@ def _reward_model(where: str, name: str, value: Any) -> dict[str, Any] | None:
             f"({', '.join(off_policy)}), got the on-policy {name!r}"
         )
     if "seed" in model:
-        raise ValueError(f"{where} must not set 'seed': the run's seed seeds the model")
+        seeded = "buffer" if kind in GUIDANCE_BUFFERS else "model"
+        raise ValueError(f"{where} must not set 'seed': the run's seed seeds the {seeded}")
     _check_agent_kwargs(where, name, {k: v for k, v in model.items() if k != "type"})
     return model
 

@@ -199,12 +199,13 @@ def test_every_registered_agent_has_a_reference_test_here():
 
 
 COMPILED_PATH_TESTS = {
-    "OracleQLearning": "tests/agents/test_oracle.py::test_without_delay_it_is_q_learning_update_"
-    "for_update (and ::test_under_a_constant_delay_it_is_fixed_delay_q_learning)",
-    "DeconvolutionQLearning": "tests/agents/test_deconvolution.py::test_the_compiled_and_python_"
-    "paths_learn_the_same_from_the_same_steps",
-}
-"""Agents with a compiled rule whose compiled path is checked by a test elsewhere, by class."""
+    "OracleQLearning": ("tests/agents/test_oracle.py", "test_without_delay_it_is_q_learning_update_for_update"),
+    "DeconvolutionQLearning": (
+        "tests/agents/test_deconvolution.py",
+        "test_the_compiled_and_python_paths_learn_the_same_from_the_same_steps",
+    ),
+}  # fmt: skip
+"""Agents with a compiled rule whose compiled path is checked by a test elsewhere: file, test."""
 
 
 def test_every_compiled_rule_is_checked_on_both_paths():
@@ -213,6 +214,8 @@ def test_every_compiled_rule_is_checked_on_both_paths():
     Here (:data:`LEARN_PATH_CASES`, replayed into its reference) or in a test named in
     :data:`COMPILED_PATH_TESTS`; an agent without a compiled rule trains on the Python path only.
     """
+    from pathlib import Path
+
     from delayed_rl.agents import TabularAgent
     from delayed_rl.agents.registry import REGISTRY, agent_class
 
@@ -221,6 +224,9 @@ def test_every_compiled_rule_is_checked_on_both_paths():
         cls = agent_class(name)
         if cls.compiled_tables is not TabularAgent.compiled_tables:
             assert cls in here or cls.__name__ in COMPILED_PATH_TESTS, cls.__name__
+    root = Path(__file__).resolve().parents[2]
+    for path, test in COMPILED_PATH_TESTS.values():  # the tests named are there
+        assert f"def {test}(" in (root / path).read_text(encoding="utf-8"), (path, test)
 
 
 def _reference_for(agent):

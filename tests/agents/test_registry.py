@@ -28,7 +28,7 @@ def _seeded_runs():
     return module
 
 
-def test_every_entry_is_a_public_agent_class_with_a_label():
+def test_every_entry_is_a_public_agent_class_with_a_description():
     for name, entry in REGISTRY.items():
         cls = agent_class(name)
         assert cls.__name__ == entry.class_name == CLASS_NAMES[name]
@@ -60,15 +60,26 @@ def test_every_registered_agent_has_a_seeded_run():
     assert {class_name for _, class_name, _ in rows} == set(CLASS_NAMES.values())
 
 
-def test_a_new_rule_trains_on_the_python_path_until_it_compiles():
-    """A ``QAgent`` subclass with its own rule inherits no compiled rule (none would be its own)."""
+@pytest.fixture
+def defined_classes():
+    """Agent classes a test defines: out of the model-file class table after it, pass or fail."""
     from delayed_rl.agents.common import persistence
+
+    made: list[type] = []
+    yield made
+    for cls in made:
+        persistence.AGENT_CLASSES.pop(persistence.class_key(cls), None)
+
+
+def test_a_new_rule_trains_on_the_python_path_until_it_compiles(defined_classes):
+    """A ``QAgent`` subclass with its own rule inherits no compiled rule (none would be its own)."""
     from delayed_rl.compiled import NotCompilable
 
     class HalfRewardQ(QAgent):  # a rule of its own: Q-learning on half the reward
         def _learn_transition(self, s, a, r, s2, terminated, truncated):
             self._q_learning_update(s, a, 0.5 * r, s2, terminated)
 
+    defined_classes.append(HalfRewardQ)
     env = "delayed_rl/GridWorld-3x3-v0"
     agent = HalfRewardQ(env, seed=0).learn(500)
     assert agent.last_learn_path == "python" and agent.compiled_tables() is None
@@ -78,7 +89,6 @@ def test_a_new_rule_trains_on_the_python_path_until_it_compiles():
     assert not np.array_equal(agent.q_table, q.q_table)  # its own rule ran, not Q-learning's
     assert _seeded_runs().paths(HalfRewardQ) == (False,)
     assert _seeded_runs().paths(QLearning) == (False, True)
-    del persistence.AGENT_CLASSES[persistence.class_key(HalfRewardQ)]  # (model files' classes)
 
 
 def test_the_packages_top_level_agents_are_registered_classes():
@@ -122,9 +132,8 @@ def test_the_hand_written_lists_of_agents_name_every_agent():
         assert f"`{module}.py`" in algorithms or f"`{module}/`" in algorithms, module
 
 
-def test_a_rule_over_several_delay_estimates_acts_as_mmq_does():
+def test_a_rule_over_several_delay_estimates_acts_as_mmq_does(defined_classes):
     """``QAgent`` with several tables acts from the one holding the state's max (MMQ's choice)."""
-    from delayed_rl.agents.common import persistence
 
     class FirstTableQ(QAgent):  # learns in table 0 only; table 1 keeps q_init
         def __init__(self, env, **hyperparameters):
@@ -133,11 +142,15 @@ def test_a_rule_over_several_delay_estimates_acts_as_mmq_does():
         def _learn_transition(self, s, a, r, s2, terminated, truncated):
             self._q_learning_update(s, a, r, s2, terminated)
 
-    agent = FirstTableQ("delayed_rl/GridWorld-3x3-v0", q_init=1.0, seed=0).learn(3_000)
-    del persistence.AGENT_CLASSES[persistence.class_key(FirstTableQ)]
-    share = agent.acting_delay_share
-    assert agent.last_learn_path == "python" and share.shape == (2,)
-    assert share[0] > 0 and share[1] > 0  # both tables acted: the max is in either
+    defined_classes.append(FirstTableQ)
+    agent = FirstTableQ("delayed_rl/GridWorld-3x3-v0", q_init=1.0, seed=0)
+    table, uniform = agent._table, (lambda: 0.5)
+    table.write(0, 0 * table.row_size + 1 * agent.n_actions + 3, 5.0, 1.0)  # state 0: table 1
+    table.write(1, 1 * table.row_size + 0 * agent.n_actions + 2, 7.0, 1.0)  # state 1: table 0
+    assert agent._choose(0, 0.0, uniform) == (1, 3)
+    assert agent._choose(1, 0.0, uniform) == (0, 2)
+    share = agent.learn(3_000).acting_delay_share  # (it raised IndexError here)
+    assert agent.last_learn_path == "python" and share[0] > 0 and share[1] > 0
 
 
 def test_writing_named_fingerprints_keeps_the_others(tmp_path, monkeypatch):
@@ -145,7 +158,8 @@ def test_writing_named_fingerprints_keeps_the_others(tmp_path, monkeypatch):
 
     seeded = _seeded_runs()
     versions = {name: importlib.metadata.version(name) for name in seeded.PACKAGES}
-    stored = {"versions": versions, "steps": 1, "hashes": {"a/x/python": "old", "b/x/python": "b"}}
+    hashes = {"a/x/python": "old", "b/x/python": "b"}
+    stored = {"versions": versions, "steps": seeded.STEPS, "hashes": hashes}
     monkeypatch.setattr(seeded, "RESULTS", tmp_path / "runs.json")
     seeded.RESULTS.write_text(json.dumps({**stored, "history": ["kept"]}))
     table = {"a/x/python": lambda: "new", "a/x/compiled": lambda: "c", "b/x/python": lambda: "b"}
@@ -158,8 +172,27 @@ def test_writing_named_fingerprints_keeps_the_others(tmp_path, monkeypatch):
     monkeypatch.setattr(sys, "argv", ["seeded_runs.py", "--write", "c"])
     with pytest.raises(SystemExit):  # no such run: refused, naming the agents
         seeded.main()
-    seeded.RESULTS.write_text(json.dumps({**stored, "versions": {"numpy": "0.1"}}))
     monkeypatch.setattr(sys, "argv", ["seeded_runs.py", "--write", "a"])
-    with pytest.raises(SystemExit):  # other versions: one set, written whole
-        seeded.main()
-    assert json.loads(seeded.RESULTS.read_text())["hashes"] == stored["hashes"]
+    for other in ({"versions": {"numpy": "0.1"}}, {"steps": seeded.STEPS + 1}):
+        seeded.RESULTS.write_text(json.dumps({**stored, **other}))
+        with pytest.raises(SystemExit):  # other versions or steps: one set, written whole
+            seeded.main()
+        assert json.loads(seeded.RESULTS.read_text())["hashes"] == hashes
+
+
+def test_the_check_reports_a_stored_run_that_no_longer_runs(tmp_path, monkeypatch, capsys):
+    import json
+
+    seeded = _seeded_runs()
+    versions = {name: importlib.metadata.version(name) for name in seeded.PACKAGES}
+    stored = {
+        "versions": versions,
+        "steps": seeded.STEPS,
+        "hashes": {"a/x/python": "h", "a/x/compiled": "c"},
+    }
+    monkeypatch.setattr(seeded, "RESULTS", tmp_path / "runs.json")
+    seeded.RESULTS.write_text(json.dumps(stored))
+    monkeypatch.setattr(seeded, "runs", lambda: {"a/x/python": lambda: "h"})  # a path lost
+    monkeypatch.setattr(sys, "argv", ["seeded_runs.py", "--check"])
+    assert seeded.main() == 1
+    assert "missing: a/x/compiled" in capsys.readouterr().out

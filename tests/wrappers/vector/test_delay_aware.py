@@ -40,7 +40,7 @@ STACKS = {  # name: (observation delay, its max_delay, arrival, action delay, it
     "unbounded, ages clipped": (Poisson(3.0), None, "network", Constant(1), None, 2, 3),
     "no delay": (None, None, None, None, None, None, 2),
 }
-VIEW_KEYS = ("arrived_observations", "age_clipped")
+VIEW_INFO_KEYS = ("arrived_observations", "age_clipped")
 DELAY_KEYS = ("observation_age",)  # (the view rewrites arrived_observations, the same pairs)
 
 
@@ -112,13 +112,13 @@ def compare_step(got, expected, t) -> None:
     """Assert one step (or reset) of the twin and of the reference agree."""
     assert same(got[0], expected[0]), t
     info, expected_info = got[-1], expected[-1]
-    same_entries(info, expected_info, VIEW_KEYS + DELAY_KEYS, f"step {t}")
+    same_entries(info, expected_info, VIEW_INFO_KEYS + DELAY_KEYS, f"step {t}")
     assert ("final_obs" in info) == ("final_obs" in expected_info), t
     if "final_obs" in expected_info:
         assert np.array_equal(info["_final_obs"], expected_info["_final_obs"]), t
         for i in np.flatnonzero(expected_info["_final_obs"]):
             assert same(info["final_obs"][i], expected_info["final_obs"][i]), (t, i)
-        keys = VIEW_KEYS + DELAY_KEYS
+        keys = VIEW_INFO_KEYS + DELAY_KEYS
         same_entries(info["final_info"], expected_info["final_info"], keys, f"final {t}")
 
 
