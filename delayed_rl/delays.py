@@ -193,6 +193,14 @@ class Poisson(Delay):
     Raises:
         TypeError: ``lam`` is not a real number (a bool or a string included).
         ValueError: ``lam`` is negative, NaN, infinite or above :attr:`MAX_LAM`.
+
+    Example:
+        >>> import numpy as np
+        >>> delay = Poisson(3.0)
+        >>> delay.mean, delay.support_max, round(float(delay.pmf(3)), 4)
+        (3.0, None, 0.224)
+        >>> delay.sample(np.random.default_rng(0), size=4).shape
+        (4,)
     """
 
     TAIL = 1e-20
@@ -264,6 +272,11 @@ class Constant(Delay):
     Raises:
         TypeError: ``k`` is not an integer (``2.0`` included).
         ValueError: ``k`` is negative or above :data:`MAX_DELAY`.
+
+    Example:
+        >>> import numpy as np
+        >>> Constant(2).sample(np.random.default_rng(0), size=3).tolist()
+        [2, 2, 2]
     """
 
     def __init__(self, k: int):
@@ -301,6 +314,11 @@ class Geometric(Delay):
     Raises:
         TypeError: ``p`` is not a real number.
         ValueError: ``p`` is outside ``[MIN_P, 1]`` or NaN.
+
+    Example:
+        >>> delay = Geometric(0.25)
+        >>> delay.mean, delay.support_max, float(delay.pmf(2))  # 0.25 · 0.75²
+        (3.0, None, 0.140625)
     """
 
     MIN_P = -portable_math.log(_TAIL) / MAX_DELAY
@@ -348,6 +366,11 @@ class Uniform(Delay):
         TypeError: ``low`` or ``high`` is not an integer.
         ValueError: ``low`` is negative or above :data:`MAX_DELAY`, or ``high`` is below ``low``
             or above :data:`MAX_DELAY`.
+
+    Example:
+        >>> delay = Uniform(1, 3)
+        >>> delay.mean, delay.support_max, float(delay.pmf(0)), round(float(delay.pmf(2)), 4)
+        (2.0, 3, 0.0, 0.3333)
     """
 
     def __init__(self, low: int, high: int):
@@ -390,6 +413,14 @@ class Empirical(Delay):
         TypeError: ``pmf`` does not hold numbers.
         ValueError: ``pmf`` is empty or not 1-D, has a negative or non-finite entry, or does not
             sum to 1.
+
+    Example:
+        >>> import numpy as np
+        >>> delay = Empirical([0.5, 0.0, 0.5])  # half undelayed, half two steps late
+        >>> delay.mean, delay.support_max
+        (1.0, 2)
+        >>> set(delay.sample(np.random.default_rng(0), size=100).tolist())
+        {0, 2}
     """
 
     def __init__(self, pmf: Sequence[float] | np.ndarray):

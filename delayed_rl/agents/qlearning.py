@@ -75,6 +75,14 @@ class FixedDelayQLearning(QAgent):
             :mod:`delayed_rl.delays`.)
         **hyperparameters: the hyper-parameters every agent shares, by keyword: see
             :class:`~delayed_rl.agents.common.base.TabularAgent`.
+
+    Example:
+        >>> import gymnasium as gym
+        >>> from delayed_rl.delays import Constant
+        >>> env = gym.make("delayed_rl/GridWorld-3x3-v0", reward_delay=Constant(2))
+        >>> agent = FixedDelayQLearning(env, delay_estimate=2, q_init=20.0, seed=0).learn(2_000)
+        >>> agent.delay_estimate, agent.q_table.shape, agent.last_learn_path
+        (2, (9, 1, 4), 'compiled')
     """
 
     @shares_hyperparameters
