@@ -214,7 +214,10 @@ def _in_sweep_order(
 
 # ---------------------------------------------------------------------------------- summary
 def summarize(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
-    """Per (agent, env, delay), in the rows' order: the seeds and both rewards' mean and 95 % CI."""
+    """Per (agent, env, delay), in the rows' order: the seeds and both rewards' mean and 95 % CI.
+
+    One seed gives no interval: its half-widths are NaN (not 0, which would claim no spread).
+    """
     groups: dict[tuple[str, str, str], list[Mapping[str, Any]]] = {}
     for row in rows:
         groups.setdefault((row["agent"], row["env"], row["delay"]), []).append(row)
@@ -222,6 +225,8 @@ def summarize(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
     for (agent, env, delay), runs in groups.items():
         train_mean, train_ci = mean_ci95([float(run["train_reward"]) for run in runs])
         eval_mean, eval_ci = mean_ci95([float(run["eval_reward"]) for run in runs])
+        if len(runs) == 1:
+            train_ci = eval_ci = math.nan
         summary.append(
             {
                 "agent": agent,
@@ -268,7 +273,8 @@ def _by_env(summary: Sequence[Mapping[str, Any]]) -> dict[str, list[Mapping[str,
 
 
 def _cell(mean: float, ci: float) -> str:
-    return f"{mean:.3f} ± {ci:.3f}"
+    """``mean ± ci``, or ``mean (one seed)`` where there is no interval."""
+    return f"{mean:.3f} (one seed)" if math.isnan(ci) else f"{mean:.3f} ± {ci:.3f}"
 
 
 def _markdown(text: str) -> str:
@@ -325,7 +331,8 @@ def render_summary(
         "",
         f"From `{sweep.source}`: {len(sweep.agents)} agent(s) × {len(sweep.envs)} env(s) × "
         f"{len(sweep.delays)} delay(s) × {seeds} seed(s). Each cell is the mean ± the half-width "
-        "of its 95 % confidence interval over the seeds (Student t); `results.csv` has every "
+        "of its 95 % confidence interval over the seeds (Student t; one seed gives none); "
+        "`results.csv` has every "
         "run, `summary.csv` these numbers.",
     ]
     for env, rows in _by_env(summary).items():
@@ -368,7 +375,9 @@ def plot_env(path: Path, env: str, rows: Sequence[Mapping[str, Any]]) -> None:
         mine = [row for row in rows if row["agent"] == agent]
         x = [delays.index(row["delay"]) + (i - (len(agents) - 1) / 2) * width for row in mine]
         means = [row["eval_reward_mean"] for row in mine]
-        cis = [row["eval_reward_ci95"] for row in mine]
+        cis = [
+            0.0 if math.isnan(row["eval_reward_ci95"]) else row["eval_reward_ci95"] for row in mine
+        ]
         label = figures.band_label(agent, min(row["seeds"] for row in mine))
         ax.errorbar(x, means, yerr=cis, marker="o", linestyle="none", capsize=4, label=label)
     ax.set_xticks(range(len(delays)), [textwrap.fill(delay, 18) for delay in delays])

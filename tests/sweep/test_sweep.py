@@ -366,8 +366,9 @@ def test_a_sweep_writes_one_row_per_run_a_summary_and_a_figure_per_env(tmp_path,
     with open(tmp_path / "summary.csv", newline="") as handle:
         summary = list(csv.DictReader(handle))
     assert len(summary) == 4 * 2 * 2 and summary[0]["seeds"] == "1"
-    assert summary[0]["eval_reward_ci95"] == "0.0"
+    assert summary[0]["eval_reward_ci95"] == "nan"  # one seed: no interval, not a zero-width one
     text = (tmp_path / "summary.md").read_text()
+    assert "(one seed)" in text and "±" not in text.split("## grid")[1]
     assert text.startswith("# tiny\n") and "## grid" in text and "## Taxi-v4" in text
     assert "| agent | Poisson(lam=1.5) | observation 1 |" in text
     assert "per episode" in text and "per step" in text
