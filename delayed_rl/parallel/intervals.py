@@ -18,13 +18,17 @@ Z975 = 1.959964
 
 
 def mean_ci95(values: Sequence[float]) -> tuple[float, float]:
-    """Mean and the half-width of a 95 % Student-t confidence interval (0 for one value)."""
+    """Mean and the half-width of a 95 % Student-t confidence interval.
+
+    One value gives no interval: its half-width is NaN (a 0 would claim no spread, and a rule
+    on the interval would then give a verdict from one run). No values: both NaN.
+    """
     values = np.asarray(values, dtype=float)
     n = values.size
     if n == 0:
         return math.nan, math.nan
     if n == 1:
-        return float(values[0]), 0.0
+        return float(values[0]), math.nan
     return float(values.mean()), float(t975(n - 1) * values.std(ddof=1) / math.sqrt(n))
 
 

@@ -225,8 +225,6 @@ def summarize(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
     for (agent, env, delay), runs in groups.items():
         train_mean, train_ci = mean_ci95([float(run["train_reward"]) for run in runs])
         eval_mean, eval_ci = mean_ci95([float(run["eval_reward"]) for run in runs])
-        if len(runs) == 1:
-            train_ci = eval_ci = math.nan
         summary.append(
             {
                 "agent": agent,

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -13,7 +15,8 @@ def test_mean_ci95_matches_the_t_interval():
     mean, half = mean_ci95([1.0, 2.0, 3.0, 4.0])
     assert mean == 2.5
     assert half == pytest.approx(3.182 * np.std([1, 2, 3, 4], ddof=1) / 2, rel=0.02)
-    assert mean_ci95([5.0]) == (5.0, 0.0)
+    mean, half = mean_ci95([5.0])  # one value: no interval
+    assert mean == 5.0 and math.isnan(half)
 
 
 def test_wilson_interval_values():
