@@ -73,11 +73,13 @@ class IRCRReplayBuffer(ReplayBuffer):
     Batches are drawn from NumPy's global generator, as SB3's buffers draw them, so a seeded
     algorithm draws the same batches.
 
-    **Before the first batch** the buffer needs a finished episode and two distinct credits (the
-    authors run two exploration episodes and assert ``c_min < c_max``): until then :meth:`sample`
-    raises ``RuntimeError``; set the algorithm's ``learning_starts`` to a few episodes' steps. If,
-    later, every credit held is the same (the authors' code would divide by zero there), every
-    guidance reward is 1.
+    **Before the first batch** the buffer needs a finished episode: until then :meth:`sample`
+    raises ``RuntimeError``; set the algorithm's ``learning_starts`` to a few episodes' steps.
+    While every credit held is the same, every guidance reward is 1: before two episodes' credits
+    differ (a sparse task's first episodes, all of return 0), and if they all become equal again.
+    The authors run two exploration episodes and assert ``c_min < c_max``, which stops their run
+    there; a run here goes on, with guidance that carries nothing until two credits differ
+    (``distinct_credits_seen`` says whether they have).
 
     **Where SB3 differs from the authors' code.**
 
@@ -256,14 +258,13 @@ class IRCRReplayBuffer(ReplayBuffer):
         """The guidance rewards of episodes with ``credits`` (see the class docstring).
 
         Raises:
-            RuntimeError: no episode has finished, or no two credits have differed yet.
+            RuntimeError: no episode has finished.
         """
         bounds = self.credit_bounds()
-        if bounds is None or not self.distinct_credits_seen:
+        if bounds is None:
             raise RuntimeError(
-                "IRCRReplayBuffer cannot normalise guidance rewards yet: it needs finished "
-                f"episodes with two distinct credits (finished: {len(self.episodes)}, credits "
-                f"{bounds}); raise the algorithm's learning_starts to a few episodes' steps"
+                "IRCRReplayBuffer cannot normalise guidance rewards yet: no episode has "
+                "finished; raise the algorithm's learning_starts to a few episodes' steps"
             )
         low, high = bounds
         if high == low:
@@ -312,7 +313,7 @@ class IRCRReplayBuffer(ReplayBuffer):
         """A batch: ``batch_size − batch_size // 2`` from the ring, the rest from the heap.
 
         Raises:
-            RuntimeError: no finished episode, or no two distinct credits yet.
+            RuntimeError: no finished episode.
         """
         rows, envs = self._ring_draw(batch_size - batch_size // 2)
         heap_obs, heap_actions, heap_next, heap_dones, heap_credits = self._heap_draw(

@@ -245,13 +245,15 @@ def test_sample_refuses_before_a_finished_episode():
         buffer.sample(4)
 
 
-def test_sample_refuses_until_two_credits_differ():
+def test_equal_credits_give_guidance_one_before_any_two_differ():
+    """A sparse task's first episodes (all one credit) train on, as if they had all differed."""
     # means 1, 1, 1; returns 2, 1, 3
     episodes = [[1.0, 1.0], [1.0], [1.0, 1.0, 1.0]]
     buffer = make(credit="mean")
     fill(buffer, episodes, open_steps=2)
-    with pytest.raises(RuntimeError, match="learning_starts"):
-        buffer.sample(4)
+    _, _, rewards, _ = draws(buffer, 8, 10)
+    np.testing.assert_array_equal(rewards, 1.0)
+    assert not buffer.distinct_credits_seen
     buffer = make(credit="return")
     fill(buffer, episodes, open_steps=2)
     found, _, rewards, _ = draws(buffer, 8, 10)
