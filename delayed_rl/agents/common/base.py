@@ -359,10 +359,11 @@ class TabularAgent(persistence.CopyProtocol, ABC):
         self._before_update()
         self._learn_transition(s, a, r, s2, *ended)
         self.num_timesteps += 1
-        self._episode_step += 1
         if ended[0] or ended[1]:  # as learn() at the env's reset
             self._episode_step = 0
             self._end_episode()
+        else:
+            self._episode_step += 1
 
     def learn(
         self,
