@@ -128,6 +128,12 @@ class _RelabelingOffPolicy(_Relabeling):
     ):
         own = {key: settings.pop(key) for key in ("n_steps", "gamma") if key in settings}
         model = self._checked_model(reward_model, observation_space, action_space, settings)
+        if optimize_memory_usage and model.reads_next_observation:
+            raise ValueError(
+                f"optimize_memory_usage=True with {type(model).__name__}(state_change=True): "
+                "the buffer would read an episode's last s′ from the next episode's first "
+                "observation; use optimize_memory_usage=False, or state_change=False"
+            )
         super().__init__(
             buffer_size,
             observation_space,
@@ -220,13 +226,8 @@ class _RelabelingOffPolicy(_Relabeling):
             obs = encoding.flat(encoding.take(self.observations, rows))
             actions = self.actions[rows].reshape(-1, *model.actions.shape)
             inputs = [obs, actions]
-            if model.reads_next_observation:  # a Box: SB3 keeps next observations as arrays
-                following = (
-                    self.observations[(rows + 1) % self.buffer_size]
-                    if self.optimize_memory_usage
-                    else self.next_observations[rows]
-                )
-                inputs.append(encoding.flat(following))
+            if model.reads_next_observation:  # a Box, never with optimize_memory_usage
+                inputs.append(encoding.flat(self.next_observations[rows]))
             relabelled = model.reward_tensor(*inputs).numpy()
             self.rewards[rows] = relabelled.reshape(rows.size, self.n_envs)
             if self.watched:

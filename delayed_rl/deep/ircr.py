@@ -93,6 +93,10 @@ class IRCRReplayBuffer(ReplayBuffer):
       are not sampled until it ends). Their other settings (SAC with ``tau=0.001``,
       ``learning_rate=3e-4``, initial temperature 0.1, a 300k-transition buffer, γ = 0.99) are
       the algorithm's arguments.
+    - Their SAC differs from SB3's where SB3 has no argument for it: the temperature learns at
+      1e-4 (SB3: the one ``learning_rate``), the critic's loss is the smooth L1 (SB3: squared
+      error), gradients are clipped to norm 1, and the policy's log-std is bounded to [−5, 2]
+      (SB3: [−20, 2]).
 
     Args:
         buffer_size, observation_space, action_space, device, n_envs: as SB3's ``ReplayBuffer``.

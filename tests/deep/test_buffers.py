@@ -582,3 +582,19 @@ def test_a_reward_model_made_for_other_spaces_is_refused():
         RelabelingRolloutBuffer(
             8, pendulum.observation_space, pendulum.action_space, reward_model=model
         )
+
+
+def test_a_model_reading_the_next_observation_is_refused_with_optimize_memory_usage():
+    """SB3 then keeps no next observations: an episode's last s′ would be the next one's first."""
+    from delayed_rl.deep import RelabelingReplayBuffer
+
+    env = gym.make("Pendulum-v1")
+    spaces = (env.observation_space, env.action_space)
+    shared = {"optimize_memory_usage": True, "handle_timeout_termination": False}
+    with pytest.raises(ValueError, match=r"optimize_memory_usage=True with .*state_change=True"):
+        RelabelingReplayBuffer(
+            100, *spaces, reward_model={"type": "ReturnDecompositionRewardModel"}, **shared
+        )
+    spec = {"type": "ReturnDecompositionRewardModel", "state_change": False}
+    buffer = RelabelingReplayBuffer(100, *spaces, reward_model=spec, **shared)
+    assert buffer.optimize_memory_usage and not buffer.reward_model.reads_next_observation

@@ -36,7 +36,10 @@ METHODS = ("raw", "oracle", "rrd", "ircr", "return-regression", "deconv-known", 
 - ``rrd``: :class:`~delayed_rl.deep.ReturnDecompositionRewardModel` with the authors'
   settings (its defaults);
 - ``ircr``: :class:`~delayed_rl.deep.IRCRReplayBuffer`, IRCR as its authors wrote it (off-policy
-  only: half of its batches replay the best episodes);
+  only: half of its batches replay the best episodes), under the same algorithm as every other
+  method: SB3's SAC with its defaults, so a batch is 128 ring plus 128 heap transitions (the
+  authors' SAC: 512 + 512, ``tau=0.001``, initial temperature 0.1, a 300k buffer). The
+  comparison holds the learner fixed and varies only what it learns from;
 - ``return-regression``: :class:`~delayed_rl.deep.ReturnRegressionRewardModel`, IRCR's target
   learned by a network;
 - ``deconv-known``: :class:`~delayed_rl.deep.DeconvolutionRewardModel` with the delay's pmf;
