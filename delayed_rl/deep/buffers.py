@@ -110,6 +110,20 @@ class _Relabeling:
         """Refuse an algorithm whose settings the buffer cannot serve (none here)."""
 
 
+def _check_next_observations_kept(model: RewardModel, optimize_memory_usage: bool) -> None:
+    """Refuse a model that reads ``s′`` in a buffer that keeps no next observations.
+
+    With ``optimize_memory_usage`` SB3 reads a row's next observation from the next row, which at
+    an episode's end holds the next episode's first observation.
+    """
+    if optimize_memory_usage and model.reads_next_observation:
+        raise ValueError(
+            f"optimize_memory_usage=True with {type(model).__name__}(state_change=True): "
+            "the buffer would read an episode's last s′ from the next episode's first "
+            "observation; use optimize_memory_usage=False, or state_change=False"
+        )
+
+
 class _RelabelingOffPolicy(_Relabeling):
     """What the off-policy relabelling buffers share (a mixin before SB3's buffer class)."""
 
@@ -128,12 +142,7 @@ class _RelabelingOffPolicy(_Relabeling):
     ):
         own = {key: settings.pop(key) for key in ("n_steps", "gamma") if key in settings}
         model = self._checked_model(reward_model, observation_space, action_space, settings)
-        if optimize_memory_usage and model.reads_next_observation:
-            raise ValueError(
-                f"optimize_memory_usage=True with {type(model).__name__}(state_change=True): "
-                "the buffer would read an episode's last s′ from the next episode's first "
-                "observation; use optimize_memory_usage=False, or state_change=False"
-            )
+        _check_next_observations_kept(model, optimize_memory_usage)
         super().__init__(
             buffer_size,
             observation_space,
@@ -171,6 +180,7 @@ class _RelabelingOffPolicy(_Relabeling):
             )
 
     def __setstate__(self, state: dict[str, Any]) -> None:
+        _check_next_observations_kept(state["reward_model"], state["optimize_memory_usage"])
         self.__dict__.update(state)
         algorithm = calling_algorithm("load_replay_buffer")
         if algorithm is not None:

@@ -598,3 +598,25 @@ def test_a_model_reading_the_next_observation_is_refused_with_optimize_memory_us
     spec = {"type": "ReturnDecompositionRewardModel", "state_change": False}
     buffer = RelabelingReplayBuffer(100, *spaces, reward_model=spec, **shared)
     assert buffer.optimize_memory_usage and not buffer.reward_model.reads_next_observation
+
+
+def test_a_saved_buffer_whose_model_reads_the_next_observation_is_refused_on_load():
+    """A file from before the refusal: loading it would read s′ that SB3 did not keep."""
+    import pickle
+
+    from delayed_rl.deep import RelabelingReplayBuffer
+
+    env = gym.make("Pendulum-v1")
+    spec = {"type": "ReturnDecompositionRewardModel", "state_change": False}
+    buffer = RelabelingReplayBuffer(
+        100,
+        env.observation_space,
+        env.action_space,
+        reward_model=spec,
+        optimize_memory_usage=True,
+        handle_timeout_termination=False,
+    )
+    assert pickle.loads(pickle.dumps(buffer)).optimize_memory_usage  # allowed: reads no s′
+    buffer.reward_model.state_change = True  # as the earlier code let it be
+    with pytest.raises(ValueError, match=r"optimize_memory_usage=True with .*state_change=True"):
+        pickle.loads(pickle.dumps(buffer))
