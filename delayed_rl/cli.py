@@ -36,7 +36,7 @@ from delayed_rl._validation import (
     check_probability,
     check_real,
 )
-from delayed_rl.agents.common.hyperparameters import MAX_SEED_VALUE
+from delayed_rl.agents.common.hyperparameters import DEFAULTS, MAX_SEED_VALUE, check_value
 from delayed_rl.agents.common.python_loop import MAX_TIMESTEPS
 from delayed_rl.agents.registry import REGISTRY
 from delayed_rl.delays import Poisson
@@ -94,7 +94,7 @@ def _limited(low: int, limit: Limit) -> Callable[[str], int]:
     return _checked(int, check)
 
 
-_float = _checked(float, check_real)
+_value = _checked(float, check_value)
 _probability = _checked(float, check_probability)
 _poisson_mean = _checked(float, check_real, 0.0, Poisson.MAX_LAM)
 _learning_rate = _checked(float, check_fraction)
@@ -459,22 +459,29 @@ def _add_train_command(commands: Any) -> None:
 def _add_agent_options(train: argparse.ArgumentParser) -> None:
     """``train``'s hyper-parameter options: α, γ, ε, the initial Q-value and the delays."""
     train.add_argument(
-        "--learning-rate", type=_learning_rate, default=0.1, help="α in (0, 1] (default 0.1)"
+        "--learning-rate",
+        type=_learning_rate,
+        default=DEFAULTS.learning_rate,
+        help=f"α in (0, 1] (default {DEFAULTS.learning_rate:g})",
     )
     train.add_argument(
-        "--gamma", type=_probability, default=0.9, help="discount factor in [0, 1] (default 0.9)"
+        "--gamma",
+        type=_probability,
+        default=DEFAULTS.gamma,
+        help=f"discount factor in [0, 1] (default {DEFAULTS.gamma:g})",
     )
     train.add_argument(
         "--epsilon",
         type=_probability,
-        default=0.1,
-        help="constant ε of ε-greedy exploration (default 0.1)",
+        default=DEFAULTS.exploration_final_eps,
+        help=f"constant ε of ε-greedy exploration (default {DEFAULTS.exploration_final_eps:g})",
     )
     train.add_argument(
         "--q-init",
-        type=_float,
-        default=0.0,
-        help="initial Q-value; above the true values explores optimistically (default 0)",
+        type=_value,
+        default=DEFAULTS.q_init,
+        help="initial Q-value; above the true values explores optimistically "
+        f"(default {DEFAULTS.q_init:g})",
     )
     train.add_argument(
         "--delay-estimate",

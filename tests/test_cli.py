@@ -139,6 +139,7 @@ def test_evaluate_with_episodes_on_a_continuing_env_fails_clearly(tmp_path, caps
         (TRAIN + "--reward-delay 1e300", "argument --reward-delay: must be a number in [0, "),
         (f"evaluate m.npz --env {GRID} --reward-delay 1e20", "--reward-delay: must be a number in"),
         (TRAIN + "--q-init nan", "argument --q-init: must be a finite number, got nan"),
+        (TRAIN + "--q-init 1e300", "argument --q-init: must be within ±MAX_ABS_VALUE = 2**200"),
         (TRAIN + "--seed -1", "argument --seed: must be an integer >= 0, got -1"),
         (f"train --env {GRID} --agent fixed --save x", "--agent fixed needs --delay-estimate"),
         (TRAIN + "--delay-estimate 2", "--delay-estimate is for --agent fixed, not --agent q"),
@@ -666,3 +667,16 @@ def test_deep_rl_without_torch_is_an_error_naming_the_extra(tmp_path):
     needs = 'needs torch and stable-baselines3: pip install "delayed-rl[sb3]"'
     assert f"error: the deep-rl experiment {needs}" in done.stderr
     assert not any(tmp_path.iterdir())
+
+
+def test_the_train_options_default_to_the_agents_defaults():
+    from delayed_rl.agents import DEFAULTS
+    from delayed_rl.cli import build_parser
+
+    args = build_parser().parse_args(["train", "--env", GRID, "--agent", "q", "--save", "x"])
+    assert (args.learning_rate, args.gamma, args.q_init) == (
+        DEFAULTS.learning_rate,
+        DEFAULTS.gamma,
+        DEFAULTS.q_init,
+    )
+    assert args.epsilon == DEFAULTS.exploration_initial_eps == DEFAULTS.exploration_final_eps
