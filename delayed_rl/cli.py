@@ -94,7 +94,7 @@ def _limited(low: int, limit: Limit) -> Callable[[str], int]:
     return _checked(int, check)
 
 
-_value = _checked(float, check_value)
+_bounded_value = _checked(float, check_value)
 _probability = _checked(float, check_probability)
 _poisson_mean = _checked(float, check_real, 0.0, Poisson.MAX_LAM)
 _learning_rate = _checked(float, check_fraction)
@@ -478,7 +478,7 @@ def _add_agent_options(train: argparse.ArgumentParser) -> None:
     )
     train.add_argument(
         "--q-init",
-        type=_value,
+        type=_bounded_value,
         default=DEFAULTS.q_init,
         help="initial Q-value; above the true values explores optimistically "
         f"(default {DEFAULTS.q_init:g})",

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import ast
 import importlib
+from collections.abc import Iterator
 from functools import cache
 from pathlib import Path
 
@@ -38,15 +39,12 @@ def _bound_names(module: str) -> frozenset[str]:
     """The names ``module`` binds at its top level or lists in ``__all__``."""
     tree = ast.parse(_module_file(module).read_text(encoding="utf-8"))
     names: set[str] = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef | ast.Lambda):
-            if not isinstance(node, ast.Lambda) and _is_top_level(tree, node):
-                names.add(node.name)
-        elif isinstance(node, ast.Import | ast.ImportFrom) and _is_top_level(tree, node):
+    for node in _run_at_import(tree.body):
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
+            names.add(node.name)
+        elif isinstance(node, ast.Import | ast.ImportFrom):
             names.update((a.asname or a.name).split(".")[0] for a in node.names)
         elif isinstance(node, ast.Assign | ast.AnnAssign | ast.AugAssign):
-            if not _is_top_level(tree, node):
-                continue
             targets = node.targets if isinstance(node, ast.Assign) else [node.target]
             for target in targets:
                 names.update(n.id for n in ast.walk(target) if isinstance(n, ast.Name))
@@ -59,26 +57,23 @@ def _bound_names(module: str) -> frozenset[str]:
     return frozenset(names)
 
 
+def _run_at_import(statements: list[ast.stmt]) -> Iterator[ast.stmt]:
+    """The statements that run at import: these, and those under their ``if`` and ``try``."""
+    for statement in statements:
+        yield statement
+        if isinstance(statement, ast.If | ast.Try):
+            yield from _run_at_import(statement.body + statement.orelse)
+        if isinstance(statement, ast.Try):
+            yield from _run_at_import(statement.finalbody)
+            for handler in statement.handlers:
+                yield from _run_at_import(handler.body)
+
+
 def _has_name(module: str, name: str) -> bool:
     """Whether ``module`` has ``name``: read from its source, else from the module imported."""
     if name in _bound_names(module) or _module_file(f"{module}.{name}") is not None:
         return True
     return hasattr(importlib.import_module(module), name)
-
-
-def _is_top_level(tree: ast.Module, node: ast.AST) -> bool:
-    """Whether ``node`` runs at import: in the module's body, or under its ``if`` or ``try``."""
-    pending = list(tree.body)
-    while pending:
-        statement = pending.pop()
-        if statement is node:
-            return True
-        if isinstance(statement, ast.If | ast.Try):
-            pending += statement.body + statement.orelse
-            pending += getattr(statement, "finalbody", [])
-            for handler in getattr(statement, "handlers", []):
-                pending += handler.body
-    return False
 
 
 def _importing_module(path: Path) -> str | None:

@@ -118,9 +118,10 @@ def _check_next_observations_kept(model: RewardModel, optimize_memory_usage: boo
     """
     if optimize_memory_usage and model.reads_next_observation:
         raise ValueError(
-            f"optimize_memory_usage=True with {type(model).__name__}(state_change=True): "
-            "the buffer would read an episode's last s′ from the next episode's first "
-            "observation; use optimize_memory_usage=False, or state_change=False"
+            f"optimize_memory_usage=True with a {type(model).__name__} that reads s′ "
+            "(RRD's state_change=True): the buffer would read an episode's last s′ from the "
+            "next episode's first observation; use optimize_memory_usage=False, or a model "
+            "that reads no s′ (state_change=False)"
         )
 
 
