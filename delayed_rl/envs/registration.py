@@ -64,50 +64,27 @@ class DelayableEntryPoint:
         """The env class's metadata, so ``gym.make`` can check ``render_mode``."""
         return self.env_cls.metadata
 
-    def __call__(
-        self,
-        reward_delay: Any = None,
-        observation_delay: Any = None,
-        action_delay: Any = None,
-        observation_arrival: str = "stale",
-        delay_aware: bool = False,
-        action_history: int | None = None,
-        **kwargs: Any,
-    ) -> gym.Env:
-        """Build the env from ``kwargs``, wrapped for each delay that is not None.
+    def __call__(self, **kwargs: Any) -> gym.Env:
+        """Build the env from ``kwargs`` and wrap it with :func:`~delayed_rl.wrappers.wrap_delays`.
 
         Args:
-            reward_delay: ``None`` (no wrapper), a number λ (``PoissonRewardDelay``), a
-                :class:`~delayed_rl.delays.Delay` or its ``to_dict()`` description
-                (``RewardDelay``).
-            observation_delay: ``None``, or a delay as above (``ObservationDelay``).
-            action_delay: ``None``, or a delay as above (``ActionDelay``).
-            observation_arrival: the observation delay's arrival rule, ``"stale"`` or
-                ``"network"`` (``ObservationDelay``'s ``arrival``).
-            delay_aware: wrap a ``DelayAwareObservation`` around the delays.
-            action_history: its ``action_history`` (only with ``delay_aware=True``).
-            **kwargs: the env class's own arguments.
+            **kwargs: :func:`~delayed_rl.wrappers.wrap_delays`' keywords go to it, and take its
+                defaults when absent: ``reward_delay``, ``observation_delay`` and
+                ``action_delay`` (each ``None``, the default: no wrapper; a number λ, for
+                Poisson(λ); a :class:`~delayed_rl.delays.Delay` or its ``to_dict()``
+                description), ``observation_arrival``, ``delay_aware`` and ``action_history``.
+                The rest are the env class's own arguments (over the preset's).
 
         Raises:
-            TypeError, ValueError: a delay is neither a number, a ``Delay`` nor a dict, or is
-                not a valid Poisson mean or describes no distribution; another argument is
-                refused by :func:`~delayed_rl.wrappers.wrap_delays` (or the env refuses one of
-                its arguments). The message names the argument.
+            TypeError, ValueError: :func:`~delayed_rl.wrappers.wrap_delays` refuses a delay
+                keyword, or the env class one of its own arguments. The message names it.
         """
+        from delayed_rl.wrappers.stack import WRAP_DELAYS_KEYWORDS, wrap_delays
+
+        delays = {name: kwargs.pop(name) for name in WRAP_DELAYS_KEYWORDS if name in kwargs}
         if self.preset is not None:
             kwargs = {**_load(self.preset), **kwargs}
-        env = self.env_cls(**kwargs)
-        from delayed_rl.wrappers import wrap_delays
-
-        return wrap_delays(
-            env,
-            action_delay=action_delay,
-            observation_delay=observation_delay,
-            reward_delay=reward_delay,
-            observation_arrival=observation_arrival,
-            delay_aware=delay_aware,
-            action_history=action_history,
-        )
+        return wrap_delays(self.env_cls(**kwargs), **delays)
 
     def __repr__(self) -> str:
         preset = "" if self.preset is None else f", preset={self.preset!r}"

@@ -6,6 +6,7 @@ reward_delay=..., ...)`` does for every ``delayed_rl/`` id, and what you call fo
 
 from __future__ import annotations
 
+import inspect
 from typing import Any
 
 import gymnasium as gym
@@ -17,7 +18,7 @@ from delayed_rl.wrappers.delay_aware import DelayAwareObservation
 from delayed_rl.wrappers.observation_delay import ARRIVAL_RULES, ObservationDelay
 from delayed_rl.wrappers.reward_delay import wrap_reward_delay
 
-__all__ = ["wrap_delays"]
+__all__ = ["WRAP_DELAYS_KEYWORDS", "wrap_delays"]
 
 
 def wrap_delays(
@@ -81,3 +82,7 @@ def wrap_delays(
     if reward_delay is not None:
         env = wrap_reward_delay(env, reward_delay)
     return env
+
+
+WRAP_DELAYS_KEYWORDS = tuple(inspect.signature(wrap_delays).parameters)[1:]
+""":func:`wrap_delays`' keywords: what ``gym.make`` hands it for a ``delayed_rl/`` id."""

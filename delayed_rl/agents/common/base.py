@@ -33,10 +33,11 @@ from delayed_rl.agents.common.env_util import (
     vec_env_view,
 )
 from delayed_rl.agents.common.hyperparameters import (
-    DEFAULTS,
     HYPERPARAMETER_NAMES,
     check_hyperparameters,
     check_value,
+    shares_hyperparameters,
+    with_defaults,
 )
 from delayed_rl.agents.common.logger import Logger
 from delayed_rl.agents.common.python_loop import (
@@ -48,7 +49,6 @@ from delayed_rl.agents.common.python_loop import (
 from delayed_rl.agents.common.schedules import (
     ConstantSchedule,
     LinearSchedule,
-    Schedule,
     check_schedule_value,
     schedule_to_json,
 )
@@ -107,28 +107,9 @@ class TabularAgent(persistence.CopyProtocol, ABC):
         super().__init_subclass__(**kwargs)
         persistence.AGENT_CLASSES[persistence.class_key(cls)] = cls
 
-    def __init__(
-        self,
-        env: gym.Env | str,
-        learning_rate: float | Schedule = DEFAULTS.learning_rate,
-        gamma: float = DEFAULTS.gamma,
-        exploration_initial_eps: float = DEFAULTS.exploration_initial_eps,
-        exploration_final_eps: float = DEFAULTS.exploration_final_eps,
-        exploration_fraction: float = DEFAULTS.exploration_fraction,
-        q_init: float = DEFAULTS.q_init,
-        seed: int | None = None,
-        verbose: int = 0,
-    ):
-        self._set_hyperparameters(
-            learning_rate=learning_rate,
-            gamma=gamma,
-            exploration_initial_eps=exploration_initial_eps,
-            exploration_final_eps=exploration_final_eps,
-            exploration_fraction=exploration_fraction,
-            q_init=q_init,
-            seed=seed,
-            verbose=verbose,
-        )
+    @shares_hyperparameters
+    def __init__(self, env: gym.Env | str, **hyperparameters: Any):
+        self._set_hyperparameters(**with_defaults(type(self).__name__, hyperparameters))
         env = make_env(env)
         self._set_spaces(env.observation_space, env.action_space)
         self._setup_model()

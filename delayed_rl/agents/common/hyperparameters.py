@@ -27,6 +27,7 @@ __all__ = [
     "check_value",
     "check_hyperparameters",
     "shares_hyperparameters",
+    "with_defaults",
 ]
 
 
@@ -120,9 +121,10 @@ def shares_hyperparameters(init: _Init) -> _Init:
     """Mark ``__init__(self, env, ..., **hyperparameters)`` as taking the shared hyper-parameters.
 
     The constructor passes ``**hyperparameters`` on to
-    :class:`~delayed_rl.agents.common.base.TabularAgent`, so their defaults live in one place
-    (:data:`DEFAULTS`); its signature, as ``help()``, ``inspect`` and the documentation show it,
-    lists them by name, keyword-only, with those defaults.
+    :class:`~delayed_rl.agents.common.base.TabularAgent`, whose own constructor takes them the
+    same way and fills in the missing ones (:func:`with_defaults`), so their defaults live in
+    one place (:data:`DEFAULTS`); its signature, as ``help()``, ``inspect`` and the
+    documentation show it, lists them by name, keyword-only, with those defaults.
     """
     signature = inspect.signature(init)
     own = [p for p in signature.parameters.values() if p.kind is not p.VAR_KEYWORD]
@@ -130,6 +132,23 @@ def shares_hyperparameters(init: _Init) -> _Init:
               for name, default in _SHARED.items()]  # fmt: skip
     init.__signature__ = signature.replace(parameters=own + shared)
     return init
+
+
+def with_defaults(owner: str, given: dict[str, Any]) -> dict[str, Any]:
+    """``given`` with the default of every shared hyper-parameter it lacks (:data:`DEFAULTS`).
+
+    Args:
+        owner: the class whose constructor was called, for the message.
+        given: the shared hyper-parameters passed to it, by name.
+
+    Raises:
+        TypeError: a name in ``given`` is not a shared hyper-parameter, worded as Python words
+            an unexpected keyword argument.
+    """
+    for name in given:
+        if name not in _SHARED:
+            raise TypeError(f"{owner}() got an unexpected keyword argument {name!r}")
+    return {**_SHARED, **given}
 
 
 def check_hyperparameters(

@@ -4,9 +4,9 @@ The grid-world experiments ``delay-sweep``, ``world-size`` and ``estimate-error`
 design: for every seed and world size, an undelayed Q-learning *reference* run, and delayed
 runs whose average reward is divided by the reference's. :func:`grid_tasks` builds those tasks
 (:func:`delay_grid_tasks` for a sweep of mean delays),
-:func:`grid_task` runs one (it is those experiments' ``run_task``), and :func:`normalised`
-pairs each delayed run with its reference; the experiments pivot its results by their own
-fields (:func:`~.results.pivot`), into :func:`condition_means` and :func:`learning_curve_groups`.
+:func:`grid_task` runs one (it is those experiments' ``run_task``), and
+:meth:`NormalisedRuns.of` pairs each delayed run with its reference and groups them by the
+experiment's own fields.
 """
 
 from __future__ import annotations
@@ -127,67 +127,82 @@ def _is_reference(task: GridTask) -> bool:
     return task.reference
 
 
-def normalised(tasks: Sequence[GridTask], results: list[dict]) -> tuple[list[GridTask], list[dict]]:
-    """Eq. 5.3 per delayed task: its average reward over that of the matching undelayed run.
+@dataclasses.dataclass(frozen=True)
+class NormalisedRuns:
+    """The delayed runs of a normalised grid-world experiment, grouped by task fields.
 
-    Each delayed task is matched with the reference run of its world size and seed. The curve
-    is normalised step by step (NaN while the reference has earned nothing yet).
+    Built by :meth:`of` from all the tasks and results; every view groups the runs by the
+    fields ``by`` (:func:`~.results.pivot`), then by seed.
 
-    Returns:
-        The delayed tasks (the reference runs left out), in the order of ``tasks``, and one
-        result per delayed task: its ``steps``, normalised ``curve`` and normalised
-        ``average``, ready for :func:`~.results.pivot`.
+    Attributes:
+        tasks: the delayed tasks (the reference runs left out), in the order given.
+        results: one result per delayed task: its ``steps``, normalised ``curve`` and
+            normalised ``average``.
+        by: the task fields the runs are grouped by, e.g. ``("size", "lam")``.
     """
-    references = pivot(tasks, results, by=("size",), where=_is_reference)
-    delayed, out = [], []
-    for task, result in zip(tasks, results, strict=True):
-        if task.reference:
-            continue
-        base = references[task.size][task.seed]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            curve = np.where(base["curve"] > 0, result["curve"] / base["curve"], np.nan)
-        delayed.append(task)
-        out.append(
-            {
-                "steps": result["steps"],
-                "curve": curve,
-                "average": result["average"] / base["average"],
-            }
-        )
-    return delayed, out
 
+    tasks: list[GridTask]
+    results: list[dict]
+    by: tuple[str, ...]
 
-def normalised_curves(tasks: Sequence[GridTask], normalised_results: list[dict]) -> list[Curve]:
-    """The normalised curves for the CSV, condition by condition (each task's ``condition``).
+    @classmethod
+    def of(
+        cls, tasks: Sequence[GridTask], results: list[dict], by: tuple[str, ...]
+    ) -> NormalisedRuns:
+        """Eq. 5.3 per delayed task: its average reward over that of the matching undelayed run.
 
-    Args:
-        tasks: the delayed tasks and their normalised results, as :func:`normalised` returns them.
-        normalised_results: see ``tasks``.
-    """
-    return [
-        Curve(condition, seed, run["steps"], run["curve"], "normalised_average_reward")
-        for condition, runs in pivot(tasks, normalised_results, by=("condition",)).items()
-        for seed, run in runs.items()
-    ]
+        Each delayed task is matched with the reference run of its world size and seed. The
+        curve is normalised step by step (NaN while the reference has earned nothing yet).
 
+        Args:
+            tasks: every task of the experiment, reference runs included.
+            results: one result per task, as :func:`grid_task` returns it.
+            by: the task fields the views group by.
+        """
+        references = pivot(tasks, results, by=("size",), where=_is_reference)
+        delayed, out = [], []
+        for task, result in zip(tasks, results, strict=True):
+            if task.reference:
+                continue
+            base = references[task.size][task.seed]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                curve = np.where(base["curve"] > 0, result["curve"] / base["curve"], np.nan)
+            delayed.append(task)
+            out.append(
+                {
+                    "steps": result["steps"],
+                    "curve": curve,
+                    "average": result["average"] / base["average"],
+                }
+            )
+        return cls(delayed, out, by)
 
-def condition_means(groups: dict) -> dict:
-    """(mean, 95 % CI, n) of the normalised average of each group of :func:`~.results.pivot`.
+    def groups(self) -> dict:
+        """``{key: {seed: normalised result}}``, ``key`` the values of :attr:`by`."""
+        return pivot(self.tasks, self.results, by=self.by)
 
-    Args:
-        groups: ``{key: {seed: normalised result}}``, a pivot of :func:`normalised`'s results.
-    """
-    return {
-        key: mean_ci_n([run["average"] for run in runs.values()]) for key, runs in groups.items()
-    }
+    def averages(self) -> dict:
+        """``{key: {seed: normalised average reward}}``: the per-seed values claims pair."""
+        return pivot(self.tasks, self.results, by=self.by, value="average")
 
+    def means(self) -> dict:
+        """``{key: (mean, 95 % CI, n)}`` of the normalised average reward over the seeds."""
+        return {
+            key: mean_ci_n([run["average"] for run in runs.values()])
+            for key, runs in self.groups().items()
+        }
 
-def learning_curve_groups(groups: dict) -> dict:
-    """``{key: [(steps, normalised curve), ...]}``: the groups a learning-curve figure draws.
+    def curve_groups(self) -> dict:
+        """``{key: [(steps, normalised curve), ...]}``: the groups a learning-curve figure draws."""
+        return {
+            key: [(run["steps"], run["curve"]) for run in runs.values()]
+            for key, runs in self.groups().items()
+        }
 
-    Args:
-        groups: ``{key: {seed: normalised result}}``, a pivot of :func:`normalised`'s results.
-    """
-    return {
-        key: [(run["steps"], run["curve"]) for run in runs.values()] for key, runs in groups.items()
-    }
+    def curves(self) -> list[Curve]:
+        """The normalised curves for the CSV, condition by condition (each task's ``condition``)."""
+        return [
+            Curve(condition, seed, run["steps"], run["curve"], "normalised_average_reward")
+            for condition, runs in pivot(self.tasks, self.results, by=("condition",)).items()
+            for seed, run in runs.items()
+        ]

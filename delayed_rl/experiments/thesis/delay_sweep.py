@@ -18,14 +18,11 @@ from delayed_rl.experiments.framework.claims import (
 from delayed_rl.experiments.framework.experiment import Config, Experiment, Summary
 from delayed_rl.experiments.framework.normalised_runs import (
     GridTask,
-    condition_means,
+    NormalisedRuns,
     delay_grid_tasks,
     grid_task,
-    learning_curve_groups,
-    normalised,
-    normalised_curves,
 )
-from delayed_rl.experiments.framework.results import common_seeds, pivot
+from delayed_rl.experiments.framework.results import common_seeds
 from delayed_rl.experiments.framework.training import ALPHA, EPSILON, GAMMA
 
 #: The grid world's side.
@@ -53,11 +50,9 @@ def summarize(task_list: list[GridTask], results: list[dict], config: Config) ->
     seed (below 0). Each λ's normalised reward is a ``reference`` row: the thesis gives the
     curves, not a value per λ to test.
     """
-    delayed, scaled = normalised(task_list, results)
-    by_lam = pivot(delayed, scaled, by=("lam",))
-    by_seed = pivot(delayed, scaled, by=("lam",), value="average")
-    stats = condition_means(by_lam)
-    lams = sorted(by_lam)
+    runs = NormalisedRuns.of(task_list, results, by=("lam",))
+    by_seed, stats = runs.averages(), runs.means()
+    lams = sorted(stats)
     means = [stats[lam][0] for lam in lams]
     seeds = common_seeds(*(by_seed[lam] for lam in lams))
     claims = [
@@ -89,14 +84,14 @@ def summarize(task_list: list[GridTask], results: list[dict], config: Config) ->
     figures = {
         "fig5_2_delay_sweep": plotting.figure(
             plotting.learning_curves,
-            {f"λ = {lam}": runs for lam, runs in learning_curve_groups(by_lam).items()},
+            {f"λ = {lam}": group for lam, group in runs.curve_groups().items()},
             f"{SIZE}×{SIZE} grid world: Q-learning under Poisson delays of mean λ (Fig. 5.2)\n"
             f"thesis: {THESIS_TREND} (it gives no value per λ)",
             "normalised average reward (Eq. 5.3)",
         )
     }
     extra = {"normalised_means": dict(zip(map(str, lams), means, strict=True))}
-    return Summary(claims, normalised_curves(delayed, scaled), figures, extra)
+    return Summary(claims, runs.curves(), figures, extra)
 
 
 EXPERIMENT = Experiment(

@@ -15,13 +15,11 @@ from delayed_rl.experiments.framework.claims import band_claim, direction_claim,
 from delayed_rl.experiments.framework.experiment import Config, Experiment, Summary, step_count
 from delayed_rl.experiments.framework.normalised_runs import (
     GridTask,
-    condition_means,
+    NormalisedRuns,
     grid_task,
     grid_tasks,
-    normalised,
-    normalised_curves,
 )
-from delayed_rl.experiments.framework.results import common_seeds, pivot
+from delayed_rl.experiments.framework.results import common_seeds
 from delayed_rl.experiments.framework.task import optional
 
 #: The grid world's side and the Poisson mean delay λ.
@@ -77,9 +75,8 @@ def summarize(task_list: list[EstimateErrorTask], results: list[dict], config: C
     the peak" read as less than half of it. A seed whose peak is not positive (a run too short
     to learn) has no such half: NaN, and the row is ``inconclusive``.
     """
-    delayed, scaled = normalised(task_list, results)
-    stats = condition_means(pivot(delayed, scaled, by=("error",)))
-    by_seed = pivot(delayed, scaled, by=("error",), value="average")
+    runs = NormalisedRuns.of(task_list, results, by=("error",))
+    by_seed, stats = runs.averages(), runs.means()
     errors = sorted(by_seed)
     means = np.array([stats[e][0] for e in errors])
     cis = np.array([stats[e][1] for e in errors])
@@ -128,8 +125,7 @@ def summarize(task_list: list[EstimateErrorTask], results: list[dict], config: C
             thesis=[(0, THESIS_PEAK, f"thesis: peak ≈ {THESIS_PEAK} at i = 0 (Fig. 5.6)")],
         )
     }
-    curves = normalised_curves(delayed, scaled)
-    return Summary(claims, curves, figures, {"errors": errors, "normalised_means": means})
+    return Summary(claims, runs.curves(), figures, {"errors": errors, "normalised_means": means})
 
 
 EXPERIMENT = Experiment(

@@ -16,14 +16,10 @@ from delayed_rl.experiments.framework.claims import (
 from delayed_rl.experiments.framework.experiment import Config, Experiment, Summary
 from delayed_rl.experiments.framework.normalised_runs import (
     GridTask,
-    condition_means,
+    NormalisedRuns,
     delay_grid_tasks,
     grid_task,
-    learning_curve_groups,
-    normalised,
-    normalised_curves,
 )
-from delayed_rl.experiments.framework.results import pivot
 
 #: The grid worlds' sides.
 SIZES = (3, 5, 9)
@@ -54,12 +50,9 @@ def summarize(task_list: list[GridTask], results: list[dict], config: Config) ->
     [0, 1] ("above 0, below 1": a delayed learner earns something, less than undelayed); the
     last row per λ is the 9×9 minus 3×3 normalised reward, paired by seed (below 0).
     """
-    delayed, scaled = normalised(task_list, results)
-    by_world = pivot(delayed, scaled, by=("size", "lam"))
-    by_seed = pivot(delayed, scaled, by=("size", "lam"), value="average")
-    stats = condition_means(by_world)
-    groups = learning_curve_groups(by_world)
-    lams = sorted({lam for _, lam in by_world})
+    runs = NormalisedRuns.of(task_list, results, by=("size", "lam"))
+    by_seed, stats, groups = runs.averages(), runs.means(), runs.curve_groups()
+    lams = sorted({lam for _, lam in stats})
     claims, figures = [], {}
     for lam in lams:
         for size in SIZES:
@@ -88,7 +81,7 @@ def summarize(task_list: list[GridTask], results: list[dict], config: Config) ->
             thesis=[(THESIS_9X9, "thesis 9×9 ≈ 0 % (Figs. 5.3–5.5)", "9×9")],
             settle=SETTLE,
         )
-    return Summary(claims, normalised_curves(delayed, scaled), figures)
+    return Summary(claims, runs.curves(), figures)
 
 
 #: The first fifth of training does not set the figures' y-range: the 9×9 curves divide by an
