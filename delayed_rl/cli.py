@@ -28,15 +28,12 @@ from typing import Any
 import gymnasium as gym
 
 import delayed_rl
-from delayed_rl._validation import (
-    Limit,
-    check_fraction,
-    check_int,
-    check_limit,
-    check_probability,
-    check_real,
+from delayed_rl._validation import Limit, check_int, check_limit, check_real
+from delayed_rl.agents.common.hyperparameters import (
+    DEFAULTS,
+    HYPERPARAMETER_CHECKS,
+    MAX_SEED_VALUE,
 )
-from delayed_rl.agents.common.hyperparameters import DEFAULTS, MAX_SEED_VALUE, check_value
 from delayed_rl.agents.common.python_loop import MAX_TIMESTEPS
 from delayed_rl.agents.registry import REGISTRY
 from delayed_rl.delays import Poisson
@@ -94,10 +91,12 @@ def _limited(low: int, limit: Limit) -> Callable[[str], int]:
     return _checked(int, check)
 
 
-_bounded_value = _checked(float, check_value)
-_probability = _checked(float, check_probability)
+def _hyperparameter(name: str) -> Callable[[str], float]:
+    """An argparse ``type``: a number, checked as the agents check the hyper-parameter ``name``."""
+    return _checked(float, HYPERPARAMETER_CHECKS[name])
+
+
 _poisson_mean = _checked(float, check_real, 0.0, Poisson.MAX_LAM)
-_learning_rate = _checked(float, check_fraction)
 _non_negative_int = _checked(int, check_int, 0)
 _positive_int = _checked(int, check_int, 1)
 _steps = _limited(1, MAX_TIMESTEPS)
@@ -460,25 +459,25 @@ def _add_agent_options(train: argparse.ArgumentParser) -> None:
     """``train``'s hyper-parameter options: α, γ, ε, the initial Q-value and the delays."""
     train.add_argument(
         "--learning-rate",
-        type=_learning_rate,
+        type=_hyperparameter("learning_rate"),
         default=DEFAULTS.learning_rate,
         help=f"α in (0, 1] (default {DEFAULTS.learning_rate:g})",
     )
     train.add_argument(
         "--gamma",
-        type=_probability,
+        type=_hyperparameter("gamma"),
         default=DEFAULTS.gamma,
         help=f"discount factor in [0, 1] (default {DEFAULTS.gamma:g})",
     )
     train.add_argument(
         "--epsilon",
-        type=_probability,
+        type=_hyperparameter("exploration_final_eps"),
         default=DEFAULTS.exploration_final_eps,
         help=f"constant ε of ε-greedy exploration (default {DEFAULTS.exploration_final_eps:g})",
     )
     train.add_argument(
         "--q-init",
-        type=_bounded_value,
+        type=_hyperparameter("q_init"),
         default=DEFAULTS.q_init,
         help="initial Q-value; above the true values explores optimistically "
         f"(default {DEFAULTS.q_init:g})",

@@ -680,3 +680,35 @@ def test_the_train_options_default_to_the_agents_defaults():
         DEFAULTS.q_init,
     )
     assert args.epsilon == DEFAULTS.exploration_initial_eps == DEFAULTS.exploration_final_eps
+
+
+@pytest.mark.parametrize(
+    ("option", "name"),
+    [
+        ("--learning-rate", "learning_rate"),
+        ("--gamma", "gamma"),
+        ("--epsilon", "exploration_final_eps"),
+        ("--q-init", "q_init"),
+    ],
+)
+@pytest.mark.parametrize("text", ["0", "1", "0.5", "1.5", "-0.25", "nan", "inf", "1e300", "x"])
+def test_a_hyperparameter_option_refuses_what_the_agent_refuses(option, name, text, capsys):
+    from delayed_rl.agents import QLearning
+    from delayed_rl.cli import build_parser
+
+    try:
+        value = float(text)
+    except ValueError:
+        value = text
+    try:
+        QLearning(GRID, **{name: value})
+        agent_takes = True
+    except (TypeError, ValueError):
+        agent_takes = False
+    command = ["train", "--env", GRID, "--agent", "q", "--save", "x", option, text]
+    try:
+        build_parser().parse_args(command)
+        parser_takes = True
+    except SystemExit:
+        parser_takes = False
+    assert parser_takes == agent_takes, capsys.readouterr().err

@@ -15,10 +15,11 @@ from delayed_rl._validation import (
     check_probability,
     check_real,
 )
-from delayed_rl.agents.common.schedules import Schedule, as_learning_rate_schedule
+from delayed_rl.agents.common.schedules import as_learning_rate_schedule
 
 __all__ = [
     "DEFAULTS",
+    "HYPERPARAMETER_CHECKS",
     "HYPERPARAMETER_NAMES",
     "MAX_ABS_VALUE",
     "MAX_SEED_VALUE",
@@ -151,37 +152,50 @@ def with_defaults(owner: str, given: dict[str, Any]) -> dict[str, Any]:
     return {**_SHARED, **given}
 
 
-def check_hyperparameters(
-    learning_rate: float | Schedule,
-    gamma: float,
-    exploration_initial_eps: float,
-    exploration_final_eps: float,
-    exploration_fraction: float,
-    q_init: float,
-    seed: int | None,
-    verbose: int,
-) -> dict[str, Any]:
-    """The shared hyper-parameters, checked, plus the learning rate as a schedule.
+def _check_learning_rate(name: str, value: Any) -> Any:
+    """α as given: a number in (0, 1], or a schedule (whose values are checked as it runs)."""
+    return value if callable(value) else check_fraction(name, value)
+
+
+def _check_verbose(name: str, value: Any) -> int:
+    return check_int(name, value, 0, note=" (0 silent, 1 info)")
+
+
+HYPERPARAMETER_CHECKS: dict[str, Callable[[str, Any], Any]] = {
+    "learning_rate": _check_learning_rate,
+    "gamma": check_probability,
+    "exploration_initial_eps": check_probability,
+    "exploration_final_eps": check_probability,
+    "exploration_fraction": check_fraction,
+    "q_init": check_value,
+    "seed": check_seed,
+    "verbose": _check_verbose,
+}
+"""The check of each shared hyper-parameter, ``check(name, value) -> value``: what the agents
+and ``delayed-rl train``'s options both refuse."""
+
+
+def check_hyperparameters(**hyperparameters: Any) -> dict[str, Any]:
+    """The shared hyper-parameters, each checked by :data:`HYPERPARAMETER_CHECKS`.
 
     ``q_init`` must lie within ±:data:`MAX_ABS_VALUE` and ``seed`` in ``[0, MAX_SEED_VALUE]``.
+
+    Args:
+        **hyperparameters: every name of :data:`HYPERPARAMETER_NAMES`, and no other.
 
     Returns:
         One entry per argument (``learning_rate`` as given), and ``lr_schedule``.
 
     Raises:
-        TypeError: an argument has the wrong type.
+        TypeError: a name is missing or unknown, or an argument has the wrong type.
         ValueError: an argument is out of range (the message names it and what is allowed).
     """
-    return {
-        "learning_rate": learning_rate,
-        "lr_schedule": as_learning_rate_schedule(learning_rate),
-        "gamma": check_probability("gamma", gamma),
-        "exploration_initial_eps": check_probability(
-            "exploration_initial_eps", exploration_initial_eps
-        ),
-        "exploration_final_eps": check_probability("exploration_final_eps", exploration_final_eps),
-        "exploration_fraction": check_fraction("exploration_fraction", exploration_fraction),
-        "q_init": check_value("q_init", q_init),
-        "seed": check_seed("seed", seed),
-        "verbose": check_int("verbose", verbose, 0, note=" (0 silent, 1 info)"),
+    if hyperparameters.keys() != HYPERPARAMETER_CHECKS.keys():
+        raise TypeError(
+            f"the shared hyper-parameters are {list(HYPERPARAMETER_NAMES)}, got "
+            f"{list(hyperparameters)}"
+        )
+    checked = {
+        name: HYPERPARAMETER_CHECKS[name](name, value) for name, value in hyperparameters.items()
     }
+    return {**checked, "lr_schedule": as_learning_rate_schedule(checked["learning_rate"])}

@@ -89,26 +89,17 @@ def result_table(
     return table
 
 
-def optimal_seeds_claim(
-    setting: str,
-    agent: str,
-    runs: Mapping[int, dict],
-    thesis: str,
-    low: float = SEED_SHARE,
-    high: float = 1.0,
-) -> Claim:
-    """``agent``'s seeds whose final greedy policy is optimal, k of n: the share in [low, high].
+def optimal_seeds_claim(setting: str, agent: str, runs: Mapping[int, dict], thesis: str) -> Claim:
+    """``agent``'s seeds whose final greedy policy is optimal, k of n: the share in [SEED_SHARE, 1].
 
     The count rule (:func:`~delayed_rl.experiments.framework.claims.count_claim`): the Wilson 95 %
-    interval of the share against the band, ``[SEED_SHARE, 1]`` by default.
+    interval of the share against the band ``[SEED_SHARE, 1]``.
 
     Args:
         setting: the setting's label.
         agent: the agent's name.
         runs: its results in the setting, by seed.
         thesis: what the thesis says.
-        low: the band's lower end.
-        high: the band's upper end.
     """
     flags = [bool(result["optimal"]) for result in runs.values()]
     return count_claim(
@@ -116,8 +107,8 @@ def optimal_seeds_claim(
         thesis,
         sum(flags),
         len(flags),
-        low,
-        high,
+        SEED_SHARE,
+        1.0,
         note=f"optimal: a 1000-step greedy walk ≥ {LOOP_FRACTION} of the loop",
     )
 
@@ -130,34 +121,25 @@ def paired_gap_claim(
     return direction_claim(quantity, thesis, mean_ci_n(gaps), "above", note="paired by seed")
 
 
-def stability_claim(
-    setting: str,
-    agent: str,
-    runs: Mapping[int, dict],
-    thesis: str,
-    low: float = STABLE_SHARE,
-    high: float = 1.0,
-) -> Claim:
-    """``agent``'s share of second-half greedy snapshots that are optimal, in [low, high].
+def stability_claim(setting: str, agent: str, runs: Mapping[int, dict], thesis: str) -> Claim:
+    """``agent``'s share of second-half greedy snapshots that are optimal, in [STABLE_SHARE, 1].
 
     Per seed, the share of its snapshots after half the steps that are optimal; the 95 % CI
-    of its mean over the seeds against the band (``[STABLE_SHARE, 1]`` by default).
+    of its mean over the seeds against the band ``[STABLE_SHARE, 1]``.
 
     Args:
         setting: the setting's label.
         agent: the agent's name.
         runs: its results in the setting, by seed.
         thesis: what the thesis says.
-        low: the band's lower end.
-        high: the band's upper end.
     """
     stats = mean_ci_n([result["second_half_optimal"] for result in runs.values()])
     return range_claim(
         f"{setting}: {agent} share of second-half greedy snapshots optimal",
         thesis,
         stats,
-        low,
-        high,
+        STABLE_SHARE,
+        1.0,
         note="per seed, the share of its snapshots after half the steps that are optimal",
     )
 
