@@ -10,7 +10,7 @@ when that arrives. The exact rule and the history it keeps are on the docs' agen
 from __future__ import annotations
 
 import numbers
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -20,7 +20,7 @@ from delayed_rl._delay_line import delay_bound, ring_size
 from delayed_rl.agents.common.compiled_loop import CompiledTables
 from delayed_rl.agents.common.env_util import make_env
 from delayed_rl.agents.common.hyperparameters import check_value, shares_hyperparameters
-from delayed_rl.agents.common.q_agent import QAgent
+from delayed_rl.agents.common.q_agent import QAgent, shown
 from delayed_rl.wrappers.reward_delay import find_reward_delay
 
 __all__ = ["OracleQLearning"]
@@ -139,80 +139,61 @@ class OracleQLearning(QAgent):
             )
         self._arrivals = arrivals
 
-    def update(
-        self,
-        obs: Any,
-        action: Any,
-        reward: float,
-        next_obs: Any,
-        terminated: bool = False,
-        truncated: bool = False,
-        *,
-        arrivals: Sequence[tuple[int, float]] | None = None,
-    ) -> None:
-        """One learning step from a transition you drove yourself, with its reward arrivals.
+    def _before_update(self, info: Any) -> None:
+        """Take the step's arrivals from the ``info`` given to :meth:`update`, checked.
 
-        As ``TabularAgent.update``, plus the step's ``arrivals``: the oracle learns from them,
-        not from ``reward`` (which is checked but not used). The agent must have its env (the
-        ``RewardDelay`` sets how much history it keeps), and transitions must come in the order
-        they happened, episodes ending with ``terminated`` or ``truncated``, so that the episode
-        clock is the wrapper's.
-
-        Args:
-            obs: the observation the action was taken in.
-            action: the action taken.
-            reward: the reward received at this step.
-            next_obs: the observation after the action.
-            terminated: the episode ended in a terminal state.
-            truncated: the episode was cut short.
-            arrivals: the step's ``info["reward_arrivals"]``: ``(emission_step, value)`` pairs,
-                ``emission_step`` an integer on the episode's clock, at most this step's.
+        The oracle learns from them, not from ``reward`` (which is checked but not used). It
+        must have its env (the ``RewardDelay`` sets how much history it keeps), and
+        transitions must come in the order they happened, episodes ending with ``terminated``
+        or ``truncated``, so that the episode clock is the wrapper's.
 
         Raises:
-            TypeError: an argument has the wrong type, or ``arrivals`` is missing.
-            ValueError: an argument is outside its space, an arrival comes from a later step or
-                has a non-finite value (or one above
-                :data:`~delayed_rl.agents.common.hyperparameters.MAX_ABS_VALUE` in magnitude), or the
-                agent has no env.
+            TypeError: ``info`` is not a dict with ``"reward_arrivals"``, or an arrival is not
+                an ``(emission_step, value)`` pair of an integer and a number.
+            ValueError: an arrival comes from a later step or has a non-finite value (or one
+                above :data:`~delayed_rl.agents.common.hyperparameters.MAX_ABS_VALUE` in
+                magnitude), or the agent has no env.
         """
         if self.env is None:
             raise ValueError(
                 f"{type(self).__name__}.update needs the agent's env (its RewardDelay sets the "
                 "history kept): pass env= to load() or call set_env(env) first"
             )
-        checked = self._check_arrivals(arrivals)
-        self._arrivals = checked
-        try:
-            super().update(obs, action, reward, next_obs, terminated, truncated)
-        finally:
-            self._arrivals = None
+        self._arrivals = self._check_arrivals(info)
 
-    def _check_arrivals(self, arrivals: Any) -> list[tuple[int, float]]:
-        """``arrivals`` as a list of ``(int, float)`` pairs, checked against the episode's clock."""
-        allowed = "a sequence of (emission_step, value) pairs, the step's info['reward_arrivals']"
-        if arrivals is None:
-            raise TypeError(f"{type(self).__name__}.update needs arrivals: {allowed}")
+    def _check_arrivals(self, info: Any) -> list[tuple[int, float]]:
+        """``info["reward_arrivals"]`` as ``(int, float)`` pairs, checked against the episode's clock."""
+        allowed = (
+            "the step's info, a dict whose 'reward_arrivals' holds (emission_step, value) pairs"
+        )
+        if not isinstance(info, Mapping) or "reward_arrivals" not in info:
+            found = (
+                f"one without it, keys {shown(info)}" if isinstance(info, Mapping) else repr(info)
+            )
+            raise TypeError(f"{type(self).__name__}.update needs info={allowed}, got {found}")
+        arrivals = info["reward_arrivals"]
         if isinstance(arrivals, (str, bytes)) or not isinstance(arrivals, Sequence):
-            raise TypeError(f"arrivals must be {allowed}, got {arrivals!r}")
-        step = self._clock - self._episode_start
+            raise TypeError(
+                f"info['reward_arrivals'] must be a sequence of (emission_step, value) pairs, "
+                f"got {arrivals!r}"
+            )
+        name, step = "info['reward_arrivals']", self._clock - self._episode_start
         checked = []
         for i, pair in enumerate(arrivals):
             if isinstance(pair, (str, bytes)) or not isinstance(pair, Sequence) or len(pair) != 2:
-                raise TypeError(
-                    f"arrivals[{i}] must be an (emission_step, value) pair, got {pair!r}"
-                )
+                raise TypeError(f"{name}[{i}] must be an (emission_step, value) pair, got {pair!r}")
             emitted, value = pair
             if isinstance(emitted, (bool, np.bool_)) or not isinstance(emitted, numbers.Integral):
                 raise TypeError(
-                    f"arrivals[{i}][0] must be an integer (the emission step), got {emitted!r} "
+                    f"{name}[{i}][0] must be an integer (the emission step), got {emitted!r} "
                     f"({type(emitted).__name__})"
                 )
             if emitted > step:
                 raise ValueError(
-                    f"arrivals[{i}][0] must be an emission step <= {step} (this step's), "
+                    f"{name}[{i}][0] must be an emission step <= {step} (this step's), "
                     f"got {emitted!r}"
                 )
-            checked.append((int(emitted), check_value(f"arrivals[{i}][1]", value)))
+            checked.append((int(emitted), check_value(f"{name}[{i}][1]", value)))
         return checked
 
     def _learn_transition(
@@ -222,7 +203,7 @@ class OracleQLearning(QAgent):
         if arrivals is None:
             raise RuntimeError(
                 f"{type(self).__name__} got no reward arrivals for this step: learn() hands "
-                "them over from info, update() takes them as arrivals="
+                "them over from info, update() reads them from its info="
             )
         clock, mask = self._clock, self._ring_mask
         j = clock & mask

@@ -108,48 +108,66 @@ def hand_agent(**kwargs):
 def test_update_applies_each_transitions_own_reward_when_it_arrives():
     agent = hand_agent()
     q = lambda s, a: agent.q_table[s, 0, a]  # noqa: E731
-    agent.update(8, 0, 0.0, 5, arrivals=[])  # step 0: nothing known yet
+    agent.update(8, 0, 0.0, 5, info={"reward_arrivals": []})  # step 0: nothing known yet
     assert not agent.q_table.any()
-    agent.update(5, 0, 1.0, 2, arrivals=[(0, 1.0)])  # step 1: step 0's reward
+    agent.update(5, 0, 1.0, 2, info={"reward_arrivals": [(0, 1.0)]})  # step 1: step 0's reward
     assert q(8, 0) == 0.5 * (1.0 + 0.9 * 0.0)
     # step 2: two arrivals, applied in emission order: step 1's, then step 2's own (a zero)
-    agent.update(2, 3, 2.0, 1, arrivals=[(2, 0.0), (1, 2.0)])
+    agent.update(2, 3, 2.0, 1, info={"reward_arrivals": [(2, 0.0), (1, 2.0)]})
     assert q(5, 0) == 0.5 * 2.0
     assert q(2, 3) == 0.0
     # step 3: step 0 again is ignored (a transition has one reward, updated once); bootstraps
     # are read at the arrival step: step 2's transition leads to state 1, still 0
-    agent.update(1, 3, 4.0, 0, terminated=True, arrivals=[(0, 7.0)])
+    agent.update(1, 3, 4.0, 0, terminated=True, info={"reward_arrivals": [(0, 7.0)]})
     assert q(8, 0) == 0.5
     # next episode, under "carry": the terminal step 3 of the last one is step -1 now; it does
     # not bootstrap (terminated)
-    agent.update(8, 0, 3.0, 5, arrivals=[(-1, 3.0)])
+    agent.update(8, 0, 3.0, 5, info={"reward_arrivals": [(-1, 3.0)]})
     assert q(1, 3) == 0.5 * 3.0
     # step 1 of this episode: its step 0 bootstraps from Q(5) = max(1.0, 0...) = 1.0
-    agent.update(5, 1, 0.0, 4, arrivals=[(0, 0.0)])
+    agent.update(5, 1, 0.0, 4, info={"reward_arrivals": [(0, 0.0)]})
     assert q(8, 0) == pytest.approx(0.5 + 0.5 * (0.0 + 0.9 * 1.0 - 0.5))
     assert agent.num_timesteps == 6
 
 
 def test_update_without_arrivals_or_with_bad_ones_raises_naming_them():
     agent = hand_agent()
-    with pytest.raises(TypeError, match="update needs arrivals"):
+    with pytest.raises(TypeError, match="update needs info=.*, got None"):
         agent.update(8, 0, 0.0, 5)
+    with pytest.raises(TypeError, match=r"update needs info=.*, got one without it, keys \['x'\]"):
+        agent.update(8, 0, 0.0, 5, info={"x": 1})
     for bad, error, match in [
-        ("(0, 1.0)", TypeError, "arrivals must be a sequence"),
-        ([0, 1.0], TypeError, r"arrivals\[0\] must be an \(emission_step, value\) pair"),
-        ([(0, 1.0, 2)], TypeError, r"arrivals\[0\] must be an \(emission_step, value\) pair"),
-        ([(0.0, 1.0)], TypeError, r"arrivals\[0\]\[0\] must be an integer"),
-        ([(True, 1.0)], TypeError, r"arrivals\[0\]\[0\] must be an integer"),
-        ([(0, "1")], TypeError, r"arrivals\[0\]\[1\] must be a finite number"),
-        ([(0, math.nan)], ValueError, r"arrivals\[0\]\[1\] must be a finite number"),
-        ([(1, 1.0)], ValueError, r"arrivals\[0\]\[0\] must be an emission step <= 0"),
+        ("(0, 1.0)", TypeError, r"reward_arrivals'\] must be a sequence"),
+        (
+            [0, 1.0],
+            TypeError,
+            r"info\['reward_arrivals'\]\[0\] must be an \(emission_step, value\) pair",
+        ),
+        (
+            [(0, 1.0, 2)],
+            TypeError,
+            r"info\['reward_arrivals'\]\[0\] must be an \(emission_step, value\) pair",
+        ),
+        ([(0.0, 1.0)], TypeError, r"info\['reward_arrivals'\]\[0\]\[0\] must be an integer"),
+        ([(True, 1.0)], TypeError, r"info\['reward_arrivals'\]\[0\]\[0\] must be an integer"),
+        ([(0, "1")], TypeError, r"info\['reward_arrivals'\]\[0\]\[1\] must be a finite number"),
+        (
+            [(0, math.nan)],
+            ValueError,
+            r"info\['reward_arrivals'\]\[0\]\[1\] must be a finite number",
+        ),
+        (
+            [(1, 1.0)],
+            ValueError,
+            r"info\['reward_arrivals'\]\[0\]\[0\] must be an emission step <= 0",
+        ),
     ]:
         with pytest.raises(error, match=match):
-            agent.update(8, 0, 0.0, 5, arrivals=bad)
+            agent.update(8, 0, 0.0, 5, info={"reward_arrivals": bad})
     assert agent.num_timesteps == 0 and not agent.q_table.any()
     with pytest.raises(ValueError, match="obs must be an integer"):
-        agent.update(99, 0, 0.0, 5, arrivals=[])
-    agent.update(8, 0, 0.0, 5, arrivals=[(0, 1.0)])  # a failed update left nothing behind
+        agent.update(99, 0, 0.0, 5, info={"reward_arrivals": []})
+    agent.update(8, 0, 0.0, 5, info={"reward_arrivals": [(0, 1.0)]})  # failures left nothing
     assert agent.q_table[8, 0, 0] == 0.5
 
 
@@ -267,7 +285,7 @@ def test_save_and_load_round_trip(tmp_path):
         assert loaded.learning_rate == 0.2 and loaded.num_timesteps == 2_000
     assert loaded.env is None and loaded.history_length == 0
     with pytest.raises(ValueError, match="update needs the agent's env"):
-        loaded.update(8, 0, 0.0, 5, arrivals=[])
+        loaded.update(8, 0, 0.0, 5, info={"reward_arrivals": []})
     with pytest.raises(ValueError, match="cannot load .* record_arrivals=False"):
         OracleQLearning.load(path, env=gym.make(GRID3, reward_delay=2))
     resumed = OracleQLearning.load(path, env=oracle_env())

@@ -123,7 +123,7 @@ def test_oracle_is_the_reference(steps, data):
     for s, a, r, s2, code in steps:
         emitted = data.draw(st.lists(st.integers(-10, step), max_size=3))
         arrivals = [(e, r + e) for e in emitted]
-        agent.update(s, a, r, s2, *_ends(code), arrivals=arrivals)
+        agent.update(s, a, r, s2, *_ends(code), info={"reward_arrivals": arrivals})
         reference.update(s, a, s2, *_ends(code), arrivals)
         np.testing.assert_array_equal(agent.q_table, reference.q)
         step = 0 if code in (0, 1) else step + 1

@@ -111,7 +111,7 @@ def test_compiled_oracle_is_the_python_rule(mode, max_steps):
         arrived += len(info["reward_arrivals"])
         python.update(
             int(log["obs"][t]), action, reward, int(s2[t]), terminated, truncated,
-            arrivals=info["reward_arrivals"],
+            info=info,
         )  # fmt: skip
         if terminated or truncated:
             replayed.reset()

@@ -166,8 +166,11 @@ class TabularAgent(persistence.CopyProtocol, ABC):
         after a terminated or truncated step, and by :meth:`set_env`.
         """
 
-    def _before_update(self) -> None:
-        """Prepare the rule for a transition given to :meth:`update` (nothing by default)."""
+    def _before_update(self, info: dict[str, Any] | None) -> None:
+        """Prepare the rule for a transition given to :meth:`update`, with its ``info``.
+
+        Nothing by default: the step's ``info`` is for a rule that learns from it.
+        """
 
     @abstractmethod
     def _get_state_arrays(self) -> dict[str, np.ndarray]: ...
@@ -310,6 +313,7 @@ class TabularAgent(persistence.CopyProtocol, ABC):
         next_obs: Any,
         terminated: bool = False,
         truncated: bool = False,
+        info: dict[str, Any] | None = None,
     ) -> None:
         """One learning step from a transition you drove yourself (custom loops, robots).
 
@@ -325,6 +329,9 @@ class TabularAgent(persistence.CopyProtocol, ABC):
             next_obs: the observation after the action.
             terminated: the episode ended in a terminal state.
             truncated: the episode was cut short (e.g. a time limit).
+            info: the step's ``info``, as ``env.step`` returned it. A rule that learns from it
+                reads it (:class:`~delayed_rl.agents.OracleQLearning` needs its
+                ``"reward_arrivals"``); the others ignore it.
 
         Raises:
             TypeError: an argument has the wrong type (``obs``, ``action`` and ``next_obs``
@@ -337,7 +344,7 @@ class TabularAgent(persistence.CopyProtocol, ABC):
         a = self._action_index.index(action, "action")
         r = check_value("reward", reward)
         ended = check_bool("terminated", terminated), check_bool("truncated", truncated)
-        self._before_update()
+        self._before_update(info)
         self._learn_transition(s, a, r, s2, *ended)
         self.num_timesteps += 1
         if ended[0] or ended[1]:  # as learn() at the env's reset

@@ -237,7 +237,7 @@ class MultipleModelQLearning(QAgent):
         return greedy_actions(self._greedy_source(), states)
 
     # ------------------------------------------------------------------ learning
-    def _before_update(self) -> None:
+    def _before_update(self, info: dict[str, Any] | None) -> None:
         """Clear the acting model: ``update()``'s transition was not chosen by ``learn()``.
 
         The reward kernel and the delay trace then take the greedy model of ``obs``
