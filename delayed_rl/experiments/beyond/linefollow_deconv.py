@@ -20,14 +20,7 @@ from delayed_rl.experiments.framework.claims import (
     reference_row,
 )
 from delayed_rl.experiments.framework.delay_estimates import ESTIMATE_LABELS, mean_delay_claim
-from delayed_rl.experiments.framework.experiment import (
-    Config,
-    Curve,
-    Experiment,
-    Summary,
-    seed_tasks,
-    step_count,
-)
+from delayed_rl.experiments.framework.experiment import Config, Experiment, Summary, step_count
 from delayed_rl.experiments.framework.line_claims import (
     error_ratio_claim,
     reward_claims,
@@ -40,7 +33,9 @@ from delayed_rl.experiments.framework.line_following import (
     Q_INIT,
     TRACK,
     LineTask,
+    line_curves,
     line_statistics,
+    line_tasks,
     logged_task_cost,
     logged_task_run,
     run_logged_task,
@@ -65,8 +60,7 @@ QUICK_STEPS, STEPS = 5_000, 150_000
 
 def tasks(config: Config) -> list[LineTask]:
     """Per seed, one run of each of :data:`LEARNERS`: :data:`STEPS` (:data:`QUICK_STEPS` quick)."""
-    steps = config.run_steps(STEPS, QUICK_STEPS)
-    return seed_tasks(config, LEARNERS, LineTask, steps=steps)
+    return line_tasks(config, LEARNERS, STEPS, QUICK_STEPS)
 
 
 def _paired(runs: dict[str, dict[int, dict]], ours: str, theirs: str, how: str) -> tuple:
@@ -105,11 +99,11 @@ def summarize(task_list: list[LineTask], results: list[dict], config: Config) ->
     """
     by_agent = pivot(task_list, results, by=("agent",))
     runs = {agent: by_agent.get(agent, {}) for agent in LEARNERS}
-    curves = []
-    for task, result in zip(task_list, results, strict=True):
-        agent, seed, steps = task.agent, task.seed, result["steps"]
-        curves.append(Curve(agent, seed, steps, result["curve"]))
-        curves.append(Curve(agent, seed, steps, result["error"], "accumulated_error"))
+    curves = [
+        curve
+        for task, result in zip(task_list, results, strict=True)
+        for curve in line_curves(task.agent, task.seed, result)
+    ]
     return Summary(_claims(runs), curves, _figures(runs), _statistics(runs))
 
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -20,7 +20,13 @@ import numpy as np
 
 from delayed_rl._validation import check_choice
 from delayed_rl.experiments.framework.delay_estimates import delay_estimate
-from delayed_rl.experiments.framework.experiment import SharedRun, running_average
+from delayed_rl.experiments.framework.experiment import (
+    Config,
+    Curve,
+    SharedRun,
+    running_average,
+    seed_tasks,
+)
 from delayed_rl.experiments.framework.task import Task
 from delayed_rl.experiments.framework.training import thesis_hyperparameters
 from delayed_rl.parallel.intervals import mean_ci95
@@ -164,6 +170,30 @@ class LineTask(Task):
 
     agent: str
     steps: int
+
+
+def line_tasks(
+    config: Config, learners: Sequence[str], steps: int, quick_steps: int
+) -> list[LineTask]:
+    """Per seed, one :class:`LineTask` of each of ``learners``, ``steps`` steps long.
+
+    ``quick_steps`` long in a quick run (:meth:`~.experiment.Config.run_steps`).
+    """
+    return seed_tasks(config, learners, LineTask, steps=config.run_steps(steps, quick_steps))
+
+
+def line_curves(name: str, seed: int, run: dict) -> list[Curve]:
+    """A run's two curves for ``curves.csv``: its average reward and its accumulated error.
+
+    Args:
+        name: the curves' condition, e.g. the learner.
+        seed: the run's seed.
+        run: :func:`run_metrics`' ``steps``, ``curve`` and ``error``.
+    """
+    return [
+        Curve(name, seed, run["steps"], run["curve"]),
+        Curve(name, seed, run["steps"], run["error"], "accumulated_error"),
+    ]
 
 
 def logged_task_run(task: LineTask) -> SharedRun:

@@ -12,14 +12,7 @@ from __future__ import annotations
 
 from delayed_rl.experiments.framework import plotting
 from delayed_rl.experiments.framework.claims import band_claim, direction_claim, mean_ci_n, paired
-from delayed_rl.experiments.framework.experiment import (
-    Config,
-    Curve,
-    Experiment,
-    Summary,
-    seed_tasks,
-    step_count,
-)
+from delayed_rl.experiments.framework.experiment import Config, Experiment, Summary, step_count
 from delayed_rl.experiments.framework.line_claims import (
     REWARD_TOLERANCE,
     error_ratio_claim,
@@ -36,7 +29,9 @@ from delayed_rl.experiments.framework.line_following import (
     TRACK,
     UNSEEN_ERROR,
     LineTask,
+    line_curves,
     line_statistics,
+    line_tasks,
     logged_task_cost,
     logged_task_run,
     run_logged_task,
@@ -57,8 +52,7 @@ STEPS, QUICK_STEPS = 150_000, 3_000
 
 def tasks(config: Config) -> list[LineTask]:
     """Per seed: one Q-learning and one MMQ run, :data:`STEPS` each (:data:`QUICK_STEPS` quick)."""
-    steps = config.run_steps(STEPS, QUICK_STEPS)
-    return seed_tasks(config, LEARNERS, LineTask, steps=steps)
+    return line_tasks(config, LEARNERS, STEPS, QUICK_STEPS)
 
 
 def summarize(task_list: list[LineTask], results: list[dict], config: Config) -> Summary:
@@ -71,11 +65,11 @@ def summarize(task_list: list[LineTask], results: list[dict], config: Config) ->
     """
     by_agent = pivot(task_list, results, by=("agent",))
     runs = {agent: by_agent[agent] for agent in LEARNERS}
-    curves = []
-    for task, result in zip(task_list, results, strict=True):
-        agent, seed, steps = task.agent, task.seed, result["steps"]
-        curves.append(Curve(agent, seed, steps, result["curve"]))
-        curves.append(Curve(agent, seed, steps, result["error"], "accumulated_error"))
+    curves = [
+        curve
+        for task, result in zip(task_list, results, strict=True)
+        for curve in line_curves(task.agent, task.seed, result)
+    ]
     stat = {agent: mean_ci_n([r["average"] for r in rs.values()]) for agent, rs in runs.items()}
     errors = pivot(task_list, results, by=("agent",), value="total_error")
     averages = pivot(task_list, results, by=("agent",), value="average")

@@ -31,7 +31,6 @@ from delayed_rl.experiments.framework.claims import (
 from delayed_rl.experiments.framework.experiment import (
     Claim,
     Config,
-    Curve,
     Experiment,
     SharedRun,
     Summary,
@@ -46,6 +45,7 @@ from delayed_rl.experiments.framework.line_following import (
     REAL_ENV_ID,
     TRACK,
     UNSEEN_ERROR,
+    line_curves,
     pooled_training,
     training_cost,
 )
@@ -192,14 +192,12 @@ def summarize(task_list: list[RealRobotTask], results: list[dict], config: Confi
     """
     by_agent = pivot(task_list, results, by=("agent",))
     runs = {agent: by_agent.get(agent, {}) for agent in LEARNERS}
-    curves = []
-    for task, result in zip(task_list, results, strict=True):
-        agent, seed = task.agent, task.seed
-        for condition in CONDITIONS:
-            r = result[condition]
-            name = f"{agent} {condition}"
-            curves.append(Curve(name, seed, r["steps"], r["curve"]))
-            curves.append(Curve(name, seed, r["steps"], r["error"], "accumulated_error"))
+    curves = [
+        curve
+        for task, result in zip(task_list, results, strict=True)
+        for condition in CONDITIONS
+        for curve in line_curves(f"{task.agent} {condition}", task.seed, result[condition])
+    ]
     claims = [*_real_claims(runs), *_control_claims(runs), *_deconv_claims(runs)]
     seeds = sorted(runs["MMQ"])
     extra = {**_statistics(runs, seeds), "protocol": _protocol(task_list)}
