@@ -148,7 +148,7 @@ def fake_grid_run(
 
 
 def fake_line_run(average: float, total_error: float, mean_delay: float | None) -> dict:
-    """A result shaped like ``line_following.run_logged_task``'s: a 10-step run, for summaries.
+    """A result shaped like a line-following run's (``line_following.run_metrics``'): a 10-step run, for summaries.
 
     ``average`` is its training reward, ``total_error`` its accumulated error (half of it by
     step 5), with a flat delay estimate on 0..150 of mean ``mean_delay`` (``None``: none held).

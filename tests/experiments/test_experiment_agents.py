@@ -157,7 +157,7 @@ def test_bad_arguments():
     with pytest.raises(TypeError, match="averaged"):
         snapshots.greedy_policy(agent, averaged="yes")
     with pytest.raises(ValueError, match=r"agent must be one of \('MMQ', 'Q', 'DeconvQ learned'\)"):
-        lfd.EXPERIMENT.run_task(LineTask(agent="SARSA", seed=0, steps=10))
+        lfd.EXPERIMENT.run_alone(LineTask(agent="SARSA", seed=0, steps=10))
 
 
 def test_the_new_experiments_are_listed(capsys):
@@ -203,7 +203,7 @@ def test_future_work_small_run_has_a_row_and_claims_per_variant():
 
 
 def test_linefollow_deconv_run_measures_reward_error_and_the_delay_estimate():
-    result = lfd.EXPERIMENT.run_task(LineTask(agent="DeconvQ learned", steps=1_200, seed=0))
+    result = lfd.EXPERIMENT.run_alone(LineTask(agent="DeconvQ learned", steps=1_200, seed=0))
     assert result["steps"][-1] == 1_200 and result["error"][-1] == result["total_error"]
     assert result["curve"][-1] == pytest.approx(result["average"])
     assert result["estimate"].shape == (151,) and 0 <= result["mean_delay"] <= 150

@@ -188,7 +188,7 @@ def test_learners_keep_learning_through_the_controllers_run():
 def test_linefollow_run_records_reward_and_accumulated_error():
     from delayed_rl.experiments.thesis.linefollow import EXPERIMENT
 
-    result = EXPERIMENT.run_task(LineTask(agent="MMQ", steps=1000, seed=0))
+    result = EXPERIMENT.run_alone(LineTask(agent="MMQ", steps=1000, seed=0))
     assert result["steps"][-1] == 1000 and result["error"][-1] == result["total_error"]
     assert np.all(np.diff(result["error"]) >= 0)  # an accumulated sum of |Δ| ≥ 0
     assert np.all(np.diff(result["error"]) <= 20 * np.diff(result["steps"]))  # |Δ| ≤ 20 a step

@@ -38,7 +38,6 @@ from delayed_rl.experiments.framework.line_following import (
     line_tasks,
     logged_task_cost,
     logged_task_run,
-    run_logged_task,
 )
 from delayed_rl.experiments.framework.results import pivot
 from delayed_rl.experiments.framework.training import hyperparameter_text
@@ -210,7 +209,6 @@ EXPERIMENT = Experiment(
     f"{step_count(STEPS)} steps per run; {hyperparameter_text(Q_INIT)}. Average reward during "
     "learning and accumulated error Σ|Δ|, paired by seed; delay estimates; ns/step.",
     tasks=tasks,
-    run_task=run_logged_task,
     summarize=summarize,
     default_seeds=5,
     shared_run=logged_task_run,

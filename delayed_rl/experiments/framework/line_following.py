@@ -201,24 +201,16 @@ def logged_task_run(task: LineTask) -> SharedRun:
 
     ``linefollow``'s and ``linefollow-deconv``'s tasks are such tasks: their runs of the same
     learner and seed are one, and the start of ``controllers``' and ``real-robot``'s.
+    The run's result: :func:`run_metrics`' (``steps``, ``curve``, ``error``, ``average``,
+    ``total_error``, ``visible``), ``ns_per_step`` (``learn``'s wall time over the steps),
+    ``path`` (``learn``'s) and the agent's delay estimate, if it holds one
+    (:func:`~.delay_estimates.delay_estimate`).
 
     Raises:
         ValueError: the task's agent is not one of :data:`LEARNERS`.
     """
     check_choice("agent", task.agent, LEARNERS)
     return logged_run(task.agent, task.seed, task.steps)
-
-
-def run_logged_task(task: LineTask) -> dict:
-    """Train a :func:`logged_task_run` task's learner on the line follower and measure the run.
-
-    Returns:
-        :func:`run_metrics`' (``steps``, ``curve``, ``error``, ``average``, ``total_error``,
-        ``visible``), ``ns_per_step`` (``learn``'s wall time over the steps), ``path``
-        (``learn``'s) and the agent's delay estimate, if it holds one
-        (:func:`~.delay_estimates.delay_estimate`).
-    """
-    return logged_task_run(task).alone()
 
 
 def logged_task_cost(task: LineTask) -> float:

@@ -34,7 +34,6 @@ from delayed_rl.experiments.framework.line_following import (
     line_tasks,
     logged_task_cost,
     logged_task_run,
-    run_logged_task,
 )
 from delayed_rl.experiments.framework.results import pivot
 from delayed_rl.experiments.framework.training import (
@@ -157,7 +156,6 @@ EXPERIMENT = Experiment(
     f"undelayed reward stream; accumulated error Σ|Δ|, Δ = m − {CENTRE}, with an unseen line "
     f"counted as |Δ| = {UNSEEN_ERROR}.",
     tasks=tasks,
-    run_task=run_logged_task,
     summarize=summarize,
     default_seeds=5,
     shared_run=logged_task_run,
