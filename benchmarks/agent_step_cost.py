@@ -47,7 +47,7 @@ import delayed_rl  # noqa: F401  (registers the env ids)
 from delayed_rl.agents import DEFAULTS, MultipleModelQLearning, QLearning
 
 MODEL_COUNTS = (1, 11, 51, 151)
-LAMBDA = 13
+LAM = 13
 FLOOR = "minimal loop"
 """The name of the floor's timings."""
 WARM_UP = 30_000
@@ -58,7 +58,7 @@ SETTINGS = {"q_init": 20.0, "seed": 0}
 
 def make_env(size: int) -> gym.Env:
     """A ``size``×``size`` grid world with Poisson(13) reward delays, made as users make it."""
-    return gym.make("delayed_rl/GridWorld-v0", size=size, reward_delay=LAMBDA)
+    return gym.make("delayed_rl/GridWorld-v0", size=size, reward_delay=LAM)
 
 
 def make_agent(size: int, n_models: int) -> MultipleModelQLearning:

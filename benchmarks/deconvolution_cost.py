@@ -23,11 +23,11 @@ import gymnasium as gym
 import delayed_rl  # noqa: F401  (registers the env ids)
 from delayed_rl.agents import DeconvolutionQLearning, MultipleModelQLearning, TabularAgent
 
-LAMBDA = 13
+LAM = 13
 
 
 def _env() -> gym.Env:
-    return gym.make("delayed_rl/GridWorld-9x9-v0", reward_delay=LAMBDA)
+    return gym.make("delayed_rl/GridWorld-9x9-v0", reward_delay=LAM)
 
 
 FACTORIES: dict[str, Callable[[], TabularAgent]] = {
@@ -38,7 +38,7 @@ FACTORIES: dict[str, Callable[[], TabularAgent]] = {
         _env(), max_delay_estimate=50, q_init=25.0, seed=1
     ),
     "DeconvQ, delay known": lambda: DeconvolutionQLearning(
-        _env(), delay=float(LAMBDA), q_init=25.0, seed=1
+        _env(), delay=float(LAM), q_init=25.0, seed=1
     ),
 }
 
@@ -70,7 +70,7 @@ def main() -> None:
         for name, make in FACTORIES.items():
             seconds[name].append(time_run(make, args.steps))
     reference = seconds["MMQ, 51 models"]
-    print(f"GridWorld-9x9, Poisson({LAMBDA}), {args.steps:,} steps, {args.repeats} repeats")
+    print(f"GridWorld-9x9, Poisson({LAM}), {args.steps:,} steps, {args.repeats} repeats")
     print("| agent | seconds per run (min / median / max) | ratio to MMQ (min / median / max) |")
     print("|---|---|---|")
     for name, values in seconds.items():

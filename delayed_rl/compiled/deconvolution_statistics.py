@@ -58,7 +58,7 @@ class Statistics(NamedTuple):
 
 
 @_jit
-def _slot(keys, key):
+def hash_slot(keys, key):
     """Where ``key`` is or would go in the hashed table ``keys`` (a power-of-two length)."""
     mask = keys.shape[0] - 1
     i = np.int64((np.uint64(key) * _GOLDEN) >> _SHIFT) & mask
@@ -79,7 +79,7 @@ def find_row(keys, n_pairs, later, earlier):
     key = later * n_pairs + earlier
     if keys.shape[0] == 0:
         return key
-    i = _slot(keys, key)
+    i = hash_slot(keys, key)
     return i if keys[i] == key else -1
 
 
@@ -108,7 +108,7 @@ def observe(stats, pair, reward, episode_end):
         row = base + window[m]
         if hashed:  # the couple's row, claimed if new (the caller kept room)
             key = row
-            row = _slot(keys, key)
+            row = hash_slot(keys, key)
             if keys[row] == -1:
                 keys[row] = key
                 counters[6] += 1

@@ -11,7 +11,7 @@ from delayed_rl.delays import Delay
 from delayed_rl.multiagent._agents import per_agent_actions
 from delayed_rl.multiagent._base import ParallelDelayWrapper
 from delayed_rl.wrappers._samples import as_action, copy_sample
-from delayed_rl.wrappers.action_delay import ActionLine, _check_action, neutral_action
+from delayed_rl.wrappers.action_delay import ActionLine, checked_action, neutral_action
 
 __all__ = ["ParallelActionDelay"]
 
@@ -119,7 +119,7 @@ class ParallelActionDelay(ParallelDelayWrapper):
         for agent, action in actions.items():
             self.position(agent, "actions")
             space = self.env.action_space(agent)
-            checked[agent] = _check_action(space, action, f"actions[{agent!r}]")
+            checked[agent] = checked_action(space, action, f"actions[{agent!r}]")
         sent = {}
         for agent, action in checked.items():
             delay = self._samplers[agent]()

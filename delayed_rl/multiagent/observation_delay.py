@@ -10,7 +10,11 @@ from delayed_rl._validation import check_choice
 from delayed_rl.delays import Delay
 from delayed_rl.multiagent._base import ParallelDelayWrapper
 from delayed_rl.wrappers._samples import copy_sample
-from delayed_rl.wrappers.observation_delay import ARRIVAL_RULES, _new_rule, _settings
+from delayed_rl.wrappers.observation_delay import (
+    ARRIVAL_RULES,
+    new_arrival_rule,
+    observation_delay_settings,
+)
 
 __all__ = ["ParallelObservationDelay"]
 
@@ -70,11 +74,12 @@ class ParallelObservationDelay(ParallelDelayWrapper):
         super().__init__(env, delay, max_delay, {"arrival": arrival})
         self.arrival = check_choice("arrival", arrival, ARRIVAL_RULES)
         self.histories: dict[Any, int] = {
-            agent: _settings(self.delays[agent], max_delay, arrival)[3]
+            agent: observation_delay_settings(self.delays[agent], max_delay, arrival)[3]
             for agent in self.agent_order
         }
         self.rules = {
-            agent: _new_rule(self.arrival, self.histories[agent]) for agent in self.agent_order
+            agent: new_arrival_rule(self.arrival, self.histories[agent])
+            for agent in self.agent_order
         }
         self._samplers = self.delay_samplers("observation")
         self._live: set[Any] = set()  # the agents whose rule is in an episode

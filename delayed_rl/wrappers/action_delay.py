@@ -58,7 +58,7 @@ def neutral_action(space: gym.Space) -> Any:
     )
 
 
-def _check_action(space: gym.Space, action: Any, name: str) -> Any:
+def checked_action(space: gym.Space, action: Any, name: str) -> Any:
     """A copy of ``action`` (:func:`copy_sample`), checked to be in ``space``.
 
     The copy is what the line keeps: the caller may reuse or modify its own object.
@@ -211,7 +211,7 @@ class ActionDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     def step(self, action):
         """Send ``action``; step the env with the action executed now (see the class docstring)."""
-        action = _check_action(self.action_space, action, "action")
+        action = checked_action(self.action_space, action, "action")
         delay = self._sampler()
         executed = self.line.send(action, delay)
         obs, reward, terminated, truncated, info = self.env.step(copy_sample(executed))

@@ -134,7 +134,7 @@ def _bounded_history(
     return total
 
 
-def _view_settings(
+def view_settings(
     observation_space: gym.Space,
     action_space: gym.Space,
     observation_delay: Any,
@@ -317,7 +317,7 @@ class DelayAwareObservation(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstruc
         self._observation_delay = _the_wrapper(env, ObservationDelay, owner)
         self._action_delay = _the_wrapper(env, ActionDelay, owner)
         self.action_history, self.max_age, self.initial_action, self.observation_space = (
-            _view_settings(
+            view_settings(
                 env.observation_space,
                 env.action_space,
                 self._observation_delay,

@@ -123,7 +123,9 @@ class NetworkArrival:
         return made - self.newest_index, self.newest, arrived
 
 
-def _settings(delay: Any, max_delay: Any, arrival: Any) -> tuple[Delay, int | None, str, int]:
+def observation_delay_settings(
+    delay: Any, max_delay: Any, arrival: Any
+) -> tuple[Delay, int | None, str, int]:
     """An observation delay's ``delay``, ``max_delay`` and ``arrival``, checked, and its ``history``.
 
     ``history`` is how many observations the ``"stale"`` rule keeps: the delay's bound plus 1
@@ -140,7 +142,7 @@ def _settings(delay: Any, max_delay: Any, arrival: Any) -> tuple[Delay, int | No
     return delay, max_delay, arrival, min(delay_bound(delay, max_delay), MAX_DELAY - 1) + 1
 
 
-def _new_rule(arrival: str, history: int) -> StaleArrival | NetworkArrival:
+def new_arrival_rule(arrival: str, history: int) -> StaleArrival | NetworkArrival:
     """A new arrival rule of kind ``arrival`` (one of :data:`ARRIVAL_RULES`), for one env."""
     return StaleArrival(history) if arrival == "stale" else NetworkArrival()
 
@@ -196,11 +198,11 @@ class ObservationDelay(JsonSpecMixin, gym.Wrapper, gym.utils.RecordConstructorAr
     ):
         record_arguments(self, delay=delay, max_delay=max_delay, arrival=arrival)
         gym.Wrapper.__init__(self, env)
-        self.delay, self.max_delay, self.arrival, self.history = _settings(
+        self.delay, self.max_delay, self.arrival, self.history = observation_delay_settings(
             delay, max_delay, arrival
         )
         self._sampler = DelaySampler(self.delay, self.max_delay, "observation")
-        self._rule = _new_rule(self.arrival, self.history)
+        self._rule = new_arrival_rule(self.arrival, self.history)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Reset the env and the observations kept; ``seed`` also reseeds the delay generator.

@@ -17,7 +17,7 @@ from delayed_rl.experiments.framework.experiment import VERDICTS
 from delayed_rl.experiments.framework.pool import pool_key
 from delayed_rl.multiagent import sb3_vec_env
 
-SETTING = f"pursuit-poisson{pursuit.LAMBDA}"
+SETTING = f"pursuit-poisson{pursuit.LAM}"
 
 
 def _tiny(method: str, seed: int = 0, **changes) -> dict:

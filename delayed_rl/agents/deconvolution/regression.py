@@ -15,7 +15,7 @@ import numpy as np
 
 from delayed_rl._numba import jit as _jit
 from delayed_rl.agents.common.hyperparameters import MAX_ABS_VALUE
-from delayed_rl.compiled.deconvolution_statistics import Statistics, _slot, find_row, observe
+from delayed_rl.compiled.deconvolution_statistics import Statistics, find_row, hash_slot, observe
 
 __all__ = [
     "DENSE_SOLVE_PAIRS",
@@ -842,7 +842,7 @@ def _rehash(keys, cooc, size):
         key = keys[row]
         if key == -1:
             continue
-        slot = _slot(new_keys, key)
+        slot = hash_slot(new_keys, key)
         new_keys[slot] = key
         new_cooc[slot] = cooc[row]
     return new_keys, new_cooc
@@ -852,7 +852,7 @@ def _rehash(keys, cooc, size):
 def _all_found(keys):
     """Whether a lookup of every key in the hashed table ``keys`` finds it where it is."""
     for row in range(keys.shape[0]):
-        if keys[row] != -1 and _slot(keys, keys[row]) != row:
+        if keys[row] != -1 and hash_slot(keys, keys[row]) != row:
             return False
     return True
 

@@ -27,10 +27,10 @@ from delayed_rl.experiments.framework.multiagent_training import (
 from delayed_rl.experiments.framework.results import pivot
 
 #: The Poisson mean of every pursuer's reward delay.
-LAMBDA = 30
+LAM = 30
 #: The seeds of a full run.
 SEEDS = 5
-SETTING = f"pursuit-poisson{LAMBDA}"
+SETTING = f"pursuit-poisson{LAM}"
 SETTINGS: dict[str, dict[str, Any]] = {
     SETTING: {
         "env": "pursuit",
@@ -43,8 +43,8 @@ SETTINGS: dict[str, dict[str, Any]] = {
             "surround": False,
             "n_catch": 2,
         },
-        "delay": Poisson(LAMBDA).to_dict(),
-        "max_delay_estimate": 3 * LAMBDA,
+        "delay": Poisson(LAM).to_dict(),
+        "max_delay_estimate": 3 * LAM,
         "ppo": {"n_steps": 512, "batch_size": 256},
         "steps": 300_000,
         "eval_every": 30_000,
@@ -55,7 +55,7 @@ SETTINGS: dict[str, dict[str, Any]] = {
 The game: 4 pursuers and 6 evaders on an 8×8 grid, 200-step episodes, an evader caught when 2
 pursuers tag it, and the team's reward shared by every pursuer (PettingZoo's default
 ``shared_reward``): +5 a catch and −0.1 a step; each pursuer's rewards delayed by its own
-Poisson(:data:`LAMBDA`) draws, flushed at the episode's end. One SB3 PPO policy acts for every
+Poisson(:data:`LAM`) draws, flushed at the episode's end. One SB3 PPO policy acts for every
 pursuer (parameter sharing, through SuperSuit's vector conversion), with SB3's defaults but for
 rollouts of 512 steps a pursuer (2048 a rollout, SB3's default for one env) and minibatches of
 256, 300k pursuer-steps a run. ``--quick`` (:data:`QUICK`): 4000 steps, 2 seeds.
@@ -143,7 +143,7 @@ def _setting_claims(setting: str, scores: dict, by_method: dict) -> list[rules.C
     delays = [r["mean_delay"] for r in by_method["deconv-learned"].values()]
     claims.append(
         mean_delay_claim(
-            f"{setting}: deconvolution's learned mean delay", rules.mean_ci_n(delays), LAMBDA
+            f"{setting}: deconvolution's learned mean delay", rules.mean_ci_n(delays), LAM
         )
     )
     return claims
@@ -215,7 +215,7 @@ EXPERIMENT = Experiment(
         "against a random policy and the oracle."
     ).format(
         **SETTINGS[SETTING]["env_kwargs"],
-        lam=LAMBDA,
+        lam=LAM,
         seeds=SEEDS,
         steps=SETTINGS[SETTING]["steps"],
         episodes=EVAL_EPISODES,

@@ -22,7 +22,7 @@ from typing import Any
 
 from delayed_rl._validation import check_bool
 from delayed_rl.experiments.framework.experiment import Config, Experiment, SharedRun, Summary
-from delayed_rl.experiments.framework.report import _json_default, write_outputs
+from delayed_rl.experiments.framework.report import json_default, write_outputs
 from delayed_rl.experiments.framework.task import Task
 from delayed_rl.parallel.pools import iter_tasks, process_pool
 from delayed_rl.parallel.progress import RunProgress
@@ -93,7 +93,7 @@ def _items(run: SharedRun) -> Sequence[Any]:
 
 def _canonical(value: Any) -> str:
     """``value`` in canonical JSON (keys sorted): what tells tasks and pooled items apart."""
-    return json.dumps(value, sort_keys=True, default=_json_default)
+    return json.dumps(value, sort_keys=True, default=json_default)
 
 
 def _pooled(runs: Sequence[SharedRun]) -> SharedRun:
@@ -399,7 +399,7 @@ def _keep_result(folders: list[Path], run: SharedRun, result: dict, seconds: flo
         folder.mkdir(parents=True, exist_ok=True)
         payload = {"run": identity, "seconds": float(seconds), "result": result}
         partial = path.with_suffix(f".{os.getpid()}.part")
-        partial.write_text(json.dumps(payload, default=_json_default), encoding="utf-8")
+        partial.write_text(json.dumps(payload, default=json_default), encoding="utf-8")
         os.replace(partial, path)
 
 

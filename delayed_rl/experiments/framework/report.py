@@ -34,7 +34,7 @@ def write_outputs(experiment: Experiment, config: Config, summary: Summary, out:
         "claims": [asdict(claim) for claim in summary.claims],
         **summary.extra,
     }
-    (out / "summary.json").write_text(json.dumps(payload, indent=2, default=_json_default))
+    (out / "summary.json").write_text(json.dumps(payload, indent=2, default=json_default))
     figures = []
     for name, draw in summary.figures.items():
         try:
@@ -93,7 +93,7 @@ def write_index(
     return path
 
 
-def _json_default(value: Any) -> Any:
+def json_default(value: Any) -> Any:
     """What JSON writes for ``value``: a task's :meth:`~.task.Task.to_json`, an array's list."""
     if isinstance(value, Task):
         return value.to_json()

@@ -12,7 +12,7 @@ from gymnasium.vector.utils import concatenate, create_empty_array
 from delayed_rl.delays import Delay, as_delay
 from delayed_rl.wrappers._samples import as_action, copy_sample
 from delayed_rl.wrappers._spec import record_arguments
-from delayed_rl.wrappers.action_delay import ActionLine, _check_action, neutral_action
+from delayed_rl.wrappers.action_delay import ActionLine, checked_action, neutral_action
 from delayed_rl.wrappers.reward_delay import DelaySampler, check_max_delay
 from delayed_rl.wrappers.vector._sub_envs import (
     autoreset_mode,
@@ -114,7 +114,7 @@ class VectorActionDelay(gym.vector.VectorWrapper, gym.utils.RecordConstructorArg
         delays = np.zeros(self.num_envs, dtype=np.int64)
         sending = ~self._resetting
         for i in np.flatnonzero(sending).tolist():
-            action = _check_action(space, given[i], f"actions[{i}]")
+            action = checked_action(space, given[i], f"actions[{i}]")
             delays[i] = self._samplers[i]()
             executed[i] = self.lines[i].send(action, int(delays[i]))
             sent_steps[i] = self.lines[i].executed_step

@@ -16,7 +16,7 @@ from delayed_rl.wrappers.delay_aware import (
     MAX_ACTION_HISTORY,
     ViewState,
     _the_wrapper,
-    _view_settings,
+    view_settings,
 )
 from delayed_rl.wrappers.vector._sub_envs import autoreset_mode, reset_mask, unbatch_actions
 from delayed_rl.wrappers.vector.action_delay import VectorActionDelay
@@ -78,7 +78,7 @@ class VectorDelayAwareObservation(gym.vector.VectorWrapper, gym.utils.RecordCons
         self._observation_delay = _the_wrapper(env, VectorObservationDelay, owner)
         self._action_delay = _the_wrapper(env, VectorActionDelay, owner)
         self.action_history, self.max_age, self.initial_action, self.single_observation_space = (
-            _view_settings(
+            view_settings(
                 env.single_observation_space,
                 env.single_action_space,
                 self._observation_delay,

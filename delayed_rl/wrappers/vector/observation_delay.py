@@ -13,8 +13,8 @@ from delayed_rl.delays import Delay
 from delayed_rl.wrappers._samples import batch_of_copies, copy_sample
 from delayed_rl.wrappers._spec import record_arguments
 from delayed_rl.wrappers.observation_delay import (
-    _new_rule,
-    _settings,
+    new_arrival_rule,
+    observation_delay_settings,
 )
 from delayed_rl.wrappers.reward_delay import DelaySampler
 from delayed_rl.wrappers.vector._sub_envs import (
@@ -71,11 +71,11 @@ class VectorObservationDelay(gym.vector.VectorWrapper, gym.utils.RecordConstruct
     ):
         record_arguments(self, delay=delay, max_delay=max_delay, arrival=arrival)
         gym.vector.VectorWrapper.__init__(self, env)
-        self.delay, self.max_delay, self.arrival, self.history = _settings(
+        self.delay, self.max_delay, self.arrival, self.history = observation_delay_settings(
             delay, max_delay, arrival
         )
         self.autoreset_mode = autoreset_mode(env)
-        self.rules = [_new_rule(self.arrival, self.history) for _ in range(self.num_envs)]
+        self.rules = [new_arrival_rule(self.arrival, self.history) for _ in range(self.num_envs)]
         self._samplers = [
             DelaySampler(self.delay, self.max_delay, "observation") for _ in range(self.num_envs)
         ]
