@@ -217,6 +217,8 @@ class OracleQLearning(QAgent):
 
     def _credit(self, arrivals: Sequence[tuple[int, float]]) -> None:
         """The update of each arrival's transition, one after the other (see the module)."""
+        # the ring's size is a power of 2: a clock's slot is ``clock & mask``; ``.item(j)``
+        # reads a Python scalar, cheaper per element than indexing, which makes a numpy scalar
         start, mask, n_actions = self._episode_start, self._ring_mask, self.n_actions
         steps, table = self._past_step, self._table
         alpha, gamma = self._alpha, self.gamma

@@ -163,7 +163,7 @@ def _statistics(by_seed: dict[str, dict[int, dict]]) -> dict:
 
 
 def _figures(by_seed: dict[str, dict[int, dict]]) -> dict:
-    """Reward and accumulated-error curves with 95 % bands; the delay estimates over Poisson(90)."""
+    """Reward and accumulated-error curves with 95 % bands; the delay estimates over the true pmf."""
     from delayed_rl.delays import Poisson
 
     runs = {agent: list(rs.values()) for agent, rs in by_seed.items()}

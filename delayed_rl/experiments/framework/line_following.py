@@ -89,8 +89,8 @@ def line_env(reward_delay: float | None = LAM, env_id: str = ENV_ID, **kwargs: A
 def make_agent(kind: str, env: gym.Env, seed: int) -> Any:
     """A thesis-setting learner on ``env``, one of :data:`LEARNERS`, built from the registry.
 
-    ``"Q"`` (Q-learning), ``"MMQ"`` (Λ = {0, ..., 150}) or ``"DeconvQ learned"``
-    (:class:`~DeconvolutionQLearning` learning the delay on 0..150), with the thesis's
+    ``"Q"`` (Q-learning), ``"MMQ"`` (Λ = {0, ..., :data:`LAMBDA_MAX`}) or ``"DeconvQ learned"``
+    (:class:`~DeconvolutionQLearning` learning the delay on 0..:data:`LAMBDA_MAX`), with the thesis's
     hyper-parameters and ``q_init`` = :data:`Q_INIT`.
 
     Raises:
@@ -105,7 +105,7 @@ def make_agent(kind: str, env: gym.Env, seed: int) -> Any:
 
 
 def line_error(centroids: np.ndarray) -> np.ndarray:
-    """|Δ| = |m − 20| per step, and 20 where the line is not seen (m = 0)."""
+    """|Δ| = |m − :data:`CENTRE`| per step, and :data:`UNSEEN_ERROR` where the line is not seen (m = 0)."""
     centroids = np.asarray(centroids, dtype=np.int64)
     return np.where(centroids == 0, UNSEEN_ERROR, np.abs(centroids - CENTRE))
 

@@ -77,7 +77,7 @@ def _walk_average(actions: tuple[int, ...], size: int, steps: int) -> float:
 
 
 def is_optimal(policy: Sequence[int] | np.ndarray, size: int) -> bool:
-    """Whether ``policy``'s 1000-step walk scores ``LOOP_FRACTION`` of the optimal loop."""
+    """Whether ``policy``'s :data:`WALK_STEPS`-step walk scores ``LOOP_FRACTION`` of the optimal loop."""
     return walk_average(policy, size) >= LOOP_FRACTION * optimal_average(size)
 
 
@@ -175,7 +175,7 @@ def measure(agent: Any, steps: int, size: int) -> dict[str, Any]:
 
     Returns:
         ``steps`` and ``curve`` (the running average reward), ``average`` (the training mean
-        reward), ``greedy`` (the final greedy 1000-step average) and ``optimal``, the snapshot
+        reward), ``greedy`` (the final greedy :data:`WALK_STEPS`-step average) and ``optimal``, the snapshot
         arrays of :func:`train_with_snapshots`, ``second_half_optimal`` (the share of snapshots
         after half the steps that are optimal), ``ns_per_step``, ``path``, and the
         :func:`delay_estimate`. With a ``greedy_window``, the averaged table's readouts too:

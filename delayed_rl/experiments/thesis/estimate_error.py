@@ -70,7 +70,7 @@ def summarize(task_list: list[EstimateErrorTask], results: list[dict], config: C
 
     Every quantity is formed per seed, its CI over the seeds: the normalised reward at i = 0
     (band 0.6 ± ``PEAK_TOLERANCE``); the error i of the seed's best estimate, its argmax over
-    the errors (band 0 ± ``PEAK_ERROR``); and at i = −15 and i = +15 the seed's normalised
+    the errors (band 0 ± ``PEAK_ERROR``); and at both ends, i = ±:data:`MAX_ERROR`, the seed's normalised
     reward minus half of its peak (the seed's largest over the errors), below 0: "far below
     the peak" read as less than half of it. A seed whose peak is not positive (a run too short
     to learn) has no such half: NaN, and the row is ``inconclusive``.

@@ -155,7 +155,7 @@ def run_task(task: MMQGridTask) -> dict:
 
     Returns:
         ``steps`` and ``curve`` (the running average reward), ``average`` (over the run),
-        ``greedy`` (the final greedy policy's average reward over 1000 steps), ``optimal``
+        ``greedy`` (the final greedy policy's average reward over :data:`WALK_STEPS` steps), ``optimal``
         (whether that is the optimal loop), ``snapshot_steps`` and ``snapshot_optimal`` (per
         snapshot), ``second_half_optimal`` (the share of snapshots after half the steps that
         are optimal), ``visits`` (per cell), ``policy`` (greedy action per cell),
@@ -421,7 +421,7 @@ def _figures(by_agent: dict[str, list[dict]], stat: dict[str, dict]) -> dict:
         "greedy_average_reward": plotting.figure(
             plotting.value_bars,
             {a: stat[a]["greedy"] for a in by_agent},
-            f"{_SETTING}: the final greedy policy's average reward over 1000 steps",
+            f"{_SETTING}: the final greedy policy's average reward over {WALK_STEPS} steps",
             "greedy average reward",
             {a: (v, f"thesis {a} {v:.2f} (section 5.1.1)") for a, v in THESIS_GREEDY.items()},
         ),
