@@ -481,9 +481,9 @@ class RewardModel(ABC):
                     **self.actions.arrays(history.action, "action"),
                     **{name: getattr(history, name) for name in HISTORY_ARRAYS},
                 }
-                buffer = io.BytesIO()
-                np.savez(buffer, **arrays)
-                archive.writestr("history.npz", buffer.getvalue())
+                stream = io.BytesIO()
+                np.savez(stream, **arrays)
+                archive.writestr("history.npz", stream.getvalue())
         return path
 
     def __getstate__(self) -> dict[str, Any]:
