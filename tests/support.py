@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import tracemalloc
 from typing import TYPE_CHECKING
 
 import gymnasium as gym
@@ -84,17 +85,70 @@ def binned_chisquare(draws: np.ndarray, pmf) -> float:
 
 
 class NeverEndingEnv(gym.Env):
-    """Reward 1 every step, never ends: the cheapest env to drive a delay wrapper."""
+    """Pays ``reward`` (whatever it is: non-finite, numpy-typed, not a number) every step, never ends.
+
+    The cheapest env to drive a delay wrapper; by default it pays 1.0.
+    """
 
     observation_space = gym.spaces.Discrete(1)
     action_space = gym.spaces.Discrete(1)
+
+    def __init__(self, reward=1.0):
+        self.reward = reward
 
     def reset(self, *, seed=None, options=None):
         super().reset(seed=seed)
         return 0, {}
 
     def step(self, action):
-        return 0, 1.0, False, False, {}
+        return 0, self.reward, False, False, {}
+
+
+def layers(env: gym.Env) -> list[str]:
+    """The wrapper classes from the outside in, without Gymnasium's bookkeeping."""
+    names = []
+    while isinstance(env, gym.Wrapper):
+        if not isinstance(env, gym.wrappers.OrderEnforcing | gym.wrappers.PassiveEnvChecker):
+            names.append(type(env).__name__)
+        env = env.env
+    return names
+
+
+def actions(env, steps, seed):
+    """``steps`` random batches of ``env``'s actions."""
+    space = env.action_space
+    space.seed(seed)
+    return [space.sample() for _ in range(steps)]
+
+
+def flush_trap_warnings(caught) -> list:
+    """The flush-trap warnings (``the delay had no effect``) among the ``caught`` ones."""
+    return [w for w in caught if "the delay had no effect" in str(w.message)]
+
+
+MB = 1 << 20
+"""A mebibyte, in bytes: the unit of the memory bounds."""
+
+
+def peak_of(make):
+    """``(result, peak bytes)`` of calling ``make`` under tracemalloc."""
+    tracemalloc.start()
+    try:
+        result = make()
+        return result, tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
+def peak_of_error(make, exc, match):
+    """The peak bytes allocated before ``make`` raises ``exc`` matching ``match``."""
+    tracemalloc.start()
+    try:
+        with pytest.raises(exc, match=match):
+            make()
+        return tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
 
 
 def fake_grid_run(
@@ -179,6 +233,13 @@ def same(a, b) -> bool:
     if isinstance(a, tuple):
         return isinstance(b, tuple) and len(a) == len(b) and all(map(same, a, b))
     return bool(np.array_equal(a, b))
+
+
+def same_tensors(a, b) -> bool:
+    """Whether two lists of torch tensors are equal, pair by pair, bit for bit (torch imported here)."""
+    import torch
+
+    return len(a) == len(b) and all(torch.equal(x, y) for x, y in zip(a, b, strict=True))
 
 
 def scribble(sample) -> None:

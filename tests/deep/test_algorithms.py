@@ -21,7 +21,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium import spaces
-from support import torch_on_one_thread  # noqa: F401  (the fixture)
+from support import same_tensors, torch_on_one_thread  # noqa: F401  (the fixture)
 
 from delayed_rl.wrappers import RewardDelay
 
@@ -139,12 +139,6 @@ def tensors(module):
     return [p.detach().clone() for p in module.state_dict().values()]
 
 
-def same(a, b):
-    import torch
-
-    return len(a) == len(b) and all(torch.equal(x, y) for x, y in zip(a, b, strict=True))
-
-
 def model_of(agent):
     buffer = getattr(agent, "replay_buffer", None) or agent.rollout_buffer
     return buffer.reward_model
@@ -177,11 +171,11 @@ def test_the_same_seed_gives_the_same_bits(name, route):
     model, again = model_of(first), model_of(second)
     assert model.seed == again.seed == reward_model_seed(7)
     assert model.ready and model.updates_taken == again.updates_taken
-    assert same(tensors(model.network), tensors(again.network))
-    assert same(tensors(first.policy), tensors(second.policy))
+    assert same_tensors(tensors(model.network), tensors(again.network))
+    assert same_tensors(tensors(first.policy), tensors(second.policy))
     other = train(name, route, seed=8)
     assert model_of(other).seed == reward_model_seed(8) != model.seed
-    assert not same(tensors(model_of(other).network), tensors(model.network))
+    assert not same_tensors(tensors(model_of(other).network), tensors(model.network))
 
 
 def test_an_explicit_model_seed_is_kept_and_an_unseeded_run_stays_unseeded():
@@ -244,7 +238,7 @@ def test_sb3s_resume_flow_keeps_the_live_model(tmp_path, route):
     resumed.load_replay_buffer(tmp_path / "a.pkl")
     live = resumed.replay_buffer.reward_model
     assert live is resumed.replay_buffer_kwargs["reward_model"]
-    assert same(tensors(live.network), tensors(model_of(agent).network))
+    assert same_tensors(tensors(live.network), tensors(model_of(agent).network))
     resumed.learn(80, reset_num_timesteps=False)
     assert live.updates_taken == model_of(agent).updates_taken + 80
     resumed.save(tmp_path / "b.zip")
@@ -257,14 +251,14 @@ def test_sb3s_resume_flow_keeps_the_live_model(tmp_path, route):
     assert from_buffer is from_zip is restored.replay_buffer_kwargs["reward_model"]
     for model in (from_zip, from_buffer):
         assert isinstance(model, RewardModel)
-        assert same(tensors(model.network), tensors(live.network))
-        assert same([model.delay_logits], [live.delay_logits])
+        assert same_tensors(tensors(model.network), tensors(live.network))
+        assert same_tensors([model.delay_logits], [live.delay_logits])
         np.testing.assert_array_equal(model.delay_pmf, live.delay_pmf)
         assert (model.updates_taken, model.seed) == (live.updates_taken, live.seed)
         assert model.history.steps_added == live.history.steps_added == 200
         np.testing.assert_array_equal(model.history.reward, live.history.reward)
         assert model.rng.bit_generator.state == live.rng.bit_generator.state
-        assert same(
+        assert same_tensors(
             [v for s in model.optimizer.state.values() for v in s.values()],
             [v for s in live.optimizer.state.values() for v in s.values()],
         )
@@ -289,7 +283,7 @@ def test_ppo_saves_its_live_model_from_a_mapping(tmp_path):
     agent.save(tmp_path / "ppo.zip")
     restored = PPO.load(tmp_path / "ppo.zip", env=cartpole(), device="cpu")
     assert model_of(restored) is restored.rollout_buffer_kwargs["reward_model"]
-    assert same(tensors(model_of(restored).network), tensors(live.network))
+    assert same_tensors(tensors(model_of(restored).network), tensors(live.network))
     assert model_of(restored).updates_taken == live.updates_taken
 
 
@@ -607,6 +601,6 @@ def test_storing_a_transition_never_trains():
         action = rng.uniform(-1, 1, (1, 1)).astype(np.float32)
         buffer.add(obs, obs, action, np.array([1.0]), np.array([step % 20 == 19]), [{}])
     assert buffer.reward_model.updates_taken == 0
-    assert same(before, tensors(buffer.reward_model.network))
+    assert same_tensors(before, tensors(buffer.reward_model.network))
     buffer.sample(8)
     assert buffer.reward_model.updates_taken == 60 + 20

@@ -14,7 +14,7 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
-from support import torch_on_one_thread  # noqa: F401  (the fixture)
+from support import same_tensors, torch_on_one_thread  # noqa: F401  (the fixture)
 
 from delayed_rl.delays import Poisson
 from delayed_rl.wrappers import RewardDelay
@@ -132,12 +132,6 @@ def params(module):
     return [p.detach().clone() for p in module.parameters()]
 
 
-def same(a, b):
-    import torch
-
-    return len(a) == len(b) and all(torch.equal(x, y) for x, y in zip(a, b, strict=True))
-
-
 # ---------------------------------------------------------------------- off-policy
 def test_sac_learns_the_same_bits_without_the_diagnostic_infos():
     from delayed_rl.deep import RewardModelCallback
@@ -152,9 +146,9 @@ def test_sac_learns_the_same_bits_without_the_diagnostic_infos():
         runs.append((env, model, agent))
     (env, model, agent), (stripped_env, stripped_model, stripped_agent) = runs
     assert model.updates_taken == stripped_model.updates_taken > 100
-    assert same(params(model.network), params(stripped_model.network))
-    assert same([model.delay_logits], [stripped_model.delay_logits])
-    assert same(params(agent.policy), params(stripped_agent.policy))
+    assert same_tensors(params(model.network), params(stripped_model.network))
+    assert same_tensors([model.delay_logits], [stripped_model.delay_logits])
+    assert same_tensors(params(agent.policy), params(stripped_agent.policy))
     assert env.rewards == stripped_env.rewards
     assert np.isfinite(model.rmse()) and np.isnan(stripped_model.rmse())
     # what the model learned from is what the env delivered, as the buffer also keeps it

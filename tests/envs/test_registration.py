@@ -6,6 +6,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
+from support import layers
 
 from delayed_rl.delays import Constant, Geometric, Poisson, Uniform
 from delayed_rl.envs import env_ids, register_envs
@@ -151,16 +152,6 @@ def test_make_rejects_a_bad_delay_naming_its_argument(env_id: str, kwarg: str, b
 
 
 # ---------------------------------------------------------------------- the three delays
-def layers(env: gym.Env) -> list[str]:
-    """The wrapper classes from the outside in, without Gymnasium's bookkeeping."""
-    names = []
-    while isinstance(env, gym.Wrapper):
-        if not isinstance(env, gym.wrappers.OrderEnforcing | gym.wrappers.PassiveEnvChecker):
-            names.append(type(env).__name__)
-        env = env.env
-    return names
-
-
 @pytest.mark.parametrize("env_id", [*IDS, "delayed_rl/EPuckLineFollow-v0"])
 def test_every_id_takes_the_three_delays_in_the_documented_order(env_id: str) -> None:
     kwargs = IDS.get(env_id, {})

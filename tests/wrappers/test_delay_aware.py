@@ -18,7 +18,7 @@ from gymnasium import spaces
 from gymnasium.utils.env_checker import check_env
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from support import ScriptedDelay, examples, same, scribble
+from support import ScriptedDelay, examples, layers, same, scribble
 
 from delayed_rl.delays import Constant, Geometric, Poisson, Uniform
 from delayed_rl.wrappers import (
@@ -390,16 +390,6 @@ def test_flatten_observation_gives_one_box() -> None:
 
 
 # --------------------------------------------------------------------------- gym.make, specs
-def layers(env: gym.Env) -> list[str]:
-    """The wrapper classes from the outside in, without Gymnasium's bookkeeping."""
-    names = []
-    while isinstance(env, gym.Wrapper):
-        if not isinstance(env, gym.wrappers.OrderEnforcing | gym.wrappers.PassiveEnvChecker):
-            names.append(type(env).__name__)
-        env = env.env
-    return names
-
-
 def trajectory(env: gym.Env, seed: int, n: int = 100) -> tuple:
     """The observations, rewards and received observations of ``n`` seeded random steps."""
     obs, info = env.reset(seed=seed)

@@ -12,7 +12,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from support import ScriptedDelay
+from support import NeverEndingEnv, ScriptedDelay, flush_trap_warnings
 
 from delayed_rl.delays import Constant, Empirical, Geometric, Poisson, Uniform
 from delayed_rl.wrappers import (
@@ -82,23 +82,6 @@ class ScriptedEnv(gym.Env):
         self.t += 1
         end = self.episode < len(self.lengths) and self.t >= self.lengths[self.episode]
         return 0, reward, end and not self.truncate, end and self.truncate, {}
-
-
-class ConstantRewardEnv(gym.Env):
-    """Returns a fixed (possibly non-finite, possibly numpy-typed) reward."""
-
-    observation_space = gym.spaces.Discrete(1)
-    action_space = gym.spaces.Discrete(1)
-
-    def __init__(self, reward):
-        self.reward = reward
-
-    def reset(self, *, seed=None, options=None):
-        super().reset(seed=seed)
-        return 0, {}
-
-    def step(self, action):
-        return 0, self.reward, False, False, {}
 
 
 def run_and_check(env: RewardDelay, inner_seed: int, n_steps: int, mode: str, record: bool):
@@ -362,7 +345,7 @@ def test_mid_episode_reset_with_nothing_pending_does_not_warn() -> None:
 
 def test_numpy_and_integer_rewards_are_floats() -> None:
     for raw in (np.float32(1.5), np.int64(3), 2, np.array(0.25)):
-        env = PoissonRewardDelay(ConstantRewardEnv(raw), 0)
+        env = PoissonRewardDelay(NeverEndingEnv(raw), 0)
         env.reset(seed=0)
         _, reward, *_, info = env.step(0)
         assert type(reward) is float and reward == float(raw) == info["undelayed_reward"]
@@ -389,7 +372,7 @@ def test_float32_rewards_are_summed_in_double_precision(mode: str) -> None:
 @pytest.mark.parametrize("bad", [float("nan"), float("inf"), -float("inf"), np.float32("nan")])
 @pytest.mark.parametrize("lam", [0, 3])
 def test_non_finite_reward_raises(bad, lam) -> None:
-    env = PoissonRewardDelay(ConstantRewardEnv(bad), lam)
+    env = PoissonRewardDelay(NeverEndingEnv(bad), lam)
     env.reset(seed=0)
     with pytest.raises(ValueError, match="non-finite reward"):
         env.step(0)
@@ -430,15 +413,15 @@ def test_different_seeds_differ() -> None:
 def test_delays_do_not_depend_on_the_inner_env() -> None:
     """The delay stream is the wrapper's own: the inner env's randomness does not shift it."""
     a = [d for _, d in trajectory(PoissonRewardDelay(RandomEndEnv(0, 0, scale=1.0), 7), 9)]
-    b = [d for _, d in trajectory(PoissonRewardDelay(ConstantRewardEnv(1.0), 7), 9)]
+    b = [d for _, d in trajectory(PoissonRewardDelay(NeverEndingEnv(1.0), 7), 9)]
     assert a == b
 
 
 def test_delay_stream_is_independent_of_env_np_random() -> None:
-    env = PoissonRewardDelay(ConstantRewardEnv(1.0), 5)
+    env = PoissonRewardDelay(NeverEndingEnv(1.0), 5)
     env.reset(seed=11)
     wrapper_delays = [env.step(0)[4]["drawn_reward_delay"] for _ in range(200)]
-    twin = ConstantRewardEnv(1.0)
+    twin = NeverEndingEnv(1.0)
     twin.reset(seed=11)
     env_stream = twin.np_random.poisson(5, 200).tolist()
     plain_stream = np.random.default_rng(11).poisson(5, 200).tolist()
@@ -740,7 +723,7 @@ def _trap_warnings(env, episodes):
             while not env.step(0)[2]:
                 pass
             env.reset()
-    return [w for w in caught if "the delay had no effect" in str(w.message)]
+    return flush_trap_warnings(caught)
 
 
 @pytest.mark.parametrize(

@@ -12,6 +12,7 @@ from fractions import Fraction
 import gymnasium as gym
 import numpy as np
 import pytest
+from support import NeverEndingEnv
 
 from delayed_rl.delays import Constant
 from delayed_rl.wrappers import PoissonRewardDelay, RewardDelay, VectorRewardDelay
@@ -33,26 +34,9 @@ WRONG_TYPE = [
 ]
 
 
-class Paying(gym.Env):
-    """Pays ``reward`` (whatever it is) at every step."""
-
-    action_space = gym.spaces.Discrete(1)
-    observation_space = gym.spaces.Discrete(1)
-
-    def __init__(self, reward=1.0):
-        self.reward = reward
-
-    def reset(self, *, seed=None, options=None):
-        super().reset(seed=seed)
-        return 0, {}
-
-    def step(self, action):
-        return 0, self.reward, False, False, {}
-
-
 @pytest.mark.parametrize("reward", ACCEPTED, ids=repr)
 def test_real_scalars_are_summed_as_float64(reward) -> None:
-    env = RewardDelay(Paying(reward), Constant(1))
+    env = RewardDelay(NeverEndingEnv(reward), Constant(1))
     env.reset(seed=0)
     assert env.step(0)[1] == 0.0
     delivered = env.step(0)[1]
@@ -62,7 +46,7 @@ def test_real_scalars_are_summed_as_float64(reward) -> None:
 @pytest.mark.parametrize("reward", WRONG_TYPE, ids=repr)
 @pytest.mark.parametrize("wrapper", [RewardDelay, PoissonRewardDelay])
 def test_a_reward_that_is_not_a_real_scalar_is_a_type_error_naming_it(wrapper, reward) -> None:
-    env = wrapper(Paying(1.0), Constant(1) if wrapper is RewardDelay else 1.0)
+    env = wrapper(NeverEndingEnv(1.0), Constant(1) if wrapper is RewardDelay else 1.0)
     env.reset(seed=0)
     first = env.step(0)[1]
     env.unwrapped.reward = reward
@@ -75,14 +59,14 @@ def test_a_reward_that_is_not_a_real_scalar_is_a_type_error_naming_it(wrapper, r
 
 @pytest.mark.parametrize("reward", [10**400, -(10**309)], ids=["1e400", "-1e309"])
 def test_an_int_beyond_float64_is_a_value_error_naming_it(reward) -> None:
-    env = RewardDelay(Paying(reward), Constant(0))
+    env = RewardDelay(NeverEndingEnv(reward), Constant(0))
     env.reset(seed=0)
     with pytest.raises(ValueError, match=r"^reward must be a real number within float64's range"):
         env.step(0)
 
 
 def test_a_reward_too_long_to_print_is_shown_cut() -> None:
-    env = RewardDelay(Paying(list(range(10_000))), Constant(0))
+    env = RewardDelay(NeverEndingEnv(list(range(10_000))), Constant(0))
     env.reset(seed=0)
     with pytest.raises(TypeError) as caught:
         env.step(0)

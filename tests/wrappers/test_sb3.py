@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 import gymnasium as gym
 import numpy as np
 import pytest
+from support import flush_trap_warnings
 
 from delayed_rl.delays import Constant, Poisson, Uniform
 from delayed_rl.wrappers import EPISODE_END_MODES, PoissonRewardDelay, reward_delay
@@ -405,10 +406,6 @@ def _sb3_walk(env: VecRewardDelay, steps: int, seed: int = 0) -> int | None:
     return None
 
 
-def _trap_warnings(caught) -> list:
-    return [w for w in caught if "the delay had no effect" in str(w.message)]
-
-
 def test_frozen_lake_sub_envs_warn_of_the_flush_trap_once() -> None:
     from stable_baselines3.common.vec_env import DummyVecEnv
 
@@ -422,7 +419,7 @@ def test_frozen_lake_sub_envs_warn_of_the_flush_trap_once() -> None:
         assert _sb3_walk(env, FLUSH_WATCH_STEPS // n_envs) is not None
         for _ in range(50):  # and never again
             env.step(np.zeros(n_envs, dtype=int))
-    (warning,) = _trap_warnings(caught)
+    (warning,) = flush_trap_warnings(caught)
     assert "on_episode_end='carry'" in str(warning.message)
     assert warning.filename == __file__  # it names the line that called step()
 
@@ -436,7 +433,7 @@ def test_rewards_along_the_way_end_the_sb3_watch_at_once() -> None:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         assert _sb3_walk(env, 10) == 1
-    assert _trap_warnings(caught) == []
+    assert flush_trap_warnings(caught) == []
 
 
 def test_the_sb3_step_cap_counts_every_sub_envs_steps(monkeypatch) -> None:
@@ -451,7 +448,7 @@ def test_the_sb3_step_cap_counts_every_sub_envs_steps(monkeypatch) -> None:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         assert _sb3_walk(env, 100) == cap // n_envs
-    assert _trap_warnings(caught) == []
+    assert flush_trap_warnings(caught) == []
 
 
 @pytest.mark.parametrize("on_episode_end", ["carry", "drop"])
@@ -469,4 +466,4 @@ def test_carry_and_drop_never_watch_sb3_sub_envs(on_episode_end) -> None:
         env.reset()
         for _ in range(300):
             env.step(rng.integers(4, size=3))
-    assert _trap_warnings(caught) == []
+    assert flush_trap_warnings(caught) == []

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
-from support import same, scribble
+from support import actions, same, scribble
 
 from delayed_rl.delays import Constant, Poisson, Uniform
 from delayed_rl.wrappers import (
@@ -99,13 +99,6 @@ def same_entries(got, expected, keys, where) -> None:
         assert np.array_equal(got["_" + key], mask), (where, key)
         for i in np.flatnonzero(mask):
             assert same(got[key][i], expected[key][i]), (where, key, i)
-
-
-def actions(env, steps, seed):
-    """``steps`` random batches of ``env``'s actions."""
-    space = env.action_space
-    space.seed(seed)
-    return [space.sample() for _ in range(steps)]
 
 
 def compare_step(got, expected, t) -> None:

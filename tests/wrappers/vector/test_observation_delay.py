@@ -12,7 +12,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.vector import AutoresetMode
-from support import same, scribble
+from support import actions, same, scribble
 
 from delayed_rl.delays import Constant, Poisson, Uniform
 from delayed_rl.wrappers import ObservationDelay, VectorObservationDelay
@@ -57,13 +57,6 @@ def same_info(got, expected, where="info") -> None:
                 assert same(a, b), (where, key, i, a, b)
         else:
             assert np.array_equal(got[key], value), (where, key, got[key], value)
-
-
-def actions(env, steps, seed):
-    """``steps`` random batches of ``env``'s actions."""
-    space = env.action_space
-    space.seed(seed)
-    return [space.sample() for _ in range(steps)]
 
 
 @pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])

@@ -9,6 +9,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
+from support import flush_trap_warnings
 
 from delayed_rl.delays import Constant, Empirical, Poisson
 from delayed_rl.wrappers import EPISODE_END_MODES, VectorRewardDelay, reward_delay
@@ -348,10 +349,6 @@ class TerminalReward(gym.Env):
         return 0, self.final if done else 0.0, done, False, {}
 
 
-def _trap_warnings(caught) -> list:
-    return [w for w in caught if "the delay had no effect" in str(w.message)]
-
-
 def _random_step(env: VectorRewardDelay) -> None:
     """One step of random actions; under DISABLED, reset the sub-envs whose episode ended."""
     _, _, terminated, truncated, _ = env.step(env.action_space.sample())
@@ -383,7 +380,7 @@ def test_frozen_lake_sub_envs_warn_of_the_flush_trap_once(autoreset) -> None:
         assert _walk(env, FLUSH_WATCH_STEPS // n_envs) is not None
         for _ in range(50):  # and never again
             _random_step(env)
-    (warning,) = _trap_warnings(caught)
+    (warning,) = flush_trap_warnings(caught)
     assert "on_episode_end='carry'" in str(warning.message)
     assert warning.filename == __file__  # it names the line that called step()
 
@@ -401,7 +398,7 @@ def test_the_sub_envs_rewarded_episodes_count_together() -> None:
     # every sub-env ends an episode every `length` steps: the watch has its rewarded episodes
     # once the rounds of n_envs episodes reach FLUSH_WATCH_EPISODES, not FLUSH_WATCH_EPISODES each
     assert steps == length * math.ceil(FLUSH_WATCH_EPISODES / n_envs)
-    assert len(_trap_warnings(caught)) == 1
+    assert len(flush_trap_warnings(caught)) == 1
 
 
 def test_rewards_along_the_way_end_the_vector_watch_at_once() -> None:
@@ -411,7 +408,7 @@ def test_rewards_along_the_way_end_the_vector_watch_at_once() -> None:
         assert _walk(env, 10) == 1
         for _ in range(100):
             env.step(env.action_space.sample())
-    assert _trap_warnings(caught) == []
+    assert flush_trap_warnings(caught) == []
 
 
 def test_the_step_cap_counts_every_sub_envs_steps(monkeypatch) -> None:
@@ -425,7 +422,7 @@ def test_the_step_cap_counts_every_sub_envs_steps(monkeypatch) -> None:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         assert _walk(env, 100) == cap // n_envs
-    assert _trap_warnings(caught) == []
+    assert flush_trap_warnings(caught) == []
 
 
 @pytest.mark.parametrize("on_episode_end", ["carry", "drop"])
@@ -438,7 +435,7 @@ def test_carry_and_drop_never_watch_sub_envs(on_episode_end) -> None:
         env.reset(seed=0)
         for _ in range(200):
             env.step(env.action_space.sample())
-    assert _trap_warnings(caught) == []
+    assert flush_trap_warnings(caught) == []
 
 
 def test_copies_of_an_unseeded_vector_wrapper_draw_their_own_delays() -> None:
