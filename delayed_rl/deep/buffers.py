@@ -267,6 +267,17 @@ class RelabelingReplayBuffer(_RelabelingOffPolicy, ReplayBuffer):
 
     Raises:
         TypeError, ValueError: see ``docs/deep_rl.md`` ("Refused at construction").
+
+    Example:
+        >>> import gymnasium as gym
+        >>> from stable_baselines3 import SAC
+        >>> from delayed_rl.wrappers import RewardDelay
+        >>> env = RewardDelay(gym.make("Pendulum-v1"), 20)  # Poisson(20) delays, flushed
+        >>> spec = {"type": "DeconvolutionRewardModel", "delay": 20}  # made for env's spaces
+        >>> agent = SAC("MlpPolicy", env, replay_buffer_class=RelabelingReplayBuffer,
+        ...             replay_buffer_kwargs={"reward_model": spec}, buffer_size=10_000, seed=0)
+        >>> round(agent.replay_buffer.reward_model.mean_delay)  # the known delay's mean
+        20
     """
 
     counterpart = "RelabelingDictReplayBuffer"
@@ -277,6 +288,19 @@ class RelabelingDictReplayBuffer(_RelabelingOffPolicy, DictReplayBuffer):
 
     Takes what :class:`RelabelingReplayBuffer` takes, for a ``Dict`` observation space (n-step
     returns are refused, as SB3 has no ``Dict`` n-step buffer).
+
+    Example:
+        >>> import gymnasium as gym
+        >>> from stable_baselines3 import SAC
+        >>> from delayed_rl.delays import Constant
+        >>> from delayed_rl.wrappers import wrap_delays
+        >>> env = wrap_delays(gym.make("Pendulum-v1"), observation_delay=Constant(2),
+        ...                   delay_aware=True, reward_delay=20)  # a Dict view, rewards late
+        >>> spec = {"type": "ReturnRegressionRewardModel"}  # made for the view's Dict
+        >>> agent = SAC("MultiInputPolicy", env, replay_buffer_class=RelabelingDictReplayBuffer,
+        ...             replay_buffer_kwargs={"reward_model": spec}, buffer_size=10_000, seed=0)
+        >>> sorted(agent.replay_buffer.observations)  # the view's keys, stored and read by R̂
+        ['actions', 'age', 'observation']
     """
 
     takes_dict = True
@@ -297,6 +321,17 @@ class RelabelingNStepReplayBuffer(_RelabelingOffPolicy, NStepReplayBuffer):
 
     Takes what :class:`RelabelingReplayBuffer` takes, and SB3's ``n_steps`` (default 3) and
     ``gamma`` (default 0.99). With an algorithm built with ``n_steps > 1`` they must agree.
+
+    Example:
+        >>> import gymnasium as gym
+        >>> from stable_baselines3 import SAC
+        >>> from delayed_rl.wrappers import RewardDelay
+        >>> env = RewardDelay(gym.make("Pendulum-v1"), 20)  # Poisson(20) delays, flushed
+        >>> kwargs = {"reward_model": {"type": "ReturnRegressionRewardModel"}, "n_steps": 5}
+        >>> agent = SAC("MlpPolicy", env, replay_buffer_class=RelabelingNStepReplayBuffer,
+        ...             replay_buffer_kwargs=kwargs, buffer_size=10_000, seed=0)
+        >>> agent.replay_buffer.n_steps, agent.replay_buffer.gamma  # gamma: the default
+        (5, 0.99)
     """
 
     counterpart = "RelabelingDictReplayBuffer (without n-step returns)"
@@ -482,6 +517,19 @@ class RelabelingRolloutBuffer(_RelabelingOnPolicy, RolloutBuffer):
 
     Raises:
         TypeError, ValueError: see ``docs/deep_rl.md`` ("Refused at construction").
+
+    Example:
+        >>> import gymnasium as gym
+        >>> from stable_baselines3 import PPO
+        >>> from delayed_rl.wrappers import RewardDelay
+        >>> env = RewardDelay(gym.make("CartPole-v1"), 20)  # Poisson(20) delays, flushed
+        >>> spec = {"type": "ReturnRegressionRewardModel"}  # made for env's spaces
+        >>> agent = PPO("MlpPolicy", env, n_steps=64, rollout_buffer_class=RelabelingRolloutBuffer,
+        ...             rollout_buffer_kwargs={"reward_model": spec}, seed=0)
+        >>> agent.learn(64)  # learn(64, callback=RewardModelCallback()) trains
+        Traceback (most recent call last):
+            ...
+        RuntimeError: RelabelingRolloutBuffer needs delayed_rl.deep.RewardModelCallback in learn(...
     """
 
     counterpart = "RelabelingDictRolloutBuffer"
@@ -491,6 +539,20 @@ class RelabelingDictRolloutBuffer(_RelabelingOnPolicy, DictRolloutBuffer):
     """SB3's ``DictRolloutBuffer`` whose rewards become ``R̂(s, a)``, for ``MultiInputPolicy``.
 
     Takes what :class:`RelabelingRolloutBuffer` takes, for a ``Dict`` observation space.
+
+    Example:
+        >>> import gymnasium as gym
+        >>> from stable_baselines3 import PPO
+        >>> from delayed_rl.delays import Constant
+        >>> from delayed_rl.wrappers import wrap_delays
+        >>> env = wrap_delays(gym.make("CartPole-v1"), observation_delay=Constant(2),
+        ...                   delay_aware=True, reward_delay=20)  # a Dict view, rewards late
+        >>> spec = {"type": "ReturnRegressionRewardModel"}  # made for the view's Dict
+        >>> agent = PPO("MultiInputPolicy", env, n_steps=64, seed=0,
+        ...             rollout_buffer_class=RelabelingDictRolloutBuffer,
+        ...             rollout_buffer_kwargs={"reward_model": spec})
+        >>> sorted(agent.rollout_buffer.observations)  # the view's keys, stored and read by R̂
+        ['actions', 'age', 'observation']
     """
 
     takes_dict = True

@@ -34,6 +34,20 @@ class RewardModelCallback(BaseCallback):
     Raises:
         TypeError: at the start of training, when the algorithm has no relabelling buffer
             (with ``HerReplayBuffer``, saying why it cannot have one).
+
+    Example:
+        >>> import gymnasium as gym
+        >>> from stable_baselines3 import PPO
+        >>> from delayed_rl.deep import RelabelingRolloutBuffer
+        >>> from delayed_rl.wrappers import RewardDelay
+        >>> spec = {"type": "ReturnRegressionRewardModel", "warmup_updates": 10,
+        ...         "updates_per_step": 0}  # 10 updates once an episode has finished
+        >>> agent = PPO("MlpPolicy", RewardDelay(gym.make("CartPole-v1"), 20), n_steps=64, seed=0,
+        ...             n_epochs=1, rollout_buffer_class=RelabelingRolloutBuffer,
+        ...             rollout_buffer_kwargs={"reward_model": spec})
+        >>> model = agent.learn(64, callback=RewardModelCallback()).rollout_buffer.reward_model
+        >>> model.history.steps_added, model.ready  # every step handed over; the rollout relabelled
+        (64, True)
     """
 
     def _buffer(self):

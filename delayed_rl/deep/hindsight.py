@@ -223,6 +223,17 @@ class HindsightSAC(SAC):
             ``n_steps > 1``, an unknown ``critic_input``.
 
     ``docs/deep_rl.md`` ("HindsightSAC") states the rule, what the learner may read and when.
+
+    Example:
+        >>> import gymnasium as gym
+        >>> from delayed_rl.delays import Constant
+        >>> from delayed_rl.wrappers import wrap_delays
+        >>> env = wrap_delays(
+        ...     gym.make("Pendulum-v1"), observation_delay=Constant(2), delay_aware=True
+        ... )  # the delay-aware view
+        >>> agent = HindsightSAC("MultiInputPolicy", env, learning_starts=200, seed=0).learn(100)
+        >>> agent.transitions_stored  # all but the last 2 steps, whose observations are in transit
+        98
     """
 
     policy_aliases: ClassVar[dict[str, type]] = {

@@ -142,6 +142,16 @@ class ReturnDecompositionRewardModel(RewardModel):
         ValueError: ``subset_size`` out of range, or 1 with ``unbiased``; an unknown
             ``episode_draw`` or ``initialisation``; ``state_change=True`` for observations that
             are not a ``Box`` of measurements.
+
+    Example:
+        >>> import gymnasium as gym
+        >>> env = gym.make("Pendulum-v1")
+        >>> model = ReturnDecompositionRewardModel(env.observation_space, env.action_space, seed=0)
+        >>> model.state_change, model.subset_size, model.hidden_sizes  # the authors' settings
+        (True, 64, (256, 256))
+        >>> lake = gym.make("FrozenLake-v1")  # Discrete observations: no s − s′
+        >>> ReturnDecompositionRewardModel(lake.observation_space, lake.action_space).state_change
+        False
     """
 
     own_settings = ("subset_size", "episode_draw", "initialisation", "unbiased", "state_change")

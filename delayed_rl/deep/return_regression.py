@@ -33,6 +33,18 @@ class ReturnRegressionRewardModel(RewardModel):
 
     The normalisation uses the returns of the finished episodes in the history (a single
     return, or all equal: every step's target is 1).
+
+    Example:
+        >>> import gymnasium as gym
+        >>> env = gym.make("CartPole-v1")
+        >>> model = ReturnRegressionRewardModel(env.observation_space, env.action_space, seed=0)
+        >>> obs, _ = env.reset(seed=0)
+        >>> model.add([obs], [0], [0.0], [False])  # one step of one sub-env, its episode open
+        >>> model.train(10)  # no finished episode: no target yet
+        0
+        >>> model.add([obs], [1], [3.0], [True])  # the episode ends, its return 3
+        >>> model.train(10)
+        10
     """
 
     def loss(self) -> torch.Tensor | None:

@@ -102,6 +102,22 @@ class RewardModel(ABC):
         seed: the seed its randomness came from.
         takes_algorithm_seed: whether a seeded algorithm's buffer will seed it (it was made
             with ``seed=None`` and has seen no step).
+
+    Example:
+        >>> import gymnasium as gym
+        >>> from delayed_rl.deep import DeconvolutionRewardModel  # a concrete RewardModel
+        >>> env = gym.make("CartPole-v1")
+        >>> model = DeconvolutionRewardModel(
+        ...     env.observation_space, env.action_space, delay=2, updates_per_step=0.05,
+        ...     warmup_updates=5, seed=0,
+        ... )
+        >>> obs, _ = env.reset(seed=0)
+        >>> for _ in range(100):  # what a buffer hands it at each step (one sub-env here)
+        ...     model.add([obs], [0], [1.0], [False])
+        >>> model.train_on_schedule(), model.ready  # 100 steps × 0.05 updates, + 5 warm-up ones
+        (10, True)
+        >>> model.predict([obs, obs], [0, 1]).shape  # R̂ of a batch of (s, a)
+        (2,)
     """
 
     #: The settings a subclass adds, in its constructor's order (saved in files).

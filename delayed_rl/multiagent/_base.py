@@ -11,8 +11,8 @@ from pettingzoo.utils import BaseParallelWrapper
 from delayed_rl._validation import check_int
 from delayed_rl.delays import Delay
 from delayed_rl.multiagent._agents import agent_seed, delay_record, per_agent_delays
+from delayed_rl.wrappers._delay_draws import DelaySampler, check_max_delay
 from delayed_rl.wrappers._spec import record_arguments
-from delayed_rl.wrappers.reward_delay import DelaySampler, check_max_delay
 
 __all__ = ["ParallelDelayWrapper", "check_parallel_env"]
 

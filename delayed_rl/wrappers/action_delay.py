@@ -16,10 +16,10 @@ import numpy as np
 from gymnasium import spaces
 
 from delayed_rl.delays import Delay, as_delay
+from delayed_rl.wrappers._delay_draws import DelaySampler, check_max_delay
 from delayed_rl.wrappers._in_transit import InTransit
 from delayed_rl.wrappers._samples import as_action, copy_sample
 from delayed_rl.wrappers._spec import JsonSpecMixin, record_arguments
-from delayed_rl.wrappers.reward_delay import DelaySampler, check_max_delay
 
 __all__ = [
     "ActionDelay",

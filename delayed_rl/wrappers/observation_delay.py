@@ -16,10 +16,10 @@ import gymnasium as gym
 from delayed_rl._delay_line import delay_bound
 from delayed_rl._validation import check_choice
 from delayed_rl.delays import MAX_DELAY, Delay, as_delay
+from delayed_rl.wrappers._delay_draws import DelaySampler, check_max_delay
 from delayed_rl.wrappers._in_transit import InTransit
 from delayed_rl.wrappers._samples import copy_sample
 from delayed_rl.wrappers._spec import JsonSpecMixin, record_arguments
-from delayed_rl.wrappers.reward_delay import DelaySampler, check_max_delay
 
 __all__ = [
     "ARRIVAL_RULES",

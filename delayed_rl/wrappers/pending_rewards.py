@@ -8,7 +8,7 @@ import numpy as np
 
 from delayed_rl._delay_line import delay_bound, draw_delays, exact_sum, regrow_ring, ring_size
 from delayed_rl.delays import Delay
-from delayed_rl.wrappers.reward_delay import _BLOCK, delay_rng
+from delayed_rl.wrappers._delay_draws import BLOCK, delay_rng
 
 __all__ = ["INITIAL_RING", "MAX_RING_ENTRIES", "RING_PER_STEP", "PendingRewards"]
 
@@ -72,9 +72,9 @@ class PendingRewards:
         self._far_envs: set[int] = set()  # the envs whose ``far`` dict is not empty
         # unseeded streams take their entropy at their first draw (:meth:`_stream`)
         self.rngs: list[np.random.Generator | None] = [None] * num_envs
-        self._block = np.zeros((_BLOCK, num_envs), dtype=np.int64)  # column i: env i's delays
-        self._next = np.full(num_envs, _BLOCK, dtype=np.int64)  # _BLOCK: draw a new block
-        self._sync: int | None = _BLOCK  # while every env is at the same ``_next``: that index
+        self._block = np.zeros((BLOCK, num_envs), dtype=np.int64)  # column i: env i's delays
+        self._next = np.full(num_envs, BLOCK, dtype=np.int64)  # BLOCK: draw a new block
+        self._sync: int | None = BLOCK  # while every env is at the same ``_next``: that index
 
     def seed(self, seeds: Sequence[int | None]) -> None:
         """Restart env ``i``'s delay stream from ``seeds[i]``; a ``None`` entry leaves it going.
@@ -86,7 +86,7 @@ class PendingRewards:
         for i, seed in enumerate(seeds):
             if seed is not None:
                 self.rngs[i] = delay_rng(seed)
-                self._next[i] = _BLOCK
+                self._next[i] = BLOCK
         self._resync()
 
     @property
@@ -114,22 +114,22 @@ class PendingRewards:
     def _draw(self, active: np.ndarray, every: bool) -> np.ndarray:
         """This step's delays: the next of each active env's stream, 0 for the others."""
         if every and self._sync is not None:  # the common case: one row of the block
-            if self._sync == _BLOCK:  # once every 1024 steps
+            if self._sync == BLOCK:  # once every 1024 steps
                 for i in range(self.num_envs):
                     self._block[:, i] = draw_delays(
-                        self.delay, self._stream(i), _BLOCK, self.max_delay
+                        self.delay, self._stream(i), BLOCK, self.max_delay
                     )
                 self._sync = 0
             delays = self._block[self._sync].copy()
             self._sync += 1
             return delays
         self._unsync()
-        empty = active & (self._next == _BLOCK)
+        empty = active & (self._next == BLOCK)
         if empty.any():  # once every 1024 steps of each env
             for i in np.flatnonzero(empty):
-                self._block[:, i] = draw_delays(self.delay, self._stream(i), _BLOCK, self.max_delay)
+                self._block[:, i] = draw_delays(self.delay, self._stream(i), BLOCK, self.max_delay)
             self._next[empty] = 0
-        delays = np.where(active, self._block[np.minimum(self._next, _BLOCK - 1), self.rows], 0)
+        delays = np.where(active, self._block[np.minimum(self._next, BLOCK - 1), self.rows], 0)
         self._next += active
         self._resync()
         return delays

@@ -13,8 +13,9 @@ from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
 from delayed_rl._validation import check_int
 from delayed_rl.delays import Delay, as_delay
+from delayed_rl.wrappers._delay_draws import check_max_delay
 from delayed_rl.wrappers.pending_rewards import PendingRewards
-from delayed_rl.wrappers.reward_delay import check_episode_end, check_max_delay, flush_watch
+from delayed_rl.wrappers.reward_delay import check_episode_end, flush_watch
 from delayed_rl.wrappers.vector._sub_envs import checked_rewards
 
 

@@ -15,8 +15,8 @@ from support import ScriptedDelay, examples, same, scribble
 
 from delayed_rl.delays import Constant, Geometric, Poisson, Uniform
 from delayed_rl.wrappers import ObservationDelay
+from delayed_rl.wrappers._delay_draws import delay_rng
 from delayed_rl.wrappers.observation_delay import ARRIVAL_RULES, NetworkArrival
-from delayed_rl.wrappers.reward_delay import delay_rng
 
 
 class Counter(gym.Env):

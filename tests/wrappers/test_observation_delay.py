@@ -9,7 +9,7 @@ from support import ScriptedDelay
 
 from delayed_rl.delays import Constant, Poisson, Uniform
 from delayed_rl.wrappers import ObservationDelay
-from delayed_rl.wrappers.reward_delay import delay_rng
+from delayed_rl.wrappers._delay_draws import delay_rng
 
 EPISODE_STRIDE = 100_000
 

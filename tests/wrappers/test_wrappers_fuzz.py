@@ -311,7 +311,7 @@ def _from_points(points):
 
 
 def _delay_rng(seed):
-    from delayed_rl.wrappers.reward_delay import delay_rng
+    from delayed_rl.wrappers._delay_draws import delay_rng
 
     return delay_rng(seed)
 

@@ -93,6 +93,18 @@ class TabularAgent(persistence.CopyProtocol, ABC):
     streams, env, compiled run); what cannot be copied is dropped: an env (with a warning: call
     ``set_env``), the compiled run (a new one starts), a logger (a default one replaces it).
     ``copy.copy`` shares everything, tables and env included: train only one of the two.
+
+    Example:
+        >>> from delayed_rl.agents import QLearning
+        >>> agent = QLearning("delayed_rl/GridWorld-3x3-v0", seed=0)  # a concrete TabularAgent
+        >>> agent.learn(total_timesteps=500).num_timesteps
+        500
+        >>> agent.update(0, 1, 0.0, 1)  # a step of your own loop: obs, action, reward, next obs
+        >>> agent.num_timesteps
+        501
+        >>> actions, _ = agent.predict([0, 4, 8], deterministic=True)  # SB3's predict, on a batch
+        >>> actions.shape
+        (3,)
     """
 
     _hyperparameter_names: ClassVar[tuple[str, ...]] = HYPERPARAMETER_NAMES

@@ -84,6 +84,14 @@ class QAgent(TabularAgent):
     state than the table, it extends ``_setup_model``,
     ``_get_state_arrays``, ``_state_array_specs`` and ``_set_extra_state_arrays``. The
     ``q_table`` has shape ``(|S|, |Λ|, |A|)``.
+
+    Example:
+        >>> class HalvedRewardQ(QAgent):  # a rule of its own: Q-learning on half the reward
+        ...     def _learn_transition(self, s, a, r, s2, terminated, truncated):
+        ...         self._q_learning_update(s, a, 0.5 * r, s2, terminated)
+        >>> agent = HalvedRewardQ("delayed_rl/GridWorld-3x3-v0", seed=0).learn(300)
+        >>> agent.q_table.shape, agent.last_learn_path  # (|S|, |Λ|, |A|); no compiled rule
+        ((9, 1, 4), 'python')
     """
 
     _hyperparameter_names: ClassVar[tuple[str, ...]] = (*HYPERPARAMETER_NAMES, "delay_estimates")

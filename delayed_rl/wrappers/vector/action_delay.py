@@ -10,10 +10,10 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import concatenate, create_empty_array
 
 from delayed_rl.delays import Delay, as_delay
+from delayed_rl.wrappers._delay_draws import DelaySampler, check_max_delay
 from delayed_rl.wrappers._samples import as_action, copy_sample
 from delayed_rl.wrappers._spec import record_arguments
 from delayed_rl.wrappers.action_delay import ActionLine, checked_action, neutral_action
-from delayed_rl.wrappers.reward_delay import DelaySampler, check_max_delay
 from delayed_rl.wrappers.vector._sub_envs import (
     autoreset_mode,
     reset_inner,

@@ -10,13 +10,13 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import iterate
 
 from delayed_rl.delays import Delay
+from delayed_rl.wrappers._delay_draws import DelaySampler
 from delayed_rl.wrappers._samples import batch_of_copies, copy_sample
 from delayed_rl.wrappers._spec import record_arguments
 from delayed_rl.wrappers.observation_delay import (
     new_arrival_rule,
     observation_delay_settings,
 )
-from delayed_rl.wrappers.reward_delay import DelaySampler
 from delayed_rl.wrappers.vector._sub_envs import (
     autoreset_mode,
     reset_inner,

@@ -9,9 +9,10 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 
 from delayed_rl.delays import Delay, as_delay
+from delayed_rl.wrappers._delay_draws import check_max_delay
 from delayed_rl.wrappers._spec import record_arguments
 from delayed_rl.wrappers.pending_rewards import PendingRewards
-from delayed_rl.wrappers.reward_delay import check_episode_end, check_max_delay, flush_watch
+from delayed_rl.wrappers.reward_delay import check_episode_end, flush_watch
 from delayed_rl.wrappers.vector._sub_envs import (
     autoreset_mode,
     checked_rewards,
