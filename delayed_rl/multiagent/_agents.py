@@ -31,7 +31,7 @@ def agent_seed(seed: int, index: int) -> int:
     It is the 128-bit integer that ``numpy.random.SeedSequence(seed, spawn_key=(AGENT_STREAM,
     index))`` generates: different for every agent (``index`` is the agent's position in
     ``possible_agents``) and unrelated to the env's own stream for ``seed``. The agent's delay
-    generator is then :func:`~delayed_rl.wrappers.reward_delay.delay_rng` of it, so the agent
+    generator is then ``delayed_rl.wrappers._delay_draws.delay_rng`` of it, so the agent
     draws exactly the delays of a single-agent wrapper (:class:`~delayed_rl.wrappers.RewardDelay`,
     :class:`~delayed_rl.wrappers.ObservationDelay`, :class:`~delayed_rl.wrappers.ActionDelay`)
     reset with ``seed=agent_seed(seed, index)``.

@@ -88,7 +88,7 @@ class ParallelDelayWrapper(BaseParallelWrapper, gym.utils.RecordConstructorArgs)
         self.max_delay = check_max_delay(max_delay)
 
     def delay_samplers(self, signal: str) -> dict[Any, DelaySampler]:
-        """A :class:`~delayed_rl.wrappers.reward_delay.DelaySampler` per agent, on ``signal``'s stream."""
+        """A ``DelaySampler`` (``delayed_rl.wrappers._delay_draws``) per agent, on ``signal``'s stream."""
         return {
             agent: DelaySampler(self.delays[agent], self.max_delay, signal)
             for agent in self.agent_order

@@ -105,7 +105,7 @@ def make_agent(kind: str, env: gym.Env, seed: int) -> Any:
 
 
 def line_error(centroids: np.ndarray) -> np.ndarray:
-    """|Δ| = |m − :data:`CENTRE`| per step, and :data:`UNSEEN_ERROR` where the line is not seen (m = 0)."""
+    """|Δ| = abs(m − :data:`CENTRE`) per step; :data:`UNSEEN_ERROR` where the line is not seen (m = 0)."""
     centroids = np.asarray(centroids, dtype=np.int64)
     return np.where(centroids == 0, UNSEEN_ERROR, np.abs(centroids - CENTRE))
 
