@@ -542,15 +542,13 @@ class RelabelingDictRolloutBuffer(_RelabelingOnPolicy, DictRolloutBuffer):
 
     Example:
         >>> import gymnasium as gym
+        >>> import delayed_rl
         >>> from stable_baselines3 import PPO
-        >>> from delayed_rl.delays import Constant
-        >>> from delayed_rl.wrappers import wrap_delays
-        >>> env = wrap_delays(gym.make("CartPole-v1"), observation_delay=Constant(2),
-        ...                   delay_aware=True, reward_delay=20)  # a Dict view, rewards late
-        >>> spec = {"type": "ReturnRegressionRewardModel"}  # made for the view's Dict
+        >>> env = gym.make("delayed_rl/GridWorld-3x3-v0", observation_delay=1, delay_aware=True,
+        ...                action_history=4, reward_delay=2)  # a Dict view, rewards late
         >>> agent = PPO("MultiInputPolicy", env, n_steps=64, seed=0,
         ...             rollout_buffer_class=RelabelingDictRolloutBuffer,
-        ...             rollout_buffer_kwargs={"reward_model": spec})
+        ...             rollout_buffer_kwargs={"reward_model": {"type": "ReturnRegressionRewardModel"}})
         >>> sorted(agent.rollout_buffer.observations)  # the view's keys, stored and read by R̂
         ['actions', 'age', 'observation']
     """

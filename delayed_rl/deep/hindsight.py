@@ -228,9 +228,8 @@ class HindsightSAC(SAC):
         >>> import gymnasium as gym
         >>> from delayed_rl.delays import Constant
         >>> from delayed_rl.wrappers import wrap_delays
-        >>> env = wrap_delays(
-        ...     gym.make("Pendulum-v1"), observation_delay=Constant(2), delay_aware=True
-        ... )  # the delay-aware view
+        >>> late = {"observation_delay": Constant(2), "action_delay": Constant(1)}
+        >>> env = wrap_delays(gym.make("Pendulum-v1"), **late, delay_aware=True)  # the view
         >>> agent = HindsightSAC("MultiInputPolicy", env, learning_starts=200, seed=0).learn(100)
         >>> agent.transitions_stored  # all but the last 2 steps, whose observations are in transit
         98
