@@ -522,10 +522,9 @@ class RelabelingRolloutBuffer(_RelabelingOnPolicy, RolloutBuffer):
         >>> import gymnasium as gym
         >>> from stable_baselines3 import PPO
         >>> from delayed_rl.wrappers import RewardDelay
-        >>> env = RewardDelay(gym.make("CartPole-v1"), 20)  # Poisson(20) delays, flushed
-        >>> spec = {"type": "ReturnRegressionRewardModel"}  # made for env's spaces
-        >>> agent = PPO("MlpPolicy", env, n_steps=64, rollout_buffer_class=RelabelingRolloutBuffer,
-        ...             rollout_buffer_kwargs={"reward_model": spec}, seed=0)
+        >>> kwargs = {"reward_model": {"type": "ReturnRegressionRewardModel"}}  # for env's spaces
+        >>> agent = PPO("MlpPolicy", RewardDelay(gym.make("CartPole-v1"), 20), n_steps=64, seed=0,
+        ...             rollout_buffer_class=RelabelingRolloutBuffer, rollout_buffer_kwargs=kwargs)
         >>> agent.learn(64)  # learn(64, callback=RewardModelCallback()) trains
         Traceback (most recent call last):
             ...
