@@ -71,9 +71,17 @@ def test_every_module_imports_and_the_search_misses_no_example():
 
 @pytest.mark.parametrize("name", [_case(name) for name in MODULES])
 def test_doctests(name: str) -> None:
+    """Each example runs; an agent class one defines leaves the model-file class table after."""
+    from delayed_rl.agents.common import persistence
+
     runner = doctest.DocTestRunner(optionflags=OPTIONS)
-    for test in _examples(name):
-        runner.run(test)
+    classes = dict(persistence.AGENT_CLASSES)
+    try:
+        for test in _examples(name):
+            runner.run(test)
+    finally:
+        persistence.AGENT_CLASSES.clear()
+        persistence.AGENT_CLASSES.update(classes)
     result = runner.summarize(verbose=False)
     assert result.attempted > 0, f"{name}'s >>> lines are no doctest example"
     assert result.failed == 0, f"{result.failed} of {result.attempted} examples of {name} failed"

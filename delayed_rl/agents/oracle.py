@@ -20,7 +20,7 @@ from delayed_rl._delay_line import delay_bound, ring_size
 from delayed_rl.agents.common.compiled_loop import CompiledTables
 from delayed_rl.agents.common.env_util import make_env
 from delayed_rl.agents.common.hyperparameters import check_value, shares_hyperparameters
-from delayed_rl.agents.common.q_agent import QAgent, shown
+from delayed_rl.agents.common.q_agent import QAgent
 from delayed_rl.wrappers.reward_delay import find_reward_delay
 
 __all__ = ["OracleQLearning"]
@@ -47,6 +47,14 @@ class OracleQLearning(QAgent):
             arrivals: wrap ``gym.make(id)`` yourself.
         **hyperparameters: the hyper-parameters every agent shares, by keyword: see
             :class:`~delayed_rl.agents.common.base.TabularAgent`.
+
+    ``update(obs, action, reward, next_obs, terminated, truncated, info=info)`` learns from
+    ``info["reward_arrivals"]`` as ``learn()`` does (``reward`` is checked but not used). It needs
+    the agent's env (its ``RewardDelay`` sets the history kept) and the transitions in the order
+    they happened, so that the episode clock is the wrapper's; it raises ``TypeError`` for an
+    ``info`` that is not a dict or an arrival that is not an ``(int, number)`` pair, and
+    ``ValueError`` without ``"reward_arrivals"``, for an arrival from a later step or of a
+    non-finite value, or without an env.
 
     Raises:
         ValueError: the env has no ``RewardDelay`` with ``record_arrivals=True`` (also from
@@ -129,15 +137,9 @@ class OracleQLearning(QAgent):
         self._allocate_history(delay_bound(wrapper.delay, wrapper.max_delay) + 1)
 
     # ------------------------------------------------------------------ learning
-    def _observe_info(self, info: dict[str, Any]) -> None:
+    def _observe_info(self, info: Mapping[str, Any]) -> None:
         """Take the step's arrivals from its ``info`` (the Python loop calls this first)."""
-        arrivals = info.get("reward_arrivals")
-        if arrivals is None:
-            raise ValueError(
-                "the step's info has no 'reward_arrivals': the env's RewardDelay must have "
-                "record_arrivals=True and be the wrapper whose info reaches the agent"
-            )
-        self._arrivals = arrivals
+        self._arrivals = _reward_arrivals(info)
 
     def _before_update(self, info: Any) -> None:
         """Take the step's arrivals from the ``info`` given to :meth:`update`, checked.
@@ -148,30 +150,27 @@ class OracleQLearning(QAgent):
         or ``truncated``, so that the episode clock is the wrapper's.
 
         Raises:
-            TypeError: ``info`` is not a dict with ``"reward_arrivals"``, or an arrival is not
-                an ``(emission_step, value)`` pair of an integer and a number.
-            ValueError: an arrival comes from a later step or has a non-finite value (or one
-                above :data:`~delayed_rl.agents.common.hyperparameters.MAX_ABS_VALUE` in
-                magnitude), or the agent has no env.
+            TypeError: ``info`` is not a mapping (``None`` included), or an arrival is not an
+                ``(emission_step, value)`` pair of an integer and a number.
+            ValueError: ``info`` has no ``"reward_arrivals"`` (as in ``learn()``), an arrival
+                comes from a later step or has a non-finite value (or one above
+                :data:`~delayed_rl.agents.common.hyperparameters.MAX_ABS_VALUE` in magnitude),
+                or the agent has no env.
         """
         if self.env is None:
             raise ValueError(
                 f"{type(self).__name__}.update needs the agent's env (its RewardDelay sets the "
                 "history kept): pass env= to load() or call set_env(env) first"
             )
-        self._arrivals = self._check_arrivals(info)
-
-    def _check_arrivals(self, info: Any) -> list[tuple[int, float]]:
-        """``info["reward_arrivals"]`` as ``(int, float)`` pairs, checked against the episode's clock."""
-        allowed = (
-            "the step's info, a dict whose 'reward_arrivals' holds (emission_step, value) pairs"
-        )
-        if not isinstance(info, Mapping) or "reward_arrivals" not in info:
-            found = (
-                f"one without it, keys {shown(info)}" if isinstance(info, Mapping) else repr(info)
+        if not isinstance(info, Mapping):
+            raise TypeError(
+                f"{type(self).__name__}.update needs info=, the step's info (a dict holding "
+                f"'reward_arrivals'), got {info!r}"
             )
-            raise TypeError(f"{type(self).__name__}.update needs info={allowed}, got {found}")
-        arrivals = info["reward_arrivals"]
+        self._arrivals = self._check_arrivals(_reward_arrivals(info))
+
+    def _check_arrivals(self, arrivals: Any) -> list[tuple[int, float]]:
+        """``info["reward_arrivals"]`` as ``(int, float)`` pairs, checked against the episode's clock."""
         if isinstance(arrivals, (str, bytes)) or not isinstance(arrivals, Sequence):
             raise TypeError(
                 f"info['reward_arrivals'] must be a sequence of (emission_step, value) pairs, "
@@ -234,3 +233,19 @@ class OracleQLearning(QAgent):
                 0.0 if self._past_terminated.item(j) else table.v_max.item(self._past_s2.item(j))
             )
             table.write(s, cell, value + gamma * bootstrap, alpha)
+
+
+def _reward_arrivals(info: Mapping[str, Any]) -> Any:
+    """``info["reward_arrivals"]``: the step's ``(emission_step, value)`` pairs.
+
+    Raises:
+        ValueError: ``info`` has none (the env's ``RewardDelay`` does not record them, or is not
+            the wrapper whose ``info`` reaches the agent).
+    """
+    arrivals = info.get("reward_arrivals")
+    if arrivals is None:
+        raise ValueError(
+            "the step's info has no 'reward_arrivals': the env's RewardDelay must have "
+            "record_arrivals=True and be the wrapper whose info reaches the agent"
+        )
+    return arrivals

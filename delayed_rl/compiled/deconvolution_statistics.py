@@ -14,7 +14,7 @@ import numpy as np
 
 from delayed_rl._numba import jit as _jit
 
-__all__ = ["Statistics", "find_row", "observe"]
+__all__ = ["Statistics", "find_row", "observe", "hash_slot"]
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)  # Fibonacci hashing: 2**64 / the golden ratio
 _SHIFT = np.uint64(32)  # the hash's upper half indexes the table (up to 2**32 rows)

@@ -21,11 +21,7 @@ from delayed_rl.wrappers._in_transit import InTransit
 from delayed_rl.wrappers._samples import as_action, copy_sample
 from delayed_rl.wrappers._spec import JsonSpecMixin, record_arguments
 
-__all__ = [
-    "ActionDelay",
-    "ActionLine",
-    "neutral_action",
-]
+__all__ = ["ActionDelay", "ActionLine", "neutral_action", "checked_action"]
 
 
 def neutral_action(space: gym.Space) -> Any:

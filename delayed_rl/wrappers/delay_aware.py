@@ -33,6 +33,7 @@ __all__ = [
     "DelayAwareObservation",
     "DiscreteDelayAwareObservation",
     "ViewState",
+    "view_settings",
 ]
 
 MAX_ACTION_HISTORY = 2**16

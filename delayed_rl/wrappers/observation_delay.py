@@ -26,6 +26,8 @@ __all__ = [
     "NetworkArrival",
     "ObservationDelay",
     "StaleArrival",
+    "new_arrival_rule",
+    "observation_delay_settings",
 ]
 
 ARRIVAL_RULES = ("stale", "network")

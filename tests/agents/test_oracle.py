@@ -134,10 +134,11 @@ def test_update_without_arrivals_or_with_bad_ones_raises_naming_them():
     agent = hand_agent()
     with pytest.raises(TypeError, match="update needs info=.*, got None"):
         agent.update(8, 0, 0.0, 5)
-    with pytest.raises(TypeError, match=r"update needs info=.*, got one without it, keys \['x'\]"):
-        agent.update(8, 0, 0.0, 5, info={"x": 1})
+    with pytest.raises(ValueError, match="the step's info has no 'reward_arrivals'"):
+        agent.update(8, 0, 0.0, 5, info={"x": 1})  # as learn() refuses it
     for bad, error, match in [
         ("(0, 1.0)", TypeError, r"reward_arrivals'\] must be a sequence"),
+        (None, ValueError, "the step's info has no 'reward_arrivals'"),
         (
             [0, 1.0],
             TypeError,

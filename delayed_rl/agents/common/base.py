@@ -10,7 +10,7 @@ page (``docs/agents.md``, "Writing your own agent").
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -178,7 +178,7 @@ class TabularAgent(persistence.CopyProtocol, ABC):
         after a terminated or truncated step, and by :meth:`set_env`.
         """
 
-    def _before_update(self, info: dict[str, Any] | None) -> None:
+    def _before_update(self, info: Mapping[str, Any] | None) -> None:
         """Prepare the rule for a transition given to :meth:`update`, with its ``info``.
 
         Nothing by default: the step's ``info`` is for a rule that learns from it.
@@ -325,7 +325,7 @@ class TabularAgent(persistence.CopyProtocol, ABC):
         next_obs: Any,
         terminated: bool = False,
         truncated: bool = False,
-        info: dict[str, Any] | None = None,
+        info: Mapping[str, Any] | None = None,
     ) -> None:
         """One learning step from a transition you drove yourself (custom loops, robots).
 
@@ -350,6 +350,9 @@ class TabularAgent(persistence.CopyProtocol, ABC):
                 must each be one integer, or a 0-d integer array: a batch is refused).
             ValueError: an argument is outside its space, or the reward is not finite or above
                 :data:`~delayed_rl.agents.common.hyperparameters.MAX_ABS_VALUE` in magnitude.
+
+            A rule that reads ``info`` may refuse it too
+            (:class:`~delayed_rl.agents.OracleQLearning`'s class docstring says how).
         """
         s = self._obs_index.index(obs, "obs")
         s2 = self._obs_index.index(next_obs, "next_obs")

@@ -190,12 +190,19 @@ def check_hyperparameters(**hyperparameters: Any) -> dict[str, Any]:
         TypeError: a name is missing or unknown, or an argument has the wrong type.
         ValueError: an argument is out of range (the message names it and what is allowed).
     """
-    if hyperparameters.keys() != HYPERPARAMETER_CHECKS.keys():
+    missing = [name for name in HYPERPARAMETER_NAMES if name not in hyperparameters]
+    unknown = [name for name in hyperparameters if name not in HYPERPARAMETER_CHECKS]
+    if missing or unknown:
         raise TypeError(
-            f"the shared hyper-parameters are {list(HYPERPARAMETER_NAMES)}, got "
-            f"{list(hyperparameters)}"
+            f"check_hyperparameters takes every shared hyper-parameter and no other: missing "
+            f"{missing}, unknown {unknown}"
         )
     checked = {
         name: HYPERPARAMETER_CHECKS[name](name, value) for name, value in hyperparameters.items()
     }
-    return {**checked, "lr_schedule": as_learning_rate_schedule(checked["learning_rate"])}
+    learning_rate = hyperparameters["learning_rate"]  # kept as given (a number or a schedule)
+    return {
+        **checked,
+        "learning_rate": learning_rate,
+        "lr_schedule": as_learning_rate_schedule(learning_rate),
+    }

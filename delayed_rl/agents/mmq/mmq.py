@@ -8,7 +8,7 @@ page (``docs/agents.md``); :class:`delayed_rl.agents.reference.ReferenceMMQ` wri
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -237,7 +237,7 @@ class MultipleModelQLearning(QAgent):
         return greedy_actions(self._greedy_source(), states)
 
     # ------------------------------------------------------------------ learning
-    def _before_update(self, info: dict[str, Any] | None) -> None:
+    def _before_update(self, info: Mapping[str, Any] | None) -> None:
         """Clear the acting model: ``update()``'s transition was not chosen by ``learn()``.
 
         The reward kernel and the delay trace then take the greedy model of ``obs``
