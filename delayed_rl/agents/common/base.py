@@ -350,9 +350,8 @@ class TabularAgent(persistence.CopyProtocol, ABC):
                 must each be one integer, or a 0-d integer array: a batch is refused).
             ValueError: an argument is outside its space, or the reward is not finite or above
                 :data:`~delayed_rl.agents.common.hyperparameters.MAX_ABS_VALUE` in magnitude.
-
-            A rule that reads ``info`` may refuse it too
-            (:class:`~delayed_rl.agents.OracleQLearning`'s class docstring says how).
+                A rule that reads ``info`` may refuse it too (the oracle's class docstring
+                says how).
         """
         s = self._obs_index.index(obs, "obs")
         s2 = self._obs_index.index(next_obs, "next_obs")
