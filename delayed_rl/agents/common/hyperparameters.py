@@ -191,7 +191,7 @@ def check_hyperparameters(**hyperparameters: Any) -> dict[str, Any]:
         ValueError: an argument is out of range (the message names it and what is allowed).
     """
     missing = [name for name in HYPERPARAMETER_NAMES if name not in hyperparameters]
-    unknown = [name for name in hyperparameters if name not in HYPERPARAMETER_CHECKS]
+    unknown = [name for name in hyperparameters if name not in HYPERPARAMETER_NAMES]
     if missing or unknown:
         raise TypeError(
             f"check_hyperparameters takes every shared hyper-parameter and no other: missing "
