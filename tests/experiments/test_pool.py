@@ -16,6 +16,7 @@ from delayed_rl.experiments.framework import delay_settings as settings
 from delayed_rl.experiments.framework import snapshot_runs as snapshots
 from delayed_rl.experiments.framework.experiment import Experiment, SharedRun, Summary
 from delayed_rl.experiments.framework.pool import pool_key, run_key
+from delayed_rl.experiments.framework.task import Task
 
 CALLS: list[dict] = []
 
@@ -34,8 +35,7 @@ def _summarize(tasks, results, config):
     return Summary([], [], extra={"values": [r["value"] for r in results], "tasks": tasks})
 
 
-def _experiment(name: str, xs: list[int], shared_run=None, cost=None) -> Experiment:
-    options = {} if cost is None else {"cost": cost}
+def _experiment(name: str, xs: list[int], shared_run=None) -> Experiment:
     return Experiment(
         name=name,
         thesis="-",
@@ -45,8 +45,22 @@ def _experiment(name: str, xs: list[int], shared_run=None, cost=None) -> Experim
         summarize=_summarize,
         default_seeds=1,
         shared_run=shared_run,
-        **options,
     )
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class CostlyTask(Task):
+    """A task whose run costs ten core-seconds per ``x``."""
+
+    x: int
+
+    def cost(self) -> float:
+        return 10.0 * self.x
+
+
+def square_of_x(task: CostlyTask) -> dict:
+    """:func:`square` of a :class:`CostlyTask`."""
+    return square({"x": task.x})
 
 
 def _by_x(task: dict) -> SharedRun:
@@ -73,7 +87,11 @@ def test_a_run_shared_by_tasks_and_experiments_runs_once_and_each_task_gets_its_
 def test_runs_start_longest_first_and_experiments_are_summarized_as_they_finish():
     CALLS.clear()
     done = []
-    slow = _experiment("slow", [5, 6], cost=lambda task: 10.0 * task["x"])
+    slow = dataclasses.replace(
+        _experiment("slow", []),
+        tasks=lambda config: [CostlyTask(x=x, seed=0) for x in (5, 6)],
+        run_task=square_of_x,
+    )
     fast = _experiment("fast", [1, 2, 3])
     summaries = run_experiments(
         [fast, slow], Config(workers=1), progress=False, on_done=lambda e, s: done.append(e.name)

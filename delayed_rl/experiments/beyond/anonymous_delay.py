@@ -83,15 +83,6 @@ def shared_run(task: SettingTask) -> SharedRun | None:
     return SharedRun(run_agent, dataclasses.replace(task, delay=kind, setting=label))
 
 
-#: Compiled training cost per step (µs) of each learner on these grids, for scheduling only.
-STEP_MICROSECONDS = {"DeconvQ learned": 1.8, "DeconvQ known": 0.9, "MMQ": 0.8}
-
-
-def cost(task: SettingTask) -> float:
-    """A task's estimated core-seconds (its steps at :data:`STEP_MICROSECONDS`, else 0.7 µs)."""
-    return 1e-6 * task.steps * STEP_MICROSECONDS.get(task.agent, 0.7)
-
-
 def relative_gap_claim(
     quantity: str,
     thesis: str,
@@ -258,5 +249,4 @@ EXPERIMENT = Experiment(
     summarize=summarize,
     default_seeds=20,
     shared_run=shared_run,
-    cost=cost,
 )

@@ -152,6 +152,13 @@ class DeepTask(RewardDelayTask):
     warmup_episodes: int | None = optional()
     reward: str | None = optional()
 
+    def cost(self) -> float:
+        """Estimated core-seconds: SAC about 20 ms a step, PPO 1.5 ms (for scheduling only)."""
+        if self.method == "random":
+            return 1.0
+        per_step = 0.02 if self.algorithm == "SAC" else 0.0015
+        return per_step * self.steps
+
 
 def tasks(config: Config) -> list[DeepTask]:
     """Every (setting, method, seed), and a ``random`` task per (setting, seed)."""
@@ -173,14 +180,6 @@ def shared_run(task: DeepTask) -> SharedRun:
     run.update({key: entries[key] for key in _OPTIONAL_RUN_FIELDS if key in entries})
     run["eval_episodes"] = EVAL_EPISODES
     return SharedRun(train_and_score, {**run, **delay_fields(task)})
-
-
-def cost(task: DeepTask) -> float:
-    """Estimated core-seconds: SAC about 20 ms a step, PPO 1.5 ms (for scheduling only)."""
-    if task.method == "random":
-        return 1.0
-    per_step = 0.02 if task.algorithm == "SAC" else 0.0015
-    return per_step * task.steps
 
 
 def _paired_claim(setting: str, ours: str, theirs: str, gains: dict) -> Claim:
@@ -332,7 +331,6 @@ EXPERIMENT = Experiment(
     summarize=summarize,
     default_seeds=max(_SEEDS),
     shared_run=shared_run,
-    cost=cost,
     resumable=True,
     extras=("sb3",),
 )

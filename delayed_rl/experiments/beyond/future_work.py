@@ -84,6 +84,19 @@ def make_variant(variant: str, size: int, delay: Any, steps: int, seed: int) -> 
     )
 
 
+#: Compiled training cost per step (µs) of the variants on these grids, for scheduling only.
+STEP_MICROSECONDS = {"MMQ kernel σ=2": 1.2, "MMQ kernel σ=5": 1.1, "MMQ Λ step 3": 0.35}
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class VariantTask(SettingTask):
+    """A variant's run in one of ``anonymous-delay``'s settings (``agent``: the variant)."""
+
+    def cost(self) -> float:
+        """The run's estimated core-seconds (its steps at :data:`STEP_MICROSECONDS`, else 0.85 µs)."""
+        return 1e-6 * self.steps * STEP_MICROSECONDS.get(self.agent, 0.85)
+
+
 def shared_run(task: SettingTask) -> SharedRun | None:
     """The thesis rule and the greedy window: ``anonymous-delay``'s MMQ run, read two ways.
 
@@ -97,18 +110,9 @@ def shared_run(task: SettingTask) -> SharedRun | None:
     return SharedRun(delay_settings.run_agent, dataclasses.replace(task, agent="MMQ"), view)
 
 
-#: Compiled training cost per step (µs) of each variant on these grids, for scheduling only.
-STEP_MICROSECONDS = {"MMQ kernel σ=2": 1.2, "MMQ kernel σ=5": 1.1, "MMQ Λ step 3": 0.35}
-
-
-def cost(task: SettingTask) -> float:
-    """A task's estimated core-seconds (its steps at :data:`STEP_MICROSECONDS`, else 0.85 µs)."""
-    return 1e-6 * task.steps * STEP_MICROSECONDS.get(task.agent, 0.85)
-
-
 def tasks(config: Config) -> list[SettingTask]:
     """Every (setting, variant, seed), as ``anonymous-delay``'s (:func:`~.setting_tasks`)."""
-    return delay_settings.setting_tasks(config, tuple(VARIANTS))
+    return delay_settings.setting_tasks(config, tuple(VARIANTS), VariantTask)
 
 
 def run_task(task: SettingTask) -> dict:
@@ -236,5 +240,4 @@ EXPERIMENT = Experiment(
     summarize=summarize,
     default_seeds=20,
     shared_run=shared_run,
-    cost=cost,
 )

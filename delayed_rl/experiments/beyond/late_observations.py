@@ -169,6 +169,12 @@ class LateTask(GainTask):
     env_kwargs: dict[str, Any] | None = optional()
     observation_max_delay: int | None = optional()
 
+    def cost(self) -> float:
+        """Estimated core-seconds: SAC about 10 ms a step (for scheduling only)."""
+        if self.method in ("random", *CONTROLLERS):
+            return 1.0
+        return 0.01 * self.steps
+
 
 def tasks(config: Config) -> list[LateTask]:
     """Every (setting, method, seed), and a ``random`` task per (setting, seed)."""
@@ -196,13 +202,6 @@ def shared_run(task: LateTask) -> SharedRun:
     run = {key: entries[key] for key in (*_RUN_FIELDS, "method", "seed")}
     run = {**run, **given, "eval_episodes": EVAL_EPISODES}
     return SharedRun(controller_score if task.method == "p-delayed" else train_and_score, run)
-
-
-def cost(task: LateTask) -> float:
-    """Estimated core-seconds: SAC about 10 ms a step (for scheduling only)."""
-    if task.method in ("random", *CONTROLLERS):
-        return 1.0
-    return 0.01 * task.steps
 
 
 def _at_least(seeds: int) -> int:
@@ -359,7 +358,6 @@ EXPERIMENT = Experiment(
     summarize=summarize,
     default_seeds=SEEDS,
     shared_run=shared_run,
-    cost=cost,
     resumable=True,
     extras=("sb3",),
 )

@@ -41,7 +41,7 @@ from delayed_rl.experiments.framework.experiment import (
     seed_tasks,
     step_count,
 )
-from delayed_rl.experiments.framework.results import pivot
+from delayed_rl.experiments.framework.results import curve_groups, pivot
 from delayed_rl.experiments.framework.task import Task, optional
 from delayed_rl.experiments.framework.training import hyperparameter_text, thesis_hyperparameters
 from delayed_rl.multiagent.gridworld import MEETING_REWARD
@@ -75,6 +75,10 @@ LEARNER_STREAM = 0x1EA52
 """The spawn key of the learners' seeds (:func:`learner_seed`)."""
 
 
+#: Rough cost of one joint step (µs, both learners and the env), for scheduling only.
+STEP_MICROSECONDS = {"Q undelayed": 40.0, "Q": 90.0, "DeconvQ known": 110.0}
+
+
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class MultiagentGridTask(Task):
     """A learner's run of ``multiagent-gridworld``.
@@ -93,6 +97,10 @@ class MultiagentGridTask(Task):
     episode_steps: int
     steps: int
     lam: int | None = optional()
+
+    def cost(self) -> float:
+        """The run's estimated core-seconds (its steps at :data:`STEP_MICROSECONDS`, else 140 µs)."""
+        return 1e-6 * self.steps * STEP_MICROSECONDS.get(self.agent, 140.0)
 
 
 def tasks(config: Config) -> list[MultiagentGridTask]:
@@ -113,15 +121,6 @@ def shared_run(task: MultiagentGridTask) -> SharedRun:
     if task.agent == "Q undelayed":
         return SharedRun(train_and_score, dataclasses.replace(task, lam=None))
     return SharedRun(train_and_score, task)
-
-
-#: Rough cost of one joint step (µs, both learners and the env), for scheduling only.
-STEP_MICROSECONDS = {"Q undelayed": 40.0, "Q": 90.0, "DeconvQ known": 110.0}
-
-
-def cost(task: MultiagentGridTask) -> float:
-    """A task's estimated core-seconds (its steps at :data:`STEP_MICROSECONDS`, else 140 µs)."""
-    return 1e-6 * task.steps * STEP_MICROSECONDS.get(task.agent, 140.0)
 
 
 class AgentSpaces(gym.Env):
@@ -359,13 +358,9 @@ def _figures(groups: dict[float, dict[str, dict]]) -> dict:
     for lam, by_agent in groups.items():
         label = setting_label(lam)
         title = f"two independent learners, {SIZE}×{SIZE} cooperative grid world, {label} delays"
-        curves = {
-            agent: [(np.asarray(r["steps"]), np.asarray(r["greedy"])) for r in runs.values()]
-            for agent, runs in by_agent.items()
-        }
         figures[f"greedy_score_poisson{lam:g}"] = plotting.figure(
             plotting.learning_curves,
-            curves,
+            curve_groups(by_agent, y="greedy"),
             f"{title}: greedy joint policy",
             "greedy score (reward per step)",
             levels=[(optimum(), f"optimum {optimum():.2f}")],
@@ -440,7 +435,6 @@ EXPERIMENT = Experiment(
     summarize=summarize,
     default_seeds=5,
     shared_run=shared_run,
-    cost=cost,
     resumable=True,
     extras=("multiagent",),
 )

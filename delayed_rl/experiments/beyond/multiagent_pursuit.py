@@ -89,6 +89,10 @@ class PursuitTask(gain_settings.RewardDelayTask):
     env_kwargs: dict[str, Any]
     ppo: dict[str, Any]
 
+    def cost(self) -> float:
+        """Estimated core-seconds: about 0.6 ms a pursuer-step (for scheduling only)."""
+        return 1.0 if self.method == "random" else 6e-4 * self.steps
+
 
 def tasks(config: Config) -> list[PursuitTask]:
     """Every (setting, method, seed), and a ``random`` task per (setting, seed)."""
@@ -104,11 +108,6 @@ def shared_run(task: PursuitTask) -> SharedRun:
     run = {key: entries[key] for key in _RUN_FIELDS}
     run.update(method=task.method, eval_episodes=EVAL_EPISODES)
     return SharedRun(train_and_score, {**run, **gain_settings.delay_fields(task)})
-
-
-def cost(task: PursuitTask) -> float:
-    """Estimated core-seconds: about 0.6 ms a pursuer-step (for scheduling only)."""
-    return 1.0 if task.method == "random" else 6e-4 * task.steps
 
 
 def _setting_claims(setting: str, scores: dict, by_method: dict) -> list[rules.Claim]:
@@ -224,7 +223,6 @@ EXPERIMENT = Experiment(
     summarize=summarize,
     default_seeds=SEEDS,
     shared_run=shared_run,
-    cost=cost,
     resumable=True,
     extras=("sb3", "multiagent"),
 )

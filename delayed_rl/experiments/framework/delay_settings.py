@@ -112,18 +112,29 @@ class SettingTask(Task):
     agent: str
     steps: int
 
+    def cost(self) -> float:
+        """The run's estimated core-seconds (its steps at :data:`STEP_MICROSECONDS`, else 0.7 µs)."""
+        return 1e-6 * self.steps * STEP_MICROSECONDS.get(self.agent, 0.7)
 
-def setting_tasks(config: Config, agents: Sequence[str]) -> list[SettingTask]:
+
+#: Compiled training cost per step (µs) of the learners on these grids, for scheduling only.
+STEP_MICROSECONDS = {"DeconvQ learned": 1.8, "DeconvQ known": 0.9, "MMQ": 0.8}
+
+
+def setting_tasks(
+    config: Config, agents: Sequence[str], task_type: type[SettingTask] = SettingTask
+) -> list[SettingTask]:
     """One task per (setting, agent, seed): :data:`SETTINGS` × :data:`DELAYS`, or the quick one.
 
-    ``config.steps`` replaces every setting's own step count.
+    ``config.steps`` replaces every setting's own step count; ``task_type`` is
+    :class:`SettingTask` or an experiment's subclass of it (one that costs its runs otherwise).
     """
     if config.quick:
         worlds, kinds = [(QUICK_SIZE, QUICK_LAM, QUICK_STEPS)], ("Poisson",)
     else:
         worlds, kinds = SETTINGS, DELAYS
     return [
-        SettingTask(
+        task_type(
             setting=setting_label(size, kind, lam),
             size=size,
             lam=lam,

@@ -211,11 +211,6 @@ EXTRA_PACKAGES = {
 """The packages of each extra an experiment may need (:attr:`Experiment.extras`)."""
 
 
-def default_cost(task: Task) -> float:
-    """A task's estimated cost for scheduling: its ``steps`` (1 without), at a microsecond each."""
-    return 1e-6 * float(getattr(task, "steps", 1))
-
-
 @dataclass(kw_only=True)
 class Experiment:
     """An experiment, the thesis's or beyond it.
@@ -234,8 +229,6 @@ class Experiment:
         shared_run: the :class:`SharedRun` behind a task whose run another task (of this
             experiment or another) also needs, else ``None`` (``shared_run`` itself ``None``:
             every task is its own run, ``run_task(task)``).
-        cost: a task's estimated core-seconds, which only orders the runs (longest first, so
-            that no long run starts last); ``None``: :func:`default_cost`.
         resumable: keep each run's result as it finishes, in ``OUT/runs/`` of the experiment's
             output folder, and read it back instead of running it again when the experiment is
             run into the same folder (its results must be JSON: dicts, lists, numbers, text).
@@ -254,7 +247,6 @@ class Experiment:
     run_task: Callable[[Any], dict] | None = None
     quick_seeds: int = 2
     shared_run: Callable[[Any], SharedRun | None] | None = None
-    cost: Callable[[Any], float] | None = None
     resumable: bool = False
     extras: tuple[str, ...] = ()
 
@@ -292,9 +284,9 @@ class Experiment:
         """``task``'s result from a run of its own, in this process (:meth:`run_of`)."""
         return self.run_of(task).alone()
 
-    def task_cost(self, task: Task) -> float:
-        """``task``'s estimated core-seconds: its :attr:`cost`, else :func:`default_cost`."""
-        return float((self.cost or default_cost)(task))
+    def task_cost(self, task: Task | dict) -> float:
+        """``task``'s estimated core-seconds: its :meth:`~.task.Task.cost` (a dict task: 1 µs)."""
+        return float(task.cost()) if isinstance(task, Task) else 1e-6
 
 
 TaskType = TypeVar("TaskType", bound=Task)

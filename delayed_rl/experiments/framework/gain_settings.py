@@ -21,6 +21,7 @@ import numpy as np
 from delayed_rl.experiments.framework import claims as rules
 from delayed_rl.experiments.framework import plotting
 from delayed_rl.experiments.framework.experiment import Claim, Config, Curve, Summary
+from delayed_rl.experiments.framework.results import curve_groups
 from delayed_rl.experiments.framework.task import Task
 
 __all__ = [
@@ -166,16 +167,16 @@ def learning_curves(
         references: other ``(score, label)`` levels to draw as lines (fixed controllers).
         colours: the colours of the curves and levels, by label (:func:`method_colours`).
     """
-    curves, groups = [], {}
-    for method, label in labels.items():
-        runs = by_method[method]
-        groups[label] = [(r["steps"], r["scores"]) for r in runs.values()]
-        for seed, r in runs.items():
+    curves = []
+    for method in labels:
+        for seed, r in by_method[method].items():
             steps, values = np.asarray(r["steps"]), np.asarray(r["scores"])
             curves.append(Curve(f"{setting}/{method}", seed, steps, values, "score"))
     figure = plotting.figure(
         plotting.learning_curves,
-        groups=groups,
+        groups=curve_groups(
+            {label: by_method[method] for method, label in labels.items()}, y="scores"
+        ),
         title=f"{setting}: mean return of 10 greedy episodes of {scored_in}",
         ylabel="return",
         thesis=[(random_mean, "random policy")],

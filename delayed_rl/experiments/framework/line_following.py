@@ -171,6 +171,10 @@ class LineTask(Task):
     agent: str
     steps: int
 
+    def cost(self) -> float:
+        """The run's estimated core-seconds, for scheduling (:func:`training_cost`)."""
+        return training_cost(self.agent, self.steps)
+
 
 def line_tasks(
     config: Config, learners: Sequence[str], steps: int, quick_steps: int
@@ -211,11 +215,6 @@ def logged_task_run(task: LineTask) -> SharedRun:
     """
     check_choice("agent", task.agent, LEARNERS)
     return logged_run(task.agent, task.seed, task.steps)
-
-
-def logged_task_cost(task: LineTask) -> float:
-    """A :class:`LineTask`'s estimated core-seconds, for scheduling."""
-    return training_cost(task.agent, task.steps)
 
 
 def training_run(task: dict) -> dict:

@@ -19,7 +19,7 @@ import numpy as np
 
 from delayed_rl.experiments.framework.claims import mean_ci_n
 from delayed_rl.experiments.framework.experiment import Config, Curve, running_average
-from delayed_rl.experiments.framework.results import pivot
+from delayed_rl.experiments.framework.results import curve_groups, pivot
 from delayed_rl.experiments.framework.task import Task, optional
 from delayed_rl.experiments.framework.training import grid_env, train
 
@@ -194,10 +194,7 @@ class NormalisedRuns:
 
     def curve_groups(self) -> dict:
         """``{key: [(steps, normalised curve), ...]}``: the groups a learning-curve figure draws."""
-        return {
-            key: [(run["steps"], run["curve"]) for run in runs.values()]
-            for key, runs in self.groups().items()
-        }
+        return curve_groups(self.groups())
 
     def curves(self) -> list[Curve]:
         """The normalised curves for the CSV, condition by condition (each task's ``condition``)."""

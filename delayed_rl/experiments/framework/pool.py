@@ -197,7 +197,7 @@ def run_experiments(
     *pool* a list of their task (``SharedRun.pooled``, e.g. the steps at which a training run is
     read) are one run when their tasks differ only in that list, run on the union of its items.
 
-    All runs go to one pool, ordered by their estimated cost (:attr:`~.experiment.Experiment.cost`),
+    All runs go to one pool, ordered by their estimated cost (:meth:`~.task.Task.cost`),
     longest first, so the workers are never left idle behind one experiment's slowest run before the
     next experiment starts, and the last runs to start are short ones. Each experiment is
     summarized as soon as its last run is in, while the workers go on with the other experiments'

@@ -4,7 +4,8 @@ An experiment's ``summarize`` gets its tasks and their results as two parallel l
 :func:`pivot` turns them into ``{condition: {seed: value}}``, the condition being any of the
 tasks' fields (``by=("agent",)``, ``by=("setting", "method")``...), the value the whole result,
 one of its entries or any function of it; :func:`common_seeds` gives the seeds that several such
-groups share, the ones a paired comparison reads. Both keep the order of the tasks, so the
+groups share, the ones a paired comparison reads; :func:`curve_groups` reads such groups' runs
+as the ``(x, y)`` pairs a learning-curve figure draws. All keep the order of the tasks, so the
 statistics (and the tables, curves and figures drawn from them) come out in the order the tasks
 were made.
 """
@@ -14,9 +15,11 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
+import numpy as np
+
 from delayed_rl.experiments.framework.task import Task
 
-__all__ = ["common_seeds", "pivot"]
+__all__ = ["common_seeds", "curve_groups", "pivot"]
 
 
 def pivot(
@@ -103,3 +106,20 @@ def common_seeds(*groups: Mapping[int, Any]) -> list[int]:
         return []
     first, *rest = groups
     return [seed for seed in first if all(seed in group for group in rest)]
+
+
+def curve_groups(
+    groups: Mapping[Any, Mapping[int, Mapping[str, Any]]], x: str = "steps", y: str = "curve"
+) -> dict[Any, list[tuple[np.ndarray, np.ndarray]]]:
+    """``{key: [(run[x], run[y]), ...]}``, as arrays: each group's runs, by seed, as curves.
+
+    ``groups`` is ``{key: {seed: result}}`` (a :func:`pivot`'s); the pairs are what the
+    learning-curve figures draw, one per seed, in the seeds' order.
+
+    >>> curve_groups({"Q": {0: {"steps": [1, 2], "curve": [0.5, 0.7]}}})
+    {'Q': [(array([1, 2]), array([0.5, 0.7]))]}
+    """
+    return {
+        key: [(np.asarray(run[x]), np.asarray(run[y])) for run in runs.values()]
+        for key, runs in groups.items()
+    }

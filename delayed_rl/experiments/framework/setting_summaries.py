@@ -26,6 +26,7 @@ from delayed_rl.experiments.framework.claims import (
 from delayed_rl.experiments.framework.delay_estimates import ESTIMATE_LABELS
 from delayed_rl.experiments.framework.delay_settings import LAMBDA_MAX, SettingTask, make_delay
 from delayed_rl.experiments.framework.experiment import Claim, Curve
+from delayed_rl.experiments.framework.results import curve_groups
 from delayed_rl.experiments.framework.snapshot_runs import LOOP_FRACTION, optimal_average
 
 #: The claims' rules: a share of seeds optimal, and the share of second-half snapshots that are.
@@ -188,24 +189,17 @@ def setting_figures(
         task0 = settings[setting]
         size, name = task0.size, slug(setting)
         optimum = (optimal_average(size), f"optimal loop ({optimal_average(size):.3f})")
-        curves = {
-            a: [(r["steps"], r["curve"]) for r in runs.values()]
-            for a, runs in by_agent.items()
-            if a not in same_curves
-        }
+        drawn = {a: runs for a, runs in by_agent.items() if a not in same_curves}
         left_out = [a for a in same_curves if a in by_agent]
         suffix = f"\n({', '.join(left_out)}: the same curve as the thesis rule)" if left_out else ""
         thesis = ""  # the thesis's Poisson statement, in words (Fig. 5.9 gives no value here)
         if "Poisson" in setting:
             above = ", above Q" if "Q" in by_agent else ""
             thesis = f"\nthesis (Poisson, Fig. 5.9): MMQ near-optimal{above}"
-        snaps = {
-            a: [(r["snapshot_steps"], r["snapshot_optimal"]) for r in runs.values()]
-            for a, runs in by_agent.items()
-        }
+        snaps = curve_groups(by_agent, "snapshot_steps", "snapshot_optimal")
         figures[f"learning_curves_{name}"] = plotting.figure(
             plotting.band_plot,
-            curves,
+            curve_groups(drawn),
             f"{setting}: average reward during learning{thesis}{suffix}",
             "time step",
             "average reward (undelayed)",

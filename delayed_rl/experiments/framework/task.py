@@ -1,8 +1,8 @@
 """An experiment's task: a small frozen dataclass, one per (condition, seed).
 
 Each experiment defines its task type, a subclass of :class:`Task` with one typed field per
-setting; its run and summary read ``task.field``. A task's identity, what finds its kept run,
-is its canonical JSON (:meth:`Task.to_json`).
+setting; its run and summary read ``task.field``, and its :meth:`Task.cost` orders the runs. A
+task's identity, what finds its kept run, is its canonical JSON (:meth:`Task.to_json`).
 """
 
 from __future__ import annotations
@@ -35,6 +35,15 @@ class Task:
             for field in dataclasses.fields(self)
             if not (field.metadata.get("optional") and getattr(self, field.name) == field.default)
         }
+
+    def cost(self) -> float:
+        """The task's run's estimated core-seconds, which only orders the runs.
+
+        The pool starts the longest runs first, so that none starts last. The base estimate is
+        a microsecond a step (its ``steps``, 1 without); a task type whose steps cost more, or
+        whose cost depends on its settings, overrides it.
+        """
+        return 1e-6 * float(getattr(self, "steps", 1))
 
 
 def optional(default: Any = None) -> Any:

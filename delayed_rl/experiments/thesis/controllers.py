@@ -64,6 +64,12 @@ class ControllerTask(Task):
     train_steps: int
     run_steps: int
 
+    def cost(self) -> float:
+        """The run's estimated core-seconds, for scheduling: a learner's training and its run."""
+        learner = not self.controller.startswith("P ")
+        steps = self.run_steps + (self.train_steps if learner else 0)
+        return training_cost(self.controller, steps)
+
 
 def tasks(config: Config) -> list[ControllerTask]:
     """Per seed, one run of each of the four controllers (:data:`THESIS`), all from one pose.
@@ -162,13 +168,6 @@ def _pick(metrics: dict) -> dict:
     return {key: metrics[key] for key in ("steps", "curve", "average", "total_error", "visible")}
 
 
-def cost(task: ControllerTask) -> float:
-    """A task's estimated core-seconds, for scheduling: a learner's training and its run."""
-    learner = not task.controller.startswith("P ")
-    steps = task.run_steps + (task.train_steps if learner else 0)
-    return training_cost(task.controller, steps)
-
-
 def summarize(task_list: list[ControllerTask], results: list[dict], config: Config) -> Summary:
     """Fig. 5.19's claims: each controller's final average reward, and their order.
 
@@ -245,5 +244,4 @@ EXPERIMENT = Experiment(
     summarize=summarize,
     default_seeds=5,
     shared_run=shared_run,
-    cost=cost,
 )

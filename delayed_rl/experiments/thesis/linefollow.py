@@ -32,7 +32,6 @@ from delayed_rl.experiments.framework.line_following import (
     line_curves,
     line_statistics,
     line_tasks,
-    logged_task_cost,
     logged_task_run,
 )
 from delayed_rl.experiments.framework.results import pivot
@@ -159,5 +158,4 @@ EXPERIMENT = Experiment(
     summarize=summarize,
     default_seeds=5,
     shared_run=logged_task_run,
-    cost=logged_task_cost,
 )

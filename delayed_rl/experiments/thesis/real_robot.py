@@ -19,15 +19,8 @@ import numpy as np
 from delayed_rl import figures
 from delayed_rl._validation import check_choice
 from delayed_rl.envs.linefollow.env import REAL_ROBOT
+from delayed_rl.experiments.framework import claims as rules
 from delayed_rl.experiments.framework import plotting
-from delayed_rl.experiments.framework.claims import (
-    band_claim,
-    direction_claim,
-    mean_ci_n,
-    paired,
-    range_claim,
-    reference_row,
-)
 from delayed_rl.experiments.framework.experiment import (
     Claim,
     Config,
@@ -88,6 +81,10 @@ class RealRobotTask(Task):
     agent: str
     pretrain_steps: int
     steps: int
+
+    def cost(self) -> float:
+        """The run's estimated core-seconds, for scheduling: its pretraining and two runs."""
+        return training_cost(self.agent, self.pretrain_steps + 2 * self.steps)
 
 
 def tasks(config: Config) -> list[RealRobotTask]:
@@ -160,11 +157,6 @@ def _by_condition(result: dict) -> dict:
     return out
 
 
-def cost(task: RealRobotTask) -> float:
-    """A task's estimated core-seconds, for scheduling: its pretraining and two runs."""
-    return training_cost(task.agent, task.pretrain_steps + 2 * task.steps)
-
-
 def _by_seed(runs: dict, agent: str, condition: str, key: str) -> dict[int, float]:
     """``{seed: result[condition][key]}`` of one agent's runs (``runs``: a pivot by agent)."""
     return {seed: result[condition][key] for seed, result in runs[agent].items()}
@@ -208,22 +200,43 @@ def _stats(
     runs: dict, agent: str, condition: str, key: str = "average"
 ) -> tuple[float, float, int]:
     """(mean, CI, n) over the seeds of one agent's ``key`` in one condition."""
-    return mean_ci_n(list(_by_seed(runs, agent, condition, key).values()))
+    return rules.mean_ci_n(list(_by_seed(runs, agent, condition, key).values()))
 
 
 def _gap(runs: dict, agent: str) -> tuple[float, float, int]:
     """(mean, CI, n) of what the gap costs ``agent``: control minus real average reward, by seed."""
     control = _by_seed(runs, agent, "control", "average")
-    return mean_ci_n(paired(control, _by_seed(runs, agent, "real", "average")))
+    return rules.mean_ci_n(rules.paired(control, _by_seed(runs, agent, "real", "average")))
+
+
+def _reward_claims(runs: dict, condition: str, where: str, thesis: dict) -> list[Claim]:
+    """MMQ's and Q's average rewards in ``condition`` (named ``where``), each against the thesis.
+
+    The targets are :data:`THESIS_REAL` on the real robot and :data:`THESIS_SIM` in the control,
+    ± :data:`~.line_claims.REWARD_TOLERANCE`; ``thesis`` gives each agent's thesis statement.
+    """
+    targets = THESIS_REAL if condition == "real" else THESIS_SIM
+    return [
+        rules.band_claim(
+            f"{agent} average reward{where}",
+            thesis[agent],
+            _stats(runs, agent, condition),
+            targets[agent],
+            REWARD_TOLERANCE,
+        )
+        for agent in ("MMQ", "Q")
+    ]
 
 
 def _real_claims(runs: dict) -> list[Claim]:
     """On the real robot: MMQ's and Q's average rewards, MMQ above Q, Q's error over MMQ's."""
-    mmq_over_q = mean_ci_n(
-        paired(_by_seed(runs, "MMQ", "real", "average"), _by_seed(runs, "Q", "real", "average"))
+    mmq_over_q = rules.mean_ci_n(
+        rules.paired(
+            _by_seed(runs, "MMQ", "real", "average"), _by_seed(runs, "Q", "real", "average")
+        )
     )
-    error_ratio = mean_ci_n(
-        paired(
+    error_ratio = rules.mean_ci_n(
+        rules.paired(
             _by_seed(runs, "Q", "real", "total_error"),
             _by_seed(runs, "MMQ", "real", "total_error"),
             "ratio",
@@ -231,28 +244,19 @@ def _real_claims(runs: dict) -> list[Claim]:
     )
     low = min(THESIS_ERROR_RATIOS.values()) - ERROR_RATIO_TOLERANCE
     high = max(THESIS_ERROR_RATIOS.values()) + ERROR_RATIO_TOLERANCE
+    thesis = {
+        "MMQ": "≈ 0.2 (run 1 just over, run 2 just under; Figs. 5.24, 5.26)",
+        "Q": "≈ −0.25 (run 1 −0.2, run 2 just under −0.3; Figs. 5.24, 5.26)",
+    }
     return [
-        band_claim(
-            "MMQ average reward on the real robot",
-            "≈ 0.2 (run 1 just over, run 2 just under; Figs. 5.24, 5.26)",
-            _stats(runs, "MMQ", "real"),
-            THESIS_REAL["MMQ"],
-            REWARD_TOLERANCE,
-        ),
-        band_claim(
-            "Q average reward on the real robot",
-            "≈ −0.25 (run 1 −0.2, run 2 just under −0.3; Figs. 5.24, 5.26)",
-            _stats(runs, "Q", "real"),
-            THESIS_REAL["Q"],
-            REWARD_TOLERANCE,
-        ),
-        direction_claim(
+        *_reward_claims(runs, "real", " on the real robot", thesis),
+        rules.direction_claim(
             "MMQ minus Q average reward on the real robot (paired by seed)",
             "> 0: MMQ above Q in both runs (≈ +0.4, +0.5)",
             mmq_over_q,
             "above",
         ),
-        range_claim(
+        rules.range_claim(
             "Q accumulated error / MMQ accumulated error on the real robot",
             "1.7 (run 1), 1.55 (run 2) (Figs. 5.25, 5.27)",
             error_ratio,
@@ -266,28 +270,19 @@ def _real_claims(runs: dict) -> list[Claim]:
 
 def _control_claims(runs: dict) -> list[Claim]:
     """In the clean simulation: MMQ's and Q's average rewards, and what the gap costs each."""
+    thesis = {
+        "MMQ": "just over 0.6 (Fig. 5.19, pretrained MMQ in simulation, 1,700 steps)",
+        "Q": "≈ 0.3 (Fig. 5.19, pretrained Q in simulation, 1,700 steps)",
+    }
     return [
-        band_claim(
-            "MMQ average reward, control (clean simulation)",
-            "just over 0.6 (Fig. 5.19, pretrained MMQ in simulation, 1,700 steps)",
-            _stats(runs, "MMQ", "control"),
-            THESIS_SIM["MMQ"],
-            REWARD_TOLERANCE,
-        ),
-        band_claim(
-            "Q average reward, control (clean simulation)",
-            "≈ 0.3 (Fig. 5.19, pretrained Q in simulation, 1,700 steps)",
-            _stats(runs, "Q", "control"),
-            THESIS_SIM["Q"],
-            REWARD_TOLERANCE,
-        ),
-        direction_claim(
+        *_reward_claims(runs, "control", ", control (clean simulation)", thesis),
+        rules.direction_claim(
             "MMQ gap cost: control minus real average reward (paired by seed)",
             "> 0: worse on the robot than in simulation (section 5.3; ≈ 0.6 − 0.2)",
             _gap(runs, "MMQ"),
             "above",
         ),
-        direction_claim(
+        rules.direction_claim(
             "Q gap cost: control minus real average reward (paired by seed)",
             "> 0: worse on the robot than in simulation (section 5.3; ≈ 0.3 + 0.25)",
             _gap(runs, "Q"),
@@ -298,20 +293,20 @@ def _control_claims(runs: dict) -> list[Claim]:
 
 def _deconv_claims(runs: dict) -> list[Claim]:
     """The extension: DeconvQ learned above Q on the real robot, and its reward as a reference."""
-    deconv_over_q = mean_ci_n(
-        paired(
+    deconv_over_q = rules.mean_ci_n(
+        rules.paired(
             _by_seed(runs, "DeconvQ learned", "real", "average"),
             _by_seed(runs, "Q", "real", "average"),
         )
     )
     return [
-        direction_claim(
+        rules.direction_claim(
             "DeconvQ learned minus Q average reward on the real robot (paired by seed)",
             "extension: DeconvQ above Q",
             deconv_over_q,
             "above",
         ),
-        reference_row(
+        rules.reference_row(
             "DeconvQ learned average reward on the real robot",
             _stats(runs, "DeconvQ learned", "real"),
             note=f"control: {_stats(runs, 'DeconvQ learned', 'control')[0]:.3f}",
@@ -337,7 +332,8 @@ def _statistics(runs: dict, seeds: list[int]) -> dict[str, Any]:
             for name, seed in zip(THESIS_RUNS, seeds, strict=False)
         },
         "pretrain_seconds": {
-            a: mean_ci_n([r["pretrain_seconds"] for r in runs[a].values()])[:2] for a in LEARNERS
+            a: rules.mean_ci_n([r["pretrain_seconds"] for r in runs[a].values()])[:2]
+            for a in LEARNERS
         },
     }
 
@@ -493,5 +489,4 @@ EXPERIMENT = Experiment(
     summarize=summarize,
     default_seeds=4,
     shared_run=shared_run,
-    cost=cost,
 )
