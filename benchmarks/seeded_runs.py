@@ -83,10 +83,11 @@ AGENT_RUNS: list[tuple[str, str, dict]] = [
         {"max_delay_estimate": 20, "solve_interval": 1000},
     ),
 ]
-#: A registered agent without a row above runs with its defaults, under its registry name (so
-#: a new agent needs no row here, only ``--write`` to record its fingerprints).
+#: A registered agent without a row above runs with its registry entry's ``example_arguments``,
+#: under its registry name (so a new agent needs no row here, only ``--write`` to record its
+#: fingerprints).
 AGENT_RUNS += [
-    (name, entry.class_name, {})
+    (name, entry.class_name, dict(entry.example_arguments))
     for name, entry in REGISTRY.items()
     if entry.class_name not in {class_name for _, class_name, _ in AGENT_RUNS}
 ]

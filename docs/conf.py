@@ -3,8 +3,8 @@
 Build it with ``sphinx-build -W --keep-going -b html docs docs/_build/html`` (the ``docs``
 extra). Before Sphinx reads the sources, :func:`generate` writes the pages made from the
 repository itself into ``docs/_generated/``: one page per experiment (its module docstring and
-the committed report with its figures, from ``benchmarks/reproduction/NAME/``) and the grid
-world's rendered frames.
+the committed report with its figures, from ``benchmarks/reproduction/NAME/``), the grid
+world's rendered frames and the table of the agent registry.
 """
 
 from __future__ import annotations
@@ -95,6 +95,14 @@ def generate() -> None:
     _deep_rl_results(out)
     _api_pages(out / "api")
     _grid_frames(out)
+    _agent_registry(out)
+
+
+def _agent_registry(out: Path) -> None:
+    """The agents' table (:func:`delayed_rl.agents.registry.registry_table`), for the agents page."""
+    from delayed_rl.agents.registry import registry_table
+
+    (out / "agent_registry.md").write_text(registry_table(), encoding="utf-8")
 
 
 def _modules(package: str) -> list[str]:

@@ -430,29 +430,28 @@ def test_the_removed_names_are_gone():
 
 @pytest.mark.parametrize("name", list(REGISTRY))
 def test_every_agent_shows_the_shared_hyperparameters_with_the_one_set_of_defaults(name):
-    """Every registered class: ``@shares_hyperparameters`` on its ``__init__`` shows them."""
+    """Every registered class: ``@shares_hyperparameters`` on its ``__init__`` shows them.
+
+    Each is built from its registry entry's ``example_arguments``, as the code that builds
+    every agent does.
+    """
     from delayed_rl.wrappers import RewardDelay
 
+    entry = REGISTRY[name]
     cls = agent_class(name)
     grid = gym.make("delayed_rl/GridWorld-3x3-v0")
-    env = RewardDelay(grid, 1, record_arrivals=True) if REGISTRY[name].needs_arrivals else grid
+    env = RewardDelay(grid, 1, record_arrivals=True) if entry.needs_arrivals else grid
     shown = inspect.signature(cls).parameters
-    for name, default in {**asdict(DEFAULTS), "seed": None, "verbose": 0}.items():
-        assert shown[name].default == default, name
+    for parameter, default in {**asdict(DEFAULTS), "seed": None, "verbose": 0}.items():
+        assert shown[parameter].default == default, parameter
     base = inspect.signature(TabularAgent.__init__).parameters
-    assert {name: base[name].default for name in HYPERPARAMETER_NAMES} == {
-        name: shown[name].default for name in HYPERPARAMETER_NAMES
+    assert {parameter: base[parameter].default for parameter in HYPERPARAMETER_NAMES} == {
+        parameter: shown[parameter].default for parameter in HYPERPARAMETER_NAMES
     }
-    agent = cls(env, gamma=0.5, q_init=2.0, **_own_arguments(cls))
+    agent = cls(env, gamma=0.5, q_init=2.0, **entry.example_arguments)
     assert agent.gamma == 0.5 and agent.q_init == 2.0
     with pytest.raises(TypeError, match="unexpected keyword argument 'gammma'"):
-        cls(env, gammma=0.5, **_own_arguments(cls))
-
-
-def _own_arguments(cls):
-    """The arguments a class needs beyond the env (a new agent that needs some adds them here)."""
-    needed = {"FixedDelayQLearning": {"delay_estimate": 1}, "ExpectedCreditQLearning": {"delay": 2}}
-    return needed.get(cls.__name__, {})
+        cls(env, gammma=0.5, **entry.example_arguments)
 
 
 def test_module_docstrings_are_docs_not_manuals():

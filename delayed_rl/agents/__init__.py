@@ -1,11 +1,10 @@
 """Tabular agents with a stable-baselines3-like API (``learn``, ``predict``, ``save``/``load``).
 
-- :class:`QLearning` and :class:`FixedDelayQLearning` (a constant delay ``k``);
-- :class:`MultipleModelQLearning`: the thesis's agent, over parallel delay hypotheses;
-- :class:`ExpectedCreditQLearning`: each reward spread over the past by a known delay's pmf;
-- :class:`OracleQLearning`: each reward credited to its own transition (the upper bound);
-- :class:`DeconvolutionQLearning`: Q-learning on deconvolved mean rewards, delay known or learned;
-- :func:`load_agent`, and ``ProportionalController`` (thesis Eqs. 5.8–5.9, imported on first use).
+Every agent of :data:`~delayed_rl.agents.registry.REGISTRY` is exported here by its class name
+(``delayed-rl list`` prints them; the docs' agents page says which to use when), e.g.
+:class:`MultipleModelQLearning`, the thesis's agent, over parallel delay hypotheses, and
+:class:`DeconvolutionQLearning`, Q-learning on deconvolved mean rewards. Also
+:func:`load_agent`, and ``ProportionalController`` (thesis Eqs. 5.8–5.9, imported on first use).
 
 All share :class:`~delayed_rl.agents.common.base.TabularAgent`; the rules are written plainly in
 :mod:`delayed_rl.agents.reference` and stated on the docs' agents page (``docs/agents.md``).

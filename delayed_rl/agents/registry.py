@@ -10,9 +10,18 @@ entry here, as Gymnasium registers an env by its entry point.
 from __future__ import annotations
 
 import importlib
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
 
-__all__ = ["CLASS_NAMES", "ARRIVAL_AGENTS", "REGISTRY", "AgentEntry", "agent_class"]
+__all__ = [
+    "CLASS_NAMES",
+    "ARRIVAL_AGENTS",
+    "REGISTRY",
+    "AgentEntry",
+    "agent_class",
+    "registry_table",
+]
 
 
 @dataclass(frozen=True)
@@ -29,6 +38,10 @@ class AgentEntry:
             the same name (``max_delay_estimate`` from ``--max-delay-estimate``; ``None``:
             ``train`` does not take this agent).
         train_required: those of ``train_options`` that ``train`` must be given.
+        example_arguments: constructor arguments, beyond the env, for a small working instance:
+            a value for each argument the class needs (``{"delay_estimate": 2}``). The code
+            that builds every agent in turn (the seeded runs, the tests of every agent, the
+            model-file corpus) passes them.
     """
 
     entry_point: str
@@ -36,6 +49,7 @@ class AgentEntry:
     needs_arrivals: bool = False
     train_options: tuple[str, ...] | None = None
     train_required: tuple[str, ...] = ()
+    example_arguments: Mapping[str, Any] = field(default_factory=dict)
 
     @property
     def class_name(self) -> str:
@@ -51,6 +65,7 @@ REGISTRY: dict[str, AgentEntry] = {
         "Q-learning assuming a constant delay",
         train_options=("delay_estimate",),
         train_required=("delay_estimate",),
+        example_arguments={"delay_estimate": 2},
     ),
     "mmq": AgentEntry(
         "delayed_rl.agents.mmq:MultipleModelQLearning",
@@ -70,6 +85,7 @@ REGISTRY: dict[str, AgentEntry] = {
     "expected-credit": AgentEntry(
         "delayed_rl.agents.expected_credit:ExpectedCreditQLearning",
         "Q-learning crediting each reward over the past by a known delay's pmf",
+        example_arguments={"delay": 2},
     ),
 }
 #: Each agent's class name, by its short name.
@@ -86,3 +102,28 @@ def agent_class(name: str) -> type:
     """
     module, _, class_name = REGISTRY[name].entry_point.partition(":")
     return getattr(importlib.import_module(module), class_name)
+
+
+def registry_table() -> str:
+    """The registry as a Markdown table, as the docs' agents page shows it.
+
+    One row per agent: its short name, its class, what it is, and what ``delayed-rl train``
+    takes for it (the options it sets, or that ``train`` does not take it). The library's
+    ``pprint_registry``, as Gymnasium's is for envs.
+
+    >>> print(registry_table().splitlines()[2])
+    | `q` | `QLearning` | Q-learning | `--agent q` |
+    """
+    rows = ["| name | class | what it is | `delayed-rl train` |", "|---|---|---|---|"]
+    for name, entry in REGISTRY.items():
+        if entry.train_options is None:
+            train = "not taken (sweeps and Python)"
+        else:
+            options = [
+                f"`--{option.replace('_', '-')}`"
+                + (" (required)" if option in entry.train_required else "")
+                for option in entry.train_options
+            ]
+            train = ", ".join([f"`--agent {name}`", *options])
+        rows.append(f"| `{name}` | `{entry.class_name}` | {entry.description} | {train} |")
+    return "\n".join(rows) + "\n"

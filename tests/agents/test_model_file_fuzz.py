@@ -30,16 +30,14 @@ from support import examples
 import delayed_rl  # noqa: F401  (registers the env ids)
 from delayed_rl.agents import (
     DeconvolutionQLearning,
-    ExpectedCreditQLearning,
-    FixedDelayQLearning,
     MultipleModelQLearning,
-    OracleQLearning,
     QLearning,
     load_agent,
 )
 from delayed_rl.agents.common import save_util
 from delayed_rl.agents.common.q_table import MAX_TABLE_BYTES
 from delayed_rl.agents.deconvolution import regression as regression_module
+from delayed_rl.agents.registry import REGISTRY, agent_class
 from delayed_rl.delays import Poisson
 from delayed_rl.envs.gridworld import GridWorldEnv
 from delayed_rl.wrappers import RewardDelay
@@ -646,11 +644,7 @@ class Kind:
     hashed: bool = False  # DeconvQ's statistics in the hashed layout
 
 
-KINDS = {
-    "QLearning": Kind(lambda e: QLearning(e, q_init=5.0, seed=0), _grid_env),
-    "FixedDelayQLearning": Kind(
-        lambda e: FixedDelayQLearning(e, delay_estimate=2, q_init=5.0, seed=0), _grid_env
-    ),
+SPECIAL_KINDS = {
     "MMQ with options": Kind(
         lambda e: MultipleModelQLearning(
             e,
@@ -663,10 +657,6 @@ KINDS = {
         ),
         _grid_env,
     ),
-    "ExpectedCreditQLearning": Kind(
-        lambda e: ExpectedCreditQLearning(e, delay=2, q_init=5.0, seed=0), _grid_env
-    ),
-    "OracleQLearning": Kind(lambda e: OracleQLearning(e, q_init=5.0, seed=0), _oracle_env),
     "DeconvQ known delay": Kind(
         lambda e: DeconvolutionQLearning(
             e, delay=Poisson(2.0), max_delay_estimate=6, q_init=5.0, seed=0
@@ -683,13 +673,29 @@ KINDS = {
         hashed=True,
     ),
 }
+"""Kinds with what a registered agent's example leaves off: MMQ's options, DeconvQ's layouts."""
+
+
+def _registered_kind(name: str) -> Kind:
+    """A registered agent built from its registry entry's ``example_arguments``, on the grid."""
+    entry = REGISTRY[name]
+    return Kind(
+        lambda e: agent_class(name)(e, **entry.example_arguments, q_init=5.0, seed=0),
+        _oracle_env if entry.needs_arrivals else _grid_env,
+    )
+
+
+KINDS = {
+    **{entry.class_name: _registered_kind(name) for name, entry in REGISTRY.items()},
+    **SPECIAL_KINDS,
+}
+"""The corpus's kinds: every registered agent as its entry builds it, and the special kinds."""
 
 
 def test_the_corpus_has_a_file_of_every_registered_agent():
-    from delayed_rl.agents.registry import CLASS_NAMES
-
-    built = {type(kind.make(kind.env())).__name__ for kind in KINDS.values()}
-    assert set(CLASS_NAMES.values()) <= built, set(CLASS_NAMES.values()) - built
+    for name, entry in REGISTRY.items():
+        kind = KINDS[entry.class_name]
+        assert type(kind.make(kind.env())) is agent_class(name), name
 
 
 TRAINED = 900

@@ -106,30 +106,22 @@ def test_the_options_train_requires_are_options_it_takes():
         assert set(entry.train_required) <= set(entry.train_options or ()), key
 
 
-def _passage(path: str, start: str, stop: str) -> str:
-    """The text of ``path`` (from the repository's root) from ``start`` to the next ``stop``."""
-    text = (ROOT / path).read_text(encoding="utf-8")
-    begin = text.index(start)
-    return text[begin : text.index(stop, begin + len(start))]
+def test_the_docs_table_of_agents_is_the_registry():
+    """The agents page includes :func:`registry_table`: a row per entry, in the registry's order."""
+    from delayed_rl.agents.registry import registry_table
 
-
-def test_the_hand_written_lists_of_agents_name_every_agent():
-    """The prose that lists agents (for readers, in words) names each one the registry holds."""
-    train = _passage("README.md", "`train` takes", "; `evaluate`")
-    for key in TRAIN_AGENTS:
-        assert f"`{key}`" in train or f"`--agent {key}`" in train, ("README.md", key)
-    sweeps = _passage("docs/sweeps.md", "``name`` (required)", "``kwargs``")
-    for key, entry in REGISTRY.items():
-        assert f"``{key}``" in sweeps and entry.class_name in sweeps, ("docs/sweeps.md", key)
-    names = _passage("docs/agents.md", "Each agent has one short name", "and its class's")
-    for key in REGISTRY:
-        assert f"`{key}`" in names, ("docs/agents.md", key)
-    for entry in REGISTRY.values():
-        assert f":class:`{entry.class_name}`" in agents.__doc__, ("delayed_rl.agents", entry)
-    algorithms = _passage("ARCHITECTURE.md", "**The algorithms**", "\n- ")
-    for entry in REGISTRY.values():
-        module = entry.entry_point.partition(":")[0].split(".")[-1]
-        assert f"`{module}.py`" in algorithms or f"`{module}/`" in algorithms, module
+    rows = registry_table().splitlines()[2:]
+    assert len(rows) == len(REGISTRY)
+    for row, (key, entry) in zip(rows, REGISTRY.items(), strict=True):
+        cells = [cell.strip() for cell in row.strip("|").split("|")]
+        assert cells[:3] == [f"`{key}`", f"`{entry.class_name}`", entry.description], row
+        assert (f"`--agent {key}`" in cells[3]) == (key in TRAIN_AGENTS), row
+        for option in entry.train_options or ():
+            flag = f"`--{option.replace('_', '-')}`"
+            required = option in entry.train_required
+            assert flag + (" (required)" if required else "") in cells[3], (row, option)
+    agents_page = (ROOT / "docs" / "agents.md").read_text(encoding="utf-8")
+    assert "```{include} _generated/agent_registry.md" in agents_page
 
 
 def test_a_rule_over_several_delay_estimates_acts_as_mmq_does(defined_classes):

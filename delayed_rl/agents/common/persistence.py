@@ -255,8 +255,11 @@ def _check_headers(
     expected["acting_counts"] = (None, np.dtype(np.int64), "a 1-D int64 array")
     for name, (shape, dtype, wanted) in expected.items():
         header = model.headers.get(name)
-        if header is None:
-            raise ValueError(f"{model.where}: {name} must be {wanted}, got missing")
+        if header is None:  # which arrays a file needs follows from its class and settings
+            raise ValueError(
+                f"{model.where}: {name} must be {wanted} (as the file's class and "
+                "hyper-parameters call for it), got missing"
+            )
         fits = shape == header.shape if shape is not None else len(header.shape) == 1
         if name in dict(_STREAMS).values():
             fits = fits and header.shape[0] <= block
