@@ -11,20 +11,30 @@ import numpy as np
 import pytest
 
 import delayed_rl  # noqa: F401  (registers the env ids)
-from delayed_rl.agents import FixedDelayQLearning, MultipleModelQLearning, QLearning
+from delayed_rl.agents import MultipleModelQLearning, QLearning
 from delayed_rl.agents.common.q_table import greedy_actions
+from delayed_rl.agents.registry import REGISTRY, agent_class
+from delayed_rl.wrappers import RewardDelay
 
 GRID5 = "delayed_rl/GridWorld-5x5-v0"
 STATES = np.arange(25)
 
 
 def make(cls=QLearning, **options):
-    env = gym.make(GRID5, reward_delay=2)
+    """A ``cls`` on the 5×5 grid under a delay of 2 steps, built as its registry entry says."""
+    name = next(name for name, entry in REGISTRY.items() if entry.class_name == cls.__name__)
+    entry = REGISTRY[name]
+    if entry.needs_arrivals:
+        env = RewardDelay(gym.make(GRID5), 2, record_arrivals=True)
+    else:
+        env = gym.make(GRID5, reward_delay=2)
     if cls is MultipleModelQLearning:
         options.setdefault("max_delay_estimate", 4)
-    if cls is FixedDelayQLearning:
-        options.setdefault("delay_estimate", 2)
-    return cls(env, q_init=5.0, seed=0, **options)
+    return cls(env, q_init=5.0, seed=0, **{**entry.example_arguments, **options})
+
+
+#: Every registered agent class, for the tests that hold for each.
+CLASSES = [agent_class(name) for name in REGISTRY]
 
 
 def pickled(agent):
@@ -49,7 +59,7 @@ def assert_predicts_from_its_own_table(agent):
     )
 
 
-@pytest.mark.parametrize("cls", [QLearning, FixedDelayQLearning, MultipleModelQLearning])
+@pytest.mark.parametrize("cls", CLASSES, ids=lambda cls: cls.__name__)
 @pytest.mark.parametrize("duplicate", [copy.deepcopy, pickled], ids=["deepcopy", "pickle"])
 @pytest.mark.parametrize("compiled", [False, None], ids=["python", "default"])
 def test_a_copy_learns_into_the_table_it_predicts_from(cls, duplicate, compiled):
@@ -62,7 +72,7 @@ def test_a_copy_learns_into_the_table_it_predicts_from(cls, duplicate, compiled)
     assert_predicts_from_its_own_table(original)
 
 
-@pytest.mark.parametrize("cls", [QLearning, MultipleModelQLearning])
+@pytest.mark.parametrize("cls", CLASSES, ids=lambda cls: cls.__name__)
 @pytest.mark.parametrize("duplicate", [copy.deepcopy, pickled], ids=["deepcopy", "pickle"])
 @pytest.mark.parametrize("compiled", [False, None], ids=["python", "default"])
 @pytest.mark.parametrize("restart", [False, True], ids=["continue", "restart"])
@@ -76,7 +86,8 @@ def test_a_copy_continues_exactly_as_the_original(cls, duplicate, compiled, rest
     twin = duplicate(original)
     for agent in (original, twin):
         agent.learn(2_000, compiled=compiled, reset_num_timesteps=restart)
-        agent.update(3, 1, 1.0, 4)  # and the transitions a user drives, from the same state
+        # and the transitions a user drives, from the same state (nothing arrives with them)
+        agent.update(3, 1, 1.0, 4, info={"reward_arrivals": []})
     np.testing.assert_array_equal(twin.q_table, original.q_table)
     assert twin.num_timesteps == original.num_timesteps
     np.testing.assert_array_equal(twin.acting_delay_share, original.acting_delay_share)

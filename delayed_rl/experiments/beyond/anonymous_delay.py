@@ -226,7 +226,7 @@ def summarize(task_list: list[SettingTask], results: list[dict], config: Config)
             "delay_tolerance": DELAY_TOLERANCE,
             "stable_share": STABLE_SHARE,
             "snapshots": SNAPSHOTS,
-            "lambda_max": LAMBDA_MAX,
+            "max_delay_estimate": LAMBDA_MAX,
         },
     }
     figures = setting_figures(groups, settings, estimators=("DeconvQ learned", "MMQ"))

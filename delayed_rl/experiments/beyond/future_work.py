@@ -212,7 +212,7 @@ def summarize(task_list: list[SettingTask], results: list[dict], config: Config)
             "seed_share": setting_summaries.SEED_SHARE,
             "stable_share": setting_summaries.STABLE_SHARE,
             "snapshots": snapshot_runs.SNAPSHOTS,
-            "lambda_max": delay_settings.LAMBDA_MAX,
+            "max_delay_estimate": delay_settings.LAMBDA_MAX,
         },
     }
     estimators = tuple(name for name in VARIANTS if name not in GREEDY_ONLY)

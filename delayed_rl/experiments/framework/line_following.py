@@ -38,7 +38,7 @@ REAL_ENV_ID = "delayed_rl/EPuckLineFollowReal-v0"
 SETTINGS = {"clean": ENV_ID, "real": REAL_ENV_ID}
 #: The track of every line-following run.
 TRACK = "racetrack"
-#: The Poisson mean λ of the reward delay, and MMQ's largest delay estimate λ̂max.
+#: The Poisson mean λ of the reward delay, and the learners' λ̂max (their ``max_delay_estimate``).
 LAM, LAMBDA_MAX = 90, 150
 #: The line-less steps after which the robot is put back on the track.
 LOST_LINE_STEPS = 50

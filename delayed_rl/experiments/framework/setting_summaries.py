@@ -27,7 +27,11 @@ from delayed_rl.experiments.framework.delay_estimates import ESTIMATE_LABELS
 from delayed_rl.experiments.framework.delay_settings import LAMBDA_MAX, SettingTask, make_delay
 from delayed_rl.experiments.framework.experiment import Claim, Curve
 from delayed_rl.experiments.framework.results import curve_groups
-from delayed_rl.experiments.framework.snapshot_runs import LOOP_FRACTION, optimal_average
+from delayed_rl.experiments.framework.snapshot_runs import (
+    LOOP_FRACTION,
+    optimal_average,
+    snapshot_curves,
+)
 
 #: The claims' rules: a share of seeds optimal, and the share of second-half snapshots that are.
 SEED_SHARE, STABLE_SHARE = 0.95, 0.90
@@ -147,20 +151,11 @@ def stability_claim(setting: str, agent: str, runs: Mapping[int, dict], thesis: 
 
 def curves_of(task_list: Sequence[SettingTask], results: list[dict]) -> list[Curve]:
     """The learning curves and the snapshot optimality of every run, for ``curves.csv``."""
-    curves = []
-    for task, result in zip(task_list, results, strict=True):
-        condition = f"{task.setting} | {task.agent}"
-        curves.append(Curve(condition, task.seed, result["steps"], result["curve"]))
-        curves.append(
-            Curve(
-                condition,
-                task.seed,
-                result["snapshot_steps"],
-                result["snapshot_optimal"].astype(np.float64),
-                "greedy_optimal",
-            )
-        )
-    return curves
+    return [
+        curve
+        for task, result in zip(task_list, results, strict=True)
+        for curve in snapshot_curves(f"{task.setting} | {task.agent}", task.seed, result)
+    ]
 
 
 def slug(setting: str) -> str:

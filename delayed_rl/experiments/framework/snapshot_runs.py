@@ -20,7 +20,7 @@ import numpy as np
 from delayed_rl._validation import check_bool, check_int
 from delayed_rl.agents.common.q_table import greedy_actions
 from delayed_rl.experiments.framework.delay_estimates import delay_estimate
-from delayed_rl.experiments.framework.experiment import running_average
+from delayed_rl.experiments.framework.experiment import Curve, running_average
 from delayed_rl.experiments.framework.training import grid_env
 
 LOOP_FRACTION = 0.95
@@ -202,6 +202,25 @@ def measure(agent: Any, steps: int, size: int) -> dict[str, Any]:
                 run["snapshot_steps"], snapshots, steps
             )
     return out
+
+
+def snapshot_curves(condition: str, seed: int, result: dict[str, Any]) -> list[Curve]:
+    """A run's two curves for ``curves.csv``: its average reward, and its snapshots' optimality.
+
+    ``result`` is :func:`measure`'s (``steps``, ``curve``, ``snapshot_steps``,
+    ``snapshot_optimal``); the second curve's metric is ``greedy_optimal`` (1.0 where the
+    snapshot's greedy policy walks the optimal loop).
+    """
+    return [
+        Curve(condition, seed, result["steps"], result["curve"]),
+        Curve(
+            condition,
+            seed,
+            result["snapshot_steps"],
+            np.asarray(result["snapshot_optimal"]).astype(np.float64),
+            "greedy_optimal",
+        ),
+    ]
 
 
 def current_readout(result: dict[str, Any]) -> dict[str, Any]:

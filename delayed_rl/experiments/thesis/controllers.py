@@ -225,7 +225,7 @@ def summarize(task_list: list[ControllerTask], results: list[dict], config: Conf
     extra = {
         "train_steps": task_list[0].train_steps,
         "run_steps": run_steps,
-        "lambda_max": LAMBDA_MAX,
+        "max_delay_estimate": LAMBDA_MAX,
         **line_statistics(runs),
     }
     return Summary(claims, curves, figures, extra)

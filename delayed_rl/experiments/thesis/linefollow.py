@@ -98,7 +98,7 @@ def summarize(task_list: list[LineTask], results: list[dict], config: Config) ->
             "epsilon": EPSILON,
             "q_init": Q_INIT,
             "lambda": LAM,
-            "lambda_max": LAMBDA_MAX,
+            "max_delay_estimate": LAMBDA_MAX,
             "track": TRACK,
             "lost_line": "recover",
         },

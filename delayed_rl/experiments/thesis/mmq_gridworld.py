@@ -31,7 +31,6 @@ from delayed_rl.experiments.framework.claims import (
 from delayed_rl.experiments.framework.experiment import (
     Claim,
     Config,
-    Curve,
     Experiment,
     Summary,
     running_average,
@@ -44,6 +43,7 @@ from delayed_rl.experiments.framework.snapshot_runs import (
     WALK_STEPS,
     optimal_average,
     second_half_share,
+    snapshot_curves,
     train_with_snapshots,
 )
 from delayed_rl.experiments.framework.task import Task
@@ -54,7 +54,7 @@ from delayed_rl.experiments.framework.training import (
     thesis_hyperparameters,
 )
 
-#: The grid world's side, the Poisson mean delay λ and MMQ's largest delay estimate λ̂max.
+#: The grid world's side, the Poisson mean delay λ and MMQ's λ̂max (its ``max_delay_estimate``).
 SIZE, LAM, LAMBDA_MAX = 9, 13, 50
 #: The steps of a run, and of a quick run.
 STEPS, QUICK_STEPS = 1_000_000, 100_000
@@ -227,19 +227,11 @@ def summarize(task_list: list[MMQGridTask], results: list[dict], config: Config)
         for agent, runs in pivot(task_list, results, by=("agent",)).items()
     }
     training = pivot(task_list, results, by=("agent",), value="average")
-    curves = []
-    for task, result in zip(task_list, results, strict=True):
-        agent, seed = task.agent, task.seed
-        curves.append(Curve(agent, seed, result["steps"], result["curve"]))
-        curves.append(
-            Curve(
-                agent,
-                seed,
-                result["snapshot_steps"],
-                result["snapshot_optimal"].astype(np.float64),
-                "greedy_optimal",
-            )
-        )
+    curves = [
+        curve
+        for task, result in zip(task_list, results, strict=True)
+        for curve in snapshot_curves(task.agent, task.seed, result)
+    ]
     keys = ("average", "greedy", "second_half_optimal")
     stat = {
         agent: {key: mean_ci_n([r[key] for r in runs]) for key in keys}

@@ -344,7 +344,7 @@ def _protocol(task_list: list[RealRobotTask]) -> dict[str, Any]:
         "pretrain_steps": task_list[0].pretrain_steps,
         "run_steps": task_list[0].steps,
         "lambda": LAM,
-        "lambda_max": LAMBDA_MAX,
+        "max_delay_estimate": LAMBDA_MAX,
         "real_env": REAL_ENV_ID,
         "real_config": _real_config(),
     }

@@ -17,7 +17,7 @@ from delayed_rl.experiments.framework.task import Task
 from delayed_rl.experiments.framework.training import ALPHA, GAMMA
 
 EVEN, THIRTEEN = 0, 1
-#: The worked example's MMQ: its optimistic initial value and largest delay estimate λ̂max
+#: The worked example's MMQ: its optimistic initial value and λ̂max (its ``max_delay_estimate``)
 #: (α and γ are the thesis's, :mod:`~delayed_rl.experiments.framework.training`).
 Q_INIT, LAMBDA_MAX = 50.0, 2
 ROUNDING = 0.005
