@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -43,7 +44,9 @@ def test_geometric_and_bimodal_delays_are_what_the_docstring_says():
     bimodal = settings.make_delay("bimodal", 8)
     np.testing.assert_allclose(bimodal.pmf([0, 1, 8, 15, 16, 17]), [0.5, 0, 0, 0, 0.5, 0])
     assert settings.setting_label(9, "bimodal", 13) == "9×9 bimodal {0, 26}"
-    assert summaries.slug(settings.setting_label(7, "geometric", 8)) == "7x7_geometric"
+    task = settings.setting_tasks(Config(quick=True, seeds=1), ["Q"])[0]
+    assert summaries.slug(task) == f"{settings.QUICK_SIZE}x{settings.QUICK_SIZE}_poisson"
+    assert summaries.slug(dataclasses.replace(task, size=7, delay="geometric")) == "7x7_geometric"
 
 
 def _loop_policy(size: int) -> np.ndarray:

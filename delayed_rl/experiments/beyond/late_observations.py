@@ -204,6 +204,18 @@ def shared_run(task: LateTask) -> SharedRun:
     return SharedRun(controller_score if task.method == "p-delayed" else train_and_score, run)
 
 
+TARGETS = {
+    "pendulum-small": "seed share",
+    "pendulum-large": "over augmented",
+    "pendulum-large-50k": "over augmented",
+    "epuck": "over P",
+}
+"""Each setting's target (:func:`summarize` states them): ``seed share``, the learners' gain at
+least :data:`GAIN_TARGET` on a :data:`SEED_SHARE` of the seeds; ``over augmented``, each
+learner's gain above augmented SAC's and the :data:`MOONSHOT`; ``over P``, the best learner's
+score above the P-controller's on delayed observations."""
+
+
 def _at_least(seeds: int) -> int:
     """How many of ``seeds`` the small setting's target needs: a :data:`SEED_SHARE` of them."""
     return math.ceil(SEED_SHARE * seeds)
@@ -211,9 +223,9 @@ def _at_least(seeds: int) -> int:
 
 def _setting_claims(setting: str, gains: dict, scores: dict) -> list[rules.Claim]:
     """The target claims of ``setting`` (see :func:`summarize`)."""
-    at = step_count(LONG_STEPS if setting.endswith("-50k") else STEPS)
+    at = step_count(SETTINGS[setting]["steps"])
     learners = [method for method in LEARNERS if method in gains]
-    if setting.startswith("pendulum-small"):
+    if TARGETS[setting] == "seed share":
         return [
             rules.seed_rule_claim(
                 f"{setting}: {LABELS[learner]}, seeds with gain ≥ {GAIN_TARGET}",
@@ -225,7 +237,7 @@ def _setting_claims(setting: str, gains: dict, scores: dict) -> list[rules.Claim
             )
             for learner in learners
         ]
-    if setting.startswith("pendulum-large"):
+    if TARGETS[setting] == "over augmented":
         return [
             claim
             for learner in learners
@@ -245,7 +257,7 @@ def _setting_claims(setting: str, gains: dict, scores: dict) -> list[rules.Claim
                 ),
             )
         ]
-    if setting == "epuck":
+    if TARGETS[setting] == "over P":
         best = max(
             (method for method in METHODS[1:] if method in scores),
             key=lambda method: rules.mean_ci_n(list(scores[method].values()))[0],
@@ -254,7 +266,7 @@ def _setting_claims(setting: str, gains: dict, scores: dict) -> list[rules.Claim
             rules.direction_claim(
                 f"{setting}: best learner ({LABELS[best]}) − P-controller on delayed "
                 "observations, score",
-                f"target: above 0 (paired by seed) at {step_count(STEPS)} steps",
+                f"target: above 0 (paired by seed) at {at} steps",
                 rules.mean_ci_n(rules.paired(scores[best], scores["p-delayed"])),
                 "above",
             )

@@ -158,10 +158,9 @@ def curves_of(task_list: Sequence[SettingTask], results: list[dict]) -> list[Cur
     ]
 
 
-def slug(setting: str) -> str:
-    """A file-name form of a setting's label: ``"7×7 Poisson(8)"`` → ``"7x7_poisson"``."""
-    size, kind = setting.split(" ", 1)
-    return f"{size.replace('×', 'x')}_{kind.split('(')[0].split(' ')[0].lower()}"
+def slug(task: SettingTask) -> str:
+    """A file-name form of a task's setting, from its world and delay kind: ``"7x7_poisson"``."""
+    return f"{task.size}x{task.size}_{task.delay.lower()}"
 
 
 def setting_figures(
@@ -182,7 +181,7 @@ def setting_figures(
     figures = {}
     for setting, by_agent in groups.items():
         task0 = settings[setting]
-        size, name = task0.size, slug(setting)
+        size, name = task0.size, slug(task0)
         optimum = (optimal_average(size), f"optimal loop ({optimal_average(size):.3f})")
         drawn = {a: runs for a, runs in by_agent.items() if a not in same_curves}
         left_out = [a for a in same_curves if a in by_agent]

@@ -30,8 +30,9 @@ SNAPSHOTS = 50
 """Greedy snapshots a run takes: one every ``max(1, steps // SNAPSHOTS)`` steps."""
 WALK_STEPS = 1000
 """Steps of a greedy walk (:func:`walk_average`), from the start cell of the undelayed grid."""
-AVERAGED = "window_"
-"""The prefix of :func:`measure`'s readouts of the averaged table (MMQ's ``greedy_window``)."""
+AVERAGED = "averaged"
+"""The entry of :func:`measure`'s result holding the averaged table's readouts (MMQ's
+``greedy_window``), under the names the current table's have."""
 WARM_UP = 2000
 """Steps of the untimed warm-up run before each timed one (:func:`warm_up`): past DeconvQ's
 first solve, so every kernel of the run is loaded."""
@@ -118,16 +119,17 @@ def train_with_snapshots(
         the ``learn`` calls), ``snapshot_steps``, ``snapshot_optimal`` (bool) and
         ``snapshot_greedy`` (the walk's average) per snapshot, ``path`` (``learn``'s last), and
         ``obs`` with ``keep_obs``. An agent with a ``greedy_window`` has its averaged table's
-        snapshots too, as ``window_snapshot_optimal`` and ``window_snapshot_greedy``.
+        snapshots too, ``snapshot_optimal`` and ``snapshot_greedy`` in the entry
+        :data:`AVERAGED`.
     """
     steps = check_int("steps", steps, 1)
     interval = max(1, steps // SNAPSHOTS)
-    readouts = {"": False}
+    tables = [False]  # whether the readout is of the averaged table
     if getattr(agent, "greedy_window", None) is not None:
-        readouts[AVERAGED] = True
+        tables.append(True)
     rewards, observations, marks = [], [], []
-    optimal: dict[str, list[bool]] = {prefix: [] for prefix in readouts}
-    greedy: dict[str, list[float]] = {prefix: [] for prefix in readouts}
+    optimal: dict[bool, list[bool]] = {averaged: [] for averaged in tables}
+    greedy: dict[bool, list[float]] = {averaged: [] for averaged in tables}
     seconds, done = 0.0, 0
     while done < steps:
         piece = min(interval, steps - done)
@@ -139,19 +141,22 @@ def train_with_snapshots(
         if keep_obs:
             observations.append(agent.training_log["obs"])
         marks.append(done)
-        for prefix, averaged in readouts.items():
+        for averaged in tables:
             average = walk_average(greedy_policy(agent, averaged), size)
-            greedy[prefix].append(average)
-            optimal[prefix].append(average >= LOOP_FRACTION * optimal_average(size))
+            greedy[averaged].append(average)
+            optimal[averaged].append(average >= LOOP_FRACTION * optimal_average(size))
     out: dict[str, Any] = {
         "rewards": np.concatenate(rewards),
         "learn_seconds": seconds,
         "snapshot_steps": np.asarray(marks, dtype=np.int64),
         "path": agent.last_learn_path,
     }
-    for prefix in readouts:
-        out[f"{prefix}snapshot_optimal"] = np.asarray(optimal[prefix], dtype=bool)
-        out[f"{prefix}snapshot_greedy"] = np.asarray(greedy[prefix])
+    for averaged in tables:
+        snapshots = {
+            "snapshot_optimal": np.asarray(optimal[averaged], dtype=bool),
+            "snapshot_greedy": np.asarray(greedy[averaged]),
+        }
+        out.update({AVERAGED: snapshots} if averaged else snapshots)
     if keep_obs:
         out["obs"] = np.concatenate(observations)
     return out
@@ -179,7 +184,7 @@ def measure(agent: Any, steps: int, size: int) -> dict[str, Any]:
         arrays of :func:`train_with_snapshots`, ``second_half_optimal`` (the share of snapshots
         after half the steps that are optimal), ``ns_per_step``, ``path``, and the
         :func:`delay_estimate`. With a ``greedy_window``, the averaged table's readouts too:
-        ``greedy``, ``optimal``, ``second_half_optimal`` and the snapshot arrays prefixed
+        ``greedy``, ``optimal``, ``second_half_optimal`` and the snapshot arrays, in the entry
         :data:`AVERAGED` (:func:`averaged_readout` puts them in place of the others).
     """
     run = train_with_snapshots(agent, steps, size)
@@ -193,15 +198,19 @@ def measure(agent: Any, steps: int, size: int) -> dict[str, Any]:
         **run,
         **delay_estimate(agent),
     }
-    for prefix in ("", AVERAGED):
-        if f"{prefix}snapshot_optimal" in run:
-            snapshots = run[f"{prefix}snapshot_optimal"]
-            out[f"{prefix}greedy"] = float(run[f"{prefix}snapshot_greedy"][-1])
-            out[f"{prefix}optimal"] = bool(snapshots[-1])
-            out[f"{prefix}second_half_optimal"] = second_half_share(
-                run["snapshot_steps"], snapshots, steps
-            )
+    out.update(_readouts(run, run["snapshot_steps"], steps))
+    if AVERAGED in run:
+        out[AVERAGED] = {**run[AVERAGED], **_readouts(run[AVERAGED], run["snapshot_steps"], steps)}
     return out
+
+
+def _readouts(snapshots: dict[str, Any], marks: np.ndarray, steps: int) -> dict[str, Any]:
+    """A table's final ``greedy`` and ``optimal`` and its ``second_half_optimal`` share."""
+    return {
+        "greedy": float(snapshots["snapshot_greedy"][-1]),
+        "optimal": bool(snapshots["snapshot_optimal"][-1]),
+        "second_half_optimal": second_half_share(marks, snapshots["snapshot_optimal"], steps),
+    }
 
 
 def snapshot_curves(condition: str, seed: int, result: dict[str, Any]) -> list[Curve]:
@@ -225,7 +234,7 @@ def snapshot_curves(condition: str, seed: int, result: dict[str, Any]) -> list[C
 
 def current_readout(result: dict[str, Any]) -> dict[str, Any]:
     """A :func:`measure` result with the readouts of the current table only (as MMQ acts)."""
-    return {key: value for key, value in result.items() if not key.startswith(AVERAGED)}
+    return {key: value for key, value in result.items() if key != AVERAGED}
 
 
 def averaged_readout(result: dict[str, Any]) -> dict[str, Any]:
@@ -234,10 +243,9 @@ def averaged_readout(result: dict[str, Any]) -> dict[str, Any]:
     Raises:
         ValueError: the run kept no averaged table.
     """
-    averaged = {k[len(AVERAGED) :]: v for k, v in result.items() if k.startswith(AVERAGED)}
-    if not averaged:
+    if AVERAGED not in result:
         raise ValueError("the run kept no averaged table (an MMQ run without greedy_window)")
-    return {**current_readout(result), **averaged}
+    return {**current_readout(result), **result[AVERAGED]}
 
 
 _WARMED: set[str] = set()

@@ -45,6 +45,9 @@ TRAIN_STEPS, QUICK_TRAIN_STEPS = 300_000, 2_000
 K_P = 6
 #: Thesis Fig. 5.19's final average rewards, in the thesis's order of performance.
 THESIS = {"P undelayed": 0.9, "MMQ": 0.6, "Q": 0.3, "P delayed observations": -0.6}
+#: The proportional controllers among them, by whether their observations are delayed (the
+#: others are learners).
+PROPORTIONAL = {"P undelayed": False, "P delayed observations": True}
 #: The band of each controller's final average reward: the thesis's value ± this.
 TOLERANCE = 0.2
 
@@ -64,10 +67,14 @@ class ControllerTask(Task):
     train_steps: int
     run_steps: int
 
+    @property
+    def learner(self) -> bool:
+        """Whether the contestant learns (else it is one of the :data:`PROPORTIONAL`)."""
+        return self.controller not in PROPORTIONAL
+
     def cost(self) -> float:
         """The run's estimated core-seconds, for scheduling: a learner's training and its run."""
-        learner = not self.controller.startswith("P ")
-        steps = self.run_steps + (self.train_steps if learner else 0)
+        steps = self.run_steps + (self.train_steps if self.learner else 0)
         return training_cost(self.controller, steps)
 
 
@@ -132,10 +139,10 @@ def run_task(task: ControllerTask) -> dict:
         final value), ``total_error`` (Σ|Δ| over the run) and ``visible`` (the fraction of
         steps whose camera saw the line).
     """
-    name, seed, steps = task.controller, task.seed, task.run_steps
-    if not name.startswith("P "):
+    if task.learner:
         return shared_run(task).alone()
-    rewards, centroids = _run_proportional(name != "P undelayed", steps, seed)
+    delayed = PROPORTIONAL[task.controller]
+    rewards, centroids = _run_proportional(delayed, task.run_steps, task.seed)
     return _metrics({"undelayed_reward": rewards, "obs": centroids})
 
 
@@ -147,7 +154,7 @@ def shared_run(task: ControllerTask) -> SharedRun | None:
     learner and seed and whose training ``real-robot`` continues); the P controllers' runs are
     their own (``None``).
     """
-    if task.controller.startswith("P "):
+    if not task.learner:
         return None
     continuation = ["continue", task.train_steps, "clean", task.run_steps]
     return pooled_training(task.controller, task.seed, [continuation], _continuation_metrics)
