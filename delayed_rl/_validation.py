@@ -25,6 +25,7 @@ import numpy as np
 
 __all__ = [
     "Limit",
+    "RealLimit",
     "check_bool",
     "check_choice",
     "check_fraction",
@@ -323,6 +324,35 @@ class Limit(int):
         return (Limit, (int(self), self.name, self.home, self.shown))
 
 
+class RealLimit(float):
+    """A real bound the library states as a named constant: :class:`Limit`'s twin for floats.
+
+    ``RealLimit(2.0**200, "MAX_ABS_VALUE", "delayed_rl.agents.common.hyperparameters",
+    "2**200")`` is the float ``2.0**200``, whose ``text`` is ``"MAX_ABS_VALUE = 2**200
+    (delayed_rl.agents.common.hyperparameters)"``.
+
+    Args:
+        value: the bound.
+        name: the constant's name.
+        home: the module that defines it.
+        shown: how the message writes the value.
+
+    Attributes:
+        name, home, shown: the arguments.
+        text: ``"NAME = shown (home)"``.
+    """
+
+    def __new__(cls, value: float, name: str, home: str, shown: str) -> RealLimit:
+        """A new bound (see the class docstring)."""
+        limit = super().__new__(cls, value)
+        limit.name, limit.home, limit.shown = name, home, shown
+        limit.text = f"{name} = {shown} ({home})"
+        return limit
+
+    def __reduce__(self) -> tuple:
+        return (RealLimit, (float(self), self.name, self.home, self.shown))
+
+
 def check_limit(name: str, value: Any, limit: int | float, limit_name: str | None = None) -> Any:
     """Return ``value`` after checking that it is at most ``limit`` (a checked number, or None).
 
@@ -332,8 +362,9 @@ def check_limit(name: str, value: Any, limit: int | float, limit_name: str | Non
     Args:
         name: the argument's name, for the message.
         value: its value (``None`` passes).
-        limit: the largest value allowed: a :class:`Limit`, or a number named by ``limit_name``.
-        limit_name: how the message names ``limit`` (``None``: a :class:`Limit`'s ``text``).
+        limit: the largest value allowed: a :class:`Limit` or :class:`RealLimit`, or a number
+            named by ``limit_name``.
+        limit_name: how the message names ``limit`` (``None``: the limit's ``text``).
 
     Raises:
         ValueError: ``value`` is above ``limit``.

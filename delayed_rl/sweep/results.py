@@ -171,7 +171,7 @@ def _number(row: Mapping[str, str], column: str) -> float:
     value = float(text) if len(text) <= 40 and _NUMBER.fullmatch(text) else math.nan
     if not abs(value) <= MAX_ABS_VALUE:
         raise ValueError(
-            f"{column} must be a decimal number of magnitude at most MAX_ABS_VALUE = 2**200, "
+            f"{column} must be a decimal number of magnitude at most {MAX_ABS_VALUE.text}, "
             f"got {text[:40]!r}"
         )
     return value

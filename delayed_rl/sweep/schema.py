@@ -49,12 +49,10 @@ MAX_EVAL_EPISODES = Limit(10**6, "MAX_EVAL_EPISODES", __name__, "10**6")
 MAX_SWEEP_SEED_VALUE = Limit(2**32 - 1, "MAX_SWEEP_SEED_VALUE", __name__, "2**32 - 1")
 """The largest seed: what every agent accepts (stable-baselines3 seeds numpy's legacy generator,
 which takes 32 bits)."""
-MAX_LABEL_CHARS = 1000
+MAX_LABEL_CHARS = Limit(1000, "MAX_LABEL_CHARS", __name__, "1000")
 """The longest name, label or env id in a sweep file (they are written in every row)."""
-MAX_RUNS = 100_000
+MAX_RUNS = Limit(100_000, "MAX_RUNS", __name__)
 """The most runs (agents × envs × delays × seeds) in one sweep."""
-
-_HERE = "delayed_rl.sweep.schema"
 
 _TOP_KEYS = ("name", "agents", "envs", "delays", "seeds", "steps", "eval_episodes", "eval_steps")
 _AGENT_KEYS = ("name", "label", "kwargs", "reward_model", "steps", "envs")
@@ -205,7 +203,7 @@ def parse_sweep(data: Any, name: str = "sweep", source: str = "sweep") -> Sweep:
     if runs > MAX_RUNS:
         raise ValueError(
             f"the sweep has {runs:,} runs ({pairs} (agent, env) pairs × {len(delays)} delays × "
-            f"{len(seeds)} seeds), more than MAX_RUNS = {MAX_RUNS:,} ({_HERE}): split it"
+            f"{len(seeds)} seeds), more than {MAX_RUNS.text}: split it"
         )
     return Sweep(
         name=_text("name", data.get("name", name)),
@@ -273,7 +271,7 @@ def _text(where: str, value: Any) -> str:
         raise ValueError(f"{where} must be a non-empty string, got {value!r}")
     if len(value) > MAX_LABEL_CHARS:
         raise ValueError(
-            f"{where} must be at most MAX_LABEL_CHARS = {MAX_LABEL_CHARS} characters ({_HERE}), got "
+            f"{where}'s length must be at most {MAX_LABEL_CHARS.text}, got "
             f"{len(value):,}: {value[:40]!r}..."
         )
     try:

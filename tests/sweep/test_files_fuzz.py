@@ -420,19 +420,19 @@ def set_cell(lines: list[str], line: int, column: str, value: str) -> list[str]:
             2,
             "eval_reward",
             "nan",
-            r"line 2: eval_reward must be a decimal number of magnitude at most MAX_ABS_VALUE = 2\*\*200, got 'nan'",
+            r"line 2: eval_reward must be a decimal number of magnitude at most MAX_ABS_VALUE = 2\*\*200 \(delayed_rl\.agents\.common\.hyperparameters\), got 'nan'",
         ),
         (
             3,
             "train_reward",
             "inf",
-            r"line 3: train_reward must be a decimal number of magnitude at most MAX_ABS_VALUE = 2\*\*200",
+            r"line 3: train_reward must be a decimal number of magnitude at most MAX_ABS_VALUE = 2\*\*200 \(delayed_rl\.agents\.common\.hyperparameters\)",
         ),
         (
             4,
             "eval_reward",
             "abc",
-            r"line 4: eval_reward must be a decimal number of magnitude at most MAX_ABS_VALUE = 2\*\*200, got 'abc'",
+            r"line 4: eval_reward must be a decimal number of magnitude at most MAX_ABS_VALUE = 2\*\*200 \(delayed_rl\.agents\.common\.hyperparameters\), got 'abc'",
         ),
         (2, "wall_s", "-1", r"line 2: wall_s must be a number >= 0"),
         (3, "seed", "-1", r"line 3: seed must be an integer in \[0, 4294967295\], got '-1'"),
@@ -585,12 +585,13 @@ def test_yaml_types_that_are_not_json_are_refused_naming_the_field(tmp_path, tag
         (
             {"name": "x" * 1001},
             ValueError,
-            r"^name must be at most MAX_LABEL_CHARS = 1000 characters",
+            r"^name's length must be at most MAX_LABEL_CHARS = 1000 \(delayed_rl\.sweep\.schema\), "
+            r"got 1,001",
         ),
         (
             {"envs": [{"id": GRID, "label": "y" * 900_000, "eval_steps": 20}]},
             ValueError,
-            r"^envs\[0\]\.label must be at most MAX_LABEL_CHARS",
+            r"^envs\[0\]\.label's length must be at most MAX_LABEL_CHARS",
         ),
         ({"name": "\ud800"}, ValueError, r"^name must be text UTF-8 can write"),
         ({"agents": [{"name": "q", "label": "a\udfffb"}]}, ValueError, r"agents\[0\]\.label"),

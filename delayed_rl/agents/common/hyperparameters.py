@@ -9,6 +9,7 @@ from typing import Any, TypeVar
 
 from delayed_rl._validation import (
     Limit,
+    RealLimit,
     check_fraction,
     check_int,
     check_limit,
@@ -56,7 +57,7 @@ class AgentDefaults:
 DEFAULTS = AgentDefaults()
 """The defaults the agents' constructors use."""
 
-MAX_ABS_VALUE = 2.0**200
+MAX_ABS_VALUE = RealLimit(2.0**200, "MAX_ABS_VALUE", __name__, "2**200")
 """The largest magnitude of a value the agents are given to learn from (about 1.6e60).
 
 It bounds ``q_init``, every entry of a Q-table, averaged table or reward model a model file
@@ -84,9 +85,6 @@ MAX_SEED_VALUE = Limit(2**63 - 1, "MAX_SEED_VALUE", __name__, "2**63 - 1")
 """The largest ``seed`` value (the int64 range, which numpy arrays and the sweeps' tables hold)."""
 
 
-_MAX_ABS_VALUE = "MAX_ABS_VALUE = 2**200 (delayed_rl.agents.common.hyperparameters.MAX_ABS_VALUE)"
-
-
 def check_value(name: str, value: Any) -> float:
     """Return ``value`` as a float after checking that it is a number within ±MAX_ABS_VALUE.
 
@@ -96,7 +94,7 @@ def check_value(name: str, value: Any) -> float:
     """
     number = check_real(name, value)
     if abs(number) > MAX_ABS_VALUE:
-        raise ValueError(f"{name} must be within ±{_MAX_ABS_VALUE}, got {value!r}")
+        raise ValueError(f"{name} must be within ±{MAX_ABS_VALUE.text}, got {value!r}")
     return number
 
 

@@ -27,7 +27,7 @@ __all__ = ["QAgent", "check_delay_estimates", "shown"]
 
 VALUE_RANGE = (-MAX_ABS_VALUE, MAX_ABS_VALUE)
 """The range of a model file's Q-values (see ``MAX_ABS_VALUE``)."""
-VALUE_NOTE = " (|value| <= MAX_ABS_VALUE = 2**200, delayed_rl.agents.common.hyperparameters)"
+VALUE_NOTE = f" (|value| <= {MAX_ABS_VALUE.text})"
 """How a message about a model file's Q-values states the range."""
 
 

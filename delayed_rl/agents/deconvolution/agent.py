@@ -16,7 +16,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from delayed_rl._validation import check_choice, check_int, check_real
+from delayed_rl._validation import Limit, check_choice, check_int, check_real
 from delayed_rl.agents.common.compiled_loop import CompiledTables
 from delayed_rl.agents.common.delay_estimate import (
     DEFAULT_MAX_DELAY_ESTIMATE,
@@ -48,13 +48,15 @@ __all__ = [
     "DeconvolutionQLearning",
 ]
 
-MAX_DELAY_ITERATIONS = 100
+MAX_DELAY_ITERATIONS = Limit(100, "MAX_DELAY_ITERATIONS", "delayed_rl.agents.deconvolution", "100")
 """The most ``delay_iterations`` (alternations of the ``R`` and ``p`` solves at each solve).
 
 Each is a least-squares solve for ``R`` and 300 projected-gradient steps for ``p``; the default
 is 2.
 """
-MAX_SOLVE_INTERVAL = MAX_TIMESTEPS
+MAX_SOLVE_INTERVAL = Limit(
+    MAX_TIMESTEPS, "MAX_SOLVE_INTERVAL", "delayed_rl.agents.deconvolution", "2**40"
+)
 """The longest ``solve_interval`` (``MAX_TIMESTEPS`` = 2**40: a longer gap is never reached)."""
 PMF_TOLERANCE = 1e-9
 """How far from 1 a model file's ``delay_pmf`` may sum (its entries finite and >= 0); a known
@@ -62,7 +64,6 @@ delay's must also be within this of the delay's own pmf, entry by entry."""
 _CHUNK = 4096  # compiled steps between two looks at the statistics' room for segment ends
 _HASHED_CHUNK = 256  # the same with hashed statistics: each step may claim K + 1 new rows
 _FIRST_SOLVE = 1_000  # steps before the first solve; the gaps then double to solve_interval
-_HERE = "(delayed_rl.agents.deconvolution)"
 _OWN_NAMES = {  # this class's own constructor arguments, and their defaults
     "delay": None,
     "max_delay_estimate": None,
@@ -180,19 +181,16 @@ class DeconvolutionQLearning(QAgent):
             "solve_interval",
             check_int("solve_interval", solve_interval, 1),
             MAX_SOLVE_INTERVAL,
-            f"MAX_SOLVE_INTERVAL = 2**40 {_HERE}",
         )
         self.ridge = check_limit(
             "ridge",
             check_real("ridge", ridge, 0.0, low_open=True),
             MAX_ABS_VALUE,
-            "MAX_ABS_VALUE = 2**200 (delayed_rl.agents.common.hyperparameters.MAX_ABS_VALUE)",
         )
         self.delay_iterations = check_limit(
             "delay_iterations",
             check_int("delay_iterations", delay_iterations, 1),
             MAX_DELAY_ITERATIONS,
-            f"MAX_DELAY_ITERATIONS = {MAX_DELAY_ITERATIONS} {_HERE}",
         )
         if on_episode_end is not None:
             check_choice("on_episode_end", on_episode_end, EPISODE_END_MODES)
@@ -344,8 +342,8 @@ class DeconvolutionQLearning(QAgent):
         if not within.all():
             worst = float(rewards[int(np.argmin(within))])
             raise ValueError(
-                f"the reward model's solve gave a mean reward of {worst!r}, beyond MAX_ABS_VALUE "
-                f"= 2**200 (delayed_rl.agents.common.hyperparameters): the received rewards "
+                f"the reward model's solve gave a mean reward of {worst!r}, beyond "
+                f"{MAX_ABS_VALUE.text}: the received rewards "
                 f"(mean {regression.mean_reward!r}) are too large for ridge={self.ridge!r}"
             )
         return rewards
@@ -458,7 +456,7 @@ class DeconvolutionQLearning(QAgent):
             np.float64,
             -MAX_ABS_VALUE,
             MAX_ABS_VALUE,
-            note=" (MAX_ABS_VALUE = 2**200, delayed_rl.agents.common.hyperparameters)",
+            note=f" ({MAX_ABS_VALUE.text})",
         )
         pmf = _check_pmf(arrays.get("delay_pmf"), k1, self._known_pmf)
         since, after = (

@@ -987,7 +987,7 @@ def _check_reward_sums(arrays: dict[str, np.ndarray], steps: int, prefix: str) -
         if not np.all(np.isfinite(sums)) or np.any(np.abs(sums) > bound):
             raise ValueError(
                 f"{prefix}{name} must hold finite reward sums within the step count times "
-                f"MAX_ABS_VALUE = 2**200 (delayed_rl.agents.common.hyperparameters.MAX_ABS_VALUE)"
+                f"{MAX_ABS_VALUE.text}"
             )
     if np.any(arrays["end_rewards"][~arrays["end_flushed"]]):
         raise ValueError(f"{prefix}end_rewards: only a flushed end holds a reward")
