@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import tracemalloc
 from typing import TYPE_CHECKING
 
@@ -49,6 +50,21 @@ class ScriptedDelay(Delay):
     @property
     def mean(self):
         return self._mean
+
+
+ALPHA = 1e-3
+"""The statistical tests' significance level: a correct sampler fails a check with this
+probability (the seeds are fixed, so the outcome is deterministic)."""
+N_SE = 4.0
+"""How many standard errors a sample mean or count may be from its expectation."""
+POISSON_MEANS = [0.5, 5, 13.7, 90, 150]
+"""The Poisson means the samplers are checked at: small, the thesis's, and its line follower's."""
+
+
+def assert_mean_close(draws: np.ndarray, mean: float, var: float) -> None:
+    """``draws``' mean is within :data:`N_SE` standard errors of ``mean`` (variance ``var``)."""
+    se = math.sqrt(var / draws.size) if var > 0 else 0.0
+    assert abs(draws.mean() - mean) <= N_SE * se + 1e-12, (draws.mean(), mean, se)
 
 
 def binned_chisquare(draws: np.ndarray, pmf) -> float:
@@ -268,3 +284,22 @@ def torch_on_one_thread():
     torch.set_num_threads(1)
     yield
     torch.set_num_threads(threads)
+
+
+class Echo(gym.Env):
+    """Records the actions it executes; never ends an episode by itself (or after ``length``)."""
+
+    def __init__(self, n=50, length=None):
+        self.action_space = gym.spaces.Discrete(n)
+        self.observation_space = gym.spaces.Discrete(1)
+        self.length, self.executed = length, []
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.t = 0
+        return 0, {}
+
+    def step(self, action):
+        self.executed.append(int(action))
+        self.t += 1
+        return 0, 0.0, False, self.length is not None and self.t >= self.length, {}

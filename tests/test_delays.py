@@ -1,24 +1,22 @@
 """Delay distributions: interface, validation and goodness of fit of the sampled delays.
 
-Poisson delays by table look-up (the alias table, the Poisson table, and the streams using it,
-the compiled run's among them) are checked the same way.
+Poisson delays by table look-up (the alias table and the Poisson table) are checked the same
+way; the streams the wrappers and the compiled run draw from them, in
+``tests/wrappers/test_delay_draws.py`` and ``tests/compiled/test_randomness.py``.
 
-Statistical tests use fixed seeds and a significance level of ``ALPHA = 1e-3``: a correct sampler
-fails a given check with probability 1e-3, and since the seeds are fixed the outcome is
-deterministic. Chi-square bins are merged until every expected count is at least 5 (the usual
-validity condition); means are checked to within 4 standard errors.
+Statistical tests use fixed seeds and a significance level of ``support.ALPHA`` (1e-3): a
+correct sampler fails a given check with probability 1e-3, and since the seeds are fixed the
+outcome is deterministic. Chi-square bins are merged until every expected count is at least 5
+(the usual validity condition); means are checked to within ``support.N_SE`` (4) standard
+errors.
 """
 
 from __future__ import annotations
 
-import math
-
-import gymnasium as gym
 import numpy as np
 import pytest
-from support import NeverEndingEnv, binned_chisquare
+from support import ALPHA, POISSON_MEANS, assert_mean_close, binned_chisquare
 
-from delayed_rl.compiled import CompiledRun
 from delayed_rl.delays import (
     AliasTable,
     Constant,
@@ -29,16 +27,8 @@ from delayed_rl.delays import (
     Uniform,
     as_delay,
 )
-from delayed_rl.wrappers import PoissonRewardDelay, RewardDelay
 
-ALPHA = 1e-3
 N_DRAWS = 20_000
-N_SE = 4.0
-
-
-def assert_mean_close(draws: np.ndarray, mean: float, var: float) -> None:
-    se = math.sqrt(var / draws.size) if var > 0 else 0.0
-    assert abs(draws.mean() - mean) <= N_SE * se + 1e-12, (draws.mean(), mean, se)
 
 
 class SciPyReference:
@@ -57,7 +47,7 @@ class SciPyReference:
 
 
 # (distribution, its scipy frozen distribution on {0, 1, ...} or None)
-LAMS = [0.5, 5, 13.7, 90, 150]
+LAMS = POISSON_MEANS
 CASES = [(Poisson(lam), SciPyReference("poisson", lam)) for lam in LAMS] + [
     (Geometric(0.3), SciPyReference("geom", 0.3, loc=-1)),
     (Geometric(0.05), SciPyReference("geom", 0.05, loc=-1)),
@@ -228,51 +218,6 @@ def test_valid_argument_types_are_normalised() -> None:
     assert Empirical(np.array([1, 0])).probs.tolist() == [1.0, 0.0]
 
 
-# --- the delays the reward wrapper actually applies (the info["drawn_reward_delay"] stream) ---------
-
-
-def delay_stream(env: gym.Env, n: int, seed: int) -> np.ndarray:
-    env.reset(seed=seed)
-    return np.array([env.step(0)[4]["drawn_reward_delay"] for _ in range(n)])
-
-
-@pytest.mark.parametrize("lam", LAMS)
-def test_wrapper_delay_stream_is_poisson(lam: float) -> None:
-    draws = delay_stream(PoissonRewardDelay(NeverEndingEnv(), lam), N_DRAWS, seed=7)
-    assert binned_chisquare(draws, Poisson(lam).pmf) > ALPHA
-    assert_mean_close(draws, lam, lam)
-
-
-@pytest.mark.parametrize(
-    "dist", [Geometric(0.25), Uniform(3, 12), Empirical([0.2, 0.1, 0.0, 0.3, 0.4])], ids=repr
-)
-def test_wrapper_delay_stream_other_distributions(dist: Delay) -> None:
-    draws = delay_stream(RewardDelay(NeverEndingEnv(), dist), N_DRAWS, seed=8)
-    assert binned_chisquare(draws, dist.pmf) > ALPHA
-
-
-@pytest.mark.parametrize(("lam", "clip"), [(13.7, 10), (5, 0), (90, 80)])
-def test_max_delay_puts_the_tail_mass_at_the_clip(lam: float, clip: int) -> None:
-    draws = delay_stream(PoissonRewardDelay(NeverEndingEnv(), lam, max_delay=clip), N_DRAWS, seed=9)
-    assert draws.max() <= clip
-    from scipy import stats
-
-    ref = stats.poisson(lam)
-
-    def clipped_pmf(k):
-        k = np.asarray(k)
-        return np.where(k < clip, ref.pmf(k), np.where(k == clip, ref.sf(clip - 1), 0.0))
-
-    if clip == 0:
-        assert draws.tolist() == [0] * N_DRAWS
-        return
-    assert binned_chisquare(draws, clipped_pmf) > ALPHA
-    # the clip cell alone: binomial count within N_SE standard errors
-    p_clip = ref.sf(clip - 1)
-    count = int((draws == clip).sum())
-    assert abs(count - N_DRAWS * p_clip) <= N_SE * math.sqrt(N_DRAWS * p_clip * (1 - p_clip))
-
-
 # --- delays that fit int64, and JSON descriptions ---------------------------------------------
 
 INT64_MAX = 2**63 - 1
@@ -412,17 +357,3 @@ def test_poisson_scalar_and_shaped_draws():
     rng = np.random.default_rng(2)
     assert isinstance(Poisson(3.0).sample(rng), int)
     assert Poisson(3.0).sample(rng, (4, 5)).shape == (4, 5)
-
-
-@pytest.mark.parametrize("max_delay", [None, 6])
-def test_compiled_run_draws_poisson_delays(max_delay):
-    """The compiled run's delays are Poisson(λ), capped like the wrapper's (the tail at the cap)."""
-    env = RewardDelay(gym.make("delayed_rl/GridWorld-3x3-v0").unwrapped, 9.0, max_delay=max_delay)
-    run = CompiledRun(env, np.array([0]), seed=4)
-    draws = np.concatenate([run._draw_delays(10_000) for _ in range(5)])
-    pmf = Poisson(9.0).pmf(np.arange(60))
-    if max_delay is not None:
-        assert draws.max() == max_delay
-        pmf[max_delay] = 1.0 - pmf[:max_delay].sum()
-        pmf[max_delay + 1 :] = 0.0
-    assert binned_chisquare(draws, lambda k: pmf[k]) > ALPHA

@@ -374,7 +374,8 @@ class DiscreteDelayAwareObservation(JsonSpecMixin, DiscreteObservation):
     states (``D`` the age bound, ``K`` the actions observed; ``m^K`` is the product of the
     actions' sizes for a ``MultiDiscrete``, ``2^(K · entries)`` for a ``MultiBinary``), which
     must be at most :data:`MAX_DISCRETE_STATES` = 2**24. :meth:`decode` maps an index back to the
-    view's ``Dict``.
+    view's ``Dict``. Rewards, ends and ``info`` pass through unchanged (it adds no ``info`` key;
+    the view's own keys are :class:`DelayAwareObservation`'s).
 
     Args:
         env: an env whose observation is a :class:`DelayAwareObservation`'s view.

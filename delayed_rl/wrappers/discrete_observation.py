@@ -44,7 +44,8 @@ class DiscreteObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArg
     parts ``x_i`` of ``Discrete(n_i, start=s_i)``, the index is ``Σ_i (x_i − s_i) · Π_{j > i}
     n_j``, in ``0 .. Π n_i − 1``; :meth:`decode` maps an index back to its parts. An observation
     outside the env's own space (a part missing, of the wrong type or out of its range) raises
-    ``ValueError`` rather than mapping to another state's index.
+    ``ValueError`` rather than mapping to another state's index. Rewards, ends and ``info``
+    pass through unchanged (it adds no ``info`` key).
 
     Args:
         env: an env whose ``observation_space`` is a ``Tuple`` of ``Discrete`` spaces (e.g.

@@ -9,11 +9,14 @@ import gymnasium as gym
 import numba
 import numpy as np
 import pytest
+from support import ALPHA, binned_chisquare
 
 import delayed_rl  # noqa: F401  (registers the ids)
 from delayed_rl.agents import MultipleModelQLearning, QLearning
 from delayed_rl.compiled import CompiledRun
 from delayed_rl.compiled.kernel import generator_state, next_uniform
+from delayed_rl.delays import Poisson
+from delayed_rl.wrappers import RewardDelay
 
 MASK = (1 << 64) - 1
 
@@ -138,3 +141,17 @@ def test_how_learn_splits_a_run_changes_nothing():
         tables.append(agent.q_table.copy())
     for table in tables[1:]:
         np.testing.assert_array_equal(tables[0], table)
+
+
+@pytest.mark.parametrize("max_delay", [None, 6])
+def test_compiled_run_draws_poisson_delays(max_delay):
+    """The compiled run's delays are Poisson(λ), capped like the wrapper's (the tail at the cap)."""
+    env = RewardDelay(gym.make("delayed_rl/GridWorld-3x3-v0").unwrapped, 9.0, max_delay=max_delay)
+    run = CompiledRun(env, np.array([0]), seed=4)
+    draws = np.concatenate([run._draw_delays(10_000) for _ in range(5)])
+    pmf = Poisson(9.0).pmf(np.arange(60))
+    if max_delay is not None:
+        assert draws.max() == max_delay
+        pmf[max_delay] = 1.0 - pmf[:max_delay].sum()
+        pmf[max_delay + 1 :] = 0.0
+    assert binned_chisquare(draws, lambda k: pmf[k]) > ALPHA

@@ -1,35 +1,15 @@
-"""ActionDelay and VectorActionDelay: which action the env executes, step by step."""
+"""ActionDelay: which action the env executes, step by step."""
 
 from __future__ import annotations
 
 import gymnasium as gym
 import numpy as np
 import pytest
-from gymnasium.vector import AutoresetMode
-from support import ScriptedDelay
+from support import Echo, ScriptedDelay
 
 from delayed_rl.delays import Constant, Empirical, Geometric, Poisson, Uniform
-from delayed_rl.wrappers import ActionDelay, VectorActionDelay
+from delayed_rl.wrappers import ActionDelay
 from delayed_rl.wrappers.action_delay import ActionLine, neutral_action
-
-
-class Echo(gym.Env):
-    """Records the actions it executes; never ends an episode by itself (or after ``length``)."""
-
-    def __init__(self, n=50, length=None):
-        self.action_space = gym.spaces.Discrete(n)
-        self.observation_space = gym.spaces.Discrete(1)
-        self.length, self.executed = length, []
-
-    def reset(self, *, seed=None, options=None):
-        super().reset(seed=seed)
-        self.t = 0
-        return 0, {}
-
-    def step(self, action):
-        self.executed.append(int(action))
-        self.t += 1
-        return 0, 0.0, False, self.length is not None and self.t >= self.length, {}
 
 
 def reference(actions, delays, initial):
@@ -141,37 +121,3 @@ def test_box_actions_are_copied_when_sent():
     second = env.step(action)[-1]
     np.testing.assert_array_equal(first["executed_action"], [0.0])
     np.testing.assert_array_equal(second["executed_action"], [1.5])
-
-
-@pytest.mark.parametrize("mode", list(AutoresetMode))
-def test_the_vector_twin_is_one_action_delay_per_sub_env(mode):
-    n, steps, seed = 3, 120, 5
-
-    def make():
-        return ActionDelay(Echo(length=17), Poisson(2.0), initial_action=1)
-
-    vector = gym.vector.SyncVectorEnv(
-        [lambda: Echo(length=17) for _ in range(n)], autoreset_mode=mode
-    )
-    wrapped = VectorActionDelay(vector, Poisson(2.0), initial_action=1)
-    wrapped.reset(seed=seed)
-    rng = np.random.default_rng(0)
-    sent = rng.integers(0, 50, (steps, n))
-    for t in range(steps):
-        *_, terminated, truncated, info = wrapped.step(sent[t])
-        if mode == AutoresetMode.DISABLED and (terminated | truncated).any():
-            wrapped.reset(options={"reset_mask": terminated | truncated})
-    for i, sub in enumerate(vector.envs):
-        single = make()
-        single.reset(seed=seed + i)
-        resets = 0
-        for t in range(steps):
-            if mode == AutoresetMode.NEXT_STEP and single.unwrapped.t == 17:
-                single.reset()  # the vector env's reset step: no action sent
-                resets += 1
-                continue
-            *_, truncated, _ = single.step(int(sent[t, i]))
-            if truncated and mode != AutoresetMode.NEXT_STEP:
-                single.reset()
-        assert sub.executed == single.unwrapped.executed, (mode, i)
-        assert (resets > 0) == (mode == AutoresetMode.NEXT_STEP)

@@ -12,6 +12,7 @@ formatted from; the score is :func:`train_and_score`'s, the claims, fixed before
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import math
 from typing import Any
 
@@ -19,9 +20,10 @@ import gymnasium as gym
 import numpy as np
 
 from delayed_rl._validation import check_choice
-from delayed_rl.agents import DeconvolutionQLearning, QLearning, TabularAgent
+from delayed_rl.agents import TabularAgent
+from delayed_rl.agents.registry import agent_class
 from delayed_rl.delays import Poisson
-from delayed_rl.experiments.framework import plotting
+from delayed_rl.experiments.framework import delay_settings, plotting
 from delayed_rl.experiments.framework.claims import (
     direction_claim,
     mean_ci_n,
@@ -30,6 +32,7 @@ from delayed_rl.experiments.framework.claims import (
     seed_rule_claim,
 )
 from delayed_rl.experiments.framework.delay_estimates import mean_delay_claim
+from delayed_rl.experiments.framework.delay_settings import learner_arguments
 from delayed_rl.experiments.framework.experiment import (
     Claim,
     Config,
@@ -65,7 +68,7 @@ LAMS, QUICK_LAM = (5, 10), 10
 STEPS, QUICK_STEPS = 150_000, 10_000
 CHECKPOINTS = 30
 """Greedy evaluations a run: the learning curve's points, every ``steps // CHECKPOINTS``."""
-LAMBDA_MAX = 50
+LAMBDA_MAX = delay_settings.LAMBDA_MAX
 """The longest delay DeconvQ models (``max_delay_estimate``), as in ``anonymous-delay``."""
 OPTIMAL_FRACTION = 0.95
 """A joint policy is optimal when its score is at least this share of the optimum."""
@@ -154,14 +157,19 @@ def make_game(task: MultiagentGridTask) -> Any:
 
 
 def make_learner(task: MultiagentGridTask, env: gym.Env, seed: int) -> TabularAgent:
-    """One independent learner of ``task.agent``'s kind, on ``env``'s spaces."""
-    hyperparameters = thesis_hyperparameters(seed)
-    if task.agent in ("Q", "Q undelayed"):
-        return QLearning(env, **hyperparameters)
-    known = Poisson(task.lam) if task.agent == "DeconvQ known" else None
-    return DeconvolutionQLearning(
-        env, delay=known, max_delay_estimate=LAMBDA_MAX, on_episode_end="flush", **hyperparameters
-    )
+    """One independent learner of ``task.agent``'s kind, on ``env``'s spaces.
+
+    Built as ``anonymous-delay`` builds the learner of that name
+    (:func:`~.delay_settings.learner_arguments`, the known delay Poisson(λ)); a learner that
+    models the delay is told the episodes' ends flush (the stand-in env has no reward delay to
+    read it from).
+    """
+    delay = None if task.lam is None else Poisson(task.lam)
+    agent, options = learner_arguments(task.agent, delay)
+    cls = agent_class(agent)
+    if "on_episode_end" in inspect.signature(cls).parameters:
+        options["on_episode_end"] = "flush"
+    return cls(env, **options, **thesis_hyperparameters(seed))
 
 
 def greedy_score(learners: dict[Any, TabularAgent], size: int, episode_steps: int) -> float:

@@ -170,6 +170,18 @@ def grid(size: int, delay: Delay | None = None, record_arrivals: bool = False) -
     return gym.make("delayed_rl/GridWorld-v0", size=size, reward_delay=delay)
 
 
+def learner_arguments(name: str, delay: Delay) -> tuple[str, dict[str, Any]]:
+    """One of :data:`LEARNERS` as its registry name and arguments, told ``delay`` if it is told it.
+
+    Raises:
+        TypeError: ``name`` is not a string.
+        ValueError: ``name`` is not one of :data:`LEARNERS`.
+    """
+    check_choice("agent", name, LEARNERS)
+    agent, extra = _LEARNER_AGENTS[name]
+    return agent, {key: delay if value is _TRUE_DELAY else value for key, value in extra.items()}
+
+
 def make_agent(name: str, size: int, delay: Delay, seed: int, steps: int | None = None) -> Any:
     """One of :data:`LEARNERS` on its own ``size`` grid under ``delay``, built from the registry.
 
@@ -187,10 +199,8 @@ def make_agent(name: str, size: int, delay: Delay, seed: int, steps: int | None 
     """
     from delayed_rl.agents.registry import REGISTRY, agent_class
 
-    check_choice("agent", name, LEARNERS)
     steps = check_int("steps", steps, 1, optional=True)
-    agent, extra = _LEARNER_AGENTS[name]
-    options = {key: delay if value is _TRUE_DELAY else value for key, value in extra.items()}
+    agent, options = learner_arguments(name, delay)
     if name == "MMQ":
         options["greedy_window"] = None if steps is None else max(1, steps // WINDOW_DIVISOR)
     if name == "Q undelayed":
