@@ -295,7 +295,28 @@ def check_rewards(name: str, values: Any, count: int) -> np.ndarray:
     return np.array([check_reward(f"{name}[{i}]", v) for i, v in enumerate(values)])
 
 
-class Limit(int):
+class _NamedBound:
+    """What :class:`Limit` and :class:`RealLimit` share: a number that knows its constant's name.
+
+    A subclass also derives from ``int`` or ``float``; it is built by :meth:`_named`.
+    """
+
+    name: str
+    home: str
+    shown: str | None
+    text: str
+
+    def _named(self, name: str, home: str, shown: str | None, default: str) -> Any:
+        self.name, self.home, self.shown = name, home, shown
+        self.text = f"{name} = {default if shown is None else shown} ({home})"
+        return self
+
+    def __reduce__(self) -> tuple:
+        number = int(self) if isinstance(self, int) else float(self)
+        return (type(self), (number, self.name, self.home, self.shown))
+
+
+class Limit(_NamedBound, int):
     """An integer bound the library states as a named constant; messages name it by its ``text``.
 
     ``Limit(2**40, "MAX_TIMESTEPS", "delayed_rl.agents.common.python_loop", "2**40")`` is the
@@ -315,42 +336,22 @@ class Limit(int):
 
     def __new__(cls, value: int, name: str, home: str, shown: str | None = None) -> Limit:
         """A new bound (see the class docstring)."""
-        limit = super().__new__(cls, value)
-        limit.name, limit.home, limit.shown = name, home, shown
-        limit.text = f"{name} = {f'{value:,}' if shown is None else shown} ({home})"
-        return limit
-
-    def __reduce__(self) -> tuple:
-        return (Limit, (int(self), self.name, self.home, self.shown))
+        return super().__new__(cls, value)._named(name, home, shown, f"{value:,}")
 
 
-class RealLimit(float):
+class RealLimit(_NamedBound, float):
     """A real bound the library states as a named constant: :class:`Limit`'s twin for floats.
 
     ``RealLimit(2.0**200, "MAX_ABS_VALUE", "delayed_rl.agents.common.hyperparameters",
     "2**200")`` is the float ``2.0**200``, whose ``text`` is ``"MAX_ABS_VALUE = 2**200
     (delayed_rl.agents.common.hyperparameters)"``.
 
-    Args:
-        value: the bound.
-        name: the constant's name.
-        home: the module that defines it.
-        shown: how the message writes the value.
-
-    Attributes:
-        name, home, shown: the arguments.
-        text: ``"NAME = shown (home)"``.
+    Args and attributes: :class:`Limit`'s (``shown`` ``None``: the float as Python writes it).
     """
 
-    def __new__(cls, value: float, name: str, home: str, shown: str) -> RealLimit:
+    def __new__(cls, value: float, name: str, home: str, shown: str | None = None) -> RealLimit:
         """A new bound (see the class docstring)."""
-        limit = super().__new__(cls, value)
-        limit.name, limit.home, limit.shown = name, home, shown
-        limit.text = f"{name} = {shown} ({home})"
-        return limit
-
-    def __reduce__(self) -> tuple:
-        return (RealLimit, (float(self), self.name, self.home, self.shown))
+        return super().__new__(cls, value)._named(name, home, shown, repr(float(value)))
 
 
 def check_limit(name: str, value: Any, limit: int | float, limit_name: str | None = None) -> Any:
