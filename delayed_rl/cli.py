@@ -35,7 +35,7 @@ from delayed_rl.agents.common.hyperparameters import (
     MAX_SEED_VALUE,
 )
 from delayed_rl.agents.common.python_loop import MAX_TIMESTEPS
-from delayed_rl.agents.registry import REGISTRY
+from delayed_rl.agents.registry import REGISTRY, option_flag
 from delayed_rl.delays import Poisson
 from delayed_rl.envs import env_ids
 from delayed_rl.experiments import DEFAULT_NAMES, LONG_NAMES, NAMES
@@ -149,7 +149,14 @@ def _list(args: argparse.Namespace) -> int:
         print(f"  {env_id}")
     print("Agents (delayed-rl train --agent KEY, or a sweep file's agents[].name):")
     for key, entry in REGISTRY.items():
-        where = "" if key in TRAIN_AGENTS else " (sweeps and Python; not train)"
+        if key in TRAIN_AGENTS:
+            flags = [f"--agent {key}"] + [
+                option_flag(option) + (" required" if option in entry.train_required else "")
+                for option in entry.train_options
+            ]
+            where = f" (train: {', '.join(flags)})"
+        else:
+            where = " (sweeps and Python; not train)"
         print(f"  {key}: {entry.class_name}, {entry.description}{where}")
     print("Experiments (delayed-rl bench NAME):")
     for name in NAMES:
@@ -645,12 +652,11 @@ def _check_agent_options(args: argparse.Namespace) -> None:
     """Refuse an agent option given to an agent that does not take it, or one missing (usage)."""
     for option in REGISTRY[args.agent].train_required:
         if getattr(args, option) is None:
-            args.parser.error(f"--agent {args.agent} needs --{option.replace('_', '-')}")
+            args.parser.error(f"--agent {args.agent} needs {option_flag(option)}")
     for option in sorted({o for key in TRAIN_AGENTS for o in REGISTRY[key].train_options}):
         if getattr(args, option) is not None and option not in REGISTRY[args.agent].train_options:
             args.parser.error(
-                f"--{option.replace('_', '-')} is for --agent {_takers(option)}, "
-                f"not --agent {args.agent}"
+                f"{option_flag(option)} is for --agent {_takers(option)}, not --agent {args.agent}"
             )
 
 

@@ -175,16 +175,17 @@ def epuck_agent_run(compiled: bool, steps: int = 1500) -> str:
 TIMINGS = re.compile(r"ns_per_step|seconds|wall_time")
 
 
-RECORDED_KEYS = {"max_delay_estimate": "lambda_max"}
-"""Summary keys renamed after the fingerprints were recorded, ``{current: recorded}``: a key is
-hashed under its recorded name, so that a rename alone (CHANGELOG.md) changes no fingerprint
-while a changed value still does."""
+RECORDED_KEYS = {"lambda_max": "max_delay_estimate"}
+"""Summary keys renamed after the fingerprints were recorded, ``{recorded: current}`` (as
+``seeded_runs.RECORDED_NAMES``): a key is hashed under its recorded name, so that a rename alone
+(CHANGELOG.md) changes no fingerprint while a changed value still does."""
+_RECORDED_AS = {current: recorded for recorded, current in RECORDED_KEYS.items()}
 
 
 def _without_timings(value):
     if isinstance(value, dict):
         return {
-            RECORDED_KEYS.get(k, k): _without_timings(v)
+            _RECORDED_AS.get(k, k): _without_timings(v)
             for k, v in value.items()
             if not TIMINGS.search(k)
         }

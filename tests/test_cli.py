@@ -209,6 +209,9 @@ def test_list_names_the_envs_agents_and_experiments(capsys):
     out = capsys.readouterr().out
     assert "delayed_rl/GridWorld-9x9-v0" in out and "mmq-gridworld" in out
     assert "  fixed: FixedDelayQLearning" in out
+    assert "(train: --agent fixed, --delay-estimate required)" in out
+    assert "  mmq: MultipleModelQLearning" in out and "--agent mmq, --max-delay-estimate)" in out
+    assert "oracle: OracleQLearning, " in out and "(sweeps and Python; not train)" in out
 
 
 def test_every_command_has_help(capsys):

@@ -12,6 +12,7 @@ from __future__ import annotations
 import importlib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import Any
 
 __all__ = [
@@ -20,6 +21,7 @@ __all__ = [
     "REGISTRY",
     "AgentEntry",
     "agent_class",
+    "option_flag",
     "registry_table",
 ]
 
@@ -49,7 +51,13 @@ class AgentEntry:
     needs_arrivals: bool = False
     train_options: tuple[str, ...] | None = None
     train_required: tuple[str, ...] = ()
-    example_arguments: Mapping[str, Any] = field(default_factory=dict)
+    example_arguments: Mapping[str, Any] = field(default_factory=dict, hash=False)
+
+    def __post_init__(self) -> None:
+        # read-only, as the rest of the entry: the registry is shared by everything that reads it
+        object.__setattr__(
+            self, "example_arguments", MappingProxyType(dict(self.example_arguments))
+        )
 
     @property
     def class_name(self) -> str:
@@ -104,6 +112,15 @@ def agent_class(name: str) -> type:
     return getattr(importlib.import_module(module), class_name)
 
 
+def option_flag(option: str) -> str:
+    """The ``delayed-rl train`` flag that sets constructor argument ``option``.
+
+    >>> option_flag("max_delay_estimate")
+    '--max-delay-estimate'
+    """
+    return "--" + option.replace("_", "-")
+
+
 def registry_table() -> str:
     """The registry as a Markdown table, as the docs' agents page shows it.
 
@@ -120,7 +137,7 @@ def registry_table() -> str:
             train = "not taken (sweeps and Python)"
         else:
             options = [
-                f"`--{option.replace('_', '-')}`"
+                f"`{option_flag(option)}`"
                 + (" (required)" if option in entry.train_required else "")
                 for option in entry.train_options
             ]

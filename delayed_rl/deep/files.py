@@ -98,7 +98,7 @@ def _member(archive: zipfile.ZipFile, name: str, path: Path) -> bytes | None:
     except KeyError:
         return None
     if info.file_size > MAX_MEMBER_BYTES:
-        raise ValueError(f"{path}: {name} is {info.file_size} bytes, over MAX_MEMBER_BYTES = 2**34")
+        raise ValueError(f"{path}: {name} is {info.file_size} bytes, over {MAX_MEMBER_BYTES.text}")
     return archive.read(name)
 
 

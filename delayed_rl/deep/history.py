@@ -10,12 +10,12 @@ from typing import Any
 
 import numpy as np
 
-from delayed_rl._validation import check_int
+from delayed_rl._validation import Limit, check_int
 from delayed_rl.deep.encoding import SpaceEncoding
 
 __all__ = ["MAX_HISTORY_BYTES", "TransitionHistory"]
 
-MAX_HISTORY_BYTES = 2**34
+MAX_HISTORY_BYTES = Limit(2**34, "MAX_HISTORY_BYTES", __name__, "2**34")
 """The most memory a history's arrays may take (16 GiB): a larger ``capacity`` is refused."""
 
 
@@ -71,7 +71,7 @@ class TransitionHistory:
         per_step = n_envs * (obs_bytes + actions.value_bytes + 8 + 1 + 1 + 8)
         if per_step * self.capacity > MAX_HISTORY_BYTES:
             raise ValueError(
-                f"capacity must keep the history within MAX_HISTORY_BYTES = 2**34 bytes, got "
+                f"capacity must keep the history's size at most {MAX_HISTORY_BYTES.text}, got "
                 f"{capacity} steps of {n_envs} sub-envs at {per_step // n_envs} bytes a "
                 "transition"
             )

@@ -21,7 +21,7 @@ from typing import Any, ClassVar
 import numpy as np
 import torch
 
-from delayed_rl._validation import check_int, check_real
+from delayed_rl._validation import Limit, check_int, check_real
 from delayed_rl._version import __version__
 from delayed_rl.deep.encoding import SpaceEncoding
 from delayed_rl.deep.history import TransitionHistory
@@ -32,7 +32,7 @@ __all__ = ["DIAGNOSTIC_PAIRS", "FORMAT", "RewardModel"]
 FORMAT = "delayed-rl reward model 3"
 """The ``format`` a reward model file declares."""
 
-MAX_MEMBER_BYTES = 2**34
+MAX_MEMBER_BYTES = Limit(2**34, "MAX_MEMBER_BYTES", __name__, "2**34")
 """The largest member of a reward model file that is read."""
 
 DIAGNOSTIC_PAIRS = 4096

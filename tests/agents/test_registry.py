@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.metadata
 import importlib.util
+import inspect
 import sys
 from pathlib import Path
 
@@ -120,6 +121,8 @@ def test_the_docs_table_of_agents_is_the_registry():
             flag = f"`--{option.replace('_', '-')}`"
             required = option in entry.train_required
             assert flag + (" (required)" if required else "") in cells[3], (row, option)
+    fixed = "| `fixed` | `FixedDelayQLearning` | Q-learning assuming a constant delay | `--agent fixed`, "
+    assert fixed + "`--delay-estimate` (required) |" in rows  # the whole row, as the page shows it
     agents_page = (ROOT / "docs" / "agents.md").read_text(encoding="utf-8")
     assert "```{include} _generated/agent_registry.md" in agents_page
 
@@ -188,3 +191,18 @@ def test_the_check_reports_a_stored_run_that_no_longer_runs(tmp_path, monkeypatc
     monkeypatch.setattr(sys, "argv", ["seeded_runs.py", "--check"])
     assert seeded.main() == 1
     assert "missing: a/x/compiled" in capsys.readouterr().out
+
+
+def test_each_entry_gives_a_value_for_every_argument_its_class_needs():
+    """``example_arguments`` builds the class: no argument without a default is left out."""
+    variadic = (inspect.Parameter.VAR_POSITIONAL, inspect.Parameter.VAR_KEYWORD)
+    for name, entry in REGISTRY.items():
+        parameters = inspect.signature(agent_class(name)).parameters
+        needed = {
+            parameter
+            for parameter, spec in parameters.items()
+            if parameter != "env"
+            and spec.default is inspect.Parameter.empty
+            and spec.kind not in variadic
+        }
+        assert needed <= set(entry.example_arguments) <= set(parameters), name

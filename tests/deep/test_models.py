@@ -1046,7 +1046,10 @@ def test_bad_arguments_are_refused_by_name(kwargs, error, match):
 
 def test_a_history_beyond_the_memory_limit_is_refused_at_the_first_step():
     model = make(capacity=2**40)  # the history is made when the first step fixes n_envs
-    with pytest.raises(ValueError, match="capacity must keep the history within MAX_HISTORY_BYTES"):
+    with pytest.raises(
+        ValueError,
+        match=r"capacity must keep the history's size at most MAX_HISTORY_BYTES = 2\*\*34 \(",
+    ):
         model.add([0], [0], [0.0], [False])
     assert model.history is None
 

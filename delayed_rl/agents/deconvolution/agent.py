@@ -48,15 +48,13 @@ __all__ = [
     "DeconvolutionQLearning",
 ]
 
-MAX_DELAY_ITERATIONS = Limit(100, "MAX_DELAY_ITERATIONS", "delayed_rl.agents.deconvolution", "100")
+MAX_DELAY_ITERATIONS = Limit(100, "MAX_DELAY_ITERATIONS", __name__, "100")
 """The most ``delay_iterations`` (alternations of the ``R`` and ``p`` solves at each solve).
 
 Each is a least-squares solve for ``R`` and 300 projected-gradient steps for ``p``; the default
 is 2.
 """
-MAX_SOLVE_INTERVAL = Limit(
-    MAX_TIMESTEPS, "MAX_SOLVE_INTERVAL", "delayed_rl.agents.deconvolution", "2**40"
-)
+MAX_SOLVE_INTERVAL = Limit(MAX_TIMESTEPS, "MAX_SOLVE_INTERVAL", __name__, MAX_TIMESTEPS.shown)
 """The longest ``solve_interval`` (``MAX_TIMESTEPS`` = 2**40: a longer gap is never reached)."""
 PMF_TOLERANCE = 1e-9
 """How far from 1 a model file's ``delay_pmf`` may sum (its entries finite and >= 0); a known

@@ -132,7 +132,7 @@ def _setting_claims(
         fields: the setting's fields (:func:`~.setting_summaries.setting_fields`).
     """
     claims = []
-    poisson = "Poisson" in setting
+    poisson = fields.delay == "Poisson"
     mmq_thesis = (
         "near-optimal greedy policy (Figs. 5.9, Table 5.1: 9×9, Poisson(13))"
         if poisson

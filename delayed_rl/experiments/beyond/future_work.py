@@ -133,15 +133,18 @@ def run_task(task: SettingTask) -> dict:
 
 
 def _setting_claims(
-    setting: str, by_variant: dict[str, dict[int, dict]], averages: dict[str, dict[int, float]]
+    fields: SettingTask,
+    by_variant: dict[str, dict[int, dict]],
+    averages: dict[str, dict[int, float]],
 ) -> list[Claim]:
     """Per variant: optimal seeds, second-half stability and (variants) reward against the thesis.
 
     Args:
-        setting: the setting's label.
+        fields: the setting's fields (:func:`~.setting_summaries.setting_fields`).
         by_variant: its results, ``{variant: {seed: result}}``.
         averages: their training rewards, ``{variant: {seed: average}}``.
     """
+    setting = fields.setting
     claims = []
     thesis = by_variant.get(THESIS)
     for variant, runs in by_variant.items():
@@ -152,7 +155,7 @@ def _setting_claims(
                 variant,
                 runs,
                 "near-optimal greedy policy (Fig. 5.9)"
-                if is_thesis and "Poisson" in setting
+                if is_thesis and fields.delay == "Poisson"
                 else "future work: ≥ 95 % of seeds",
             )
         )
@@ -199,7 +202,7 @@ def summarize(task_list: list[SettingTask], results: list[dict], config: Config)
     claims = [
         claim
         for setting, runs in groups.items()
-        for claim in _setting_claims(setting, runs, averages[setting])
+        for claim in _setting_claims(settings[setting], runs, averages[setting])
     ]
     extra = {
         "table": setting_summaries.result_table(groups, settings),

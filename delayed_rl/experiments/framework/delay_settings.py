@@ -170,16 +170,20 @@ def grid(size: int, delay: Delay | None = None, record_arrivals: bool = False) -
     return gym.make("delayed_rl/GridWorld-v0", size=size, reward_delay=delay)
 
 
-def learner_arguments(name: str, delay: Delay) -> tuple[str, dict[str, Any]]:
-    """One of :data:`LEARNERS` as its registry name and arguments, told ``delay`` if it is told it.
+def learner_arguments(agent: str, delay: Delay) -> tuple[str, dict[str, Any]]:
+    """The learner ``agent`` (one of :data:`LEARNERS`): its registry name and its arguments.
+
+    A learner told the true delay (``expected credit``, ``DeconvQ known``) is told ``delay``.
 
     Raises:
-        TypeError: ``name`` is not a string.
-        ValueError: ``name`` is not one of :data:`LEARNERS`.
+        TypeError: ``agent`` is not a string.
+        ValueError: ``agent`` is not one of :data:`LEARNERS`.
     """
-    check_choice("agent", name, LEARNERS)
-    agent, extra = _LEARNER_AGENTS[name]
-    return agent, {key: delay if value is _TRUE_DELAY else value for key, value in extra.items()}
+    check_choice("agent", agent, LEARNERS)
+    registered, extra = _LEARNER_AGENTS[agent]
+    return registered, {
+        key: delay if value is _TRUE_DELAY else value for key, value in extra.items()
+    }
 
 
 def make_agent(name: str, size: int, delay: Delay, seed: int, steps: int | None = None) -> Any:

@@ -187,7 +187,7 @@ def setting_figures(
         left_out = [a for a in same_curves if a in by_agent]
         suffix = f"\n({', '.join(left_out)}: the same curve as the thesis rule)" if left_out else ""
         thesis = ""  # the thesis's Poisson statement, in words (Fig. 5.9 gives no value here)
-        if "Poisson" in setting:
+        if task0.delay == "Poisson":
             above = ", above Q" if "Q" in by_agent else ""
             thesis = f"\nthesis (Poisson, Fig. 5.9): MMQ near-optimal{above}"
         snaps = curve_groups(by_agent, "snapshot_steps", "snapshot_optimal")
