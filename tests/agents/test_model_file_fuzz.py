@@ -34,7 +34,7 @@ from delayed_rl.agents import (
     QLearning,
     load_agent,
 )
-from delayed_rl.agents.common import save_util
+from delayed_rl.agents.common import persistence, save_util
 from delayed_rl.agents.common.q_table import MAX_TABLE_BYTES
 from delayed_rl.agents.deconvolution import regression as regression_module
 from delayed_rl.agents.registry import REGISTRY, agent_class
@@ -457,17 +457,7 @@ METADATA.append(
 MISSING: list[Case] = [
     (f"no {field}", lambda b, f=field: changed(b, {f: DROP}), "")
     for field in (
-        "class",
-        "hyperparameters",
-        "observation_space",
-        "action_space",
-        "num_timesteps",
-        "progress_remaining",
-        "exploration_rate",
-        "rng_state",
-        "predict_rng_state",
-        "format",
-        "format_version",
+        *sorted(persistence._METADATA_KEYS - {"library_version"}),  # all but the optional one
         "hyperparameters.gamma",
         "hyperparameters.learning_rate",
         "hyperparameters.delay_estimates",
