@@ -214,15 +214,14 @@ def test_each_discrete_action_drives_its_table_5_2_wheel_speeds(action):
 
 
 def test_table_5_2():
-    assert WHEEL_SPEED_ACTIONS == (
-        (0, 300),
-        (100, 300),
-        (200, 300),
-        (300, 300),
-        (300, 200),
-        (300, 100),
-        (300, 0),
-    )
+    """Thesis Table 5.2: each action's wheel speeds in steps/s, from hard left to hard right.
+
+    Action ``i`` (thesis ``i + 1``) of 0..6 drives the wheels at ``(min(300, 100 i),
+    min(300, 100 (6 − i)))``; action 3 goes straight.
+    """
+    table = tuple((min(300, 100 * i), min(300, 100 * (6 - i))) for i in range(7))
+    assert table == WHEEL_SPEED_ACTIONS
+    assert table[0] == (0, 300) and table[3] == (300, 300) and table[6] == (300, 0)
 
 
 def test_full_speed_is_e_puck_300_steps_per_second():
