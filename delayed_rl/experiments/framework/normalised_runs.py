@@ -187,10 +187,7 @@ class NormalisedRuns:
 
     def means(self) -> dict:
         """``{key: (mean, 95 % CI, n)}`` of the normalised average reward over the seeds."""
-        return {
-            key: mean_ci_n([run["average"] for run in runs.values()])
-            for key, runs in self.groups().items()
-        }
+        return {key: mean_ci_n(list(runs.values())) for key, runs in self.averages().items()}
 
     def curve_groups(self) -> dict:
         """``{key: [(steps, normalised curve), ...]}``: the groups a learning-curve figure draws."""

@@ -61,6 +61,8 @@ THESIS_RUNS = {"run 1": {"MMQ": 0.2, "Q": -0.2}, "run 2": {"MMQ": 0.2, "Q": -0.3
 THESIS_REAL = {"MMQ": 0.2, "Q": -0.25}
 #: Thesis Fig. 5.19: pretrained agents' average reward over 1,700 steps in simulation.
 THESIS_SIM = {"MMQ": 0.6, "Q": 0.3}
+#: The average-reward targets by condition: the robot runs' mean, and the simulation's.
+THESIS_REWARDS = {"real": THESIS_REAL, "control": THESIS_SIM}
 #: Thesis section 5.3: Q's accumulated error over MMQ's in run 1 and run 2.
 THESIS_ERROR_RATIOS = {"run 1": 1.7, "run 2": 1.55}
 #: The error-ratio claim's band: the thesis's range [1.55, 1.7] widened by this on each side.
@@ -215,7 +217,7 @@ def _reward_claims(runs: dict, condition: str, where: str, thesis: dict) -> list
     The targets are :data:`THESIS_REAL` on the real robot and :data:`THESIS_SIM` in the control,
     ± :data:`~.line_claims.REWARD_TOLERANCE`; ``thesis`` gives each agent's thesis statement.
     """
-    targets = THESIS_REAL if condition == "real" else THESIS_SIM
+    targets = THESIS_REWARDS[condition]
     return [
         rules.band_claim(
             f"{agent} average reward{where}",
@@ -380,7 +382,7 @@ def _figures(runs: dict, seeds: list[int]) -> dict:
                 for a in LEARNERS
             }
             if metric == "reward":
-                values = THESIS_REAL if condition == "real" else THESIS_SIM
+                values = THESIS_REWARDS[condition]
                 source = "runs 1–2 mean" if condition == "real" else "Fig. 5.19, simulation"
                 lines = [(a, values[a], f"thesis {a} ≈ {values[a]:+g} ({source})") for a in values]
             else:
