@@ -54,6 +54,11 @@ class AgentEntry:
     example_arguments: Mapping[str, Any] = field(default_factory=dict, hash=False)
 
     def __post_init__(self) -> None:
+        if not isinstance(self.example_arguments, Mapping):
+            raise TypeError(
+                "example_arguments must be a mapping of constructor arguments, got "
+                f"{self.example_arguments!r}"
+            )
         # read-only, as the rest of the entry: the registry is shared by everything that reads it
         object.__setattr__(
             self, "example_arguments", MappingProxyType(dict(self.example_arguments))
@@ -117,7 +122,15 @@ def option_flag(option: str) -> str:
 
     >>> option_flag("max_delay_estimate")
     '--max-delay-estimate'
+
+    Raises:
+        TypeError: ``option`` is not a string.
+        ValueError: ``option`` is not a Python identifier (an argument's name).
     """
+    if not isinstance(option, str):
+        raise TypeError(f"option must be a constructor argument's name (a str), got {option!r}")
+    if not option.isidentifier():
+        raise ValueError(f"option must be a constructor argument's name, got {option!r}")
     return "--" + option.replace("_", "-")
 
 

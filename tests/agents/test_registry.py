@@ -206,3 +206,23 @@ def test_each_entry_gives_a_value_for_every_argument_its_class_needs():
             and spec.kind not in variadic
         }
         assert needed <= set(entry.example_arguments) <= set(parameters), name
+
+
+def test_option_flag_spells_an_argument_and_refuses_what_is_not_one():
+    from delayed_rl.agents.registry import option_flag
+
+    assert option_flag("delay_estimate") == "--delay-estimate"
+    with pytest.raises(TypeError, match="option must be"):
+        option_flag(3)
+    with pytest.raises(ValueError, match="option must be .* got 'max delay'"):
+        option_flag("max delay")
+
+
+def test_an_entry_refuses_example_arguments_that_are_not_a_mapping():
+    from delayed_rl.agents.registry import AgentEntry
+
+    with pytest.raises(TypeError, match="example_arguments must be a mapping"):
+        AgentEntry("delayed_rl.agents.qlearning:QLearning", "Q", example_arguments=[("a", 1)])
+    entry = AgentEntry("delayed_rl.agents.qlearning:QLearning", "Q", example_arguments={"a": 1})
+    with pytest.raises(TypeError):
+        entry.example_arguments["a"] = 2  # read-only

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import dataclasses
 
+import numpy as np
 import pytest
 
-from delayed_rl.experiments.framework.results import common_seeds, pivot
+from delayed_rl.experiments.framework.results import common_seeds, curve_groups, pivot
 from delayed_rl.experiments.framework.task import Task
 
 
@@ -59,3 +60,15 @@ def test_pivot_refuses_what_it_cannot_pivot():
 def test_common_seeds_are_in_the_first_groups_order():
     assert common_seeds({3: 0, 1: 0, 2: 0}, {1: 0, 2: 0}, {2: 0, 1: 0, 5: 0}) == [1, 2]
     assert common_seeds({4: 0}) == [4] and common_seeds() == []
+
+
+def test_curve_groups_reads_each_runs_pair_as_arrays_in_seed_order():
+    groups = {"a": {2: {"steps": [1, 2], "score": [3.0, 4.0]}, 0: {"steps": [1], "score": [5.0]}}}
+    first, second = curve_groups(groups, y="score")["a"]
+    assert first[1].tolist() == [3.0, 4.0] and second[0].tolist() == [1]
+    assert isinstance(first[0], np.ndarray)
+
+
+def test_curve_groups_names_a_run_without_the_entries_it_reads():
+    with pytest.raises(ValueError, match=r"y='curve'.*group 'a', seed 2"):
+        curve_groups({"a": {2: {"steps": [1]}}})

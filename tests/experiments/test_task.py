@@ -39,3 +39,14 @@ def test_future_work_costs_its_variants_by_their_own_step_times():
 
 def test_a_dict_task_costs_a_microsecond():
     assert get_experiment("roulette").task_cost({"x": 1}) == pytest.approx(1e-6)
+
+
+def test_setting_tasks_take_a_setting_task_type_and_learners_by_name():
+    from delayed_rl.experiments.framework import delay_settings
+
+    with pytest.raises(TypeError, match="task_type must be SettingTask"):
+        delay_settings.setting_tasks(Config(quick=True, seeds=1), ["Q"], Stepped)
+    with pytest.raises(ValueError, match="agent must be one of"):
+        delay_settings.learner_arguments("SARSA", None)
+    agent, options = delay_settings.learner_arguments("DeconvQ known", "the delay")
+    assert agent == "deconv" and options["delay"] == "the delay"

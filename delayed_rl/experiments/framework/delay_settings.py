@@ -128,7 +128,12 @@ def setting_tasks(
 
     ``config.steps`` replaces every setting's own step count; ``task_type`` is
     :class:`SettingTask` or an experiment's subclass of it (one that costs its runs otherwise).
+
+    Raises:
+        TypeError: ``task_type`` is not :class:`SettingTask` or a subclass of it.
     """
+    if not (isinstance(task_type, type) and issubclass(task_type, SettingTask)):
+        raise TypeError(f"task_type must be SettingTask or a subclass of it, got {task_type!r}")
     if config.quick:
         worlds, kinds = [(QUICK_SIZE, QUICK_LAM, QUICK_STEPS)], ("Poisson",)
     else:

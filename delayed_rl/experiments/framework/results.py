@@ -118,7 +118,17 @@ def curve_groups(
 
     >>> curve_groups({"Q": {0: {"steps": [1, 2], "curve": [0.5, 0.7]}}})
     {'Q': [(array([1, 2]), array([0.5, 0.7]))]}
+
+    Raises:
+        ValueError: a run has no ``x`` or no ``y`` entry (the message names the run).
     """
+    for key, runs in groups.items():
+        for seed, run in runs.items():
+            if x not in run or y not in run:
+                raise ValueError(
+                    f"curve_groups needs the entries x={x!r} and y={y!r} of every run, "
+                    f"got {sorted(run)} in group {key!r}, seed {seed}"
+                )
     return {
         key: [(np.asarray(run[x]), np.asarray(run[y])) for run in runs.values()]
         for key, runs in groups.items()
